@@ -1,0 +1,95 @@
+"""One home for argument checks: positivity, finiteness, shapes, time bases.
+
+Each check raises :class:`ValueError` (or a subclass) whose message names the
+parameter, so a bad value is reported where the user wrote it and never as a
+traceback from inside numpy.
+"""
+
+import numpy as np
+
+__all__ = ["positive", "nonnegative", "finite_array", "time_base"]
+
+
+def positive(name, value):
+    """Return `value` as a float after checking it is finite and > 0."""
+    value = _finite_scalar(name, value)
+    if value <= 0:
+        raise ValueError(f"{name} must be positive, got {value!r}")
+    return value
+
+
+def nonnegative(name, value):
+    """Return `value` as a float after checking it is finite and >= 0."""
+    value = _finite_scalar(name, value)
+    if value < 0:
+        raise ValueError(f"{name} must be zero or positive, got {value!r}")
+    return value
+
+
+def _finite_scalar(name, value):
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return value
+
+
+def finite_array(name, value, ndim=None, shape=None):
+    """Return `value` as a float ndarray after checking it.
+
+    Parameters
+    ----------
+    name : str
+        Parameter name used in error messages.
+    value : array_like
+        The values.
+    ndim : int, optional
+        Required number of dimensions.
+    shape : tuple, optional
+        Required shape; ``None`` entries match any length.
+    """
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numeric") from None
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
+    if shape is not None:
+        if arr.ndim != len(shape) or any(
+            want is not None and want != got for want, got in zip(shape, arr.shape)
+        ):
+            want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+            raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        first = np.unravel_index(np.argmax(bad), arr.shape)
+        raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
+    return arr
+
+
+def time_base(name, t, rtol=1e-3):
+    """Check that `t` is strictly increasing and uniformly sampled.
+
+    Returns
+    -------
+    t : ndarray, shape (N,)
+    dt : float
+        The sample period [s].
+    """
+    t = finite_array(name, t, ndim=1)
+    if t.size < 2:
+        raise ValueError(f"{name} needs at least 2 samples, got {t.size}")
+    step = np.diff(t)
+    if np.any(step <= 0):
+        i = int(np.argmax(step <= 0))
+        raise ValueError(f"{name} must be strictly increasing: t[{i + 1}] = {t[i + 1]} follows t[{i}] = {t[i]}")
+    dt = float(np.median(step))
+    worst = int(np.argmax(np.abs(step - dt)))
+    if abs(step[worst] - dt) > rtol * max(dt, 1e-300) + 1e-12:
+        raise ValueError(
+            f"{name} must be uniformly sampled: step {worst} is {step[worst]:.9g} s, "
+            f"the median step is {dt:.9g} s"
+        )
+    return t, dt

@@ -1,0 +1,55 @@
+"""Exceptions raised by contoursim.
+
+Every error a user can cause is one of these, subclassing the built-in
+exception a Python programmer would expect (``ValueError`` for bad values),
+with a message that names what is wrong and where.
+"""
+
+__all__ = ["ConfigError", "TraceFormatError", "UnstableLoopError", "PathError"]
+
+
+class ConfigError(ValueError):
+    """A configuration value is invalid.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, as a plain sentence.
+    source : str, optional
+        The file the value came from.
+    line : int, optional
+        The 1-based line of `source` holding the value.
+    """
+
+    def __init__(self, message, source=None, line=None):
+        self.source = source
+        self.line = line
+        where = ""
+        if source is not None:
+            where = f"{source}, line {line}: " if line is not None else f"{source}: "
+        super().__init__(where + message)
+
+
+class TraceFormatError(ConfigError):
+    """A measured-trace CSV file does not follow the trace format."""
+
+
+class PathError(ValueError):
+    """A reference path is degenerate (zero length, collinear arc points, ...)."""
+
+
+class UnstableLoopError(ValueError):
+    """A servo loop is unstable or too poorly damped to simulate.
+
+    Parameters
+    ----------
+    message : str
+        Which axis and why.
+    margins : dict
+        Gain margin [-], phase margin [deg] and their crossover frequencies
+        [rad/s], as computed by :func:`control.stability_margins`.
+    """
+
+    def __init__(self, message, margins=None):
+        self.margins = margins
+        super().__init__(message)

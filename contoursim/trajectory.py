@@ -1,0 +1,93 @@
+"""The sampled reference every loop, estimator and plot consumes."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _validate
+
+__all__ = ["Trajectory"]
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A reference path sampled at the servo period.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times [s], uniform.
+    position : ndarray, shape (N, d)
+        Reference (interpolator) positions [mm], d = 2 or 3.
+    velocity : ndarray, shape (N, d)
+        Reference velocity [mm/s] (used by velocity feedforward).
+    acceleration : ndarray, shape (N, d)
+        Reference acceleration [mm/s^2] (used by acceleration feedforward).
+    s : ndarray, shape (N,)
+        Arc length along the path [mm].
+    path : contoursim.paths.Path, optional
+        The continuous geometry the samples were taken from; the exact contour
+        error is the distance to it. ``None`` for a reference known only by
+        its samples (a measured trace).
+    measuring : ndarray of bool, shape (N,), optional
+        Samples that belong to the test proper (e.g. the full circle of an
+        ISO 230-4 test, without its run-in and run-out arcs). All samples when
+        omitted.
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    s: np.ndarray
+    path: object = None
+    measuring: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        t, dt = _validate.time_base("t", self.t)
+        n = t.size
+        pos = _validate.finite_array("position", self.position, ndim=2)
+        if pos.shape[0] != n or pos.shape[1] not in (2, 3):
+            raise ValueError(f"position must have shape (N, 2) or (N, 3) with N = {n}, got {pos.shape}")
+        d = pos.shape[1]
+        vel = _validate.finite_array("velocity", self.velocity, shape=(n, d))
+        acc = _validate.finite_array("acceleration", self.acceleration, shape=(n, d))
+        s = _validate.finite_array("s", self.s, shape=(n,))
+        measuring = np.ones(n, bool) if self.measuring is None else np.asarray(self.measuring, bool)
+        if measuring.shape != (n,):
+            raise ValueError(f"measuring must have shape ({n},), got {measuring.shape}")
+        for name, value in dict(t=t, position=pos, velocity=vel, acceleration=acc, s=s, measuring=measuring).items():
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "dt", dt)
+
+    def __len__(self):
+        return self.t.size
+
+    @property
+    def dim(self):
+        """Number of coordinates, 2 or 3."""
+        return self.position.shape[1]
+
+    @property
+    def speed(self):
+        """Path speed |v| [mm/s], shape (N,)."""
+        return np.linalg.norm(self.velocity, axis=1)
+
+    @property
+    def tangent(self):
+        """Unit tangent, shape (N, d); zero where the reference stands still."""
+        v = self.speed[:, None]
+        return np.divide(self.velocity, v, out=np.zeros_like(self.velocity), where=v > 0)
+
+    @property
+    def curvature(self):
+        """Path curvature |v x a| / |v|^3 [1/mm], shape (N,); zero at standstill."""
+        v, a = _as3(self.velocity), _as3(self.acceleration)
+        speed = self.speed
+        cross = np.linalg.norm(np.cross(v, a), axis=1)
+        return np.divide(cross, speed**3, out=np.zeros_like(speed), where=speed > 0)
+
+
+def _as3(x):
+    return x if x.shape[1] == 3 else np.column_stack([x, np.zeros(len(x))])

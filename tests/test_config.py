@@ -1,0 +1,55 @@
+import pytest
+
+from contoursim.config import TomlFile
+from contoursim.exceptions import ConfigError
+
+TEXT = """# a machine
+[machine]
+servo_period = 2e-4
+
+[axes.x]
+kp = 30
+kvv = 2
+
+[[body]]
+name = "bed"
+
+[[body]]
+name = "x"
+joint = "linear x"
+"""
+
+
+def test_line_of_walks_tables_and_arrays_of_tables():
+    f = TomlFile("m.toml", TEXT)
+    assert f.line_of("machine", "servo_period") == 3
+    assert f.line_of("axes", "x") == 5
+    assert f.line_of("axes", "x", "kvv") == 7
+    assert f.line_of("body", 0, "name") == 10
+    assert f.line_of("body", 1, "joint") == 14
+    assert f.line_of("nothing") is None
+
+
+def test_unknown_key_is_reported_with_its_line():
+    with pytest.raises(ConfigError, match=r"^m.toml, line 7: unknown key 'kvv' in \[axes.x\]; expected one of: kp, kv$"):
+        TomlFile("m.toml", TEXT).table("axes", "x", allowed=["kp", "kv"])
+
+
+def test_missing_key_and_table():
+    f = TomlFile("m.toml", TEXT)
+    with pytest.raises(ConfigError, match=r"line 5: missing key 'kv'"):
+        f.table("axes", "x", required=["kv"])
+    with pytest.raises(ConfigError, match=r"missing \[feed\]"):
+        f.table("feed")
+
+
+def test_syntax_error_names_the_line(tmp_path):
+    file = tmp_path / "bad.toml"
+    file.write_text("[a]\nx = 1\ny = = 2\n")
+    with pytest.raises(ConfigError, match=r"bad.toml, line 3: not valid TOML"):
+        TomlFile.read(file)
+
+
+def test_unreadable_file(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read the file"):
+        TomlFile.read(tmp_path / "absent.toml")

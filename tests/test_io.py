@@ -1,0 +1,64 @@
+import numpy as np
+import pytest
+
+from contoursim.exceptions import TraceFormatError
+from contoursim.io import Trace, read_trace, write_trace
+
+
+def _trace(n=50, axes=("x", "y")):
+    t = np.arange(n) * 1e-3
+    ref = np.column_stack([np.sin(t * (i + 1)) for i in range(len(axes))])
+    return Trace(t, ref, ref + 1e-3, axes, {"machine": "test"})
+
+
+@pytest.mark.parametrize("axes", [("x",), ("x", "y"), ("x", "y", "z")])
+def test_round_trip(tmp_path, axes):
+    trace = _trace(axes=axes)
+    write_trace(tmp_path / "a.csv", trace, extra={"contour_um": np.zeros(50)})
+    back = read_trace(tmp_path / "a.csv")
+    assert back.axes == axes
+    assert back.metadata == {"machine": "test"}
+    np.testing.assert_allclose(back.t, trace.t, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(back.actual, trace.actual, rtol=1e-11)
+    np.testing.assert_allclose(back.tracking_error, 1e-3, rtol=1e-8)
+
+
+def test_refuses_to_overwrite(tmp_path):
+    (tmp_path / "a.csv").write_text("mine")
+    with pytest.raises(FileExistsError, match="a.csv"):
+        write_trace(tmp_path / "a.csv", _trace())
+    assert (tmp_path / "a.csv").read_text() == "mine"
+
+
+GOOD = "# free text\n# rate: 1 kHz\nt,x_ref,x,extra\n0,0,0,a\n0.001,1,0.9,b\n0.002,2,1.9,c\n"
+
+
+def test_reads_metadata_and_ignores_extra_columns(tmp_path):
+    (tmp_path / "m.csv").write_text(GOOD.replace(",a", ",1").replace(",b", ",2").replace(",c", ",3"))
+    trace = read_trace(tmp_path / "m.csv")
+    assert trace.metadata == {"rate": "1 kHz"}
+    assert trace.axes == ("x",)
+    np.testing.assert_array_equal(trace.reference[:, 0], [0, 1, 2])
+
+
+@pytest.mark.parametrize(
+    "text, line, words",
+    [
+        ("t,x_ref\n0,0\n0.001,1\n", 1, "missing column 'x'"),
+        ("x_ref,x\n0,0\n1,1\n", 1, "missing column 't'"),
+        ("t,y_ref,y\n0,0,0\n0.001,1,1\n", 1, "x, x+y or x+y+z"),
+        ("t,x_ref,x\n0,0,0\n0.001,abc,1\n", 3, "column 'x_ref': 'abc' is not a number"),
+        ("t,x_ref,x\n0,0,0\n0.001,1,nan\n", 3, "column 'x': value nan is not finite"),
+        ("t,x_ref,x\n0,0,0\n0.001,1\n", 3, "expected 3 cells, found 2"),
+        ("# c\nt,x_ref,x\n0,0,0\n0.002,1,1\n0.001,1,1\n", 5, "strictly increasing"),
+        ("t,x_ref,x\n0,0,0\n0.001,1,1\n0.003,1,1\n", 2, "uniformly sampled"),
+    ],
+)
+def test_rejects_bad_files_naming_line_and_column(tmp_path, text, line, words):
+    file = tmp_path / "bad.csv"
+    file.write_text(text)
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(file)
+    message = str(info.value)
+    assert message.startswith(f"{file}, line {line}: "), message
+    assert words in message
