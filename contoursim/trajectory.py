@@ -64,6 +64,37 @@ class Trajectory:
     def __len__(self):
         return self.t.size
 
+    def held(self, duration):
+        """This trajectory followed by a standstill at its last point.
+
+        Parameters
+        ----------
+        duration : float
+            How long to hold [s]; rounded up to whole samples.
+
+        Returns
+        -------
+        Trajectory
+            The extra samples have zero velocity and acceleration and are not
+            `measuring`. Raises ValueError unless the reference ends at rest.
+        """
+        duration = _validate.nonnegative("duration", duration)
+        if np.abs(self.velocity[-1]).max() > 0 or np.abs(self.acceleration[-1]).max() > 0:
+            raise ValueError("only a reference that ends at rest can be held")
+        n = int(np.ceil(duration / self.dt - 1e-9))
+        if n == 0:
+            return self
+        tail = np.zeros((n, self.dim))
+        return Trajectory(
+            np.concatenate([self.t, self.t[-1] + self.dt * np.arange(1, n + 1)]),
+            np.concatenate([self.position, np.broadcast_to(self.position[-1], (n, self.dim))]),
+            np.concatenate([self.velocity, tail]),
+            np.concatenate([self.acceleration, tail]),
+            np.concatenate([self.s, np.full(n, self.s[-1])]),
+            self.path,
+            np.concatenate([self.measuring, np.zeros(n, bool)]),
+        )
+
     @property
     def dim(self):
         """Number of coordinates, 2 or 3."""

@@ -1,0 +1,168 @@
+"""Command line: ``contoursim demo | simulate | volumetric``.
+
+Every job prints a summary table to stdout and writes plots and traces to
+``--out`` (default ``./contoursim-out``). A directory that holds files but was
+not made by contoursim is never written into, so nothing a user keeps there
+is overwritten.
+"""
+
+import argparse
+import sys
+from dataclasses import replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .config import TomlFile
+from .exceptions import ConfigError, UnstableLoopError
+from .feed import sample
+from .geocomp import GeometricCompensation
+from .machine import load_machine, preset_file
+from .pathfile import load_path_file
+from .paths import HelicalArc
+from .plotting import save_figures
+from .simulate import simulate
+
+_MARKER = ".contoursim-out"
+DEMO_MACHINE = "demo_mill"
+DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
+_JOB_KEYS = ("machine", "path", "feed_mm_min", "geometric_compensation")
+
+
+def library_path(name):
+    """A path file given as a file name or as a name in the trajectories library."""
+    path = Path(name)
+    if path.exists():
+        return path
+    library = resources.files("contoursim.trajectories")
+    for candidate in (name, f"{name}.toml", f"{name}.nc"):
+        if library.joinpath(candidate).is_file():
+            return Path(str(library.joinpath(candidate)))
+    known = sorted(p.name for p in library.iterdir() if p.suffix in (".toml", ".nc"))
+    raise ConfigError(f"no path file {name!r} here nor in the trajectories library ({', '.join(known)})")
+
+
+def output_dir(out):
+    """Create or reuse `out`; refuse a non-empty directory contoursim did not make."""
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not (out / _MARKER).exists():
+        raise ConfigError(f"{out} holds files that contoursim did not write; choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / _MARKER).write_text("written by contoursim; its files here are replaced on each run\n")
+    return out
+
+
+def test_circle(path):
+    """Centre and radius of a path's full test circle (ISO 230-4), or ``None``."""
+    for prim in path.primitives:
+        if isinstance(prim, HelicalArc) and prim.role == "test" and prim.rise == 0 and abs(prim.sweep) >= 2 * np.pi - 1e-9:
+            return prim.center[:2], prim.radius
+    return None
+
+
+_COLUMNS = ("tracking_max_um", "tracking_rms_um", "contour_max_um", "contour_rms_um")
+
+
+def _table(rows):
+    head = f"{'run':<34} {'tracking max':>13} {'tracking RMS':>13} {'contour max':>12} {'contour RMS':>12}"
+    lines = [head + "   [µm]", "-" * len(head)]
+    for name, summary in rows:
+        lines.append(f"{name:<34} " + " ".join(f"{summary[c]:>{13 if i < 2 else 12}.2f}" for i, c in enumerate(_COLUMNS)))
+    return "\n".join(lines)
+
+
+def run_job(machine, path_file, out, feed=None, strategies=(), label=None):
+    """Simulate `machine` on a path file; write plots and the trace CSV; return the summary row."""
+    path, settings = load_path_file(path_file)
+    if feed is not None:
+        settings = replace(settings, feed=feed)
+    trajectory = sample(path, settings.plan(path), machine.servo_period)
+    result = simulate(machine, trajectory, strategies)
+    name = label or Path(path_file).stem
+    result.save_csv(out / f"{name}.csv", metadata={"machine": machine.name, "path": Path(path_file).name}, overwrite=True)
+    save_figures(result, out, name, circle=test_circle(path))
+    return name, result.summary()
+
+
+def demo(args):
+    """The README's main job: ISO 230-4 circles and a free-form path on the demo machine."""
+    out = output_dir(args.out)
+    machine = load_machine(DEMO_MACHINE)
+    rows = [run_job(machine, library_path(name), out) for name in DEMO_PATHS]
+    print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
+    print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
+    print(_table(rows))
+    print(f"\nplots and traces written to {out}/")
+
+
+def _job(args):
+    """Machine, path file, feed override [mm/s] and geometric switch of ``simulate FILE``.
+
+    FILE is a job file (a TOML with ``machine`` and ``path`` keys; both name
+    presets/library entries or files relative to the job) or a bare path file,
+    run on ``--machine`` (default: the demo machine).
+    """
+    file = Path(args.file)
+    if file.suffix == ".toml" and file.exists():
+        toml = TomlFile.read(file)
+        if "machine" in toml.data:
+            data = toml.table(allowed=_JOB_KEYS, required=("machine", "path"))
+            near = lambda name: file.parent / name if (file.parent / name).exists() else name  # noqa: E731
+            feed = data.get("feed_mm_min")
+            if feed is not None and (not isinstance(feed, (int, float)) or feed <= 0):
+                raise toml.error(f"feed_mm_min must be a positive number, got {feed!r}", "feed_mm_min")
+            return (load_machine(near(data["machine"])), library_path(near(data["path"])),
+                    None if feed is None else feed / 60.0, bool(data.get("geometric_compensation", False)))
+    return load_machine(args.machine or DEMO_MACHINE), library_path(args.file), None, False
+
+
+def simulate_command(args):
+    """``contoursim simulate FILE``: see :func:`_job`."""
+    out = output_dir(args.out)
+    machine, path_file, feed, geometric = _job(args)
+    rows = [run_job(machine, path_file, out, feed)]
+    if geometric or args.geometric_compensation:
+        if machine.chain is None:
+            raise ConfigError(f"{machine.name} has no geometric model to compensate with")
+        rows.append(run_job(machine, path_file, out, feed, [GeometricCompensation(machine.chain)],
+                            label=f"{Path(path_file).stem}_geometric_comp"))
+    print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}")
+    print(_table(rows))
+    print(f"\nplots and traces written to {out}/")
+
+
+def volumetric(args):
+    """``contoursim volumetric MACHINE``: worst volumetric errors and error-field plots."""
+    from .volumetric import volumetric_report
+
+    print(volumetric_report(preset_file(args.machine), output_dir(args.out)))
+
+
+def main(argv=None):
+    """Entry point of the ``contoursim`` command."""
+    parser = argparse.ArgumentParser(prog="contoursim", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("demo", help="ISO 230-4 circle tests and a free-form path on the demo machine")
+    p.set_defaults(run=demo)
+    p = sub.add_parser("simulate", help="simulate a job file (machine + path) or a path file")
+    p.add_argument("file", help="job .toml, path .toml or G-code .nc (a file, or a name in the trajectories library)")
+    p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
+    p.add_argument("--geometric-compensation", action="store_true", help="also run with geometric compensation")
+    p.set_defaults(run=simulate_command)
+    p = sub.add_parser("volumetric", help="volumetric error map of a machine preset or file")
+    p.add_argument("machine", help="machine preset name or file")
+    p.set_defaults(run=volumetric)
+    for p in sub.choices.values():
+        p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
+    args = parser.parse_args(argv)
+    try:
+        args.run(args)
+    except (ConfigError, UnstableLoopError, ValueError, FileExistsError) as exc:
+        print(f"contoursim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,286 @@
+"""Exact contour error: distance from actual tool positions to the continuous reference path.
+
+For each actual point, in time order:
+
+1. a windowed nearest-sample search over the reference samples, started at
+   the previous point's index (the window hops along while the nearest sample
+   sits on its edge), so the search follows the branch being travelled where
+   a closed curve comes back near itself or a figure-eight crosses, and the
+   cost is linear in the number of points;
+2. refinement on the primitives spanned by that sample's two neighbours:
+   closed form on lines and plain arcs, Newton's method on the arc length of
+   helices and on the parameter of spline pieces; when the foot point is
+   clamped at a primitive end, the neighbouring primitive (across the seam
+   of a closed path, too) is tried.
+
+The result is independent of the sample spacing: the samples only seed the
+search.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from . import _validate
+from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _spline_u_of_w, _spline_w_of_u, _primitive_at
+
+__all__ = ["ContourError", "exact_contour_error"]
+
+
+@dataclass(frozen=True)
+class ContourError:
+    """Contour error of N actual points against a reference path.
+
+    Parameters
+    ----------
+    magnitude : ndarray, shape (N,)
+        Distance to the path [mm], >= 0.
+    vector : ndarray, shape (N, d)
+        From the actual point to its nearest path point (the correction) [mm].
+    foot : ndarray, shape (N, d)
+        Nearest path points [mm].
+    s : ndarray, shape (N,)
+        Arc length of the foot points [mm].
+    normal : ndarray, shape (N,)
+        Signed in-plane component (P_a - foot) . n_left [mm], n_left = b x T
+        normalised: positive to the left of the direction of travel, so a CCW
+        circle gives R - |P_a - c|.
+    out_of_plane : ndarray, shape (N,)
+        Component (P_a - foot) . b [mm] along the path's plane normal b (for
+        helices and 3-D curves, b made orthogonal to T, so that
+        normal^2 + out_of_plane^2 = magnitude^2 wherever the foot is not a
+        path end).
+    """
+
+    magnitude: np.ndarray
+    vector: np.ndarray
+    foot: np.ndarray
+    s: np.ndarray
+    normal: np.ndarray
+    out_of_plane: np.ndarray
+
+    def __post_init__(self):
+        n = np.shape(self.magnitude)[0]
+        d = np.shape(self.vector)[1]
+        for name, shape in dict(magnitude=(n,), vector=(n, d), foot=(n, d), s=(n,), normal=(n,),
+                                out_of_plane=(n,)).items():
+            value = _validate.finite_array(name, getattr(self, name), shape=shape)
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
+        if np.any(self.magnitude < 0):
+            raise ValueError("magnitude must be non-negative")
+
+
+# --------------------------------------------------------------------------- compiled search
+
+@njit(cache=True)
+def _dist2(a, i, b, j):
+    return (a[i, 0] - b[j, 0]) ** 2 + (a[i, 1] - b[j, 1]) ** 2 + (a[i, 2] - b[j, 2]) ** 2
+
+
+@njit(cache=True)
+def _nearest_samples(ref, act, window):
+    """Index of the nearest reference sample to each actual point, searched around the previous one."""
+    n = ref.shape[0]
+    idx = np.empty(act.shape[0], np.int64)
+    j = 0
+    for i in range(act.shape[0]):
+        for _ in range(n):
+            lo, hi = max(0, j - window), min(n - 1, j + window)
+            best, bd = j, _dist2(ref, j, act, i)
+            for m in range(lo, hi + 1):
+                d = _dist2(ref, m, act, i)
+                if d < bd:
+                    best, bd = m, d
+            hop = (best == hi and hi < n - 1) or (best == lo and lo > 0)
+            j = best
+            if not hop:
+                break
+        idx[i] = j
+    return idx
+
+
+@njit(cache=True)
+def _closest(kind, row, p, u0, length, out):
+    """Arc length of the point of one primitive nearest to p, from the guess u0; fills out (9,) there."""
+    if kind == LINE:
+        u = (p[0] - row[0]) * row[3] + (p[1] - row[1]) * row[4] + (p[2] - row[2]) * row[5]
+        u = min(max(u, 0.0), length)
+    elif kind == ARC and row[15] == 0.0:
+        x = y = 0.0
+        for i in range(3):
+            x += (p[i] - row[i]) * row[3 + i]
+            y += (p[i] - row[i]) * row[6 + i]
+        u = u0
+        if x * x + y * y > 1e-24:
+            radius, sweep = row[12], abs(row[14])
+            sgn = 1.0 if row[14] >= 0.0 else -1.0
+            turned = (sgn * (math.atan2(y, x) - row[13])) % (2 * math.pi)
+            # among turned + 2πm inside [0, sweep], the one nearest the guess; else the nearer end
+            m = math.floor((u0 / radius - turned) / (2 * math.pi) + 0.5)
+            best = -1.0
+            for cand in (turned + 2 * math.pi * (m - 1), turned + 2 * math.pi * m, turned + 2 * math.pi * (m + 1)):
+                if 0.0 <= cand <= sweep and (best < 0 or abs(cand - u0 / radius) < abs(best - u0 / radius)):
+                    best = cand
+            if best < 0:
+                over = (turned - sweep) % (2 * math.pi)
+                best = sweep if over < 2 * math.pi - sweep - over else 0.0
+            u = best * radius
+    elif kind == ARC:
+        u = u0
+        for _ in range(50):
+            _eval_prim(kind, row, u, out)
+            f = fp = 0.0
+            for i in range(3):
+                r = out[i] - p[i]
+                f += r * out[3 + i]
+                fp += r * out[6 + i]
+            fp = 1.0 + fp if 1.0 + fp > 0.1 else 1.0
+            un = min(max(u - f / fp, 0.0), length)
+            if abs(un - u) < 1e-13:
+                u = un
+                break
+            u = un
+    else:
+        w = _spline_w_of_u(row, u0)
+        for _ in range(50):
+            g = gp = speed2 = 0.0
+            for i in range(3):
+                c = row[i] + w * (row[3 + i] + w * (row[6 + i] + w * row[9 + i])) - p[i]
+                d1 = row[3 + i] + 2.0 * row[6 + i] * w + 3.0 * row[9 + i] * w * w
+                d2 = 2.0 * row[6 + i] + 6.0 * row[9 + i] * w
+                g += c * d1
+                speed2 += d1 * d1
+                gp += d1 * d1 + c * d2
+            if gp < 0.1 * speed2:
+                gp = speed2
+            wn = min(max(w - g / gp, 0.0), 1.0)
+            if abs(wn - w) < 1e-15:
+                w = wn
+                break
+            w = wn
+        _eval_spline_w(row, w, out)
+        return min(_spline_u_of_w(row, w), length)
+    _eval_prim(kind, row, u, out)
+    return u
+
+
+@njit(cache=True)
+def _foot_points(kinds, rows, breaks, closed, ref_s, idx, act):
+    """Foot point (position, tangent, curvature vector), arc length and primitive of each actual point."""
+    n, k_count = ref_s.size, kinds.size
+    frame = np.empty((act.shape[0], 9))
+    s_out = np.empty(act.shape[0])
+    prim = np.empty(act.shape[0], np.int64)
+    out = np.empty(9)
+    for i in range(act.shape[0]):
+        p = act[i]
+        j = idx[i]
+        k_lo = _primitive_at(breaks, ref_s[max(j - 1, 0)])
+        k_hi = _primitive_at(breaks, ref_s[min(j + 1, n - 1)])
+        best_d, best_k, best_u = np.inf, -1, 0.0
+        for k in range(k_lo, k_hi + 1):
+            length = breaks[k + 1] - breaks[k]
+            u0 = min(max(ref_s[j] - breaks[k], 0.0), length)
+            u = _closest(kinds[k], rows[k], p, u0, length, out)
+            d = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
+            if d < best_d:
+                best_d, best_k, best_u = d, k, u
+                frame[i] = out
+        for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
+            k, u = best_k, best_u
+            for _ in range(k_count):
+                at_end = u >= breaks[k + 1] - breaks[k] - 1e-12 if step == 1 else u <= 1e-12
+                nk = k + step
+                if closed:
+                    nk %= k_count
+                if not at_end or nk < 0 or nk >= k_count:
+                    break
+                length = breaks[nk + 1] - breaks[nk]
+                u = _closest(kinds[nk], rows[nk], p, length if step == -1 else 0.0, length, out)
+                d = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
+                if d >= best_d:
+                    break
+                best_d, best_k, best_u, k = d, nk, u, nk
+                frame[i] = out
+        s_out[i] = breaks[best_k] + best_u
+        prim[i] = best_k
+    return frame, s_out, prim
+
+
+# --------------------------------------------------------------------------- public function
+
+def _binormal(path, prim, tangent, kvec):
+    """Plane normal b at each foot: the path's plane, an arc's axis, the osculating binormal, else z."""
+    if path.plane_normal is not None:
+        return np.broadcast_to(path.plane_normal, tangent.shape)
+    b = np.cross(tangent, kvec)
+    norm = np.linalg.norm(b, axis=1)
+    arcs = path.kinds[prim] == ARC
+    b[arcs] = path.rows[prim[arcs], 9:12]
+    straight = ~arcs & (norm < 1e-9)
+    b[~arcs & ~straight] /= norm[~arcs & ~straight, None]
+    ref = np.where(np.abs(tangent[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    fallback = ref - np.sum(ref * tangent, axis=1, keepdims=True) * tangent
+    b[straight] = fallback[straight] / np.linalg.norm(fallback[straight], axis=1, keepdims=True)
+    return b
+
+
+def exact_contour_error(trajectory, actual, window=8):
+    """Distance from actual tool positions to the continuous reference path.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        Reference samples with their `path` (the search seeds on the samples).
+    actual : array_like, shape (N, d)
+        Actual tool positions [mm], d = trajectory.dim, in time order, starting
+        near the path start.
+    window : int
+        Half-width of the nearest-sample search window [samples].
+
+    Returns
+    -------
+    ContourError
+
+    Examples
+    --------
+    >>> from contoursim.paths import circle
+    >>> from contoursim.feed import plan, sample
+    >>> path = circle((0, 0), 50.0)
+    >>> ref = sample(path, plan(path, 100.0, 1000.0), 0.01)
+    >>> err = exact_contour_error(ref, [[50.002, 0.0], [0.0, 49.999]])
+    >>> np.round(err.normal * 1e3, 6).tolist()   # R - |P - c| [µm]
+    [-2.0, 1.0]
+    """
+    path = trajectory.path
+    if path is None:
+        raise ValueError("trajectory has no path: the exact contour error needs the continuous reference geometry")
+    d = trajectory.dim
+    act = _validate.finite_array("actual", actual, ndim=2)
+    if act.shape[1] != d:
+        raise ValueError(f"actual must have shape (N, {d}) like the trajectory's positions, got {act.shape}")
+    if int(window) < 1:
+        raise ValueError(f"window must be at least 1, got {window!r}")
+    pad = np.zeros((len(act), 3 - d))
+    act3 = np.ascontiguousarray(np.hstack([act, pad]))
+    ref3 = np.ascontiguousarray(np.hstack([trajectory.position, np.zeros((len(trajectory), 3 - d))]))
+    idx = _nearest_samples(ref3, act3, int(window))
+    frame, s, prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, np.ascontiguousarray(trajectory.s),
+                                  idx, act3)
+    foot, tangent, kvec = frame[:, :3], frame[:, 3:6], frame[:, 6:9]
+    b = _binormal(path, prim, tangent, kvec)
+    left = np.cross(b, tangent)
+    left /= np.linalg.norm(left, axis=1, keepdims=True)
+    b_perp = np.cross(tangent, left)
+    delta = act3 - foot
+    return ContourError(
+        magnitude=np.linalg.norm(delta, axis=1),
+        vector=-delta[:, :d],
+        foot=foot[:, :d],
+        s=s,
+        normal=np.sum(delta * left, axis=1),
+        out_of_plane=np.sum(delta * b_perp, axis=1),
+    )

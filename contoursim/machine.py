@@ -1,0 +1,215 @@
+"""A machine: servo axes at a common servo period, and optionally their geometry.
+
+A machine file (TOML) holds both halves. The servo half::
+
+    name = "demo mill"
+    servo_period_ms = 0.2
+
+    [axes.x]                 # keys are the AxisServo parameters, SI units
+    mass = 300.0             # [kg]
+    force_constant = 942.0   # [N/A]
+    kv = 120.0               # [A·s/m]
+    ti = 0.01                # [s]
+    kp = 40.0                # [1/s]
+
+and, optionally, the geometric half — bodies, joints and their errors, read
+by :func:`contoursim.multibody.chain_from_toml` (see that function for the
+keys). Without bodies the machine is an error-free Cartesian one with axes
+x, y (, z). With bodies, axes without a ``[axes.*]`` table (rotary tables on
+a contouring test, say) follow their commands exactly.
+"""
+
+from dataclasses import MISSING, dataclass
+from importlib import resources
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+
+from . import _validate
+from .config import TomlFile
+from .exceptions import ConfigError
+from .servo import AxisServo
+
+__all__ = ["CARTESIAN", "Machine", "load_machine", "preset_names"]
+
+CARTESIAN = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class Machine:
+    """Servo axes at a common servo period, and optionally their geometry.
+
+    Parameters
+    ----------
+    axes : mapping str -> AxisServo
+        The servo-controlled axes.
+    servo_period : float
+        Period the position/velocity controllers run at [s].
+    chain : contoursim.multibody.MachineChain, optional
+        Geometry with its errors: maps axis positions to the tool tip in
+        workpiece coordinates. Without it the machine is an error-free
+        Cartesian one whose axes are x, y (, z) in that order.
+    name : str
+        A label for reports.
+    """
+
+    axes: dict
+    servo_period: float
+    chain: object = None
+    name: str = ""
+
+    def __post_init__(self):
+        axes = dict(self.axes)
+        if not axes:
+            raise ValueError("a machine needs at least one servo axis")
+        for name, servo in axes.items():
+            if not isinstance(servo, AxisServo):
+                raise ValueError(f"axis {name!r} must be an AxisServo, got {type(servo).__name__}")
+        if self.chain is None:
+            if tuple(axes) != CARTESIAN[: len(axes)]:
+                raise ValueError(f"a machine without a chain has axes x, y (, z) in that order, got {tuple(axes)}")
+        else:
+            unknown = [a for a in axes if a not in self.chain.axes]
+            if unknown:
+                raise ValueError(f"servo axes {unknown} are not axes of the chain {tuple(self.chain.axes)}")
+        object.__setattr__(self, "axes", MappingProxyType(axes))
+        object.__setattr__(self, "servo_period", _validate.positive("servo_period", self.servo_period))
+
+    @property
+    def axis_names(self):
+        """All commanded axes in column order: the chain's, else the servo axes."""
+        return tuple(self.axes) if self.chain is None else tuple(self.chain.axes)
+
+    @property
+    def servo_columns(self):
+        """Columns of :attr:`axis_names` that are servo-controlled, shape (n_servo,)."""
+        return np.array([self.axis_names.index(a) for a in self.axes])
+
+    def axis_commands(self, trajectory):
+        """Axis position, velocity and acceleration commands for a tool-tip reference.
+
+        Parameters
+        ----------
+        trajectory : Trajectory
+            Tool-tip reference in workpiece coordinates.
+
+        Returns
+        -------
+        position, velocity, acceleration : ndarray, shape (N, n_axes)
+            One column per :attr:`axis_names` [mm, mm/s, mm/s^2] (rad for
+            rotary axes, which hold their angle).
+        """
+        p, v, a = (_pad3(x) for x in (trajectory.position, trajectory.velocity, trajectory.acceleration))
+        if self.chain is None:
+            n = len(self.axes)
+            if np.abs(p[:, n:]).max(initial=0.0) > 0:
+                raise ValueError(f"the path moves in {trajectory.dim} coordinates but the machine has only {n} axes")
+            return p[:, :n], v[:, :n], a[:, :n]
+        q = self.chain.inverse(p, ideal=True)
+        # Only the linear axes move (rotary ones hold their angle), so the ideal chain
+        # is affine in q: its position Jacobian is constant and maps v and a exactly.
+        linear = ~self.chain.rotary_axes
+        jac = np.linalg.pinv(self.chain.axis_jacobian(q)[:, :3][:, :, linear])
+        qv, qa = np.zeros_like(q), np.zeros_like(q)
+        qv[:, linear] = np.einsum("nij,nj->ni", jac, v)
+        qa[:, linear] = np.einsum("nij,nj->ni", jac, a)
+        return q, qv, qa
+
+    def tool_position(self, q, t, dim):
+        """Tool tip in workpiece coordinates.
+
+        Parameters
+        ----------
+        q : ndarray, shape (N, n_axes)
+            Actual axis positions, columns as :attr:`axis_names` [mm, rad].
+        t : ndarray, shape (N,)
+            Times [s] (thermal drift).
+        dim : int
+            Coordinates to return, 2 or 3.
+
+        Returns
+        -------
+        ndarray, shape (N, dim)
+            [mm]
+        """
+        p = _pad3(q) if self.chain is None else self.chain.tool_pose(q, t)[0]
+        return p[:, :dim]
+
+
+def _pad3(x):
+    return np.column_stack([x, np.zeros((len(x), 3 - x.shape[1]))]) if x.shape[1] < 3 else x
+
+
+_PRESETS = "presets"
+_SERVO_KEYS = ("name", "description", "servo_period_ms", "axes")
+
+
+def preset_names():
+    """Names of the machine files shipped with contoursim (``contoursim/presets``)."""
+    folder = resources.files("contoursim").joinpath(_PRESETS)
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def preset_file(name_or_file):
+    """The file of a machine given as a preset name or a path."""
+    path = Path(name_or_file)
+    if path.exists():
+        return path
+    if str(name_or_file) in preset_names():
+        return Path(str(resources.files("contoursim").joinpath(_PRESETS, f"{name_or_file}.toml")))
+    raise ConfigError(f"no machine file {str(name_or_file)!r} and no preset of that name; presets: {', '.join(preset_names())}")
+
+
+def load_machine(name_or_file, geometry=True):
+    """Load a machine from a preset name or a machine TOML file.
+
+    Parameters
+    ----------
+    name_or_file : str or Path
+        A preset name (see :func:`preset_names`) or a machine file.
+    geometry : bool
+        Read the geometric half (bodies) when the file has one; ``False``
+        gives the error-free Cartesian machine of the servo axes.
+
+    Returns
+    -------
+    Machine
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and line of an unknown key or a bad value.
+    """
+    from .multibody import chain_from_toml
+
+    toml = TomlFile.read(preset_file(name_or_file))
+    data = toml.data
+    chain = None
+    if "body" in data:
+        chain = chain_from_toml(toml, extra=_SERVO_KEYS)
+    else:
+        toml.table(allowed=_SERVO_KEYS)
+    if "axes" not in data:
+        raise toml.error("missing [axes.<name>] tables: the servo parameters of each axis")
+    if "servo_period_ms" not in data:
+        raise toml.error("missing key 'servo_period_ms': the servo period [ms]")
+    try:
+        period = _validate.positive("servo_period_ms", data["servo_period_ms"]) * 1e-3
+    except ValueError as exc:
+        raise toml.error(str(exc), "servo_period_ms") from None
+    fields = AxisServo.__dataclass_fields__
+    required = [name for name, f in fields.items() if f.default is MISSING]
+    servos = {}
+    for axis in toml.table("axes"):
+        table = toml.table("axes", axis, allowed=fields, required=required)
+        try:
+            servos[axis] = AxisServo(**table)
+        except (TypeError, ValueError) as exc:
+            bad = next((key for key in table if str(exc).startswith(key)), None)
+            keys = ("axes", axis, bad) if bad else ("axes", axis)
+            raise toml.error(f"axis {axis}: {exc}", *keys) from None
+    try:
+        return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)))
+    except ValueError as exc:
+        raise toml.error(str(exc), "axes") from None

@@ -1,0 +1,128 @@
+"""Path files of the trajectories library: a TOML path description or a G-code program.
+
+The TOML format (``[feed]`` and ``[path]`` tables, units in the key names) is
+described in trajectories/README.md. Every error names the file and the line
+of the offending key, through :class:`contoursim.config.TomlFile`.
+"""
+
+import math
+import re
+from pathlib import Path as _FilePath
+
+from . import _validate
+from .config import TomlFile
+from .exceptions import ConfigError
+from .feed import FeedSettings
+from .gcode import read_gcode
+from .paths import circle, helix, iso230_4_circle, polyline, spline
+
+__all__ = ["load_path_file"]
+
+
+def _angle(name, value):
+    """An angle of any sign [deg] in [rad]."""
+    return math.radians(float(_validate.finite_array(name, value, ndim=0)))
+
+
+def _tolerance(name, value):
+    """A non-negative angle [deg] in [rad]."""
+    return math.radians(_validate.nonnegative(name, value))
+
+
+def _per_minute(name, value):
+    """A positive rate [mm/min] in [mm/s]."""
+    return _validate.positive(name, value) / 60.0
+
+
+# path type -> (builder, {file key: builder argument}, required file keys)
+_PATHS = {
+    "circle": (circle, dict(center_mm="center", radius_mm="radius", direction="direction", normal="normal",
+                            start_angle_deg="start_angle"), ("center_mm", "radius_mm")),
+    "iso230_4_circle": (iso230_4_circle, dict(radius_mm="radius", center_mm="center", direction="direction",
+                                              run_angle_deg="run_angle", run_radius_mm="run_radius",
+                                              start_angle_deg="start_angle"), ("radius_mm",)),
+    "polyline": (polyline, dict(points_mm="points", blend_radius_mm="blend_radius"), ("points_mm",)),
+    "spline": (spline, dict(points_mm="points", closed="closed"), ("points_mm",)),
+    "helix": (helix, dict(center_mm="center", radius_mm="radius", pitch_mm="pitch", turns="turns",
+                          direction="direction", normal="normal", start_angle_deg="start_angle"),
+              ("center_mm", "radius_mm", "pitch_mm", "turns")),
+}
+# [feed] key -> (FeedSettings argument, converter raising ValueError on a bad value)
+_FEED = dict(feed_mm_min=("feed", _per_minute), accel_mm_s2=("accel", _validate.positive),
+             jerk_mm_s3=("jerk", _validate.positive), centripetal_accel_mm_s2=("centripetal_accel", _validate.positive),
+             corner_tolerance_deg=("corner_tolerance", _tolerance))
+
+
+def load_path_file(file):
+    """Read a path file of the trajectories library.
+
+    Parameters
+    ----------
+    file : str or os.PathLike
+        A ``.toml`` path file (format in trajectories/README.md) or a ``.nc``
+        G-code program (see :func:`contoursim.gcode.read_gcode`).
+
+    Returns
+    -------
+    path : contoursim.paths.Path
+    feed : contoursim.feed.FeedSettings
+        Feed rate(s) [mm/s], acceleration and jerk limits of the file.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and line of an unknown or missing key or a bad value.
+    """
+    file = _FilePath(file)
+    if file.suffix.lower() == ".nc":
+        program = read_gcode(file)
+        return program.path, FeedSettings(tuple(program.feeds))
+    if file.suffix.lower() != ".toml":
+        raise ConfigError(f"unknown path file type {file.suffix!r}: use .toml or .nc", source=str(file))
+    toml = TomlFile.read(file)
+    top = toml.table(allowed=("name", "description", "path", "feed"))
+    for key in ("name", "description"):
+        if not isinstance(top.get(key, ""), str):
+            raise toml.error(f"{key} must be a string", key)
+    return _path(toml), _feed(toml)
+
+
+def _path(toml):
+    """The :class:`~contoursim.paths.Path` described by the ``[path]`` table."""
+    kind = toml.table("path", required=("type",))["type"]
+    if not isinstance(kind, str) or kind not in _PATHS:
+        raise toml.error(f"[path] type must be one of {', '.join(sorted(_PATHS))}, got {kind!r}", "path", "type")
+    build, arguments, required = _PATHS[kind]
+    spec = toml.table("path", allowed=("type", *arguments), required=required)
+    kwargs = {}
+    for key, value in spec.items():
+        if key == "type":
+            continue
+        try:
+            kwargs[arguments[key]] = _angle(key, value) if key.endswith("_deg") else value
+        except ValueError as exc:
+            raise toml.error(str(exc), "path", key) from None
+    try:
+        return build(**kwargs)
+    except (ValueError, TypeError) as exc:
+        raise toml.error(f"bad {kind} [path]: {exc}", "path", *_blamed(str(exc), arguments, spec)) from None
+
+
+def _blamed(message, arguments, spec):
+    """The file key whose builder argument `message` names first, as a 0- or 1-tuple."""
+    found = {key: re.search(rf"\b{arg}\b", message) for key, arg in arguments.items() if key in spec}
+    found = {key: match.start() for key, match in found.items() if match}
+    return (min(found, key=found.get),) if found else ()
+
+
+def _feed(toml):
+    """The :class:`~contoursim.feed.FeedSettings` of the ``[feed]`` table."""
+    spec = toml.table("feed", allowed=_FEED, required=("feed_mm_min",))
+    settings = {}
+    for key, value in spec.items():
+        argument, convert = _FEED[key]
+        try:
+            settings[argument] = convert(key, value)
+        except ValueError as exc:
+            raise toml.error(str(exc), "feed", key) from None
+    return FeedSettings(**settings)

@@ -1,0 +1,941 @@
+"""Reference path geometry: lines, helical arcs and spline pieces joined into a Path.
+
+Every path is three-dimensional inside (planar paths have z = 0) and remembers
+its nominal dimension ``dim`` (2 for paths in the XY plane, 3 otherwise). Each
+primitive is parameterised by its own arc length u in [0, length]; a
+:class:`Path` is an ordered, G0-continuous tuple of primitives parameterised by
+the total arc length s.
+
+Evaluation runs in compiled kernels over a flat encoding of the primitives
+(one kind code and one row of parameters each, see ``Path.kinds`` and
+``Path.rows``), which the exact contour error (:mod:`contoursim.contour`)
+reuses for its foot-point search.
+
+Row layout (``NCOL`` columns, unused entries zero):
+
+- ``LINE``:   start (0:3), unit direction (3:6), length (6)
+- ``ARC``:    centre (0:3), in-plane basis e1 (3:6), e2 (6:9), axis (9:12),
+  radius (12), start angle (13), signed sweep (14), rise per radian (15),
+  sqrt(radius^2 + rise^2) (16), length (17)
+- ``SPLINE``: cubic coefficients a, b, c, d of P(w) = a + b w + c w^2 + d w^3,
+  w in [0, 1] (0:12), cumulative arc length at w = 0, 1/16, ..., 1 (12:29)
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+from scipy.interpolate import CubicSpline
+
+from . import _validate
+from .exceptions import PathError
+
+__all__ = [
+    "Line", "HelicalArc", "SplinePiece", "Path",
+    "line", "arc", "circle", "tilted_circle", "helix", "iso230_4_circle", "polyline", "spline", "join",
+    "LINE", "ARC", "SPLINE", "NCOL",
+]
+
+LINE, ARC, SPLINE = 0, 1, 2
+NCOL = 29
+CONTINUITY_TOL = 1e-9  # [mm] gap allowed between consecutive primitives
+_TABLE = 16  # arc-length table intervals per spline piece
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+_GL_X = 0.5 * (_GL_X + 1.0)  # nodes on [0, 1]
+_GL_W = 0.5 * _GL_W
+
+
+# --------------------------------------------------------------------------- compiled kernels
+
+@njit(cache=True)
+def _spline_speed(row, w):
+    acc = 0.0
+    for i in range(3):
+        d = row[3 + i] + 2.0 * row[6 + i] * w + 3.0 * row[9 + i] * w * w
+        acc += d * d
+    return math.sqrt(acc)
+
+
+@njit(cache=True)
+def _spline_integral(row, w0, w1):
+    """Arc length between parameters w0 and w1 (8-point Gauss-Legendre)."""
+    h = w1 - w0
+    acc = 0.0
+    for k in range(_GL_X.size):
+        acc += _GL_W[k] * _spline_speed(row, w0 + h * _GL_X[k])
+    return acc * h
+
+
+@njit(cache=True)
+def _spline_u_of_w(row, w):
+    j = min(int(w * _TABLE), _TABLE - 1)
+    return row[12 + j] + _spline_integral(row, j / _TABLE, w)
+
+
+@njit(cache=True)
+def _spline_w_of_u(row, u):
+    """Invert the arc-length map: Newton inside the bracketing table interval, bisection as safeguard."""
+    if u <= 0.0:
+        return 0.0
+    if u >= row[12 + _TABLE]:
+        return 1.0
+    j = 0
+    while j < _TABLE - 1 and row[13 + j] <= u:
+        j += 1
+    lo = j / _TABLE
+    a, b = lo, (j + 1) / _TABLE
+    w = a + (b - a) * (u - row[12 + j]) / (row[13 + j] - row[12 + j])
+    for _ in range(60):
+        f = row[12 + j] + _spline_integral(row, lo, w) - u
+        if f > 0.0:
+            b = w
+        else:
+            a = w
+        wn = w - f / _spline_speed(row, w)
+        if not (a < wn < b):
+            wn = 0.5 * (a + b)
+        if abs(wn - w) <= 2e-15:
+            return wn
+        w = wn
+    return w
+
+
+@njit(cache=True)
+def _spline_table(coef):
+    """Row of a spline piece from its (12,) coefficients: appends the cumulative arc-length table."""
+    row = np.zeros(NCOL)
+    row[:12] = coef
+    for j in range(_TABLE):
+        row[13 + j] = row[12 + j] + _spline_integral(row, j / _TABLE, (j + 1) / _TABLE)
+    return row
+
+
+@njit(cache=True)
+def _eval_spline_w(row, w, out):
+    """Position, unit tangent and curvature vector dT/ds at spline parameter w into out (9,)."""
+    speed2 = dot12 = 0.0
+    for i in range(3):
+        out[i] = row[i] + w * (row[3 + i] + w * (row[6 + i] + w * row[9 + i]))
+        out[3 + i] = row[3 + i] + 2.0 * row[6 + i] * w + 3.0 * row[9 + i] * w * w  # dP/dw
+        out[6 + i] = 2.0 * row[6 + i] + 6.0 * row[9 + i] * w  # d2P/dw2
+        speed2 += out[3 + i] ** 2
+        dot12 += out[3 + i] * out[6 + i]
+    speed = math.sqrt(speed2)
+    for i in range(3):
+        out[3 + i] /= speed
+        out[6 + i] = (out[6 + i] - dot12 / speed * out[3 + i]) / speed2
+
+
+@njit(cache=True)
+def _eval_prim(kind, row, u, out):
+    """Position, unit tangent and curvature vector dT/ds at arc length u of one primitive into out (9,)."""
+    if kind == LINE:
+        for i in range(3):
+            out[i] = row[i] + u * row[3 + i]
+            out[3 + i] = row[3 + i]
+            out[6 + i] = 0.0
+    elif kind == ARC:
+        radius, theta0, sweep, rise, rho = row[12], row[13], row[14], row[15], row[16]
+        sgn = 1.0 if sweep >= 0.0 else -1.0
+        turned = u / rho
+        c = math.cos(theta0 + sgn * turned)
+        s = math.sin(theta0 + sgn * turned)
+        for i in range(3):
+            radial = c * row[3 + i] + s * row[6 + i]
+            across = -s * row[3 + i] + c * row[6 + i]
+            out[i] = row[i] + radius * radial + rise * turned * row[9 + i]
+            out[3 + i] = (sgn * radius * across + rise * row[9 + i]) / rho
+            out[6 + i] = -radius * radial / (rho * rho)
+    else:
+        _eval_spline_w(row, _spline_w_of_u(row, u), out)
+
+
+@njit(cache=True)
+def _primitive_at(breaks, s):
+    """Index of the primitive holding arc length s (the later one at a junction)."""
+    k = np.searchsorted(breaks, s, side="right") - 1
+    return min(max(k, 0), breaks.size - 2)
+
+
+@njit(cache=True)
+def _evaluate(kinds, rows, breaks, s):
+    out = np.empty((s.size, 9))
+    for m in range(s.size):
+        k = _primitive_at(breaks, s[m])
+        u = min(max(s[m] - breaks[k], 0.0), breaks[k + 1] - breaks[k])
+        _eval_prim(kinds[k], rows[k], u, out[m])
+    return out
+
+
+# --------------------------------------------------------------------------- primitives
+
+def _vector(name, value):
+    """A 2- or 3-vector as a float (3,) array (z = 0 for 2-vectors)."""
+    try:
+        v = _validate.finite_array(name, value, ndim=1)
+    except ValueError as exc:
+        raise PathError(str(exc)) from None
+    if v.size not in (2, 3):
+        raise PathError(f"{name} must have 2 or 3 coordinates, got {v.size}")
+    return np.append(v, 0.0) if v.size == 2 else v
+
+
+def _scalar(check, name, value):
+    try:
+        return check(name, value)
+    except ValueError as exc:
+        raise PathError(str(exc)) from None
+
+
+def _number(name, value):
+    """A finite float of any sign."""
+    try:
+        return float(_validate.finite_array(name, value, ndim=0))
+    except ValueError as exc:
+        raise PathError(str(exc)) from None
+
+
+def _unit(name, value):
+    v = _vector(name, value)
+    n = np.linalg.norm(v)
+    if n < 1e-12:
+        raise PathError(f"{name} must be a non-zero vector")
+    return v / n
+
+
+def _frozen(obj, **arrays):
+    for name, value in arrays.items():
+        value = np.array(value, dtype=float)
+        value.flags.writeable = False
+        object.__setattr__(obj, name, value)
+
+
+class _Primitive:
+    """Shared behaviour: evaluation through the compiled kernel on this primitive's row."""
+
+    def evaluate(self, u):
+        """Position, unit tangent and curvature vector at arc lengths `u` [mm] of this primitive.
+
+        Parameters
+        ----------
+        u : array_like, shape (M,)
+            Arc length from the primitive's start [mm], clamped to [0, length].
+
+        Returns
+        -------
+        position, tangent, curvature_vector : ndarray, shape (M, 3)
+            Point [mm], unit tangent [-] and dT/du [1/mm].
+        """
+        u = _validate.finite_array("u", u, ndim=1)
+        out = _evaluate(np.array([self.kind]), self.row[None, :], np.array([0.0, self.length]), u)
+        return out[:, :3], out[:, 3:6], out[:, 6:9]
+
+    @property
+    def start(self):
+        """First point [mm], shape (3,)."""
+        return self.evaluate([0.0])[0][0]
+
+    @property
+    def end(self):
+        """Last point [mm], shape (3,)."""
+        return self.evaluate([self.length])[0][0]
+
+
+@dataclass(frozen=True, eq=False)
+class Line(_Primitive):
+    """Straight segment.
+
+    Parameters
+    ----------
+    p0, p1 : array_like, shape (2,) or (3,)
+        Start and end point [mm].
+    role : str
+        Tag such as "run-in", "test", "run-out", "rapid" or "path".
+    """
+
+    p0: np.ndarray
+    p1: np.ndarray
+    role: str = "path"
+    kind = LINE
+
+    def __post_init__(self):
+        p0, p1 = _vector("p0", self.p0), _vector("p1", self.p1)
+        length = float(np.linalg.norm(p1 - p0))
+        if length < CONTINUITY_TOL:
+            raise PathError(f"line from {p0.tolist()} to {p1.tolist()} has zero length")
+        _frozen(self, p0=p0, p1=p1)
+        row = np.zeros(NCOL)
+        row[0:3], row[3:6], row[6] = p0, (p1 - p0) / length, length
+        _frozen(self, row=row)
+        object.__setattr__(self, "length", length)
+
+    @property
+    def in_xy_plane(self):
+        """True if the segment lies in z = 0."""
+        return abs(self.p0[2]) < 1e-12 and abs(self.p1[2]) < 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class HelicalArc(_Primitive):
+    """Circular arc or helix: P(θ) = c + R (cos θ e1 + sin θ e2) + rise |θ - θ0| a, a = e1 x e2.
+
+    Parameters
+    ----------
+    center : array_like, shape (3,)
+        Centre at the start's axial level [mm].
+    e1, e2 : array_like, shape (3,)
+        Orthonormal in-plane basis; the axis (plane normal) is e1 x e2.
+    radius : float
+        Radius [mm].
+    start_angle : float
+        θ0, measured from e1 towards e2 [rad].
+    sweep : float
+        Signed angle travelled, counter-clockwise about the axis positive [rad]; may exceed 2π.
+    rise : float
+        Travel along the axis per radian turned [mm/rad]; 0 for a plain arc.
+    role : str
+        Tag, see :class:`Line`.
+    """
+
+    center: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    radius: float
+    start_angle: float
+    sweep: float
+    rise: float = 0.0
+    role: str = "path"
+    kind = ARC
+
+    def __post_init__(self):
+        c, e1, e2 = _vector("center", self.center), _vector("e1", self.e1), _vector("e2", self.e2)
+        if abs(e1 @ e1 - 1) > 1e-9 or abs(e2 @ e2 - 1) > 1e-9 or abs(e1 @ e2) > 1e-9:
+            raise PathError("e1 and e2 must be orthonormal")
+        radius = _scalar(_validate.positive, "radius", self.radius)
+        theta0 = _number("start_angle", self.start_angle)
+        sweep = _number("sweep", self.sweep)
+        if abs(sweep) <= 1e-12:
+            raise PathError(f"arc sweep must be non-zero, got {self.sweep!r}")
+        rise = _number("rise", self.rise)
+        rho = math.hypot(radius, rise)
+        length = abs(sweep) * rho
+        _frozen(self, center=c, e1=e1, e2=e2)
+        for name, value in dict(radius=radius, start_angle=theta0, sweep=sweep, rise=rise, length=length).items():
+            object.__setattr__(self, name, value)
+        row = np.zeros(NCOL)
+        row[0:3], row[3:6], row[6:9], row[9:12] = c, e1, e2, np.cross(e1, e2)
+        row[12:18] = radius, theta0, sweep, rise, rho, length
+        _frozen(self, row=row)
+
+    @property
+    def axis(self):
+        """Unit axis e1 x e2, shape (3,)."""
+        return self.row[9:12]
+
+    @property
+    def in_xy_plane(self):
+        """True for a plain arc in z = 0 about the z axis."""
+        return self.rise == 0 and abs(self.center[2]) < 1e-12 and np.linalg.norm(self.axis[:2]) < 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class SplinePiece(_Primitive):
+    """One cubic piece P(w) = a + b w + c w^2 + d w^3, w in [0, 1], of a C2 spline.
+
+    Parameters
+    ----------
+    coefficients : array_like, shape (4, 3)
+        Rows a, b, c, d [mm].
+    role : str
+        Tag, see :class:`Line`.
+
+    Notes
+    -----
+    The arc length is not linear in w: a table of cumulative arc length at 17
+    values of w (8-point Gauss-Legendre per interval) brackets the inverse
+    map, which Newton's method then solves to machine precision.
+    """
+
+    coefficients: np.ndarray
+    role: str = "path"
+    kind = SPLINE
+
+    def __post_init__(self):
+        try:
+            coef = _validate.finite_array("coefficients", self.coefficients, shape=(4, 3))
+        except ValueError as exc:
+            raise PathError(str(exc)) from None
+        w = np.linspace(0.0, 1.0, 65)[:, None]
+        speed = np.linalg.norm(coef[1] + 2 * coef[2] * w + 3 * coef[3] * w**2, axis=1)
+        chord = np.linalg.norm(coef[1:].sum(axis=0))
+        if speed.min() <= 1e-9 * max(chord, 1e-300):
+            raise PathError("spline piece has a cusp or zero length (duplicate control points?)")
+        row = _spline_table(coef.ravel())
+        _frozen(self, coefficients=coef, row=row)
+        object.__setattr__(self, "length", float(row[12 + _TABLE]))
+
+    @property
+    def in_xy_plane(self):
+        """True if the piece lies in z = 0."""
+        return bool(np.all(np.abs(self.coefficients[:, 2]) < 1e-12))
+
+
+_PRIMITIVES = (Line, HelicalArc, SplinePiece)
+
+
+# --------------------------------------------------------------------------- path
+
+@dataclass(frozen=True, eq=False)
+class Path:
+    """An ordered, G0-continuous sequence of primitives, parameterised by arc length s [mm].
+
+    Parameters
+    ----------
+    primitives : sequence of Line, HelicalArc, SplinePiece
+        Consecutive ends and starts must coincide within 1e-9 mm.
+    dim : {2, 3}, optional
+        Nominal dimension; 2 by default when every primitive lies in the XY
+        plane (z = 0), else 3.
+
+    Attributes
+    ----------
+    length : float
+        Total arc length [mm].
+    breaks : ndarray, shape (K + 1,)
+        Arc length at the start of each primitive, then the total [mm].
+    kinds : ndarray of int, shape (K,)
+        ``LINE``, ``ARC`` or ``SPLINE`` per primitive.
+    rows : ndarray, shape (K, NCOL)
+        Flat parameters per primitive (layout in the module docstring).
+    roles : tuple of str
+        The primitives' roles.
+    closed : bool
+        True if the path ends where it starts.
+    plane_normal : ndarray, shape (3,), or None
+        Unit normal of the path's plane: +z for XY paths, the first arc's axis
+        for paths with arcs in one plane, else the plane's normal with its
+        first non-zero component among (z, y, x) positive. None for paths
+        that are not planar (helices, 3-D curves) or are straight lines in 3-D.
+    """
+
+    primitives: tuple
+    dim: int = None
+    length: float = field(init=False)
+
+    def __post_init__(self):
+        prims = tuple(self.primitives)
+        if not prims:
+            raise PathError("a path needs at least one primitive")
+        for k, p in enumerate(prims):
+            if not isinstance(p, _PRIMITIVES):
+                raise PathError(f"segment {k} is a {type(p).__name__}, not a Line, HelicalArc or SplinePiece")
+        for k in range(1, len(prims)):
+            gap = float(np.linalg.norm(prims[k].start - prims[k - 1].end))
+            if gap > CONTINUITY_TOL:
+                raise PathError(f"segment {k} starts {gap:.3g} mm away from the end of segment {k - 1}")
+        planar_xy = all(p.in_xy_plane for p in prims)
+        dim = 2 if (self.dim is None and planar_xy) else 3 if self.dim is None else self.dim
+        if dim not in (2, 3) or (dim == 2 and not planar_xy):
+            raise PathError(f"dim must be 3, or 2 for a path in the XY plane, got {self.dim!r}")
+        kinds = np.array([p.kind for p in prims], dtype=np.int64)
+        rows = np.array([p.row for p in prims])
+        breaks = np.concatenate([[0.0], np.cumsum([p.length for p in prims])])
+        for name, value in dict(kinds=kinds, rows=rows, breaks=breaks).items():
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "primitives", prims)
+        object.__setattr__(self, "dim", dim)
+        object.__setattr__(self, "length", float(breaks[-1]))
+        object.__setattr__(self, "roles", tuple(p.role for p in prims))
+        object.__setattr__(self, "closed", bool(np.linalg.norm(prims[-1].end - prims[0].start) <= CONTINUITY_TOL))
+        object.__setattr__(self, "plane_normal", np.array([0.0, 0.0, 1.0]) if planar_xy else self._plane())
+
+    def _plane(self):
+        u = np.linspace(0.0, 1.0, 9)
+        pts = np.concatenate([p.evaluate(u * p.length)[0] for p in self.primitives])
+        pts = pts - pts.mean(axis=0)
+        _, sv, vt = np.linalg.svd(pts, full_matrices=False)
+        extent = max(sv[0], 1e-300)
+        normal = vt[2]
+        if sv[1] <= 1e-12 * extent or np.abs(pts @ normal).max() > 1e-9 * max(1.0, np.abs(pts).max()):
+            return None
+        arcs = [p.axis for p in self.primitives if isinstance(p, HelicalArc)]
+        if arcs:
+            return normal * np.sign(normal @ arcs[0])
+        first = next(normal[i] for i in (2, 1, 0) if abs(normal[i]) > 1e-12)
+        return normal * np.sign(first)
+
+    def __add__(self, other):
+        return join(self, other)
+
+    def __len__(self):
+        return len(self.primitives)
+
+    @property
+    def start(self):
+        """First point [mm], shape (3,)."""
+        return self.primitives[0].start
+
+    @property
+    def end(self):
+        """Last point [mm], shape (3,)."""
+        return self.primitives[-1].end
+
+    def derivatives(self, s):
+        """Position, unit tangent and curvature vector at arc lengths `s`.
+
+        Parameters
+        ----------
+        s : array_like, shape (M,)
+            Arc length [mm], clamped to [0, length].
+
+        Returns
+        -------
+        position : ndarray, shape (M, 3)
+            Point on the path [mm].
+        tangent : ndarray, shape (M, 3)
+            Unit tangent dP/ds [-].
+        curvature_vector : ndarray, shape (M, 3)
+            dT/ds = kappa N [1/mm]; zero on lines.
+        """
+        s = _validate.finite_array("s", s, ndim=1)
+        out = _evaluate(self.kinds, self.rows, self.breaks, s)
+        return out[:, :3], out[:, 3:6], out[:, 6:9]
+
+    def evaluate(self, s):
+        """Position, unit tangent and curvature at arc lengths `s`.
+
+        Parameters
+        ----------
+        s : array_like, shape (M,)
+            Arc length [mm], clamped to [0, length].
+
+        Returns
+        -------
+        position : ndarray, shape (M, 3)
+            Point on the path [mm].
+        tangent : ndarray, shape (M, 3)
+            Unit tangent [-].
+        curvature : ndarray, shape (M,)
+            Curvature [1/mm].
+        """
+        pos, tan, kvec = self.derivatives(s)
+        return pos, tan, np.linalg.norm(kvec, axis=1)
+
+    def segment_index(self, s):
+        """Index of the primitive holding each arc length (the later one at a junction).
+
+        Parameters
+        ----------
+        s : array_like, shape (M,)
+            Arc length [mm].
+
+        Returns
+        -------
+        ndarray of int, shape (M,)
+        """
+        s = _validate.finite_array("s", s, ndim=1)
+        return np.clip(np.searchsorted(self.breaks, s, side="right") - 1, 0, len(self.primitives) - 1)
+
+    def corner_angles(self):
+        """Angle between the end tangent of each primitive and the start tangent of the next [rad].
+
+        Returns
+        -------
+        ndarray, shape (K - 1,)
+        """
+        k = np.arange(1, len(self.primitives))
+        out = _evaluate(self.kinds, self.rows, self.breaks, self.breaks[1:-1])
+        ends = _evaluate(self.kinds[k - 1], self.rows[k - 1], np.concatenate([[0.0], self.breaks[k]]), self.breaks[k])
+        cos = np.clip(np.sum(out[:, 3:6] * ends[:, 3:6], axis=1), -1.0, 1.0)
+        return np.arccos(cos)
+
+    def max_curvature(self):
+        """Largest curvature of each primitive [1/mm] (sampled at 65 points on spline pieces).
+
+        Returns
+        -------
+        ndarray, shape (K,)
+        """
+        result = np.zeros(len(self.primitives))
+        for k, p in enumerate(self.primitives):
+            if isinstance(p, HelicalArc):
+                result[k] = p.radius / (p.radius**2 + p.rise**2)
+            elif isinstance(p, SplinePiece):
+                result[k] = np.linalg.norm(p.evaluate(np.linspace(0.0, p.length, 65))[2], axis=1).max()
+        return result
+
+
+def join(*paths):
+    """Concatenate paths end to start.
+
+    Parameters
+    ----------
+    *paths : Path
+        Each must start where the previous one ends (within 1e-9 mm).
+
+    Returns
+    -------
+    Path
+        Dimension 2 if every piece lies in the XY plane, else 3.
+    """
+    prims = []
+    for k, p in enumerate(paths):
+        if not isinstance(p, Path):
+            raise PathError(f"argument {k} of join is a {type(p).__name__}, not a Path")
+        prims.extend(p.primitives)
+    return Path(tuple(prims))
+
+
+# --------------------------------------------------------------------------- builders
+
+def _direction(direction):
+    if direction not in ("ccw", "cw"):
+        raise PathError(f"direction must be 'ccw' or 'cw', got {direction!r}")
+    return 1.0 if direction == "ccw" else -1.0
+
+
+def _plane_basis(normal):
+    """In-plane basis (e1, e2) for a unit normal: e1 is the x axis projected onto the plane (y if normal ~ x)."""
+    ref = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = ref - (ref @ normal) * normal
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(normal, e1)
+
+
+def _arc_from_point(center, start, axis, sweep, rise=0.0, role="path"):
+    """Arc (or helix) about `axis` through `start`, turning `sweep` [rad] about the axis line through `center`."""
+    radial = start - center
+    radial = radial - (radial @ axis) * axis
+    radius = np.linalg.norm(radial)
+    if radius < CONTINUITY_TOL:
+        raise PathError("arc start point lies on the arc's axis (zero radius)")
+    e1 = radial / radius
+    return HelicalArc(start - radial, e1, np.cross(axis, e1), radius, 0.0, sweep, rise, role)
+
+
+def line(start, end, role="path"):
+    """A straight path.
+
+    Parameters
+    ----------
+    start, end : array_like, shape (2,) or (3,)
+        End points [mm].
+    role : str
+        Role tag of the segment.
+
+    Returns
+    -------
+    Path
+    """
+    return Path((Line(_vector("start", start), _vector("end", end), role),))
+
+
+def arc(center, radius, start_angle, end_angle=None, *, sweep=None, direction="ccw", normal=(0, 0, 1), role="path"):
+    """A circular arc.
+
+    Angles are measured in the plane normal to `normal`, from the x axis
+    projected onto that plane (from the y axis if `normal` is close to x).
+
+    Parameters
+    ----------
+    center : array_like, shape (2,) or (3,)
+        Centre [mm].
+    radius : float
+        Radius [mm].
+    start_angle : float
+        Start angle [rad].
+    end_angle : float, optional
+        End angle [rad]; the arc runs from start to end in `direction`
+        (a full turn when they are equal). Give this or `sweep`.
+    sweep : float, optional
+        Signed angle travelled about `normal`, counter-clockwise positive [rad].
+    direction : {"ccw", "cw"}
+        Turning direction about `normal`, used with `end_angle`.
+    normal : array_like, shape (3,)
+        Plane normal (arc axis).
+    role : str
+        Role tag.
+
+    Returns
+    -------
+    Path
+    """
+    c, n = _vector("center", center), _unit("normal", normal)
+    radius = _scalar(_validate.positive, "radius", radius)
+    start_angle = _number("start_angle", start_angle)
+    if (end_angle is None) == (sweep is None):
+        raise PathError("give exactly one of end_angle and sweep")
+    if sweep is None:
+        sign = _direction(direction)
+        end_angle = _number("end_angle", end_angle)
+        sweep = (sign * (end_angle - start_angle)) % (2 * np.pi)
+        sweep = sign * (sweep if sweep > 1e-12 else 2 * np.pi)
+    else:
+        sweep = _number("sweep", sweep)
+    e1, e2 = _plane_basis(n)
+    return Path((HelicalArc(c, e1, e2, radius, start_angle, sweep, 0.0, role),))
+
+
+def circle(center, radius, direction="ccw", normal=(0, 0, 1), start_angle=0.0, role="path"):
+    """A full circle starting and ending at `start_angle`.
+
+    Parameters
+    ----------
+    center : array_like, shape (2,) or (3,)
+        Centre [mm].
+    radius : float
+        Radius [mm].
+    direction : {"ccw", "cw"}
+        Turning direction about `normal`.
+    normal : array_like, shape (3,)
+        Plane normal; (0, 0, 1) gives a circle in the XY plane.
+    start_angle : float
+        Start angle [rad], measured as in :func:`arc`.
+    role : str
+        Role tag.
+
+    Returns
+    -------
+    Path
+    """
+    return arc(center, radius, start_angle, sweep=2 * np.pi * _direction(direction), normal=normal, role=role)
+
+
+def tilted_circle(center, radius, normal, direction="ccw", start_angle=0.0):
+    """A full circle in the plane normal to `normal` (see :func:`circle`).
+
+    Parameters
+    ----------
+    center : array_like, shape (3,)
+        Centre [mm].
+    radius : float
+        Radius [mm].
+    normal : array_like, shape (3,)
+        Plane normal.
+    direction : {"ccw", "cw"}
+        Turning direction about `normal`.
+    start_angle : float
+        Start angle [rad].
+
+    Returns
+    -------
+    Path
+    """
+    return circle(center, radius, direction, normal, start_angle)
+
+
+def helix(center, radius, pitch, turns, direction="ccw", normal=(0, 0, 1), start_angle=0.0, role="path"):
+    """A helix rising along `normal`.
+
+    Parameters
+    ----------
+    center : array_like, shape (3,)
+        Centre of the first turn [mm] (the helix starts at this axial level).
+    radius : float
+        Radius [mm].
+    pitch : float
+        Axial rise per turn [mm]; negative descends.
+    turns : float
+        Number of turns (> 0).
+    direction : {"ccw", "cw"}
+        Turning direction about `normal`.
+    normal : array_like, shape (3,)
+        Helix axis.
+    start_angle : float
+        Start angle [rad], measured as in :func:`arc`.
+    role : str
+        Role tag.
+
+    Returns
+    -------
+    Path
+    """
+    c, n = _vector("center", center), _unit("normal", normal)
+    radius = _scalar(_validate.positive, "radius", radius)
+    turns = _scalar(_validate.positive, "turns", turns)
+    pitch = _number("pitch", pitch)
+    start_angle = _number("start_angle", start_angle)
+    e1, e2 = _plane_basis(n)
+    sweep = 2 * np.pi * turns * _direction(direction)
+    return Path((HelicalArc(c, e1, e2, radius, start_angle, sweep, pitch / (2 * np.pi), role),))
+
+
+def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi / 2, run_radius=None, start_angle=0.0):
+    """ISO 230-4 circular test: tangential run-in arc, the full test circle, tangential run-out arc.
+
+    The run-in and run-out are arcs of radius `run_radius` inside the test
+    circle, internally tangent to it at the test's start point and turning in
+    the same direction, so the tangent is continuous at both joins (the
+    curvature steps from 1/run_radius to 1/radius). The run-in turns
+    `run_angle` onto the circle; the full 360° circle follows (role "test");
+    the run-out turns `run_angle` off it. With the defaults (start at angle 0,
+    run radius R/2, 90°) a CCW test about (0, 0) starts at (R/2, -R/2), joins
+    the circle at (R, 0) and ends at (R/2, R/2).
+
+    Parameters
+    ----------
+    radius : float
+        Test circle radius R [mm].
+    center : array_like, shape (2,)
+        Test circle centre [mm].
+    direction : {"ccw", "cw"}
+        Turning direction.
+    run_angle : float
+        Angle turned on the run-in and run-out arcs [rad], in (0, 2π].
+    run_radius : float, optional
+        Radius of the run-in and run-out arcs [mm], below R; R/2 by default.
+    start_angle : float
+        Angle of the point where the test circle starts and ends [rad].
+
+    Returns
+    -------
+    Path
+        Three primitives with roles "run-in", "test", "run-out".
+    """
+    c = _vector("center", center)
+    radius = _scalar(_validate.positive, "radius", radius)
+    run_radius = radius / 2 if run_radius is None else _scalar(_validate.positive, "run_radius", run_radius)
+    if run_radius >= radius:
+        raise PathError(f"run_radius ({run_radius} mm) must be below the test radius ({radius} mm)")
+    run_angle = _scalar(_validate.positive, "run_angle", run_angle)
+    if run_angle > 2 * np.pi:
+        raise PathError(f"run_angle must be at most 2π rad, got {run_angle}")
+    start_angle = _number("start_angle", start_angle)
+    sign = _direction(direction)
+    e1, e2 = np.eye(3)[0], np.eye(3)[1]
+    c_run = c + (radius - run_radius) * np.array([np.cos(start_angle), np.sin(start_angle), 0.0])
+    return Path((
+        HelicalArc(c_run, e1, e2, run_radius, start_angle - sign * run_angle, sign * run_angle, 0.0, "run-in"),
+        HelicalArc(c, e1, e2, radius, start_angle, sign * 2 * np.pi, 0.0, "test"),
+        HelicalArc(c_run, e1, e2, run_radius, start_angle, sign * run_angle, 0.0, "run-out"),
+    ))
+
+
+def _point_rows(name, points, minimum):
+    try:
+        pts = _validate.finite_array(name, points, ndim=2)
+    except ValueError as exc:
+        raise PathError(str(exc)) from None
+    if pts.shape[1] not in (2, 3) or pts.shape[0] < minimum:
+        raise PathError(f"{name} must have shape (n, 2) or (n, 3) with n >= {minimum}, got {pts.shape}")
+    if pts.shape[1] == 2:
+        pts = np.column_stack([pts, np.zeros(len(pts))])
+    gaps = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    if np.any(gaps < CONTINUITY_TOL):
+        i = int(np.argmax(gaps < CONTINUITY_TOL))
+        raise PathError(f"{name}[{i}] and {name}[{i + 1}] coincide")
+    return pts, gaps
+
+
+def polyline(points, blend_radius=0.0, role="path"):
+    """Straight segments through `points`, corners rounded by tangent fillet arcs.
+
+    Parameters
+    ----------
+    points : array_like, shape (n, 2) or (n, 3)
+        Corner points [mm], n >= 2. Repeat the first point last for a closed
+        contour (start it mid-edge to have no corner at the start).
+    blend_radius : float
+        Fillet radius [mm]; 0 keeps sharp corners.
+    role : str
+        Role tag of every segment.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    PathError
+        If points coincide, the path reverses at a corner, or a fillet does
+        not fit: the tangent lengths r tan(φ/2) of a segment's two corners
+        exceed its length.
+    """
+    pts, lengths = _point_rows("points", points, 2)
+    r = _scalar(_validate.nonnegative, "blend_radius", blend_radius)
+    d = np.diff(pts, axis=0) / lengths[:, None]
+    turn = np.arccos(np.clip(np.sum(d[:-1] * d[1:], axis=1), -1.0, 1.0))
+    if np.any(turn > np.pi - 1e-9):
+        i = int(np.argmax(turn > np.pi - 1e-9)) + 1
+        raise PathError(f"polyline reverses direction at points[{i}]: no corner blend is possible")
+    blend = (turn > 1e-9) & (r > 0)
+    back = np.where(blend, r * np.tan(turn / 2), 0.0)
+    need = np.concatenate([[0.0], back]) + np.concatenate([back, [0.0]])
+    if np.any(need > lengths * (1 + 1e-12)):
+        i = int(np.argmax(need > lengths * (1 + 1e-12)))
+        raise PathError(
+            f"blend_radius {r} mm does not fit segment {i} (points[{i}] to points[{i + 1}], "
+            f"{lengths[i]:.6g} mm long): its corner blends need {need[i]:.6g} mm"
+        )
+    planar_xy = bool(np.all(pts[:, 2] == 0.0))
+    prims, here = [], pts[0]
+    for i in range(len(d)):
+        stop = pts[i + 1] - (back[i] if i < len(back) else 0.0) * d[i]
+        if np.linalg.norm(stop - here) > CONTINUITY_TOL:
+            prims.append(Line(here, stop, role))
+        here = stop
+        if i < len(back) and blend[i]:
+            inward = d[i + 1] - (d[i + 1] @ d[i]) * d[i]
+            axis = np.cross(d[i], d[i + 1])
+            axis /= np.linalg.norm(axis)
+            sweep = turn[i]
+            if planar_xy and axis[2] < 0:
+                axis, sweep = -axis, -sweep
+            center = here + r * inward / np.linalg.norm(inward)
+            prims.append(_arc_from_point(center, here, axis, sweep, 0.0, role))
+            here = pts[i + 1] + back[i] * d[i + 1]
+    return Path(tuple(prims))
+
+
+def spline(points, closed=False, role="path"):
+    """C2 cubic spline through `points`, chord-length parameterised.
+
+    Parameters
+    ----------
+    points : array_like, shape (n, 2) or (n, 3)
+        Points the curve passes through [mm]; n >= 2 (open) or n >= 3 (closed).
+    closed : bool
+        Periodic spline back to the first point (C2 there too). A repeated
+        first point at the end is accepted and dropped.
+    role : str
+        Role tag of every piece.
+
+    Returns
+    -------
+    Path
+        One :class:`SplinePiece` per interval.
+    """
+    pts, _ = _point_rows("points", points, 3 if closed else 2)
+    if closed:
+        if np.linalg.norm(pts[-1] - pts[0]) > CONTINUITY_TOL:
+            pts = np.vstack([pts, pts[:1]])
+        pts[-1] = pts[0]
+        if len(pts) < 4:
+            raise PathError("a closed spline needs at least 3 distinct points")
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    cs = CubicSpline(chord, pts, bc_type="periodic" if closed else "not-a-knot")
+    h = np.diff(chord)
+    prims = []
+    for i in range(len(h)):
+        c3, c2, c1, c0 = cs.c[:, i, :]
+        coef = np.array([c0, c1 * h[i], c2 * h[i] ** 2, c3 * h[i] ** 3])
+        coef[0] = pts[i]
+        try:
+            prims.append(SplinePiece(coef, role))
+        except PathError as exc:
+            raise PathError(f"spline piece {i} (points[{i}] to points[{i + 1}]): {exc}") from None
+    # snap each piece's end onto the next start (rounding of the polynomial sum)
+    return Path(tuple(_snap(prims)))
+
+
+def _snap(prims):
+    out = [prims[0]]
+    for nxt in prims[1:]:
+        prev = out[-1]
+        coef = np.array(prev.coefficients)
+        coef[3] += nxt.coefficients[0] - coef.sum(axis=0)
+        out[-1] = SplinePiece(coef, prev.role)
+        out.append(nxt)
+    return out

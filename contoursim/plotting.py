@@ -1,0 +1,162 @@
+"""Plots of a simulation result: magnified path error, ballbar polar plot, errors over time.
+
+Every function draws on a Matplotlib ``Axes`` it is given (or a new figure)
+and returns that ``Axes``, like :mod:`control.ctrlplot`. The magnification
+factor of an exaggerated plot is always written on the plot.
+"""
+
+import numpy as np
+
+__all__ = ["magnification_for", "plot_path_error", "plot_polar_deviation", "plot_errors_over_time", "save_figures"]
+
+
+def _axes(ax, **subplot):
+    if ax is not None:
+        return ax
+    import matplotlib.pyplot as plt
+
+    return plt.figure(figsize=(6.4, 6.0)).add_subplot(**subplot)
+
+
+def magnification_for(size, error, fraction=0.08):
+    """A round magnification that draws the largest error as `fraction` of `size`.
+
+    Parameters
+    ----------
+    size : float
+        Extent of the path [mm].
+    error : float
+        Largest error to show [mm].
+    fraction : float
+        Share of `size` the magnified largest error should take.
+
+    Returns
+    -------
+    float
+        1, 2 or 5 times a power of ten; 1 when `error` is zero.
+
+    Examples
+    --------
+    >>> magnification_for(100.0, 0.01)      # 0.01 mm drawn as ~8 mm
+    500.0
+    """
+    if error <= 0:
+        return 1.0
+    raw = fraction * size / error
+    decade = 10.0 ** np.floor(np.log10(raw))
+    return float(max(m for m in (1.0, 2.0, 5.0) if m * decade <= raw) * decade)
+
+
+def plot_path_error(result, ax=None, magnification=None):
+    """Reference path and the actual path with its contour error magnified.
+
+    The magnified path is ``foot + k·(actual − foot)``: each actual point is
+    moved away from its nearest path point by `k` times its contour error.
+
+    Parameters
+    ----------
+    result : contoursim.simulate.SimResult
+    ax : matplotlib.axes.Axes, optional
+    magnification : float, optional
+        Factor k [-]; chosen by :func:`magnification_for` when omitted.
+    """
+    ax = _axes(ax)
+    ref = result.trajectory.position
+    foot = result.contour.foot
+    size = float(np.ptp(ref[:, :2], axis=0).max())
+    k = magnification or magnification_for(size, float(result.contour.magnitude.max()))
+    shown = foot + k * (result.tool_position - foot)
+    ax.plot(ref[:, 0], ref[:, 1], color="0.6", lw=1.0, label="reference")
+    ax.plot(shown[:, 0], shown[:, 1], color="C3", lw=1.0, label=f"actual, contour error ×{k:g}")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(f"Contour error magnified ×{k:g} (max {1e3 * result.contour.magnitude.max():.2f} µm)")
+    ax.legend(loc="upper right", fontsize="small")
+    return ax
+
+
+def plot_polar_deviation(result, center, radius, ax=None):
+    """Ballbar-style polar plot of the radial deviation over the test circle.
+
+    Only the samples of the test proper (``trajectory.measuring``) are shown.
+    The radial axis is the deviation |p − c| − R [µm] with its zero on the
+    dashed circle, as a ballbar's software draws it.
+
+    Parameters
+    ----------
+    result : contoursim.simulate.SimResult
+    center : array_like, shape (2,)
+        Nominal circle centre [mm].
+    radius : float
+        Nominal radius R [mm].
+    ax : matplotlib.axes.Axes with polar projection, optional
+    """
+    ax = _axes(ax, projection="polar")
+    keep = result.trajectory.measuring
+    rel = result.tool_position[keep, :2] - np.asarray(center, float)
+    theta = np.arctan2(rel[:, 1], rel[:, 0])
+    dev = 1e3 * (np.hypot(rel[:, 0], rel[:, 1]) - radius)
+    span = max(float(np.abs(dev).max()), 1e-3)
+    ax.plot(theta, dev, color="C3", lw=1.0)
+    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.8)
+    ax.set_rorigin(-2.5 * span)
+    ax.set_ylim(-1.2 * span, 1.2 * span)
+    ax.set_title(
+        f"Radial deviation from R = {radius:g} mm [µm]\n"
+        f"min {dev.min():.2f} µm, max {dev.max():.2f} µm (dashed: zero)",
+        fontsize="medium",
+    )
+    return ax
+
+
+def plot_errors_over_time(result, ax=None):
+    """Tracking error |e| and contour error ε over time [µm]."""
+    ax = _axes(ax)
+    t = result.trajectory.t
+    ax.plot(t, 1e3 * np.linalg.norm(result.tracking_error, axis=1), label="tracking error |e|")
+    ax.plot(t, 1e3 * result.contour.magnitude, label="contour error ε")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("error [µm]")
+    ax.set_yscale("symlog", linthresh=0.1)
+    ax.set_title("Tracking vs contour error")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
+    return ax
+
+
+def save_figures(result, out_dir, name, circle=None):
+    """Write the standard plots of `result` as PNG files into `out_dir`.
+
+    Parameters
+    ----------
+    result : contoursim.simulate.SimResult
+    out_dir : pathlib.Path
+    name : str
+        File name stem.
+    circle : tuple (center, radius), optional
+        When given, the polar radial-deviation plot is drawn too.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    drawings = [("path", plot_path_error, {}), ("errors", plot_errors_over_time, {})]
+    if circle is not None:
+        drawings.append(("polar", plot_polar_deviation, dict(center=circle[0], radius=circle[1])))
+    written = []
+    for kind, draw, kwargs in drawings:
+        fig = plt.figure(figsize=(6.4, 6.0) if kind != "errors" else (8.0, 4.0))
+        draw(result, ax=fig.add_subplot(projection="polar" if kind == "polar" else None), **kwargs)
+        fig.tight_layout()
+        file = out_dir / f"{name}_{kind}.png"
+        fig.savefig(file, dpi=110)
+        plt.close(fig)
+        written.append(file)
+    return written

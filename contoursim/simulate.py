@@ -1,0 +1,137 @@
+"""A machine follows a path: servo loops, geometric errors, tracking and contour error.
+
+The data flow of DESIGN.md, as one pure function::
+
+    trajectory ─▶ axis commands (ideal inverse kinematics) ─▶ strategies (pre-correction)
+        ─▶ servo kernel ─▶ axis positions ─▶ multibody chain ─▶ tool tip in workpiece
+        coordinates ─▶ tracking error, exact contour error
+"""
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+
+from . import _validate, kernel
+from .contour import exact_contour_error
+from .io import Trace, write_trace
+from .machine import CARTESIAN, Machine
+
+__all__ = ["SimResult", "simulate"]
+
+@dataclass(frozen=True)
+class SimResult:
+    """Everything a simulation produced, time first.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The tool-tip reference.
+    machine : Machine
+    axis_command : ndarray, shape (N, n_axes)
+        Position commands sent to the servo loops (after pre-correcting
+        strategies) [mm].
+    servo : contoursim.kernel.ServoResponse
+        Axis positions, velocities, currents.
+    tool_position : ndarray, shape (N, d)
+        Actual tool tip in workpiece coordinates [mm].
+    contour : contoursim.contour.ContourError
+        Exact contour error of `tool_position` w.r.t. the reference path.
+    strategies : tuple
+        The compensation strategies that were applied.
+    """
+
+    trajectory: object
+    machine: Machine
+    axis_command: np.ndarray
+    servo: object
+    tool_position: np.ndarray
+    contour: object
+    strategies: tuple = field(default=())
+
+    @property
+    def tracking_error(self):
+        """Actual minus reference tool position at the same instant [mm], shape (N, d)."""
+        return self.tool_position - self.trajectory.position
+
+    def summary(self, measuring_only=True):
+        """Max and RMS of tracking and contour error [µm].
+
+        Parameters
+        ----------
+        measuring_only : bool
+            Restrict to the test proper (``trajectory.measuring``), e.g. the
+            full circle of an ISO 230-4 test without its run-in and run-out.
+
+        Returns
+        -------
+        dict
+            ``tracking_max_um``, ``tracking_rms_um``, ``contour_max_um``,
+            ``contour_rms_um``.
+        """
+        keep = self.trajectory.measuring if measuring_only else slice(None)
+        e = 1e3 * np.linalg.norm(self.tracking_error[keep], axis=1)
+        c = 1e3 * self.contour.magnitude[keep]
+        rms = lambda x: float(np.sqrt(np.mean(x**2)))  # noqa: E731
+        return dict(tracking_max_um=float(e.max()), tracking_rms_um=rms(e),
+                    contour_max_um=float(c.max()), contour_rms_um=rms(c))
+
+    def to_trace(self, metadata=None):
+        """The result in the measured-trace format: reference vs actual tool position."""
+        axes = CARTESIAN[: self.trajectory.dim]
+        return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
+
+    def save_csv(self, file, metadata=None, overwrite=False):
+        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm]."""
+        extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
+        write_trace(file, self.to_trace(metadata), extra=extra, overwrite=overwrite)
+
+
+def simulate(machine, trajectory, strategies=(), settle=None):
+    """Simulate `machine` following `trajectory`.
+
+    Parameters
+    ----------
+    machine : Machine
+    trajectory : Trajectory
+        Tool-tip reference in workpiece coordinates, sampled at the machine's
+        servo period.
+    strategies : sequence
+        Compensation strategies applied in order to the axis commands; each
+        has ``commands(q, t) -> q_corrected`` (e.g.
+        :class:`contoursim.geocomp.GeometricCompensation`).
+    settle : float, optional
+        Standstill appended after the reference ends, so the axes settle [s];
+        default five time constants of the slowest position loop, ``5 / min(kp)``.
+        The result's trajectory includes it.
+
+    Returns
+    -------
+    SimResult
+
+    Raises
+    ------
+    UnstableLoopError
+        An axis loop is unstable or badly damped at this servo period.
+    ValueError
+        The trajectory's sampling differs from the servo period, or the path
+        does not fit the machine's axes.
+    """
+    if abs(trajectory.dt - machine.servo_period) > 1e-9 * machine.servo_period:
+        raise ValueError(
+            f"the trajectory is sampled every {trajectory.dt:g} s but the servo period is "
+            f"{machine.servo_period:g} s: sample the path at the servo period"
+        )
+    if settle is None:
+        settle = 5.0 / min(servo.kp for servo in machine.axes.values())
+    trajectory = trajectory.held(settle)
+    q, v, a = machine.axis_commands(trajectory)
+    for strategy in strategies:
+        q = strategy.commands(q, trajectory.t)
+    servo = machine.servo_columns
+    response = kernel.run(dict(machine.axes), machine.servo_period, q[:, servo], v[:, servo], a[:, servo])
+    actual = q.copy()
+    actual[:, servo] = response.position
+    tool = machine.tool_position(actual, trajectory.t, trajectory.dim)
+    contour = exact_contour_error(trajectory, tool)
+    return SimResult(trajectory, machine, q, response, tool, contour, tuple(strategies))

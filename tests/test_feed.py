@@ -1,0 +1,109 @@
+"""Feed profiles against closed forms worked out by hand; sampling on the path."""
+
+import numpy as np
+import pytest
+
+from contoursim import paths
+from contoursim.feed import FeedSettings, plan, sample
+
+
+def _differences(profile, dt):
+    t = np.arange(0.0, profile.duration + 4 * dt, dt)
+    s = profile.evaluate(t)[0]
+    return s, np.diff(s, 2) / dt**2, np.diff(s, 3) / dt**3
+
+
+def test_trapezoid_closed_form():
+    # F = 20 mm/s, a = 100 mm/s^2: ramps of F/a = 0.2 s over F^2/2a = 2 mm; 96 mm at 20 mm/s
+    profile = plan(paths.line((0, 0), (100, 0)), 20.0, 100.0)
+    assert profile.duration == pytest.approx(0.2 + 96 / 20 + 0.2, rel=1e-12)
+    s, v, a = profile.evaluate(np.array([0.1, 0.2, 2.6, 5.1, 5.2, 6.0]))
+    np.testing.assert_allclose(s, [0.5, 2.0, 50.0, 99.5, 100.0, 100.0], rtol=1e-12)
+    np.testing.assert_allclose(v, [10.0, 20.0, 20.0, 10.0, 0.0, 0.0], atol=1e-9)
+
+
+def test_triangle_when_feed_is_not_reached():
+    # 1 mm at a = 100: peak sqrt(a L) = 10 mm/s < F, duration 2 sqrt(L/a) = 0.2 s
+    profile = plan(paths.line((0, 0), (1, 0)), 20.0, 100.0)
+    assert profile.duration == pytest.approx(0.2, rel=1e-12)
+    assert profile.evaluate([0.1])[1][0] == pytest.approx(10.0, rel=1e-12)
+
+
+def test_scurve_closed_form_and_bounds():
+    # F = 20, a = 100, j = 1000: F reached with a_max (F >= a^2/j = 10): T = L/F + F/a + a/j
+    profile = plan(paths.line((0, 0), (100, 0)), 20.0, 100.0, 1000.0)
+    assert profile.duration == pytest.approx(5.0 + 0.2 + 0.1, rel=1e-12)
+    s, acc, jerk = _differences(profile, 1e-3)
+    assert s[-1] == 100.0
+    assert np.abs(acc).max() <= 100.0 * (1 + 1e-6) and np.abs(acc).max() > 99.0
+    assert np.abs(jerk).max() <= 1000.0 * (1 + 1e-6)
+
+
+def test_scurve_reduced_profile_for_short_moves():
+    # neither a_max nor F reached: each half is a triangular acceleration pulse,
+    # peak v = (L^2 j / 4)^(1/3), duration 4 sqrt(v / j)
+    length, jerk = 0.5, 1000.0
+    peak = (length**2 * jerk / 4) ** (1 / 3)
+    profile = plan(paths.line((0, 0), (length, 0)), 20.0, 100.0, jerk)
+    assert profile.duration == pytest.approx(4 * np.sqrt(peak / jerk), rel=1e-12)
+    assert profile.evaluate([profile.duration / 2])[1][0] == pytest.approx(peak, rel=1e-12)
+    s, acc, jerks = _differences(profile, 1e-4)
+    assert s[-1] == length
+    assert np.abs(acc).max() <= np.sqrt(peak * jerk) * (1 + 1e-6)
+    assert np.abs(jerks).max() <= jerk * (1 + 1e-6)
+
+
+def test_exact_stop_at_a_sharp_corner():
+    # two rest-to-rest 10 mm moves: 2 (L/F + F/a) = 2 (0.5 + 0.2)
+    path = paths.polyline([[0, 0], [10, 0], [10, 10]])
+    profile = plan(path, 20.0, 100.0)
+    assert profile.duration == pytest.approx(1.4, rel=1e-12)
+    assert profile.evaluate([0.7])[:2] == pytest.approx((10.0, 0.0), abs=1e-9)
+
+
+def test_per_block_feeds():
+    # 50 mm at 20 then 50 mm at 10 (a = 100): 0.2 s ramp-up over 2 mm, brake 20 -> 10 in 0.1 s
+    # over 1.5 mm, 46.5 mm cruise; then 49.5 mm at 10 and 0.1 s stop over 0.5 mm
+    path = paths.line((0, 0), (50, 0)) + paths.line((50, 0), (100, 0))
+    profile = plan(path, [20.0, 10.0], 100.0)
+    assert profile.duration == pytest.approx(0.2 + 46.5 / 20 + 0.1 + 49.5 / 10 + 0.1, rel=1e-12)
+    traj = sample(path, profile, 1e-3)
+    second = traj.s > 50.0
+    assert traj.speed[second].max() <= 10.0 + 1e-9 and traj.speed.max() == pytest.approx(20.0)
+
+
+def test_centripetal_limit():
+    path = paths.circle((0, 0), 50.0)
+    traj = sample(path, plan(path, 100.0, 1000.0, centripetal_accel=50.0), 1e-3)
+    assert traj.speed.max() == pytest.approx(np.sqrt(50.0 * 50.0), rel=1e-12)
+
+
+def test_bad_values_name_the_parameter():
+    path = paths.line((0, 0), (10, 0))
+    with pytest.raises(ValueError, match="exceeds max_feed"):
+        plan(path, 30.0, 100.0, max_feed=20.0)
+    with pytest.raises(ValueError, match="accel must be positive"):
+        plan(path, 10.0, -1.0)
+    with pytest.raises(ValueError, match=r"feed\[1\] = 0"):
+        plan(path + paths.line((10, 0), (20, 0)), [10.0, 0.0], 100.0)
+    with pytest.raises(ValueError, match="jerk must be positive"):
+        FeedSettings(10.0, jerk=0.0)
+    with pytest.raises(ValueError, match="dt must be positive"):
+        sample(path, plan(path, 10.0, 100.0), 0.0)
+
+
+def test_sampled_circle_lies_on_the_path_with_analytic_derivatives():
+    radius, feed, dt = 50.0, 1000 / 60, 1e-3
+    path = paths.iso230_4_circle(radius)
+    traj = sample(path, plan(path, feed, 1000.0, 50000.0), dt)
+    assert traj.dim == 2 and np.all(np.diff(traj.t) == pytest.approx(dt))
+    assert traj.s[-1] == path.length and traj.speed[-1] == 0.0
+    on = traj.measuring
+    assert np.all(path.segment_index(traj.s[on]) == 1) and on.sum() == pytest.approx(2 * np.pi * radius / feed / dt, abs=2)
+    np.testing.assert_allclose(np.linalg.norm(traj.position[on], axis=1), radius, atol=1e-9)
+    # on the test circle (cruise): |a| = v^2 / R, velocity matches central differences
+    np.testing.assert_allclose(np.linalg.norm(traj.acceleration[on], axis=1), feed**2 / radius, rtol=1e-9)
+    # central difference error at constant speed: v^3 dt^2 / (6 R^2)
+    inside = np.flatnonzero(on)[1:-1]
+    central = (traj.position[inside + 1] - traj.position[inside - 1]) / (2 * dt)
+    np.testing.assert_allclose(central, traj.velocity[inside], rtol=0, atol=1.01 * feed**3 * dt**2 / (6 * radius**2))

@@ -1,0 +1,99 @@
+"""G-code reader: geometry of the moves worked out by hand, errors naming file and line."""
+
+import numpy as np
+import pytest
+
+from contoursim.exceptions import ConfigError
+from contoursim.gcode import read_gcode
+
+POCKET = """%
+(a closed contour: lines, I/J arc, R arc, incremental arc)
+N10 G21 G17 G90
+N20 G0 X-30 Y0 ; positioning only
+N30 G1 Y-12 F600
+N40 G3 X-22 Y-20 I8 J0
+N50 G1 X22 F1200
+N60 G3 X30 Y-12 R8
+N70 G1 Y12
+N80 G91 G3 X-8 Y8 I-8
+N90 G90 G1 X-30 (back along the top)
+N100 Y0
+N110 G0 Z50
+M30
+"""
+
+
+def test_contour_program():
+    program = read_gcode(POCKET)
+    path = program.path
+    assert path.dim == 2 and path.closed and program.source == "<gcode>"
+    assert program.lines.tolist() == [5, 6, 7, 8, 9, 10, 11, 12]  # G0 before and after the cut left out
+    np.testing.assert_allclose(program.feeds * 60, [600, 600, 1200, 1200, 1200, 1200, 1200, 1200])
+    np.testing.assert_allclose(path.start, [-30, 0, 0])
+    corners = [path.primitives[i] for i in (1, 3, 5)]
+    np.testing.assert_allclose([c.center for c in corners], [[-22, -12, 0], [22, -12, 0], [22, 12, 0]], atol=1e-12)
+    np.testing.assert_allclose([c.sweep for c in corners], np.pi / 2, rtol=1e-12)
+    np.testing.assert_allclose(path.corner_angles(), [0, 0, 0, 0, 0, 0, np.pi / 2], atol=1e-7)  # tangent joins
+    straight = 12 + 44 + 24 + 52 + 20  # then a sharp corner at (-30, 20)
+    assert path.length == pytest.approx(straight + 3 * np.pi / 2 * 8, rel=1e-13)
+
+
+def test_r_word_major_arc_and_helix():
+    # R < 0: the arc over 180°; chord 10 on R 10 subtends 60°, so the major arc turns 300° (clockwise)
+    program = read_gcode("G17 G90 G0 X0 Y0\nG2 X10 Y0 R-10 F100\nG3 X10 Y0 Z6 I-5\n")
+    major, turn = program.path.primitives
+    assert major.sweep == pytest.approx(-np.radians(300), rel=1e-12) and major.radius == pytest.approx(10)
+    np.testing.assert_allclose(major.end, [10, 0, 0], atol=1e-12)
+    # start = end in the plane with I/J: a full turn, here rising 6 mm along Z: a helix
+    assert turn.sweep == pytest.approx(2 * np.pi) and turn.rise == pytest.approx(6 / (2 * np.pi))
+    np.testing.assert_allclose(turn.end, [10, 0, 6], atol=1e-12)
+    assert program.path.dim == 3
+
+
+@pytest.mark.parametrize("word, middle", [("G2", [np.sqrt(50), 0, np.sqrt(50)]), ("G3", [-np.sqrt(50), 0, -np.sqrt(50)])])
+def test_g18_arc_turns_about_y(word, middle):
+    # G18: the ZX plane, G3 counter-clockwise about +Y, which turns +X towards -Z: from (10, 0, 0)
+    # to (0, 0, 10) G2 turns 90° (midpoint at 45°), G3 turns 270° (midpoint at 135° towards -Z)
+    program = read_gcode(f"G18 G0 X10 Z0\n{word} X0 Z10 I-10 K0 F100\n")
+    arc = program.path.primitives[0]
+    np.testing.assert_allclose(arc.axis, [0, 1, 0])
+    np.testing.assert_allclose(program.path.evaluate([program.path.length / 2])[0][0], middle, atol=1e-12)
+
+
+def test_rapid_between_cuts_is_kept():
+    program = read_gcode("G0 X0 Y0\nG1 X10 F600\nG0 X10 Y10\nG1 X0\n", rapid_feed=100.0)
+    assert program.path.roles == ("path", "rapid", "path")
+    np.testing.assert_allclose(program.feeds, [10.0, 100.0, 10.0])
+
+
+def test_arc_centre_is_moved_onto_the_bisector():
+    # radii 10 and 10.001 (within the 0.002 mm tolerance): the arc still ends exactly at the target
+    arc = read_gcode("G0 X10 Y0\nG3 X0 Y10.001 I-10 J0 F100\n").path.primitives[0]
+    np.testing.assert_allclose(arc.end, [0, 10.001, 0], atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(arc.start - arc.center), np.linalg.norm(arc.end - arc.center))
+
+
+@pytest.mark.parametrize("text, line, message", [
+    ("G21\nG20 G1 X1 F100\n", 2, "inch programs are not supported"),
+    ("G1 X1 F100\nS1000 M3\n", 2, "unknown word S1000"),
+    ("G1 X1 F100\nG54\n", 2, "unknown word G54"),
+    ("G0 X1\n\nG1 X2\n", 3, "missing F before the first feed move"),
+    ("G0 X10\nG2 X0 Y10.1 I-10 F100\n", 2, "start radius 10 mm and end radius 10.1 mm differ"),
+    ("G1 X1 F100\nG1 X2 I3\n", 2, "only belong to arc moves"),
+    ("G1 X1 F100\nG1 X2 X3\n", 2, "appears twice"),
+    ("X1\n", 1, "needs a motion mode"),
+    ("G1 X1 F100 (open comment\n", 1, "unbalanced parenthesis"),
+    ("G0 X1\nG0 X2\n", None, "no feed move"),
+])
+def test_errors_name_the_line(text, line, message):
+    with pytest.raises(ConfigError, match=message) as info:
+        read_gcode(text)
+    assert info.value.line == line and info.value.source == "<gcode>"
+
+
+def test_errors_name_the_file(tmp_path):
+    file = tmp_path / "part.nc"
+    file.write_text("G21\nG1 X1 Y1\n")
+    with pytest.raises(ConfigError, match="part.nc, line 2: missing F") as info:
+        read_gcode(file)
+    assert info.value.source == str(file)

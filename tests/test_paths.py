@@ -1,0 +1,190 @@
+"""Path geometry against closed forms; path files of the library."""
+
+from importlib.resources import files
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from contoursim import paths
+from contoursim.exceptions import ConfigError, PathError
+from contoursim.feed import sample
+from contoursim.pathfile import load_path_file
+
+
+def test_circle_positions_tangent_curvature():
+    path = paths.circle((1.0, 2.0), 50.0, direction="cw", start_angle=np.pi / 2)
+    assert path.dim == 2 and path.closed
+    assert path.length == pytest.approx(2 * np.pi * 50.0, rel=1e-15)
+    s = np.linspace(0, path.length, 37)
+    pos, tan, kappa = path.evaluate(s)
+    phi = np.pi / 2 - s / 50.0  # clockwise from the top
+    np.testing.assert_allclose(pos[:, :2], [1, 2] + 50.0 * np.column_stack([np.cos(phi), np.sin(phi)]), atol=1e-12)
+    np.testing.assert_allclose(tan[:, :2], np.column_stack([np.sin(phi), -np.cos(phi)]), atol=1e-14)
+    np.testing.assert_allclose(kappa, 1 / 50.0, rtol=1e-13)
+
+
+def test_arc_end_angle_and_direction():
+    # from 0 to 90°: a quarter turn counter-clockwise, three quarters clockwise
+    ccw = paths.arc((0, 0), 10.0, 0.0, np.pi / 2).primitives[0]
+    cw = paths.arc((0, 0), 10.0, 0.0, np.pi / 2, direction="cw").primitives[0]
+    assert ccw.sweep == pytest.approx(np.pi / 2) and cw.sweep == pytest.approx(-1.5 * np.pi)
+    np.testing.assert_allclose([ccw.end, cw.end], [[0, 10, 0], [0, 10, 0]], atol=1e-12)
+    joined = paths.line((20, 0), (10, 0)) + paths.arc((0, 0), 10.0, 0.0, sweep=np.pi)
+    assert len(joined) == 2 and joined.length == pytest.approx(10 + 10 * np.pi)
+    with pytest.raises(PathError, match="exactly one of end_angle and sweep"):
+        paths.arc((0, 0), 10.0, 0.0)
+
+
+def test_tilted_circle_lies_in_its_plane():
+    n = np.array([1.0, 1.0, 1.0]) / np.sqrt(3)
+    path = paths.tilted_circle((5.0, 0.0, -3.0), 20.0, n)
+    assert path.dim == 3
+    np.testing.assert_allclose(path.plane_normal, n, atol=1e-15)
+    pos, tan, kappa = path.evaluate(np.linspace(0, path.length, 50))
+    np.testing.assert_allclose((pos - [5, 0, -3]) @ n, 0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(pos - [5, 0, -3], axis=1), 20.0, rtol=1e-14)
+    np.testing.assert_allclose(np.cross(pos - [5, 0, -3], tan) @ n, 20.0, rtol=1e-13)  # CCW about n
+
+
+def test_helix_closed_form():
+    # P(θ) = (R cos θ, R sin θ, pitch θ / 2π): length per turn sqrt((2πR)^2 + pitch^2),
+    # curvature R / (R^2 + h^2) with h = pitch / 2π
+    path = paths.helix((0, 0, 1.0), 20.0, 5.0, 3)
+    h = 5.0 / (2 * np.pi)
+    assert path.length == pytest.approx(3 * np.hypot(2 * np.pi * 20.0, 5.0), rel=1e-14)
+    assert path.plane_normal is None
+    s = np.linspace(0, path.length, 41)
+    pos, tan, kappa = path.evaluate(s)
+    theta = s / np.hypot(20.0, h)
+    np.testing.assert_allclose(pos, np.column_stack([20 * np.cos(theta), 20 * np.sin(theta), 1 + h * theta]),
+                               atol=1e-12)
+    np.testing.assert_allclose(kappa, 20.0 / (20.0**2 + h**2), rtol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(tan, axis=1), 1.0, rtol=1e-14)
+
+
+def test_iso230_4_circle_geometry():
+    path = paths.iso230_4_circle(50.0, center=(10.0, 0.0), direction="cw")
+    assert path.roles == ("run-in", "test", "run-out")
+    assert path.breaks[2] - path.breaks[1] == pytest.approx(2 * np.pi * 50, rel=1e-15)
+    np.testing.assert_allclose(path.start[:2], [35.0, 25.0], atol=1e-12)  # (R/2, +R/2) for CW
+    np.testing.assert_allclose(path.primitives[1].start[:2], [60.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(path.end[:2], [35.0, -25.0], atol=1e-12)
+    np.testing.assert_allclose(path.corner_angles(), 0.0, atol=1e-7)  # tangential joins
+    s = np.linspace(path.breaks[1], path.breaks[2], 9)
+    np.testing.assert_allclose(np.linalg.norm(path.evaluate(s)[0][:, :2] - [10, 0], axis=1), 50.0, rtol=1e-14)
+
+
+def test_polyline_blends_are_tangent_fillets():
+    r = 10.0
+    path = paths.polyline([[0, -50], [50, -50], [50, 50], [-50, 50]], blend_radius=r)
+    assert len(path) == 5  # line, arc, line, arc, line
+    np.testing.assert_allclose(path.corner_angles(), 0.0, atol=1e-7)
+    fillet = path.primitives[1]
+    np.testing.assert_allclose(fillet.start[:2], [40, -50], atol=1e-12)  # r tan(45°) before the corner
+    np.testing.assert_allclose(fillet.end[:2], [50, -40], atol=1e-12)
+    np.testing.assert_allclose(fillet.center[:2], [40, -40], atol=1e-12)
+    assert fillet.radius == r and fillet.sweep == pytest.approx(np.pi / 2)
+    assert path.length == pytest.approx(50 + 100 + 100 - 4 * r + 2 * (np.pi / 2) * r, rel=1e-14)
+
+
+def test_polyline_errors_name_the_problem():
+    with pytest.raises(PathError, match="does not fit segment 1"):
+        paths.polyline([[0, 0], [10, 0], [10, 5], [20, 5]], blend_radius=3.0)
+    with pytest.raises(PathError, match=r"points\[1\] and points\[2\] coincide"):
+        paths.polyline([[0, 0], [1, 0], [1, 0]])
+    with pytest.raises(PathError, match=r"reverses direction at points\[1\]"):
+        paths.polyline([[0, 0], [1, 0], [0, 0]], blend_radius=0.1)
+    with pytest.raises(PathError, match="non-finite"):
+        paths.polyline([[0, 0], [np.nan, 1]])
+
+
+def test_spline_arc_length_matches_quadrature():
+    pts = [[0, 0], [10, 5], [20, -3], [35, 8], [40, 0]]
+    path = paths.spline(pts)
+    for piece in path.primitives:
+        a, b, c, d = piece.coefficients
+        length, _ = quad(lambda w: np.linalg.norm(b + 2 * c * w + 3 * d * w * w), 0, 1, epsabs=1e-13)
+        assert piece.length == pytest.approx(length, rel=1e-12)
+    # evaluation by arc length: the chord of small steps adds up to the step in s
+    s = np.linspace(0, path.length, 20001)
+    pos = path.evaluate(s)[0]
+    assert np.sum(np.linalg.norm(np.diff(pos, axis=0), axis=1)) == pytest.approx(path.length, rel=1e-8)
+    np.testing.assert_allclose(path.evaluate(path.breaks)[0][:, :2], pts, atol=1e-12)
+
+
+def test_closed_spline_is_c2_at_the_seam():
+    t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    path = paths.spline(np.column_stack([30 * np.cos(t), 20 * np.sin(2 * t)]), closed=True)
+    assert path.closed and len(path) == 12
+    _, t0, k0 = path.derivatives([0.0])
+    _, t1, k1 = path.derivatives([path.length])
+    np.testing.assert_allclose(t0, t1, atol=1e-12)
+    np.testing.assert_allclose(k0, k1, atol=1e-10)
+
+
+def test_degenerate_input_raises_path_error():
+    with pytest.raises(PathError, match="zero length"):
+        paths.line((1, 1), (1, 1))
+    with pytest.raises(PathError, match="radius must be positive"):
+        paths.circle((0, 0), 0.0)
+    with pytest.raises(PathError, match=r"points\[2\] and points\[3\] coincide"):
+        paths.spline([[0, 0], [1, 0], [2, 1], [2, 1]])
+    with pytest.raises(PathError, match="center contains a non-finite"):
+        paths.arc((np.nan, 0), 1.0, 0.0, 1.0)
+    with pytest.raises(PathError, match="segment 1 starts"):
+        paths.line((0, 0), (1, 0)) + paths.line((1, 1e-6), (2, 0))
+    with pytest.raises(PathError, match="direction"):
+        paths.circle((0, 0), 1.0, direction="clockwise")
+
+
+def _library():
+    root = files("contoursim.trajectories")
+    return sorted(f for f in root.iterdir() if f.name.endswith((".toml", ".nc")))
+
+
+@pytest.mark.parametrize("file", _library(), ids=lambda f: f.name)
+def test_every_library_file_loads_and_samples(file):
+    path, feed = load_path_file(file)
+    trajectory = sample(path, feed.plan(path), 0.002)
+    assert trajectory.dim == path.dim
+    assert trajectory.s[-1] == path.length
+    np.testing.assert_allclose(trajectory.speed.max(), np.max(feed.feed), rtol=1e-9)
+
+
+def test_library_contents():
+    names = {f.name for f in _library()}
+    assert {"iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "rounded_square.toml", "butterfly.toml",
+            "helix.toml", "pocket.nc"} <= names
+    path, feed = load_path_file(files("contoursim.trajectories") / "iso230_4_circle_cw.toml")
+    assert feed.feed == pytest.approx(1000 / 60)
+    assert path.primitives[1].radius == 50 and path.primitives[1].sweep < 0
+
+
+@pytest.mark.parametrize("text, line, message", [
+    ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\ncolour = 1\n',
+     7, "unknown key 'colour'"),
+    ('[feed]\nfeed_mm_min = 100\nspeed = 3\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\n',
+     3, "unknown key 'speed' in \\[feed\\]"),
+    ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = -5\n',
+     6, "radius must be positive"),
+    ('[feed]\nfeed_mm_min = 0\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\n',
+     2, "feed_mm_min must be positive"),
+    ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "polyline"\npoints_mm = [[0, 0], [1, 0], [1, 1]]\n'
+     'blend_radius_mm = 2\n', 6, "does not fit"),
+    ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "square"\n', 4, "type must be one of"),
+    ('[feed]\nfeed_mm_min = 100\n[path\n', 3, "not valid TOML"),
+    ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "helix"\ncenter_mm = [0, 0]\nradius_mm = 5\nturns = 2\n',
+     3, "missing key 'pitch_mm' in \\[path\\]"),
+    ('name = "x"\nnotes = "y"\n[feed]\nfeed_mm_min = 100\n', 2, "unknown key 'notes'"),
+    ('[feed]\nfeed_mm_min = 100\ncorner_tolerance_deg = -1\n[path]\ntype = "spline"\npoints_mm = [[0, 0], [1, 1]]\n',
+     3, "corner_tolerance_deg must be zero or positive"),
+    ('[path]\ntype = "circle"\ncenter_mm = [0, 0]\nstart_angle_deg = "north"\nradius_mm = 5\n[feed]\n',
+     4, "start_angle_deg must be numeric"),
+])
+def test_path_file_errors_name_file_and_line(tmp_path, text, line, message):
+    file = tmp_path / "bad.toml"
+    file.write_text(text)
+    with pytest.raises(ConfigError, match=message) as info:
+        load_path_file(file)
+    assert info.value.source == str(file) and info.value.line == line

@@ -1,0 +1,1 @@
+"""The reference path library, installed as package data (see README.md here)."""
