@@ -1,0 +1,733 @@
+"""One axis of a CNC feed drive: the P / PI / PI servo cascade as python-control systems.
+
+Block diagram (signal names as used by :func:`control.interconnect`)::
+
+    x_ref ─▶(+)─ e_x ─▶[kp]─ v_p ─▶(+)─ v_cmd ─▶(+)─ e_v ─▶[velocity PI]─ i_pi ─▶(+)─ i_cmd ─▶ ...
+             ▲ -                    ▲ v_ff         ▲ -                            ▲ i_ff
+             x          v_ref ─▶[vff]              v              a_ref ─▶[aff m/kf]
+
+    ... i_cmd ─▶(+)─ e_i ─▶[current PI]─ u ─▶[plant: electrical + mechanical]─▶ x, v, i
+                 ▲ -
+                 i
+
+Without electrical dynamics (no ``inductance``) the current loop is taken as
+ideal: the plant's input is the current command ``i_cmd`` itself.
+
+Units inside are mm, s, A, V. The parameters are SI (kg, N, N·s/m, A·s/m,
+H, Ω) and are converted once, in the properties ``force_gain``,
+``damping_rate``, ``kv_mm`` and ``emf_mm``.
+
+The plant (a rigid translating mass ``m`` driven by the force ``kf·i``)::
+
+    dx/dt = v                                        [mm/s]
+    dv/dt = -(c/m)·v + (1000·kf/m)·i                 [mm/s^2]   (1000 mm per m)
+    di/dt = (u - R·i - kf·v/1000) / L                [A/s]      (back-EMF constant = kf in SI)
+
+The sampled loop (:func:`discretize`) is what the kernel steps: the plant is
+discretised exactly for a zero-order-hold input, the PI controllers by the
+trapezoidal (Tustin) rule, and every controller reads the state sampled at
+``t_k`` and holds its output over ``[t_k, t_k + dt)``.
+"""
+
+import warnings
+from dataclasses import dataclass
+
+import control as ct
+import numpy as np
+from scipy.linalg import expm
+
+from . import _validate
+from .exceptions import UnstableLoopError
+
+__all__ = [
+    "AxisServo",
+    "DiscreteServo",
+    "plant",
+    "velocity_loop",
+    "closed_loop",
+    "sensitivity",
+    "discretize",
+    "zoh",
+    "bandwidth",
+    "margins",
+    "check",
+    "MIN_PHASE_MARGIN_DEG",
+    "MIN_DAMPING_RATIO",
+    "MAX_CROSSOVER_FRACTION",
+]
+
+#: A loop whose phase margin [deg] is below this is rejected as badly damped.
+MIN_PHASE_MARGIN_DEG = 30.0
+#: A loop whose closed-loop poles have a damping ratio below this is rejected.
+MIN_DAMPING_RATIO = 0.2
+#: A loop's gain crossover must stay below this fraction of the Nyquist frequency.
+MAX_CROSSOVER_FRACTION = 0.25
+
+
+@dataclass(frozen=True, kw_only=True)
+class AxisServo:
+    """Parameters of one feed-drive axis (SI at the edge, keyword-only).
+
+    Parameters
+    ----------
+    mass : float
+        Moving mass [kg], including the rotor and screw inertia reflected to
+        the table (``J·(2π/lead)^2``).
+    force_constant : float
+        Feed force per motor current [N/A]; for a rotary motor on a ball screw
+        ``kt·2π/lead``. Also the back-EMF constant [V·s/m] in SI.
+    kv : float
+        Velocity-controller proportional gain [A·s/m]: current command per
+        velocity error. The velocity loop crosses over near
+        ``kv·force_constant/mass`` [rad/s].
+    kp : float, default 40
+        Position-loop gain [1/s] (the "Kv factor": 1 (m/min)/mm = 16.67 1/s).
+    ti : float, optional
+        Velocity-controller integral time [s]. ``None`` (default): pure P
+        velocity controller, as on many drives.
+    damping : float, default 0
+        Viscous damping of the slide [N·s/m].
+    current_limit : float, optional
+        Amplifier current limit [A]; the current command is clamped to
+        ``±current_limit`` and the velocity integrator stops integrating
+        while it is clamped (anti-windup). ``None`` (default): no limit.
+    vff : float, default 0
+        Velocity feedforward gain [-], 0..1, on the reference velocity.
+    aff : float, default 0
+        Acceleration feedforward gain [-], 0..1, on
+        ``mass · reference acceleration / force_constant`` (a current [A]).
+    inductance : float, optional
+        Motor winding inductance [H]. When given, the electrical dynamics
+        (with back-EMF) and an inner PI current loop are modelled, and
+        `resistance`, `kc` and `ti_current` are required.
+    resistance : float, optional
+        Winding resistance [Ω].
+    kc : float, optional
+        Current-controller proportional gain [V/A]. The current loop crosses
+        over near ``kc/inductance`` [rad/s].
+    ti_current : float, optional
+        Current-controller integral time [s]; ``inductance/resistance``
+        cancels the electrical pole.
+
+    Examples
+    --------
+    >>> axis = AxisServo(mass=300.0, force_constant=900.0, kv=200.0)
+    >>> round(axis.force_gain)                     # 1000·900/300 [mm/s^2 per A]
+    3000
+    """
+
+    mass: float
+    force_constant: float
+    kv: float
+    kp: float = 40.0
+    ti: float | None = None
+    damping: float = 0.0
+    current_limit: float | None = None
+    vff: float = 0.0
+    aff: float = 0.0
+    inductance: float | None = None
+    resistance: float | None = None
+    kc: float | None = None
+    ti_current: float | None = None
+
+    def __post_init__(self):
+        required = ("mass", "force_constant", "kv", "kp")
+        checked = {name: _validate.positive(name, getattr(self, name)) for name in required}
+        checked["damping"] = _validate.nonnegative("damping", self.damping)
+        for name in ("vff", "aff"):
+            gain = _validate.nonnegative(name, getattr(self, name))
+            if gain > 1:
+                raise ValueError(f"{name} must be between 0 and 1 (a fraction of full feedforward), got {gain!r}")
+            checked[name] = gain
+        for name in ("ti", "current_limit"):
+            if getattr(self, name) is not None:
+                checked[name] = _validate.positive(name, getattr(self, name))
+        electrical = ("resistance", "kc", "ti_current")
+        if self.inductance is None:
+            given = [name for name in electrical if getattr(self, name) is not None]
+            if given:
+                raise ValueError(
+                    f"{', '.join(given)} given without inductance: give inductance [H] to model the current "
+                    "loop, or drop the current-loop parameters for an ideal current loop"
+                )
+        else:
+            checked["inductance"] = _validate.positive("inductance", self.inductance)
+            missing = [name for name in electrical if getattr(self, name) is None]
+            if missing:
+                raise ValueError(f"inductance is given, so the current loop needs {', '.join(missing)} as well")
+            checked["resistance"] = _validate.nonnegative("resistance", self.resistance)
+            checked["kc"] = _validate.positive("kc", self.kc)
+            checked["ti_current"] = _validate.positive("ti_current", self.ti_current)
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
+
+    # -- SI -> internal units (mm, s, A, V), the one place they are converted --------------
+
+    @property
+    def force_gain(self):
+        """Acceleration per motor current, ``1000·force_constant/mass`` [mm/s^2 per A]."""
+        return 1000.0 * self.force_constant / self.mass
+
+    @property
+    def damping_rate(self):
+        """Viscous damping per mass, ``damping/mass`` [1/s]."""
+        return self.damping / self.mass
+
+    @property
+    def kv_mm(self):
+        """Velocity-controller gain in internal units, ``kv/1000`` [A per mm/s]."""
+        return self.kv / 1000.0
+
+    @property
+    def emf_mm(self):
+        """Back-EMF per velocity in internal units, ``force_constant/1000`` [V per mm/s]."""
+        return self.force_constant / 1000.0
+
+    @property
+    def electrical(self):
+        """True when the electrical dynamics and the current loop are modelled."""
+        return self.inductance is not None
+
+    # -- thin methods; the module functions do the work -------------------------------------
+
+    def plant(self):
+        """Continuous plant, see :func:`plant`."""
+        return plant(self)
+
+    def velocity_loop(self):
+        """Closed velocity loop ``v_cmd -> v``, see :func:`velocity_loop`."""
+        return velocity_loop(self)
+
+    def closed_loop(self, feedforward=True):
+        """Closed position loop ``x_ref -> x``, see :func:`closed_loop`."""
+        return closed_loop(self, feedforward=feedforward)
+
+    def sensitivity(self):
+        """Sensitivity of the position loop ``x_ref -> e_x``, see :func:`sensitivity`."""
+        return sensitivity(self)
+
+    def discretize(self, dt):
+        """Sampled loop for the kernel, see :func:`discretize`."""
+        return discretize(self, dt)
+
+    def bandwidth(self):
+        """Half-power bandwidth of the closed position loop [Hz], see :func:`bandwidth`."""
+        return bandwidth(self)
+
+    def margins(self, dt=None):
+        """Gain/phase margins of each loop, see :func:`margins`."""
+        return margins(self, dt)
+
+    def check(self, dt, axis="x"):
+        """Reject a loop that cannot be simulated at `dt`, see :func:`check`."""
+        return check(self, dt, axis)
+
+
+@dataclass(frozen=True)
+class DiscreteServo:
+    """The sampled loop of one axis, as stepped by :mod:`contoursim.kernel`.
+
+    Parameters
+    ----------
+    servo : AxisServo
+        The continuous axis it was built from.
+    dt : float
+        Servo period [s].
+    plant : control.StateSpace
+        Exact ZOH plant, input ``'i_cmd'`` [A] (or ``'u'`` [V] with electrical
+        dynamics), outputs ``'x'`` [mm], ``'v'`` [mm/s] (and ``'i'`` [A]).
+    velocity_controller : control.StateSpace
+        Velocity PI (Tustin) or P, ``'e_v'`` [mm/s] -> ``'i_pi'`` [A].
+    current_controller : control.StateSpace or None
+        Current PI (Tustin), ``'e_i'`` [A] -> ``'u'`` [V]; ``None`` without
+        electrical dynamics.
+    closed_loop : control.StateSpace
+        The whole sampled cascade, inputs ``'x_ref'`` [mm], ``'v_ref'``
+        [mm/s], ``'a_ref'`` [mm/s^2], outputs ``'x'``, ``'v'``, ``'i_cmd'``.
+    """
+
+    servo: AxisServo
+    dt: float
+    plant: ct.StateSpace
+    velocity_controller: ct.StateSpace
+    current_controller: ct.StateSpace | None
+    closed_loop: ct.StateSpace
+
+
+# ---------------------------------------------------------------------------------------------
+# Blocks
+
+
+def _plant_matrices(servo):
+    """Continuous plant matrices ``A, B`` (states x [mm], v [mm/s] and, when modelled, i [A])."""
+    b, d = servo.force_gain, servo.damping_rate
+    if not servo.electrical:
+        return np.array([[0.0, 1.0], [0.0, -d]]), np.array([[0.0], [b]])
+    L, R = servo.inductance, servo.resistance
+    A = np.array([[0.0, 1.0, 0.0], [0.0, -d, b], [0.0, -servo.emf_mm / L, -R / L]])
+    return A, np.array([[0.0], [0.0], [1.0 / L]])
+
+
+def _plant_system(servo, A, B, dt):
+    n = A.shape[0]
+    names = ["x", "v", "i"][:n]
+    inputs = "u" if servo.electrical else "i_cmd"
+    return ct.ss(A, B, np.eye(n), 0.0, dt, inputs=inputs, outputs=names, states=names, name="plant")
+
+
+def zoh(A, B, dt):
+    """Exact zero-order-hold discretisation ``(Ad, Bd)`` of ``dx/dt = A x + B u``.
+
+    With ``u`` held constant over a step,
+    ``x(t + dt) = e^{A dt} x(t) + (∫_0^dt e^{A τ} dτ) B u``. Both terms come
+    from one matrix exponential: the augmented system
+    ``d/dt [x; u] = [[A, B], [0, 0]] [x; u]`` (u constant) has the transition
+    matrix ``expm([[A, B], [0, 0]] dt) = [[Ad, Bd], [0, I]]``, whose upper
+    blocks are ``Ad = e^{A dt}`` and ``Bd = ∫_0^dt e^{A τ} dτ B``.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+    B : ndarray, shape (n, m)
+    dt : float
+        Sample period [s].
+
+    Returns
+    -------
+    Ad : ndarray, shape (n, n)
+    Bd : ndarray, shape (n, m)
+
+    Examples
+    --------
+    A double integrator: ``Ad = [[1, dt], [0, 1]]``, ``Bd = [[dt²/2], [dt]]``.
+
+    >>> Ad, Bd = zoh(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), 0.5)
+    >>> Bd.ravel().tolist()
+    [0.125, 0.5]
+    """
+    n, m = B.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n], M[:n, n:] = A, B
+    Phi = expm(M * dt)
+    return Phi[:n, :n], Phi[:n, n:]
+
+
+def _gain(k, inp, out, dt):
+    return ct.ss(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[k]], dt, inputs=inp, outputs=out)
+
+
+def _pi(k, ti, inp, out, dt, name):
+    """PI ``k·(1 + 1/(ti·s))`` (or P when ti is None), state ``z = ∫e dt`` [input unit · s].
+
+    Continuous: ``dz/dt = e``, ``y = (k/ti)·z + k·e``.
+    Discrete, trapezoidal (Tustin) rule: ``z[k+1] = z[k] + dt·e[k]`` and
+    ``y[k] = (k/ti)·(z[k] + dt/2·e[k]) + k·e[k]``, i.e.
+    ``C(z) = k·(1 + dt/(2·ti)·(z + 1)/(z - 1))`` — ``1/s`` replaced by
+    ``dt/2·(z + 1)/(z - 1)``.
+    """
+    if ti is None:
+        return _gain(k, inp, out, dt).copy(name=name)
+    if dt:
+        D = k * (1.0 + dt / (2.0 * ti))
+        return ct.ss([[1.0]], [[dt]], [[k / ti]], [[D]], dt, inputs=inp, outputs=out, states="z", name=name)
+    return ct.ss([[0.0]], [[1.0]], [[k / ti]], [[k]], 0, inputs=inp, outputs=out, states="z", name=name)
+
+
+def _blocks(servo, dt):
+    """All blocks of the cascade, keyed by role; ``dt = 0`` for continuous time."""
+    A, B = _plant_matrices(servo)
+    if dt:
+        A, B = zoh(A, B, dt)
+    blocks = {
+        "plant": _plant_system(servo, A, B, dt),
+        "velocity": _pi(servo.kv_mm, servo.ti, "e_v", "i_pi", dt, "velocity_controller"),
+        "position": _gain(servo.kp, "e_x", "v_p", dt),
+        "position_sum": ct.summing_junction(["x_ref", "-x"], "e_x"),
+        "vff": _gain(servo.vff, "v_ref", "v_ff", dt),
+        "command_sum": ct.summing_junction(["v_p", "v_ff"], "v_cmd"),
+        "velocity_sum": ct.summing_junction(["v_cmd", "-v"], "e_v"),
+        "aff": _gain(servo.aff / servo.force_gain, "a_ref", "i_ff", dt),
+        "current_command_sum": ct.summing_junction(["i_pi", "i_ff"], "i_cmd"),
+    }
+    if servo.electrical:
+        blocks["current"] = _pi(servo.kc, servo.ti_current, "e_i", "u", dt, "current_controller")
+        blocks["current_sum"] = ct.summing_junction(["i_cmd", "-i"], "e_i")
+        # The winding with the rotor blocked (back-EMF taken as a disturbance), as drives tune
+        # their current loop; only the current-loop margins use it.
+        L, R = servo.inductance, servo.resistance
+        Aw, Bw = np.array([[-R / L]]), np.array([[1.0 / L]])
+        if dt:
+            Aw, Bw = zoh(Aw, Bw, dt)
+        blocks["winding"] = ct.ss(Aw, Bw, [[1.0]], 0.0, dt, inputs="u", outputs="i", name="winding")
+    return blocks
+
+
+def _connect(blocks, roles, inputs, outputs, unused_inputs=(), unused_outputs=()):
+    """Interconnect the blocks named in `roles` (skipping absent current-loop blocks) by signal name.
+
+    ``unused_*`` name the signals deliberately left open (python-control
+    warns about any other unconnected signal).
+    """
+    syslist = [blocks[r] for r in roles if r in blocks]
+    return ct.interconnect(
+        syslist, inplist=inputs, outlist=outputs, inputs=inputs, outputs=outputs,
+        ignore_inputs=list(unused_inputs), ignore_outputs=list(unused_outputs),
+    )
+
+
+_INNER = ("current_sum", "current", "plant")  # the current loop (or the bare plant)
+
+
+def _cascade(blocks):
+    """The whole closed cascade: inputs x_ref, v_ref, a_ref; outputs x, v, i_cmd."""
+    roles = ("position_sum", "position", "vff", "command_sum", "velocity_sum", "velocity", "aff", "current_command_sum")
+    roles += _INNER
+    return _connect(blocks, roles, ["x_ref", "v_ref", "a_ref"], ["x", "v", "i_cmd"])
+
+
+def _drop_unread_states(sys):
+    """Remove states no output and no other state reads (e.g. position in the velocity loop).
+
+    Such a state is unobservable by construction: removing it leaves the
+    transfer function unchanged and keeps its pole (an integrator at s = 0,
+    z = 1) out of the loop's closed-loop poles.
+    """
+    A, B, C = sys.A, sys.B, sys.C
+    keep = np.ones(sys.nstates, bool)
+    while True:
+        off_diagonal = np.abs(A - np.diag(np.diag(A)))[keep][:, keep].sum(axis=0)
+        read = (off_diagonal > 0) | (np.abs(C[:, keep]).sum(axis=0) > 0)
+        if read.all():
+            break
+        keep[np.flatnonzero(keep)[~read]] = False
+    A, B, C = A[keep][:, keep], B[keep], C[:, keep]
+    return ct.ss(A, B, C, sys.D, sys.dt, inputs=sys.input_labels, outputs=sys.output_labels)
+
+
+def _loop_gains(blocks):
+    """Loop transfer functions, innermost first, each broken at its own error signal.
+
+    Standard cascade analysis: the loop being examined sees its inner loops
+    closed and its outer loops open; the current loop sees the winding with
+    the rotor blocked. Feedforward does not enter a loop gain.
+    """
+    velocity_chain = ("velocity", "current_command_sum") + _INNER
+    loops = {}
+    if "current" in blocks:
+        loops["current"] = _connect(blocks, ("current", "winding"), ["e_i"], ["i"])
+    loops["velocity"] = _connect(blocks, velocity_chain, ["e_v"], ["v"], unused_inputs=["i_ff"], unused_outputs=["x"])
+    loops = {name: _drop_unread_states(loop) for name, loop in loops.items()}
+    position_chain = ("position", "command_sum", "velocity_sum") + velocity_chain
+    loops["position"] = _connect(blocks, position_chain, ["e_x"], ["x"], unused_inputs=["i_ff", "v_ff"])
+    return loops
+
+
+# ---------------------------------------------------------------------------------------------
+# Continuous-time systems
+
+
+def plant(servo):
+    """Continuous plant of one axis.
+
+    Parameters
+    ----------
+    servo : AxisServo
+
+    Returns
+    -------
+    control.StateSpace
+        Input ``'i_cmd'`` [A] (ideal current loop) or ``'u'`` [V] (electrical
+        dynamics modelled); outputs and states ``'x'`` [mm], ``'v'`` [mm/s]
+        (and ``'i'`` [A]).
+    """
+    return _plant_system(servo, *_plant_matrices(servo), 0)
+
+
+def velocity_loop(servo):
+    """Closed velocity loop (current loop closed inside), ``'v_cmd'`` [mm/s] -> ``'v'`` [mm/s].
+
+    Parameters
+    ----------
+    servo : AxisServo
+
+    Returns
+    -------
+    control.StateSpace
+    """
+    roles = ("velocity_sum", "velocity", "current_command_sum") + _INNER
+    return _connect(_blocks(servo, 0), roles, ["v_cmd"], ["v"], unused_inputs=["i_ff"], unused_outputs=["x"])
+
+
+def _derivative_inputs(sys):
+    """SISO realisation of ``y = G_r·r + G_v·dr/dt + G_a·d²r/dt²`` from the 3-input `sys`.
+
+    With ``dx/dt = A x + b_r r + b_v r' + b_a r''`` and ``y = C x`` (``C b_a = 0``:
+    the acceleration command reaches position through at least two
+    integrations), the state ``q = x - (A b_a + b_v) r - b_a r'`` obeys
+    ``dq/dt = A q + (b_r + A (A b_a + b_v)) r`` and
+    ``y = C q + C (A b_a + b_v) r`` — a proper system in r alone.
+    """
+    A, B, C = sys.A, sys.B, sys.C
+    b_r, b_v, b_a = B[:, [0]], B[:, [1]], B[:, [2]]
+    w = A @ b_a + b_v
+    return ct.ss(A, b_r + A @ w, C, C @ w, inputs="x_ref", outputs="x", name="closed_loop")
+
+
+def closed_loop(servo, feedforward=True):
+    """Closed position loop, position command -> actual position.
+
+    Parameters
+    ----------
+    servo : AxisServo
+    feedforward : bool, default True
+        Include the velocity and acceleration feedforward paths (active when
+        ``vff``/``aff`` are set), driven by the derivatives of the command.
+
+    Returns
+    -------
+    control.StateSpace
+        ``'x_ref'`` [mm] -> ``'x'`` [mm], ``T(s) = G_r + s·G_v + s²·G_a``
+        where ``G_r, G_v, G_a`` are the closed cascade's responses to the
+        position, velocity and acceleration commands.
+    """
+    blocks = _blocks(servo, 0)
+    if not feedforward:
+        blocks["vff"] = _gain(0.0, "v_ref", "v_ff", 0)
+        blocks["aff"] = _gain(0.0, "a_ref", "i_ff", 0)
+    return _derivative_inputs(_cascade(blocks)[0, :])
+
+
+def sensitivity(servo):
+    """Sensitivity ``S = 1/(1 + L)`` of the position loop (feedback only).
+
+    It is the response of the following error ``e_x = x_ref - x`` to the
+    position command without feedforward; ``|S(jω)|`` is the relative
+    tracking error of a sine of frequency ω.
+
+    Parameters
+    ----------
+    servo : AxisServo
+
+    Returns
+    -------
+    control.StateSpace
+        ``'x_ref'`` [mm] -> ``'e_x'`` [mm].
+    """
+    roles = ("position_sum", "position", "command_sum", "velocity_sum", "velocity", "current_command_sum") + _INNER
+    return _connect(_blocks(servo, 0), roles, ["x_ref"], ["e_x"], unused_inputs=["v_ff", "i_ff"])
+
+
+def bandwidth(servo):
+    """Bandwidth of the closed position loop without feedforward [Hz].
+
+    The lowest frequency where ``|T|`` falls to ``1/√2`` (half power, -3.01 dB).
+
+    Parameters
+    ----------
+    servo : AxisServo
+
+    Returns
+    -------
+    float
+        About ``kp/2π`` when the velocity loop is much faster than the position loop.
+    """
+    half_power_db = 20 * np.log10(np.sqrt(0.5))
+    return float(ct.bandwidth(closed_loop(servo, feedforward=False), dbdrop=half_power_db)) / (2 * np.pi)
+
+
+# ---------------------------------------------------------------------------------------------
+# Sampled loop
+
+
+def discretize(servo, dt):
+    """The sampled cascade the kernel steps, built from discrete blocks.
+
+    Parameters
+    ----------
+    servo : AxisServo
+    dt : float
+        Servo period [s].
+
+    Returns
+    -------
+    DiscreteServo
+        Exact ZOH plant (see :func:`zoh`), Tustin PI controllers (see the
+        module docstring), and their closed interconnection.
+    """
+    dt = _validate.positive("dt", dt)
+    blocks = _blocks(servo, dt)
+    return DiscreteServo(
+        servo=servo,
+        dt=dt,
+        plant=blocks["plant"],
+        velocity_controller=blocks["velocity"],
+        current_controller=blocks.get("current"),
+        closed_loop=_cascade(blocks),
+    )
+
+
+def _damping_ratio(poles, dt):
+    """Smallest damping ratio of continuous (`dt` = 0) or discrete poles; 1 for none."""
+    poles = np.asarray(poles, complex)
+    if dt:
+        poles = poles[np.abs(poles) > 1e-12]  # z = 0 (pure delay) is s = -inf: fully damped
+        poles = np.log(poles) / dt
+    poles = poles[np.abs(poles) > 0]
+    if poles.size == 0:
+        return 1.0
+    return float(np.min(-poles.real / np.abs(poles)))
+
+
+def _loop_response(loop, omega):
+    """Complex frequency response of a SISO state-space `loop` at `omega` [rad/s].
+
+    Evaluated as ``C (sI - A)^-1 B + D`` with ``s = jω`` (or ``z = e^{jω dt}``),
+    which stays accurate where the transfer-function polynomials of a sampled
+    loop with poles near z = 1 lose all their digits.
+    """
+    s = np.exp(1j * omega * loop.dt) if loop.dt else 1j * omega
+    n = loop.nstates
+    resolvent = np.linalg.solve(s[:, None, None] * np.eye(n) - loop.A, np.broadcast_to(loop.B, (s.size, n, 1)))
+    return (loop.C @ resolvent)[:, 0, 0] + loop.D[0, 0]
+
+
+def _frequency_grid(loop):
+    """100 points per decade from 0.1 rad/s to the Nyquist frequency (or far beyond the fastest pole)."""
+    if loop.dt:
+        top = np.pi / loop.dt
+    else:
+        top = 1e3 * max(1.0, np.abs(loop.poles()).max(initial=0.0), np.abs(loop.zeros()).max(initial=0.0))
+    return np.logspace(-1, np.log10(top), int(100 * (np.log10(top) + 1)) + 1)
+
+
+def margins(servo, dt=None):
+    """Gain and phase margins of each loop of the cascade.
+
+    Each loop gain (see the block diagram in the module docstring) is broken
+    at its own error signal with the inner loops closed and the outer loops
+    open; the current loop sees the winding with the rotor blocked. The
+    margins come from :func:`control.stability_margins` applied to the loop's
+    frequency response on a dense grid (100 points per decade up to the
+    Nyquist frequency): its polynomial method returns spurious crossovers for
+    sampled loops of fourth order and its default grid can miss a low
+    crossover.
+
+    Parameters
+    ----------
+    servo : AxisServo
+    dt : float, optional
+        Servo period [s]. When given, the margins are those of the sampled
+        loop (ZOH plant, Tustin controllers), which includes the sampling
+        delay; otherwise of the continuous loop.
+
+    Returns
+    -------
+    dict
+        ``{loop: {...}}`` for the loops ``'current'`` (when modelled),
+        ``'velocity'`` and ``'position'``, innermost first, each with
+        ``gain_margin`` [-], ``phase_margin`` [deg], ``gain_crossover``
+        and ``phase_crossover`` [rad/s] (NaN when there is none),
+        ``stability_margin`` [-] (the smallest distance of the Nyquist curve
+        to -1 on the grid), plus
+        ``damping_ratio`` [-] (the smallest of the loop's closed-loop poles)
+        and ``stable`` (all closed-loop poles strictly inside the stability
+        region).
+    """
+    dt = 0 if dt is None else _validate.positive("dt", dt)
+    result = {}
+    for name, loop in _loop_gains(_blocks(servo, dt)).items():
+        omega = _frequency_grid(loop)
+        response = _loop_response(loop, omega)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # |L| is infinite at an integrator
+            gm, pm, _, wpc, wgc, _ = ct.stability_margins(
+                (np.abs(response), np.angle(response, deg=True), omega), method="frd"
+            )
+        poles = ct.feedback(loop, 1).poles()
+        stable = bool(np.all(np.abs(poles) < 1)) if dt else bool(np.all(poles.real < 0))
+        result[name] = dict(
+            gain_margin=float(gm),
+            phase_margin=float(pm),
+            stability_margin=float(np.min(np.abs(1.0 + response))),
+            gain_crossover=float(wgc),
+            phase_crossover=float(wpc),
+            damping_ratio=_damping_ratio(poles, dt),
+            stable=stable,
+        )
+    return result
+
+
+_GAIN_OF = {"current": "kc", "velocity": "kv", "position": "kp"}
+_REMEDY = {
+    "current": "lower kc or lengthen ti_current",
+    "velocity": "lower kv or lengthen ti",
+    "position": "lower kp (or make the velocity loop faster)",
+}
+
+
+def check(servo, dt, axis="x"):
+    """Reject a servo loop that cannot be simulated faithfully at the period `dt`.
+
+    Criteria, applied loop by loop from the innermost outwards:
+
+    1. sampling: the continuous loop's gain crossover must stay below
+       ``MAX_CROSSOVER_FRACTION`` (1/4) of the Nyquist frequency ``1/(2 dt)``,
+       so the sampling delay costs at most ``π/8`` (22.5°) of phase there —
+       otherwise :class:`ValueError` naming ``dt`` and the loop's gain;
+    2. stability of the sampled loop: every closed-loop pole strictly inside
+       the unit circle, phase margin >= ``MIN_PHASE_MARGIN_DEG`` (30°) and
+       closed-loop damping ratio >= ``MIN_DAMPING_RATIO`` (0.2) — otherwise
+       :class:`~contoursim.exceptions.UnstableLoopError` naming the axis, the
+       loop and its margins.
+
+    Parameters
+    ----------
+    servo : AxisServo
+    dt : float
+        Servo period [s].
+    axis : str, default "x"
+        Axis name used in the messages.
+
+    Returns
+    -------
+    dict
+        The sampled loop's margins, as :func:`margins` with `dt`.
+
+    Raises
+    ------
+    ValueError
+        `dt` is too long for a loop.
+    UnstableLoopError
+        A sampled loop is unstable or badly damped.
+    """
+    dt = _validate.positive("dt", dt)
+    f_max = MAX_CROSSOVER_FRACTION / (2.0 * dt)
+    for loop, m in margins(servo).items():
+        f_c = m["gain_crossover"] / (2 * np.pi)
+        if f_c > f_max:
+            gain = _GAIN_OF[loop]
+            raise ValueError(
+                f"dt = {dt:.6g} s is too long for the {loop} loop of axis {axis!r}: its crossover "
+                f"{f_c:.4g} Hz is above 1/4 of the Nyquist frequency ({f_max:.4g} Hz). Use "
+                f"dt <= {MAX_CROSSOVER_FRACTION / (2 * f_c):.3g} s, or lower {gain} = {getattr(servo, gain):.6g}."
+            )
+    sampled = margins(servo, dt)
+    for loop, m in sampled.items():
+        if not m["stable"]:
+            problem = "is unstable"
+        elif m["phase_margin"] < MIN_PHASE_MARGIN_DEG or m["damping_ratio"] < MIN_DAMPING_RATIO:
+            problem = (
+                f"is badly damped (needs phase margin >= {MIN_PHASE_MARGIN_DEG:g} deg and "
+                f"closed-loop damping ratio >= {MIN_DAMPING_RATIO:g})"
+            )
+        else:
+            continue
+        gain = _GAIN_OF[loop]
+        raise UnstableLoopError(
+            f"the {loop} loop of axis {axis!r} {problem} at dt = {dt:.6g} s: gain margin "
+            f"{m['gain_margin']:.3g}, phase margin {m['phase_margin']:.3g} deg at "
+            f"{m['gain_crossover'] / (2 * np.pi):.4g} Hz, damping ratio {m['damping_ratio']:.3g} "
+            f"({gain} = {getattr(servo, gain):.6g}): {_REMEDY[loop]}.",
+            margins=m,
+        )
+    return sampled

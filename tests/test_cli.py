@@ -1,0 +1,102 @@
+"""The command line: the demo, simulate on job and path files, and what bad input gives."""
+
+import numpy as np
+import pytest
+
+from contoursim.cli import main
+from contoursim.io import read_trace
+
+SMALL_PATH = """
+[feed]
+feed_mm_min = 600
+accel_mm_s2 = 500
+
+[path]
+type = "iso230_4_circle"
+radius_mm = 2
+"""
+
+MACHINE = """
+name = "two axes"
+servo_period_ms = 0.5
+
+[axes.x]
+mass = 300.0
+force_constant = 942.0
+kv = 80.0
+ti = 0.016
+kp = {kp}
+
+[axes.y]
+mass = 300.0
+force_constant = 942.0
+kv = 80.0
+ti = 0.016
+kp = 40.0
+"""
+
+
+def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "out")]) == 0
+    table = capsys.readouterr().out
+    for run in ("iso230_4_circle_ccw", "iso230_4_circle_cw", "butterfly"):
+        assert run in table
+        for kind in ("path", "errors"):
+            assert (tmp_path / "out" / f"{run}_{kind}.png").stat().st_size > 10_000
+        trace = read_trace(tmp_path / "out" / f"{run}.csv")
+        assert trace.axes == ("x", "y")
+    assert (tmp_path / "out" / "iso230_4_circle_ccw_polar.png").exists()
+    # the circle row: tracking ≈ v/Kp = (1000/60)/36 mm on the slower axis, contour far smaller
+    row = next(line for line in table.splitlines() if line.startswith("iso230_4_circle_ccw"))
+    tracking_max, _, contour_max, _ = map(float, row.split()[1:])
+    assert tracking_max == pytest.approx(1e3 * (1000 / 60) / 36, rel=0.02)
+    assert contour_max < tracking_max / 10
+    # a second run reuses its own output directory
+    assert main(["demo", "--out", str(tmp_path / "out")]) == 0
+
+
+def test_never_writes_into_a_users_directory(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("mine")
+    assert main(["demo", "--out", str(tmp_path)]) == 2
+    assert "did not write; choose another --out" in capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_simulate_a_job_file(tmp_path, capsys):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "two.toml").write_text(MACHINE.format(kp=40.0))
+    (tmp_path / "job.toml").write_text('machine = "two.toml"\npath = "small.toml"\nfeed_mm_min = 300\n')
+    assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "machine: two axes, path: small.toml" in out
+    trace = read_trace(tmp_path / "out" / "small.csv")
+    assert trace.dt == pytest.approx(5e-4)
+    speed = np.linalg.norm(np.diff(trace.reference, axis=0), axis=1) / trace.dt
+    assert speed.max() == pytest.approx(300 / 60, rel=1e-3)
+
+
+def test_simulate_a_library_path_on_a_named_machine(tmp_path, capsys):
+    (tmp_path / "two.toml").write_text(MACHINE.format(kp=40.0))
+    assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "two.toml"), "--out", str(tmp_path / "o")]) == 0
+    assert "rounded_square" in capsys.readouterr().out
+
+
+def test_unknown_job_key_names_file_and_line(tmp_path, capsys):
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "rounded_square"\nfeed = 3\n')
+    assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert f"{tmp_path / 'job.toml'}, line 3: unknown key 'feed'" in capsys.readouterr().err
+
+
+def test_bad_servo_value_names_file_line_and_axis(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp=-1.0))
+    assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'm.toml'}, line 10: axis x: kp must be positive" in err
+
+
+def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp=900.0))
+    assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "axis 'x'" in err and "phase margin 16.6 deg" in err and "lower kp" in err

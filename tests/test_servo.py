@@ -1,0 +1,237 @@
+"""AxisServo: plant, loops and margins against hand-derived closed forms and python-control."""
+
+import control as ct
+import numpy as np
+import pytest
+
+from contoursim.exceptions import UnstableLoopError
+from contoursim.servo import AxisServo, zoh
+
+# A ball-screw axis: 300 kg, 900 N/A, velocity loop crossing over at kv·kf/m = 600 rad/s.
+MASS, KF, KV = 300.0, 900.0, 200.0
+W_V = KV * KF / MASS  # [rad/s]
+ELECTRICAL = dict(inductance=5e-3, resistance=1.2, kc=5e-3 * 2 * np.pi * 800, ti_current=5e-3 / 1.2)
+
+
+def axis(**kw):
+    return AxisServo(**{**dict(mass=MASS, force_constant=KF, kv=KV), **kw})
+
+
+def response(sys, w):
+    return ct.frequency_response(sys, np.atleast_1d(w)).complex.ravel()
+
+
+# --- plant and its discretisation ------------------------------------------------------------
+
+
+def test_plant_units_steady_velocity_per_amp():
+    # Constant current i against viscous damping c: kf·i = c·v  ->  v = kf·i/c [m/s] = 1000·kf/c [mm/s per A].
+    c = 4000.0
+    velocity_per_amp = response(axis(damping=c).plant()[1, 0], 1e-7)[0]  # the plant at DC
+    assert velocity_per_amp == pytest.approx(1000.0 * KF / c, rel=1e-6)
+
+
+def test_electrical_plant_steady_state_with_back_emf():
+    # Constant voltage u: di/dt = 0 and dv/dt = 0 give  kf·i = c·v/1000 and u = R·i + kf·v/1000.
+    c, R = 4000.0, 1.2
+    servo = axis(damping=c, **ELECTRICAL)
+    v = response(servo.plant()[1, 0], 1e-7)[0].real  # per volt at DC [mm/s]
+    i = response(servo.plant()[2, 0], 1e-7)[0].real  # per volt at DC [A]
+    assert KF * i == pytest.approx(c * v / 1000.0, rel=1e-6)
+    assert R * i + KF * v / 1000.0 == pytest.approx(1.0, rel=1e-6)
+
+
+def test_zoh_double_integrator_closed_form():
+    dt = 1e-3
+    Ad, Bd = zoh(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [3.0]]), dt)
+    np.testing.assert_allclose(Ad, [[1.0, dt], [0.0, 1.0]], atol=1e-15)
+    np.testing.assert_allclose(Bd.ravel(), [3.0 * dt**2 / 2, 3.0 * dt], rtol=1e-12)
+
+
+@pytest.mark.parametrize("extra", [dict(damping=2500.0), dict(damping=2500.0, **ELECTRICAL)])
+def test_discrete_plant_equals_python_control_zoh(extra):
+    servo, dt = axis(**extra), 1e-4
+    mine = servo.discretize(dt).plant
+    ref = ct.sample_system(servo.plant(), dt, method="zoh")
+    np.testing.assert_allclose(mine.A, ref.A, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(mine.B, ref.B, rtol=1e-12, atol=1e-18)
+    assert mine.dt == dt
+
+
+@pytest.mark.parametrize(
+    "gain, ti, block",
+    [(KV / 1000, 0.01, "velocity_controller"), (ELECTRICAL["kc"], ELECTRICAL["ti_current"], "current_controller")],
+)
+def test_discrete_pi_is_tustin(gain, ti, block):
+    dt = 1e-4
+    d = axis(ti=0.01, **ELECTRICAL).discretize(dt)
+    continuous = ct.tf([gain * ti, gain], [ti, 0])  # k·(1 + 1/(ti·s))
+    ref = ct.sample_system(continuous, dt, method="tustin")
+    w = np.logspace(0, np.log10(np.pi / dt) - 0.01, 7)
+    np.testing.assert_allclose(response(getattr(d, block), w), response(ref, w), rtol=1e-10)
+
+
+def test_pure_p_velocity_controller_has_no_state():
+    d = axis().discretize(1e-4)
+    assert d.velocity_controller.nstates == 0
+    assert d.velocity_controller.D[0, 0] == pytest.approx(KV / 1000)
+
+
+# --- closed loops: hand-derived transfer functions -------------------------------------------
+
+
+def test_velocity_loop_first_order():
+    # P velocity loop, no damping: L = W_V/s, closed loop W_V/(s + W_V).
+    w = np.array([10.0, W_V, 5000.0])
+    np.testing.assert_allclose(response(axis().velocity_loop(), w), W_V / (1j * w + W_V), rtol=1e-10)
+
+
+def test_closed_loop_p_p_second_order():
+    # T = kp·W_V / (s² + W_V·s + kp·W_V);  S = 1 - T.
+    kp, w = 40.0, np.array([1.0, 40.0, 300.0])
+    s = 1j * w
+    T = kp * W_V / (s**2 + W_V * s + kp * W_V)
+    servo = axis(kp=kp)
+    np.testing.assert_allclose(response(servo.closed_loop(), w), T, rtol=1e-10)
+    np.testing.assert_allclose(response(servo.sensitivity(), w), 1 - T, rtol=1e-10)
+
+
+def test_full_feedforward_makes_p_p_loop_exact():
+    # vff = aff = 1, no damping: (s² + W_V s + kp W_V)(x - r) = 0, so T = 1 at every frequency.
+    w = np.array([1.0, 100.0, 1000.0])
+    np.testing.assert_allclose(response(axis(vff=1.0, aff=1.0).closed_loop(), w), 1.0, rtol=1e-9)
+
+
+def test_velocity_feedforward_alone():
+    # vff = 1: T = W_V (s + kp) / (s² + W_V s + kp W_V); without feedforward the paths are off.
+    kp, w = 40.0, np.array([1.0, 40.0, 300.0])
+    s = 1j * w
+    servo = axis(kp=kp, vff=1.0)
+    den = s**2 + W_V * s + kp * W_V
+    np.testing.assert_allclose(response(servo.closed_loop(), w), W_V * (s + kp) / den, rtol=1e-10)
+    np.testing.assert_allclose(response(servo.closed_loop(feedforward=False), w), kp * W_V / den, rtol=1e-10)
+
+
+def test_bandwidth_of_second_order_loop():
+    kp = 40.0
+    wn, zeta = np.sqrt(kp * W_V), W_V / (2 * np.sqrt(kp * W_V))
+    wb = wn * np.sqrt(1 - 2 * zeta**2 + np.sqrt((1 - 2 * zeta**2) ** 2 + 1))
+    assert axis(kp=kp).bandwidth() == pytest.approx(wb / (2 * np.pi), rel=1e-4)
+
+
+# --- margins ---------------------------------------------------------------------------------
+
+
+def test_margins_continuous_closed_form():
+    # Velocity: L = W_V/s -> crossover W_V, 90°. Position: L = kp W_V/(s (s + W_V)),
+    # crossover where ω²(ω² + W_V²) = (kp W_V)², phase margin 90° - atan(ω/W_V).
+    kp = 40.0
+    m = axis(kp=kp).margins()
+    assert m["velocity"]["gain_crossover"] == pytest.approx(W_V, rel=1e-6)
+    assert m["velocity"]["phase_margin"] == pytest.approx(90.0, abs=1e-6)
+    w2 = (-(W_V**2) + np.sqrt(W_V**4 + 4 * (kp * W_V) ** 2)) / 2
+    wc = np.sqrt(w2)
+    assert m["position"]["gain_crossover"] == pytest.approx(wc, rel=1e-6)
+    assert m["position"]["phase_margin"] == pytest.approx(90.0 - np.degrees(np.arctan(wc / W_V)), abs=1e-4)
+
+
+def test_margins_sampled_velocity_loop_include_zoh_delay():
+    # ZOH of W_V/s: L(z) = W_V dt/(z - 1); on z = e^{jωdt}: |L| = W_V dt / (2 sin(ωdt/2)),
+    # phase -90° - ωdt/2. Crossover ω_c = (2/dt) asin(W_V dt/2), phase margin 90° - ω_c dt/2.
+    dt = 2e-4
+    wc = 2 / dt * np.arcsin(W_V * dt / 2)
+    m = axis().margins(dt)["velocity"]
+    assert m["gain_crossover"] == pytest.approx(wc, rel=1e-6)
+    assert m["phase_margin"] == pytest.approx(90.0 - np.degrees(wc * dt / 2), abs=1e-4)
+    # gain margin: phase -180° at the Nyquist frequency, where |L| = W_V dt / 2
+    assert m["gain_margin"] == pytest.approx(2 / (W_V * dt), rel=1e-4)
+
+
+@pytest.mark.parametrize("extra", [dict(ti=0.01, damping=2000.0), dict(ti=0.01, **ELECTRICAL)])
+def test_margins_match_dense_frequency_sweep(extra):
+    # Crossovers found by brute force on 20,000 frequencies of python-control's own loop response.
+    from contoursim.servo import _blocks, _loop_gains
+
+    dt = 1e-4
+    servo = axis(**extra)
+    m = servo.margins(dt)
+    for name, loop in _loop_gains(_blocks(servo, dt)).items():
+        w = np.logspace(-1, np.log10(np.pi / dt) - 1e-9, 20_000)
+        L = response(loop, w)
+        i = np.flatnonzero(np.diff(np.sign(np.abs(L) - 1)))
+        assert i.size == 1, name
+        assert m[name]["gain_crossover"] == pytest.approx(w[i[0]], rel=1e-3)
+        assert m[name]["phase_margin"] == pytest.approx(180 + np.degrees(np.angle(L[i[0]])), abs=0.02)
+        assert m[name]["stable"]
+
+
+def test_check_accepts_typical_axes():
+    assert axis().check(2e-4)["position"]["stable"]
+    assert set(axis(ti=0.01, **ELECTRICAL).check(1e-4)) == {"current", "velocity", "position"}
+
+
+# --- bad input -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kw, name",
+    [
+        (dict(mass=-1.0), "mass"),
+        (dict(mass=0.0), "mass"),
+        (dict(force_constant=float("nan")), "force_constant"),
+        (dict(kv=0.0), "kv"),
+        (dict(kp=-40.0), "kp"),
+        (dict(ti=0.0), "ti"),
+        (dict(damping=-1.0), "damping"),
+        (dict(current_limit=0.0), "current_limit"),
+        (dict(vff=1.5), "vff"),
+        (dict(aff=-0.1), "aff"),
+        (dict(kv="fast"), "kv"),
+        (dict(resistance=1.0), "inductance"),
+        (dict(inductance=5e-3, resistance=1.0, ti_current=1e-3), "kc"),
+        (dict(inductance=-5e-3, resistance=1.0, kc=10.0, ti_current=1e-3), "inductance"),
+    ],
+)
+def test_bad_parameters_name_the_parameter(kw, name):
+    with pytest.raises(ValueError, match=name):
+        axis(**kw)
+
+
+def test_mass_is_required():
+    with pytest.raises(TypeError, match="mass"):
+        AxisServo(force_constant=KF, kv=KV)
+
+
+def test_dt_too_long_names_dt_and_gain():
+    # velocity crossover 95 Hz: needs dt <= 1/(8·95 Hz) = 1.3 ms
+    with pytest.raises(ValueError, match=r"dt = 0\.005 s .*velocity loop of axis 'y'.*kv") as err:
+        axis().check(5e-3, axis="y")
+    assert not isinstance(err.value, UnstableLoopError)
+    with pytest.raises(ValueError, match="dt must be positive"):
+        axis().check(0.0)
+
+
+def test_badly_damped_position_gain_names_axis_loop_and_margins():
+    # kp = 2000 1/s against a 600 rad/s velocity loop: phase margin about 25°
+    message = r"position loop of axis 'z' is badly damped.*phase margin 2\d\.\d deg.*kp"
+    with pytest.raises(UnstableLoopError, match=message) as err:
+        axis(kp=2000.0).check(2e-4, axis="z")
+    assert err.value.margins["phase_margin"] < 30.0
+    assert err.value.margins["stable"]
+
+
+def test_unstable_position_gain():
+    # P-P sampled position loop: gain margin 10 at kp = 1000 (phase -180° at 2475 rad/s), so kp = 12000
+    # is unstable, while its continuous crossover (430 Hz) still passes the sampling rule.
+    assert axis(kp=1000.0).margins(2e-4)["position"]["gain_margin"] == pytest.approx(10.0, rel=1e-3)
+    with pytest.raises(UnstableLoopError, match=r"position loop of axis 'x' is unstable") as err:
+        axis(kp=12000.0).check(2e-4)
+    assert not err.value.margins["stable"]
+
+
+def test_sampled_instability_is_caught():
+    # Continuous loops are fine (crossover 150 Hz < 1/4 Nyquist), but a PI integral time far
+    # shorter than the velocity loop's time constant destabilises it.
+    with pytest.raises(UnstableLoopError, match=r"velocity loop of axis 'x' is (unstable|badly damped).*ti") as err:
+        axis(ti=2e-4).check(2e-4)
+    assert err.value.margins is not None

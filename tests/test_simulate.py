@@ -1,0 +1,108 @@
+"""The whole pipeline (path -> servo kernel -> tool -> contour error) against independent references."""
+
+import control as ct
+import numpy as np
+import pytest
+
+from contoursim import paths
+from contoursim.feed import plan, sample
+from contoursim.io import read_trace
+from contoursim.machine import Machine
+from contoursim.servo import AxisServo
+from contoursim.simulate import simulate
+
+DT = 2e-4
+AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, damping=500.0)
+
+
+def _circle_run(kp_x, kp_y, radius=20.0, feed=40.0):
+    machine = Machine({"x": AxisServo(kp=kp_x, **AXIS), "y": AxisServo(kp=kp_y, **AXIS)}, DT)
+    path = paths.circle(center=(0, 0), radius=radius, direction="ccw", start_angle=0.0, role="test")
+    path = paths.join(*(path,) * 3)  # three turns: the last one is in steady state
+    trajectory = sample(path, plan(path, feed=feed, accel=2000.0), DT)
+    return machine, simulate(machine, trajectory, settle=0.0), radius, feed
+
+
+def _last_turn(result, radius, feed):
+    """Samples of the last turn at full feed: the loops are in steady state there."""
+    traj = result.trajectory
+    return (traj.s > traj.s[-1] - 2 * np.pi * radius * 0.95) & (traj.speed > 0.999 * feed)
+
+
+@pytest.mark.parametrize("kp_x, kp_y", [(40.0, 40.0), (40.0, 30.0)])
+def test_steady_state_circle_matches_python_control_frequency_response(kp_x, kp_y):
+    """Each axis settles to R·|T(jω)| at phase ∠T(jω) (python-control); the radial error follows.
+
+    With equal gains the circle just shrinks; with unequal gains it becomes the
+    45° ellipse of a gain mismatch. Either way the simulated radial deviation
+    over the last turn equals the one predicted from the two axes' closed-loop
+    frequency responses.
+    """
+    machine, result, radius, feed = _circle_run(kp_x, kp_y)
+    omega = feed / radius
+    tx, ty = (complex(ct.frequency_response(machine.axes[a].closed_loop(), [omega]).complex.squeeze()) for a in "xy")
+    last = _last_turn(result, radius, feed)
+    angle = result.trajectory.s[last] / radius
+    predicted = np.column_stack([radius * abs(tx) * np.cos(angle + np.angle(tx)),
+                                 radius * abs(ty) * np.sin(angle + np.angle(ty))])
+    dev_sim = np.linalg.norm(result.tool_position[last], axis=1) - radius
+    dev_pred = np.linalg.norm(predicted, axis=1) - radius
+    assert np.ptp(dev_pred) > 0 if kp_x != kp_y else np.ptp(dev_pred) < 1e-9
+    np.testing.assert_allclose(dev_sim, dev_pred, atol=1e-3 * np.abs(dev_pred).max() + 1e-7)
+    # on a circle the exact contour error is the radial deviation
+    np.testing.assert_allclose(result.contour.normal[last], -dev_sim, atol=1e-9)
+
+
+def test_gain_mismatch_gives_a_45_degree_ellipse():
+    """Unequal Kp: the phase difference between the axes makes a 45° ellipse.
+
+    The radial deviation is c + a·sin 2θ + b·cos 2θ. The phase difference
+    (∝ ω/Kp) gives the sin 2θ term, the magnitude difference (∝ (ω/Kp)²) the
+    cos 2θ term, so the ellipse's axis leaves 45° by about ω/Kp at most.
+    """
+    kp_x, kp_y = 40.0, 30.0
+    _, result, radius, feed = _circle_run(kp_x, kp_y)
+    p = result.tool_position[_last_turn(result, radius, feed)]
+    theta = np.arctan2(p[:, 1], p[:, 0])
+    dev = np.hypot(p[:, 0], p[:, 1]) - radius
+    basis = np.column_stack([np.ones_like(theta), np.sin(2 * theta), np.cos(2 * theta)])
+    (_, a, b), *_ = np.linalg.lstsq(basis, dev, rcond=None)
+    omega = feed / radius
+    assert abs(a) > 0.5 * radius * omega * (1 / kp_y - 1 / kp_x) / 2  # the 45° term is there
+    assert abs(np.arctan(b / a) / 2) < omega / min(kp_x, kp_y)
+
+
+def test_tracking_error_is_v_over_kp_while_contour_error_is_small():
+    """Tracking error ≈ v/Kp; contour error ≈ R(1 − |T(jω)|) of a first-order lag, 40× smaller here."""
+    kp = 40.0
+    _, result, radius, feed = _circle_run(kp, kp)
+    steady = _last_turn(result, radius, feed)
+    tracking = np.linalg.norm(result.tracking_error[steady], axis=1)
+    assert np.median(tracking) == pytest.approx(feed / kp, rel=0.02)
+    first_order_lag = radius * (1 - 1 / np.hypot(1, feed / radius / kp))
+    assert result.contour.magnitude[steady].mean() == pytest.approx(first_order_lag, rel=0.05)
+
+
+def test_sampling_must_match_the_servo_period():
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    path = paths.circle(center=(0, 0), radius=5.0)
+    with pytest.raises(ValueError, match="servo period"):
+        simulate(machine, sample(path, plan(path, feed=10.0, accel=500.0), 2 * DT))
+
+
+def test_a_3d_path_needs_three_axes():
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    path = paths.helix(center=(0, 0, 0), radius=5.0, pitch=2.0, turns=1)
+    with pytest.raises(ValueError, match="3 coordinates but the machine has only 2 axes"):
+        simulate(machine, sample(path, plan(path, feed=10.0, accel=500.0), DT))
+
+
+def test_saved_trace_follows_the_csv_contract(tmp_path):
+    _, result, _, _ = _circle_run(40.0, 40.0, radius=2.0, feed=5.0)
+    result.save_csv(tmp_path / "run.csv", metadata={"machine": "test"})
+    trace = read_trace(tmp_path / "run.csv")
+    assert trace.axes == ("x", "y") and trace.metadata == {"machine": "test"}
+    np.testing.assert_allclose(trace.reference, result.trajectory.position, atol=1e-10)
+    np.testing.assert_allclose(trace.actual, result.tool_position, atol=1e-10)
+    with pytest.raises(FileExistsError):
+        result.save_csv(tmp_path / "run.csv")
