@@ -31,7 +31,17 @@ class ConfigError(ValueError):
 
 
 class TraceFormatError(ConfigError):
-    """A measured-trace CSV file does not follow the trace format."""
+    """A measured-trace CSV file does not follow the trace format.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, naming the column.
+    source : str, optional
+        The CSV file.
+    line : int, optional
+        The 1-based line of the offending row or header.
+    """
 
 
 class PathError(ValueError):

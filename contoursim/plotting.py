@@ -111,7 +111,13 @@ def plot_polar_deviation(result, center, radius, ax=None):
 
 
 def plot_errors_over_time(result, ax=None):
-    """Tracking error |e| and contour error ε over time [µm]."""
+    """Tracking error |e| and contour error ε over time [µm], on a log scale.
+
+    Parameters
+    ----------
+    result : contoursim.simulate.SimResult
+    ax : matplotlib.axes.Axes, optional
+    """
     ax = _axes(ax)
     t = result.trajectory.t
     ax.plot(t, 1e3 * np.linalg.norm(result.tracking_error, axis=1), label="tracking error |e|")

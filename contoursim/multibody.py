@@ -1,0 +1,1050 @@
+"""Multibody chain of a machine tool with its geometric errors.
+
+A machine is a tree of bodies hanging from the bed (body 0): a tool branch
+ending at the tool and a workpiece branch ending at the workpiece (seeds 000,
+002, 004). The **lower-body array** L^n(j) (L^0(j) = j, L^1(j) = parent(j),
+L^n = L(L^(n-1)), L(0) = 0) gives both chains.
+
+Between body j and its parent the actual transform is the product of the
+characteristic matrices (seed 000 eq. 1.41, seed 004 eq. 6 and 15)::
+
+    T_j = S_j · ΔS_j · M_j(q) · D_j(t) · E_j(q)
+
+- ``S``: ideal static matrix, a translation by the body's offset [mm];
+- ``ΔS``: static (assembly) error, six constants;
+- ``M``: ideal motion, a translation ``q·u`` along the joint direction, or for
+  a rotary joint a rotation by q about its axis line. With a squareness
+  (tilt) error the rotary axis line is the tilted unit vector ``l`` of seed
+  001 (l_a, l_b, l_c) and M is the Rodrigues rotation about ``l``;
+- ``D``: thermal drift, its own matrix (seed 004): rates [mm/s, rad/s] × t;
+- ``E``: motion error, the six error motions ``dx, dy, dz, ex, ey, ez`` of
+  the axis as functions of q, plus the linear-axis squareness, which enters
+  the translation column as ``−ξ·S`` (seed 004 eq. 9 and 11; ξ the carriage
+  coordinate along its own axis).
+
+Small rotations are applied exactly (exponential map), so the full product is
+an exact rigid-body transform. The tool tip in workpiece coordinates is
+``P_w = T_work⁻¹ · T_tool · P_t`` with ``P_t = 0`` in the tool body's frame and
+the tool axis ``V_t`` (seed 004 eq. 24-31).
+
+The first-order linearisation: inserting a small twist (δ, ε) at a frame F of
+the tool branch moves the tool tip by ``R_W^T (R_F δ + R_F ε × (p − o_F))``,
+with (R_F, o_F) the frame's pose and p the tool tip in bed coordinates; on the
+workpiece branch the sign is negative. :meth:`MachineChain.error_jacobian`
+builds the sensitivity to every named error parameter from that.
+
+Units inside: mm, rad, s. Axis positions q are (N, n_axes), time first.
+"""
+
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from . import _validate
+from .config import TomlFile
+from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table
+from .exceptions import ConfigError
+
+__all__ = [
+    "Body",
+    "MachineChain",
+    "lower_body_array",
+    "tilted_axis",
+    "chain_from_toml",
+]
+
+_DIRECTIONS = "xyz"
+_JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+_UM, _URAD = 1e-3, 1e-6
+
+
+def lower_body_array(parents):
+    """Lower-body array of a tree of bodies.
+
+    Parameters
+    ----------
+    parents : sequence of int, length n
+        ``parents[j - 1]`` is the parent of body j (1..n); 0 is the bed.
+
+    Returns
+    -------
+    ndarray of int, shape (K, n)
+        Row k holds L^k(j) for bodies j = 1..n; the last row is all zeros
+        (K − 1 is the depth of the deepest body), as in seed 004, Table 1.
+
+    Raises
+    ------
+    ValueError
+        A parent out of range, a body that is its own ancestor.
+    """
+    parents = np.asarray(parents)
+    if parents.ndim != 1 or parents.size == 0 or not np.issubdtype(parents.dtype, np.integer):
+        raise ValueError(f"parents must be a non-empty 1-D sequence of integers, got {parents!r}")
+    n = parents.size
+    bad = np.flatnonzero((parents < 0) | (parents > n) | (parents == np.arange(1, n + 1)))
+    if bad.size:
+        j = int(bad[0]) + 1
+        raise ValueError(f"parents: body {j} has parent {int(parents[j - 1])}, which is not a body 0..{n} other than itself")
+    lookup = np.concatenate([[0], parents])  # L(0) = 0
+    rows = [np.arange(1, n + 1)]
+    while rows[-1].any():
+        if len(rows) > n:
+            j = int(np.flatnonzero(rows[-1])[0]) + 1
+            raise ValueError(f"parents: body {j} is its own ancestor (the bodies do not form a tree)")
+        rows.append(lookup[rows[-1]])
+    return np.array(rows)
+
+
+def tilted_axis(direction, tilt):
+    """Unit direction of a rotary axis line tilted by squareness errors (seed 001).
+
+    Parameters
+    ----------
+    direction : int
+        The ideal axis: 0 (A, about x), 1 (B, about y), 2 (C, about z).
+    tilt : array_like, shape (3,)
+        Squareness angles s_k,d [rad] towards the other two directions d
+        (the entry of the own direction is ignored): A uses s_ay, s_az;
+        B uses s_bx, s_bz; C uses s_cx, s_cy.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        ``l_a = [cos s_az cos s_ay, −cos s_az sin s_ay, −sin s_az]``,
+        ``l_b = [−sin s_bx, cos s_bx cos s_bz, −cos s_bx sin s_bz]``,
+        ``l_c = [−sin s_cx, −cos s_cx sin s_cy, cos s_cx cos s_cy]``.
+    """
+    sx, sy, sz = _validate.finite_array("tilt", tilt, shape=(3,))
+    c, s = np.cos, np.sin
+    if direction == 0:
+        return np.array([c(sz) * c(sy), -c(sz) * s(sy), -s(sz)])
+    if direction == 1:
+        return np.array([-s(sx), c(sx) * c(sz), -c(sx) * s(sz)])
+    if direction == 2:
+        return np.array([-s(sx), -c(sx) * s(sy), c(sx) * c(sy)])
+    raise ValueError(f"direction must be 0, 1 or 2, got {direction!r}")
+
+
+@dataclass(frozen=True)
+class Body:
+    """One body of the machine and the joint to its parent.
+
+    Parameters
+    ----------
+    name : str
+        Unique name (``bed`` is reserved for body 0).
+    parent : int
+        Index of the parent body (0 = bed).
+    joint : str
+        ``"fixed"``, ``"linear"`` or ``"rotary"``.
+    direction : int
+        Joint direction 0, 1, 2 (x, y, z) of a moving joint.
+    sign : float
+        +1 or −1: the carriage moves along (or about) ``sign·e_direction`` for
+        a positive axis command (−1 for a table that carries the workpiece
+        opposite to the programmed tool motion).
+    axis : str, optional
+        Name of the commanded axis driving a moving joint.
+    offset : ndarray, shape (3,)
+        Ideal static offset from the parent frame [mm].
+    static : ndarray, shape (6,)
+        Static error (dx, dy, dz [mm], ex, ey, ez [rad]).
+    motion : tuple of ErrorMotion, length 6
+        Error motions dx, dy, dz [mm], ex, ey, ez [rad] as functions of the
+        axis position q [mm or rad].
+    squareness : ndarray, shape (3,)
+        Linear joint: out-of-squareness S [rad] of the line of motion towards
+        each other direction (positive: the angle between the positive axes
+        exceeds 90°); enters the motion error as ``δ_d −= ξ·S_d``.
+    tilt : ndarray, shape (3,)
+        Rotary joint: squareness of the axis line s_k,d [rad] (seed 001).
+    thermal : ndarray, shape (6,)
+        Thermal drift rates dx, dy, dz [mm/s], ex, ey, ez [rad/s].
+    travel : tuple of float, optional
+        Axis travel (min, max) [mm or rad].
+    """
+
+    name: str
+    parent: int = 0
+    joint: str = "fixed"
+    direction: int = 2
+    sign: float = 1.0
+    axis: str = None
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    static: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    motion: tuple = field(default_factory=lambda: (ErrorMotion(),) * 6)
+    squareness: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tilt: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    thermal: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    travel: tuple = None
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not _NAME.match(self.name) or self.name == "bed":
+            raise ValueError(f"body name must be an identifier other than 'bed', got {self.name!r}")
+        if self.joint not in ("fixed", "linear", "rotary"):
+            raise ValueError(f"{self.name}: joint must be 'fixed', 'linear' or 'rotary', got {self.joint!r}")
+        if self.direction not in (0, 1, 2) or self.sign not in (1, -1):
+            raise ValueError(f"{self.name}: direction must be 0, 1 or 2 and sign ±1")
+        if (self.axis is None) != (self.joint == "fixed"):
+            raise ValueError(f"{self.name}: a moving joint needs an axis name, a fixed one has none")
+        if len(self.motion) != 6 or not all(isinstance(m, ErrorMotion) for m in self.motion):
+            raise ValueError(f"{self.name}: motion must be 6 ErrorMotion objects (dx, dy, dz, ex, ey, ez)")
+        for name, size in (("offset", 3), ("static", 6), ("squareness", 3), ("tilt", 3), ("thermal", 6)):
+            arr = _validate.finite_array(f"{self.name}.{name}", getattr(self, name), shape=(size,))
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+        if self.squareness[self.direction] or (self.squareness.any() and self.joint != "linear"):
+            raise ValueError(f"{self.name}: squareness applies to a linear joint, towards the other two directions")
+        if self.tilt[self.direction] or (self.tilt.any() and self.joint != "rotary"):
+            raise ValueError(f"{self.name}: tilt applies to a rotary joint, towards the other two directions")
+        if self.joint == "fixed" and any(not m.is_zero for m in self.motion):
+            raise ValueError(f"{self.name}: a fixed body has no error motions (use static)")
+        if self.travel is not None:
+            lo, hi = _validate.finite_array(f"{self.name}.travel", self.travel, shape=(2,))
+            if not lo < hi:
+                raise ValueError(f"{self.name}.travel must be (min, max) with min < max")
+            object.__setattr__(self, "travel", (float(lo), float(hi)))
+
+    def parameters(self):
+        """The body's error parameters that are set, as ``{name: value}`` [mm, rad, /s]."""
+        out = {}
+        for comp, motion in zip(COMPONENTS, self.motion):
+            out.update({f"{self.name}.{comp}.{k}": v for k, v in motion.parameters().items()})
+        for group, values, comps in (
+            ("static", self.static, COMPONENTS),
+            ("squareness", self.squareness, _DIRECTIONS),
+            ("tilt", self.tilt, _DIRECTIONS),
+            ("thermal", self.thermal, COMPONENTS),
+        ):
+            out.update({f"{self.name}.{group}.{c}": float(v) for c, v in zip(comps, values) if v})
+        return out
+
+    def scaled(self, factor):
+        """A copy with every error multiplied by `factor`."""
+        return replace(
+            self,
+            static=factor * self.static,
+            motion=tuple(m.scaled(factor) for m in self.motion),
+            squareness=factor * self.squareness,
+            tilt=factor * self.tilt,
+            thermal=factor * self.thermal,
+        )
+
+    def with_parameter(self, key, value):
+        """A copy with parameter `key` (the name without the body prefix) set."""
+        group, _, rest = key.partition(".")
+        if group in COMPONENTS:
+            i = COMPONENTS.index(group)
+            motion = list(self.motion)
+            motion[i] = motion[i].with_parameter(rest, value)
+            return replace(self, motion=tuple(motion))
+        names = {"static": COMPONENTS, "thermal": COMPONENTS, "squareness": _DIRECTIONS, "tilt": _DIRECTIONS}
+        if group not in names or rest not in names[group]:
+            raise ValueError(f"unknown parameter {self.name}.{key}")
+        arr = getattr(self, group).copy()
+        arr[names[group].index(rest)] = value
+        return replace(self, **{group: arr})
+
+    def motion_error(self, q):
+        """Motion error twist (dx, dy, dz, ex, ey, ez) at positions `q`, squareness included.
+
+        Parameters
+        ----------
+        q : ndarray, shape (N,)
+            Axis positions [mm or rad].
+
+        Returns
+        -------
+        ndarray, shape (N, 6)
+            [mm, rad], in the body's frame after its ideal motion.
+        """
+        out = np.stack([m(q) for m in self.motion], axis=-1)
+        if self.squareness.any():
+            out[:, :3] -= (self.sign * q)[:, None] * self.squareness
+        return out
+
+    def thermal_drift(self, t, n):
+        """Thermal drift twist, shape (n, 6), at times `t` (s, shape (n,)); zeros when t is None."""
+        if t is None or not self.thermal.any():
+            return np.zeros((n, 6))
+        return t[:, None] * self.thermal
+
+    def tilt_twist(self, q):
+        """First-order equivalent of the axis-line tilt: a twist after the ideal rotation, shape (N, 6).
+
+        With ``Q = I + [φ]×`` taking e_k to l (φ = e_k × dl), the rotation
+        about l is ``Q R0 Qᵀ = R0 (I + [R0ᵀφ − φ]×)`` to first order.
+        """
+        e = np.eye(3)[self.direction]
+        phi = np.cross(e, -self.tilt)  # dl/ds_d = -e_d for every axis of seed 001
+        out = np.zeros((np.size(q), 6))
+        out[:, 3:] = _rotate(phi, -(self.sign * q)[:, None] * e) - phi
+        return out
+
+
+@dataclass(frozen=True)
+class MachineChain:
+    """A machine as a multibody chain: tool pose, volumetric error, Jacobians, inverse kinematics.
+
+    Parameters
+    ----------
+    bodies : tuple of Body
+        Bodies 1..n (``bodies[j - 1]`` is body j); parents refer to indices.
+    tool : int
+        The body carrying the tool (tip at `tool_tip` in its frame).
+    workpiece : int
+        The body carrying the workpiece (0 = the bed itself).
+    axes : tuple of str, optional
+        Column order of axis positions q; default: order of first appearance.
+    tool_axis : array_like, shape (3,)
+        Tool axis V_t in the tool frame (unit vector), default (0, 0, 1).
+    tool_tip : array_like, shape (3,)
+        Tool tip P_t in the tool frame [mm], default the origin.
+    name : str
+        A label for reports.
+    """
+
+    bodies: tuple
+    tool: int
+    workpiece: int
+    axes: tuple = None
+    tool_axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    tool_tip: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    name: str = ""
+
+    def __post_init__(self):
+        bodies = tuple(self.bodies)
+        if not bodies or not all(isinstance(b, Body) for b in bodies):
+            raise ValueError("bodies must be a non-empty sequence of Body")
+        object.__setattr__(self, "bodies", bodies)
+        names = [b.name for b in bodies]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ValueError(f"body names must be unique; repeated: {', '.join(sorted(dup))}")
+        lower = lower_body_array([b.parent for b in bodies])
+        lower.flags.writeable = False
+        object.__setattr__(self, "lower", lower)
+        n = len(bodies)
+        for label in ("tool", "workpiece"):
+            value = getattr(self, label)
+            if not isinstance(value, (int, np.integer)) or not (1 if label == "tool" else 0) <= value <= n:
+                raise ValueError(f"{label} must be a body index, got {value!r}")
+        moving = [b.axis for b in bodies if b.axis is not None]
+        axes = tuple(dict.fromkeys(moving)) if self.axes is None else tuple(self.axes)
+        missing = set(moving) - set(axes)
+        if missing or len(set(axes)) != len(axes):
+            raise ValueError(f"axes {axes} must list each driven axis once; missing: {sorted(missing)}")
+        object.__setattr__(self, "axes", axes)
+        for b in bodies:
+            if b.axis is not None:
+                kinds = {c.joint for c in bodies if c.axis == b.axis}
+                if len(kinds) > 1:
+                    raise ValueError(f"axis {b.axis!r} drives both linear and rotary joints")
+        v = _validate.finite_array("tool_axis", self.tool_axis, shape=(3,))
+        if abs(np.linalg.norm(v) - 1) > 1e-9:
+            raise ValueError(f"tool_axis must be a unit vector, got {v}")
+        v.flags.writeable = False
+        object.__setattr__(self, "tool_axis", v)
+        tip = _validate.finite_array("tool_tip", self.tool_tip, shape=(3,))
+        tip.flags.writeable = False
+        object.__setattr__(self, "tool_tip", tip)
+        object.__setattr__(self, "tool_chain", self.chain_to(self.tool))
+        object.__setattr__(self, "work_chain", self.chain_to(self.workpiece))
+
+    # -- topology ---------------------------------------------------------
+
+    @property
+    def parents(self):
+        """Parent index of bodies 1..n, shape (n,)."""
+        return np.array([b.parent for b in self.bodies])
+
+    def chain_to(self, j):
+        """Bodies from the bed out to body `j` (tuple of indices; empty for the bed)."""
+        if j == 0:
+            return ()
+        column = self.lower[:, j - 1]
+        return tuple(int(k) for k in column[column > 0][::-1])
+
+    def axis_kind(self, axis):
+        """``"linear"`` or ``"rotary"`` for an axis name."""
+        return next(b.joint for b in self.bodies if b.axis == axis)
+
+    @property
+    def rotary_axes(self):
+        """Boolean mask over `axes`: True for rotary axes."""
+        return np.array([self.axis_kind(a) == "rotary" for a in self.axes])
+
+    # -- derived chains ---------------------------------------------------
+
+    def ideal(self):
+        """The same machine without any error."""
+        return self.scaled(0.0)
+
+    def scaled(self, factor):
+        """The same machine with every error multiplied by `factor`."""
+        return replace(self, bodies=tuple(b.scaled(factor) for b in self.bodies))
+
+    def parameters(self):
+        """Every error parameter that is set, ``{name: value}``.
+
+        Names are ``<body>.<dx|dy|dz|ex|ey|ez>.p<k>`` (polynomial coefficient
+        [mm or rad per unit of q^k]), ``<body>.<comp>.cyclic<i>.sin|cos``,
+        ``<body>.static.<comp>``, ``<body>.squareness.<x|y|z>`` [rad],
+        ``<body>.tilt.<x|y|z>`` [rad], ``<body>.thermal.<comp>`` [mm/s, rad/s].
+        Tabulated error motions are data, not parameters.
+        """
+        out = {}
+        for b in self.bodies:
+            out.update(b.parameters())
+        return out
+
+    def with_parameters(self, values):
+        """A copy with the named parameters set (names as in :meth:`parameters`; new ones allowed)."""
+        bodies = list(self.bodies)
+        for name, value in values.items():
+            j, key = self._split(name)
+            bodies[j - 1] = bodies[j - 1].with_parameter(key, value)
+        return replace(self, bodies=tuple(bodies))
+
+    # -- forward kinematics -----------------------------------------------
+
+    def tool_pose(self, q, t=None, ideal=False):
+        """Tool tip and tool axis in workpiece coordinates (exact 4x4 products).
+
+        Parameters
+        ----------
+        q : ndarray, shape (N, n_axes)
+            Axis positions, columns in the order of `axes` [mm for linear,
+            rad for rotary axes].
+        t : ndarray, shape (N,), optional
+            Times [s] for the thermal drift; no drift when omitted.
+        ideal : bool
+            Evaluate the error-free machine.
+
+        Returns
+        -------
+        position : ndarray, shape (N, 3)
+            Tool tip P_w [mm].
+        axis : ndarray, shape (N, 3)
+            Tool axis V_w (unit vector).
+        """
+        q, t = self._check(q, t)
+        n = q.shape[0]
+        pv = np.empty((n, 2, 3))  # tool tip and tool axis, rotated together
+        pv[:, 0], pv[:, 1] = self.tool_tip, self.tool_axis
+        for j in reversed(self.tool_chain):  # tool frame -> bed
+            for w, d in reversed(self._steps(j, q, t, ideal)):
+                if w is not None:
+                    pv = _rotate(pv, np.asarray(w)[..., None, :])
+                if d is not None:
+                    pv[:, 0] += d
+        for j in self.work_chain:  # bed -> workpiece frame
+            for w, d in self._steps(j, q, t, ideal):
+                if d is not None:
+                    pv[:, 0] -= d
+                if w is not None:
+                    pv = _rotate(pv, -np.asarray(w)[..., None, :])
+        return pv[:, 0].copy(), pv[:, 1].copy()
+
+    def volumetric_error(self, q, t=None):
+        """Actual minus ideal tool pose at the same axis positions.
+
+        Parameters
+        ----------
+        q : ndarray, shape (N, n_axes)
+            Axis positions [mm, rad].
+        t : ndarray, shape (N,), optional
+            Times [s] (thermal drift).
+
+        Returns
+        -------
+        position : ndarray, shape (N, 3)
+            Volumetric position error [mm].
+        axis : ndarray, shape (N, 3)
+            Tool-axis error V_w(actual) − V_w(ideal) [rad, small].
+        """
+        pa, va = self.tool_pose(q, t)
+        pi, vi = self.tool_pose(q, t, ideal=True)
+        return pa - pi, va - vi
+
+    def _steps(self, j, q, t, ideal):
+        """Characteristic matrices of body j as (rotation vector, translation) pairs, left to right."""
+        b = self.bodies[j - 1]
+        n = q.shape[0]
+        steps = [(None, b.offset)]
+        if not ideal and b.static.any():
+            steps.append((b.static[3:], b.static[:3]))
+        if b.joint != "fixed":
+            xi = b.sign * q[:, self.axes.index(b.axis)]
+            if b.joint == "linear":
+                steps.append((None, xi[:, None] * np.eye(3)[b.direction]))
+            else:
+                line = np.eye(3)[b.direction] if ideal else tilted_axis(b.direction, b.tilt)
+                steps.append((xi[:, None] * line, None))
+        if not ideal and b.thermal.any() and t is not None:
+            drift = b.thermal_drift(t, n)
+            steps.append((drift[:, 3:], drift[:, :3]))
+        if not ideal and b.joint != "fixed":
+            err = b.motion_error(q[:, self.axes.index(b.axis)])
+            if err.any():
+                steps.append((err[:, 3:], err[:, :3]))
+        return steps
+
+    # -- first-order model ------------------------------------------------
+
+    def _frames(self, q):
+        """Ideal poses (R, o) in bed coordinates of every body's static and motion frames."""
+        n = q.shape[0]
+        static, motion = {0: None}, {0: (np.eye(3)[None], np.zeros((n, 3)))}
+        for j in np.argsort(np.count_nonzero(self.lower, axis=0), kind="stable") + 1:
+            b = self.bodies[j - 1]
+            R, o = motion[b.parent]
+            o = o + R @ b.offset
+            static[j] = (R, o)
+            if b.joint == "linear":
+                xi = b.sign * q[:, self.axes.index(b.axis)]
+                o = o + xi[:, None] * R[..., b.direction]
+            elif b.joint == "rotary":
+                xi = b.sign * q[:, self.axes.index(b.axis)]
+                w = (xi[:, None] * R[..., b.direction])[:, None, :]
+                R = np.swapaxes(_rotate(np.swapaxes(R, -1, -2), w), -1, -2)
+            motion[int(j)] = (R, o)
+        return static, motion
+
+    def _effects(self, q):
+        """A function (body, frame kind, twist) -> first-order change of (P_w, V_w), shape (N, 6).
+
+        The twist (δ, ε), shape (N, 6) or (6,), is given in the coordinates of
+        the body's static frame (after S) or motion frame (after M).
+        """
+        static, motion = self._frames(q)
+        R_t, o_t = motion[self.tool]
+        p = o_t + R_t @ self.tool_tip
+        v = np.broadcast_to(R_t @ self.tool_axis, p.shape)
+        R_w = motion[self.workpiece][0]
+        sides = {j: 1.0 for j in self.tool_chain} | {j: -1.0 for j in self.work_chain}
+        shared = set(self.tool_chain) & set(self.work_chain)
+
+        def effect(j, kind, twist):
+            if j in shared:
+                return np.zeros((p.shape[0], 6))
+            R, o = (static if kind == "static" else motion)[j]
+            twist = np.broadcast_to(twist, (p.shape[0], 6))
+            d = np.matmul(R, twist[:, :3, None])[..., 0]
+            e = np.matmul(R, twist[:, 3:, None])[..., 0]
+            dp = d + _cross(e, p - o)
+            dv = _cross(e, v)
+            back = np.swapaxes(R_w, -1, -2)
+            return sides[j] * np.concatenate([np.matmul(back, dp[..., None])[..., 0], np.matmul(back, dv[..., None])[..., 0]], axis=1)
+
+        return effect
+
+    def first_order_error(self, q, t=None):
+        """First-order (small-error) volumetric error.
+
+        Parameters
+        ----------
+        q : ndarray, shape (N, n_axes)
+            Axis positions [mm, rad].
+        t : ndarray, shape (N,), optional
+            Times [s] (thermal drift).
+
+        Returns
+        -------
+        ndarray, shape (N, 6)
+            Position error [mm] (columns 0-2) and tool-axis error (3-5).
+        """
+        q, t = self._check(q, t)
+        effect = self._effects(q)
+        out = np.zeros((q.shape[0], 6))
+        for j in set(self.tool_chain) ^ set(self.work_chain):
+            b = self.bodies[j - 1]
+            if b.static.any():
+                out += effect(j, "static", b.static)
+            twist = b.thermal_drift(t, q.shape[0])
+            if b.joint != "fixed":
+                qj = q[:, self.axes.index(b.axis)]
+                twist = twist + b.motion_error(qj)
+                if b.tilt.any():
+                    twist += b.tilt_twist(qj)
+            if twist.any():
+                out += effect(j, "motion", twist)
+        return out
+
+    def error_jacobian(self, q, names=None, t=None):
+        """Sensitivity of the volumetric error to error parameters (first order, at zero error).
+
+        Parameters
+        ----------
+        q : ndarray, shape (N, n_axes)
+            Axis positions [mm, rad].
+        names : sequence of str, optional
+            Parameter names (see :meth:`parameters`; any valid name, set or
+            not). Default: the parameters that are set.
+        t : ndarray, shape (N,), optional
+            Times [s], needed for thermal parameters.
+
+        Returns
+        -------
+        ndarray, shape (N, 6, P)
+            d(P_w, V_w)/d(parameter), columns in the order of `names`.
+        """
+        q, t = self._check(q, t)
+        names = list(self.parameters()) if names is None else list(names)
+        effect = self._effects(q)
+        n = q.shape[0]
+        out = np.zeros((n, 6, len(names)))
+        for col, name in enumerate(names):
+            j, key = self._split(name)
+            b = self.bodies[j - 1]
+            group, _, rest = key.partition(".")
+            kind = "static" if group == "static" else "motion"
+            if b.joint == "fixed" and kind == "motion" and group != "thermal":
+                raise ValueError(f"{name}: a fixed body has only static errors and thermal drift")
+            qj = None if b.joint == "fixed" else q[:, self.axes.index(b.axis)]
+            basis = np.zeros((n, 6))
+            if group in COMPONENTS:
+                basis[:, COMPONENTS.index(group)] = b.motion[COMPONENTS.index(group)].basis(rest, qj)
+            elif group == "static" and rest in COMPONENTS:
+                basis[:, COMPONENTS.index(rest)] = 1.0
+            elif group == "thermal" and rest in COMPONENTS:
+                if t is None:
+                    raise ValueError(f"{name}: thermal parameters need the times t")
+                basis[:, COMPONENTS.index(rest)] = t
+            elif group == "squareness" and rest in _DIRECTIONS and b.joint == "linear":
+                if _DIRECTIONS.index(rest) == b.direction:
+                    raise ValueError(f"{name}: squareness is towards the other two directions")
+                basis[:, _DIRECTIONS.index(rest)] = -b.sign * qj
+            elif group == "tilt" and rest in _DIRECTIONS and b.joint == "rotary":
+                if _DIRECTIONS.index(rest) == b.direction:
+                    raise ValueError(f"{name}: tilt is towards the other two directions")
+                unit = replace(b, tilt=np.eye(3)[_DIRECTIONS.index(rest)])
+                basis = unit.tilt_twist(qj)
+            else:
+                raise ValueError(f"unknown parameter {name!r}")
+            out[:, :, col] = effect(j, kind, basis)
+        return out
+
+    def axis_jacobian(self, q):
+        """Sensitivity of the ideal tool pose to the axis positions.
+
+        Parameters
+        ----------
+        q : ndarray, shape (N, n_axes)
+            Axis positions [mm, rad].
+
+        Returns
+        -------
+        ndarray, shape (N, 6, n_axes)
+            d(P_w, V_w)/dq [mm/mm, mm/rad, 1/mm, 1/rad].
+        """
+        q, _ = self._check(q, None)
+        effect = self._effects(q)
+        out = np.zeros((q.shape[0], 6, len(self.axes)))
+        for j in set(self.tool_chain) ^ set(self.work_chain):
+            b = self.bodies[j - 1]
+            if b.joint != "fixed":
+                twist = np.zeros(6)
+                twist[b.direction + (3 if b.joint == "rotary" else 0)] = b.sign
+                out[:, :, self.axes.index(b.axis)] += effect(j, "static", twist)
+        return out
+
+    # -- inverse kinematics -----------------------------------------------
+
+    def inverse(self, position, tool_axis=None, q0=None, t=None, free=None, ideal=False, tol=1e-10, max_iter=20):
+        """Axis positions that put the tool tip (and axis) at a target, by Gauss-Newton iteration.
+
+        Each step solves the least-squares problem with the ideal chain's axis
+        Jacobian, position first and the tool axis in the freedom left (see
+        :func:`_prioritized_step`); on the ideal chain of a Cartesian machine the
+        first step is exact (the map is affine), on the actual chain the
+        residual shrinks by about the relative error size per step.
+
+        Parameters
+        ----------
+        position : ndarray, shape (N, 3)
+            Target tool tip in workpiece coordinates [mm].
+        tool_axis : ndarray, shape (N, 3), optional
+            Target tool axis (unit vectors). Without it only the position is
+            matched and rotary axes stay at `q0`.
+        q0 : ndarray, shape (N, n_axes), optional
+            Starting positions (zeros by default) [mm, rad].
+        t : ndarray, shape (N,), optional
+            Times [s] (thermal drift).
+        free : sequence of str, optional
+            Axes to solve for; the others stay at `q0`. Default: all axes
+            when `tool_axis` is given, else the linear axes.
+        ideal : bool
+            Invert the error-free chain.
+        tol : float
+            Stop when no axis moves more than this [mm or rad].
+        max_iter : int
+            Iteration limit.
+
+        Returns
+        -------
+        ndarray, shape (N, n_axes)
+            Axis positions [mm, rad].
+
+        Raises
+        ------
+        ValueError
+            The iteration does not converge within `max_iter` steps.
+        """
+        position = _validate.finite_array("position", position, ndim=2)
+        n = position.shape[0]
+        _validate.finite_array("position", position, shape=(n, 3))
+        if tool_axis is not None:
+            tool_axis = _validate.finite_array("tool_axis", tool_axis, shape=(n, 3))
+        q = np.zeros((n, len(self.axes))) if q0 is None else _validate.finite_array("q0", q0, shape=(n, len(self.axes)))
+        q = q.copy()
+        if free is None:
+            mask = np.ones(len(self.axes), bool) if tool_axis is not None else ~self.rotary_axes
+        else:
+            unknown = set(free) - set(self.axes)
+            if unknown:
+                raise ValueError(f"free: unknown axes {sorted(unknown)}; the axes are {list(self.axes)}")
+            mask = np.array([a in free for a in self.axes])
+        rows = slice(0, 6) if tool_axis is not None else slice(0, 3)
+        for _ in range(int(_validate.positive("max_iter", max_iter))):
+            p, v = self.tool_pose(q, t, ideal=ideal)
+            r = p - position if tool_axis is None else np.concatenate([p - position, v - tool_axis], axis=1)
+            J = self.axis_jacobian(q)[:, rows][:, :, mask]
+            step = _prioritized_step(J, r)
+            q[:, mask] -= step
+            if np.max(np.abs(step), initial=0.0) <= tol:
+                return q
+        worst = int(np.argmax(np.abs(step).max(axis=1)))
+        raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {np.abs(step[worst]).max():.3g})")
+
+    # -- helpers ----------------------------------------------------------
+
+    def _check(self, q, t):
+        q = _validate.finite_array("q", q, ndim=2)
+        if q.shape[1] != len(self.axes):
+            raise ValueError(f"q must have shape (N, {len(self.axes)}) for axes {list(self.axes)}, got {q.shape}")
+        if t is not None:
+            t = _validate.finite_array("t", t, shape=(q.shape[0],))
+        return q, t
+
+    def _split(self, name):
+        body, _, key = str(name).partition(".")
+        for j, b in enumerate(self.bodies, start=1):
+            if b.name == body:
+                return j, key
+        raise ValueError(f"unknown parameter {name!r}: no body named {body!r}")
+
+
+def _prioritized_step(J, r, rcond=1e-4):
+    """Per-sample least-squares step for ``J·step = r``: position rows first, tool axis second.
+
+    The position rows (0-2) are solved in the least-squares sense; the
+    tool-axis rows (3-5, if present) only in the null space the position
+    leaves free, so an orientation that cannot be reached never costs
+    position accuracy. Directions that barely act are dropped instead of
+    being sent far away (a rotary axis at a singular pose: C parallel to the
+    tool at A = 0, a lathe spindle with the tool on its axis): for the
+    position, directions moving the tool less than 10 µm per mm or rad; for
+    the tool axis, directions turning it less than 1 % as much as the
+    strongest axis does.
+
+    Parameters
+    ----------
+    J : ndarray, shape (N, 3 or 6, k)
+        Axis Jacobian [mm/mm, mm/rad; 1/mm, 1/rad].
+    r : ndarray, shape (N, 3 or 6)
+        Residual [mm; -].
+    rcond : float
+        Eigenvalue threshold of the column-scaled normal equations.
+
+    Returns
+    -------
+    ndarray, shape (N, k)
+    """
+    x, null = _solve(J[:, :3], r[:, :3], rcond, 1.0)
+    Jo = J[:, 3:]
+    if Jo.size and Jo.any():
+        A = Jo @ null
+        strongest = np.sqrt(np.sum(Jo * Jo, axis=1)).max(axis=1, keepdims=True) + 1e-300
+        x2, _ = _solve(A, r[:, 3:] - (Jo @ x[..., None])[..., 0], rcond, strongest)
+        x = x + (null @ x2[..., None])[..., 0]
+    return x
+
+
+def _solve(A, b, rcond, floor):
+    """Least-squares x for A x = b per sample, and the projector onto the dropped directions.
+
+    Columns are divided by their norm but at least by `floor` (scalar or
+    (N, 1)); eigenvalues of the scaled normal equations below `rcond` are
+    dropped.
+    """
+    s = np.maximum(np.sqrt(np.sum(A * A, axis=1)), floor)
+    As = A / s[:, None, :]
+    At = np.swapaxes(As, 1, 2)
+    lam, V = np.linalg.eigh(At @ As)
+    keep = lam > rcond
+    inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
+    g = (np.swapaxes(V, 1, 2) @ (At @ b[..., None]))[..., 0]
+    null = (V * (~keep)[:, None, :]) @ np.swapaxes(V, 1, 2)  # in scaled variables
+    return (V @ (inv * g)[..., None])[..., 0] / s, null * s[:, None, :] / s[:, :, None]
+
+
+def _rotate(v, w):
+    """Rotate vectors `v` (..., 3) by rotation vectors `w` (..., 3) (Rodrigues, exact; broadcasts)."""
+    v = np.asarray(v, dtype=float)
+    w = np.asarray(w, dtype=float)
+    shape = np.broadcast_shapes(v.shape, w.shape)
+    flat = lambda a: np.ascontiguousarray(np.broadcast_to(a, shape)).reshape(-1, 3)
+    return _rotate_kernel(flat(v), flat(w)).reshape(shape)
+
+
+@njit(cache=True)
+def _rotate_kernel(v, w):
+    """v + a (w × v) + b w × (w × v) with a = sin θ/θ, b = (1 − cos θ)/θ², θ = |w|; rows of (M, 3) arrays."""
+    out = np.empty_like(v)
+    for n in range(v.shape[0]):
+        wx, wy, wz = w[n, 0], w[n, 1], w[n, 2]
+        th2 = wx * wx + wy * wy + wz * wz
+        if th2 < 1e-12:
+            a = 1.0 - th2 / 6.0
+            b = 0.5 - th2 / 24.0
+        else:
+            th = np.sqrt(th2)
+            a = np.sin(th) / th
+            b = (1.0 - np.cos(th)) / th2
+        vx, vy, vz = v[n, 0], v[n, 1], v[n, 2]
+        cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
+        out[n, 0] = vx + a * cx + b * (wy * cz - wz * cy)
+        out[n, 1] = vy + a * cy + b * (wz * cx - wx * cz)
+        out[n, 2] = vz + a * cz + b * (wx * cy - wy * cx)
+    return out
+
+
+def _cross(a, b):
+    """Cross product of broadcastable (..., 3) arrays."""
+    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+    out = np.empty(a.shape)
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+# -- TOML machine description ----------------------------------------------
+
+_MACHINE_KEYS = ("name", "description", "tool", "workpiece", "tool_tip", "tool_axis", "axis_order", "body")
+_BODY_KEYS = ("name", "parent", "joint", "axis", "travel", "offset", "static", "squareness", "tilt", "thermal", "errors")
+_TERM_KEYS = ("constant", "poly", "cyclic")
+
+
+def chain_from_toml(toml, *keys, extra=()):
+    """Build a :class:`MachineChain` from a TOML machine description.
+
+    This is the geometric half of a machine file (see
+    :func:`contoursim.machine.load_machine`, which also reads the servo
+    half). The description reads like the machine (units at this edge: mm, deg, µm,
+    µrad, µm/min)::
+
+        name = "3-axis vertical mill"
+        tool = "tool"                 # the body carrying the tool
+        workpiece = "table"
+        tool_tip = [0, 0, 0]          # optional tip in the tool body's frame [mm]
+        tool_axis = [0, 0, 1]         # optional
+        axis_order = ["x", "y", "z"]  # optional column order of q
+
+        [[body]]
+        name = "X"
+        parent = "Y"                  # a body name or "bed"
+        joint = "linear -x"           # fixed | linear [-]x|y|z | rotary [-]x|y|z
+        axis = "x"                    # the commanded axis driving it
+        travel = [0, 500]             # [mm] or [deg]
+        offset = [0, 0, 0]            # [mm]
+        static = { dz = 5 }           # assembly error [µm] / [µrad]
+        squareness = { y = 20 }       # linear joint [µrad], positive: angle > 90°
+        tilt = { x = 10, y = -5 }     # rotary joint axis-line squareness [µrad] (seed 001)
+        thermal = { dx = 2 }          # drift rate [µm/min] / [µrad/min]
+        [body.errors]
+        table = "x_laser.csv"         # optional ISO 230-2 table, relative to this file
+        dx = { poly = [0, 12e-3], cyclic = [{ amplitude = 1.5, period = 10, phase_deg = 0 }] }
+        ey = { constant = 8 }         # [µrad]
+
+    Polynomial coefficients are per mm^k (per deg^k for a rotary axis),
+    cyclic periods in mm (deg).
+
+    Parameters
+    ----------
+    toml : contoursim.config.TomlFile
+        The parsed file (keeps the text for line numbers in errors).
+    *keys : str
+        Path of the machine table inside the file (none: the top level).
+    extra : iterable of str
+        Further keys the machine table may hold (e.g. a job's own section).
+
+    Returns
+    -------
+    MachineChain
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and line of an unknown key or a bad value.
+    """
+    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"))
+    raw = top["body"]
+    if not isinstance(raw, list) or not raw:
+        raise toml.error("body must be an array of tables ([[body]])", *keys, "body")
+    names = []
+    for i in range(len(raw)):
+        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",))
+        if not isinstance(item["name"], str) or item["name"] in names or item["name"] == "bed":
+            raise toml.error(f"body name must be a unique string other than 'bed', got {item['name']!r}", *keys, "body", i, "name")
+        names.append(item["name"])
+    index = {"bed": 0, **{name: j for j, name in enumerate(names, start=1)}}
+
+    def body_index(value, *where):
+        if value not in index:
+            raise toml.error(f"{value!r} is not a body; expected 'bed' or one of: {', '.join(names)}", *where)
+        return index[value]
+
+    base = Path(toml.source).parent
+    bodies = [_body_from_toml(toml, base, keys + ("body", i), raw[i], body_index) for i in range(len(raw))]
+    where = keys
+    try:
+        axes = top.get("axis_order")
+        tool_axis = top.get("tool_axis", [0.0, 0.0, 1.0])
+        tool_tip = np.asarray(top.get("tool_tip", [0.0, 0.0, 0.0]), float)
+        return MachineChain(
+            tuple(bodies),
+            tool=body_index(top["tool"], *keys, "tool"),
+            workpiece=body_index(top["workpiece"], *keys, "workpiece"),
+            axes=None if axes is None else tuple(axes),
+            tool_axis=np.asarray(tool_axis, float) / np.linalg.norm(tool_axis),
+            tool_tip=tool_tip,
+            name=str(top.get("name", Path(toml.source).stem)),
+        )
+    except (ValueError, TypeError) as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise toml.error(str(exc), *where) from None
+
+
+def _body_from_toml(toml, base, where, item, body_index):
+    def fail(message, *key):
+        return toml.error(f"body {item['name']!r}: {message}", *where, *key)
+
+    joint = _JOINT.match(str(item.get("joint", "fixed")))
+    if not joint or (joint.group(1) != "fixed") != (joint.group(3) is not None):
+        raise fail(f"joint must be 'fixed', 'linear [-]x|y|z' or 'rotary [-]x|y|z', got {item.get('joint')!r}", "joint")
+    kind = joint.group(1)
+    rotary = kind == "rotary"
+    direction = _DIRECTIONS.index(joint.group(3)) if joint.group(3) else 2
+    if (kind == "fixed") != ("axis" not in item):
+        raise fail("a moving joint needs 'axis' (the commanded axis name), a fixed one has none", "joint")
+
+    def vector(key, names, scale, size):
+        value = item.get(key, {})
+        if not isinstance(value, dict):
+            raise fail(f"{key} must be a table like {{ {names[0]} = ... }}", key)
+        unknown = set(value) - set(names)
+        if unknown:
+            raise fail(f"unknown key '{sorted(unknown)[0]}' in {key}; expected one of: {', '.join(names)}", key)
+        out = np.zeros(size)
+        for k, v in value.items():
+            out[names.index(k)] = _number(v, fail, key) * (scale[names.index(k)] if isinstance(scale, tuple) else scale)
+        return out
+
+    per_min = 1 / 60.0
+    lin_ang = (_UM,) * 3 + (_URAD,) * 3
+    static = vector("static", COMPONENTS, lin_ang, 6)
+    squareness = vector("squareness", _DIRECTIONS, _URAD, 3)
+    tilt = vector("tilt", _DIRECTIONS, _URAD, 3)
+    thermal = vector("thermal", COMPONENTS, tuple(s * per_min for s in lin_ang), 6)
+    for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
+        if values.any() and (kind != wanted or values[direction]):
+            raise fail(f"{key} applies to a {wanted} joint, towards the other two directions", key)
+    offset = item.get("offset", [0.0, 0.0, 0.0])
+    if not isinstance(offset, list) or len(offset) != 3:
+        raise fail("offset must be [x, y, z] in mm", "offset")
+    offset = [_number(v, fail, "offset") for v in offset]
+    travel = item.get("travel")
+    if travel is not None:
+        if not isinstance(travel, list) or len(travel) != 2:
+            raise fail("travel must be [min, max]", "travel")
+        travel = [_number(v, fail, "travel") for v in travel]
+        travel = tuple(np.deg2rad(travel)) if rotary else tuple(travel)
+    motion = _motion_from_toml(toml, base, where, item, rotary, fail)
+    try:
+        return Body(
+            name=item["name"],
+            parent=body_index(item.get("parent", "bed"), *where, "parent"),
+            joint=kind,
+            direction=direction,
+            sign=-1 if joint.group(2) == "-" else 1,
+            axis=item.get("axis"),
+            offset=offset,
+            static=static,
+            motion=motion,
+            squareness=squareness,
+            tilt=tilt,
+            thermal=thermal,
+            travel=travel,
+        )
+    except ValueError as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise fail(str(exc).removeprefix(f"{item['name']}: ")) from None
+
+
+def _motion_from_toml(toml, base, where, item, rotary, fail):
+    errors = item.get("errors", {})
+    if not errors:
+        return (ErrorMotion(),) * 6
+    toml.table(*where, "errors", allowed=COMPONENTS + ("table",))
+    tables = {}
+    if "table" in errors:
+        path = base / str(errors["table"])
+        try:
+            tables = read_error_table(path, rotary=rotary)
+        except ConfigError as exc:
+            if not path.exists():
+                raise fail(f"error table {str(errors['table'])!r} not found (relative to {base})", "errors", "table") from None
+            raise exc
+    to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
+    motion = []
+    for i, comp in enumerate(COMPONENTS):
+        scale = _UM if i < 3 else _URAD
+        spec = errors.get(comp, {})
+        if not isinstance(spec, dict):
+            raise fail(f"errors.{comp} must be a table of constant / poly / cyclic", "errors", comp)
+        unknown = set(spec) - set(_TERM_KEYS)
+        if unknown:
+            raise fail(f"unknown key '{sorted(unknown)[0]}' in errors.{comp}; expected one of: {', '.join(_TERM_KEYS)}", "errors", comp)
+        if "constant" in spec and "poly" in spec:
+            raise fail(f"errors.{comp}: give either constant or poly, not both", "errors", comp)
+        poly = spec.get("poly", [spec["constant"]] if "constant" in spec else [])
+        if not isinstance(poly, list):
+            raise fail(f"errors.{comp}.poly must be a list of coefficients", "errors", comp)
+        poly = [_number(c, fail, "errors", comp) * scale / to_q**k for k, c in enumerate(poly)]
+        cyclic = spec.get("cyclic", [])
+        cyclic = [cyclic] if isinstance(cyclic, dict) else cyclic
+        terms = []
+        for term in cyclic:
+            if not isinstance(term, dict) or set(term) - {"amplitude", "period", "phase_deg"} or not {"amplitude", "period"} <= set(term):
+                raise fail(f"errors.{comp}.cyclic terms are {{ amplitude, period, phase_deg }}", "errors", comp)
+            period = _number(term["period"], fail, "errors", comp)
+            if period <= 0:
+                raise fail(f"errors.{comp}.cyclic period must be positive, got {period}", "errors", comp)
+            terms.append(Cyclic.from_amplitude(_number(term["amplitude"], fail, "errors", comp) * scale,
+                                               period * to_q, np.deg2rad(_number(term.get("phase_deg", 0.0), fail, "errors", comp))))
+        motion.append(ErrorMotion(tuple(poly), tuple(terms), tables.get(comp)))
+    return tuple(motion)
+
+
+def _number(value, fail, *key):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise fail(f"expected a finite number, got {value!r}", *key)
+    return float(value)

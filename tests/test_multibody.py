@@ -1,0 +1,360 @@
+"""Multibody chain: topology, exact HTM products, first-order model, seed formulas."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from contoursim.config import TomlFile
+from contoursim.errormotion import Cyclic, ErrorMotion
+from contoursim.exceptions import ConfigError
+from contoursim.machine import load_machine as load_preset
+from contoursim.machine import preset_names
+from contoursim.multibody import Body, MachineChain, chain_from_toml, lower_body_array, tilted_axis
+
+# Seed 004, Table 1: rows L^0 ... L^7, columns bodies 1..10.
+TABLE_1 = [
+    [1, 2, 3, 4, 5, 6, 7, 8, 9, 10],
+    [0, 1, 2, 3, 4, 5, 6, 9, 10, 0],
+    [0, 0, 1, 2, 3, 4, 5, 10, 0, 0],
+    [0, 0, 0, 1, 2, 3, 4, 0, 0, 0],
+    [0, 0, 0, 0, 1, 2, 3, 0, 0, 0],
+    [0, 0, 0, 0, 0, 1, 2, 0, 0, 0],
+    [0, 0, 0, 0, 0, 0, 1, 0, 0, 0],
+    [0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+]
+
+
+def load_machine(name):
+    return load_preset(name).chain
+
+
+def travel_grid(chain, n, seed=0):
+    rng = np.random.default_rng(seed)
+    travel = {b.axis: b.travel for b in chain.bodies if b.axis is not None}
+    lo = np.array([travel[a][0] for a in chain.axes])
+    hi = np.array([travel[a][1] for a in chain.axes])
+    return lo + (hi - lo) * rng.random((n, len(chain.axes)))
+
+
+# -- topology --------------------------------------------------------------
+
+
+def test_lower_body_array_reproduces_seed_004_table_1():
+    np.testing.assert_array_equal(lower_body_array([0, 1, 2, 3, 4, 5, 6, 9, 10, 0]), TABLE_1)
+
+
+def test_seed_004_preset_has_the_table_1_topology_and_its_chains():
+    chain = load_machine("aircraft_drilling_7axis")
+    np.testing.assert_array_equal(chain.lower, TABLE_1)
+    assert chain.chain_to(7) == (1, 2, 3, 4, 5, 6, 7)
+    assert chain.chain_to(8) == (10, 9, 8)
+    np.testing.assert_array_equal(chain.parents, [0, 1, 2, 3, 4, 5, 6, 9, 10, 0])
+
+
+@pytest.mark.parametrize(
+    "parents, match",
+    [([0, 3, 2], "own ancestor"), ([0, 5], "not a body"), ([1], "not a body"), ([0.5], "integers")],
+)
+def test_lower_body_array_rejects_non_trees(parents, match):
+    with pytest.raises(ValueError, match=match):
+        lower_body_array(parents)
+
+
+# -- exact chain against an independent 4x4 product ----------------------------
+
+
+def htm(rotvec=(0, 0, 0), d=(0, 0, 0)):
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    T[:3, 3] = d
+    return T
+
+
+def test_polishing_platform_exact_pose_equals_explicit_4x4_product():
+    # Seed 002 chain written out by hand: T_work = T01 E_X T12 E_C, T_tool = T04 E_Z T45 E_B,
+    # P_w = T_work^-1 T_tool (0, 0, 0, 1).
+    chain = load_machine("polishing_platform_4axis")
+    q = travel_grid(chain, 5, seed=1)
+    p, v = chain.tool_pose(q)
+    X, Z, B, C = (chain.bodies[i] for i in (0, 3, 4, 1))
+    for k, (x, z, b, c) in enumerate(q):
+        eX, eZ, eB, eC = (np.array([m(np.array([val]))[0] for m in body.motion]) for body, val in ((X, x), (Z, z), (B, b), (C, c)))
+        eZ[0] -= z * Z.squareness[0]
+        work = htm(d=(x, 0, 0)) @ htm(eX[3:], eX[:3]) @ htm((0, 0, c)) @ htm(eC[3:], eC[:3])
+        tool = htm(d=(0, 0, z)) @ htm(eZ[3:], eZ[:3]) @ htm((0, b, 0)) @ htm(eB[3:], eB[:3])
+        T = np.linalg.solve(work, tool)
+        np.testing.assert_allclose(p[k], T[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(v[k], T[:3, 2], atol=1e-15)
+
+
+def test_tilted_rotary_axis_is_a_rodrigues_rotation_about_l():
+    # C on the bed with s_cx, s_cy; a target on the table at (r, 0, h); tool = target, workpiece = bed.
+    tilt = np.array([0.02, -0.03, 0.0])
+    bodies = (Body("C", 0, "rotary", 2, axis="c", tilt=tilt), Body("target", 1, offset=[120.0, 0, 30.0]))
+    chain = MachineChain(bodies, tool=2, workpiece=0)
+    theta = np.linspace(0, 2 * np.pi, 7)
+    p, _ = chain.tool_pose(theta[:, None])
+    l_c = tilted_axis(2, tilt)
+    expect = Rotation.from_rotvec(theta[:, None] * l_c).apply([120.0, 0, 30.0])
+    np.testing.assert_allclose(p, expect, atol=1e-12)
+
+
+# -- seed 001 axis vectors ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("direction", [0, 1, 2])
+def test_tilted_axes_are_unit_vectors_equal_to_the_ideal_axis_at_zero(direction):
+    rng = np.random.default_rng(direction)
+    for tilt in rng.uniform(-0.3, 0.3, (5, 3)):
+        assert np.linalg.norm(tilted_axis(direction, tilt)) == pytest.approx(1.0, abs=1e-15)
+    np.testing.assert_array_equal(tilted_axis(direction, np.zeros(3)), np.eye(3)[direction])
+
+
+def test_seed_001_formulas_for_l_a_l_b_l_c():
+    s1, s2 = 0.1, -0.2
+    c, s = np.cos, np.sin
+    np.testing.assert_allclose(tilted_axis(0, [0, s1, s2]), [c(s2) * c(s1), -c(s2) * s(s1), -s(s2)])
+    np.testing.assert_allclose(tilted_axis(1, [s1, 0, s2]), [-s(s1), c(s1) * c(s2), -c(s1) * s(s2)])
+    np.testing.assert_allclose(tilted_axis(2, [s1, s2, 0]), [-s(s1), -c(s1) * s(s2), c(s1) * c(s2)])
+
+
+def test_c_axis_squareness_minus_10_deg_gives_a_circle_normal_to_l_c():
+    # Seed 001's validation: s_cy = -10 deg built in; a target on the C table sweeps a circle in the plane normal to l_c.
+    tilt = np.array([0.0, np.deg2rad(-10.0), 0.0])
+    chain = MachineChain((Body("C", 0, "rotary", 2, axis="c", tilt=tilt), Body("target", 1, offset=[200.0, 50.0, 80.0])), 2, 0)
+    p, _ = chain.tool_pose(np.linspace(0, 2 * np.pi, 72, endpoint=False)[:, None])
+    l_c = tilted_axis(2, tilt)
+    np.testing.assert_allclose(l_c, [0, np.sin(np.deg2rad(10)), np.cos(np.deg2rad(10))], atol=1e-15)
+    centred = p - p.mean(axis=0)
+    normal = np.linalg.svd(centred)[2][-1]
+    assert abs(abs(normal @ l_c) - 1) < 1e-12
+    np.testing.assert_allclose(centred @ l_c, 0, atol=1e-10)
+    radius = np.linalg.norm(centred, axis=1)
+    np.testing.assert_allclose(radius, radius[0], rtol=1e-12)
+
+
+# -- first-order model ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["vertical_mill_3axis", "polishing_platform_4axis", "table_tilting_5axis", "diamond_lathe", "aircraft_drilling_7axis"])
+def test_full_product_agrees_with_first_order_to_second_order(name):
+    chain = load_machine(name)
+    q = travel_grid(chain, 200)
+    t = np.linspace(0, 900, 200)
+    diffs = []
+    for factor in (1.0, 0.5):
+        c = chain.scaled(factor)
+        dp, dv = c.volumetric_error(q, t)
+        diffs.append(np.abs(np.c_[dp, dv] - c.first_order_error(q, t)).max())
+    assert diffs[0] / diffs[1] == pytest.approx(4.0, rel=0.05)
+
+
+@pytest.mark.parametrize("name", ["polishing_platform_4axis", "table_tilting_5axis", "aircraft_drilling_7axis"])
+def test_error_jacobian_times_parameters_is_the_first_order_error(name):
+    chain = load_machine(name)  # no tabulated errors in these presets
+    q = travel_grid(chain, 50, seed=3)
+    t = np.linspace(0, 300, 50)
+    params = chain.parameters()
+    J = chain.error_jacobian(q, list(params), t)
+    np.testing.assert_allclose(J @ np.array(list(params.values())), chain.first_order_error(q, t), atol=1e-12)
+
+
+def test_error_jacobian_matches_finite_differences_of_the_exact_chain():
+    chain = load_machine("table_tilting_5axis").ideal()
+    q = travel_grid(chain, 20, seed=4)
+    t = np.linspace(10, 100, 20)
+    names = ["C.tilt.x", "C.tilt.y", "A.tilt.y", "A.tilt.z", "A.dx.p0", "X.ey.p1", "Z.squareness.x", "A.static.ex", "tool.static.dy", "Y.thermal.ez"]
+    J = chain.error_jacobian(q, names, t)
+    h = 1e-7
+    for k, name in enumerate(names):
+        plus = chain.with_parameters({name: h}).tool_pose(q, t)
+        minus = chain.with_parameters({name: -h}).tool_pose(q, t)
+        fd = np.c_[plus[0] - minus[0], plus[1] - minus[1]] / (2 * h)
+        np.testing.assert_allclose(J[:, :, k], fd, atol=1e-6 * max(1.0, np.abs(fd).max()), err_msg=name)
+
+
+def test_axis_jacobian_matches_finite_differences():
+    chain = load_machine("table_tilting_5axis")
+    q = travel_grid(chain, 10, seed=5)
+    J = chain.axis_jacobian(q)
+    h = 1e-6
+    for k in range(len(chain.axes)):
+        dq = np.zeros(len(chain.axes))
+        dq[k] = h
+        plus, minus = chain.tool_pose(q + dq, ideal=True), chain.tool_pose(q - dq, ideal=True)
+        fd = np.c_[plus[0] - minus[0], plus[1] - minus[1]] / (2 * h)
+        np.testing.assert_allclose(J[:, :, k], fd, atol=1e-6)
+
+
+def test_polishing_platform_first_order_expressions_term_by_term():
+    # DOMAIN.md §1 / seed 002 with θB = θC = 0, the z term re-derived as -δzX:
+    # Δx = δxZ - z εyX - z SxZ - δxX,  Δy = δyZ + z εxX + x εzX - δyX,  Δz = δzZ - x εyX - δzX,
+    # Δε = εZ - εX, i.e. tool-axis error ΔV = Δε × e_z = (Δεy, -Δεx, 0).
+    chain = load_machine("polishing_platform_4axis").ideal()
+    x, z = np.meshgrid(np.linspace(0, 200, 5), np.linspace(0, 200, 5))
+    x, z = x.ravel(), z.ravel()
+    q = np.c_[x, z, np.zeros_like(x), np.zeros_like(x)]
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    expected = {  # name: (Δx, Δy, Δz, ΔVx, ΔVy, ΔVz)
+        "Z.dx.p0": (one, zero, zero, zero, zero, zero),
+        "X.dx.p0": (-one, zero, zero, zero, zero, zero),
+        "X.ey.p0": (-z, zero, -x, -one, zero, zero),
+        "Z.squareness.x": (-z, zero, zero, zero, zero, zero),
+        "Z.dy.p0": (zero, one, zero, zero, zero, zero),
+        "X.ex.p0": (zero, z, zero, zero, one, zero),
+        "X.ez.p0": (zero, x, zero, zero, zero, zero),
+        "X.dy.p0": (zero, -one, zero, zero, zero, zero),
+        "Z.dz.p0": (zero, zero, one, zero, zero, zero),
+        "X.dz.p0": (zero, zero, -one, zero, zero, zero),
+        "Z.ex.p0": (zero, zero, zero, zero, -one, zero),
+        "Z.ey.p0": (zero, zero, zero, one, zero, zero),
+        "Z.ez.p0": (zero, zero, zero, zero, zero, zero),
+    }
+    J = chain.error_jacobian(q, list(expected))
+    for k, (name, cols) in enumerate(expected.items()):
+        np.testing.assert_allclose(J[:, :, k], np.stack(cols, axis=1), atol=1e-12, err_msg=name)
+    # the exact chain with all of them set agrees with the sum to second order
+    diffs = []
+    for size in (1e-5, 5e-6):
+        dp, dv = chain.with_parameters({name: size for name in expected}).volumetric_error(q)
+        diffs.append(np.abs(np.c_[dp, dv] - size * J.sum(axis=2)).max())
+    assert diffs[0] < 1e-4 * 200 * 1e-5 and diffs[0] / diffs[1] == pytest.approx(4.0, rel=0.01)
+
+
+# -- ISO 230-4 circle signatures ---------------------------------------------------------
+
+
+def xy_machine(x_motion=None, squareness=0.0):
+    motion = [ErrorMotion()] * 6
+    if x_motion is not None:
+        motion[0] = x_motion
+    x = Body("X", 0, "linear", 0, axis="x", motion=tuple(motion), squareness=[0, squareness, 0])
+    y = Body("Y", 1, "linear", 1, axis="y")
+    return MachineChain((x, y, Body("tool", 2)), tool=3, workpiece=0)
+
+
+def circle(R=100.0, n=720):
+    theta = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return theta, np.c_[R * np.cos(theta), R * np.sin(theta)]
+
+
+def test_squareness_gives_a_45_degree_ellipse():
+    alpha, R = 50e-6, 100.0
+    theta, q = circle(R)
+    p, _ = xy_machine(squareness=alpha).tool_pose(q)
+    dr = np.hypot(p[:, 0], p[:, 1]) - R
+    # X tilted towards -y (angle between +X and +Y is 90° + α): Δr = -(αR/2) sin 2θ
+    np.testing.assert_allclose(dr, -(alpha * R / 2) * np.sin(2 * theta), atol=alpha**2 * R)
+    assert abs(np.rad2deg(theta[np.argmax(dr)]) % 180 - 135) < 0.5
+
+
+def test_scale_error_gives_an_axis_aligned_ellipse():
+    k, R = 30e-6, 100.0
+    theta, q = circle(R)
+    p, _ = xy_machine(ErrorMotion(poly=(0.0, k))).tool_pose(q)
+    dr = np.hypot(p[:, 0], p[:, 1]) - R
+    np.testing.assert_allclose(dr, R * np.sqrt((1 + k) ** 2 * np.cos(theta) ** 2 + np.sin(theta) ** 2) - R, atol=1e-12)
+    assert theta[np.argmax(dr)] in (0.0, np.pi) and abs(dr[np.argmin(dr)]) < 1e-12
+
+
+def test_cyclic_error_gives_ripple_with_the_lead_period():
+    lead, amp = 5.0, 2e-3
+    x = np.linspace(0, 200, 4000, endpoint=False)
+    q = np.c_[x, np.zeros_like(x)]
+    p, _ = xy_machine(ErrorMotion(cyclic=(Cyclic.from_amplitude(amp, lead, 0.3),))).tool_pose(q)
+    ripple = p[:, 0] - x
+    spectrum = np.abs(np.fft.rfft(ripple))
+    wavelength = 1 / np.fft.rfftfreq(x.size, x[1] - x[0])[np.argmax(spectrum)]
+    assert wavelength == pytest.approx(lead)
+    assert np.ptp(ripple) == pytest.approx(2 * amp, rel=1e-3)
+
+
+# -- inverse kinematics ---------------------------------------------------------------
+
+
+def test_ideal_inverse_of_the_cartesian_mill_is_an_offset_map():
+    chain = load_machine("vertical_mill_3axis")
+    target = np.random.default_rng(0).uniform(0, 300, (20, 3))
+    q = chain.inverse(target, ideal=True)
+    np.testing.assert_allclose(q, target - [0, 0, 300], atol=1e-12)
+
+
+def test_actual_inverse_with_tool_axis_reaches_the_pose():
+    chain = load_machine("table_tilting_5axis")
+    q_true = travel_grid(chain, 30, seed=6)
+    q_true[:, 3] = np.where(np.abs(q_true[:, 3]) < 0.2, 0.5, q_true[:, 3])  # away from the A = 0 singularity
+    p, v = chain.tool_pose(q_true)
+    q = chain.inverse(p, v, q0=q_true + 1e-3)
+    pa, va = chain.tool_pose(q)
+    np.testing.assert_allclose(pa, p, atol=1e-10)
+    np.testing.assert_allclose(va, v, atol=1e-12)
+
+
+# -- validation and loading -----------------------------------------------------------------
+
+
+def test_inverse_leaves_the_tool_axis_alone_at_the_singular_pose():
+    # A = 0: C is parallel to the tool; a tilt about y cannot be made without a large C swing.
+    chain = load_machine("table_tilting_5axis")
+    q_true = np.array([[10.0, 20.0, -100.0, 1e-7, 0.3]])
+    p, v = chain.tool_pose(q_true, ideal=True)
+    q = chain.inverse(p, v, q0=q_true)
+    np.testing.assert_allclose(chain.tool_pose(q)[0], p, atol=1e-10)
+    assert abs(q[0, 4] - 0.3) < 1e-3
+
+
+def test_tool_pose_rejects_bad_shapes_and_values():
+    chain = load_machine("vertical_mill_3axis")
+    with pytest.raises(ValueError, match=r"q must have shape \(N, 3\)"):
+        chain.tool_pose(np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="non-finite"):
+        chain.tool_pose(np.full((2, 3), np.nan))
+    with pytest.raises(ValueError, match="unknown parameter"):
+        chain.error_jacobian(np.zeros((1, 3)), ["X.bogus.p0"])
+
+
+def test_all_presets_load():
+    assert set(preset_names()) >= {"vertical_mill_3axis", "polishing_platform_4axis", "table_tilting_5axis", "diamond_lathe", "aircraft_drilling_7axis"}
+    assert len(load_machine("vertical_mill_3axis").parameters()) >= 21
+
+
+MACHINE = """name = "test"
+tool = "tool"
+workpiece = "bed"
+
+[[body]]
+name = "X"
+joint = "linear x"
+axis = "x"
+squareness = { y = 10 }
+[body.errors]
+dx = { poly = [1, 0.01], cyclic = { amplitude = 2, period = 5 } }
+
+[[body]]
+name = "tool"
+parent = "X"
+"""
+
+
+def test_toml_units_are_converted_at_the_edge():
+    chain = chain_from_toml(TomlFile("m.toml", MACHINE))
+    x = chain.bodies[0]
+    assert x.squareness[1] == pytest.approx(10e-6)
+    assert x.motion[0].poly == pytest.approx((1e-3, 1e-5))
+    assert x.motion[0].cyclic[0].sin == pytest.approx(2e-3) and x.motion[0].cyclic[0].period == 5
+
+
+@pytest.mark.parametrize(
+    "old, new, line, match",
+    [
+        ('squareness = { y = 10 }', 'squarenes = { y = 10 }', 9, "unknown key 'squarenes'"),
+        ('joint = "linear x"', 'joint = "linear w"', 7, "joint must be"),
+        ('parent = "X"', 'parent = "Y"', 15, "'Y' is not a body"),
+        ("dx = { poly = [1, 0.01],", 'dx = { poly = [1, "a"],', 11, "expected a finite number"),
+        ("dx = { poly", "dq = { poly", 11, "unknown key 'dq'"),
+        ('squareness = { y = 10 }', 'squareness = { x = 10 }', 9, "squareness applies"),
+    ],
+)
+def test_toml_errors_name_file_and_line(old, new, line, match):
+    with pytest.raises(ConfigError, match=rf"^m.toml, line {line}: .*{match}"):
+        chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
