@@ -2,11 +2,13 @@
 
 For each actual point, in time order:
 
-1. a windowed nearest-sample search over the reference samples, started at
-   the previous point's index (the window hops along while the nearest sample
-   sits on its edge), so the search follows the branch being travelled where
-   a closed curve comes back near itself or a figure-eight crosses, and the
-   cost is linear in the number of points;
+1. the package's windowed nearest-sample search
+   (:func:`contoursim.nearest.nearest_knot`) over the distinct reference
+   samples (the repeats of a standstill removed), started at the previous
+   point's sample and reaching across the local distance minimum a sharp
+   corner leaves on the incoming edge, so the search follows the branch
+   being travelled where a closed curve comes back near itself or a
+   figure-eight crosses, and the cost is linear in the number of points;
 2. refinement on the primitives spanned by that sample's two neighbours:
    closed form on lines and plain arcs, Newton's method on the arc length of
    helices and on the parameter of spline pieces; when the foot point is
@@ -24,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from . import _validate
+from .nearest import distinct, nearest_knots
 from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _spline_u_of_w, _spline_w_of_u, _primitive_at
 
 __all__ = ["ContourError", "exact_contour_error"]
@@ -73,34 +76,7 @@ class ContourError:
             raise ValueError("magnitude must be non-negative")
 
 
-# --------------------------------------------------------------------------- compiled search
-
-@njit(cache=True)
-def _dist2(a, i, b, j):
-    return (a[i, 0] - b[j, 0]) ** 2 + (a[i, 1] - b[j, 1]) ** 2 + (a[i, 2] - b[j, 2]) ** 2
-
-
-@njit(cache=True)
-def _nearest_samples(ref, act, window):
-    """Index of the nearest reference sample to each actual point, searched around the previous one."""
-    n = ref.shape[0]
-    idx = np.empty(act.shape[0], np.int64)
-    j = 0
-    for i in range(act.shape[0]):
-        for _ in range(n):
-            lo, hi = max(0, j - window), min(n - 1, j + window)
-            best, bd = j, _dist2(ref, j, act, i)
-            for m in range(lo, hi + 1):
-                d = _dist2(ref, m, act, i)
-                if d < bd:
-                    best, bd = m, d
-            hop = (best == hi and hi < n - 1) or (best == lo and lo > 0)
-            j = best
-            if not hop:
-                break
-        idx[i] = j
-    return idx
-
+# --------------------------------------------------------------------------- compiled refinement
 
 @njit(cache=True)
 def _closest(kind, row, p, u0, length, out):
@@ -168,9 +144,12 @@ def _closest(kind, row, p, u0, length, out):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, ref_s, idx, act):
-    """Foot point (position, tangent, curvature vector), arc length and primitive of each actual point."""
-    n, k_count = ref_s.size, kinds.size
+def _foot_points(kinds, rows, breaks, closed, knot_s, idx, act):
+    """Foot point (position, tangent, curvature vector), arc length and primitive of each actual point.
+
+    knot_s : arc length of the distinct reference samples; idx : the one nearest to each actual point.
+    """
+    n, k_count = knot_s.size, kinds.size
     frame = np.empty((act.shape[0], 9))
     s_out = np.empty(act.shape[0])
     prim = np.empty(act.shape[0], np.int64)
@@ -178,12 +157,12 @@ def _foot_points(kinds, rows, breaks, closed, ref_s, idx, act):
     for i in range(act.shape[0]):
         p = act[i]
         j = idx[i]
-        k_lo = _primitive_at(breaks, ref_s[max(j - 1, 0)])
-        k_hi = _primitive_at(breaks, ref_s[min(j + 1, n - 1)])
+        k_lo = _primitive_at(breaks, knot_s[max(j - 1, 0)])
+        k_hi = _primitive_at(breaks, knot_s[min(j + 1, n - 1)])
         best_d, best_k, best_u = np.inf, -1, 0.0
         for k in range(k_lo, k_hi + 1):
             length = breaks[k + 1] - breaks[k]
-            u0 = min(max(ref_s[j] - breaks[k], 0.0), length)
+            u0 = min(max(knot_s[j] - breaks[k], 0.0), length)
             u = _closest(kinds[k], rows[k], p, u0, length, out)
             d = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
             if d < best_d:
@@ -239,7 +218,9 @@ def exact_contour_error(trajectory, actual, window=8):
         Actual tool positions [mm], d = trajectory.dim, in time order, starting
         near the path start.
     window : int
-        Half-width of the nearest-sample search window [samples].
+        Distinct reference samples searched either side of the previous
+        point's nearest one before the search walks on [samples]
+        (:func:`contoursim.nearest.nearest_knot`).
 
     Returns
     -------
@@ -266,10 +247,9 @@ def exact_contour_error(trajectory, actual, window=8):
         raise ValueError(f"window must be at least 1, got {window!r}")
     pad = np.zeros((len(act), 3 - d))
     act3 = np.ascontiguousarray(np.hstack([act, pad]))
-    ref3 = np.ascontiguousarray(np.hstack([trajectory.position, np.zeros((len(trajectory), 3 - d))]))
-    idx = _nearest_samples(ref3, act3, int(window))
-    frame, s, prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, np.ascontiguousarray(trajectory.s),
-                                  idx, act3)
+    knots, first, _ = distinct(np.hstack([trajectory.position, np.zeros((len(trajectory), 3 - d))]))
+    idx = nearest_knots(knots, act3, int(window))
+    frame, s, prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s[first], idx, act3)
     foot, tangent, kvec = frame[:, :3], frame[:, 3:6], frame[:, 6:9]
     b = _binormal(path, prim, tangent, kvec)
     left = np.cross(b, tangent)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
+from scipy.signal import lfilter
 
 from contoursim import paths
 from contoursim.contour import exact_contour_error
@@ -123,6 +124,29 @@ def test_rounded_square_offset_sampled_coarser_than_its_fillets():
     err = exact_contour_error(ref, actual)
     np.testing.assert_allclose(err.magnitude, 0.5, atol=1e-12)
     np.testing.assert_allclose(err.normal, -0.5, atol=1e-12)
+
+
+def test_sharp_corners_with_exact_stops_against_the_polygon():
+    # a square without blending: the feed stops at every corner, so the reference repeats its corner
+    # sample for a while, and the lagging tool cuts inside each corner, nearer the outgoing edge than
+    # the incoming one, whose own distance minimum lies behind the corner
+    corners = np.array([[0, -50], [50, -50], [50, 50], [-50, 50], [-50, -50], [0, -50]], float)
+    path = paths.polyline(corners, 0.0)
+    dt, kp = 2e-4, 35.0
+    ref = sample(path, plan(path, 2000 / 60, 1000.0, 50000.0), dt)
+    # first-order lag per axis, exact discrete form: q[k+1] = a q[k] + (1 - a) r[k], a = exp(-kp dt), q[0] = r[0]
+    a = np.exp(-kp * dt)
+    actual = lfilter([0.0, 1.0 - a], [1.0, -a], ref.position, axis=0, zi=ref.position[:1])[0]
+    err = exact_contour_error(ref, actual)
+    # brute force: the distance to the nearest of the five segments, on every 5th point
+    p = actual[::5]
+    start, edge = corners[:-1], np.diff(corners, axis=0)
+    u = np.clip(np.einsum("nkd,kd->nk", p[:, None] - start, edge) / np.sum(edge**2, axis=1), 0.0, 1.0)
+    distance = np.min(np.linalg.norm(p[:, None] - (start + u[..., None] * edge), axis=2), axis=1)
+    assert distance.max() > 0.3  # the corners are cut by about 0.35 mm
+    np.testing.assert_allclose(err.magnitude[::5], distance, rtol=0, atol=1e-9)
+    # the lag cuts inside the counter-clockwise square: to the left of the travel
+    np.testing.assert_allclose(err.normal[::5], distance, rtol=0, atol=1e-9)
 
 
 def test_iso_circle_trajectory_and_input_checks():
