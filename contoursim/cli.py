@@ -61,14 +61,16 @@ def test_circle(path):
     return None
 
 
-_COLUMNS = ("tracking_max_um", "tracking_rms_um", "contour_max_um", "contour_rms_um")
+_COLUMNS = {"tracking max": "tracking_max_um", "tracking RMS": "tracking_rms_um", "contour max": "contour_max_um",
+            "contour RMS": "contour_rms_um", "volumetric max": "volumetric_max_um"}
 
 
 def _table(rows):
-    head = f"{'run':<34} {'tracking max':>13} {'tracking RMS':>13} {'contour max':>12} {'contour RMS':>12}"
-    lines = [head + "   [µm]", "-" * len(head)]
+    """The summary table [µm], one row per run."""
+    lines = [f"{'run [µm]':<36}" + "".join(f"{label:>16}" for label in _COLUMNS)]
+    lines.append("-" * len(lines[0]))
     for name, summary in rows:
-        lines.append(f"{name:<34} " + " ".join(f"{summary[c]:>{13 if i < 2 else 12}.2f}" for i, c in enumerate(_COLUMNS)))
+        lines.append(f"{name:<36}" + "".join(f"{summary[key]:>16.2f}" for key in _COLUMNS.values()))
     return "\n".join(lines)
 
 

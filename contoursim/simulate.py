@@ -35,6 +35,10 @@ class SimResult:
         Axis positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
         Actual tool tip in workpiece coordinates [mm].
+    static_tool_position : ndarray, shape (N, d)
+        Where the tool tip would be if every axis followed its command
+        exactly: the reference plus the machine's volumetric (geometric)
+        error, or what is left of it after compensation [mm].
     contour : contoursim.contour.ContourError
         Exact contour error of `tool_position` w.r.t. the reference path.
     strategies : tuple
@@ -46,6 +50,7 @@ class SimResult:
     axis_command: np.ndarray
     servo: object
     tool_position: np.ndarray
+    static_tool_position: np.ndarray
     contour: object
     strategies: tuple = field(default=())
 
@@ -53,6 +58,11 @@ class SimResult:
     def tracking_error(self):
         """Actual minus reference tool position at the same instant [mm], shape (N, d)."""
         return self.tool_position - self.trajectory.position
+
+    @property
+    def volumetric_error(self):
+        """Geometric part of the tool-tip error: static tool position minus reference [mm], shape (N, d)."""
+        return self.static_tool_position - self.trajectory.position
 
     def summary(self, measuring_only=True):
         """Max and RMS of tracking and contour error [µm].
@@ -67,14 +77,19 @@ class SimResult:
         -------
         dict
             ``tracking_max_um``, ``tracking_rms_um``, ``contour_max_um``,
-            ``contour_rms_um``.
+            ``contour_rms_um``, ``volumetric_max_um``, ``volumetric_rms_um``.
         """
         keep = self.trajectory.measuring if measuring_only else slice(None)
-        e = 1e3 * np.linalg.norm(self.tracking_error[keep], axis=1)
-        c = 1e3 * self.contour.magnitude[keep]
-        rms = lambda x: float(np.sqrt(np.mean(x**2)))  # noqa: E731
-        return dict(tracking_max_um=float(e.max()), tracking_rms_um=rms(e),
-                    contour_max_um=float(c.max()), contour_rms_um=rms(c))
+        errors = dict(
+            tracking=np.linalg.norm(self.tracking_error[keep], axis=1),
+            contour=self.contour.magnitude[keep],
+            volumetric=np.linalg.norm(self.volumetric_error[keep], axis=1),
+        )
+        summary = {}
+        for name, e in errors.items():
+            summary[f"{name}_max_um"] = 1e3 * float(e.max())
+            summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(e**2)))
+        return summary
 
     def to_trace(self, metadata=None):
         """The result in the measured-trace format: reference vs actual tool position."""
@@ -133,5 +148,6 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     actual = q.copy()
     actual[:, servo] = response.position
     tool = machine.tool_position(actual, trajectory.t, trajectory.dim)
+    static = machine.tool_position(q, trajectory.t, trajectory.dim)
     contour = exact_contour_error(trajectory, tool)
-    return SimResult(trajectory, machine, q, response, tool, contour, tuple(strategies))
+    return SimResult(trajectory, machine, q, response, tool, static, contour, tuple(strategies))

@@ -48,7 +48,8 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
     assert (tmp_path / "out" / "iso230_4_circle_ccw_polar.png").exists()
     # the circle row: tracking ≈ v/Kp = (1000/60)/36 mm on the slower axis, contour far smaller
     row = next(line for line in table.splitlines() if line.startswith("iso230_4_circle_ccw"))
-    tracking_max, _, contour_max, _ = map(float, row.split()[1:])
+    tracking_max, _, contour_max, _, volumetric_max = map(float, row.split()[1:])
+    assert volumetric_max == 0.0  # the demo machine has no geometric errors
     assert tracking_max == pytest.approx(1e3 * (1000 / 60) / 36, rel=0.02)
     assert contour_max < tracking_max / 10
     # a second run reuses its own output directory

@@ -106,3 +106,70 @@ def test_saved_trace_follows_the_csv_contract(tmp_path):
     np.testing.assert_allclose(trace.actual, result.tool_position, atol=1e-10)
     with pytest.raises(FileExistsError):
         result.save_csv(tmp_path / "run.csv")
+
+
+SQUARE_XY = """
+tool = "tool"
+workpiece = "workpiece"
+
+[[body]]
+name = "Y"
+parent = "bed"
+joint = "linear -y"
+axis = "y"
+
+[[body]]
+name = "X"
+parent = "Y"
+joint = "linear -x"
+axis = "x"
+squareness = {{ y = {alpha_urad} }}
+
+[[body]]
+name = "workpiece"
+parent = "X"
+
+[[body]]
+name = "tool"
+parent = "bed"
+"""
+
+
+def test_squareness_enters_the_trace_and_geometric_compensation_removes_it():
+    """Squareness α of X on Y: a 45° ellipse of radial deviation ∓(αR/2)·sin 2θ in the static error.
+
+    The servo half is identical with and without the error, so the geometric
+    part of the tool-tip error is the difference of the two runs; compensated,
+    the machine contours like the error-free one.
+    """
+    from contoursim.config import TomlFile
+    from contoursim.geocomp import GeometricCompensation
+    from contoursim.multibody import chain_from_toml
+
+    alpha = 200e-6
+    chain = chain_from_toml(TomlFile("square.toml", SQUARE_XY.format(alpha_urad=alpha * 1e6)))
+    servos = {"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}
+    radius, feed = 50.0, 1000 / 60
+    path = paths.iso230_4_circle(radius)
+    trajectory = sample(path, plan(path, feed=feed, accel=1000.0), DT)
+    skewed = simulate(Machine(servos, DT, chain), trajectory)
+    plain = simulate(Machine(servos, DT), trajectory)
+    fixed = simulate(Machine(servos, DT, chain), trajectory, [GeometricCompensation(chain)])
+
+    test = skewed.trajectory.measuring
+    p = skewed.static_tool_position[test]
+    theta = np.arctan2(p[:, 1], p[:, 0])
+    radial = np.hypot(p[:, 0], p[:, 1]) - radius
+    first_order = -alpha * radius / 2 * np.sin(2 * theta)  # sign: S > 0 opens the XY angle beyond 90°
+    np.testing.assert_allclose(radial, first_order, atol=alpha**2 * radius)
+    # geometric and servo errors add in the actual trace, up to the cross term α·(tracking error)
+    geometric = skewed.tool_position - plain.tool_position
+    cross = alpha * np.abs(plain.tracking_error).max()
+    np.testing.assert_allclose(geometric, skewed.volumetric_error, rtol=0, atol=1.01 * cross)
+    assert cross < 0.02 * np.abs(skewed.volumetric_error).max()
+    # compensation: no static error left, and the contour error is the servo's alone
+    assert np.abs(fixed.volumetric_error).max() < 1e-9
+    np.testing.assert_allclose(fixed.contour.magnitude, plain.contour.magnitude, atol=1e-9)
+    # squareness moves y by α·x: the largest static error on the test circle is α·R
+    assert skewed.summary()["volumetric_max_um"] == pytest.approx(1e3 * alpha * radius, rel=1e-3)
+    assert plain.summary()["volumetric_max_um"] == 0.0
