@@ -9,7 +9,6 @@ is overwritten.
 import argparse
 import sys
 from dataclasses import replace
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,7 @@ from .exceptions import ConfigError, UnstableLoopError
 from .feed import sample
 from .geocomp import GeometricCompensation
 from .machine import load_machine, preset_file
-from .pathfile import load_path_file
+from .pathfile import library_file, load_path_file
 from .paths import HelicalArc
 from .plotting import save_figures
 from .simulate import simulate
@@ -28,19 +27,6 @@ _MARKER = ".contoursim-out"
 DEMO_MACHINE = "demo_mill"
 DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
 _JOB_KEYS = ("machine", "path", "feed_mm_min", "geometric_compensation")
-
-
-def library_path(name):
-    """A path file given as a file name or as a name in the trajectories library."""
-    path = Path(name)
-    if path.exists():
-        return path
-    library = resources.files("contoursim.trajectories")
-    for candidate in (name, f"{name}.toml", f"{name}.nc"):
-        if library.joinpath(candidate).is_file():
-            return Path(str(library.joinpath(candidate)))
-    known = sorted(p.name for p in library.iterdir() if p.suffix in (".toml", ".nc"))
-    raise ConfigError(f"no path file {name!r} here nor in the trajectories library ({', '.join(known)})")
 
 
 def output_dir(out):
@@ -91,7 +77,7 @@ def demo(args):
     """The README's main job: ISO 230-4 circles and a free-form path on the demo machine."""
     out = output_dir(args.out)
     machine = load_machine(DEMO_MACHINE)
-    rows = [run_job(machine, library_path(name), out) for name in DEMO_PATHS]
+    rows = [run_job(machine, library_file(name), out) for name in DEMO_PATHS]
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
     print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
     print(_table(rows))
@@ -114,9 +100,9 @@ def _job(args):
             feed = data.get("feed_mm_min")
             if feed is not None and (not isinstance(feed, (int, float)) or feed <= 0):
                 raise toml.error(f"feed_mm_min must be a positive number, got {feed!r}", "feed_mm_min")
-            return (load_machine(near(data["machine"])), library_path(near(data["path"])),
+            return (load_machine(near(data["machine"])), library_file(near(data["path"])),
                     None if feed is None else feed / 60.0, bool(data.get("geometric_compensation", False)))
-    return load_machine(args.machine or DEMO_MACHINE), library_path(args.file), None, False
+    return load_machine(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
 def simulate_command(args):

@@ -7,6 +7,7 @@ of the offending key, through :class:`contoursim.config.TomlFile`.
 
 import math
 import re
+from importlib import resources
 from pathlib import Path as _FilePath
 
 from . import _validate
@@ -16,7 +17,7 @@ from .feed import FeedSettings
 from .gcode import read_gcode
 from .paths import circle, helix, iso230_4_circle, polyline, spline
 
-__all__ = ["load_path_file"]
+__all__ = ["library_file", "load_path_file"]
 
 
 def _angle(name, value):
@@ -53,14 +54,39 @@ _FEED = dict(feed_mm_min=("feed", _per_minute), accel_mm_s2=("accel", _validate.
              corner_tolerance_deg=("corner_tolerance", _tolerance))
 
 
+def library_file(name):
+    """The path file `name`: an existing file, else an entry of the trajectories library.
+
+    Parameters
+    ----------
+    name : str or os.PathLike
+        A file name, or a library entry with or without its suffix
+        (``"butterfly"``, ``"pocket.nc"``).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    path = _FilePath(name)
+    if path.exists():
+        return path
+    library = resources.files("contoursim.trajectories")
+    for candidate in (str(name), f"{name}.toml", f"{name}.nc"):
+        if library.joinpath(candidate).is_file():
+            return _FilePath(str(library.joinpath(candidate)))
+    known = sorted(p.name for p in library.iterdir() if p.name.endswith((".toml", ".nc")))
+    raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library ({', '.join(known)})")
+
+
 def load_path_file(file):
-    """Read a path file of the trajectories library.
+    """Read a path file, or an entry of the trajectories library by name.
 
     Parameters
     ----------
     file : str or os.PathLike
-        A ``.toml`` path file (format in trajectories/README.md) or a ``.nc``
-        G-code program (see :func:`contoursim.gcode.read_gcode`).
+        A ``.toml`` path file (format in trajectories/README.md), a ``.nc``
+        G-code program (see :func:`contoursim.gcode.read_gcode`), or the name
+        of either in the trajectories library (see :func:`library_file`).
 
     Returns
     -------
@@ -73,7 +99,7 @@ def load_path_file(file):
     ConfigError
         Naming the file and line of an unknown or missing key or a bad value.
     """
-    file = _FilePath(file)
+    file = library_file(file)
     if file.suffix.lower() == ".nc":
         program = read_gcode(file)
         return program.path, FeedSettings(tuple(program.feeds))

@@ -9,6 +9,7 @@ import pytest
 from conftest import ROOT
 
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
+JOBS = sorted((ROOT / "examples").glob("*.toml"))
 
 
 @pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
@@ -16,6 +17,14 @@ def test_example_runs(script, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "argv", [str(script), str(tmp_path / "out")])
     runpy.run_path(str(script), run_name="__main__")
+
+
+@pytest.mark.parametrize("job", JOBS, ids=[p.name for p in JOBS])
+def test_example_job_runs(job, tmp_path, capsys):
+    from contoursim.cli import main
+
+    assert main(["simulate", str(job), "--out", str(tmp_path)]) == 0
+    assert "contoursim simulate" in capsys.readouterr().out
 
 
 def test_emps_model_matches_the_measured_axis(real_data):
