@@ -8,7 +8,6 @@ is overwritten.
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,7 @@ from .exceptions import ConfigError, UnstableLoopError
 from .feed import sample
 from .geocomp import GeometricCompensation
 from .machine import load_machine, preset_file
-from .pathfile import library_file, load_path_file
+from .pathfile import library_file, load_path_file, read_feed_table
 from .paths import HelicalArc
 from .plotting import save_figures
 from .simulate import simulate
@@ -26,7 +25,7 @@ from .simulate import simulate
 _MARKER = ".contoursim-out"
 DEMO_MACHINE = "demo_mill"
 DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
-_JOB_KEYS = ("machine", "path", "feed_mm_min", "geometric_compensation")
+_JOB_KEYS = ("machine", "path", "feed", "geometric_compensation")
 
 
 def output_dir(out):
@@ -60,12 +59,15 @@ def _table(rows):
     return "\n".join(lines)
 
 
-def run_job(machine, path_file, out, feed=None, strategies=(), label=None):
-    """Simulate `machine` on a path file; write plots and the trace CSV; return the summary row."""
+def run_job(machine, path_file, out, job=None, strategies=(), label=None):
+    """Simulate `machine` on a path file; write plots and the trace CSV; return the summary row.
+
+    A job file's ``[feed]`` table, when given, overrides the path file's key by key.
+    """
     path, settings = load_path_file(path_file)
-    if feed is not None:
-        settings = replace(settings, feed=feed)
-    trajectory = sample(path, settings.plan(path), machine.servo_period)
+    if job is not None and "feed" in job.data:
+        settings = read_feed_table(job, base=settings)
+    trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
     result = simulate(machine, trajectory, strategies)
     name = label or Path(path_file).stem
     result.save_csv(out / f"{name}.csv", metadata={"machine": machine.name, "path": Path(path_file).name}, overwrite=True)
@@ -85,35 +87,35 @@ def demo(args):
 
 
 def _job(args):
-    """Machine, path file, feed override [mm/s] and geometric switch of ``simulate FILE``.
+    """Machine, path file, job file (or None) and geometric switch of ``simulate FILE``.
 
-    FILE is a job file (a TOML with ``machine`` and ``path`` keys; both name
-    presets/library entries or files relative to the job) or a bare path file,
-    run on ``--machine`` (default: the demo machine).
+    FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
+    presets/library entries or files relative to the job, and optionally a
+    ``[feed]`` table and ``geometric_compensation``) or a bare path file, run
+    on ``--machine`` (default: the demo machine).
     """
     file = Path(args.file)
     if file.suffix == ".toml" and file.exists():
-        toml = TomlFile.read(file)
-        if "machine" in toml.data:
-            data = toml.table(allowed=_JOB_KEYS, required=("machine", "path"))
+        job = TomlFile.read(file)
+        if "machine" in job.data:
+            data = job.table(allowed=_JOB_KEYS, required=("machine", "path"))
             near = lambda name: file.parent / name if (file.parent / name).exists() else name  # noqa: E731
-            feed = data.get("feed_mm_min")
-            if feed is not None and (not isinstance(feed, (int, float)) or feed <= 0):
-                raise toml.error(f"feed_mm_min must be a positive number, got {feed!r}", "feed_mm_min")
-            return (load_machine(near(data["machine"])), library_file(near(data["path"])),
-                    None if feed is None else feed / 60.0, bool(data.get("geometric_compensation", False)))
+            geometric = data.get("geometric_compensation", False)
+            if not isinstance(geometric, bool):
+                raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
+            return load_machine(near(data["machine"])), library_file(near(data["path"])), job, geometric
     return load_machine(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`."""
     out = output_dir(args.out)
-    machine, path_file, feed, geometric = _job(args)
-    rows = [run_job(machine, path_file, out, feed)]
+    machine, path_file, job, geometric = _job(args)
+    rows = [run_job(machine, path_file, out, job)]
     if geometric or args.geometric_compensation:
         if machine.chain is None:
             raise ConfigError(f"{machine.name} has no geometric model to compensate with")
-        rows.append(run_job(machine, path_file, out, feed, [GeometricCompensation(machine.chain)],
+        rows.append(run_job(machine, path_file, out, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}")
     print(_table(rows))

@@ -4,6 +4,7 @@ A machine file (TOML) holds both halves. The servo half::
 
     name = "demo mill"
     servo_period_ms = 0.2
+    max_feed_mm_min = 30000  # optional: paths planned faster are refused
 
     [axes.x]                 # keys are the AxisServo parameters, SI units
     mass = 300.0             # [kg]
@@ -52,12 +53,16 @@ class Machine:
         Cartesian one whose axes are x, y (, z) in that order.
     name : str
         A label for reports.
+    max_feed : float, optional
+        Largest path feed the machine allows [mm/s]; a path planned faster
+        is refused.
     """
 
     axes: dict
     servo_period: float
     chain: object = None
     name: str = ""
+    max_feed: float = None
 
     def __post_init__(self):
         axes = dict(self.axes)
@@ -75,6 +80,8 @@ class Machine:
                 raise ValueError(f"servo axes {unknown} are not axes of the chain {tuple(self.chain.axes)}")
         object.__setattr__(self, "axes", MappingProxyType(axes))
         object.__setattr__(self, "servo_period", _validate.positive("servo_period", self.servo_period))
+        if self.max_feed is not None:
+            object.__setattr__(self, "max_feed", _validate.positive("max_feed", self.max_feed))
 
     @property
     def axis_names(self):
@@ -142,7 +149,7 @@ def _pad3(x):
 
 
 _PRESETS = "presets"
-_SERVO_KEYS = ("name", "description", "servo_period_ms", "axes")
+_SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "axes")
 
 
 def preset_names():
@@ -196,8 +203,10 @@ def load_machine(name_or_file, geometry=True):
         raise toml.error("missing key 'servo_period_ms': the servo period [ms]")
     try:
         period = _validate.positive("servo_period_ms", data["servo_period_ms"]) * 1e-3
+        max_feed = data.get("max_feed_mm_min")
+        max_feed = None if max_feed is None else _validate.positive("max_feed_mm_min", max_feed) / 60.0
     except ValueError as exc:
-        raise toml.error(str(exc), "servo_period_ms") from None
+        raise toml.error(str(exc), str(exc).split()[0]) from None
     fields = AxisServo.__dataclass_fields__
     required = [name for name, f in fields.items() if f.default is MISSING]
     servos = {}
@@ -210,6 +219,7 @@ def load_machine(name_or_file, geometry=True):
             keys = ("axes", axis, bad) if bad else ("axes", axis)
             raise toml.error(f"axis {axis}: {exc}", *keys) from None
     try:
-        return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)))
+        return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
+                       max_feed=max_feed)
     except ValueError as exc:
         raise toml.error(str(exc), "axes") from None

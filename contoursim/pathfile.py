@@ -17,7 +17,7 @@ from .feed import FeedSettings
 from .gcode import read_gcode
 from .paths import circle, helix, iso230_4_circle, polyline, spline
 
-__all__ = ["library_file", "load_path_file"]
+__all__ = ["library_file", "load_path_file", "read_feed_table"]
 
 
 def _angle(name, value):
@@ -110,7 +110,7 @@ def load_path_file(file):
     for key in ("name", "description"):
         if not isinstance(top.get(key, ""), str):
             raise toml.error(f"{key} must be a string", key)
-    return _path(toml), _feed(toml)
+    return _path(toml), read_feed_table(toml)
 
 
 def _path(toml):
@@ -141,10 +141,23 @@ def _blamed(message, arguments, spec):
     return (min(found, key=found.get),) if found else ()
 
 
-def _feed(toml):
-    """The :class:`~contoursim.feed.FeedSettings` of the ``[feed]`` table."""
-    spec = toml.table("feed", allowed=_FEED, required=("feed_mm_min",))
-    settings = {}
+def read_feed_table(toml, base=None):
+    """The feed settings of a file's ``[feed]`` table.
+
+    Parameters
+    ----------
+    toml : contoursim.config.TomlFile
+        A path file, or a job file whose ``[feed]`` overrides a path file's.
+    base : contoursim.feed.FeedSettings, optional
+        Settings the table overrides key by key; without them
+        ``feed_mm_min`` is required.
+
+    Returns
+    -------
+    contoursim.feed.FeedSettings
+    """
+    spec = toml.table("feed", allowed=_FEED, required=() if base else ("feed_mm_min",))
+    settings = {} if base is None else dict(vars(base))
     for key, value in spec.items():
         argument, convert = _FEED[key]
         try:

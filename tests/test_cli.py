@@ -19,6 +19,7 @@ radius_mm = 2
 MACHINE = """
 name = "two axes"
 servo_period_ms = 0.5
+max_feed_mm_min = 5000
 
 [axes.x]
 mass = 300.0
@@ -67,7 +68,7 @@ def test_never_writes_into_a_users_directory(tmp_path, capsys):
 def test_simulate_a_job_file(tmp_path, capsys):
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     (tmp_path / "two.toml").write_text(MACHINE.format(kp=40.0))
-    (tmp_path / "job.toml").write_text('machine = "two.toml"\npath = "small.toml"\nfeed_mm_min = 300\n')
+    (tmp_path / "job.toml").write_text('machine = "two.toml"\npath = "small.toml"\n[feed]\nfeed_mm_min = 300\n')
     assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")]) == 0
     out = capsys.readouterr().out
     assert "machine: two axes, path: small.toml" in out
@@ -84,16 +85,16 @@ def test_simulate_a_library_path_on_a_named_machine(tmp_path, capsys):
 
 
 def test_unknown_job_key_names_file_and_line(tmp_path, capsys):
-    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "rounded_square"\nfeed = 3\n')
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "rounded_square"\nspeed = 3\n')
     assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "o")]) == 2
-    assert f"{tmp_path / 'job.toml'}, line 3: unknown key 'feed'" in capsys.readouterr().err
+    assert f"{tmp_path / 'job.toml'}, line 3: unknown key 'speed'" in capsys.readouterr().err
 
 
 def test_bad_servo_value_names_file_line_and_axis(tmp_path, capsys):
     (tmp_path / "m.toml").write_text(MACHINE.format(kp=-1.0))
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert f"{tmp_path / 'm.toml'}, line 10: axis x: kp must be positive" in err
+    assert f"{tmp_path / 'm.toml'}, line 11: axis x: kp must be positive" in err
 
 
 def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
@@ -101,3 +102,14 @@ def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "axis 'x'" in err and "phase margin 16.6 deg" in err and "lower kp" in err
+
+
+def test_feed_override_is_checked_and_limited_by_the_machine(tmp_path, capsys):
+    (tmp_path / "two.toml").write_text(MACHINE.format(kp=40.0))
+    job = tmp_path / "job.toml"
+    job.write_text('machine = "two.toml"\npath = "rounded_square"\n\n[feed]\naccel_mm_s2 = -5\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
+    assert f"{job}, line 5: accel_mm_s2 must be positive" in capsys.readouterr().err
+    job.write_text('machine = "two.toml"\npath = "rounded_square"\n\n[feed]\nfeed_mm_min = 6000\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
+    assert "max_feed" in capsys.readouterr().err

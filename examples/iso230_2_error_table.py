@@ -1,0 +1,429 @@
+"""From a measured ISO 230-2 positioning test to an error table in the machine chain.
+
+The ESS target drive unit B02 (../shared/data/real/psi_ess_target_iso230_2)
+was driven to 9 (X, Y) or 5 (Z) targets, 5 cycles, approached from both
+directions, while a laser-triangulation sensor measured the true position.
+This script reads the ``*_ISO230.dat`` files, recomputes the ISO 230-2
+figures (the tool's own report.md is not trusted: its direction labels are
+swapped), writes each axis's mean bidirectional positional deviation as an
+error table in the format :func:`contoursim.errormotion.read_error_table`
+reads, builds a one-axis machine (TOML beside the table) whose axis uses it,
+and shows that the chain's positioning error reproduces the measurement at
+the targets and interpolates it linearly between them.
+
+ISO 230-2 (2014) definitions used; i = target, j = cycle (n cycles),
+↑ = target approached in the positive direction, ↓ = in the negative one:
+
+- positional deviation ``x_ij = P_ij − P_i``: measured (reference) position
+  minus target, so a positive deviation means the axis went too far in +;
+- mean unidirectional positional deviation ``x̄_i↑ = (1/n) Σ_j x_ij↑``
+  (and ``x̄_i↓``);
+- mean bidirectional positional deviation ``x̄_i = (x̄_i↑ + x̄_i↓) / 2``;
+- reversal value ``B_i = x̄_i↑ − x̄_i↓``; of the axis ``B = max |B_i|``;
+  mean reversal value ``B̄ = (1/m) Σ_i B_i`` (signed);
+- standard uncertainty ``s_i↑ = sqrt(Σ_j (x_ij↑ − x̄_i↑)² / (n − 1))``;
+  unidirectional repeatability ``R_i↑ = 4 s_i↑``, ``R↑ = max R_i↑``;
+  bidirectional repeatability ``R_i = max(2 s_i↑ + 2 s_i↓ + |B_i|, R_i↑, R_i↓)``,
+  ``R = max R_i``;
+- bidirectional systematic positional deviation
+  ``E = max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓)``;
+- range of the mean bidirectional positional deviation
+  ``M = max x̄_i − min x̄_i``;
+- bidirectional accuracy
+  ``A = max(x̄_i↑ + 2 s_i↑, x̄_i↓ + 2 s_i↓) − min(x̄_i↑ − 2 s_i↑, x̄_i↓ − 2 s_i↓)``.
+
+In the .dat files ``REF_DATA_FWD`` is the ↑ data: the raw X log shows test
+steps 1xxx (written FWD) taken on rising targets after the −20.5 mm
+overshoot, and 2xxx (BWD) on falling targets after +20.5 mm.
+
+python examples/iso230_2_error_table.py [OUT_DIR]   (default ./contoursim-out)
+"""
+
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from contoursim import _validate
+from contoursim.cli import output_dir
+from contoursim.config import TomlFile
+from contoursim.exceptions import ConfigError
+from contoursim.multibody import chain_from_toml
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "psi_ess_target_iso230_2"
+FILES = {
+    "x": "x__target_x.md_ISO230.dat",
+    "y": "y__report_target_y.md_ISO230.dat",
+    "z": "z__report_z.md_ISO230.dat",
+}
+UM = 1e3  # [µm/mm]
+
+_LINE = re.compile(r"^([A-Z][A-Z0-9_]*)(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?=(.*)$")
+_ARRAYS = {"TGT_DATA": 1, "REF_DATA_FWD": 2, "REF_DATA_BWD": 2}  # name: number of indices
+
+
+@dataclass(frozen=True)
+class Iso230Test:
+    """The measurements of one ISO 230-2 bidirectional positioning test.
+
+    Parameters
+    ----------
+    targets : ndarray, shape (m,)
+        Target positions P_i, strictly increasing [mm].
+    forward : ndarray, shape (m, n)
+        Measured positions P_ij↑ reached approaching in the positive
+        direction, cycle j in column j [mm].
+    backward : ndarray, shape (m, n)
+        Measured positions P_ij↓ approaching in the negative direction [mm].
+    source : str
+        Where the data came from (for messages and table headers).
+    """
+
+    targets: np.ndarray
+    forward: np.ndarray
+    backward: np.ndarray
+    source: str = ""
+
+    def __post_init__(self):
+        targets = _validate.finite_array("targets", self.targets, ndim=1)
+        if targets.size < 2 or np.any(np.diff(targets) <= 0):
+            raise ValueError("targets must be at least 2 strictly increasing positions")
+        forward = _validate.finite_array("forward", self.forward, shape=(targets.size, None))
+        backward = _validate.finite_array("backward", self.backward, shape=forward.shape)
+        if forward.shape[1] < 2:
+            raise ValueError("an ISO 230-2 test needs at least 2 cycles per direction")
+        for name, arr in (("targets", targets), ("forward", forward), ("backward", backward)):
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+
+
+def read_iso230_dat(file):
+    """Read an ecmc ``*_ISO230.dat`` file (``KEY=VALUE`` lines).
+
+    ``TGT_DATA[i]`` is target i [mm], ``REF_DATA_FWD[i,j]`` and
+    ``REF_DATA_BWD[i,j]`` the reference position at target i, cycle j, in the
+    positive and negative approach direction [mm]; indices count from 1.
+    ``POSITIONS`` and ``CYCLES`` (optional) fix the counts, ``UNIT`` (optional)
+    must be ``mm``. Blank lines and ``#`` lines are skipped; other scalar keys
+    are kept as text.
+
+    Parameters
+    ----------
+    file : str or Path
+        The .dat file.
+
+    Returns
+    -------
+    Iso230Test
+        Targets sorted ascending (with their rows).
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and line of a malformed, repeated or non-numeric
+        entry, or the file and the first missing entry.
+    """
+    source = str(file)
+    try:
+        lines = Path(file).read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise ConfigError(f"cannot read the ISO 230-2 data: {exc.strerror}", source) from None
+    scalars, arrays = {}, {name: {} for name in _ARRAYS}
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        match = _LINE.match(line)
+        if not match:
+            raise ConfigError(f"expected KEY=VALUE, TGT_DATA[i]=..., or REF_DATA_FWD|BWD[i,j]=...; got {line[:60]!r}", source, number)
+        key, i, j, value = match.groups()
+        if i is None:
+            if key in _ARRAYS:
+                raise ConfigError(f"{key} needs {_ARRAYS[key]} index(es) in brackets", source, number)
+            if key in scalars:
+                raise ConfigError(f"{key} is given twice (first on line {scalars[key][1]})", source, number)
+            scalars[key] = (value.strip(), number)
+            continue
+        index = (int(i),) if j is None else (int(i), int(j))
+        if key not in _ARRAYS or len(index) != _ARRAYS[key]:
+            raise ConfigError(f"unknown indexed entry {line.split('=')[0]!r}; expected TGT_DATA[i] or REF_DATA_FWD|BWD[i,j]", source, number)
+        if min(index) < 1:
+            raise ConfigError(f"{key}: indices count from 1, got {index}", source, number)
+        if index in arrays[key]:
+            raise ConfigError(f"{key}{list(index)} is given twice (first on line {arrays[key][index][1]})", source, number)
+        try:
+            v = float(value)
+        except ValueError:
+            v = np.nan
+        if not np.isfinite(v):
+            raise ConfigError(f"{key}{list(index)}: {value.strip()!r} is not a finite number", source, number)
+        arrays[key][index] = (v, number)
+
+    def count(name, default):
+        if name not in scalars:
+            return default
+        text, number = scalars[name]
+        if not text.isdigit() or int(text) < 2:
+            raise ConfigError(f"{name} must be an integer >= 2, got {text!r}", source, number)
+        return int(text)
+
+    if "UNIT" in scalars and scalars["UNIT"][0] != "mm":
+        raise ConfigError(f"UNIT must be mm, got {scalars['UNIT'][0]!r}", source, scalars["UNIT"][1])
+    m = count("POSITIONS", max((k[0] for k in arrays["TGT_DATA"]), default=0))
+    n = count("CYCLES", max((k[1] for k in arrays["REF_DATA_FWD"]), default=0))
+    wanted = {"TGT_DATA": [(i,) for i in range(1, m + 1)]}
+    wanted["REF_DATA_FWD"] = wanted["REF_DATA_BWD"] = [(i, j) for i in range(1, m + 1) for j in range(1, n + 1)]
+    table = {}
+    for name, keys in wanted.items():
+        extra = sorted(set(arrays[name]) - set(keys))
+        if extra:
+            raise ConfigError(f"{name}{list(extra[0])} is beyond {m} positions x {n} cycles", source, arrays[name][extra[0]][1])
+        missing = [k for k in keys if k not in arrays[name]]
+        if missing or not keys:
+            what = f"{name}{list(missing[0])}" if missing else name
+            raise ConfigError(f"missing {what} ({m} positions x {n} cycles expected)", source)
+        table[name] = np.array([arrays[name][k][0] for k in keys])
+    order = np.argsort(table["TGT_DATA"])
+    try:
+        return Iso230Test(
+            table["TGT_DATA"][order],
+            table["REF_DATA_FWD"].reshape(m, n)[order],
+            table["REF_DATA_BWD"].reshape(m, n)[order],
+            source,
+        )
+    except ValueError as exc:
+        raise ConfigError(str(exc), source) from None
+
+
+@dataclass(frozen=True)
+class Iso230Summary:
+    """ISO 230-2 figures of one axis (definitions in the module docstring), all in [mm].
+
+    Parameters
+    ----------
+    targets : ndarray, shape (m,)
+        Target positions P_i [mm].
+    deviation_up, deviation_down : ndarray, shape (m, n)
+        Positional deviations x_ij↑, x_ij↓ = measured − target [mm].
+    """
+
+    targets: np.ndarray
+    deviation_up: np.ndarray
+    deviation_down: np.ndarray
+
+    @property
+    def mean_up(self):
+        """x̄_i↑, shape (m,) [mm]."""
+        return self.deviation_up.mean(axis=1)
+
+    @property
+    def mean_down(self):
+        """x̄_i↓, shape (m,) [mm]."""
+        return self.deviation_down.mean(axis=1)
+
+    @property
+    def mean_bidirectional(self):
+        """x̄_i = (x̄_i↑ + x̄_i↓)/2, shape (m,) [mm]."""
+        return 0.5 * (self.mean_up + self.mean_down)
+
+    @property
+    def reversal(self):
+        """B_i = x̄_i↑ − x̄_i↓, shape (m,) [mm]."""
+        return self.mean_up - self.mean_down
+
+    @property
+    def reversal_mean(self):
+        """B̄, the signed mean of B_i [mm]."""
+        return float(self.reversal.mean())
+
+    @property
+    def reversal_max(self):
+        """B = max |B_i| [mm]."""
+        return float(np.abs(self.reversal).max())
+
+    @property
+    def s_up(self):
+        """s_i↑, shape (m,) [mm]."""
+        return self.deviation_up.std(axis=1, ddof=1)
+
+    @property
+    def s_down(self):
+        """s_i↓, shape (m,) [mm]."""
+        return self.deviation_down.std(axis=1, ddof=1)
+
+    @property
+    def repeatability_up(self):
+        """R↑ = max 4 s_i↑ [mm]."""
+        return float(4 * self.s_up.max())
+
+    @property
+    def repeatability_down(self):
+        """R↓ = max 4 s_i↓ [mm]."""
+        return float(4 * self.s_down.max())
+
+    @property
+    def repeatability(self):
+        """R = max_i max(2 s_i↑ + 2 s_i↓ + |B_i|, R_i↑, R_i↓) [mm]."""
+        both = 2 * self.s_up + 2 * self.s_down + np.abs(self.reversal)
+        return float(np.max([both, 4 * self.s_up, 4 * self.s_down]))
+
+    @property
+    def systematic(self):
+        """E = max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓) [mm]."""
+        means = np.concatenate([self.mean_up, self.mean_down])
+        return float(means.max() - means.min())
+
+    @property
+    def mean_range(self):
+        """M = max x̄_i − min x̄_i [mm]."""
+        return float(np.ptp(self.mean_bidirectional))
+
+    @property
+    def accuracy(self):
+        """A, the bidirectional accuracy [mm]."""
+        hi = np.concatenate([self.mean_up + 2 * self.s_up, self.mean_down + 2 * self.s_down])
+        lo = np.concatenate([self.mean_up - 2 * self.s_up, self.mean_down - 2 * self.s_down])
+        return float(hi.max() - lo.min())
+
+    @property
+    def drift(self):
+        """Mean change of the deviation from the first to the last cycle [mm] (not an ISO figure)."""
+        last = np.concatenate([self.deviation_up[:, -1], self.deviation_down[:, -1]])
+        first = np.concatenate([self.deviation_up[:, 0], self.deviation_down[:, 0]])
+        return float(np.mean(last - first))
+
+
+def iso230_2_summary(test):
+    """The ISO 230-2 figures of a bidirectional positioning test.
+
+    Parameters
+    ----------
+    test : Iso230Test
+        The measurements.
+
+    Returns
+    -------
+    Iso230Summary
+    """
+    targets = test.targets[:, None]
+    return Iso230Summary(test.targets, test.forward - targets, test.backward - targets)
+
+
+def write_error_table(file, axis, summary, source=""):
+    """Write the mean bidirectional deviation as an error table (position [mm], d<axis> [µm]).
+
+    Parameters
+    ----------
+    file : Path
+        The CSV to write.
+    axis : str
+        ``"x"``, ``"y"`` or ``"z"``: the column is the positioning error ``d<axis>``.
+    summary : Iso230Summary
+        The test's figures.
+    source : str
+        Where the measurement came from (a ``#`` header line).
+    """
+    rows = [f"{p:.17g},{UM * d:.17g}" for p, d in zip(summary.targets, summary.mean_bidirectional)]
+    file.write_text(
+        f"# ISO 230-2 positioning test, {axis.upper()} axis: mean bidirectional positional deviation\n"
+        f"# (measured - target), recomputed from {Path(source).name}\n"
+        f"# position in mm, d{axis} in µm\n"
+        f"position,d{axis}\n" + "\n".join(rows) + "\n",
+        encoding="utf-8",
+    )
+
+
+def axis_machine(folder, axis, table, travel):
+    """Write and load a one-axis machine whose axis carries the tool over a fixed workpiece.
+
+    Parameters
+    ----------
+    folder : Path
+        Where the TOML is written (beside `table`).
+    axis : str
+        ``"x"``, ``"y"`` or ``"z"``.
+    table : str
+        The error table's file name, relative to `folder`.
+    travel : tuple of float
+        Axis travel (min, max) [mm].
+
+    Returns
+    -------
+    file : Path
+        The machine TOML.
+    chain : contoursim.multibody.MachineChain
+    """
+    file = folder / f"{axis}_iso230_2_axis.toml"
+    file.write_text(
+        f'name = "one-axis {axis.upper()} slide, ISO 230-2 table"\n'
+        f'tool = "{axis.upper()}"\n'
+        'workpiece = "bed"\n\n'
+        "[[body]]\n"
+        f'name = "{axis.upper()}"\n'
+        'parent = "bed"\n'
+        f'joint = "linear {axis}"\n'
+        f'axis = "{axis}"\n'
+        f"travel = [{travel[0]:g}, {travel[1]:g}]\n"
+        "[body.errors]\n"
+        f'table = "{table}"                 # measured positioning error d{axis}(q)\n',
+        encoding="utf-8",
+    )
+    return file, chain_from_toml(TomlFile.read(file))
+
+
+def positioning_error(chain, q):
+    """The chain's tool-tip error along its single axis at positions `q`.
+
+    Parameters
+    ----------
+    chain : contoursim.multibody.MachineChain
+        A one-axis machine.
+    q : ndarray, shape (N,)
+        Axis positions [mm].
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        Volumetric position error [mm] (x, y, z).
+    """
+    return chain.volumetric_error(np.asarray(q, float)[:, None])[0]
+
+
+def main(out=Path("contoursim-out")):
+    """Print the ISO 230-2 table of X, Y, Z; write error tables and one-axis machines into `out`."""
+    if not DATA.is_dir():
+        print(f"skipped: the ISO 230-2 data is not at {DATA} (it ships beside the repository, not with it)")
+        return
+    out = output_dir(out)
+    for axis, name in FILES.items():
+        summary = iso230_2_summary(read_iso230_dat(DATA / name))
+        print(f"\n{axis.upper()} axis ({name}), deviation = measured - target [µm], ↑ = REF_DATA_FWD")
+        print(f"{'target mm':>10} {'x̄↑':>8} {'x̄↓':>8} {'x̄':>8} {'B_i':>8} {'R↑_i':>7} {'R↓_i':>7}")
+        for row in zip(summary.targets, summary.mean_up, summary.mean_down, summary.mean_bidirectional,
+                       summary.reversal, 4 * summary.s_up, 4 * summary.s_down):
+            print(f"{row[0]:10.1f} " + " ".join(f"{UM * v:8.1f}" for v in row[1:5]) + " " + " ".join(f"{UM * v:7.1f}" for v in row[5:]))
+        figures = {
+            "mean reversal B̄": summary.reversal_mean, "reversal B = max|B_i|": summary.reversal_max,
+            "systematic E": summary.systematic, "range of x̄ M": summary.mean_range,
+            "repeatability R↑": summary.repeatability_up, "repeatability R↓": summary.repeatability_down,
+            "repeatability R": summary.repeatability, "accuracy A": summary.accuracy,
+            "drift cycle 1→n": summary.drift,
+        }
+        for label, value in figures.items():
+            print(f"  {label:<24} {UM * value:8.1f} µm")
+        table = f"{axis}_iso230_2.csv"
+        write_error_table(out / table, axis, summary, name)
+        travel = (summary.targets[0], summary.targets[-1])
+        file, chain = axis_machine(out, axis, table, travel)
+        q = np.linspace(*travel, 8 * (summary.targets.size - 1) + 1)  # the targets and 7 points between each pair
+        error = positioning_error(chain, q)
+        gap = error[:, "xyz".index(axis)] - np.interp(q, summary.targets, summary.mean_bidirectional)
+        print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM * np.abs(gap).max():.1e} µm "
+              f"over {q.size} positions; off-axis error {UM * np.abs(np.delete(error, 'xyz'.index(axis), 1)).max():.1e} µm")
+    print(f"\nerror tables and machines written to {out}/")
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("contoursim-out"))
