@@ -7,7 +7,7 @@ factor of an exaggerated plot is always written on the plot.
 
 import numpy as np
 
-__all__ = ["magnification_for", "plot_path_error", "plot_polar_deviation", "plot_errors_over_time", "save_figures"]
+__all__ = ["fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation", "plot_errors_over_time", "save_figures"]
 
 
 def _axes(ax, **subplot):
@@ -76,12 +76,36 @@ def plot_path_error(result, ax=None, magnification=None):
     return ax
 
 
+def fit_circle_center(points):
+    """Least-squares centre of points near a circle (algebraic fit), shape (2,) [mm].
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 2)
+        Points [mm].
+
+    Examples
+    --------
+    >>> theta = np.linspace(0, 2 * np.pi, 50)
+    >>> fit_circle_center(np.column_stack([3 + 2 * np.cos(theta), -1 + 2 * np.sin(theta)])).round(12)
+    array([ 3., -1.])
+    """
+    # |p|^2 = 2 c.p + (R^2 - |c|^2) is linear in c and the constant
+    basis = np.column_stack([2 * points, np.ones(len(points))])
+    solution, *_ = np.linalg.lstsq(basis, (points**2).sum(axis=1), rcond=None)
+    return solution[:2]
+
+
 def plot_polar_deviation(result, center, radius, ax=None):
     """Ballbar-style polar plot of the radial deviation over the test circle.
 
-    Only the samples of the test proper (``trajectory.measuring``) are shown.
-    The radial axis is the deviation |p − c| − R [µm] with its zero on the
-    dashed circle, as a ballbar's software draws it.
+    Only the samples whose nearest path point lies on the test proper (the
+    primitives with role ``"test"``, e.g. the full circle of an ISO 230-4
+    test without its run-in and run-out arcs) are shown. As a ballbar's
+    software does, the centre offset is removed first (the
+    least-squares centre of the measured circle, :func:`fit_circle_center`)
+    and given in the title; the radial axis is the deviation |p − c| − R [µm]
+    with its zero on the dashed circle.
 
     Parameters
     ----------
@@ -92,9 +116,15 @@ def plot_polar_deviation(result, center, radius, ax=None):
         Nominal radius R [mm].
     ax : matplotlib.axes.Axes with polar projection, optional
     """
+    from matplotlib.ticker import MaxNLocator
+
     ax = _axes(ax, projection="polar")
-    keep = result.trajectory.measuring
-    rel = result.tool_position[keep, :2] - np.asarray(center, float)
+    path = result.trajectory.path
+    on_test = np.asarray(path.roles)[path.segment_index(result.contour.s)] == "test"
+    points = result.tool_position[on_test if on_test.any() else slice(None), :2]
+    fitted = fit_circle_center(points)
+    offset = 1e3 * (fitted - np.asarray(center, float))
+    rel = points - fitted
     theta = np.arctan2(rel[:, 1], rel[:, 0])
     dev = 1e3 * (np.hypot(rel[:, 0], rel[:, 1]) - radius)
     span = max(float(np.abs(dev).max()), 1e-3)
@@ -102,9 +132,12 @@ def plot_polar_deviation(result, center, radius, ax=None):
     ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.8)
     ax.set_rorigin(-2.5 * span)
     ax.set_ylim(-1.2 * span, 1.2 * span)
+    ax.yaxis.set_major_locator(MaxNLocator(4, symmetric=True))
+    ax.set_rlabel_position(67.5)
     ax.set_title(
-        f"Radial deviation from R = {radius:g} mm [µm]\n"
-        f"min {dev.min():.2f} µm, max {dev.max():.2f} µm (dashed: zero)",
+        f"Radial deviation from R = {radius:g} mm [µm], dashed: zero\n"
+        f"min {dev.min():.2f} µm, max {dev.max():.2f} µm; "
+        f"centre offset ({offset[0]:.2f}, {offset[1]:.2f}) µm removed",
         fontsize="medium",
     )
     return ax
