@@ -64,6 +64,11 @@ _LINE = re.compile(r"^([A-Z][A-Z0-9_]*)(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?=(.*
 _ARRAYS = {"TGT_DATA": 1, "REF_DATA_FWD": 2, "REF_DATA_BWD": 2}  # name: number of indices
 
 
+def _entry(key, index):
+    """An indexed entry as the file writes it, e.g. ``REF_DATA_FWD[2,5]``."""
+    return f"{key}[{','.join(map(str, index))}]"
+
+
 @dataclass(frozen=True)
 class Iso230Test:
     """The measurements of one ISO 230-2 bidirectional positioning test.
@@ -152,13 +157,13 @@ def read_iso230_dat(file):
         if min(index) < 1:
             raise ConfigError(f"{key}: indices count from 1, got {index}", source, number)
         if index in arrays[key]:
-            raise ConfigError(f"{key}{list(index)} is given twice (first on line {arrays[key][index][1]})", source, number)
+            raise ConfigError(f"{_entry(key, index)} is given twice (first on line {arrays[key][index][1]})", source, number)
         try:
             v = float(value)
         except ValueError:
             v = np.nan
         if not np.isfinite(v):
-            raise ConfigError(f"{key}{list(index)}: {value.strip()!r} is not a finite number", source, number)
+            raise ConfigError(f"{_entry(key, index)}: {value.strip()!r} is not a finite number", source, number)
         arrays[key][index] = (v, number)
 
     def count(name, default):
@@ -179,10 +184,10 @@ def read_iso230_dat(file):
     for name, keys in wanted.items():
         extra = sorted(set(arrays[name]) - set(keys))
         if extra:
-            raise ConfigError(f"{name}{list(extra[0])} is beyond {m} positions x {n} cycles", source, arrays[name][extra[0]][1])
+            raise ConfigError(f"{_entry(name, extra[0])} is beyond {m} positions x {n} cycles", source, arrays[name][extra[0]][1])
         missing = [k for k in keys if k not in arrays[name]]
         if missing or not keys:
-            what = f"{name}{list(missing[0])}" if missing else name
+            what = _entry(name, missing[0]) if missing else name
             raise ConfigError(f"missing {what} ({m} positions x {n} cycles expected)", source)
         table[name] = np.array([arrays[name][k][0] for k in keys])
     order = np.argsort(table["TGT_DATA"])
@@ -311,7 +316,7 @@ def iso230_2_summary(test):
     return Iso230Summary(test.targets, test.forward - targets, test.backward - targets)
 
 
-def write_error_table(file, axis, summary, source=""):
+def write_error_table(file, axis, summary, source):
     """Write the mean bidirectional deviation as an error table (position [mm], d<axis> [µm]).
 
     Parameters
@@ -322,8 +327,8 @@ def write_error_table(file, axis, summary, source=""):
         ``"x"``, ``"y"`` or ``"z"``: the column is the positioning error ``d<axis>``.
     summary : Iso230Summary
         The test's figures.
-    source : str
-        Where the measurement came from (a ``#`` header line).
+    source : str or Path
+        The measurement file (named in a ``#`` header line).
     """
     rows = [f"{p:.17g},{UM * d:.17g}" for p, d in zip(summary.targets, summary.mean_bidirectional)]
     file.write_text(
@@ -401,9 +406,10 @@ def main(out=Path("contoursim-out")):
         summary = iso230_2_summary(read_iso230_dat(DATA / name))
         print(f"\n{axis.upper()} axis ({name}), deviation = measured - target [µm], ↑ = REF_DATA_FWD")
         print(f"{'target mm':>10} {'x̄↑':>8} {'x̄↓':>8} {'x̄':>8} {'B_i':>8} {'R↑_i':>7} {'R↓_i':>7}")
-        for row in zip(summary.targets, summary.mean_up, summary.mean_down, summary.mean_bidirectional,
-                       summary.reversal, 4 * summary.s_up, 4 * summary.s_down):
-            print(f"{row[0]:10.1f} " + " ".join(f"{UM * v:8.1f}" for v in row[1:5]) + " " + " ".join(f"{UM * v:7.1f}" for v in row[5:]))
+        columns = (summary.mean_up, summary.mean_down, summary.mean_bidirectional, summary.reversal)
+        for i, target in enumerate(summary.targets):
+            means = " ".join(f"{UM * c[i]:8.1f}" for c in columns)
+            print(f"{target:10.1f} {means} {4 * UM * summary.s_up[i]:7.1f} {4 * UM * summary.s_down[i]:7.1f}")
         figures = {
             "mean reversal B̄": summary.reversal_mean, "reversal B = max|B_i|": summary.reversal_max,
             "systematic E": summary.systematic, "range of x̄ M": summary.mean_range,
@@ -419,9 +425,11 @@ def main(out=Path("contoursim-out")):
         file, chain = axis_machine(out, axis, table, travel)
         q = np.linspace(*travel, 8 * (summary.targets.size - 1) + 1)  # the targets and 7 points between each pair
         error = positioning_error(chain, q)
-        gap = error[:, "xyz".index(axis)] - np.interp(q, summary.targets, summary.mean_bidirectional)
-        print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM * np.abs(gap).max():.1e} µm "
-              f"over {q.size} positions; off-axis error {UM * np.abs(np.delete(error, 'xyz'.index(axis), 1)).max():.1e} µm")
+        k = "xyz".index(axis)
+        gap = np.abs(error[:, k] - np.interp(q, summary.targets, summary.mean_bidirectional)).max()
+        off_axis = np.abs(np.delete(error, k, axis=1)).max()
+        print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM * gap:.1e} µm "
+              f"at {q.size} positions; off-axis error {UM * off_axis:.1e} µm")
     print(f"\nerror tables and machines written to {out}/")
 
 
