@@ -44,7 +44,6 @@ import numpy as np
 from numba import njit
 
 from . import _validate
-from .config import TomlFile
 from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table
 from .exceptions import ConfigError
 

@@ -8,16 +8,16 @@ The data flow of DESIGN.md, as one pure function::
 """
 
 from dataclasses import dataclass, field
-from types import MappingProxyType
 
 import numpy as np
 
-from . import _validate, kernel
+from . import kernel
 from .contour import exact_contour_error
 from .io import Trace, write_trace
 from .machine import CARTESIAN, Machine
 
 __all__ = ["SimResult", "simulate"]
+
 
 @dataclass(frozen=True)
 class SimResult:
