@@ -16,26 +16,16 @@ from .config import TomlFile
 from .exceptions import ConfigError, UnstableLoopError
 from .feed import sample
 from .geocomp import GeometricCompensation
+from .io import output_dir
 from .machine import load_machine, preset_file
 from .pathfile import library_file, load_path_file, read_feed_table
 from .paths import HelicalArc
 from .plotting import save_figures
 from .simulate import simulate
 
-_MARKER = ".contoursim-out"
 DEMO_MACHINE = "demo_mill"
 DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
 _JOB_KEYS = ("machine", "path", "feed", "geometric_compensation")
-
-
-def output_dir(out):
-    """Create or reuse `out`; refuse a non-empty directory contoursim did not make."""
-    out = Path(out)
-    if out.exists() and any(out.iterdir()) and not (out / _MARKER).exists():
-        raise ConfigError(f"{out} holds files that contoursim did not write; choose another --out")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / _MARKER).write_text("written by contoursim; its files here are replaced on each run\n")
-    return out
 
 
 def test_circle(path):

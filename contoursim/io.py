@@ -6,6 +6,8 @@ increasing and uniform, and for each axis the pair ``<axis>_ref``, ``<axis>``
 [mm] for the axis sets ``x``, ``x, y`` or ``x, y, z``. ``*_ref`` are the
 commanded (interpolator) positions, the others the measured tool positions.
 Extra columns are ignored on reading.
+
+:func:`output_dir` prepares the folder such files are written into.
 """
 
 import io as _io
@@ -15,11 +17,12 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
-from .exceptions import TraceFormatError
+from .exceptions import ConfigError, TraceFormatError
 
-__all__ = ["Trace", "read_trace", "write_trace"]
+__all__ = ["Trace", "output_dir", "read_trace", "write_trace"]
 
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
+_MARKER = ".contoursim-out"
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,36 @@ class Trace:
     def tracking_error(self):
         """Actual minus commanded position [mm], shape (N, d)."""
         return self.actual - self.reference
+
+
+def output_dir(out):
+    """Create or reuse the output folder `out`; refuse a non-empty folder contoursim did not make.
+
+    A marker file records that contoursim made the folder, so a later run may
+    replace its files there; a folder holding anything else is never written
+    into, so nothing a user keeps there is overwritten.
+
+    Parameters
+    ----------
+    out : str or Path
+        The folder; created with its parents if missing.
+
+    Returns
+    -------
+    Path
+        `out`, existing and marked.
+
+    Raises
+    ------
+    ConfigError
+        `out` holds files and no marker.
+    """
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not (out / _MARKER).exists():
+        raise ConfigError(f"{out} holds files that contoursim did not write; choose another output directory")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / _MARKER).write_text("written by contoursim; its files here are replaced on each run\n")
+    return out
 
 
 def write_trace(file, trace, extra=None, overwrite=False):

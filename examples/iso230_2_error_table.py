@@ -3,53 +3,34 @@
 The ESS target drive unit B02 (../shared/data/real/psi_ess_target_iso230_2)
 was driven to 9 (X, Y) or 5 (Z) targets, 5 cycles, approached from both
 directions, while a laser-triangulation sensor measured the true position.
-This script reads the ``*_ISO230.dat`` files, recomputes the ISO 230-2
-figures (the tool's own report.md is not trusted: its direction labels are
-swapped), writes each axis's mean bidirectional positional deviation as an
-error table in the format :func:`contoursim.errormotion.read_error_table`
-reads, builds a one-axis machine (TOML beside the table) whose axis uses it,
-and shows that the chain's positioning error reproduces the measurement at
-the targets and interpolates it linearly between them.
-
-ISO 230-2 (2014) definitions used; i = target, j = cycle (n cycles),
-↑ = target approached in the positive direction, ↓ = in the negative one:
-
-- positional deviation ``x_ij = P_ij − P_i``: measured (reference) position
-  minus target, so a positive deviation means the axis went too far in +;
-- mean unidirectional positional deviation ``x̄_i↑ = (1/n) Σ_j x_ij↑``
-  (and ``x̄_i↓``);
-- mean bidirectional positional deviation ``x̄_i = (x̄_i↑ + x̄_i↓) / 2``;
-- reversal value ``B_i = x̄_i↑ − x̄_i↓``; of the axis ``B = max |B_i|``;
-  mean reversal value ``B̄ = (1/m) Σ_i B_i`` (signed);
-- standard uncertainty ``s_i↑ = sqrt(Σ_j (x_ij↑ − x̄_i↑)² / (n − 1))``;
-  unidirectional repeatability ``R_i↑ = 4 s_i↑``, ``R↑ = max R_i↑``;
-  bidirectional repeatability ``R_i = max(2 s_i↑ + 2 s_i↓ + |B_i|, R_i↑, R_i↓)``,
-  ``R = max R_i``;
-- bidirectional systematic positional deviation
-  ``E = max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓)``;
-- range of the mean bidirectional positional deviation
-  ``M = max x̄_i − min x̄_i``;
-- bidirectional accuracy
-  ``A = max(x̄_i↑ + 2 s_i↑, x̄_i↓ + 2 s_i↓) − min(x̄_i↑ − 2 s_i↑, x̄_i↓ − 2 s_i↓)``.
+This script reads the ``*_ISO230.dat`` files (the ecmc tool's format,
+parsed here), recomputes the ISO 230-2 figures with
+:mod:`contoursim.iso230_2`, where their definitions are (the tool's own
+report.md is not trusted: its direction labels are swapped), writes each
+axis's mean bidirectional positional deviation as an error table that
+:func:`contoursim.errormotion.read_error_table` reads, builds a one-axis
+machine (TOML beside the table) whose axis uses it, and shows that the
+chain's positioning error reproduces the measurement at the targets and
+interpolates it linearly between them.
 
 In the .dat files ``REF_DATA_FWD`` is the ↑ data: the raw X log shows test
 steps 1xxx (written FWD) taken on rising targets after the −20.5 mm
-overshoot, and 2xxx (BWD) on falling targets after +20.5 mm.
+overshoot, and 2xxx (BWD) on falling targets after +20.5 mm. So FWD is the
+test's ``up`` and BWD its ``down``.
 
 python examples/iso230_2_error_table.py [OUT_DIR]   (default ./contoursim-out)
 """
 
 import re
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from contoursim import _validate
-from contoursim.cli import output_dir
 from contoursim.config import TomlFile
 from contoursim.exceptions import ConfigError
+from contoursim.io import output_dir
+from contoursim.iso230_2 import PositioningTest, positioning_figures, write_error_table
 from contoursim.multibody import chain_from_toml
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "psi_ess_target_iso230_2"
@@ -69,41 +50,6 @@ def _entry(key, index):
     return f"{key}[{','.join(map(str, index))}]"
 
 
-@dataclass(frozen=True)
-class Iso230Test:
-    """The measurements of one ISO 230-2 bidirectional positioning test.
-
-    Parameters
-    ----------
-    targets : ndarray, shape (m,)
-        Target positions P_i, strictly increasing [mm].
-    forward : ndarray, shape (m, n)
-        Measured positions P_ij↑ reached approaching in the positive
-        direction, cycle j in column j [mm].
-    backward : ndarray, shape (m, n)
-        Measured positions P_ij↓ approaching in the negative direction [mm].
-    source : str
-        Where the data came from (for messages and table headers).
-    """
-
-    targets: np.ndarray
-    forward: np.ndarray
-    backward: np.ndarray
-    source: str = ""
-
-    def __post_init__(self):
-        targets = _validate.finite_array("targets", self.targets, ndim=1)
-        if targets.size < 2 or np.any(np.diff(targets) <= 0):
-            raise ValueError("targets must be at least 2 strictly increasing positions")
-        forward = _validate.finite_array("forward", self.forward, shape=(targets.size, None))
-        backward = _validate.finite_array("backward", self.backward, shape=forward.shape)
-        if forward.shape[1] < 2:
-            raise ValueError("an ISO 230-2 test needs at least 2 cycles per direction")
-        for name, arr in (("targets", targets), ("forward", forward), ("backward", backward)):
-            arr.flags.writeable = False
-            object.__setattr__(self, name, arr)
-
-
 def read_iso230_dat(file):
     """Read an ecmc ``*_ISO230.dat`` file (``KEY=VALUE`` lines).
 
@@ -121,8 +67,9 @@ def read_iso230_dat(file):
 
     Returns
     -------
-    Iso230Test
-        Targets sorted ascending (with their rows).
+    contoursim.iso230_2.PositioningTest
+        Targets sorted ascending (with their rows); ``up`` is
+        ``REF_DATA_FWD``, ``down`` is ``REF_DATA_BWD``.
 
     Raises
     ------
@@ -192,152 +139,13 @@ def read_iso230_dat(file):
         table[name] = np.array([arrays[name][k][0] for k in keys])
     order = np.argsort(table["TGT_DATA"])
     try:
-        return Iso230Test(
+        return PositioningTest(
             table["TGT_DATA"][order],
-            table["REF_DATA_FWD"].reshape(m, n)[order],
-            table["REF_DATA_BWD"].reshape(m, n)[order],
-            source,
+            up=table["REF_DATA_FWD"].reshape(m, n)[order],
+            down=table["REF_DATA_BWD"].reshape(m, n)[order],
         )
     except ValueError as exc:
         raise ConfigError(str(exc), source) from None
-
-
-@dataclass(frozen=True)
-class Iso230Summary:
-    """ISO 230-2 figures of one axis (definitions in the module docstring), all in [mm].
-
-    Parameters
-    ----------
-    targets : ndarray, shape (m,)
-        Target positions P_i [mm].
-    deviation_up, deviation_down : ndarray, shape (m, n)
-        Positional deviations x_ij↑, x_ij↓ = measured − target [mm].
-    """
-
-    targets: np.ndarray
-    deviation_up: np.ndarray
-    deviation_down: np.ndarray
-
-    @property
-    def mean_up(self):
-        """x̄_i↑, shape (m,) [mm]."""
-        return self.deviation_up.mean(axis=1)
-
-    @property
-    def mean_down(self):
-        """x̄_i↓, shape (m,) [mm]."""
-        return self.deviation_down.mean(axis=1)
-
-    @property
-    def mean_bidirectional(self):
-        """x̄_i = (x̄_i↑ + x̄_i↓)/2, shape (m,) [mm]."""
-        return 0.5 * (self.mean_up + self.mean_down)
-
-    @property
-    def reversal(self):
-        """B_i = x̄_i↑ − x̄_i↓, shape (m,) [mm]."""
-        return self.mean_up - self.mean_down
-
-    @property
-    def reversal_mean(self):
-        """B̄, the signed mean of B_i [mm]."""
-        return float(self.reversal.mean())
-
-    @property
-    def reversal_max(self):
-        """B = max |B_i| [mm]."""
-        return float(np.abs(self.reversal).max())
-
-    @property
-    def s_up(self):
-        """s_i↑, shape (m,) [mm]."""
-        return self.deviation_up.std(axis=1, ddof=1)
-
-    @property
-    def s_down(self):
-        """s_i↓, shape (m,) [mm]."""
-        return self.deviation_down.std(axis=1, ddof=1)
-
-    @property
-    def repeatability_up(self):
-        """R↑ = max 4 s_i↑ [mm]."""
-        return float(4 * self.s_up.max())
-
-    @property
-    def repeatability_down(self):
-        """R↓ = max 4 s_i↓ [mm]."""
-        return float(4 * self.s_down.max())
-
-    @property
-    def repeatability(self):
-        """R = max_i max(2 s_i↑ + 2 s_i↓ + |B_i|, R_i↑, R_i↓) [mm]."""
-        both = 2 * self.s_up + 2 * self.s_down + np.abs(self.reversal)
-        return float(np.max([both, 4 * self.s_up, 4 * self.s_down]))
-
-    @property
-    def systematic(self):
-        """E = max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓) [mm]."""
-        means = np.concatenate([self.mean_up, self.mean_down])
-        return float(means.max() - means.min())
-
-    @property
-    def mean_range(self):
-        """M = max x̄_i − min x̄_i [mm]."""
-        return float(np.ptp(self.mean_bidirectional))
-
-    @property
-    def accuracy(self):
-        """A, the bidirectional accuracy [mm]."""
-        hi = np.concatenate([self.mean_up + 2 * self.s_up, self.mean_down + 2 * self.s_down])
-        lo = np.concatenate([self.mean_up - 2 * self.s_up, self.mean_down - 2 * self.s_down])
-        return float(hi.max() - lo.min())
-
-    @property
-    def drift(self):
-        """Mean change of the deviation from the first to the last cycle [mm] (not an ISO figure)."""
-        last = np.concatenate([self.deviation_up[:, -1], self.deviation_down[:, -1]])
-        first = np.concatenate([self.deviation_up[:, 0], self.deviation_down[:, 0]])
-        return float(np.mean(last - first))
-
-
-def iso230_2_summary(test):
-    """The ISO 230-2 figures of a bidirectional positioning test.
-
-    Parameters
-    ----------
-    test : Iso230Test
-        The measurements.
-
-    Returns
-    -------
-    Iso230Summary
-    """
-    targets = test.targets[:, None]
-    return Iso230Summary(test.targets, test.forward - targets, test.backward - targets)
-
-
-def write_error_table(file, axis, summary, source):
-    """Write the mean bidirectional deviation as an error table (position [mm], d<axis> [µm]).
-
-    Parameters
-    ----------
-    file : Path
-        The CSV to write.
-    axis : str
-        ``"x"``, ``"y"`` or ``"z"``: the column is the positioning error ``d<axis>``.
-    summary : Iso230Summary
-        The test's figures.
-    source : str or Path
-        The measurement file (named in a ``#`` header line).
-    """
-    rows = [f"{p:.17g},{UM * d:.17g}" for p, d in zip(summary.targets, summary.mean_bidirectional)]
-    file.write_text(
-        f"# ISO 230-2 positioning test, {axis.upper()} axis: mean bidirectional positional deviation\n"
-        f"# (measured - target), recomputed from {Path(source).name}\n"
-        f"# position in mm, d{axis} in µm\n"
-        f"position,d{axis}\n" + "\n".join(rows) + "\n",
-        encoding="utf-8",
-    )
 
 
 def axis_machine(folder, axis, table, travel):
@@ -403,30 +211,30 @@ def main(out=Path("contoursim-out")):
         return
     out = output_dir(out)
     for axis, name in FILES.items():
-        summary = iso230_2_summary(read_iso230_dat(DATA / name))
+        figures = positioning_figures(read_iso230_dat(DATA / name))
         print(f"\n{axis.upper()} axis ({name}), deviation = measured - target [µm], ↑ = REF_DATA_FWD")
         print(f"{'target mm':>10} {'x̄↑':>8} {'x̄↓':>8} {'x̄':>8} {'B_i':>8} {'R↑_i':>7} {'R↓_i':>7}")
-        columns = (summary.mean_up, summary.mean_down, summary.mean_bidirectional, summary.reversal)
-        for i, target in enumerate(summary.targets):
+        columns = (figures.mean_up, figures.mean_down, figures.mean_bidirectional, figures.reversal)
+        for i, target in enumerate(figures.targets):
             means = " ".join(f"{UM * c[i]:8.1f}" for c in columns)
-            print(f"{target:10.1f} {means} {4 * UM * summary.s_up[i]:7.1f} {4 * UM * summary.s_down[i]:7.1f}")
-        figures = {
-            "mean reversal B̄": summary.reversal_mean, "reversal B = max|B_i|": summary.reversal_max,
-            "systematic E": summary.systematic, "range of x̄ M": summary.mean_range,
-            "repeatability R↑": summary.repeatability_up, "repeatability R↓": summary.repeatability_down,
-            "repeatability R": summary.repeatability, "accuracy A": summary.accuracy,
-            "drift cycle 1→n": summary.drift,
+            print(f"{target:10.1f} {means} {4 * UM * figures.s_up[i]:7.1f} {4 * UM * figures.s_down[i]:7.1f}")
+        quoted = {
+            "mean reversal B̄": figures.reversal_mean, "reversal B = max|B_i|": figures.reversal_max,
+            "systematic E": figures.systematic, "range of x̄ M": figures.mean_range,
+            "repeatability R↑": figures.repeatability_up, "repeatability R↓": figures.repeatability_down,
+            "repeatability R": figures.repeatability, "accuracy A": figures.accuracy,
+            "drift cycle 1→n": figures.drift,
         }
-        for label, value in figures.items():
+        for label, value in quoted.items():
             print(f"  {label:<24} {UM * value:8.1f} µm")
         table = f"{axis}_iso230_2.csv"
-        write_error_table(out / table, axis, summary, name)
-        travel = (summary.targets[0], summary.targets[-1])
+        write_error_table(out / table, axis, figures, source=name, overwrite=True)
+        travel = (figures.targets[0], figures.targets[-1])
         file, chain = axis_machine(out, axis, table, travel)
-        q = np.linspace(*travel, 8 * (summary.targets.size - 1) + 1)  # the targets and 7 points between each pair
+        q = np.linspace(*travel, 8 * (figures.targets.size - 1) + 1)  # the targets and 7 points between each pair
         error = positioning_error(chain, q)
         k = "xyz".index(axis)
-        gap = np.abs(error[:, k] - np.interp(q, summary.targets, summary.mean_bidirectional)).max()
+        gap = np.abs(error[:, k] - np.interp(q, figures.targets, figures.mean_bidirectional)).max()
         off_axis = np.abs(np.delete(error, k, axis=1)).max()
         print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM * gap:.1e} µm "
               f"at {q.size} positions; off-axis error {UM * off_axis:.1e} µm")

@@ -60,7 +60,7 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
 def test_never_writes_into_a_users_directory(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("mine")
     assert main(["demo", "--out", str(tmp_path)]) == 2
-    assert "did not write; choose another --out" in capsys.readouterr().err
+    assert "did not write; choose another output directory" in capsys.readouterr().err
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
     assert (tmp_path / "notes.txt").read_text() == "mine"
 

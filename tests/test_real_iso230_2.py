@@ -22,15 +22,15 @@ import pytest
 
 from conftest import ROOT
 from contoursim.exceptions import ConfigError
+from contoursim.iso230_2 import positioning_figures, write_error_table
 
 EXAMPLE = runpy.run_path(str(ROOT / "examples" / "iso230_2_error_table.py"))
 FOLDER = "psi_ess_target_iso230_2"
 UM = 1e3  # [µm/mm]
 
 
-def summary_of(real_data, axis):
-    test = EXAMPLE["read_iso230_dat"](real_data / FOLDER / EXAMPLE["FILES"][axis])
-    return EXAMPLE["iso230_2_summary"](test)
+def figures_of(real_data, axis):
+    return positioning_figures(EXAMPLE["read_iso230_dat"](real_data / FOLDER / EXAMPLE["FILES"][axis]))
 
 
 # axis: PROVENANCE's B̄, E, 4σ repeatability as (value, rounding) [µm], and the
@@ -51,7 +51,7 @@ REPORT = {
 
 @pytest.mark.parametrize("axis", "xyz")
 def test_figures_match_provenance(real_data, axis):
-    s = summary_of(real_data, axis)
+    s = figures_of(real_data, axis)
     ref = PROVENANCE[axis]
     # ↑ is REF_DATA_FWD (test steps 1xxx on rising targets in the raw log), so
     # B_i = x̄↑ − x̄↓ is negative: the slide stops short in the direction it
@@ -68,7 +68,7 @@ def test_figures_match_provenance(real_data, axis):
 
 @pytest.mark.parametrize("axis", "xyz")
 def test_figures_match_the_ecmc_report(real_data, axis):
-    s = summary_of(real_data, axis)
+    s = figures_of(real_data, axis)
     b_avg, b, m, a, r, r_fwd, r_bwd = REPORT[axis]
     printed = dict(abs=6e-6)  # 5 decimals [mm]
     assert -s.reversal_mean == pytest.approx(b_avg, **printed)  # swapped labels: opposite sign
@@ -83,8 +83,8 @@ def test_figures_match_the_ecmc_report(real_data, axis):
 
 @pytest.mark.parametrize("axis", "xyz")
 def test_chain_reproduces_the_mean_bidirectional_deviation(real_data, tmp_path, axis):
-    s = summary_of(real_data, axis)
-    EXAMPLE["write_error_table"](tmp_path / "table.csv", axis, s, EXAMPLE["FILES"][axis])
+    s = figures_of(real_data, axis)
+    write_error_table(tmp_path / "table.csv", axis, s, source=EXAMPLE["FILES"][axis])
     _, chain = EXAMPLE["axis_machine"](tmp_path, axis, "table.csv", (s.targets[0], s.targets[-1]))
     k = "xyz".index(axis)
 
@@ -130,12 +130,8 @@ def test_reader_on_a_small_file(tmp_path):
     file.write_text(DAT)
     test = EXAMPLE["read_iso230_dat"](file)
     np.testing.assert_array_equal(test.targets, [0, 10])
-    np.testing.assert_array_equal(test.forward, [[0.001, 0.003], [10.002, 10.004]])
-    s = EXAMPLE["iso230_2_summary"](test)
-    # by hand: x̄↑ = (2, 3) µm, x̄↓ = (−2, −3) µm
-    np.testing.assert_allclose(UM * s.reversal, [4, 6], atol=1e-9)
-    np.testing.assert_allclose(UM * s.mean_bidirectional, [0, 0], atol=1e-9)
-    assert UM * s.systematic == pytest.approx(6)
+    np.testing.assert_array_equal(test.up, [[0.001, 0.003], [10.002, 10.004]])  # REF_DATA_FWD
+    np.testing.assert_array_equal(test.down, [[-0.001, -0.003], [9.998, 9.996]])  # REF_DATA_BWD
 
 
 @pytest.mark.parametrize(
@@ -147,6 +143,7 @@ def test_reader_on_a_small_file(tmp_path):
         ("REF_DATA_BWD[2,2]=9.996", "REF_DATA_BWD[2]=9.996", 15, "unknown indexed entry"),
         ("REF_DATA_BWD[2,2]=9.996", "REF_DATA_BWD[2,3]=9.996", 15, "beyond 2 positions x 2 cycles"),
         ("UNIT=mm", "UNIT=um", 3, "UNIT must be mm"),
+        ("TGT_DATA[2]=10", "TGT_DATA[2]=0", None, "targets must be at least 2 strictly increasing"),
         ("REF_DATA_BWD[2,2]=9.996", "", None, "missing REF_DATA_BWD[2,2]"),
     ],
 )
