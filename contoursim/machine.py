@@ -29,7 +29,7 @@ import numpy as np
 
 from . import _validate
 from .config import TomlFile
-from .exceptions import ConfigError
+from .exceptions import ConfigError, UnstableLoopError
 from .servo import AxisServo
 
 __all__ = ["CARTESIAN", "Machine", "load_machine", "preset_names"]
@@ -186,7 +186,11 @@ def load_machine(name_or_file, geometry=True):
     Raises
     ------
     ConfigError
-        Naming the file and line of an unknown key or a bad value.
+        Naming the file and line of an unknown key or a bad value, or of the
+        servo period when it is too long for an axis's loops.
+    UnstableLoopError
+        An axis's sampled loop is unstable or badly damped: the message names
+        the file, the line of its ``[axes.*]`` table, the loop and its margins.
     """
     from .multibody import chain_from_toml
 
@@ -218,6 +222,13 @@ def load_machine(name_or_file, geometry=True):
             bad = next((key for key in table if str(exc).startswith(key)), None)
             keys = ("axes", axis, bad) if bad else ("axes", axis)
             raise toml.error(f"axis {axis}: {exc}", *keys) from None
+    for axis, servo in servos.items():  # refuse loops that cannot run at this period, pointing at the file
+        try:
+            servo.check(period, axis)
+        except UnstableLoopError as exc:
+            raise UnstableLoopError(f"{toml.source}, line {toml.line_of('axes', axis)}: {exc}", exc.margins) from None
+        except ValueError as exc:
+            raise toml.error(str(exc), "servo_period_ms") from None
     try:
         return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
                        max_feed=max_feed)

@@ -101,7 +101,15 @@ def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
     (tmp_path / "m.toml").write_text(MACHINE.format(kp=900.0))
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert "axis 'x'" in err and "phase margin 16.6 deg" in err and "lower kp" in err
+    assert f"{tmp_path / 'm.toml'}, line 6: the position loop of axis 'x'" in err
+    assert "phase margin 16.6 deg" in err and "lower kp" in err
+
+
+def test_servo_period_too_long_names_the_key(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp=40.0).replace("servo_period_ms = 0.5", "servo_period_ms = 5"))
+    assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'm.toml'}, line 3: dt = 0.005 s is too long for the velocity loop of axis 'x'" in err
 
 
 def test_feed_override_is_checked_and_limited_by_the_machine(tmp_path, capsys):
