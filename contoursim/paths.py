@@ -545,10 +545,9 @@ class Path:
         -------
         ndarray, shape (K - 1,)
         """
-        k = np.arange(1, len(self.primitives))
-        out = _evaluate(self.kinds, self.rows, self.breaks, self.breaks[1:-1])
-        ends = _evaluate(self.kinds[k - 1], self.rows[k - 1], np.concatenate([[0.0], self.breaks[k]]), self.breaks[k])
-        cos = np.clip(np.sum(out[:, 3:6] * ends[:, 3:6], axis=1), -1.0, 1.0)
+        ends = [p.evaluate([p.length])[1][0] for p in self.primitives[:-1]]
+        starts = [p.evaluate([0.0])[1][0] for p in self.primitives[1:]]
+        cos = np.clip(np.sum(np.reshape(ends, (-1, 3)) * np.reshape(starts, (-1, 3)), axis=1), -1.0, 1.0)
         return np.arccos(cos)
 
     def max_curvature(self):

@@ -107,3 +107,15 @@ def test_sampled_circle_lies_on_the_path_with_analytic_derivatives():
     inside = np.flatnonzero(on)[1:-1]
     central = (traj.position[inside + 1] - traj.position[inside - 1]) / (2 * dt)
     np.testing.assert_allclose(central, traj.velocity[inside], rtol=0, atol=1.01 * feed**3 * dt**2 / (6 * radius**2))
+
+
+def test_exact_stop_at_every_sharp_corner():
+    """At each sharp corner the feed comes to rest, so the velocity vector never jumps."""
+    square = paths.polyline([[0, 0], [20, 0], [20, 20], [0, 20], [0, 0]], 0.0)
+    dt, accel = 1e-3, 1000.0
+    trajectory = sample(square, plan(square, 2000 / 60, accel), dt)
+    dv = np.linalg.norm(np.diff(trajectory.velocity, axis=0), axis=1) / dt
+    assert dv.max() <= accel * (1 + 1e-9)
+    for corner in (20.0, 40.0, 60.0):
+        near = np.abs(trajectory.s - corner) < 0.5
+        assert trajectory.speed[near].min() < accel * dt

@@ -188,3 +188,16 @@ def test_path_file_errors_name_file_and_line(tmp_path, text, line, message):
     with pytest.raises(ConfigError, match=message) as info:
         load_path_file(file)
     assert info.value.source == str(file) and info.value.line == line
+
+
+def test_corner_angles_at_every_junction():
+    """Each junction's turn, from the incoming primitive's end tangent to the outgoing start tangent."""
+    square = paths.polyline([[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]], 0.0)
+    np.testing.assert_allclose(square.corner_angles(), [np.pi / 2] * 3, atol=1e-12)
+    zigzag = paths.polyline([[0, 0], [10, 0], [20, 10], [30, 10]], 0.0)
+    np.testing.assert_allclose(zigzag.corner_angles(), [np.pi / 4] * 2, atol=1e-12)
+    # a line into a quarter arc that leaves tangentially: 0, then the arc into a line going back: π/2
+    joined = paths.join(paths.line((0, 0), (10, 0)),
+                        paths.arc(center=(10, 5), radius=5, start_angle=-np.pi / 2, sweep=np.pi / 2),
+                        paths.line((15, 5), (15, 0)))
+    np.testing.assert_allclose(joined.corner_angles(), [0.0, np.pi], atol=1e-9)
