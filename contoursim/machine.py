@@ -32,7 +32,7 @@ from .config import TomlFile
 from .exceptions import ConfigError, UnstableLoopError
 from .servo import AxisServo
 
-__all__ = ["CARTESIAN", "Machine", "load_machine", "preset_names"]
+__all__ = ["CARTESIAN", "Machine", "load_machine", "preset_names", "read_work_offset"]
 
 CARTESIAN = ("x", "y", "z")
 
@@ -56,6 +56,10 @@ class Machine:
     max_feed : float, optional
         Largest path feed the machine allows [mm/s]; a path planned faster
         is refused.
+    work_offset : mapping str -> float, optional
+        Axis positions at which the tool tip is at the path's origin (the
+        work offset, as G54 sets it) [mm, rad]. Axes not given sit at the
+        middle of their travel (0 without one). Only with a `chain`.
     """
 
     axes: dict
@@ -63,6 +67,7 @@ class Machine:
     chain: object = None
     name: str = ""
     max_feed: float = None
+    work_offset: dict = None
 
     def __post_init__(self):
         axes = dict(self.axes)
@@ -78,6 +83,14 @@ class Machine:
             unknown = [a for a in axes if a not in self.chain.axes]
             if unknown:
                 raise ValueError(f"servo axes {unknown} are not axes of the chain {tuple(self.chain.axes)}")
+        offset = dict(self.work_offset or {})
+        if offset and self.chain is None:
+            raise ValueError("work_offset needs a machine with geometry (bodies); without one the path origin is the axes' zero")
+        unknown = [a for a in offset if self.chain is None or a not in self.chain.axes]
+        if unknown:
+            raise ValueError(f"work_offset names axes {unknown} that the machine does not have")
+        offset = {a: _validate.finite_array(f"work_offset[{a!r}]", v, ndim=0).item() for a, v in offset.items()}
+        object.__setattr__(self, "work_offset", MappingProxyType(offset))
         object.__setattr__(self, "axes", MappingProxyType(axes))
         object.__setattr__(self, "servo_period", _validate.positive("servo_period", self.servo_period))
         if self.max_feed is not None:
@@ -93,8 +106,39 @@ class Machine:
         """Columns of :attr:`axis_names` that are servo-controlled, shape (n_servo,)."""
         return np.array([self.axis_names.index(a) for a in self.axes])
 
+    @property
+    def travel(self):
+        """Travel (min, max) of each chain axis that has one [mm, rad]."""
+        if self.chain is None:
+            return {}
+        return {b.axis: b.travel for b in self.chain.bodies if b.axis is not None and b.travel is not None}
+
+    def home(self):
+        """Axis positions at the path's origin, shape (n_axes,) [mm, rad].
+
+        The work offset where given; else the middle of a linear axis's travel
+        and 0 for a rotary axis (clipped into its travel), 0 without a travel.
+        """
+        travel, rotary = self.travel, self.chain is not None and self.chain.rotary_axes
+        home = []
+        for i, axis in enumerate(self.axis_names):
+            if axis in self.work_offset:
+                home.append(self.work_offset[axis])
+            elif axis in travel:
+                lo, hi = travel[axis]
+                home.append(min(max(0.0, lo), hi) if rotary[i] else (lo + hi) / 2)
+            else:
+                home.append(0.0)
+        return np.array(home)
+
     def axis_commands(self, trajectory):
         """Axis position, velocity and acceleration commands for a tool-tip reference.
+
+        With a chain, the path's origin is put where the tool tip is at
+        :meth:`home`; the linear axes move and the rotary ones hold their
+        angle, so the ideal chain is affine in the axis positions and its
+        position Jacobian maps the path exactly:
+        ``q = q_home + J⁺ p``, ``q' = J⁺ v``, ``q'' = J⁺ a``.
 
         Parameters
         ----------
@@ -106,6 +150,12 @@ class Machine:
         position, velocity, acceleration : ndarray, shape (N, n_axes)
             One column per :attr:`axis_names` [mm, mm/s, mm/s^2] (rad for
             rotary axes, which hold their angle).
+
+        Raises
+        ------
+        ValueError
+            The path needs more axes than the machine has, or an axis would
+            leave its travel.
         """
         p, v, a = (_pad3(x) for x in (trajectory.position, trajectory.velocity, trajectory.acceleration))
         if self.chain is None:
@@ -113,18 +163,43 @@ class Machine:
             if np.abs(p[:, n:]).max(initial=0.0) > 0:
                 raise ValueError(f"the path moves in {trajectory.dim} coordinates but the machine has only {n} axes")
             return p[:, :n], v[:, :n], a[:, :n]
-        q = self.chain.inverse(p, ideal=True)
-        # Only the linear axes move (rotary ones hold their angle), so the ideal chain
-        # is affine in q: its position Jacobian is constant and maps v and a exactly.
+        home = self.home()
         linear = ~self.chain.rotary_axes
-        jac = np.linalg.pinv(self.chain.axis_jacobian(q)[:, :3][:, :, linear])
+        moves = self.chain.axis_jacobian(home[None])[0, :3][:, linear]
+        jac = np.linalg.pinv(moves)
+        unreachable = p - p @ (moves @ jac).T
+        if np.abs(unreachable).max(initial=0.0) > 1e-9:
+            worst = np.abs(unreachable).max(axis=0)
+            raise ValueError(
+                f"the machine's linear axes ({', '.join(np.array(self.axis_names)[linear])}) cannot move the tool along the path: "
+                f"it leaves their span by up to ({worst[0]:.3g}, {worst[1]:.3g}, {worst[2]:.3g}) mm in x, y, z"
+            )
+        q = np.tile(home, (len(p), 1))
         qv, qa = np.zeros_like(q), np.zeros_like(q)
-        qv[:, linear] = np.einsum("nij,nj->ni", jac, v)
-        qa[:, linear] = np.einsum("nij,nj->ni", jac, a)
+        q[:, linear] += p @ jac.T
+        qv[:, linear] = v @ jac.T
+        qa[:, linear] = a @ jac.T
+        self._check_travel(q)
         return q, qv, qa
 
+    def origin(self):
+        """Where the ideal machine's tool tip is at :meth:`home`, in workpiece coordinates [mm], shape (3,)."""
+        if self.chain is None:
+            return np.zeros(3)
+        return self.chain.tool_pose(self.home()[None], ideal=True)[0][0]
+
+    def _check_travel(self, q):
+        """Refuse commands that leave an axis's travel."""
+        for axis, (lo, hi) in self.travel.items():
+            column = q[:, self.axis_names.index(axis)]
+            if column.min() < lo - 1e-9 or column.max() > hi + 1e-9:
+                raise ValueError(
+                    f"axis {axis} would move over {column.min():.6g} .. {column.max():.6g}, outside its travel "
+                    f"{lo:.6g} .. {hi:.6g} [mm or rad]: move the path with work_offset or make it smaller"
+                )
+
     def tool_position(self, q, t, dim):
-        """Tool tip in workpiece coordinates.
+        """Tool tip in the path's coordinates: workpiece coordinates from the path's origin (:meth:`origin`).
 
         Parameters
         ----------
@@ -140,7 +215,7 @@ class Machine:
         ndarray, shape (N, dim)
             [mm]
         """
-        p = _pad3(q) if self.chain is None else self.chain.tool_pose(q, t)[0]
+        p = _pad3(q) if self.chain is None else self.chain.tool_pose(q, t)[0] - self.origin()
         return p[:, :dim]
 
 
@@ -149,7 +224,7 @@ def _pad3(x):
 
 
 _PRESETS = "presets"
-_SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "axes")
+_SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes")
 
 
 def preset_names():
@@ -222,6 +297,7 @@ def load_machine(name_or_file, geometry=True):
             bad = next((key for key in table if str(exc).startswith(key)), None)
             keys = ("axes", axis, bad) if bad else ("axes", axis)
             raise toml.error(f"axis {axis}: {exc}", *keys) from None
+    offset = read_work_offset(toml, chain) if "work_offset" in data and geometry else None
     for axis, servo in servos.items():  # refuse loops that cannot run at this period, pointing at the file
         try:
             servo.check(period, axis)
@@ -231,6 +307,32 @@ def load_machine(name_or_file, geometry=True):
             raise toml.error(str(exc), "servo_period_ms") from None
     try:
         return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
-                       max_feed=max_feed)
+                       max_feed=max_feed, work_offset=offset)
     except ValueError as exc:
         raise toml.error(str(exc), "axes") from None
+
+
+def read_work_offset(toml, chain):
+    """The ``work_offset = { x = 250, c = 90 }`` table of a machine or job file [mm; deg for rotary axes].
+
+    Parameters
+    ----------
+    toml : contoursim.config.TomlFile
+        The file holding a top-level ``work_offset`` table.
+    chain : contoursim.multibody.MachineChain or None
+        The machine's geometry; a work offset needs one.
+
+    Returns
+    -------
+    dict
+        Axis name -> position [mm, rad].
+    """
+    if chain is None:
+        raise toml.error("work_offset needs a machine with geometry ([[body]] tables)", "work_offset")
+    table = toml.table("work_offset", allowed=chain.axes)
+    offset = {}
+    for axis, value in table.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            raise toml.error(f"work_offset.{axis} must be a finite number, got {value!r}", "work_offset", axis)
+        offset[axis] = np.radians(value) if chain.axis_kind(axis) == "rotary" else float(value)
+    return offset

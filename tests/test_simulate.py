@@ -173,3 +173,27 @@ def test_squareness_enters_the_trace_and_geometric_compensation_removes_it():
     # squareness moves y by α·x: the largest static error on the test circle is α·R
     assert skewed.summary()["volumetric_max_um"] == pytest.approx(1e3 * alpha * radius, rel=1e-3)
     assert plain.summary()["volumetric_max_um"] == 0.0
+
+
+def test_paths_are_placed_at_the_work_offset_and_kept_inside_the_travel():
+    """The path's origin sits where the tool is at the home axis positions; travel and axis span are checked."""
+    from contoursim.machine import load_machine
+
+    mill = load_machine("vertical_mill_3axis")
+    path = paths.circle(center=(0, 0), radius=20.0)
+    trajectory = sample(path, plan(path, feed=20.0, accel=1000.0), mill.servo_period)
+    q, _, _ = mill.axis_commands(trajectory)
+    # the table axes move opposite to the tool ("linear -x"): the circle is drawn about mid-travel
+    np.testing.assert_allclose(q.min(axis=0), [230.0, 180.0, -150.0], atol=1e-9)
+    np.testing.assert_allclose(q.max(axis=0), [270.0, 220.0, -150.0], atol=1e-9)
+    # the ideal machine returns the path itself in the path's coordinates
+    ideal = Machine(dict(mill.axes), mill.servo_period, mill.chain.ideal())
+    np.testing.assert_allclose(ideal.tool_position(q, trajectory.t, 2), trajectory.position, atol=1e-9)
+    # moved to the edge of the table, the circle would leave the X travel
+    shifted = Machine(dict(mill.axes), mill.servo_period, mill.chain, work_offset={"x": 490.0})
+    with pytest.raises(ValueError, match=r"axis x would move over 470 .. 510, outside its travel 0 .. 500"):
+        shifted.axis_commands(trajectory)
+    # an XZ machine cannot follow an XY circle
+    lathe = load_machine("diamond_lathe")
+    with pytest.raises(ValueError, match=r"linear axes \(x, z\) cannot move the tool along the path"):
+        lathe.axis_commands(sample(path, plan(path, feed=20.0, accel=1000.0), lathe.servo_period))
