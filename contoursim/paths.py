@@ -33,7 +33,7 @@ from .exceptions import PathError
 
 __all__ = [
     "Line", "HelicalArc", "SplinePiece", "Path",
-    "line", "arc", "circle", "tilted_circle", "helix", "iso230_4_circle", "polyline", "spline", "join",
+    "line", "arc", "circle", "helix", "iso230_4_circle", "polyline", "spline", "join",
     "LINE", "ARC", "SPLINE", "NCOL",
 ]
 
@@ -700,29 +700,6 @@ def circle(center, radius, direction="ccw", normal=(0, 0, 1), start_angle=0.0, r
     Path
     """
     return arc(center, radius, start_angle, sweep=2 * np.pi * _direction(direction), normal=normal, role=role)
-
-
-def tilted_circle(center, radius, normal, direction="ccw", start_angle=0.0):
-    """A full circle in the plane normal to `normal` (see :func:`circle`).
-
-    Parameters
-    ----------
-    center : array_like, shape (3,)
-        Centre [mm].
-    radius : float
-        Radius [mm].
-    normal : array_like, shape (3,)
-        Plane normal.
-    direction : {"ccw", "cw"}
-        Turning direction about `normal`.
-    start_angle : float
-        Start angle [rad].
-
-    Returns
-    -------
-    Path
-    """
-    return circle(center, radius, direction, normal, start_angle)
 
 
 def helix(center, radius, pitch, turns, direction="ccw", normal=(0, 0, 1), start_angle=0.0, role="path"):

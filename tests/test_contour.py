@@ -37,7 +37,7 @@ def test_circle_in_plane_closed_form():
 def test_tilted_circle_with_out_of_plane_offset():
     n = np.array([1.0, 2.0, 3.0]) / np.sqrt(14)
     center, radius = np.array([10.0, 0.0, 5.0]), 50.0
-    path = paths.tilted_circle(center, radius, n)
+    path = paths.circle(center, radius, normal=n)
     e1, e2 = path.primitives[0].e1, path.primitives[0].e2
     ref = _coarse(path)
     phi = np.linspace(0.1, 2 * np.pi - 0.1, 500)

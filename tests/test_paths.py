@@ -38,7 +38,7 @@ def test_arc_end_angle_and_direction():
 
 def test_tilted_circle_lies_in_its_plane():
     n = np.array([1.0, 1.0, 1.0]) / np.sqrt(3)
-    path = paths.tilted_circle((5.0, 0.0, -3.0), 20.0, n)
+    path = paths.circle((5.0, 0.0, -3.0), 20.0, normal=n)
     assert path.dim == 3
     np.testing.assert_allclose(path.plane_normal, n, atol=1e-15)
     pos, tan, kappa = path.evaluate(np.linspace(0, path.length, 50))
