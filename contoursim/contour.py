@@ -27,7 +27,7 @@ from numba import njit
 
 from . import _validate
 from .nearest import distinct, nearest_knots
-from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _spline_u_of_w, _spline_w_of_u, _primitive_at
+from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
 
 __all__ = ["ContourError", "exact_contour_error"]
 
@@ -120,7 +120,8 @@ def _closest(kind, row, p, u0, length, out):
                 break
             u = un
     else:
-        w = _spline_w_of_u(row, u0)
+        # seed from the arc-length table; the distance Newton below does the rest
+        w = 0.0 if u0 <= 0.0 else 1.0 if u0 >= length else _spline_w_guess(row, u0)[1]
         for _ in range(50):
             g = gp = speed2 = 0.0
             for i in range(3):

@@ -74,18 +74,24 @@ def _spline_u_of_w(row, w):
 
 
 @njit(cache=True)
+def _spline_w_guess(row, u):
+    """Table interval j holding arc length u (0 < u < length) and w interpolated linearly in it."""
+    j = 0
+    while j < _TABLE - 1 and row[13 + j] <= u:
+        j += 1
+    return j, (j + (u - row[12 + j]) / (row[13 + j] - row[12 + j])) / _TABLE
+
+
+@njit(cache=True)
 def _spline_w_of_u(row, u):
     """Invert the arc-length map: Newton inside the bracketing table interval, bisection as safeguard."""
     if u <= 0.0:
         return 0.0
     if u >= row[12 + _TABLE]:
         return 1.0
-    j = 0
-    while j < _TABLE - 1 and row[13 + j] <= u:
-        j += 1
+    j, w = _spline_w_guess(row, u)
     lo = j / _TABLE
     a, b = lo, (j + 1) / _TABLE
-    w = a + (b - a) * (u - row[12 + j]) / (row[13 + j] - row[12 + j])
     for _ in range(60):
         f = row[12 + j] + _spline_integral(row, lo, w) - u
         if f > 0.0:
