@@ -7,7 +7,23 @@ traceback from inside numpy.
 
 import numpy as np
 
-__all__ = ["positive", "nonnegative", "finite_array", "time_base"]
+__all__ = ["positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
+
+
+class TimeStepError(ValueError):
+    """A time base has a bad step: not increasing, or not uniform.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong.
+    step : int
+        Index k of the offending step ``t[k + 1] - t[k]``.
+    """
+
+    def __init__(self, message, step):
+        self.step = step
+        super().__init__(message)
 
 
 def positive(name, value):
@@ -27,6 +43,8 @@ def nonnegative(name, value):
 
 
 def _finite_scalar(name, value):
+    if isinstance(value, (str, bytes, bool, np.bool_)):  # float() would take "40" and True
+        raise ValueError(f"{name} must be a number, got {value!r}")
     try:
         value = float(value)
     except (TypeError, ValueError):
@@ -50,10 +68,17 @@ def finite_array(name, value, ndim=None, shape=None):
     shape : tuple, optional
         Required shape; ``None`` entries match any length.
     """
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{name} must be numeric, got {value!r}")
     try:
-        arr = np.asarray(value, dtype=float)
+        kind = np.asarray(value).dtype.kind
+        if kind == "O":  # e.g. a list mixing numbers and text
+            kind = "U" if any(isinstance(v, (str, bytes, bool, np.bool_)) for v in np.asarray(value, object).flat) else "f"
+        arr = np.asarray(value, dtype=float) if kind in "iuf" else None
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numeric") from None
+        arr = None
+    if arr is None:
+        raise ValueError(f"{name} must be numeric (not text, booleans or complex numbers)")
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
     if shape is not None:
@@ -84,12 +109,13 @@ def time_base(name, t, rtol=1e-3):
     step = np.diff(t)
     if np.any(step <= 0):
         i = int(np.argmax(step <= 0))
-        raise ValueError(f"{name} must be strictly increasing: t[{i + 1}] = {t[i + 1]} follows t[{i}] = {t[i]}")
+        raise TimeStepError(f"{name} must be strictly increasing: t[{i + 1}] = {t[i + 1]} follows t[{i}] = {t[i]}", i)
     dt = float(np.median(step))
     worst = int(np.argmax(np.abs(step - dt)))
     if abs(step[worst] - dt) > rtol * max(dt, 1e-300) + 1e-12:
-        raise ValueError(
+        raise TimeStepError(
             f"{name} must be uniformly sampled: step {worst} is {step[worst]:.9g} s, "
-            f"the median step is {dt:.9g} s"
+            f"the median step is {dt:.9g} s",
+            worst,
         )
     return t, dt

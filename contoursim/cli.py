@@ -1,9 +1,11 @@
 """Command line: ``contoursim demo | simulate | volumetric``.
 
 Every job prints a summary table to stdout and writes plots and traces to
-``--out`` (default ``./contoursim-out``). A directory that holds files but was
-not made by contoursim is never written into, so nothing a user keeps there
-is overwritten.
+``--out`` (default ``./contoursim-out``) through :func:`contoursim.io.output_dir`:
+a directory that holds files but was not made by contoursim is never written
+into, and in its own directories contoursim replaces only the files it wrote,
+so nothing a user keeps there is overwritten. The directory is made only
+once the job's files are read and its runs succeeded.
 """
 
 import argparse
@@ -49,27 +51,40 @@ def _table(rows):
     return "\n".join(lines)
 
 
-def run_job(machine, path_file, out, job=None, strategies=(), label=None):
-    """Simulate `machine` on a path file; write plots and the trace CSV; return the summary row.
+def run_job(machine, path_file, job=None, strategies=(), label=None):
+    """Simulate `machine` on a path file.
 
     A job file's ``[feed]`` table, when given, overrides the path file's key by key.
+
+    Returns
+    -------
+    tuple
+        ``(name, path_file, result, circle)``: the run's name (file stem or
+        `label`), the path file, the :class:`~contoursim.simulate.SimResult`
+        and the path's test circle for the polar plot (or ``None``).
     """
     path, settings = load_path_file(path_file)
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
     trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
     result = simulate(machine, trajectory, strategies)
-    name = label or Path(path_file).stem
-    result.save_csv(out / f"{name}.csv", metadata={"machine": machine.name, "path": Path(path_file).name}, overwrite=True)
-    save_figures(result, out, name, circle=test_circle(path))
-    return name, result.summary()
+    return label or Path(path_file).stem, path_file, result, test_circle(path)
+
+
+def _write(out, machine, runs):
+    """Write each run's trace CSV and plots into the output folder `out`; return the table rows."""
+    out = output_dir(out)
+    for name, path_file, result, circle in runs:
+        metadata = {"machine": machine.name, "path": Path(path_file).name}
+        result.save_csv(out.file(f"{name}.csv"), metadata=metadata, overwrite=True)
+        save_figures(result, out, name, circle=circle)
+    return out, [(name, result.summary()) for name, _, result, _ in runs]
 
 
 def demo(args):
     """The README's main job: ISO 230-4 circles and a free-form path on the demo machine."""
-    out = output_dir(args.out)
     machine = load_machine(DEMO_MACHINE)
-    rows = [run_job(machine, library_file(name), out) for name in DEMO_PATHS]
+    out, rows = _write(args.out, machine, [run_job(machine, library_file(name)) for name in DEMO_PATHS])
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
     print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
     print(_table(rows))
@@ -82,13 +97,20 @@ def _job(args):
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
     presets/library entries or files relative to the job, and optionally a
     ``[feed]`` table and ``geometric_compensation``) or a bare path file, run
-    on ``--machine`` (default: the demo machine).
+    on ``--machine`` (default: the demo machine). A job file names its
+    machine, so ``--machine`` with a job file is an error.
     """
     file = Path(args.file)
     if file.suffix == ".toml" and file.exists():
         job = TomlFile.read(file)
         if "machine" in job.data:
             data = job.table(allowed=_JOB_KEYS, required=("machine", "path"))
+            for key in ("machine", "path"):
+                if not isinstance(data[key], str):
+                    raise job.error(f"{key} must be a name or a file name in quotes, got {data[key]!r}", key)
+            if args.machine is not None:
+                raise job.error(f"--machine {args.machine} is not used with a job file, which names its machine "
+                                f"({data['machine']!r}); drop one of them", "machine")
             near = lambda name: file.parent / name if (file.parent / name).exists() else name  # noqa: E731
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
@@ -98,15 +120,15 @@ def _job(args):
 
 
 def simulate_command(args):
-    """``contoursim simulate FILE``: see :func:`_job`."""
-    out = output_dir(args.out)
+    """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
     machine, path_file, job, geometric = _job(args)
-    rows = [run_job(machine, path_file, out, job)]
+    if (geometric or args.geometric_compensation) and machine.chain is None:
+        raise ConfigError(f"{machine.name} has no geometric model to compensate with")
+    runs = [run_job(machine, path_file, job)]
     if geometric or args.geometric_compensation:
-        if machine.chain is None:
-            raise ConfigError(f"{machine.name} has no geometric model to compensate with")
-        rows.append(run_job(machine, path_file, out, job, [GeometricCompensation(machine.chain)],
+        runs.append(run_job(machine, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
+    out, rows = _write(args.out, machine, runs)
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
@@ -116,7 +138,7 @@ def volumetric(args):
     """``contoursim volumetric MACHINE``: worst volumetric errors and error-field plots."""
     from .volumetric import volumetric_report
 
-    print(volumetric_report(preset_file(args.machine), output_dir(args.out)))
+    print(volumetric_report(preset_file(args.machine), args.out))
 
 
 def main(argv=None):

@@ -39,6 +39,8 @@ from .trajectory import Trajectory
 
 __all__ = ["FeedProfile", "FeedSettings", "plan", "sample"]
 
+MAX_SAMPLES = 50_000_000  # what :func:`sample` will make: 50 million samples are ~5 GB of trajectory arrays
+
 
 @dataclass(frozen=True)
 class FeedProfile:
@@ -332,11 +334,23 @@ def sample(path, profile, dt):
         acceleration T sddot + kappa N sdot^2 [mm/s^2] are analytic;
         position has ``path.dim`` columns; ``measuring`` marks samples on
         primitives with role "test" (all samples if the path has none).
+
+    Raises
+    ------
+    ValueError
+        The profile does not fit the path, or the motion would take more than
+        :data:`MAX_SAMPLES` samples (a very long path or a very slow feed).
     """
     dt = _validate.positive("dt", dt)
     if abs(profile.length - path.length) > 1e-9 * max(1.0, path.length):
         raise ValueError(f"profile length {profile.length} mm differs from the path length {path.length} mm")
-    n = max(int(math.ceil(profile.duration / dt)), 1)
+    steps = profile.duration / dt
+    if steps + 1 > MAX_SAMPLES:
+        raise ValueError(
+            f"the motion lasts {profile.duration:.6g} s: at dt = {dt:.6g} s that is {steps + 1:.4g} samples, "
+            f"more than the {MAX_SAMPLES:,} allowed; check the path length, the feed and the servo period"
+        )
+    n = max(int(math.ceil(steps)), 1)
     t = np.arange(n + 1) * dt
     s, sdot, sddot = profile.evaluate(t)
     s[-1], sdot[-1], sddot[-1] = path.length, 0.0, 0.0

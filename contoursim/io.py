@@ -7,10 +7,11 @@ increasing and uniform, and for each axis the pair ``<axis>_ref``, ``<axis>``
 commanded (interpolator) positions, the others the measured tool positions.
 Extra columns are ignored on reading.
 
-:func:`output_dir` prepares the folder such files are written into.
+:func:`output_dir` prepares the folder contoursim writes its files into (:class:`OutputDir`).
 """
 
 import io as _io
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,10 +20,11 @@ import numpy as np
 from . import _validate
 from .exceptions import ConfigError, TraceFormatError
 
-__all__ = ["Trace", "output_dir", "read_trace", "write_trace"]
+__all__ = ["OutputDir", "Trace", "output_dir", "read_trace", "write_trace"]
 
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
 _MARKER = ".contoursim-out"
+_MARKER_HEADER = "# written by contoursim; the files it wrote here, one per line, are replaced on each run\n"
 
 
 @dataclass(frozen=True)
@@ -55,10 +57,13 @@ class Trace:
         if axes not in AXIS_SETS:
             raise ValueError(f"axes must be one of {AXIS_SETS}, got {axes}")
         shape = (t.size, len(axes))
-        object.__setattr__(self, "t", t)
+        reference = _validate.finite_array("reference", self.reference, shape=shape)
+        actual = _validate.finite_array("actual", self.actual, shape=shape)
+        for name, value in dict(t=t, reference=reference, actual=actual).items():
+            value = np.array(value)  # a copy: the caller's arrays stay writeable
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
         object.__setattr__(self, "axes", axes)
-        object.__setattr__(self, "reference", _validate.finite_array("reference", self.reference, shape=shape))
-        object.__setattr__(self, "actual", _validate.finite_array("actual", self.actual, shape=shape))
         object.__setattr__(self, "dt", dt)
 
     @property
@@ -67,34 +72,107 @@ class Trace:
         return self.actual - self.reference
 
 
-def output_dir(out):
-    """Create or reuse the output folder `out`; refuse a non-empty folder contoursim did not make.
+@dataclass(frozen=True)
+class OutputDir:
+    """A folder contoursim writes into, and the record of the files it wrote there.
 
-    A marker file records that contoursim made the folder, so a later run may
-    replace its files there; a folder holding anything else is never written
-    into, so nothing a user keeps there is overwritten.
+    Making one creates the folder (with its parents) if missing and refuses a
+    folder that holds files but was not made by contoursim. A marker file,
+    ``.contoursim-out``, lists the names contoursim wrote; :meth:`file` hands
+    out paths only for new names or names on that list, so no file a user
+    keeps there is ever overwritten.
 
     Parameters
     ----------
-    out : str or Path
-        The folder; created with its parents if missing.
-
-    Returns
-    -------
-    Path
-        `out`, existing and marked.
+    path : str or Path
+        The folder.
 
     Raises
     ------
     ConfigError
-        `out` holds files and no marker.
+        `path` is a file, cannot be created, or holds files and no marker.
     """
-    out = Path(out)
-    if out.exists() and any(out.iterdir()) and not (out / _MARKER).exists():
-        raise ConfigError(f"{out} holds files that contoursim did not write; choose another output directory")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / _MARKER).write_text("written by contoursim; its files here are replaced on each run\n")
-    return out
+
+    path: Path
+
+    def __post_init__(self):
+        out = Path(self.path)
+        object.__setattr__(self, "path", out)
+        marker = out / _MARKER
+        if out.exists() and not out.is_dir():
+            raise ConfigError(f"{out} is a file, not a directory; choose another output directory")
+        if out.exists() and any(out.iterdir()) and not marker.is_file():
+            raise ConfigError(f"{out} holds files that contoursim did not write; choose another output directory")
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            if not marker.exists():
+                marker.write_text(_MARKER_HEADER, encoding="utf-8")
+        except OSError as exc:
+            raise ConfigError(f"cannot create the output directory {out}: {exc.strerror}") from None
+
+    def written(self):
+        """Names of the files contoursim wrote into the folder (from its marker).
+
+        Returns
+        -------
+        set of str
+        """
+        lines = (self.path / _MARKER).read_text(encoding="utf-8").splitlines()
+        return {line for line in lines if line and not line.startswith("#")}
+
+    def file(self, name):
+        """The path to write `name` to; records `name` as written by contoursim.
+
+        Parameters
+        ----------
+        name : str
+            A file name, without folder.
+
+        Returns
+        -------
+        Path
+            ``path / name``.
+
+        Raises
+        ------
+        FileExistsError
+            A file `name` exists in the folder and contoursim did not write it.
+        ValueError
+            `name` is not a plain file name.
+        """
+        if not isinstance(name, str) or Path(name).name != name or name in ("", ".", "..", _MARKER) or "\n" in name:
+            raise ValueError(f"name must be a plain file name, got {name!r}")
+        file = self.path / name
+        if name in self.written():
+            return file
+        if file.exists() or file.is_symlink():
+            raise FileExistsError(f"{file} exists and contoursim did not write it; refusing to overwrite it")
+        with open(self.path / _MARKER, "a", encoding="utf-8") as marker:
+            marker.write(name + "\n")
+        return file
+
+    def __str__(self):
+        return str(self.path)
+
+
+def output_dir(out):
+    """The output folder `out`, created or reused (see :class:`OutputDir`).
+
+    Parameters
+    ----------
+    out : str, Path or OutputDir
+        The folder; an :class:`OutputDir` is returned as is.
+
+    Returns
+    -------
+    OutputDir
+
+    Raises
+    ------
+    ConfigError
+        `out` is a file, cannot be created, or holds files that contoursim did not write.
+    """
+    return out if isinstance(out, OutputDir) else OutputDir(out)
 
 
 def write_trace(file, trace, extra=None, overwrite=False):
@@ -150,7 +228,7 @@ def read_trace(file):
     """
     source = str(file)
     try:
-        lines = Path(file).read_text(encoding="utf-8").splitlines()
+        lines = Path(file).read_text(encoding="utf-8-sig").splitlines()  # -sig: a leading BOM (Excel) is dropped
     except OSError as exc:
         raise TraceFormatError(f"cannot read the file: {exc.strerror}", source) from None
     except UnicodeDecodeError:
@@ -171,6 +249,10 @@ def read_trace(file):
     def fail(message, line=header_line):
         return TraceFormatError(message, source, line)
 
+    repeated = sorted(name for name, count in Counter(names).items() if count > 1)
+    if repeated:
+        raise fail(f"column name(s) {', '.join(map(repr, repeated))} appear more than once in the header")
+
     axes = tuple(a for a in ("x", "y", "z") if a in names or f"{a}_ref" in names)
     if "t" not in names:
         raise fail("missing column 't' in the header")
@@ -184,26 +266,20 @@ def read_trace(file):
     index = [names.index(name) for name in wanted]
 
     body = lines[header_line:]
+    while body and not body[-1].strip():
+        body = body[:-1]
+    if len(body) < 2:
+        raise fail(f"needs at least 2 data rows, found {len(body)}")
     data = _parse_rows(body, len(names), index, names, lambda msg, row: fail(msg, header_line + 1 + row))
-    if data.shape[0] < 2:
-        raise fail("needs at least 2 data rows", header_line)
-    t = data[:, 0]
-    step = np.diff(t)
-    if np.any(step <= 0):
-        row = int(np.argmax(step <= 0)) + 1
-        raise fail(f"column 't': time must be strictly increasing ({t[row]} after {t[row - 1]})",
-                   header_line + 1 + row)
     try:
-        _validate.time_base("t", t)
-    except ValueError as exc:
-        raise fail(f"column 't': {exc}", header_line + 1) from None
-    return Trace(t, data[:, 1::2], data[:, 2::2], axes, metadata)
+        _validate.time_base("column 't'", data[:, 0])
+    except _validate.TimeStepError as exc:  # step k ends on data row k + 1
+        raise fail(str(exc), header_line + 2 + exc.step) from None
+    return Trace(data[:, 0], data[:, 1::2], data[:, 2::2], axes, metadata)
 
 
 def _parse_rows(body, width, index, names, fail):
     """Parse the numeric rows; on any problem, name the first bad cell."""
-    while body and not body[-1].strip():
-        body = body[:-1]
     try:
         data = np.loadtxt(_io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)
     except ValueError:

@@ -49,7 +49,7 @@ _AD = 0  # 9 entries: plant Ad (3 x 3, row-major), states x [mm], v [mm/s], i [A
 _BD = 9  # 3 entries: plant Bd, input u [V] (or the current command [A])
 _KP = 12  # position gain [1/s]
 _VFF = 13  # velocity feedforward gain [-]
-_AFF = 14  # acceleration feedforward [A per mm/s^2] = aff · mass / force_constant
+_AFF = 14  # acceleration feedforward [A per mm/s^2] = aff · mass / force_constant / 1000 (aff / force_gain)
 _VB, _VC, _VD = 15, 16, 17  # velocity controller: z += VB·e; i = VC·z + VD·e
 _CB, _CC, _CD = 18, 19, 20  # current controller: z += CB·e; u = CC·z + CD·e
 _ILIM = 21  # current limit [A] (inf: none)

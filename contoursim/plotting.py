@@ -7,6 +7,8 @@ factor of an exaggerated plot is always written on the plot.
 
 import numpy as np
 
+from .io import output_dir
+
 __all__ = ["fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation", "plot_errors_over_time", "save_figures"]
 
 
@@ -170,7 +172,9 @@ def save_figures(result, out_dir, name, circle=None):
     Parameters
     ----------
     result : contoursim.simulate.SimResult
-    out_dir : pathlib.Path
+    out_dir : str, pathlib.Path or contoursim.io.OutputDir
+        The output folder (see :func:`contoursim.io.output_dir`): created if
+        missing; a file there that contoursim did not write is never replaced.
     name : str
         File name stem.
     circle : tuple (center, radius), optional
@@ -180,6 +184,11 @@ def save_figures(result, out_dir, name, circle=None):
     -------
     list of pathlib.Path
         The files written.
+
+    Raises
+    ------
+    FileExistsError
+        A plot's file exists and contoursim did not write it.
     """
     import matplotlib
 
@@ -189,13 +198,12 @@ def save_figures(result, out_dir, name, circle=None):
     drawings = [("path", plot_path_error, {}), ("errors", plot_errors_over_time, {})]
     if circle is not None:
         drawings.append(("polar", plot_polar_deviation, dict(center=circle[0], radius=circle[1])))
-    written = []
-    for kind, draw, kwargs in drawings:
+    out_dir = output_dir(out_dir)
+    files = [out_dir.file(f"{name}_{kind}.png") for kind, _, _ in drawings]  # all refused before any is drawn
+    for file, (kind, draw, kwargs) in zip(files, drawings):
         fig = plt.figure(figsize=(6.4, 6.0) if kind != "errors" else (8.0, 4.0))
         draw(result, ax=fig.add_subplot(projection="polar" if kind == "polar" else None), **kwargs)
         fig.tight_layout()
-        file = out_dir / f"{name}_{kind}.png"
         fig.savefig(file, dpi=110)
         plt.close(fig)
-        written.append(file)
-    return written
+    return files

@@ -7,13 +7,14 @@ magnified arrows and colour maps, one figure per plane of linear axes.
 """
 
 from itertools import combinations
-from pathlib import Path
 
 import numpy as np
 
 from .exceptions import ConfigError
+from .io import output_dir
 from .machine import load_machine
 from .multibody import MachineChain
+from .plotting import magnification_for
 
 __all__ = ["volumetric_grid", "volumetric_report"]
 
@@ -41,7 +42,7 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
     axes : tuple of ndarray
         The grid values of each swept axis.
     """
-    sweep = [a for a, rot in zip(chain.axes, chain.rotary_axes) if not rot] if sweep is None else list(sweep)
+    sweep = _swept(chain, sweep)
     unknown = set(sweep) - set(chain.axes)
     if unknown or not sweep:
         raise ValueError(f"sweep must name some of the axes {list(chain.axes)}, got {sweep}")
@@ -68,6 +69,11 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
     return q, tuple(values)
 
 
+def _swept(chain, sweep):
+    """The axes to sweep: `sweep`, or by default the linear axes."""
+    return [a for a, rot in zip(chain.axes, chain.rotary_axes) if not rot] if sweep is None else list(sweep)
+
+
 def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, fixed=None, time=0.0):
     """Worst volumetric errors over the workspace, and error-field plots.
 
@@ -76,8 +82,10 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     machine : str, Path or MachineChain
         A machine preset name or machine file with a geometric half
         (``[[body]]``), or the chain itself.
-    out_dir : str or Path, optional
-        Directory for the PNG plots (created); no plots when omitted.
+    out_dir : str, Path or contoursim.io.OutputDir, optional
+        Output folder for the PNG plots (see :func:`contoursim.io.output_dir`:
+        created if missing; a file there that contoursim did not write is
+        never replaced); no plots when omitted.
     grid : int
         Grid points per swept axis.
     sweep : sequence of str, optional
@@ -97,7 +105,9 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     Raises
     ------
     ConfigError
-        The machine file is bad or has no geometric half.
+        The machine file is bad or has no geometric half, or `out_dir` cannot be used.
+    FileExistsError
+        A plot's file exists in `out_dir` and contoursim did not write it.
     """
     if isinstance(machine, MachineChain):
         chain = machine
@@ -106,14 +116,13 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
         if chain is None:
             raise ConfigError("the machine has no geometric half ([[body]] tables): nothing to map", str(machine))
     q, values = volumetric_grid(chain, sweep, grid, ranges, fixed)
-    sweep = [a for a, rot in zip(chain.axes, chain.rotary_axes) if not rot] if sweep is None else list(sweep)
+    sweep = _swept(chain, sweep)
     rotary = dict(zip(chain.axes, chain.rotary_axes))
     t = np.full(q.shape[0], float(time))
     dp, dv = chain.volumetric_error(q, t)
     text = _summary(chain, q, dp, dv, sweep, values, float(time), rotary)
     if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        out = output_dir(out_dir)
         ideal = chain.tool_pose(q, t, ideal=True)[0]
         files = _plot(chain, q, ideal, dp, sweep, values, out)
         text += "\nplots: " + ", ".join(str(f) for f in files) + "\n"
@@ -121,7 +130,7 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
 
 
 def _fmt_q(chain, q, rotary):
-    return ", ".join(f"{a}={np.rad2deg(v):.1f}°" if rotary[a] else f"{a}={v:.1f}" for a, v in zip(chain.axes, q))
+    return ", ".join(f"{a}={np.rad2deg(v):.1f}°" if rotary[a] else f"{a}={v:.1f} mm" for a, v in zip(chain.axes, q))
 
 
 def _summary(chain, q, dp, dv, sweep, values, time, rotary):
@@ -130,7 +139,7 @@ def _summary(chain, q, dp, dv, sweep, values, time, rotary):
         f"grid: {len(q)} points over " + ", ".join(f"{a} {_span(v, rotary[a])}" for a, v in zip(sweep, values))
         + (f", t = {time:g} s" if time else ""),
         "",
-        f"{'component':14s} {'worst':>10s} {'min':>10s} {'max':>10s}  at",
+        f"{'component':20s} {'worst':>10s} {'min':>10s} {'max':>10s}  at (axis positions)",
     ]
     rows = [(f"position {c} [µm]", 1e3 * dp[:, i]) for i, c in enumerate("xyz")]
     rows.append(("position |Δ| [µm]", 1e3 * np.linalg.norm(dp, axis=1)))
@@ -146,15 +155,6 @@ def _span(v, rot):
     return f"{lo:g}..{hi:g}{'°' if rot else ' mm'}"
 
 
-def _nice(x):
-    """A 1-2-5 number close to and not above x."""
-    if not np.isfinite(x) or x <= 0:
-        return 1.0
-    k = np.floor(np.log10(x))
-    m = x / 10**k
-    return float((5 if m >= 5 else 2 if m >= 2 else 1) * 10**k)
-
-
 def _plot(chain, q, ideal, dp, sweep, values, out):
     """One figure per pair of swept axes (middle of the others): arrows and colour maps."""
     import matplotlib
@@ -166,8 +166,8 @@ def _plot(chain, q, ideal, dp, sweep, values, out):
     P = ideal.reshape(shape + (3,))
     D = 1e3 * dp.reshape(shape + (3,))
     pairs = list(combinations(range(len(sweep)), 2))[:3] or [(0, None)]
-    files = []
-    for i, j in pairs:
+    files = [out.file(f"volumetric_{sweep[i]}{'' if j is None else sweep[j]}.png") for i, j in pairs]
+    for (i, j), name in zip(pairs, files):
         index = [s // 2 for s in shape]
         index[i] = slice(None)
         if j is not None:
@@ -180,7 +180,6 @@ def _plot(chain, q, ideal, dp, sweep, values, out):
             ax.set_xlabel(f"axis {sweep[0]}")
             ax.set_ylabel("volumetric error [µm]")
             ax.legend()
-            name = out / f"volumetric_{sweep[0]}.png"
         else:
             spread = np.ptp(Pp.reshape(-1, 3), axis=0)
             u, w = np.argsort(spread)[::-1][:2]
@@ -188,7 +187,7 @@ def _plot(chain, q, ideal, dp, sweep, values, out):
             X, Y = Pp[..., u], Pp[..., w]
             size = max(np.ptp(X), np.ptp(Y))
             biggest = np.max(np.hypot(Dp[..., u], Dp[..., w])) * 1e-3
-            mag = _nice(0.08 * size / biggest) if biggest > 0 else 1.0
+            mag = magnification_for(size, biggest)
             fig, axs = plt.subplots(2, 2, figsize=(11, 9), layout="constrained")
             ax = axs[0, 0]
             ax.plot(X, Y, color="0.8", lw=0.6)
@@ -212,8 +211,6 @@ def _plot(chain, q, ideal, dp, sweep, values, out):
             others = [k for k in range(len(sweep)) if k not in (i, j)]
             at = ", ".join(f"{sweep[k]} = {values[k][shape[k] // 2]:g}" for k in others)
             fig.suptitle(f"{chain.name}: volumetric error, axes {sweep[i]}/{sweep[j]}" + (f" at {at}" if at else ""))
-            name = out / f"volumetric_{sweep[i]}{sweep[j]}.png"
         fig.savefig(name, dpi=90)
         plt.close(fig)
-        files.append(name)
     return files

@@ -12,6 +12,7 @@ matplotlib.use("Agg")
 
 from contoursim import paths
 from contoursim.feed import plan, sample
+from contoursim.io import output_dir
 from contoursim.machine import load_machine
 from contoursim.plotting import save_figures
 from contoursim.simulate import simulate
@@ -30,8 +31,7 @@ def main(out=Path("contoursim-out")):
     for key, value in result.summary().items():
         print(f"{key:>16}: {value:8.2f}")
 
-    out.mkdir(parents=True, exist_ok=True)
-    files = save_figures(result, out, "api_tour_circle", circle=((0, 0), 20.0))
+    files = save_figures(result, output_dir(out), "api_tour_circle", circle=((0, 0), 20.0))  # replaces only its own files
     print("wrote", ", ".join(str(f) for f in files))
     return result
 

@@ -153,8 +153,8 @@ def axis_machine(folder, axis, table, travel):
 
     Parameters
     ----------
-    folder : Path
-        Where the TOML is written (beside `table`).
+    folder : str, Path or contoursim.io.OutputDir
+        Where the TOML is written (beside `table`); see :func:`contoursim.io.output_dir`.
     axis : str
         ``"x"``, ``"y"`` or ``"z"``.
     table : str
@@ -168,7 +168,7 @@ def axis_machine(folder, axis, table, travel):
         The machine TOML.
     chain : contoursim.multibody.MachineChain
     """
-    file = folder / f"{axis}_iso230_2_axis.toml"
+    file = output_dir(folder).file(f"{axis}_iso230_2_axis.toml")
     file.write_text(
         f'name = "one-axis {axis.upper()} slide, ISO 230-2 table"\n'
         f'tool = "{axis.upper()}"\n'
@@ -228,7 +228,7 @@ def main(out=Path("contoursim-out")):
         for label, value in quoted.items():
             print(f"  {label:<24} {UM * value:8.1f} µm")
         table = f"{axis}_iso230_2.csv"
-        write_error_table(out / table, axis, figures, source=name, overwrite=True)
+        write_error_table(out.file(table), axis, figures, source=name, overwrite=True)  # replaces only its own file
         travel = (figures.targets[0], figures.targets[-1])
         file, chain = axis_machine(out, axis, table, travel)
         q = np.linspace(*travel, 8 * (figures.targets.size - 1) + 1)  # the targets and 7 points between each pair

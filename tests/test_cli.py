@@ -121,3 +121,54 @@ def test_feed_override_is_checked_and_limited_by_the_machine(tmp_path, capsys):
     job.write_text('machine = "two.toml"\npath = "rounded_square"\n\n[feed]\nfeed_mm_min = 6000\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
     assert "max_feed" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("key, line", [("machine", 1), ("path", 2)])
+def test_job_names_that_are_not_text_are_reported_and_nothing_is_written(tmp_path, capsys, key, line):
+    job = tmp_path / "job.toml"
+    job.write_text('machine = "demo_mill"\npath = "rounded_square"\n'.replace(f'{key} = "', f'{key} = 5 #"'))
+    assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
+    assert f"{job}, line {line}: {key} must be a name or a file name in quotes, got 5" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_machine_option_with_a_job_file_is_an_error(tmp_path, capsys):
+    job = tmp_path / "job.toml"
+    job.write_text('path = "rounded_square"\nmachine = "demo_mill"\n')
+    assert main(["simulate", str(job), "--machine", "vertical_mill_3axis", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{job}, line 2: --machine vertical_mill_3axis is not used with a job file" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_machine_leaves_no_output_directory(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp=-1.0))
+    assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert not (tmp_path / "o").exists()
+
+
+def test_text_for_a_number_names_file_and_line(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp='"40"'))
+    assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert f"{tmp_path / 'm.toml'}, line 11: axis x: kp must be a number, got '40'" in capsys.readouterr().err
+
+
+def test_out_must_be_a_directory(tmp_path, capsys):
+    (tmp_path / "somefile").write_text("mine")
+    assert main(["simulate", "rounded_square", "--out", str(tmp_path / "somefile")]) == 2
+    assert f"{tmp_path / 'somefile'} is a file, not a directory" in capsys.readouterr().err
+    assert (tmp_path / "somefile").read_text() == "mine"
+
+
+def test_never_replaces_a_users_file_inside_its_own_directory(tmp_path, capsys):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    out = tmp_path / "out"
+    assert main(["simulate", str(tmp_path / "small.toml"), "--out", str(out)]) == 0
+    (out / "notes.txt").write_text("mine")  # beside contoursim's files: its own are replaced ...
+    assert main(["simulate", str(tmp_path / "small.toml"), "--out", str(out)]) == 0
+    (tmp_path / "other.toml").write_text(SMALL_PATH)
+    (out / "other.csv").write_text("mine")  # ... a user's file with a name it would write is not
+    assert main(["simulate", str(tmp_path / "other.toml"), "--out", str(out)]) == 2
+    assert f"{out / 'other.csv'} exists and contoursim did not write it" in capsys.readouterr().err
+    assert (out / "other.csv").read_text() == "mine" and (out / "notes.txt").read_text() == "mine"
+    assert not (out / "other_path.png").exists()

@@ -208,9 +208,16 @@ def test_duplicates_give_the_same_result_as_distinct_samples():
         plain, with_dup = method(ref, act), method(dup, act)
         np.testing.assert_allclose(with_dup.magnitude, plain.magnitude, rtol=0, atol=1e-15)
         np.testing.assert_array_equal(with_dup.index, np.cumsum(counts)[plain.index] - counts[plain.index])
-    lin = est.linear(dup, act)
-    np.testing.assert_allclose(lin.magnitude, est.linear(np.repeat(ref, counts, axis=0), act).magnitude)
-    assert np.all(np.isfinite(lin.magnitude))
+    # the linear estimate with the same standstills, on a line at angle a: -e_x sin a + e_y cos a
+    angle = 0.7
+    line = np.linspace(0.0, 20.0, len(ref))[:, None] * [np.cos(angle), np.sin(angle), 0.0]
+    dup_line = np.repeat(line, counts, axis=0)
+    e = RNG.normal(0.0, 0.01, dup_line.shape) * [1.0, 1.0, 0.0]
+    lin = est.linear(dup_line, dup_line + e)
+    want = -e[:, 0] * np.sin(angle) + e[:, 1] * np.cos(angle)
+    np.testing.assert_allclose(lin.normal, want, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(lin.magnitude, np.abs(want), rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(lin.index, np.repeat(np.cumsum(counts) - counts, counts))
 
 
 def test_standstill_reference_gives_the_distance_to_the_point():

@@ -8,6 +8,8 @@ import pytest
 
 from conftest import ROOT
 
+from contoursim.io import output_dir
+
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 JOBS = sorted((ROOT / "examples").glob("*.toml"))
 
@@ -17,6 +19,18 @@ def test_example_runs(script, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "argv", [str(script), str(tmp_path / "out")])
     runpy.run_path(str(script), run_name="__main__")
+
+
+@pytest.mark.parametrize("script, written", [("api_tour.py", "api_tour_circle_path.png"), ("iso230_2_error_table.py", "x_iso230_2.csv")])
+def test_example_never_replaces_a_users_file(script, written, tmp_path, monkeypatch, request):
+    if script.startswith("iso230_2"):
+        request.getfixturevalue("real_data")  # that example needs the measured data
+    out = output_dir(tmp_path / "out")  # a folder contoursim made ...
+    (tmp_path / "out" / written).write_text("mine")  # ... holding a user's file under a name the example writes
+    monkeypatch.setattr(sys, "argv", [script, str(out)])
+    with pytest.raises(FileExistsError, match=f"{written} exists and contoursim did not write it"):
+        runpy.run_path(str(ROOT / "examples" / script), run_name="__main__")
+    assert (tmp_path / "out" / written).read_text() == "mine"
 
 
 @pytest.mark.parametrize("job", JOBS, ids=[p.name for p in JOBS])

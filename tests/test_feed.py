@@ -119,3 +119,16 @@ def test_exact_stop_at_every_sharp_corner():
     for corner in (20.0, 40.0, 60.0):
         near = np.abs(trajectory.s - corner) < 0.5
         assert trajectory.speed[near].min() < accel * dt
+
+
+def test_refuses_a_motion_with_too_many_samples():
+    # 100 mm at 0.001 mm/min lasts 6e6 s: 6e9 samples at 1 ms (48 GB per column), refused before allocating
+    path = paths.line((0, 0), (100, 0))
+    profile = plan(path, 1e-3 / 60, 100.0)
+    assert profile.duration == pytest.approx(100 / (1e-3 / 60), rel=1e-6)
+    with pytest.raises(ValueError, match=r"lasts 6e\+06 s: at dt = 0\.001 s that is 6e\+09 samples"):
+        sample(path, profile, 1e-3)
+    # a circle of radius 1e6 mm at 1000 mm/min: 3.8e5 s, 3.8e8 samples at 1 ms
+    circle = paths.circle((0, 0), 1e6)
+    with pytest.raises(ValueError, match="more than the 50,000,000 allowed"):
+        sample(circle, plan(circle, 1000 / 60, 1000.0), 1e-3)

@@ -1,8 +1,10 @@
+import warnings
+
 import numpy as np
 import pytest
 
-from contoursim.exceptions import TraceFormatError
-from contoursim.io import Trace, read_trace, write_trace
+from contoursim.exceptions import ConfigError, TraceFormatError
+from contoursim.io import Trace, output_dir, read_trace, write_trace
 
 
 def _trace(n=50, axes=("x", "y")):
@@ -50,8 +52,12 @@ def test_reads_metadata_and_ignores_extra_columns(tmp_path):
         ("t,x_ref,x\n0,0,0\n0.001,abc,1\n", 3, "column 'x_ref': 'abc' is not a number"),
         ("t,x_ref,x\n0,0,0\n0.001,1,nan\n", 3, "column 'x': value nan is not finite"),
         ("t,x_ref,x\n0,0,0\n0.001,1\n", 3, "expected 3 cells, found 2"),
-        ("# c\nt,x_ref,x\n0,0,0\n0.002,1,1\n0.001,1,1\n", 5, "strictly increasing"),
-        ("t,x_ref,x\n0,0,0\n0.001,1,1\n0.003,1,1\n", 2, "uniformly sampled"),
+        ("# c\nt,x_ref,x\n0,0,0\n0.002,1,1\n0.001,1,1\n", 5, "column 't' must be strictly increasing"),
+        # steps 1, 1, 2, 1 ms: step 2 (rows 2 -> 3) is off, row 3 is on line 1 + 1 + 3
+        ("t,x_ref,x\n0,0,0\n0.001,1,1\n0.002,1,1\n0.004,1,1\n0.005,1,1\n", 5, "column 't' must be uniformly sampled: step 2"),
+        ("# c\n\nt,x_ref,x\n0,0,0\n0.001,1,1\n0.002,1,1\n0.0025,1,1\n", 7, "column 't' must be uniformly sampled: step 2"),
+        ("t,x_ref,x,x\n0,0,0,0\n0.001,1,1,1\n", 1, "'x' appear more than once"),
+        ("t,x_ref,x\n\n", 1, "needs at least 2 data rows, found 0"),
     ],
 )
 def test_rejects_bad_files_naming_line_and_column(tmp_path, text, line, words):
@@ -62,3 +68,55 @@ def test_rejects_bad_files_naming_line_and_column(tmp_path, text, line, words):
     message = str(info.value)
     assert message.startswith(f"{file}, line {line}: "), message
     assert words in message
+
+
+def test_header_only_file_is_refused_without_a_numpy_warning(tmp_path):
+    (tmp_path / "h.csv").write_text("# rate: 1 kHz\nt,x_ref,x\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(TraceFormatError, match="line 2: needs at least 2 data rows, found 0"):
+            read_trace(tmp_path / "h.csv")
+
+
+def test_byte_order_mark_before_the_header_is_accepted(tmp_path):
+    (tmp_path / "bom.csv").write_bytes("t,x_ref,x\n0,0,0\n0.001,1,0.9\n".encode("utf-8-sig"))
+    trace = read_trace(tmp_path / "bom.csv")
+    np.testing.assert_array_equal(trace.t, [0.0, 0.001])
+
+
+def test_trace_arrays_are_read_only_and_the_callers_are_not():
+    t = np.arange(5) * 1e-3
+    ref = np.zeros((5, 1))
+    trace = Trace(t, ref, ref, ("x",))
+    for name in ("t", "reference", "actual"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(trace, name)[0] = 1.0
+    ref[0] = 1.0  # the caller's array is theirs
+    assert trace.reference[0, 0] == 0.0
+
+
+def test_output_dir_refuses_files_it_did_not_write(tmp_path):
+    out = output_dir(tmp_path / "out")
+    assert out.file("a.csv") == tmp_path / "out" / "a.csv"
+    (tmp_path / "out" / "a.csv").write_text("ours")
+    (tmp_path / "out" / "notes.txt").write_text("mine")
+    again = output_dir(tmp_path / "out")  # a later run reuses the folder and its record
+    assert again.file("a.csv") == tmp_path / "out" / "a.csv"
+    with pytest.raises(FileExistsError, match="notes.txt exists and contoursim did not write it"):
+        again.file("notes.txt")
+    assert (tmp_path / "out" / "notes.txt").read_text() == "mine"
+    assert again.written() == {"a.csv"}
+    with pytest.raises(ValueError, match="plain file name"):
+        again.file("../escape.csv")
+    assert output_dir(again) is again
+
+
+def test_output_dir_refuses_a_file_and_a_users_folder(tmp_path):
+    (tmp_path / "somefile").write_text("mine")
+    with pytest.raises(ConfigError, match="somefile is a file, not a directory"):
+        output_dir(tmp_path / "somefile")
+    with pytest.raises(ConfigError, match="cannot create the output directory"):
+        output_dir(tmp_path / "somefile" / "out")
+    with pytest.raises(ConfigError, match="holds files that contoursim did not write"):
+        output_dir(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["somefile"]

@@ -22,6 +22,7 @@ import pytest
 
 from conftest import ROOT
 from contoursim.exceptions import ConfigError
+from contoursim.io import output_dir
 from contoursim.iso230_2 import positioning_figures, write_error_table
 
 EXAMPLE = runpy.run_path(str(ROOT / "examples" / "iso230_2_error_table.py"))
@@ -84,8 +85,9 @@ def test_figures_match_the_ecmc_report(real_data, axis):
 @pytest.mark.parametrize("axis", "xyz")
 def test_chain_reproduces_the_mean_bidirectional_deviation(real_data, tmp_path, axis):
     s = figures_of(real_data, axis)
-    write_error_table(tmp_path / "table.csv", axis, s, source=EXAMPLE["FILES"][axis])
-    _, chain = EXAMPLE["axis_machine"](tmp_path, axis, "table.csv", (s.targets[0], s.targets[-1]))
+    out = output_dir(tmp_path)
+    write_error_table(out.file("table.csv"), axis, s, source=EXAMPLE["FILES"][axis])
+    _, chain = EXAMPLE["axis_machine"](out, axis, "table.csv", (s.targets[0], s.targets[-1]))
     k = "xyz".index(axis)
 
     at = EXAMPLE["positioning_error"](chain, s.targets)

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
+from contoursim.config import TomlFile
 from contoursim.exceptions import ConfigError
 from contoursim.machine import load_machine as load_preset
+from contoursim.machine import preset_file
 from contoursim.volumetric import volumetric_grid, volumetric_report
 
 
@@ -25,20 +27,42 @@ def test_grid_spans_the_travels_and_holds_fixed_axes():
 
 def test_report_gives_the_worst_errors_and_plots(tmp_path):
     text = volumetric_report("polishing_platform_4axis", tmp_path / "out", grid=5)
-    # independent check: Δx of the polishing platform at b = c = 0 is dominated by -z·SxZ, z = 200 mm
+    # independent check, from the preset's numbers: the worst Δx is at x = 0, z = 200 mm (b = c = 0),
+    # where the tool tip sits on the Z slide's frame origin (no Abbe offset) and X's errors vanish,
+    # so Δx = -z·S_xZ + dx_Z(z); the Z slide's horizontal straightness poly is zero at 200 mm
+    z_slide = next(b for b in TomlFile.read(preset_file("polishing_platform_4axis")).data["body"] if b["name"] == "Z")
+    z = z_slide["travel"][1]
+    squareness = 1e-6 * z_slide["squareness"]["x"]  # [rad]
+    straightness = np.polynomial.polynomial.polyval(z, z_slide["errors"]["dx"]["poly"])  # [µm]
+    want = -z * squareness * 1e3 + straightness  # [µm]
+    assert z == 200 and straightness == pytest.approx(0.0, abs=1e-12)
     chain = load_machine("polishing_platform_4axis")
     q, _ = volumetric_grid(chain, points=5)
     dp, _ = chain.volumetric_error(q)
-    worst = dp[np.argmax(np.abs(dp[:, 0])), 0] * 1e3
-    assert f"{worst:+10.3f}" in text
-    assert worst == pytest.approx(103.6429e-6 * 200 * 1e3, abs=1.0)
+    k = np.argmax(np.abs(dp[:, 0]))
+    np.testing.assert_allclose(q[k], [0.0, z, 0.0, 0.0])
+    assert dp[k, 0] * 1e3 == pytest.approx(want, rel=1e-12)
+    row = next(line for line in text.splitlines() if line.startswith("position x [µm]"))
+    assert row.split()[3] == f"{want:+.3f}"
+    assert row.endswith("x=0.0 mm, z=200.0 mm, b=0.0°, c=0.0°")  # the "at" column, with units
     assert (tmp_path / "out" / "volumetric_xz.png").stat().st_size > 10_000
     assert "position |Δ| [µm]" in text and "tool axis y [µrad]" in text
+
+
+def test_report_never_replaces_a_file_it_did_not_write(tmp_path):
+    volumetric_report("polishing_platform_4axis", tmp_path, grid=2, sweep=["x"])  # takes the empty folder
+    volumetric_report("polishing_platform_4axis", tmp_path, grid=2, sweep=["x"])  # and replaces its own plot
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".contoursim-out", "volumetric_x.png"]
+    (tmp_path / "volumetric_xz.png").write_text("mine")  # a user's file in contoursim's folder
+    with pytest.raises(FileExistsError, match="volumetric_xz.png exists and contoursim did not write it"):
+        volumetric_report("polishing_platform_4axis", tmp_path, grid=2)
+    assert (tmp_path / "volumetric_xz.png").read_text() == "mine"
 
 
 def test_report_sweeps_rotary_axes_over_given_ranges():
     out = volumetric_report("diamond_lathe", grid=4, sweep=["x", "c"], ranges={"c": (0.0, np.pi)}, fixed={"z": 10.0})
     assert "c 0..180°" in out and "16 points" in out
+    assert out.splitlines()[-1].endswith("z=10.0 mm, c=180.0°")  # rotary positions in degrees
 
 
 def test_machine_without_geometry_is_refused(tmp_path):

@@ -1,0 +1,43 @@
+"""The shared argument checks: text and booleans are not numbers, time-base problems carry their step."""
+
+import re
+
+import numpy as np
+import pytest
+
+from contoursim import _validate
+
+
+@pytest.mark.parametrize("check", [_validate.positive, _validate.nonnegative])
+@pytest.mark.parametrize("value", ["40", b"40", True, np.True_])
+def test_scalar_checks_refuse_text_and_booleans(check, value):
+    # float("40") == 40.0 and float(True) == 1.0: the checks must not let them through
+    with pytest.raises(ValueError, match=f"kp must be a number, got {value!r}"):
+        check("kp", value)
+
+
+def test_scalar_checks_take_numbers():
+    assert _validate.positive("kp", np.int64(40)) == 40.0
+    assert _validate.nonnegative("vff", 0) == 0.0
+
+
+@pytest.mark.parametrize("value", ["1.5", ["1", "2"], [True, False], np.array([1.0 + 2.0j]), np.array([1.0, "a"], object)])
+def test_array_check_refuses_text_booleans_and_complex(value):
+    with pytest.raises(ValueError, match="travel must be numeric"):
+        _validate.finite_array("travel", value)
+
+
+def test_array_check_takes_integers_and_lists():
+    np.testing.assert_array_equal(_validate.finite_array("travel", [0, 200]), [0.0, 200.0])
+    np.testing.assert_array_equal(_validate.finite_array("poly", np.array([1, 2.5], object)), [1.0, 2.5])
+
+
+@pytest.mark.parametrize(
+    "t, step, words",
+    [([0.0, 1.0, 2.0, 1.5, 4.0], 2, "strictly increasing: t[3] = 1.5 follows t[2] = 2.0"),
+     ([0.0, 1.0, 2.0, 3.0, 5.0, 6.0], 3, "uniformly sampled: step 3 is 2 s")],
+)
+def test_time_base_names_the_bad_step(t, step, words):
+    with pytest.raises(_validate.TimeStepError, match=re.escape(words)) as info:
+        _validate.time_base("t", t)
+    assert info.value.step == step
