@@ -10,6 +10,7 @@ once the job's files are read and its runs succeeded.
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from .exceptions import ConfigError, UnstableLoopError
 from .feed import sample
 from .geocomp import GeometricCompensation
 from .io import output_dir
-from .machine import load_machine, preset_file
+from .machine import load_machine, preset_file, read_work_offset
 from .pathfile import library_file, load_path_file, read_feed_table
 from .paths import HelicalArc
 from .plotting import save_figures
@@ -27,7 +28,7 @@ from .simulate import simulate
 
 DEMO_MACHINE = "demo_mill"
 DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
-_JOB_KEYS = ("machine", "path", "feed", "geometric_compensation")
+_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation")
 
 
 def test_circle(path):
@@ -96,7 +97,7 @@ def _job(args):
 
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
     presets/library entries or files relative to the job, and optionally a
-    ``[feed]`` table and ``geometric_compensation``) or a bare path file, run
+    ``[feed]`` table, ``work_offset`` and ``geometric_compensation``) or a bare path file, run
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
@@ -115,7 +116,10 @@ def _job(args):
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
-            return load_machine(near(data["machine"])), library_file(near(data["path"])), job, geometric
+            machine = load_machine(near(data["machine"]))
+            if "work_offset" in data:
+                machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
+            return machine, library_file(near(data["path"])), job, geometric
     return load_machine(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 

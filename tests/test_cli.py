@@ -172,3 +172,13 @@ def test_never_replaces_a_users_file_inside_its_own_directory(tmp_path, capsys):
     assert f"{out / 'other.csv'} exists and contoursim did not write it" in capsys.readouterr().err
     assert (out / "other.csv").read_text() == "mine" and (out / "notes.txt").read_text() == "mine"
     assert not (out / "other_path.png").exists()
+
+
+def test_job_work_offset_moves_the_path_on_the_machine(tmp_path, capsys):
+    job = tmp_path / "job.toml"
+    job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { x = 470 }\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
+    assert "axis x would move over 420 .. 520, outside its travel 0 .. 500" in capsys.readouterr().err
+    job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { w = 1 }\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
+    assert f"{job}, line 3: unknown key 'w' in [work_offset]" in capsys.readouterr().err
