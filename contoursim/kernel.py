@@ -8,20 +8,20 @@ exactly those of ``discretize(dt)`` (Tustin PI, state ``z = ∫e dt``), read
 from its state-space blocks, so the unsaturated kernel reproduces
 python-control's simulation of that discrete interconnection.
 
-One step of one axis is a chain of small ``@njit`` helpers, each the single
-place where an in-loop effect belongs:
+One step of one axis is a chain of small ``@njit`` helpers, each the one
+place an in-loop element belongs (the effects catalogue's backlash and delay
+act on the fed-back position and the command, Coulomb friction on the plant's
+force — none is modelled yet):
 
-* :func:`_feedback_position` — the fed-back (measured) position: backlash
-  between motor and load and a feedback delay act here;
+* the fed-back position ``x_fb`` (the sampled load position), read once per
+  step for every axis before the compensator sees it;
 * :func:`_velocity_command` — position controller plus velocity
-  feedforward (the compensator's corrections are added around it): a
-  command delay acts on its inputs;
+  feedforward (the compensator's corrections are added around it);
 * :func:`_velocity_controller` — velocity PI, acceleration feedforward,
   current saturation with anti-windup;
 * :func:`_current_controller` — the current PI (skipped for an ideal
   current loop);
-* :func:`_plant_step` — the exact ZOH plant update: a disturbance force
-  such as Coulomb friction enters here.
+* :func:`_plant_step` — the exact ZOH plant update.
 
 The helpers take and return scalars (state goes in and comes back out) or
 read the parameter array without branching: an array passed into a helper
@@ -149,12 +149,6 @@ class ServoResponse:
 
 
 @njit(cache=True)
-def _feedback_position(x):
-    """The position [mm] the controllers see, given the load position `x` [mm]."""
-    return x
-
-
-@njit(cache=True)
 def _velocity_command(p, a, x_ref, v_ref, x_fb):
     """Position P controller plus velocity feedforward [mm/s] (reads `p` without branching)."""
     return p[a, _KP] * (x_ref - x_fb) + p[a, _VFF] * v_ref
@@ -212,7 +206,7 @@ def _simulate(
     dvel = np.zeros(n_axes)
     for k in range(n_steps):
         for a in range(n_axes):
-            x_fb[a] = _feedback_position(state[a, _X])
+            x_fb[a] = state[a, _X]
         if comp_step is not None:
             dpos[:] = 0.0
             dvel[:] = 0.0
