@@ -83,6 +83,10 @@ class Machine:
             unknown = [a for a in axes if a not in self.chain.axes]
             if unknown:
                 raise ValueError(f"servo axes {unknown} are not axes of the chain {tuple(self.chain.axes)}")
+            rotary = [a for a in axes if self.chain.axis_kind(a) == "rotary"]
+            if rotary:
+                raise ValueError(f"servo axes {rotary} are rotary: the servo model is a linear feed drive (mass, mm); "
+                                 "rotary axes follow their commands")
         offset = dict(self.work_offset or {})
         if offset and self.chain is None:
             raise ValueError("work_offset needs a machine with geometry (bodies); without one the path origin is the axes' zero")

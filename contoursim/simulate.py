@@ -31,8 +31,8 @@ class SimResult:
     axis_command : ndarray, shape (N, n_axes)
         Position commands sent to the servo loops (after pre-correcting
         strategies) [mm].
-    servo : contoursim.kernel.ServoResponse
-        Axis positions, velocities, currents.
+    servo_response : contoursim.kernel.ServoResponse
+        Servo axes' positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
         Actual tool tip in workpiece coordinates [mm].
     static_tool_position : ndarray, shape (N, d)
@@ -48,7 +48,7 @@ class SimResult:
     trajectory: object
     machine: Machine
     axis_command: np.ndarray
-    servo: object
+    servo_response: object
     tool_position: np.ndarray
     static_tool_position: np.ndarray
     contour: object
