@@ -7,7 +7,7 @@ traceback from inside numpy.
 
 import numpy as np
 
-__all__ = ["positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
 
 
 class TimeStepError(ValueError):
@@ -119,3 +119,9 @@ def time_base(name, t, rtol=1e-3):
             worst,
         )
     return t, dt
+
+
+def as_xyz(points):
+    """Planar points (N, 2) with z = 0 appended, shape (N, 3); (N, 3) points unchanged."""
+    points = np.asarray(points, dtype=float)
+    return points if points.shape[1] == 3 else np.column_stack([points, np.zeros((len(points), 3 - points.shape[1]))])

@@ -246,9 +246,8 @@ def exact_contour_error(trajectory, actual, window=8):
         raise ValueError(f"actual must have shape (N, {d}) like the trajectory's positions, got {act.shape}")
     if int(window) < 1:
         raise ValueError(f"window must be at least 1, got {window!r}")
-    pad = np.zeros((len(act), 3 - d))
-    act3 = np.ascontiguousarray(np.hstack([act, pad]))
-    knots, first, _ = distinct(np.hstack([trajectory.position, np.zeros((len(trajectory), 3 - d))]))
+    act3 = np.ascontiguousarray(_validate.as_xyz(act))
+    knots, first, _ = distinct(np.ascontiguousarray(_validate.as_xyz(trajectory.position)))
     idx = nearest_knots(knots, act3, int(window))
     frame, s, prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s[first], idx, act3)
     foot, tangent, kvec = frame[:, :3], frame[:, 3:6], frame[:, 6:9]

@@ -561,7 +561,7 @@ def distinct_samples(reference):
     knot_of_sample : ndarray of int, shape (N,)
         Knot holding each reference sample (the hint for :func:`linear_step`).
     """
-    return distinct(_as3(_points("reference", reference)))
+    return distinct(np.ascontiguousarray(_validate.as_xyz(_points("reference", reference))))
 
 
 def search_params(up=(0.0, 0.0, 1.0), window=4):
@@ -754,7 +754,7 @@ def _searching(method, name, reference, actual, up, window):
 def _run(method, knots, hints, follow, actual, params):
     out = np.empty((len(actual), 6))
     index = np.empty(len(actual), np.int64)
-    _trace(method, knots, hints.astype(np.int64), follow, _as3(actual), params, out, index)
+    _trace(method, knots, hints.astype(np.int64), follow, np.ascontiguousarray(_validate.as_xyz(actual)), params, out, index)
     return out, index
 
 
@@ -769,9 +769,3 @@ def _points(name, value, like=None):
     if like is not None and pts.shape[1] != like.shape[1]:
         raise ValueError(f"{name} must have {like.shape[1]} columns like the reference, got {pts.shape[1]}")
     return pts
-
-
-def _as3(pts):
-    if pts.shape[1] == 3:
-        return np.ascontiguousarray(pts)
-    return np.column_stack([pts, np.zeros(len(pts))])

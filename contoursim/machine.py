@@ -161,7 +161,7 @@ class Machine:
             The path needs more axes than the machine has, or an axis would
             leave its travel.
         """
-        p, v, a = (_pad3(x) for x in (trajectory.position, trajectory.velocity, trajectory.acceleration))
+        p, v, a = (_validate.as_xyz(x) for x in (trajectory.position, trajectory.velocity, trajectory.acceleration))
         if self.chain is None:
             n = len(self.axes)
             if np.abs(p[:, n:]).max(initial=0.0) > 0:
@@ -219,12 +219,9 @@ class Machine:
         ndarray, shape (N, dim)
             [mm]
         """
-        p = _pad3(q) if self.chain is None else self.chain.tool_pose(q, t)[0] - self.origin()
+        p = _validate.as_xyz(q) if self.chain is None else self.chain.tool_pose(q, t)[0] - self.origin()
         return p[:, :dim]
 
-
-def _pad3(x):
-    return np.column_stack([x, np.zeros((len(x), 3 - x.shape[1]))]) if x.shape[1] < 3 else x
 
 
 _PRESETS = "presets"

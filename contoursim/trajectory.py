@@ -114,11 +114,7 @@ class Trajectory:
     @property
     def curvature(self):
         """Path curvature |v x a| / |v|^3 [1/mm], shape (N,); zero at standstill."""
-        v, a = _as3(self.velocity), _as3(self.acceleration)
+        v, a = _validate.as_xyz(self.velocity), _validate.as_xyz(self.acceleration)
         speed = self.speed
         cross = np.linalg.norm(np.cross(v, a), axis=1)
         return np.divide(cross, speed**3, out=np.zeros_like(speed), where=speed > 0)
-
-
-def _as3(x):
-    return x if x.shape[1] == 3 else np.column_stack([x, np.zeros(len(x))])
