@@ -5,8 +5,8 @@ logged the commanded and measured position of a ball-screw axis under a
 documented P position / P velocity loop. Here that loop is rebuilt from the
 documented parameters alone — no fitting — and driven by the measured
 command. The simulated following error is compared with the measured one;
-what is left (about 3 % of it) is the Coulomb friction the nominal model
-leaves out.
+what is left (about 3 % of it) is what the nominal model leaves out; the
+data's provenance notes fit it with a ≈0.02 mm sign(v) term, i.e. friction.
 
 Run from a checkout that has ../shared beside it:  python examples/emps_servo_check.py
 """
@@ -35,8 +35,8 @@ def compare(file=DATA):
         kp=float(d["kp"]),                # [1/s]   position gain
         current_limit=10.0,               # [V]     ±10 V drive input
     )
-    velocity = np.gradient(command, dt)[:, None]
-    response = kernel.run([axis], dt, command[:, None], velocity, np.zeros_like(velocity))
+    no_feedforward = np.zeros((command.size, 1))  # the EMPS controller has none: its v and a inputs are unused
+    response = kernel.run([axis], dt, command[:, None], no_feedforward, no_feedforward)
     return command - response.position[:, 0], command - 1e3 * d["qm"]
 
 
