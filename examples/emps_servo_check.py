@@ -48,7 +48,7 @@ def main():
     rms = lambda x: float(np.sqrt(np.mean(x**2)))  # noqa: E731
     print(f"following error RMS, measured : {rms(measured):.4f} mm")
     print(f"following error RMS, simulated: {rms(simulated):.4f} mm")
-    print(f"RMS of the difference         : {1e3 * rms(simulated - measured):.1f} µm (unmodelled friction)")
+    print(f"RMS of the difference         : {1e3 * rms(simulated - measured):.1f} µm (not in the nominal model)")
 
 
 if __name__ == "__main__":
