@@ -12,7 +12,7 @@ The main objects, by the data flow of a simulation:
 """
 
 from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopError
-from .io import Trace, read_trace, write_trace
+from .traces import Trace, read_trace, write_trace
 from .machine import Machine, load_machine
 from .servo import AxisServo
 from .simulate import SimResult, simulate

@@ -1,7 +1,7 @@
 """Command line: ``contoursim demo | simulate | volumetric``.
 
 Every job prints a summary table to stdout and writes plots and traces to
-``--out`` (default ``./contoursim-out``) through :func:`contoursim.io.output_dir`:
+``--out`` (default ``./contoursim-out``) through :func:`contoursim.output.output_dir`:
 a directory that holds files but was not made by contoursim is never written
 into, and in its own directories contoursim replaces only the files it wrote,
 so nothing a user keeps there is overwritten. The directory is made only
@@ -19,7 +19,7 @@ from .config import TomlFile
 from .exceptions import ConfigError, UnstableLoopError
 from .feed import sample
 from .geocomp import GeometricCompensation
-from .io import output_dir
+from .output import output_dir
 from .machine import load_machine, preset_file, read_work_offset
 from .pathfile import library_file, load_path_file, read_feed_table
 from .paths import HelicalArc

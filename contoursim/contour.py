@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from ._numba import njit
 
 from . import _validate
 from .nearest import distinct, nearest_knots

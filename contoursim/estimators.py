@@ -51,7 +51,7 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from ._numba import njit
 
 from . import _validate
 from .nearest import distinct, nearest_knot

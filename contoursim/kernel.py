@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
+from ._numba import njit
 from numba.core.dispatcher import Dispatcher
 
 from . import _validate

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from numba import njit
+from ._numba import njit
 
 from . import _validate
 from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table

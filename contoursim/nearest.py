@@ -17,7 +17,7 @@ from the reference sample nearest to the actual tool position. The search
 """
 
 import numpy as np
-from numba import njit
+from ._numba import njit
 
 __all__ = ["distinct", "nearest_knot", "nearest_knots"]
 

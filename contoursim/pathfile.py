@@ -7,7 +7,6 @@ of the offending key, through :class:`contoursim.config.TomlFile`.
 
 import math
 import re
-from importlib import resources
 from pathlib import Path as _FilePath
 
 from . import _validate
@@ -54,6 +53,17 @@ _FEED = dict(feed_mm_min=("feed", _per_minute), accel_mm_s2=("accel", _validate.
              corner_tolerance_deg=("corner_tolerance", _tolerance))
 
 
+def _library():
+    """The trajectories library folder.
+
+    Installed, it is the package folder ``contoursim/trajectories``. Run from a
+    source checkout (``python -m contoursim`` at the repository root imports the
+    source folder ``contoursim/``), it is the top-level ``trajectories/`` beside it.
+    """
+    package = _FilePath(__file__).parent
+    return next(f for f in (package / "trajectories", package.parent / "trajectories") if f.is_dir())
+
+
 def library_file(name):
     """The path file `name`: an existing file, else an entry of the trajectories library.
 
@@ -70,10 +80,10 @@ def library_file(name):
     path = _FilePath(name)
     if path.exists():
         return path
-    library = resources.files("contoursim.trajectories")
+    library = _library()
     for candidate in (str(name), f"{name}.toml", f"{name}.nc"):
         if library.joinpath(candidate).is_file():
-            return _FilePath(str(library.joinpath(candidate)))
+            return library / candidate
     known = sorted(p.name for p in library.iterdir() if p.name.endswith((".toml", ".nc")))
     raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library ({', '.join(known)})")
 

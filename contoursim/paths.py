@@ -25,7 +25,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from ._numba import njit
 from scipy.interpolate import CubicSpline
 
 from . import _validate

@@ -7,7 +7,7 @@ factor of an exaggerated plot is always written on the plot.
 
 import numpy as np
 
-from .io import output_dir
+from .output import output_dir
 
 __all__ = ["fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation", "plot_errors_over_time", "save_figures"]
 
@@ -172,8 +172,8 @@ def save_figures(result, out_dir, name, circle=None):
     Parameters
     ----------
     result : contoursim.simulate.SimResult
-    out_dir : str, pathlib.Path or contoursim.io.OutputDir
-        The output folder (see :func:`contoursim.io.output_dir`): created if
+    out_dir : str, pathlib.Path or contoursim.output.OutputDir
+        The output folder (see :func:`contoursim.output.output_dir`): created if
         missing; a file there that contoursim did not write is never replaced.
     name : str
         File name stem.

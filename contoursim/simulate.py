@@ -13,7 +13,7 @@ import numpy as np
 
 from . import kernel
 from .contour import exact_contour_error
-from .io import Trace, write_trace
+from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
 
 __all__ = ["SimResult", "simulate"]

@@ -11,7 +11,7 @@ from itertools import combinations
 import numpy as np
 
 from .exceptions import ConfigError
-from .io import output_dir
+from .output import output_dir
 from .machine import load_machine
 from .multibody import MachineChain
 from .plotting import magnification_for
@@ -82,8 +82,8 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     machine : str, Path or MachineChain
         A machine preset name or machine file with a geometric half
         (``[[body]]``), or the chain itself.
-    out_dir : str, Path or contoursim.io.OutputDir, optional
-        Output folder for the PNG plots (see :func:`contoursim.io.output_dir`:
+    out_dir : str, Path or contoursim.output.OutputDir, optional
+        Output folder for the PNG plots (see :func:`contoursim.output.output_dir`:
         created if missing; a file there that contoursim did not write is
         never replaced); no plots when omitted.
     grid : int

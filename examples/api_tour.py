@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 
 from contoursim import paths
 from contoursim.feed import plan, sample
-from contoursim.io import output_dir
+from contoursim.output import output_dir
 from contoursim.machine import load_machine
 from contoursim.plotting import save_figures
 from contoursim.simulate import simulate

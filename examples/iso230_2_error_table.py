@@ -29,7 +29,7 @@ import numpy as np
 
 from contoursim.config import TomlFile
 from contoursim.exceptions import ConfigError
-from contoursim.io import output_dir
+from contoursim.output import output_dir
 from contoursim.iso230_2 import PositioningTest, positioning_figures, write_error_table
 from contoursim.multibody import chain_from_toml
 
@@ -153,8 +153,8 @@ def axis_machine(folder, axis, table, travel):
 
     Parameters
     ----------
-    folder : str, Path or contoursim.io.OutputDir
-        Where the TOML is written (beside `table`); see :func:`contoursim.io.output_dir`.
+    folder : str, Path or contoursim.output.OutputDir
+        Where the TOML is written (beside `table`); see :func:`contoursim.output.output_dir`.
     axis : str
         ``"x"``, ``"y"`` or ``"z"``.
     table : str

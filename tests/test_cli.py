@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from contoursim.cli import main
-from contoursim.io import read_trace
+from contoursim.traces import read_trace
 
 SMALL_PATH = """
 [feed]

@@ -8,7 +8,7 @@ import pytest
 
 from conftest import ROOT
 
-from contoursim.io import output_dir
+from contoursim.output import output_dir
 
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 JOBS = sorted((ROOT / "examples").glob("*.toml"))

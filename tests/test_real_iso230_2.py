@@ -22,7 +22,7 @@ import pytest
 
 from conftest import ROOT
 from contoursim.exceptions import ConfigError
-from contoursim.io import output_dir
+from contoursim.output import output_dir
 from contoursim.iso230_2 import positioning_figures, write_error_table
 
 EXAMPLE = runpy.run_path(str(ROOT / "examples" / "iso230_2_error_table.py"))

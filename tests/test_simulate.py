@@ -6,7 +6,7 @@ import pytest
 
 from contoursim import paths
 from contoursim.feed import plan, sample
-from contoursim.io import read_trace
+from contoursim.traces import read_trace
 from contoursim.machine import Machine
 from contoursim.servo import AxisServo
 from contoursim.simulate import simulate

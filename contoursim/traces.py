@@ -6,11 +6,9 @@ increasing and uniform, and for each axis the pair ``<axis>_ref``, ``<axis>``
 [mm] for the axis sets ``x``, ``x, y`` or ``x, y, z``. ``*_ref`` are the
 commanded (interpolator) positions, the others the measured tool positions.
 Extra columns are ignored on reading.
-
-:func:`output_dir` prepares the folder contoursim writes its files into (:class:`OutputDir`).
 """
 
-import io as _io
+import io
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,13 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
-from .exceptions import ConfigError, TraceFormatError
+from .exceptions import TraceFormatError
 
-__all__ = ["OutputDir", "Trace", "output_dir", "read_trace", "write_trace"]
+__all__ = ["Trace", "read_trace", "write_trace"]
 
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
-_MARKER = ".contoursim-out"
-_MARKER_HEADER = "# written by contoursim; the files it wrote here, one per line, are replaced on each run\n"
 
 
 @dataclass(frozen=True)
@@ -70,109 +66,6 @@ class Trace:
     def tracking_error(self):
         """Actual minus commanded position [mm], shape (N, d)."""
         return self.actual - self.reference
-
-
-@dataclass(frozen=True)
-class OutputDir:
-    """A folder contoursim writes into, and the record of the files it wrote there.
-
-    Making one creates the folder (with its parents) if missing and refuses a
-    folder that holds files but was not made by contoursim. A marker file,
-    ``.contoursim-out``, lists the names contoursim wrote; :meth:`file` hands
-    out paths only for new names or names on that list, so no file a user
-    keeps there is ever overwritten.
-
-    Parameters
-    ----------
-    path : str or Path
-        The folder.
-
-    Raises
-    ------
-    ConfigError
-        `path` is a file, cannot be created, or holds files and no marker.
-    """
-
-    path: Path
-
-    def __post_init__(self):
-        out = Path(self.path)
-        object.__setattr__(self, "path", out)
-        marker = out / _MARKER
-        if out.exists() and not out.is_dir():
-            raise ConfigError(f"{out} is a file, not a directory; choose another output directory")
-        if out.exists() and any(out.iterdir()) and not marker.is_file():
-            raise ConfigError(f"{out} holds files that contoursim did not write; choose another output directory")
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-            if not marker.exists():
-                marker.write_text(_MARKER_HEADER, encoding="utf-8")
-        except OSError as exc:
-            raise ConfigError(f"cannot create the output directory {out}: {exc.strerror}") from None
-
-    def written(self):
-        """Names of the files contoursim wrote into the folder (from its marker).
-
-        Returns
-        -------
-        set of str
-        """
-        lines = (self.path / _MARKER).read_text(encoding="utf-8").splitlines()
-        return {line for line in lines if line and not line.startswith("#")}
-
-    def file(self, name):
-        """The path to write `name` to; records `name` as written by contoursim.
-
-        Parameters
-        ----------
-        name : str
-            A file name, without folder.
-
-        Returns
-        -------
-        Path
-            ``path / name``.
-
-        Raises
-        ------
-        FileExistsError
-            A file `name` exists in the folder and contoursim did not write it.
-        ValueError
-            `name` is not a plain file name.
-        """
-        if not isinstance(name, str) or Path(name).name != name or name in ("", ".", "..", _MARKER) or "\n" in name:
-            raise ValueError(f"name must be a plain file name, got {name!r}")
-        file = self.path / name
-        if name in self.written():
-            return file
-        if file.exists() or file.is_symlink():
-            raise FileExistsError(f"{file} exists and contoursim did not write it; refusing to overwrite it")
-        with open(self.path / _MARKER, "a", encoding="utf-8") as marker:
-            marker.write(name + "\n")
-        return file
-
-    def __str__(self):
-        return str(self.path)
-
-
-def output_dir(out):
-    """The output folder `out`, created or reused (see :class:`OutputDir`).
-
-    Parameters
-    ----------
-    out : str, Path or OutputDir
-        The folder; an :class:`OutputDir` is returned as is.
-
-    Returns
-    -------
-    OutputDir
-
-    Raises
-    ------
-    ConfigError
-        `out` is a file, cannot be created, or holds files that contoursim did not write.
-    """
-    return out if isinstance(out, OutputDir) else OutputDir(out)
 
 
 def write_trace(file, trace, extra=None, overwrite=False):
@@ -281,7 +174,7 @@ def read_trace(file):
 def _parse_rows(body, width, index, names, fail):
     """Parse the numeric rows; on any problem, name the first bad cell."""
     try:
-        data = np.loadtxt(_io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)
+        data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)
     except ValueError:
         data = None
     if data is None or data.shape[0] != len(body):

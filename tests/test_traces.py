@@ -3,8 +3,8 @@ import warnings
 import numpy as np
 import pytest
 
-from contoursim.exceptions import ConfigError, TraceFormatError
-from contoursim.io import Trace, output_dir, read_trace, write_trace
+from contoursim.exceptions import TraceFormatError
+from contoursim.traces import Trace, read_trace, write_trace
 
 
 def _trace(n=50, axes=("x", "y")):
@@ -93,30 +93,3 @@ def test_trace_arrays_are_read_only_and_the_callers_are_not():
             getattr(trace, name)[0] = 1.0
     ref[0] = 1.0  # the caller's array is theirs
     assert trace.reference[0, 0] == 0.0
-
-
-def test_output_dir_refuses_files_it_did_not_write(tmp_path):
-    out = output_dir(tmp_path / "out")
-    assert out.file("a.csv") == tmp_path / "out" / "a.csv"
-    (tmp_path / "out" / "a.csv").write_text("ours")
-    (tmp_path / "out" / "notes.txt").write_text("mine")
-    again = output_dir(tmp_path / "out")  # a later run reuses the folder and its record
-    assert again.file("a.csv") == tmp_path / "out" / "a.csv"
-    with pytest.raises(FileExistsError, match="notes.txt exists and contoursim did not write it"):
-        again.file("notes.txt")
-    assert (tmp_path / "out" / "notes.txt").read_text() == "mine"
-    assert again.written() == {"a.csv"}
-    with pytest.raises(ValueError, match="plain file name"):
-        again.file("../escape.csv")
-    assert output_dir(again) is again
-
-
-def test_output_dir_refuses_a_file_and_a_users_folder(tmp_path):
-    (tmp_path / "somefile").write_text("mine")
-    with pytest.raises(ConfigError, match="somefile is a file, not a directory"):
-        output_dir(tmp_path / "somefile")
-    with pytest.raises(ConfigError, match="cannot create the output directory"):
-        output_dir(tmp_path / "somefile" / "out")
-    with pytest.raises(ConfigError, match="holds files that contoursim did not write"):
-        output_dir(tmp_path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["somefile"]
