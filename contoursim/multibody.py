@@ -45,6 +45,7 @@ from ._numba import njit
 
 from . import _validate
 from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table
+from .config import FORMAT_DOC
 from .exceptions import ConfigError
 
 __all__ = [
@@ -835,9 +836,14 @@ def _cross(a, b):
 
 # -- TOML machine description ----------------------------------------------
 
-_MACHINE_KEYS = ("name", "description", "tool", "workpiece", "tool_tip", "tool_axis", "axis_order", "body")
-_BODY_KEYS = ("name", "parent", "joint", "axis", "travel", "offset", "static", "squareness", "tilt", "thermal", "errors")
+_MACHINE_KEYS = ("name", "description", "tool", "workpiece", "tool_tip_mm", "tool_axis", "axis_order", "body")
+_BODY_KEYS = ("name", "parent", "joint", "axis", "travel_mm", "travel_deg", "offset_mm", "static", "squareness", "tilt",
+              "thermal", "errors")
 _TERM_KEYS = ("constant", "poly", "cyclic")
+#: Units of the six error motions at the file's edge, and their scale to mm, rad.
+_ERROR_UNITS = (("um", _UM),) * 3 + (("urad", _URAD),) * 3
+#: Keys of earlier versions -> the keys that replaced them.
+_RENAMED = {"tool_tip": "tool_tip_mm", "offset": "offset_mm"}
 
 
 def chain_from_toml(toml, *keys, extra=()):
@@ -845,13 +851,13 @@ def chain_from_toml(toml, *keys, extra=()):
 
     This is the geometric half of a machine file (see
     :func:`contoursim.machine.load_machine`, which also reads the servo
-    half). The description reads like the machine (units at this edge: mm, deg, µm,
-    µrad, µm/min)::
+    half). The description reads like the machine; every key carries its
+    unit (the README section "File format" lists them all)::
 
         name = "3-axis vertical mill"
         tool = "tool"                 # the body carrying the tool
         workpiece = "table"
-        tool_tip = [0, 0, 0]          # optional tip in the tool body's frame [mm]
+        tool_tip_mm = [0, 0, 0]       # optional tip in the tool body's frame
         tool_axis = [0, 0, 1]         # optional
         axis_order = ["x", "y", "z"]  # optional column order of q
 
@@ -860,19 +866,21 @@ def chain_from_toml(toml, *keys, extra=()):
         parent = "Y"                  # a body name or "bed"
         joint = "linear -x"           # fixed | linear [-]x|y|z | rotary [-]x|y|z
         axis = "x"                    # the commanded axis driving it
-        travel = [0, 500]             # [mm] or [deg]
-        offset = [0, 0, 0]            # [mm]
-        static = { dz = 5 }           # assembly error [µm] / [µrad]
-        squareness = { y = 20 }       # linear joint [µrad], positive: angle > 90°
-        tilt = { x = 10, y = -5 }     # rotary joint axis-line squareness [µrad] (seed 001)
-        thermal = { dx = 2 }          # drift rate [µm/min] / [µrad/min]
+        travel_mm = [0, 500]          # travel_deg for a rotary joint
+        offset_mm = [0, 0, 0]
+        static = { dz_um = 5, ex_urad = 2 }        # assembly error
+        squareness = { y_urad = 20 }               # linear joint, positive: angle > 90°
+        tilt = { x_urad = 10, y_urad = -5 }        # rotary joint axis-line squareness (seed 001)
+        thermal = { dx_um_per_min = 2 }            # drift rate (ex_urad_per_min ...)
         [body.errors]
         table = "x_laser.csv"         # optional ISO 230-2 table, relative to this file
-        dx = { poly = [0, 12e-3], cyclic = [{ amplitude = 1.5, period = 10, phase_deg = 0 }] }
-        ey = { constant = 8 }         # [µrad]
+        dx_um = { poly = [0, 12e-3], cyclic = [{ amplitude_um = 1.5, period_mm = 10, phase_deg = 0 }] }
+        ey_urad = { constant = 8 }
 
-    Polynomial coefficients are per mm^k (per deg^k for a rotary axis),
-    cyclic periods in mm (deg).
+    An error motion's ``constant`` and ``poly`` are in the unit of its key,
+    polynomial coefficients per mm^k (per deg^k for a rotary axis); a cyclic
+    term's amplitude is in the same unit and its period in mm (``period_deg``
+    for a rotary axis).
 
     Parameters
     ----------
@@ -890,15 +898,17 @@ def chain_from_toml(toml, *keys, extra=()):
     Raises
     ------
     ConfigError
-        Naming the file and line of an unknown key or a bad value.
+        Naming the file and line of an unknown key or a bad value; a key of
+        an earlier version is named with the key that replaced it.
     """
-    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"))
+    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"), renamed=_RENAMED)
     raw = top["body"]
     if not isinstance(raw, list) or not raw:
         raise toml.error("body must be an array of tables ([[body]])", *keys, "body")
     names = []
     for i in range(len(raw)):
-        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",))
+        travel = "travel_deg" if str(raw[i].get("joint", "")).strip().startswith("rotary") else "travel_mm"
+        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",), renamed={**_RENAMED, "travel": travel})
         if not isinstance(item["name"], str) or item["name"] in names or item["name"] == "bed":
             raise toml.error(f"body name must be a unique string other than 'bed', got {item['name']!r}", *keys, "body", i, "name")
         names.append(item["name"])
@@ -915,7 +925,7 @@ def chain_from_toml(toml, *keys, extra=()):
     try:
         axes = top.get("axis_order")
         tool_axis = top.get("tool_axis", [0.0, 0.0, 1.0])
-        tool_tip = np.asarray(top.get("tool_tip", [0.0, 0.0, 0.0]), float)
+        tool_tip = np.asarray(top.get("tool_tip_mm", [0.0, 0.0, 0.0]), float)
         return MachineChain(
             tuple(bodies),
             tool=body_index(top["tool"], *keys, "tool"),
@@ -944,36 +954,37 @@ def _body_from_toml(toml, base, where, item, body_index):
     if (kind == "fixed") != ("axis" not in item):
         raise fail("a moving joint needs 'axis' (the commanded axis name), a fixed one has none", "joint")
 
-    def vector(key, names, scale, size):
-        value = item.get(key, {})
-        if not isinstance(value, dict):
-            raise fail(f"{key} must be a table like {{ {names[0]} = ... }}", key)
-        unknown = set(value) - set(names)
-        if unknown:
-            raise fail(f"unknown key '{sorted(unknown)[0]}' in {key}; expected one of: {', '.join(names)}", key)
-        out = np.zeros(size)
+    def vector(key, units):
+        """A table like ``{ dx_um = 2, ex_urad = 1 }`` in mm, rad; `units` is ((name, unit, scale), ...)."""
+        if not isinstance(item.get(key, {}), dict):
+            raise fail(f"{key} must be a table like {{ {units[0][0]}_{units[0][1]} = ... }}", key)
+        names = [f"{name}_{unit}" for name, unit, _ in units]
+        value = toml.table(*where, key, allowed=names, renamed=dict(zip((n for n, _, _ in units), names))) if key in item else {}
+        out = np.zeros(len(units))
         for k, v in value.items():
-            out[names.index(k)] = _number(v, fail, key) * (scale[names.index(k)] if isinstance(scale, tuple) else scale)
+            out[names.index(k)] = _number(v, fail, key) * units[names.index(k)][2]
         return out
 
     per_min = 1 / 60.0
-    lin_ang = (_UM,) * 3 + (_URAD,) * 3
-    static = vector("static", COMPONENTS, lin_ang, 6)
-    squareness = vector("squareness", _DIRECTIONS, _URAD, 3)
-    tilt = vector("tilt", _DIRECTIONS, _URAD, 3)
-    thermal = vector("thermal", COMPONENTS, tuple(s * per_min for s in lin_ang), 6)
+    static = vector("static", [(c, unit, scale) for c, (unit, scale) in zip(COMPONENTS, _ERROR_UNITS)])
+    squareness = vector("squareness", [(d, "urad", _URAD) for d in _DIRECTIONS])
+    tilt = vector("tilt", [(d, "urad", _URAD) for d in _DIRECTIONS])
+    thermal = vector("thermal", [(c, f"{unit}_per_min", scale * per_min) for c, (unit, scale) in zip(COMPONENTS, _ERROR_UNITS)])
     for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
         if values.any() and (kind != wanted or values[direction]):
             raise fail(f"{key} applies to a {wanted} joint, towards the other two directions", key)
-    offset = item.get("offset", [0.0, 0.0, 0.0])
+    offset = item.get("offset_mm", [0.0, 0.0, 0.0])
     if not isinstance(offset, list) or len(offset) != 3:
-        raise fail("offset must be [x, y, z] in mm", "offset")
-    offset = [_number(v, fail, "offset") for v in offset]
-    travel = item.get("travel")
+        raise fail("offset_mm must be [x, y, z]", "offset_mm")
+    offset = [_number(v, fail, "offset_mm") for v in offset]
+    travel_key, wrong = ("travel_deg", "travel_mm") if rotary else ("travel_mm", "travel_deg")
+    if wrong in item:
+        raise fail(f"the travel of a {kind} joint is '{travel_key}'", wrong)
+    travel = item.get(travel_key)
     if travel is not None:
         if not isinstance(travel, list) or len(travel) != 2:
-            raise fail("travel must be [min, max]", "travel")
-        travel = [_number(v, fail, "travel") for v in travel]
+            raise fail(f"{travel_key} must be [min, max]", travel_key)
+        travel = [_number(v, fail, travel_key) for v in travel]
         travel = tuple(np.deg2rad(travel)) if rotary else tuple(travel)
     motion = _motion_from_toml(toml, base, where, item, rotary, fail)
     try:
@@ -1002,7 +1013,8 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
     errors = item.get("errors", {})
     if not errors:
         return (ErrorMotion(),) * 6
-    toml.table(*where, "errors", allowed=COMPONENTS + ("table",))
+    keys = {f"{comp}_{unit}": comp for comp, (unit, _) in zip(COMPONENTS, _ERROR_UNITS)}
+    toml.table(*where, "errors", allowed=(*keys, "table"), renamed={comp: key for key, comp in keys.items()})
     tables = {}
     if "table" in errors:
         path = base / str(errors["table"])
@@ -1013,32 +1025,34 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
                 raise fail(f"error table {str(errors['table'])!r} not found (relative to {base})", "errors", "table") from None
             raise exc
     to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
+    period_key = "period_deg" if rotary else "period_mm"
     motion = []
-    for i, comp in enumerate(COMPONENTS):
-        scale = _UM if i < 3 else _URAD
-        spec = errors.get(comp, {})
+    for key, (unit, scale) in zip(keys, _ERROR_UNITS):
+        comp = keys[key]
+        spec = errors.get(key, {})
         if not isinstance(spec, dict):
-            raise fail(f"errors.{comp} must be a table of constant / poly / cyclic", "errors", comp)
-        unknown = set(spec) - set(_TERM_KEYS)
-        if unknown:
-            raise fail(f"unknown key '{sorted(unknown)[0]}' in errors.{comp}; expected one of: {', '.join(_TERM_KEYS)}", "errors", comp)
+            raise fail(f"errors.{key} must be a table of constant / poly / cyclic", "errors", key)
+        if spec:
+            toml.table(*where, "errors", key, allowed=_TERM_KEYS)
         if "constant" in spec and "poly" in spec:
-            raise fail(f"errors.{comp}: give either constant or poly, not both", "errors", comp)
+            raise fail(f"errors.{key}: give either constant or poly, not both", "errors", key)
         poly = spec.get("poly", [spec["constant"]] if "constant" in spec else [])
         if not isinstance(poly, list):
-            raise fail(f"errors.{comp}.poly must be a list of coefficients", "errors", comp)
-        poly = [_number(c, fail, "errors", comp) * scale / to_q**k for k, c in enumerate(poly)]
+            raise fail(f"errors.{key}.poly must be a list of coefficients", "errors", key)
+        poly = [_number(c, fail, "errors", key) * scale / to_q**k for k, c in enumerate(poly)]
         cyclic = spec.get("cyclic", [])
         cyclic = [cyclic] if isinstance(cyclic, dict) else cyclic
+        amplitude_key = f"amplitude_{unit}"
         terms = []
         for term in cyclic:
-            if not isinstance(term, dict) or set(term) - {"amplitude", "period", "phase_deg"} or not {"amplitude", "period"} <= set(term):
-                raise fail(f"errors.{comp}.cyclic terms are {{ amplitude, period, phase_deg }}", "errors", comp)
-            period = _number(term["period"], fail, "errors", comp)
+            if not isinstance(term, dict) or set(term) - {amplitude_key, period_key, "phase_deg"} or not {amplitude_key, period_key} <= set(term):
+                raise fail(f"errors.{key}.cyclic terms are {{ {amplitude_key}, {period_key}, phase_deg }} "
+                           f"(see {FORMAT_DOC})", "errors", key)
+            period = _number(term[period_key], fail, "errors", key)
             if period <= 0:
-                raise fail(f"errors.{comp}.cyclic period must be positive, got {period}", "errors", comp)
-            terms.append(Cyclic.from_amplitude(_number(term["amplitude"], fail, "errors", comp) * scale,
-                                               period * to_q, np.deg2rad(_number(term.get("phase_deg", 0.0), fail, "errors", comp))))
+                raise fail(f"errors.{key}.cyclic {period_key} must be positive, got {period}", "errors", key)
+            terms.append(Cyclic.from_amplitude(_number(term[amplitude_key], fail, "errors", key) * scale,
+                                               period * to_q, np.deg2rad(_number(term.get("phase_deg", 0.0), fail, "errors", key))))
         motion.append(ErrorMotion(tuple(poly), tuple(terms), tables.get(comp)))
     return tuple(motion)
 

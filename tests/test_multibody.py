@@ -326,9 +326,9 @@ workpiece = "bed"
 name = "X"
 joint = "linear x"
 axis = "x"
-squareness = { y = 10 }
+squareness = { y_urad = 10 }
 [body.errors]
-dx = { poly = [1, 0.01], cyclic = { amplitude = 2, period = 5 } }
+dx_um = { poly = [1, 0.01], cyclic = { amplitude_um = 2, period_mm = 5 } }
 
 [[body]]
 name = "tool"
@@ -347,12 +347,19 @@ def test_toml_units_are_converted_at_the_edge():
 @pytest.mark.parametrize(
     "old, new, line, match",
     [
-        ('squareness = { y = 10 }', 'squarenes = { y = 10 }', 9, "unknown key 'squarenes'"),
+        ('squareness = { y_urad = 10 }', 'squarenes = { y_urad = 10 }', 9, "unknown key 'squarenes'"),
         ('joint = "linear x"', 'joint = "linear w"', 7, "joint must be"),
         ('parent = "X"', 'parent = "Y"', 15, "'Y' is not a body"),
-        ("dx = { poly = [1, 0.01],", 'dx = { poly = [1, "a"],', 11, "expected a finite number"),
-        ("dx = { poly", "dq = { poly", 11, "unknown key 'dq'"),
-        ('squareness = { y = 10 }', 'squareness = { x = 10 }', 9, "squareness applies"),
+        ("dx_um = { poly = [1, 0.01],", 'dx_um = { poly = [1, "a"],', 11, "expected a finite number"),
+        ("dx_um = { poly", "dq_um = { poly", 11, "unknown key 'dq_um'"),
+        ('squareness = { y_urad = 10 }', 'squareness = { x_urad = 10 }', 9, "squareness applies"),
+        ("period_mm = 5", "period_deg = 5", 11, r"cyclic terms are \{ amplitude_um, period_mm, phase_deg \}"),
+        ('axis = "x"', 'axis = "x"\ntravel_deg = [0, 1]', 9, "the travel of a linear joint is 'travel_mm'"),
+        # keys without their unit (earlier versions) name the key that replaced them
+        ('axis = "x"', 'axis = "x"\ntravel = [0, 1]', 9, r"key 'travel' in \[body.0\] is now 'travel_mm'"),
+        ('squareness = { y_urad = 10 }', 'squareness = { y = 10 }', 9, "key 'y' .* is now 'y_urad'"),
+        ("dx_um = { poly", "dx = { poly", 11, "key 'dx' .* is now 'dx_um'"),
+        ('parent = "X"', 'parent = "X"\noffset = [0, 0, 1]', 16, "key 'offset' .* is now 'offset_mm'"),
     ],
 )
 def test_toml_errors_name_file_and_line(old, new, line, match):

@@ -122,7 +122,7 @@ name = "X"
 parent = "Y"
 joint = "linear -x"
 axis = "x"
-squareness = {{ y = {alpha_urad} }}
+squareness = {{ y_urad = {alpha_urad} }}
 
 [[body]]
 name = "workpiece"
