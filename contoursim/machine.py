@@ -247,7 +247,7 @@ SERVO_KEYS = MappingProxyType({
 #: Keys of earlier versions -> the keys that replaced them.
 _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
 # a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")
-_SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| \(|,| given| as well|\.|$))")
+_SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| is| \(| \[|,| given| as well|\.|$))")
 _SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes")
 
 

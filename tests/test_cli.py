@@ -115,7 +115,7 @@ def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'm.toml'}, line 6: the position loop of axis 'x'" in err
-    assert "phase margin 16.6 deg" in err and "lower kp_per_s = 900" in err
+    assert "phase margin 16.6 deg" in err and "(kp_per_s = 900): lower kp_per_s" in err
 
 
 def test_servo_period_too_long_names_the_key(tmp_path, capsys):
