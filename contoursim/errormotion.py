@@ -120,13 +120,19 @@ class ErrorMotion:
         ndarray, shape (N,)
             The error motion [mm] or [rad].
         """
-        q = np.asarray(q, dtype=float)
-        out = np.polynomial.polynomial.polyval(q, self.poly) if self.poly else np.zeros_like(q)
+        q = np.ascontiguousarray(q, dtype=float)
+        out = np.full_like(q, self.poly[-1] if self.poly else 0.0)
+        for c in self.poly[-2::-1]:  # Horner, in place
+            out *= q
+            out += c
         for term in self.cyclic:
             phase = (2 * np.pi / term.period) * q
-            out = out + term.sin * np.sin(phase) + term.cos * np.cos(phase)
+            if term.sin:
+                out += term.sin * np.sin(phase)
+            if term.cos:
+                out += term.cos * np.cos(phase)
         if self.table is not None:
-            out = out + np.interp(q, *self.table)
+            out += np.interp(q, *self.table)
         return out
 
     @property

@@ -41,11 +41,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from ._numba import njit
 
-from . import _validate
-from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table
+from . import _chainkernels, _validate
+from ._numba import njit
 from .config import FORMAT_DOC
+from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table
 from .exceptions import ConfigError
 
 __all__ = [
@@ -249,22 +249,32 @@ class Body:
         arr[names[group].index(rest)] = value
         return replace(self, **{group: arr})
 
-    def motion_error(self, q):
+    @property
+    def has_motion_error(self):
+        """True when :meth:`motion_error` is not identically zero."""
+        return bool(self.squareness.any()) or not all(m.is_zero for m in self.motion)
+
+    def motion_error(self, q, out=None):
         """Motion error twist (dx, dy, dz, ex, ey, ez) at positions `q`, squareness included.
 
         Parameters
         ----------
         q : ndarray, shape (N,)
             Axis positions [mm or rad].
+        out : ndarray, shape (N, 6), optional
+            Where to write the result.
 
         Returns
         -------
         ndarray, shape (N, 6)
             [mm, rad], in the body's frame after its ideal motion.
         """
-        out = np.stack([m(q) for m in self.motion], axis=-1)
-        if self.squareness.any():
-            out[:, :3] -= (self.sign * q)[:, None] * self.squareness
+        q = np.ascontiguousarray(q, dtype=float)
+        out = np.empty((6, q.size)).T if out is None else out  # each component contiguous
+        for i, m in enumerate(self.motion):
+            out[:, i] = 0.0 if m.is_zero else m(q)
+        for i in np.flatnonzero(self.squareness):
+            out[:, i] -= (self.sign * self.squareness[i]) * q
         return out
 
     def thermal_drift(self, t, n):
@@ -354,6 +364,22 @@ class MachineChain:
         object.__setattr__(self, "tool_tip", tip)
         object.__setattr__(self, "tool_chain", self.chain_to(self.tool))
         object.__setattr__(self, "work_chain", self.chain_to(self.workpiece))
+        object.__setattr__(self, "arrays", self._arrays())
+
+    def _arrays(self):
+        """The chain as flat arrays, one entry per body, for :func:`contoursim._chainkernels.axis_jacobian`."""
+        bodies = self.bodies
+        return dict(
+            parent=np.array([b.parent for b in bodies], np.int64),
+            kind=np.array([("fixed", "linear", "rotary").index(b.joint) for b in bodies], np.int64),
+            column=np.array([-1 if b.axis is None else self.axes.index(b.axis) for b in bodies], np.int64),
+            direction=np.array([b.direction for b in bodies], np.int64),
+            sign=np.array([b.sign for b in bodies], float),
+            offset=np.array([b.offset for b in bodies], float).reshape(len(bodies), 3),
+            # +1 on the tool branch only, -1 on the workpiece branch only, 0 on both (or neither)
+            side=np.array([float(j in self.tool_chain) - float(j in self.work_chain) for j in range(1, len(bodies) + 1)]),
+            order=np.argsort(np.count_nonzero(self.lower, axis=0), kind="stable").astype(np.int64),
+        )
 
     # -- topology ---------------------------------------------------------
 
@@ -433,22 +459,57 @@ class MachineChain:
             Tool axis V_w (unit vector).
         """
         q, t = self._check(q, t)
-        n = q.shape[0]
-        pv = np.empty((n, 2, 3))  # tool tip and tool axis, rotated together
-        pv[:, 0], pv[:, 1] = self.tool_tip, self.tool_axis
+        steps, err = self._program(q, t, ideal)
+        kind, inverse, column, vector = (np.array(x, dtype) for x, dtype in zip(zip(*steps), (np.int64, bool, np.int64, float)))
+        pose = _chainkernels.tool_pose(q, np.zeros(0) if t is None else t, err, self.tool_tip, self.tool_axis,
+                                       kind, inverse, column, vector.reshape(-1, 6))
+        return pose[:, :3], pose[:, 3:]
+
+    def _program(self, q, t, ideal):
+        """The steps of :func:`contoursim._chainkernels.tool_pose` and the error motions they read.
+
+        Body j's transform to its parent is the product of the characteristic
+        matrices S ΔS M D E (module docstring), each a step (rotation w, then
+        translation d) with w, d fixed or read from q, t or the error
+        motions. The tool tip goes out from the tool frame through the tool
+        branch's bodies, last step first, then in through the workpiece
+        branch's bodies, inverted.
+
+        Returns
+        -------
+        steps : list of (kind, inverse, column, vector (6,))
+        err : ndarray, shape (M, 6, N)
+            Error motions of the moving bodies that have any [mm, rad].
+        """
+        K = _chainkernels
+        with_errors = [j for j, b in enumerate(self.bodies, 1) if not ideal and b.joint != "fixed" and b.has_motion_error]
+        err = np.empty((len(with_errors), 6, q.shape[0]))  # each component contiguous
+        for i, j in enumerate(with_errors):
+            b = self.bodies[j - 1]
+            b.motion_error(q[:, self.axes.index(b.axis)], out=err[i].T)
+
+        def body_steps(j):
+            b = self.bodies[j - 1]
+            steps = [(K.CONSTANT, 0, np.concatenate([np.zeros(3), b.offset]))]
+            if not ideal and b.static.any():
+                steps.append((K.CONSTANT, 0, np.concatenate([b.static[3:], b.static[:3]])))
+            if b.joint == "linear":
+                steps.append((K.LINEAR, self.axes.index(b.axis), np.concatenate([np.zeros(3), b.sign * np.eye(3)[b.direction]])))
+            elif b.joint == "rotary":
+                line = np.eye(3)[b.direction] if ideal else tilted_axis(b.direction, b.tilt)
+                steps.append((K.ROTARY, self.axes.index(b.axis), np.concatenate([b.sign * line, np.zeros(3)])))
+            if not ideal and t is not None and b.thermal.any():
+                steps.append((K.THERMAL, 0, np.concatenate([b.thermal[3:], b.thermal[:3]])))
+            if j in with_errors:
+                steps.append((K.ERROR, with_errors.index(j), np.zeros(6)))
+            return steps
+
+        program = []
         for j in reversed(self.tool_chain):  # tool frame -> bed
-            for w, d in reversed(self._steps(j, q, t, ideal)):
-                if w is not None:
-                    pv = _rotate(pv, np.asarray(w)[..., None, :])
-                if d is not None:
-                    pv[:, 0] += d
+            program += [(kind, False, column, vector) for kind, column, vector in reversed(body_steps(j))]
         for j in self.work_chain:  # bed -> workpiece frame
-            for w, d in self._steps(j, q, t, ideal):
-                if d is not None:
-                    pv[:, 0] -= d
-                if w is not None:
-                    pv = _rotate(pv, -np.asarray(w)[..., None, :])
-        return pv[:, 0].copy(), pv[:, 1].copy()
+            program += [(kind, True, column, vector) for kind, column, vector in body_steps(j)]
+        return program, err
 
     def volumetric_error(self, q, t=None):
         """Actual minus ideal tool pose at the same axis positions.
@@ -470,29 +531,6 @@ class MachineChain:
         pa, va = self.tool_pose(q, t)
         pi, vi = self.tool_pose(q, t, ideal=True)
         return pa - pi, va - vi
-
-    def _steps(self, j, q, t, ideal):
-        """Characteristic matrices of body j as (rotation vector, translation) pairs, left to right."""
-        b = self.bodies[j - 1]
-        n = q.shape[0]
-        steps = [(None, b.offset)]
-        if not ideal and b.static.any():
-            steps.append((b.static[3:], b.static[:3]))
-        if b.joint != "fixed":
-            xi = b.sign * q[:, self.axes.index(b.axis)]
-            if b.joint == "linear":
-                steps.append((None, xi[:, None] * np.eye(3)[b.direction]))
-            else:
-                line = np.eye(3)[b.direction] if ideal else tilted_axis(b.direction, b.tilt)
-                steps.append((xi[:, None] * line, None))
-        if not ideal and b.thermal.any() and t is not None:
-            drift = b.thermal_drift(t, n)
-            steps.append((drift[:, 3:], drift[:, :3]))
-        if not ideal and b.joint != "fixed":
-            err = b.motion_error(q[:, self.axes.index(b.axis)])
-            if err.any():
-                steps.append((err[:, 3:], err[:, :3]))
-        return steps
 
     # -- first-order model ------------------------------------------------
 
@@ -643,15 +681,11 @@ class MachineChain:
             d(P_w, V_w)/dq [mm/mm, mm/rad, 1/mm, 1/rad].
         """
         q, _ = self._check(q, None)
-        effect = self._effects(q)
-        out = np.zeros((q.shape[0], 6, len(self.axes)))
-        for j in set(self.tool_chain) ^ set(self.work_chain):
-            b = self.bodies[j - 1]
-            if b.joint != "fixed":
-                twist = np.zeros(6)
-                twist[b.direction + (3 if b.joint == "rotary" else 0)] = b.sign
-                out[:, :, self.axes.index(b.axis)] += effect(j, "static", twist)
-        return out
+        a = self.arrays
+        return _chainkernels.axis_jacobian(
+            q, len(self.axes), self.tool, self.workpiece, self.tool_tip, self.tool_axis, a["order"], a["parent"],
+            a["kind"], a["column"], a["direction"], a["sign"], a["offset"], a["side"],
+        )
 
     # -- inverse kinematics -----------------------------------------------
 
@@ -660,9 +694,12 @@ class MachineChain:
 
         Each step solves the least-squares problem with the ideal chain's axis
         Jacobian, position first and the tool axis in the freedom left (see
-        :func:`_prioritized_step`); on the ideal chain of a Cartesian machine the
+        :func:`_prioritized_inverse`); on the ideal chain of a Cartesian machine the
         first step is exact (the map is affine), on the actual chain the
-        residual shrinks by about the relative error size per step.
+        residual shrinks by about the errors' relative size and slope per step. The
+        Jacobian is kept while the steps shrink at least tenfold each (as
+        they do on the actual chain, whose errors are small) and evaluated
+        anew where they do not.
 
         Parameters
         ----------
@@ -709,15 +746,25 @@ class MachineChain:
             if unknown:
                 raise ValueError(f"free: unknown axes {sorted(unknown)}; the axes are {list(self.axes)}")
             mask = np.array([a in free for a in self.axes])
-        rows = slice(0, 6) if tool_axis is not None else slice(0, 3)
+        rows = 6 if tool_axis is not None else 3
+        columns = np.flatnonzero(mask)
+        previous = np.inf
         for _ in range(int(_validate.positive("max_iter", max_iter))):
             p, v = self.tool_pose(q, t, ideal=ideal)
             r = p - position if tool_axis is None else np.concatenate([p - position, v - tool_axis], axis=1)
-            J = self.axis_jacobian(q)[:, rows][:, :, mask]
-            step = _prioritized_step(J, r)
-            q[:, mask] -= step
-            if np.max(np.abs(step), initial=0.0) <= tol:
+            if previous == np.inf:  # a new Jacobian only when the last one stops the residual shrinking fast
+                J = self.axis_jacobian(q)
+                P = _prioritized_inverse(J[:, :rows] if mask.all() else J[:, :rows].take(columns, axis=2))
+                del J
+            step = np.einsum("nkr,nr->nk", P, r)
+            if mask.all():
+                q -= step
+            else:
+                q[:, columns] -= step
+            largest = np.max(np.abs(step), initial=0.0)
+            if largest <= tol:
                 return q
+            previous = np.inf if largest > 0.1 * previous else largest
         worst = int(np.argmax(np.abs(step).max(axis=1)))
         raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {np.abs(step[worst]).max():.3g})")
 
@@ -739,8 +786,8 @@ class MachineChain:
         raise ValueError(f"unknown parameter {name!r}: no body named {body!r}")
 
 
-def _prioritized_step(J, r, rcond=1e-4):
-    """Per-sample least-squares step for ``J·step = r``: position rows first, tool axis second.
+def _prioritized_inverse(J, rcond=1e-4):
+    """Per-sample least-squares operator P of ``J·step = r`` (step = P r): position rows first, tool axis second.
 
     The position rows (0-2) are solved in the least-squares sense; the
     tool-axis rows (3-5, if present) only in the null space the position
@@ -756,41 +803,14 @@ def _prioritized_step(J, r, rcond=1e-4):
     ----------
     J : ndarray, shape (N, 3 or 6, k)
         Axis Jacobian [mm/mm, mm/rad; 1/mm, 1/rad].
-    r : ndarray, shape (N, 3 or 6)
-        Residual [mm; -].
     rcond : float
         Eigenvalue threshold of the column-scaled normal equations.
 
     Returns
     -------
-    ndarray, shape (N, k)
+    ndarray, shape (N, k, 3 or 6)
     """
-    x, null = _solve(J[:, :3], r[:, :3], rcond, 1.0)
-    Jo = J[:, 3:]
-    if Jo.size and Jo.any():
-        A = Jo @ null
-        strongest = np.sqrt(np.sum(Jo * Jo, axis=1)).max(axis=1, keepdims=True) + 1e-300
-        x2, _ = _solve(A, r[:, 3:] - (Jo @ x[..., None])[..., 0], rcond, strongest)
-        x = x + (null @ x2[..., None])[..., 0]
-    return x
-
-
-def _solve(A, b, rcond, floor):
-    """Least-squares x for A x = b per sample, and the projector onto the dropped directions.
-
-    Columns are divided by their norm but at least by `floor` (scalar or
-    (N, 1)); eigenvalues of the scaled normal equations below `rcond` are
-    dropped.
-    """
-    s = np.maximum(np.sqrt(np.sum(A * A, axis=1)), floor)
-    As = A / s[:, None, :]
-    At = np.swapaxes(As, 1, 2)
-    lam, V = np.linalg.eigh(At @ As)
-    keep = lam > rcond
-    inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
-    g = (np.swapaxes(V, 1, 2) @ (At @ b[..., None]))[..., 0]
-    null = (V * (~keep)[:, None, :]) @ np.swapaxes(V, 1, 2)  # in scaled variables
-    return (V @ (inv * g)[..., None])[..., 0] / s, null * s[:, None, :] / s[:, :, None]
+    return _chainkernels.prioritized_inverse(np.ascontiguousarray(J, dtype=float), rcond)
 
 
 def _rotate(v, w):

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from contoursim import multibody
 from contoursim.config import TomlFile
 from contoursim.errormotion import Cyclic, ErrorMotion
 from contoursim.exceptions import ConfigError
@@ -365,3 +366,34 @@ def test_toml_units_are_converted_at_the_edge():
 def test_toml_errors_name_file_and_line(old, new, line, match):
     with pytest.raises(ConfigError, match=rf"^m.toml, line {line}: .*{match}"):
         chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
+
+
+def _scaled_pinv(A, floor, rcond=1e-4):
+    """Least-squares operator of A x = b, columns scaled by max(norm, floor), by numpy's SVD; and the dropped directions.
+
+    Singular values with σ² <= rcond are dropped (the eigenvalue threshold of
+    the scaled normal equations).
+    """
+    s = np.maximum(np.linalg.norm(A, axis=0), floor)
+    U, sigma, Vt = np.linalg.svd(A / s)
+    keep = sigma**2 > rcond
+    V = Vt[: len(sigma)][keep].T
+    X = V @ np.diag(1 / sigma[keep]) @ U[:, keep].T
+    null = np.eye(A.shape[1]) - V @ V.T
+    return X / s[:, None], null * s[None, :] / s[:, None]
+
+
+def test_prioritized_inverse_equals_the_svd_pseudo_inverse():
+    """Position rows by the column-scaled pseudo-inverse, tool-axis rows in the null space the position leaves."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(50, 6, 5)) * np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3])[None, :, None] * rng.uniform(0.5, 300, (50, 1, 5))
+    P = multibody._prioritized_inverse(J)
+    P3 = multibody._prioritized_inverse(np.ascontiguousarray(J[:, :3]))
+    for n in range(len(J)):
+        X1, null = _scaled_pinv(J[n, :3], 1.0)
+        Jo = J[n, 3:]
+        X2, _ = _scaled_pinv(Jo @ null, np.linalg.norm(Jo, axis=0).max())
+        want = np.hstack([X1 - null @ X2 @ Jo @ X1, null @ X2])
+        np.testing.assert_allclose(P[n], want, rtol=0, atol=1e-10 * np.abs(want).max())
+        np.testing.assert_allclose(P3[n], X1, rtol=0, atol=1e-10 * np.abs(X1).max())
+        np.testing.assert_allclose(J[n, :3] @ P[n, :, :3], np.eye(3), atol=1e-9)  # the position is met exactly
