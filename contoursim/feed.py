@@ -19,8 +19,9 @@ forward/backward pass over sections of constant velocity limit:
    acceleration pulse when the change is too small to reach a_max).
 
 A jerk-limited velocity change from v0 to v1 is symmetric in time, so it covers
-exactly (v0 + v1)/2 times its duration; the plan solves the peak velocities
-with that closed form and bisection. A single-feed, single-segment move is
+exactly (v0 + v1)/2 times its duration; the plan solves the junction velocities
+with that closed form (a quadratic or a cubic in the velocity) and the peak
+velocities by bisection. A single-feed, single-segment move is
 the simplest instance: one section from rest to rest, which gives the
 classical trapezoid (or triangle) and 7-phase S-curve (or its reduced forms).
 
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _validate
+from ._numba import njit
 from .trajectory import Trajectory
 
 __all__ = ["FeedProfile", "FeedSettings", "plan", "sample"]
@@ -109,26 +111,36 @@ class FeedProfile:
 
 
 # --------------------------------------------------------------------------- velocity changes
+# Compiled: a G-code program or a spline has one section per block or piece. A jerk of 0 means
+# no jerk limit (trapezoidal ramps).
 
-def _ramp_pieces(v0, v1, accel, jerk):
-    """Time-optimal velocity change v0 -> v1 as (duration, a_start, jerk) pieces."""
+@njit(cache=True)
+def _ramp_pieces(v0, v1, accel, jerk, out, row):
+    """Write the time-optimal velocity change v0 -> v1 as (duration, a_start, jerk) rows of `out` from `row`; return the next row."""
     dv = abs(v1 - v0)
     if dv == 0.0:
-        return []
+        return row
     sign = 1.0 if v1 > v0 else -1.0
-    if jerk is None:
-        return [(dv / accel, sign * accel, 0.0)]
+    if jerk == 0.0:
+        out[row] = (dv / accel, sign * accel, 0.0)
+        return row + 1
     if dv >= accel**2 / jerk:
         tj = accel / jerk
-        return [(tj, 0.0, sign * jerk), (dv / accel - tj, sign * accel, 0.0), (tj, sign * accel, -sign * jerk)]
+        out[row] = (tj, 0.0, sign * jerk)
+        out[row + 1] = (dv / accel - tj, sign * accel, 0.0)
+        out[row + 2] = (tj, sign * accel, -sign * jerk)
+        return row + 3
     tj = math.sqrt(dv / jerk)
-    return [(tj, 0.0, sign * jerk), (tj, sign * jerk * tj, -sign * jerk)]
+    out[row] = (tj, 0.0, sign * jerk)
+    out[row + 1] = (tj, sign * jerk * tj, -sign * jerk)
+    return row + 2
 
 
+@njit(cache=True)
 def _ramp_distance(v0, v1, accel, jerk):
     """Distance of the time-optimal change v0 -> v1: (v0 + v1)/2 times its duration."""
     dv = abs(v1 - v0)
-    if jerk is None:
+    if jerk == 0.0:
         duration = dv / accel
     elif dv >= accel**2 / jerk:
         duration = dv / accel + accel / jerk
@@ -137,50 +149,94 @@ def _ramp_distance(v0, v1, accel, jerk):
     return 0.5 * (v0 + v1) * duration
 
 
-def _largest(fits, lo, hi):
-    """Largest v in [lo, hi] with fits(v), for fits monotone (true below a threshold), by bisection."""
-    if fits(hi):
+@njit(cache=True)
+def _reach(v0, length, vmax, accel, jerk):
+    """Largest v in [v0, vmax] reached from v0 within `length`: ``_ramp_distance(v0, v) <= length``, in closed form.
+
+    Without a jerk limit ``v² = v0² + 2 a L``. With one, a ramp that reaches
+    a_max (dv >= a²/j) covers ``(v² − v0²)/(2a) + (v0 + v) a/(2j)``, a
+    quadratic in v; a shorter one covers ``(2 v0 + y²) y / √j`` with
+    y = √(v − v0), a cubic in y (Cardano, one real root).
+    """
+    if _ramp_distance(v0, vmax, accel, jerk) <= length:
+        return vmax
+    if jerk == 0.0:
+        v = math.sqrt(v0 * v0 + 2.0 * accel * length)
+    elif _ramp_distance(v0, v0 + accel**2 / jerk, accel, jerk) <= length:
+        a2, b = 0.5 / accel, 0.5 * accel / jerk
+        c = b * v0 - a2 * v0 * v0 - length
+        v = 2.0 * -c / (b + math.sqrt(b * b - 4.0 * a2 * c))  # the positive root, without cancellation
+    else:
+        p, q = 2.0 * v0, length * math.sqrt(jerk)  # y³ + p y = q
+        u = (0.5 * q + math.sqrt(0.25 * q * q + p**3 / 27.0)) ** (1.0 / 3.0)
+        y = u - p / (3.0 * u)
+        v = v0 + y * y
+    v = min(max(v, v0), vmax)
+    for _ in range(64):  # rounding: step down until it fits
+        if _ramp_distance(v0, v, accel, jerk) <= length or v <= v0:
+            break
+        v = max(v - 4e-16 * max(v, 1.0), v0)
+    return v
+
+
+@njit(cache=True)
+def _peak(v0, v1, length, vmax, accel, jerk):
+    """Largest peak in [max(v0, v1), vmax] with both ramps within `length` (bisection; both ramps grow with it)."""
+    lo, hi = max(v0, v1), vmax
+    if _ramp_distance(v0, hi, accel, jerk) + _ramp_distance(hi, v1, accel, jerk) <= length:
         return hi
     for _ in range(200):
         mid = 0.5 * (lo + hi)
-        if mid in (lo, hi):
+        if mid == lo or mid == hi:
             break
-        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+        if _ramp_distance(v0, mid, accel, jerk) + _ramp_distance(mid, v1, accel, jerk) <= length:
+            lo = mid
+        else:
+            hi = mid
     return lo
+
+
+@njit(cache=True)
+def _section_pieces(breaks, vmax, vjunction, accel, jerk):
+    """Pieces (t0, s0, v0, a0, jerk) of the profile over sections with speed limits `vmax` and junction caps."""
+    lengths = np.diff(breaks)
+    v = vjunction.copy()
+    n = lengths.size
+    for i in range(n):  # forward: reachable from the previous junction
+        v[i + 1] = min(v[i + 1], _reach(v[i], lengths[i], vmax[i], accel, jerk))
+    for i in range(n - 1, -1, -1):  # backward: can still brake for the next junction
+        v[i] = min(v[i], _reach(v[i + 1], lengths[i], vmax[i], accel, jerk))
+    pieces = np.empty((7, 3))
+    rows = np.empty((7 * n, 5))
+    count, t = 0, 0.0
+    for i in range(n):
+        v0, v1, length = v[i], v[i + 1], lengths[i]
+        peak = _peak(v0, v1, length, vmax[i], accel, jerk)
+        cruise = length - _ramp_distance(v0, peak, accel, jerk) - _ramp_distance(peak, v1, accel, jerk)
+        k = _ramp_pieces(v0, peak, accel, jerk, pieces, 0)
+        if cruise > 0 and peak > 0:
+            pieces[k] = (cruise / peak, 0.0, 0.0)
+            k += 1
+        k = _ramp_pieces(peak, v1, accel, jerk, pieces, k)
+        s, vel = breaks[i], v0
+        for m in range(k):
+            duration, a0, j = pieces[m, 0], pieces[m, 1], pieces[m, 2]
+            if duration <= 0:
+                continue
+            rows[count] = (t, s, vel, a0, j)
+            count += 1
+            s += duration * (vel + duration * (a0 / 2 + duration * j / 6))
+            vel += duration * (a0 + duration * j / 2)
+            t += duration
+    return rows[:count], t
 
 
 def _plan_sections(breaks, vmax, vjunction, accel, jerk):
     """Profile over sections [breaks[i], breaks[i+1]] with speed limits vmax[i] and junction caps."""
-    lengths = np.diff(breaks)
-    v = np.array(vjunction, dtype=float)
-    n = lengths.size
-    for i in range(n):  # forward: reachable from the previous junction
-        v[i + 1] = min(v[i + 1], _largest(lambda x: _ramp_distance(v[i], x, accel, jerk) <= lengths[i], v[i], vmax[i]))
-    for i in reversed(range(n)):  # backward: can still brake for the next junction
-        v[i] = min(v[i], _largest(lambda x: _ramp_distance(x, v[i + 1], accel, jerk) <= lengths[i], v[i + 1], vmax[i]))
-    rows, t = [], 0.0
-    for i in range(n):
-        v0, v1, length = v[i], v[i + 1], lengths[i]
-
-        def fits(peak):
-            return _ramp_distance(v0, peak, accel, jerk) + _ramp_distance(peak, v1, accel, jerk) <= length
-
-        peak = _largest(fits, max(v0, v1), vmax[i])
-        cruise = length - _ramp_distance(v0, peak, accel, jerk) - _ramp_distance(peak, v1, accel, jerk)
-        pieces = _ramp_pieces(v0, peak, accel, jerk)
-        if cruise > 0 and peak > 0:
-            pieces.append((cruise / peak, 0.0, 0.0))
-        pieces += _ramp_pieces(peak, v1, accel, jerk)
-        s, vel = breaks[i], v0
-        for duration, a0, j in pieces:
-            if duration <= 0:
-                continue
-            rows.append((t, s, vel, a0, j))
-            s += duration * (vel + duration * (a0 / 2 + duration * j / 6))
-            vel += duration * (a0 + duration * j / 2)
-            t += duration
-    t0, s0, v0, a0, j = np.array(rows).T
-    return FeedProfile(t0, s0, np.maximum(v0, 0.0), a0, j, t, float(breaks[-1]))
+    rows, duration = _section_pieces(np.asarray(breaks, float), np.asarray(vmax, float), np.array(vjunction, float),
+                                     float(accel), 0.0 if jerk is None else float(jerk))
+    t0, s0, v0, a0, j = rows.T
+    return FeedProfile(t0, s0, np.maximum(v0, 0.0), a0, j, duration, float(breaks[-1]))
 
 
 # --------------------------------------------------------------------------- planning
