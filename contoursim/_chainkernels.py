@@ -11,7 +11,7 @@ import numpy as np
 
 from ._numba import njit
 
-__all__ = ["CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse"]
+__all__ = ["CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse", "newton_update"]
 
 
 #: Step kinds of a program (see :func:`tool_pose`).
@@ -303,3 +303,30 @@ def prioritized_inverse(J, rcond):
                 out[n, c, r] = a
                 out[n, c, 3 + r] = NX2[c, r]
     return out
+
+
+@njit(cache=True)
+def newton_update(q, columns, P, position, direction, target, target_direction):
+    """One step ``q[:, columns] -= P r`` with the residual r = (position − target, direction − target_direction).
+
+    `target_direction` of shape (0, 3) leaves the tool axis out (P then has
+    3 columns). Returns the largest |step| and its sample.
+    """
+    size, k, rows = P.shape
+    largest = 0.0
+    worst = 0
+    r = np.empty(rows)
+    for n in range(size):
+        for i in range(3):
+            r[i] = position[n, i] - target[n, i]
+        if rows == 6:
+            for i in range(3):
+                r[3 + i] = direction[n, i] - target_direction[n, i]
+        for c in range(k):
+            step = 0.0
+            for i in range(rows):
+                step += P[n, c, i] * r[i]
+            q[n, columns[c]] -= step
+            if abs(step) > largest:
+                largest, worst = abs(step), n
+    return largest, worst

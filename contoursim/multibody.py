@@ -270,7 +270,7 @@ class Body:
             [mm, rad], in the body's frame after its ideal motion.
         """
         q = np.ascontiguousarray(q, dtype=float)
-        out = np.empty((6, q.size)).T if out is None else out  # each component contiguous
+        out = np.empty((q.size, 6)) if out is None else out
         for i, m in enumerate(self.motion):
             out[:, i] = 0.0 if m.is_zero else m(q)
         for i in np.flatnonzero(self.squareness):
@@ -748,25 +748,19 @@ class MachineChain:
             mask = np.array([a in free for a in self.axes])
         rows = 6 if tool_axis is not None else 3
         columns = np.flatnonzero(mask)
+        target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
         previous = np.inf
         for _ in range(int(_validate.positive("max_iter", max_iter))):
-            p, v = self.tool_pose(q, t, ideal=ideal)
-            r = p - position if tool_axis is None else np.concatenate([p - position, v - tool_axis], axis=1)
-            if previous == np.inf:  # a new Jacobian only when the last one stops the residual shrinking fast
+            if previous == np.inf:  # a new Jacobian only when the last one stops the steps shrinking fast
                 J = self.axis_jacobian(q)
                 P = _prioritized_inverse(J[:, :rows] if mask.all() else J[:, :rows].take(columns, axis=2))
                 del J
-            step = np.einsum("nkr,nr->nk", P, r)
-            if mask.all():
-                q -= step
-            else:
-                q[:, columns] -= step
-            largest = np.max(np.abs(step), initial=0.0)
+            p, v = self.tool_pose(q, t, ideal=ideal)
+            largest, worst = _chainkernels.newton_update(q, columns, P, p, v, position, target_axis)
             if largest <= tol:
                 return q
             previous = np.inf if largest > 0.1 * previous else largest
-        worst = int(np.argmax(np.abs(step).max(axis=1)))
-        raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {np.abs(step[worst]).max():.3g})")
+        raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {largest:.3g})")
 
     # -- helpers ----------------------------------------------------------
 
