@@ -718,7 +718,9 @@ class MachineChain:
         ideal : bool
             Invert the error-free chain.
         tol : float
-            Stop when no axis moves more than this [mm or rad].
+            Stop when no axis moves more than this [mm or rad], or when the
+            steps still to come are estimated below it: steps shrinking by a
+            ratio ρ < 0.1 sum to at most ρ/(1 − ρ) times the last one.
         max_iter : int
             Iteration limit.
 
@@ -749,17 +751,23 @@ class MachineChain:
         rows = 6 if tool_axis is not None else 3
         columns = np.flatnonzero(mask)
         target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
-        previous = np.inf
+        refresh, previous = True, None
         for _ in range(int(_validate.positive("max_iter", max_iter))):
-            if previous == np.inf:  # a new Jacobian only when the last one stops the steps shrinking fast
+            if refresh:  # a new Jacobian only when the last one stops the steps shrinking fast
                 J = self.axis_jacobian(q)
                 P = _prioritized_inverse(J[:, :rows] if mask.all() else J[:, :rows].take(columns, axis=2))
                 del J
+                refresh = False
             p, v = self.tool_pose(q, t, ideal=ideal)
             largest, worst = _chainkernels.newton_update(q, columns, P, p, v, position, target_axis)
             if largest <= tol:
                 return q
-            previous = np.inf if largest > 0.1 * previous else largest
+            if previous is not None:
+                ratio = largest / previous  # the contraction of a linearly converging iteration ...
+                if ratio < 0.1 and largest * ratio / (1 - ratio) <= tol:  # ... bounds the steps still to come
+                    return q
+                refresh = ratio >= 0.1
+            previous = None if refresh else largest
         raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {largest:.3g})")
 
     # -- helpers ----------------------------------------------------------
