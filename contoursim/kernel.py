@@ -90,7 +90,7 @@ _AFF = 37  # acceleration feedforward [A per mm/s^2] = aff / force_gain
 _AMP = 38  # current per force, 1 / force_constant [A/N]
 _VB, _VC, _VD = 39, 40, 41  # velocity controller: z += VB·e; i = VC·z + VD·e
 _CB, _CC, _CD = 42, 43, 44  # current controller: z += CB·e; u = CC·z + CD·e
-_ILIM = 45  # current limit [A] (inf: none)
+_ILIM = 45  # current limit [A] (the largest float: none, so that a row is finite)
 _ELEC = 46  # 1.0 when the current loop is modelled
 _HALF_PLAY = 47  # half the backlash [mm]
 _SCALE = 48  # 1.0 when the loop closes on the table (linear scale)
@@ -600,7 +600,7 @@ def pack(servo, dt, effects=LoopEffects()):
     if servo.electrical:
         row[_CB : _CD + 1] = _pi_row(servo.kc, servo.ti_current, dt)
         row[_ELEC] = 1.0
-    row[_ILIM] = np.inf if servo.current_limit is None else servo.current_limit
+    row[_ILIM] = np.finfo(float).max if servo.current_limit is None else servo.current_limit
     e = effects
     row[_HALF_PLAY] = e.backlash_mm / 2.0
     row[_SCALE] = float(e.backlash_feedback == "scale")

@@ -232,3 +232,250 @@ def test_kernel_equals_python_control_reference(name, extra):
     if name != "none":
         plain = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None])
         assert np.abs(result.position - plain.position).max() > 1e-6  # the effect shows in 300 steps
+
+
+# --- physical signatures, measured from the simulated traces --------------------------------
+
+
+def circle(radius, feed, turns, dt):
+    """CCW circle from (R, 0) at `feed` [mm/s]: t, position, velocity, acceleration (N, 2)."""
+    w = feed / radius
+    t = np.arange(int(turns * 2 * np.pi / w / dt)) * dt
+    u = np.column_stack([np.cos(w * t), np.sin(w * t)])
+    return w, t, radius * u, radius * w * np.column_stack([-u[:, 1], u[:, 0]]), -radius * w**2 * u
+
+
+def friction_bulge_peaks(coulomb, ti_values=(0.02, 0.01, 0.005)):
+    """Peak radial bulge [mm] after X's reversal at 180° on a circle with Coulomb friction on X, per ti.
+
+    X reverses at 180°: the velocity integrator must rebuild the friction force, so the radius bulges
+    just after the reversal; away from reversals PI removes the friction offset entirely.
+    """
+    dt = 2e-4
+    w, t, pos, vel, acc = circle(10.0, 2000 / 60, 1.25, dt)
+    theta = np.degrees(w * t) % 360
+    after = (t > 1.0) & (theta > 180) & (theta < 200)
+    quiet = (t > 1.0) & (theta > 60) & (theta < 120)
+    peaks = []
+    for ti in ti_values:
+        servo = axis(ti=ti)
+        plain = run([servo, servo], dt, pos, vel, acc)
+        rough = run([servo, servo], dt, pos, vel, acc, effects={"x": LoopEffects(coulomb_N=coulomb)})
+        bulge = np.hypot(*rough.position.T) - np.hypot(*plain.position.T)
+        peaks.append(np.abs(bulge[after]).max())
+        assert peaks[-1] == np.abs(bulge[(t > 1.0) & (theta > 170) & (theta < 260)]).max()  # right after 180°
+        assert np.abs(bulge[quiet]).max() < 0.02 * peaks[-1]
+    return np.array(peaks)
+
+
+def test_friction_spike_after_reversal_shrinks_with_integral_gain():
+    peaks = friction_bulge_peaks(150.0)
+    assert peaks[0] > peaks[1] > peaks[2] > 1e-3  # a few µm, shrinking with shorter ti
+
+
+def test_friction_spike_grows_with_friction_level():
+    np.testing.assert_array_less(friction_bulge_peaks(75.0, (0.01,)), friction_bulge_peaks(150.0, (0.01,)))
+
+
+def back_and_forth(dt, stroke=1.0, move=0.3, dwell=0.6):
+    """Forward `stroke` [mm] in `move` [s], dwell, back, dwell: position, velocity; index of both dwells' ends."""
+    ramp = np.linspace(0.0, stroke, int(move / dt))
+    n_dwell = int(dwell / dt)
+    pos = np.concatenate([np.zeros(n_dwell), ramp, np.full(n_dwell, stroke), ramp[::-1], np.zeros(n_dwell)])
+    return pos, np.gradient(pos, dt), 2 * n_dwell + ramp.size - 1, pos.size - 1
+
+
+@pytest.mark.parametrize("feedback", ["motor", "scale"])
+def test_backlash_lost_motion_at_reversal(feedback):
+    dt, lost = 2e-4, 0.010
+    pos, vel, forward_end, back_end = back_and_forth(dt)
+    effects = {"x": LoopEffects(backlash_mm=lost, backlash_feedback=feedback)}
+    r = run([axis()], dt, pos[:, None], vel[:, None], np.zeros((pos.size, 1)), effects=effects)
+    table_error = r.position[:, 0] - pos
+    encoder_error = r.encoder[:, 0] - pos
+    # the loop settles what it sees onto the command in both dwells
+    assert np.abs(encoder_error[[forward_end, back_end]]).max() < 1e-8
+    if feedback == "motor":  # the table lags by half the play each way: a step of the lost motion between them
+        assert table_error[back_end] - table_error[forward_end] == pytest.approx(lost, abs=1e-8)
+    else:  # the scale sees the table, so the loop takes up the play
+        assert np.abs(table_error[[forward_end, back_end]]).max() < 1e-8
+    # after the reversal the table stands still until the motor has crossed the play
+    reverse = int(np.argmax(vel < 0))
+    table = r.position[reverse:, 0]
+    stuck = int(np.argmax(table < table[0] - 1e-12))
+    assert stuck > 5
+    motor_travel = r.encoder[reverse, 0] - r.encoder[reverse + stuck, 0] if feedback == "motor" else None
+    if motor_travel is not None:
+        assert motor_travel == pytest.approx(lost, rel=0.05)
+
+
+@pytest.mark.parametrize("delay", [3e-4, 2.37e-4])
+def test_feedback_delay_ramp(delay):
+    # Steady ramp, P-PI: the loop drives what it sees to kp·(r - x_fb) = v, so the encoder it reads lags
+    # by v/kp; that reading is `delay` old, so the axis itself is v·delay further on: lag v/kp - v·delay.
+    dt, v, kp = 1e-4, 50.0, 40.0
+    t = np.arange(20000) * dt
+    ramp = (v * t)[:, None]
+    r = run([axis(kp=kp)], dt, ramp, np.full_like(ramp, v), np.zeros_like(ramp),
+            effects={"x": LoopEffects(feedback_delay_s=delay)})  # fmt: skip
+    assert ramp[-1, 0] - r.encoder[-1, 0] == pytest.approx(v / kp, rel=1e-9)
+    assert ramp[-1, 0] - r.position[-1, 0] == pytest.approx(v / kp - v * delay, rel=1e-9)
+
+
+def fft_peak_hz(signal, dt, above_hz):
+    """Frequency [Hz] of the largest spectral peak above `above_hz`, cubic trend removed, Hann window."""
+    k = np.arange(signal.size)
+    signal = signal - np.polyval(np.polyfit(k, signal, 3), k)
+    pad = 64 * signal.size
+    spectrum = np.abs(np.fft.rfft(signal * np.hanning(signal.size), pad))
+    freq = np.fft.rfftfreq(pad, dt)
+    spectrum[freq < above_hz] = 0.0
+    return freq[np.argmax(spectrum)]
+
+
+@pytest.mark.parametrize("freq", [60.0, 120.0])
+def test_mode_rings_at_its_frequency_after_acceleration(freq):
+    # Accelerate at 2 m/s² for 25 ms, then cruise: the tool-side mass rings. Its frequency lies between
+    # the mode with the carriage held (f·sqrt(1 - ζ²)) and with the carriage free (f/sqrt(1 - r)).
+    dt, a, t1, zeta, ratio = 1e-4, 2000.0, 0.025, 0.02, 0.02
+    t = np.arange(6000) * dt
+    acc = np.where(t < t1, a, 0.0)
+    vel = np.where(t < t1, a * t, a * t1)
+    pos = np.where(t < t1, a * t**2 / 2, a * t1**2 / 2 + a * t1 * (t - t1))
+    refs = pos[:, None], vel[:, None], acc[:, None]
+    effects = LoopEffects(mode_freq_hz=freq, mode_damping_ratio=zeta, mode_mass_ratio=ratio)
+    ringing = run([axis()], dt, *refs, effects={"x": effects}).position[:, 0] - run([axis()], dt, *refs).position[:, 0]
+    measured = fft_peak_hz(ringing[t > t1], dt, above_hz=20.0)
+    assert freq * np.sqrt(1 - zeta**2) * 0.995 < measured < freq / np.sqrt(1 - ratio) * 1.005
+    assert np.abs(ringing[t > t1]).max() > 0.5 * a / (2 * np.pi * freq) ** 2  # about a/ω² [mm]
+
+
+def slow_ramp(n=30000, v=7.3):
+    t = np.arange(n) * DT
+    ramp = (v * t)[:, None]
+    return ramp, np.full_like(ramp, v), np.zeros_like(ramp)
+
+
+def test_quantised_encoder():
+    # The loop sees the encoder rounded to the quantum: an error uniform on ±q/2, RMS q/√12.
+    q = 0.001
+    r = run([axis()], DT, *slow_ramp(), effects={"x": LoopEffects(quantum_mm=q)})
+    np.testing.assert_allclose(r.encoder / q, np.round(r.encoder / q), rtol=0, atol=1e-6)
+    error = (r.encoder - r.position)[1000:, 0]
+    assert np.abs(error).max() <= q / 2 * (1 + 1e-9)
+    assert np.sqrt(np.mean(error**2)) == pytest.approx(q / np.sqrt(12), rel=0.02)
+
+
+def test_measurement_noise_rms_and_determinism():
+    noise = 0.002
+    plain = run([axis(), axis()], DT, *(np.tile(r, 2) for r in slow_ramp()))
+    noisy = [
+        run([axis(), axis()], DT, *(np.tile(r, 2) for r in slow_ramp()),
+            effects={"x": LoopEffects(noise_mm=noise, seed=seed), "y": LoopEffects(noise_mm=noise, seed=seed)})
+        for seed in (7, 7, 8)
+    ]  # fmt: skip
+    recorded = noisy[0].position - plain.position
+    assert np.sqrt(np.mean(recorded**2, axis=0)) == pytest.approx([noise, noise], rel=0.02)
+    assert np.abs(recorded.mean(axis=0)).max() < 0.03 * noise
+    assert abs(np.corrcoef(recorded.T)[0, 1]) < 0.03  # the axes' noise is independent
+    np.testing.assert_array_equal(noisy[0].encoder, plain.encoder)  # outside the loop
+    np.testing.assert_array_equal(noisy[0].position, noisy[1].position)  # same seed, same noise
+    assert np.abs(noisy[2].position - noisy[0].position).max() > noise
+
+
+# --- batches ---------------------------------------------------------------------------------
+
+
+def batch_case():
+    servos = {"x": axis(**ELECTRICAL), "y": axis(kp=30.0, vff=1.0, current_limit=4.0), "z": axis(ti=None)}
+    variants = [
+        {},
+        {"x": EFFECTS["all"], "y": LoopEffects(backlash_mm=0.005, coulomb_N=80.0, noise_mm=0.001, seed=3)},
+        {"y": LoopEffects(feedback_delay_s=5.5 * DT, **MODE), "z": LoopEffects(quantum_mm=0.0001, noise_mm=0.002)},
+    ]
+    w, t, pos, vel, acc = circle(5.0, 3000 / 60, 0.3, DT)
+    refs = tuple(np.column_stack([r, 0.1 * r[:, 0]]) for r in (pos, vel, acc))
+    return servos, variants, refs
+
+
+def test_batch_row_equals_single_run_bit_for_bit():
+    servos, variants, refs = batch_case()
+    rows = np.array([[pack(s, DT, v.get(name, LoopEffects())) for name, s in servos.items()] for v in variants])
+    assert rows.shape == (3, 3, NPAR)
+    batch = run_batch(rows, DT, *refs, outputs=kernel.BATCH_OUTPUTS)
+    decimated = run_batch(rows, DT, *refs, outputs=("tool", "current"), every=7, dtype=np.float32)
+    for b, effects in enumerate(variants):
+        single = run(servos, DT, *refs, effects=effects)
+        for name, field in [("tool", "position"), ("encoder", "encoder"), ("velocity", "velocity"),
+                            ("current", "current"), ("saturated", "saturated")]:  # fmt: skip
+            np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=name)
+        np.testing.assert_array_equal(batch["saturated_count"][b], single.saturated.sum(axis=0))
+        np.testing.assert_array_equal(decimated["tool"][b], single.position[::7].astype(np.float32))
+        np.testing.assert_array_equal(decimated["current"][b], single.current[::7].astype(np.float32))
+    np.testing.assert_array_equal(decimated["t"], np.arange(refs[0].shape[0])[::7] * DT)
+    assert set(decimated) == {"t", "tool", "current", "saturated_count"}
+    assert batch["saturated_count"][:, 1].min() > 0  # the limit is reached: anti-windup is exercised
+
+
+def test_switching_effects_does_not_compile():
+    servos, variants, refs = batch_case()
+    run(servos, DT, *refs)
+    compiled = len(kernel._variant_plain.signatures)
+    for effects in variants:
+        run(servos, DT, *refs, effects=effects)
+    assert len(kernel._variant_plain.signatures) == compiled
+
+
+def test_importing_the_kernel_does_not_import_python_control():
+    code = "import sys, contoursim.kernel; print('control' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+# --- bad input -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        (dict(backlash_mm=-0.001), "backlash_mm"),
+        (dict(backlash_feedback="table"), "backlash_feedback"),
+        (dict(coulomb_N=float("nan")), "coulomb_N"),
+        (dict(asymmetry_N="10"), "asymmetry_N"),
+        (dict(stribeck_velocity_mm_s=0.0), "stribeck_velocity_mm_s"),
+        (dict(mode_freq_hz=-5.0), "mode_freq_hz"),
+        (dict(mode_damping_ratio=1.0), "mode_damping_ratio"),
+        (dict(mode_mass_ratio=0.0), "mode_mass_ratio"),
+        (dict(noise_mm=-1.0), "noise_mm"),
+        (dict(seed=-1), "seed"),
+        (dict(seed=1.5), "seed"),
+    ],
+)
+def test_bad_effects_name_the_parameter(kw, message):
+    with pytest.raises(ValueError, match=message):
+        LoopEffects(**kw)
+
+
+def test_delay_beyond_the_buffer_is_refused():
+    pack(axis(), DT, LoopEffects(feedback_delay_s=MAX_DELAY_SAMPLES * DT))
+    with pytest.raises(ValueError, match=rf"feedback_delay_s = 0.0064 s is 64 servo periods.*at most {MAX_DELAY_SAMPLES}"):
+        pack(axis(), DT, LoopEffects(feedback_delay_s=64 * DT))
+
+
+def test_bad_run_and_batch_arguments():
+    ref = np.zeros((10, 1))
+    with pytest.raises(ValueError, match="effects name axis 'y', which is not one of the axes x"):
+        run([axis()], DT, ref, ref, ref, effects={"y": LoopEffects()})
+    with pytest.raises(ValueError, match="effects must be a LoopEffects"):
+        run([axis()], DT, ref, ref, ref, effects={"x": dict(backlash_mm=0.01)})
+    rows = pack(axis(), DT)[None, None, :]
+    with pytest.raises(ValueError, match=r"rows must have shape \(B, n_axes, 62\)"):
+        run_batch(rows[..., :-1], DT, ref, ref, ref)
+    with pytest.raises(ValueError, match="outputs must name signals from tool"):
+        run_batch(rows, DT, ref, ref, ref, outputs=("position",))
+    with pytest.raises(ValueError, match="every must be a positive integer"):
+        run_batch(rows, DT, ref, ref, ref, every=0)
+    with pytest.raises(ValueError, match="dtype must be float64 or float32"):
+        run_batch(rows, DT, ref, ref, ref, dtype=np.int32)
+    with pytest.raises(ValueError, match=r"ref_vel must have shape \(10, 1\)"):
+        run_batch(rows, DT, ref, ref[:5], ref)
