@@ -169,7 +169,8 @@ class LoopEffects:
 
     Notes
     -----
-    The friction force opposing motion, with ``s = tanh(v/v_ε)``, is
+    The friction force opposing motion, with the smooth sign
+    ``s = v/sqrt(v^2 + v_ε^2)``, is
     ``(coulomb_N + stribeck_N·exp(-(v/stribeck_velocity)^2))·s +
     viscous·v + asymmetry_N·|s|``; the disturbance force on the carriage is
     ``offset_N`` minus it. The velocity scale ``v_ε`` is
@@ -316,11 +317,10 @@ class ServoResponse:
 
 
 @njit(cache=True)
-def _sensors(p, a, x, table, quantum):
+def _sensors(x, table, half_play, scale, quantum):
     """Table behind the play and the encoder reading: ``(table, encoder)`` [mm]."""
-    h = p[a, _HALF_PLAY]
-    table = min(max(table, x - h), x + h)
-    encoder = table if p[a, _SCALE] != 0.0 else x
+    table = min(max(table, x - half_play), x + half_play)
+    encoder = table if scale else x
     if quantum > 0.0:
         encoder = quantum * math.floor(encoder / quantum + 0.5)
     return table, encoder
@@ -366,9 +366,12 @@ def _current_controller(b, c, d, z, e_i):
 @njit(cache=True)
 def _disturbance(fc, fv, fs, vs, fa, f0, veps, v):
     """Disturbance force on the carriage [N]: the offset minus friction at velocity `v` [mm/s]."""
-    s = math.tanh(v / veps)
-    r = v / vs
-    return f0 - (fc + fs * math.exp(-r * r)) * s - fv * v - fa * abs(s)
+    s = v / math.sqrt(v * v + veps * veps)
+    level = fc
+    if fs != 0.0:
+        r = v / vs
+        level += fs * math.exp(-r * r)
+    return f0 - level * s - fv * v - fa * abs(s)
 
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -417,7 +420,8 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
     s = np.empty(_NS)
     for a in range(n_axes):  # at rest: the delay buffers hold the first encoder reading
         keys[a] = _mix(np.uint64(par[a, _SEED]) * np.uint64(n_axes + 1) + np.uint64(a))
-        state[a, _TABLE], enc = _sensors(par, a, state[a, 0], state[a, _TABLE], par[a, _QUANTUM])
+        state[a, _TABLE], enc = _sensors(state[a, 0], state[a, _TABLE], par[a, _HALF_PLAY], par[a, _SCALE] != 0.0,
+                                         par[a, _QUANTUM])  # fmt: skip
         state[a, _BUFX : _BUFX + _NBUF] = enc
         state[a, _BUFV : _BUFV + _NBUF] = state[a, 1]
         counts[a] = 0
@@ -425,7 +429,8 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
         j = k // every
         record = k - j * every == 0
         for a in range(n_axes):
-            table, enc = _sensors(par, a, state[a, 0], state[a, _TABLE], par[a, _QUANTUM])
+            table, enc = _sensors(state[a, 0], state[a, _TABLE], par[a, _HALF_PLAY], par[a, _SCALE] != 0.0,
+                                  par[a, _QUANTUM])  # fmt: skip
             state[a, _TABLE] = table
             slot = k % _NBUF
             state[a, _BUFX + slot] = enc

@@ -151,7 +151,7 @@ def reference_loop(servo, effects, start):
         e = effects
         v_eps = max(kernel.FRICTION_VELOCITY_MM_S, 2000 * (e.coulomb_N + e.stribeck_N + abs(e.asymmetry_N)) * DT
                     / (servo.mass * (1 - e.mode_mass_ratio) if e.mode_freq_hz else servo.mass))  # fmt: skip
-        s = np.tanh(u[0] / v_eps)
+        s = u[0] / np.hypot(u[0], v_eps)
         level = e.coulomb_N + e.stribeck_N * np.exp(-((u[0] / e.stribeck_velocity_mm_s) ** 2))
         return [e.offset_N - level * s - e.viscous_N_s_per_m / 1000 * u[0] - e.asymmetry_N * abs(s)]
 
