@@ -92,9 +92,8 @@ def finite_array(name, value, ndim=None, shape=None):
         ):
             want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        first = np.unravel_index(np.argmax(bad), arr.shape)
+    if not np.isfinite(arr).all():
+        first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
         raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
     return arr
 
