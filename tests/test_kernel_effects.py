@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from contoursim import kernel
+from contoursim.exceptions import UnstableLoopError
 from contoursim.kernel import MAX_DELAY_SAMPLES, NPAR, LoopEffects, pack, run, run_batch
 from contoursim.servo import AxisServo
 
@@ -413,7 +414,8 @@ def test_batch_row_equals_single_run_bit_for_bit():
         np.testing.assert_array_equal(decimated["tool"][b], single.position[::7].astype(np.float32))
         np.testing.assert_array_equal(decimated["current"][b], single.current[::7].astype(np.float32))
     np.testing.assert_array_equal(decimated["t"], np.arange(refs[0].shape[0])[::7] * DT)
-    assert set(decimated) == {"t", "tool", "current", "saturated_count"}
+    assert set(decimated) == {"t", "tool", "current", "saturated_count", "diverged_step"}
+    assert (batch["diverged_step"] == -1).all()
     assert batch["saturated_count"][:, 1].min() > 0  # the limit is reached: anti-windup is exercised
 
 
@@ -469,7 +471,7 @@ def test_bad_run_and_batch_arguments():
     with pytest.raises(ValueError, match="effects must be a LoopEffects"):
         run([axis()], DT, ref, ref, ref, effects={"x": dict(backlash_mm=0.01)})
     rows = pack(axis(), DT)[None, None, :]
-    with pytest.raises(ValueError, match=r"rows must have shape \(B, n_axes, 62\)"):
+    with pytest.raises(ValueError, match=r"rows must have shape \(B, n_axes, 63\)"):
         run_batch(rows[..., :-1], DT, ref, ref, ref)
     with pytest.raises(ValueError, match="outputs must name signals from tool"):
         run_batch(rows, DT, ref, ref, ref, outputs=("position",))
@@ -479,3 +481,15 @@ def test_bad_run_and_batch_arguments():
         run_batch(rows, DT, ref, ref, ref, dtype=np.int32)
     with pytest.raises(ValueError, match=r"ref_vel must have shape \(10, 1\)"):
         run_batch(rows, DT, ref, ref[:5], ref)
+
+
+def test_diverging_variants_are_reported():
+    ref = np.zeros((80000, 1))  # the delayed loop grows by about 1e12 per 0.2 s: inf within 8 s
+    ref[1:] = 0.01
+    with pytest.raises(UnstableLoopError, match=r"simulation of axis 'x' diverged at t = .* s \(step \d+\)"):
+        run([axis()], DT, ref, np.zeros_like(ref), np.zeros_like(ref),
+            effects={"x": LoopEffects(feedback_delay_s=MAX_DELAY_SAMPLES * DT)})  # fmt: skip
+    rows = np.array([[pack(axis(), DT)], [pack(axis(kv=100 * KV), DT)]])  # pack does not check: kv far too high
+    result = run_batch(rows, DT, ref, np.zeros_like(ref), np.zeros_like(ref))
+    assert result["diverged_step"][0, 0] == -1 and result["diverged_step"][1, 0] > 0
+    assert np.isfinite(result["tool"][0]).all()
