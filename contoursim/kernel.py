@@ -75,6 +75,7 @@ __all__ = [
     "pack",
     "run",
     "run_batch",
+    "spectral_radius",
     "MAX_DELAY_SAMPLES",
     "NPAR",
     "BATCH_OUTPUTS",
@@ -598,7 +599,8 @@ def pack(servo, dt, effects=LoopEffects()):
     `pack` does not check the loop (that is what makes a variant cheap): a
     variant with new gains, masses or effects may be unstable, and its
     stability is the caller's business. :func:`run` checks each AxisServo's
-    nominal linear loop (:func:`contoursim.servo.check`, once per servo).
+    nominal linear loop (:func:`contoursim.servo.check`, once per servo);
+    :func:`spectral_radius` is a cheap check of a packed row.
     """
     if not isinstance(servo, AxisServo):
         raise ValueError(f"servo must be an AxisServo, got {type(servo).__name__}")
@@ -643,6 +645,69 @@ def pack(servo, dt, effects=LoopEffects()):
     row[_DELAY_N], row[_DELAY_F] = whole, max(delay - whole, 0.0)
     row[_QUANTUM], row[_NOISE], row[_SEED] = e.quantum_mm, e.noise_mm, e.seed
     return row
+
+
+def spectral_radius(row):
+    """Largest closed-loop eigenvalue modulus of a packed axis's linear sampled loop: < 1 is stable.
+
+    The cheap stability check of a variant (no python-control): the plant
+    (with its structural mode and current loop), the controllers and the
+    feedback delay, without saturation, backlash, friction and quantisation.
+
+    Parameters
+    ----------
+    row : array_like, shape (NPAR,)
+        One axis's row from :func:`pack`.
+
+    Returns
+    -------
+    float
+        ``max |λ|`` of the loop's state-transition matrix [-].
+    """
+    p = _validate.finite_array("row", row, shape=(NPAR,))
+    electrical, integral = p[_ELEC] != 0.0, p[_VC] != 0.0
+    n_delay, f = int(p[_DELAY_N]), p[_DELAY_F]
+    depth = n_delay + 1 if (n_delay or f) else 0  # past samples of x and v the loop reads
+    # state: plant (5), then the integrators in use, then the delayed x and v samples (k-1 .. k-depth)
+    zv, zc = _NS, _NS + integral
+    hx = zc + electrical
+    hv = hx + depth
+    size = hv + depth
+    Ad = p[_AD : _AD + _NS * _NS].reshape(_NS, _NS)
+    Bu = p[_BU : _BU + _NS]
+
+    def sample(signal, history, back):
+        """Row picking the plant state `signal` (0: x, 1: v) `back` samples ago."""
+        r = np.zeros(size)
+        r[signal if back == 0 else history + back - 1] = 1.0
+        return r
+
+    def fed_back(signal, history):
+        return (1.0 - f) * sample(signal, history, n_delay) + (f * sample(signal, history, n_delay + 1) if f else 0.0)
+
+    e_v = -p[_KP] * fed_back(0, hx) - fed_back(1, hv)
+    i_cmd = p[_VD] * e_v
+    if integral:
+        i_cmd[zv] += p[_VC]
+    u = i_cmd
+    if electrical:
+        e_i = i_cmd.copy()
+        e_i[4] -= 1.0
+        u = p[_CD] * e_i
+        u[zc] += p[_CC]
+    phi = np.zeros((size, size))
+    phi[:_NS, :_NS] = Ad
+    phi[:_NS] += Bu[:, None] * u
+    if integral:
+        phi[zv] = p[_VB] * e_v
+        phi[zv, zv] += 1.0
+    if electrical:
+        phi[zc] = p[_CB] * e_i
+        phi[zc, zc] += 1.0
+    for history, signal in ((hx, 0), (hv, 1)):
+        for j in range(depth):
+            phi[history + j] = sample(signal, history, j)
+    return float(np.abs(np.linalg.eigvals(phi)).max())
 
 
 # ---------------------------------------------------------------------------------------------

@@ -493,3 +493,28 @@ def test_diverging_variants_are_reported():
     result = run_batch(rows, DT, ref, np.zeros_like(ref), np.zeros_like(ref))
     assert result["diverged_step"][0, 0] == -1 and result["diverged_step"][1, 0] > 0
     assert np.isfinite(result["tool"][0]).all()
+
+
+# --- the cheap stability check of a packed variant --------------------------------------------
+
+
+@pytest.mark.parametrize("extra", [dict(), dict(ti=None), dict(**ELECTRICAL), dict(kp=2000.0)])
+def test_spectral_radius_equals_python_control_closed_loop_poles(extra):
+    servo = axis(**extra)
+    want = np.abs(servo.discretize(DT).closed_loop.poles()).max()
+    assert kernel.spectral_radius(pack(servo, DT)) == pytest.approx(want, abs=1e-12)
+
+
+@pytest.mark.parametrize("delay", [30.0, 37.5, 45.0])
+def test_spectral_radius_with_delay_is_the_simulated_growth_rate(delay):
+    # A loop made unstable by the feedback delay: its simulated oscillation grows by the radius per step.
+    row = pack(axis(), DT, LoopEffects(feedback_delay_s=delay * DT))
+    rho = kernel.spectral_radius(row)
+    assert rho > 1.0
+    ref = np.full((12000, 1), 1e-6)
+    ref[0] = 0.0
+    x = run_batch(row[None, None], DT, ref, np.zeros_like(ref), np.zeros_like(ref))["tool"][0, :, 0] - 1e-6
+    window, k1, k2 = 500, 6000, 11000
+    growth = (np.abs(x[k2 : k2 + window]).max() / np.abs(x[k1 : k1 + window]).max()) ** (1 / (k2 - k1))
+    assert growth == pytest.approx(rho, rel=2e-4)
+    assert kernel.spectral_radius(pack(axis(), DT, LoopEffects(feedback_delay_s=3 * DT))) < 1.0
