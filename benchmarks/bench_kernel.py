@@ -28,7 +28,8 @@ per turn) sampled at 5 kHz:
   friction and backlash values per axis, so nothing is cached), best of 200;
 * ``kernel_batch_axis_steps_per_s``: ``run_batch`` of 64 variants (friction
   and backlash on every axis, values varying per variant) on the first
-  50,000 steps of the helix, tool position only (float64), all cores, best of 3;
+  50,000 steps of the helix, tool position only (float64), all cores, best of 3
+  (also printed: axis-steps per CPU-second of all threads, for a loaded machine);
 * ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
   throughput over the compiled inner loop's alone (same packed rows,
   outputs preallocated), best of 5 each.
@@ -41,6 +42,7 @@ import time
 from dataclasses import replace
 
 import control as ct
+import numba
 import numpy as np
 
 from contoursim import kernel
@@ -72,12 +74,12 @@ def helix(n):
     return pos, vel, acc
 
 
-def best_of(fn, repeat):
+def best_of(fn, repeat, clock=time.perf_counter):
     times = []
     for _ in range(repeat):
-        start = time.perf_counter()
+        start = clock()
         result = fn()
-        times.append(time.perf_counter() - start)
+        times.append(clock() - start)
     return min(times), result
 
 
@@ -168,6 +170,7 @@ def main():
     refs = (pos[:N_BATCH], vel[:N_BATCH], acc[:N_BATCH])
     run_batch(batch_rows[:2], DT, *refs)  # compile or load
     t_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3)
+    cpu_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3, clock=time.process_time)
     t_loaded, kernel_result = best_of(lambda: run(loaded, DT, pos, vel, acc), 5)
 
     model = python_control_model(loaded)
@@ -198,6 +201,8 @@ def main():
     print(f"{'kernel, plain, bare inner loop (no checks, preallocated)':58s} {N:8d} {t_inner:10.4f} {axis_steps / t_inner:14.4g}")
     print(f"{'kernel, batch of 64 variants, friction + backlash':58s} {N_BATCH:8d} {t_batch:10.4f} "
           f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip
+    print(f"  the same batch per CPU-second of all its threads: {B * N_BATCH * 3 / cpu_batch:.4g} axis-steps "
+          f"({numba.get_num_threads()} threads; the wall figure is lower when other processes share the cores)")
     print(f"kernel_all_effects_slowdown: {t_effects / t_plain:.2f}")
     print(f"variant_pack_ms: {1e3 * t_pack:.3f}")
     print(f"kernel_batch_axis_steps_per_s: {B * N_BATCH * 3 / t_batch:.3g}")
