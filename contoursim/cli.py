@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import TomlFile
-from .exceptions import ConfigError, UnstableLoopError
+from .exceptions import ConfigError, OutputError, UnstableLoopError
 from .feed import sample
 from .geocomp import GeometricCompensation
 from .output import output_dir
@@ -77,7 +77,8 @@ def _write(out, machine, runs):
     out = output_dir(out)
     for name, path_file, result, circle in runs:
         metadata = {"machine": machine.name, "path": Path(path_file).name}
-        result.save_csv(out.file(f"{name}.csv"), metadata=metadata, overwrite=True)
+        with out.write(f"{name}.csv") as stream:
+            result.save_csv(stream, metadata=metadata)
         save_figures(result, out, name, circle=circle)
     return out, [(name, result.summary()) for name, _, result, _ in runs]
 
@@ -164,9 +165,13 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         args.run(args)
-    except (ConfigError, UnstableLoopError, ValueError, FileExistsError) as exc:
+    except (ConfigError, UnstableLoopError, ValueError, TypeError, FileExistsError, OutputError) as exc:
         print(f"contoursim {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"contoursim {args.command}: interrupted; files already complete are kept, none is left half-written",
+              file=sys.stderr)
+        return 130
     return 0
 
 

@@ -97,7 +97,17 @@ class SimResult:
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
 
     def save_csv(self, file, metadata=None, overwrite=False):
-        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm]."""
+        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm].
+
+        Parameters
+        ----------
+        file : str, Path or text file object
+            Destination, written atomically; see :func:`contoursim.traces.write_trace`.
+        metadata : dict, optional
+            ``# key: value`` header lines.
+        overwrite : bool
+            Replace an existing file.
+        """
         extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
         write_trace(file, self.to_trace(metadata), extra=extra, overwrite=overwrite)
 

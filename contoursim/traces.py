@@ -17,6 +17,7 @@ import numpy as np
 
 from . import _validate
 from .exceptions import TraceFormatError
+from .output import writing
 
 __all__ = ["Trace", "read_trace", "write_trace"]
 
@@ -73,8 +74,10 @@ def write_trace(file, trace, extra=None, overwrite=False):
 
     Parameters
     ----------
-    file : str or Path
-        Destination. An existing file is only replaced when `overwrite` is true.
+    file : str, Path or text file object
+        Destination. A file is written atomically (see
+        :func:`contoursim.output.atomic_write`); an existing one is only
+        replaced when `overwrite` is true.
     trace : Trace
         What to write.
     extra : dict of str -> ndarray, shape (N,), optional
@@ -82,9 +85,6 @@ def write_trace(file, trace, extra=None, overwrite=False):
     overwrite : bool
         Replace an existing file.
     """
-    file = Path(file)
-    if file.exists() and not overwrite:
-        raise FileExistsError(f"{file} exists; refusing to overwrite it")
     columns = {"t": trace.t}
     for i, axis in enumerate(trace.axes):
         columns[f"{axis}_ref"] = trace.reference[:, i]
@@ -94,7 +94,7 @@ def write_trace(file, trace, extra=None, overwrite=False):
             raise ValueError(f"extra column {name!r} clashes with a trace column")
         columns[name] = _validate.finite_array(name, values, shape=(trace.t.size,))
     header = "".join(f"# {key}: {value}\n" for key, value in trace.metadata.items())
-    with open(file, "w", encoding="utf-8", newline="") as out:
+    with writing(file, overwrite=overwrite) as out:
         out.write(header)
         np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", fmt="%.12g",
                    header=",".join(columns), comments="")

@@ -168,21 +168,22 @@ def axis_machine(folder, axis, table, travel):
         The machine TOML.
     chain : contoursim.multibody.MachineChain
     """
-    file = output_dir(folder).file(f"{axis}_iso230_2_axis.toml")
-    file.write_text(
-        f'name = "one-axis {axis.upper()} slide, ISO 230-2 table"\n'
-        f'tool = "{axis.upper()}"\n'
-        'workpiece = "bed"\n\n'
-        "[[body]]\n"
-        f'name = "{axis.upper()}"\n'
-        'parent = "bed"\n'
-        f'joint = "linear {axis}"\n'
-        f'axis = "{axis}"\n'
-        f"travel = [{travel[0]:g}, {travel[1]:g}]\n"
-        "[body.errors]\n"
-        f'table = "{table}"                 # measured positioning error d{axis}(q)\n',
-        encoding="utf-8",
-    )
+    folder = output_dir(folder)
+    file = folder.file(f"{axis}_iso230_2_axis.toml")
+    with folder.write(file.name) as stream:
+        stream.write(
+            f'name = "one-axis {axis.upper()} slide, ISO 230-2 table"\n'
+            f'tool = "{axis.upper()}"\n'
+            'workpiece = "bed"\n\n'
+            "[[body]]\n"
+            f'name = "{axis.upper()}"\n'
+            'parent = "bed"\n'
+            f'joint = "linear {axis}"\n'
+            f'axis = "{axis}"\n'
+            f"travel = [{travel[0]:g}, {travel[1]:g}]\n"
+            "[body.errors]\n"
+            f'table = "{table}"                 # measured positioning error d{axis}(q)\n'
+        )
     return file, chain_from_toml(TomlFile.read(file))
 
 
@@ -228,7 +229,8 @@ def main(out=Path("contoursim-out")):
         for label, value in quoted.items():
             print(f"  {label:<24} {UM * value:8.1f} µm")
         table = f"{axis}_iso230_2.csv"
-        write_error_table(out.file(table), axis, figures, source=name, overwrite=True)  # replaces only its own file
+        with out.write(table) as stream:  # replaces only its own file
+            write_error_table(stream, axis, figures, source=name)
         travel = (figures.targets[0], figures.targets[-1])
         file, chain = axis_machine(out, axis, table, travel)
         q = np.linspace(*travel, 8 * (figures.targets.size - 1) + 1)  # the targets and 7 points between each pair

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from contoursim.cli import main
+from contoursim.simulate import SimResult
 from contoursim.traces import read_trace
 
 SMALL_PATH = """
@@ -182,3 +183,32 @@ def test_job_work_offset_moves_the_path_on_the_machine(tmp_path, capsys):
     job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { w = 1 }\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
     assert f"{job}, line 3: unknown key 'w' in [work_offset]" in capsys.readouterr().err
+
+
+def test_unwritable_output_gives_one_line(tmp_path, capsys, monkeypatch):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+
+    def denied(file, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(file))
+
+    monkeypatch.setattr("contoursim.output.open", denied, raising=False)  # a read-only folder, even for root
+    assert main(["simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [f"contoursim simulate: error: cannot write {tmp_path / 'o' / 'small.csv'}: "
+                                        "Permission denied"]
+
+
+def test_ctrl_c_gives_one_line_exit_130_and_no_half_written_file(tmp_path, capsys, monkeypatch):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    out = tmp_path / "out"
+
+    def interrupted(self, file, metadata=None):
+        file.write("t,x_ref,x\n0,0,0\n")  # a truncated trace that ends on a whole row
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(SimResult, "save_csv", interrupted)
+    assert main(["simulate", str(tmp_path / "small.toml"), "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("contoursim simulate: interrupted")
+    assert sorted(p.name for p in out.iterdir()) == [".contoursim-out"]  # nothing half-written, nothing listed
+    assert "small.csv" not in (out / ".contoursim-out").read_text()

@@ -86,7 +86,8 @@ def test_figures_match_the_ecmc_report(real_data, axis):
 def test_chain_reproduces_the_mean_bidirectional_deviation(real_data, tmp_path, axis):
     s = figures_of(real_data, axis)
     out = output_dir(tmp_path)
-    write_error_table(out.file("table.csv"), axis, s, source=EXAMPLE["FILES"][axis])
+    with out.write("table.csv") as stream:
+        write_error_table(stream, axis, s, source=EXAMPLE["FILES"][axis])
     _, chain = EXAMPLE["axis_machine"](out, axis, "table.csv", (s.targets[0], s.targets[-1]))
     k = "xyz".index(axis)
 
