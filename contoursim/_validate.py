@@ -54,7 +54,7 @@ def _finite_scalar(name, value):
     return value
 
 
-def finite_array(name, value, ndim=None, shape=None):
+def finite_array(name, value, ndim=None, shape=None, limit=None):
     """Return `value` as a float ndarray after checking it.
 
     Parameters
@@ -67,6 +67,8 @@ def finite_array(name, value, ndim=None, shape=None):
         Required number of dimensions.
     shape : tuple, optional
         Required shape; ``None`` entries match any length.
+    limit : float, optional
+        Largest magnitude allowed.
     """
     if isinstance(value, (str, bytes)):
         raise ValueError(f"{name} must be numeric, got {value!r}")
@@ -91,6 +93,9 @@ def finite_array(name, value, ndim=None, shape=None):
     if bad.any():
         first = np.unravel_index(np.argmax(bad), arr.shape)
         raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
+    if limit is not None and np.any(np.abs(arr) > limit):
+        first = np.unravel_index(np.argmax(np.abs(arr) > limit), arr.shape)
+        raise ValueError(f"{name} holds {arr[first]:g} at index {tuple(map(int, first))}, beyond ±{limit:g}")
     return arr
 
 

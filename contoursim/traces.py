@@ -6,6 +6,11 @@ increasing and uniform, and for each axis the pair ``<axis>_ref``, ``<axis>``
 [mm] for the axis sets ``x``, ``x, y`` or ``x, y, z``. ``*_ref`` are the
 commanded (interpolator) positions, the others the measured tool positions.
 Extra columns are ignored on reading.
+
+Values must be physically meaningful: positions within ±1e6 mm
+(:data:`MAX_POSITION`, a kilometre, far beyond any machine's travel) and
+times within ±1e9 s (:data:`MAX_TIME`, about 30 years), so that differences of
+positions stay exact to the nm and never overflow.
 """
 
 import io
@@ -22,6 +27,8 @@ from .output import writing
 __all__ = ["Trace", "read_trace", "write_trace"]
 
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
+MAX_POSITION = 1e6  # [mm]: largest |position| in a trace
+MAX_TIME = 1e9  # [s]: largest |t| in a trace
 
 
 @dataclass(frozen=True)
@@ -31,11 +38,11 @@ class Trace:
     Parameters
     ----------
     t : ndarray, shape (N,)
-        Sample times [s], strictly increasing and uniform.
+        Sample times [s], strictly increasing and uniform, within ±:data:`MAX_TIME`.
     reference : ndarray, shape (N, d)
-        Commanded positions [mm].
+        Commanded positions [mm], within ±:data:`MAX_POSITION`.
     actual : ndarray, shape (N, d)
-        Measured tool positions [mm].
+        Measured tool positions [mm], within ±:data:`MAX_POSITION`.
     axes : tuple of str
         Axis names of the d columns: ``("x",)``, ``("x", "y")`` or ``("x", "y", "z")``.
     metadata : dict
@@ -49,13 +56,13 @@ class Trace:
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        t, dt = _validate.time_base("t", self.t)
+        t, dt = _validate.time_base("t", _validate.finite_array("t", self.t, ndim=1, limit=MAX_TIME))
         axes = tuple(self.axes)
         if axes not in AXIS_SETS:
             raise ValueError(f"axes must be one of {AXIS_SETS}, got {axes}")
         shape = (t.size, len(axes))
-        reference = _validate.finite_array("reference", self.reference, shape=shape)
-        actual = _validate.finite_array("actual", self.actual, shape=shape)
+        reference = _validate.finite_array("reference", self.reference, shape=shape, limit=MAX_POSITION)
+        actual = _validate.finite_array("actual", self.actual, shape=shape, limit=MAX_POSITION)
         for name, value in dict(t=t, reference=reference, actual=actual).items():
             value = np.array(value)  # a copy: the caller's arrays stay writeable
             value.flags.writeable = False
@@ -116,16 +123,22 @@ def read_trace(file):
     ------
     TraceFormatError
         Naming the file, line and column of the first problem: a missing
-        column, a non-numeric or non-finite cell, a ragged row, non-monotonic
-        or non-uniform time.
+        column (saying what the header holds), a non-numeric, non-finite or
+        out-of-range cell (see :data:`MAX_POSITION`, :data:`MAX_TIME`), a row
+        with more or fewer cells than the header, non-monotonic or non-uniform
+        time, text that is not UTF-8.
     """
     source = str(file)
     try:
-        lines = Path(file).read_text(encoding="utf-8-sig").splitlines()  # -sig: a leading BOM (Excel) is dropped
+        raw = Path(file).read_bytes()
     except OSError as exc:
         raise TraceFormatError(f"cannot read the file: {exc.strerror}", source) from None
-    except UnicodeDecodeError:
-        raise TraceFormatError("not a text file", source) from None
+    try:
+        lines = raw.decode("utf-8-sig").splitlines()  # -sig: a leading BOM (Excel) is dropped
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise TraceFormatError(f"byte 0x{raw[exc.start]:02X} is not UTF-8 text: save the file as UTF-8 "
+                               "(the trace format is UTF-8 text)", source, line) from None
 
     metadata = {}
     first = 0
@@ -148,7 +161,7 @@ def read_trace(file):
 
     axes = tuple(a for a in ("x", "y", "z") if a in names or f"{a}_ref" in names)
     if "t" not in names:
-        raise fail("missing column 't' in the header")
+        raise fail(_header_problem(names))
     if axes not in AXIS_SETS:
         raise fail(f"the axes present ({', '.join(axes) or 'none'}) must be x, x+y or x+y+z")
     for axis in axes:
@@ -163,7 +176,8 @@ def read_trace(file):
         body = body[:-1]
     if len(body) < 2:
         raise fail(f"needs at least 2 data rows, found {len(body)}")
-    data = _parse_rows(body, len(names), index, names, lambda msg, row: fail(msg, header_line + 1 + row))
+    limits = np.array([MAX_TIME] + [MAX_POSITION] * (len(wanted) - 1))
+    data = _parse_rows(body, len(names), index, names, limits, lambda msg, row: fail(msg, header_line + 1 + row))
     try:
         _validate.time_base("column 't'", data[:, 0])
     except _validate.TimeStepError as exc:  # step k ends on data row k + 1
@@ -171,8 +185,28 @@ def read_trace(file):
     return Trace(data[:, 0], data[:, 1::2], data[:, 2::2], axes, metadata)
 
 
-def _parse_rows(body, width, index, names, fail):
-    """Parse the numeric rows; on any problem, name the first bad cell."""
+def _header_problem(names):
+    """What is wrong with a header that has no column 't', saying what was found and what is expected."""
+    expected = "expected comma-separated column names t, x_ref, x (then y_ref, y, z_ref, z), in lower case"
+    found = ",".join(names)
+    for separator, label in ((";", "semicolons"), ("\t", "tabs")):
+        if separator in found:
+            return f"the header {found!r} is separated by {label}; {expected}"
+    if any(name.lower() == "t" for name in names):
+        upper = [name for name in names if name != name.lower()]
+        return f"column names are case-sensitive: the header has {', '.join(map(repr, upper))}; {expected}"
+    return f"missing column 't' in the header {found!r}; {expected}"
+
+
+def _parse_rows(body, width, index, names, limits, fail):
+    """Parse the numeric rows; on any problem, name the first bad cell.
+
+    `limits` are the largest magnitudes allowed in the columns `index`.
+    """
+    cells = np.array([text.count(",") + 1 for text in body])
+    if np.any(cells != width):
+        row = int(np.argmax(cells != width))
+        raise fail(f"expected {width} cells (as in the header), found {cells[row]}", row)
     try:
         data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)
     except ValueError:
@@ -180,8 +214,6 @@ def _parse_rows(body, width, index, names, fail):
     if data is None or data.shape[0] != len(body):
         for row, text in enumerate(body):
             cells = text.split(",")
-            if len(cells) != width:
-                raise fail(f"expected {width} cells, found {len(cells)}", row)
             for col in index:
                 try:
                     float(cells[col])
@@ -192,4 +224,10 @@ def _parse_rows(body, width, index, names, fail):
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
         raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
+    bad = np.abs(data) > limits
+    if bad.any():
+        row, col = np.unravel_index(np.argmax(bad), data.shape)
+        unit = "s" if col == 0 else "mm"
+        raise fail(f"column '{names[index[col]]}': value {data[row, col]:g} is beyond ±{limits[col]:g} {unit}, "
+                   "not a position or time a trace can hold", row)
     return data
