@@ -10,13 +10,14 @@ once the job's files are read and its runs succeeded.
 
 import argparse
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from .config import TomlFile
-from .exceptions import ConfigError, OutputError, UnstableLoopError
+from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .feed import sample
 from .geocomp import GeometricCompensation
 from .output import output_dir
@@ -163,8 +164,18 @@ def main(argv=None):
     for p in sub.choices.values():
         p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
     args = parser.parse_args(argv)
+
+    def show(message, category, *details):
+        if issubclass(category, ContoursimWarning):
+            print(f"contoursim {args.command}: warning: {message}", file=sys.stderr)
+        else:
+            default_show(message, category, *details)
+
     try:
-        args.run(args)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", ContoursimWarning)
+            default_show, warnings.showwarning = warnings.showwarning, show
+            args.run(args)
     except (ConfigError, UnstableLoopError, ValueError, TypeError, FileExistsError, OutputError) as exc:
         print(f"contoursim {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -5,7 +5,7 @@ exception a Python programmer would expect (``ValueError`` for bad values,
 ``OSError`` for a file that cannot be written), with a message that names what is wrong and where.
 """
 
-__all__ = ["ConfigError", "OutputError", "TraceFormatError", "UnstableLoopError", "PathError"]
+__all__ = ["ConfigError", "ContoursimWarning", "OutputError", "TraceFormatError", "UnstableLoopError", "PathError"]
 
 
 class ConfigError(ValueError):
@@ -49,6 +49,14 @@ class OutputError(OSError):
 
     The message names the file and the reason, e.g.
     ``cannot write out/circle.csv: Permission denied``.
+    """
+
+
+class ContoursimWarning(UserWarning):
+    """Something the user should know about a result that is still produced.
+
+    E.g. G-code words that were ignored, or a servo axis whose current
+    command was clipped at its limit. The command line prints each as one line.
     """
 
 

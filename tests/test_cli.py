@@ -212,3 +212,13 @@ def test_ctrl_c_gives_one_line_exit_130_and_no_half_written_file(tmp_path, capsy
     assert len(err.strip().splitlines()) == 1 and err.startswith("contoursim simulate: interrupted")
     assert sorted(p.name for p in out.iterdir()) == [".contoursim-out"]  # nothing half-written, nothing listed
     assert "small.csv" not in (out / ".contoursim-out").read_text()
+
+
+def test_real_gcode_runs_and_says_in_one_line_what_it_ignored(tmp_path, capsys):
+    (tmp_path / "part.nc").write_text("%\nO1234\nN10 G21 G90 G54\nN20 T1 M6\nN30 S12000 M3\nN40 G0 X0 Y0 M8\n"
+                                      "N50 G1 X2 F600\nN60 G2 X4 Y0 I1 J0\nN70 M30\n%\n")
+    assert main(["simulate", str(tmp_path / "part.nc"), "--out", str(tmp_path / "o")]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [f"contoursim simulate: warning: {tmp_path / 'part.nc'}: ignored "
+                                         "(no contour motion): O1234 G54 T1 M6 S12000 M3 M8"]
+    assert "part " in captured.out
