@@ -106,7 +106,10 @@ def _job(args):
     file = Path(args.file)
     if file.suffix == ".toml" and file.exists():
         job = TomlFile.read(file)
-        if "machine" in job.data:
+        if job.kind() == "job":
+            if "machine" not in job.data:
+                raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
+                                '(e.g. "demo_mill"), or give a path file')
             data = job.table(allowed=_JOB_KEYS, required=("machine", "path"))
             for key in ("machine", "path"):
                 if not isinstance(data[key], str):

@@ -271,6 +271,7 @@ def load_machine(name_or_file, geometry=True):
     from .multibody import chain_from_toml
 
     toml = TomlFile.read(preset_file(name_or_file))
+    toml.expect("machine")
     data = toml.data
     chain = None
     if "body" in data:

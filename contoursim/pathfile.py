@@ -116,6 +116,7 @@ def load_path_file(file):
     if file.suffix.lower() != ".toml":
         raise ConfigError(f"unknown path file type {file.suffix!r}: use .toml or .nc", source=str(file))
     toml = TomlFile.read(file)
+    toml.expect("path")
     top = toml.table(allowed=("name", "description", "path", "feed"))
     for key in ("name", "description"):
         if not isinstance(top.get(key, ""), str):

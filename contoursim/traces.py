@@ -16,11 +16,11 @@ positions stay exact to the nm and never overflow.
 import io
 from collections import Counter
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from . import _validate
+from .config import read_text
 from .exceptions import TraceFormatError
 from .output import writing
 
@@ -129,16 +129,7 @@ def read_trace(file):
         time, text that is not UTF-8.
     """
     source = str(file)
-    try:
-        raw = Path(file).read_bytes()
-    except OSError as exc:
-        raise TraceFormatError(f"cannot read the file: {exc.strerror}", source) from None
-    try:
-        lines = raw.decode("utf-8-sig").splitlines()  # -sig: a leading BOM (Excel) is dropped
-    except UnicodeDecodeError as exc:
-        line = raw.count(b"\n", 0, exc.start) + 1
-        raise TraceFormatError(f"byte 0x{raw[exc.start]:02X} is not UTF-8 text: save the file as UTF-8 "
-                               "(the trace format is UTF-8 text)", source, line) from None
+    lines = read_text(file, TraceFormatError).splitlines()  # a leading BOM (Excel) is dropped
 
     metadata = {}
     first = 0

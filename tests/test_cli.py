@@ -222,3 +222,27 @@ def test_real_gcode_runs_and_says_in_one_line_what_it_ignored(tmp_path, capsys):
     assert captured.err.splitlines() == [f"contoursim simulate: warning: {tmp_path / 'part.nc'}: ignored "
                                          "(no contour motion): O1234 G54 T1 M6 S12000 M3 M8"]
     assert "part " in captured.out
+
+
+def test_each_kind_of_file_where_another_is_expected_says_what_was_expected(tmp_path, capsys):
+    job, path, machine = tmp_path / "job.toml", tmp_path / "path.toml", tmp_path / "m.toml"
+    job.write_text('path = "iso230_4_circle_ccw"\n')  # a job file that forgot its machine
+    path.write_text(SMALL_PATH)
+    machine.write_text(MACHINE.format(kp=40.0))
+    out = ["--out", str(tmp_path / "o")]
+    assert main(["simulate", str(job), *out]) == 2
+    assert f"{job}: a job file names its machine: add machine = " in capsys.readouterr().err
+    assert main(["simulate", "rounded_square", "--machine", str(path), *out]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: this is a path file, not a machine file; a machine file describes a machine: " in err
+    assert main(["simulate", str(machine), *out]) == 2
+    assert f"{machine}: this is a machine file, not a path file; a path file describes a path: " in capsys.readouterr().err
+    assert main(["simulate", "rounded_square", "--machine", str(job), *out]) == 2
+    assert f"{job}: this is a job file, not a machine file" in capsys.readouterr().err
+    job.write_text("")
+    assert main(["simulate", "rounded_square", "--machine", str(job), *out]) == 2
+    assert f"{job}: the file is empty; a machine file describes a machine" in capsys.readouterr().err
+    machine.write_bytes('# Maschine für Prüfung\nname = "x"\n'.encode("latin-1"))
+    assert main(["simulate", "rounded_square", "--machine", str(machine), *out]) == 2
+    assert f"{machine}, line 1: byte 0xFC is not UTF-8 text" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
