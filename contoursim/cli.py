@@ -69,8 +69,13 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
     trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
-    result = simulate(machine, trajectory, strategies)
-    return label or Path(path_file).stem, path_file, result, test_circle(path)
+    name = label or Path(path_file).stem
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ContoursimWarning)
+        result = simulate(machine, trajectory, strategies)
+    for warning in caught:  # say which run
+        warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
+    return name, path_file, result, test_circle(path)
 
 
 def _write(out, machine, runs):

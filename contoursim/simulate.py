@@ -7,12 +7,14 @@ The data flow of DESIGN.md, as one pure function::
         coordinates ─▶ tracking error, exact contour error
 """
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import kernel
 from .contour import exact_contour_error
+from .exceptions import ContoursimWarning
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
 
@@ -58,6 +60,18 @@ class SimResult:
     def tracking_error(self):
         """Actual minus reference tool position at the same instant [mm], shape (N, d)."""
         return self.tool_position - self.trajectory.position
+
+    @property
+    def saturation(self):
+        """Fraction of the samples [0..1] in which each servo axis's current command was clipped at its limit.
+
+        Returns
+        -------
+        dict
+            Servo axis name -> fraction; 0 for an axis without a current limit.
+        """
+        fractions = self.servo_response.saturated.mean(axis=0)
+        return {axis: float(f) for axis, f in zip(self.machine.axes, fractions)}
 
     @property
     def volumetric_error(self):
@@ -141,6 +155,12 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     ValueError
         The trajectory's sampling differs from the servo period, or the path
         does not fit the machine's axes.
+
+    Warns
+    -----
+    ContoursimWarning
+        An axis's current command hit its limit: the message names the axis
+        and the fraction of samples (see :attr:`SimResult.saturation`).
     """
     if abs(trajectory.dt - machine.servo_period) > 1e-9 * machine.servo_period:
         raise ValueError(
@@ -160,4 +180,11 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     tool = machine.tool_position(actual, trajectory.t, trajectory.dim)
     static = machine.tool_position(q, trajectory.t, trajectory.dim)
     contour = exact_contour_error(trajectory, tool)
-    return SimResult(trajectory, machine, q, response, tool, static, contour, tuple(strategies))
+    result = SimResult(trajectory, machine, q, response, tool, static, contour, tuple(strategies))
+    clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
+    if clipped:
+        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{machine.axes[axis].current_limit:g} A)"
+                         for axis, f in clipped.items())
+        warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
+                      ContoursimWarning, stacklevel=2)
+    return result

@@ -246,3 +246,14 @@ def test_each_kind_of_file_where_another_is_expected_says_what_was_expected(tmp_
     assert main(["simulate", "rounded_square", "--machine", str(machine), *out]) == 2
     assert f"{machine}, line 1: byte 0xFC is not UTF-8 text" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_saturation_is_a_warning_naming_run_axis_and_fraction(tmp_path, capsys):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp="40.0\ncurrent_limit = 0.01"))
+    assert main(["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"),
+                 "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("contoursim simulate: warning: small: the current command hit its "
+                                               "limit on axis x in ")
+    assert err[0].endswith("% of the samples (limit ±0.01 A): the errors include the saturation")
