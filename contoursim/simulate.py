@@ -133,8 +133,9 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     ----------
     machine : Machine
     trajectory : Trajectory
-        Tool-tip reference in workpiece coordinates, sampled at the machine's
-        servo period.
+        Tool-tip reference in workpiece coordinates [mm], sampled at the
+        machine's servo period; its path speed [mm/s] must not exceed the
+        machine's ``max_feed`` [mm/s].
     strategies : sequence
         Compensation strategies applied in order to the axis commands; each
         has ``commands(q, t) -> q_corrected`` (e.g.
@@ -153,8 +154,8 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     UnstableLoopError
         An axis loop is unstable or badly damped at this servo period.
     ValueError
-        The trajectory's sampling differs from the servo period, or the path
-        does not fit the machine's axes.
+        The trajectory's sampling differs from the servo period, it is faster
+        than the machine's max feed, or the path does not fit the machine's axes.
 
     Warns
     -----
@@ -166,6 +167,14 @@ def simulate(machine, trajectory, strategies=(), settle=None):
         raise ValueError(
             f"the trajectory is sampled every {trajectory.dt:g} s but the servo period is "
             f"{machine.servo_period:g} s: sample the path at the servo period"
+        )
+    speed = trajectory.speed
+    if machine.max_feed is not None and speed.max() > machine.max_feed * (1 + 1e-9):
+        k = int(np.argmax(speed))
+        raise ValueError(
+            f"the trajectory reaches {60 * speed[k]:.6g} mm/min ({speed[k]:.6g} mm/s) at t = {trajectory.t[k]:.6g} s, "
+            f"above the machine's max feed {60 * machine.max_feed:.6g} mm/min: plan the path with a lower feed "
+            "(plan(..., max_feed=machine.max_feed) checks it)"
         )
     if settle is None:
         settle = 5.0 / min(servo.kp for servo in machine.axes.values())

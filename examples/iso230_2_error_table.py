@@ -205,14 +205,13 @@ def positioning_error(chain, q):
     return chain.volumetric_error(np.asarray(q, float)[:, None])[0]
 
 
-def main(out=Path("contoursim-out")):
-    """Print the ISO 230-2 table of X, Y, Z; write error tables and one-axis machines into `out`."""
-    if not DATA.is_dir():
-        print(f"skipped: the ISO 230-2 data is not at {DATA} (it ships beside the repository, not with it)")
-        return
+def main(out=Path("contoursim-out"), data=DATA):
+    """Print the ISO 230-2 table of X, Y, Z (files in `data`); write error tables and one-axis machines into `out`."""
+    if not Path(data).is_dir():
+        raise SystemExit(f"the ISO 230-2 data is not at {data}: it ships beside the repository, not in it")
     out = output_dir(out)
     for axis, name in FILES.items():
-        figures = positioning_figures(read_iso230_dat(DATA / name))
+        figures = positioning_figures(read_iso230_dat(Path(data) / name))
         print(f"\n{axis.upper()} axis ({name}), deviation = measured - target [µm], ↑ = REF_DATA_FWD")
         print(f"{'target mm':>10} {'x̄↑':>8} {'x̄↓':>8} {'x̄':>8} {'B_i':>8} {'R↑_i':>7} {'R↓_i':>7}")
         columns = (figures.mean_up, figures.mean_down, figures.mean_bidirectional, figures.reversal)

@@ -1,8 +1,13 @@
 """The command line: the demo, simulate on job and path files, and what bad input gives."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from contoursim.cli import main
 from contoursim.simulate import SimResult
 from contoursim.traces import read_trace
@@ -257,3 +262,22 @@ def test_saturation_is_a_warning_naming_run_axis_and_fraction(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith("contoursim simulate: warning: small: the current command hit its "
                                                "limit on axis x in ")
     assert err[0].endswith("% of the samples (limit ±0.01 A): the errors include the saturation")
+
+
+@pytest.mark.parametrize("where", ["root", "elsewhere"])
+def test_the_command_as_a_user_runs_it(where, tmp_path):
+    """``python -m contoursim`` in a fresh process, from the repository root and from another folder."""
+    cwd = ROOT if where == "root" else tmp_path
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}  # this checkout's contoursim, as if installed
+    run = lambda *args: subprocess.run([sys.executable, "-m", "contoursim", *args], cwd=cwd, env=env,  # noqa: E731
+                                       capture_output=True, text=True, timeout=300)
+    helped = run("--help")
+    assert helped.returncode == 0 and "simulate" in helped.stdout and not helped.stderr
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    done = run("simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    assert "small " in done.stdout and not done.stderr
+    assert read_trace(tmp_path / "out" / "small.csv").axes == ("x", "y")
+    imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
+                              capture_output=True, text=True, timeout=60)
+    assert imported.stdout.strip() == str(ROOT / "contoursim" / "__init__.py")  # this checkout was tested

@@ -227,3 +227,16 @@ def test_saturation_is_reported_by_axis_and_fraction():
     # unclipped, the lag is v/Kp = 1 mm; clipped, the axis falls further behind
     assert ample.summary()["tracking_max_um"] == pytest.approx(1e3 * 40.0 / 40.0, rel=0.02)
     assert starved.summary()["tracking_max_um"] > 1.1 * ample.summary()["tracking_max_um"]
+
+
+def test_the_api_refuses_a_path_faster_than_the_machine_allows_like_the_cli():
+    machine = Machine({"x": AxisServo(**AXIS), "y": AxisServo(**AXIS)}, DT, max_feed=5000 / 60)  # [mm/s]
+    path = paths.line((0, 0), (50, 0))
+    fast = sample(path, plan(path, feed=6000 / 60, accel=2000.0), DT)
+    with pytest.raises(ValueError, match=r"the trajectory reaches 6000 mm/min \(100 mm/s\) at t = .* s, above the "
+                                         r"machine's max feed 5000 mm/min"):
+        simulate(machine, fast)
+    with pytest.raises(ValueError, match=r"feed 100 mm/s \(6000 mm/min, segment 0\) exceeds max_feed"):
+        plan(path, feed=6000 / 60, accel=2000.0, max_feed=machine.max_feed)
+    at_limit = sample(path, plan(path, feed=5000 / 60, accel=2000.0), DT)
+    assert simulate(machine, at_limit).trajectory.speed.max() == pytest.approx(5000 / 60)
