@@ -42,7 +42,7 @@ from .output import writing
 
 __all__ = ["PositioningFigures", "PositioningTest", "positioning_figures", "write_error_table"]
 
-_UM = 1e3  # [µm/mm]
+_UM_PER_MM = 1e3  # [µm/mm]
 
 
 @dataclass(frozen=True)
@@ -225,11 +225,11 @@ def write_error_table(file, axis, figures, source=None, overwrite=False):
         raise TypeError(f"figures must be PositioningFigures, got {type(figures).__name__}")
     f = figures
     summary = ", ".join(
-        f"{label} = {_UM * value:.2f}"
+        f"{label} = {_UM_PER_MM * value:.2f}"
         for label, value in (("B_mean", f.reversal_mean), ("B", f.reversal_max), ("E", f.systematic),
                              ("M", f.mean_range), ("R", f.repeatability), ("A", f.accuracy))
     )
-    rows = "".join(f"{float(p)!r},{float(_UM * d)!r}\n" for p, d in zip(f.targets, f.mean_bidirectional))
+    rows = "".join(f"{float(p)!r},{float(_UM_PER_MM * d)!r}\n" for p, d in zip(f.targets, f.mean_bidirectional))
     origin = f", from {source}" if source else ""
     with writing(file, overwrite=overwrite) as out:
         out.write(

@@ -137,7 +137,7 @@ def _path(toml):
             continue
         try:
             kwargs[arguments[key]] = _angle(key, value) if key.endswith("_deg") else value
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "path", key) from None
     try:
         return build(**kwargs)
@@ -173,6 +173,6 @@ def read_feed_table(toml, base=None):
         argument, convert = _FEED[key]
         try:
             settings[argument] = convert(key, value)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "feed", key) from None
     return FeedSettings(**settings)

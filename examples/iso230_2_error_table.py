@@ -39,7 +39,7 @@ FILES = {
     "y": "y__report_target_y.md_ISO230.dat",
     "z": "z__report_z.md_ISO230.dat",
 }
-UM = 1e3  # [µm/mm]
+UM_PER_MM = 1e3  # [µm/mm]
 
 _LINE = re.compile(r"^([A-Z][A-Z0-9_]*)(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?=(.*)$")
 _ARRAYS = {"TGT_DATA": 1, "REF_DATA_FWD": 2, "REF_DATA_BWD": 2}  # name: number of indices
@@ -216,8 +216,8 @@ def main(out=Path("contoursim-out"), data=DATA):
         print(f"{'target mm':>10} {'x̄↑':>8} {'x̄↓':>8} {'x̄':>8} {'B_i':>8} {'R↑_i':>7} {'R↓_i':>7}")
         columns = (figures.mean_up, figures.mean_down, figures.mean_bidirectional, figures.reversal)
         for i, target in enumerate(figures.targets):
-            means = " ".join(f"{UM * c[i]:8.1f}" for c in columns)
-            print(f"{target:10.1f} {means} {4 * UM * figures.s_up[i]:7.1f} {4 * UM * figures.s_down[i]:7.1f}")
+            means = " ".join(f"{UM_PER_MM * c[i]:8.1f}" for c in columns)
+            print(f"{target:10.1f} {means} {4 * UM_PER_MM * figures.s_up[i]:7.1f} {4 * UM_PER_MM * figures.s_down[i]:7.1f}")
         quoted = {
             "mean reversal B̄": figures.reversal_mean, "reversal B = max|B_i|": figures.reversal_max,
             "systematic E": figures.systematic, "range of x̄ M": figures.mean_range,
@@ -226,7 +226,7 @@ def main(out=Path("contoursim-out"), data=DATA):
             "drift cycle 1→n": figures.drift,
         }
         for label, value in quoted.items():
-            print(f"  {label:<24} {UM * value:8.1f} µm")
+            print(f"  {label:<24} {UM_PER_MM * value:8.1f} µm")
         table = f"{axis}_iso230_2.csv"
         with out.write(table) as stream:  # replaces only its own file
             write_error_table(stream, axis, figures, source=name)
@@ -237,8 +237,8 @@ def main(out=Path("contoursim-out"), data=DATA):
         k = "xyz".index(axis)
         gap = np.abs(error[:, k] - np.interp(q, figures.targets, figures.mean_bidirectional)).max()
         off_axis = np.abs(np.delete(error, k, axis=1)).max()
-        print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM * gap:.1e} µm "
-              f"at {q.size} positions; off-axis error {UM * off_axis:.1e} µm")
+        print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM_PER_MM * gap:.1e} µm "
+              f"at {q.size} positions; off-axis error {UM_PER_MM * off_axis:.1e} µm")
     print(f"\nerror tables and machines written to {out}/")
 
 
