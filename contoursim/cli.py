@@ -6,6 +6,9 @@ a directory that holds files but was not made by contoursim is never written
 into, and in its own directories contoursim replaces only the files it wrote,
 so nothing a user keeps there is overwritten. The directory is made only
 once the job's files are read and its runs succeeded.
+
+The commands import the simulation modules (python-control, scipy, numba,
+matplotlib) when they run, so that ``contoursim --help`` answers at once.
 """
 
 import argparse
@@ -14,18 +17,9 @@ import warnings
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from .config import TomlFile
 from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
-from .feed import sample
-from .geocomp import GeometricCompensation
 from .output import output_dir
-from .machine import load_machine, preset_file, read_work_offset
-from .pathfile import library_file, load_path_file, read_feed_table
-from .paths import HelicalArc
-from .plotting import save_figures
-from .simulate import simulate
 
 DEMO_MACHINE = "demo_mill"
 DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
@@ -34,6 +28,10 @@ _JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation")
 
 def test_circle(path):
     """Centre and radius of a path's full test circle (ISO 230-4), or ``None``."""
+    import numpy as np
+
+    from .paths import HelicalArc
+
     for prim in path.primitives:
         if isinstance(prim, HelicalArc) and prim.role == "test" and prim.rise == 0 and abs(prim.sweep) >= 2 * np.pi - 1e-9:
             return prim.center[:2], prim.radius
@@ -65,6 +63,10 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
         `label`), the path file, the :class:`~contoursim.simulate.SimResult`
         and the path's test circle for the polar plot (or ``None``).
     """
+    from .feed import sample
+    from .pathfile import load_path_file, read_feed_table
+    from .simulate import simulate
+
     path, settings = load_path_file(path_file)
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
@@ -80,6 +82,8 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
 
 def _write(out, machine, runs):
     """Write each run's trace CSV and plots into the output folder `out`; return the table rows."""
+    from .plotting import save_figures
+
     out = output_dir(out)
     for name, path_file, result, circle in runs:
         metadata = {"machine": machine.name, "path": Path(path_file).name}
@@ -91,6 +95,9 @@ def _write(out, machine, runs):
 
 def demo(args):
     """The README's main job: ISO 230-4 circles and a free-form path on the demo machine."""
+    from .machine import load_machine
+    from .pathfile import library_file
+
     machine = load_machine(DEMO_MACHINE)
     out, rows = _write(args.out, machine, [run_job(machine, library_file(name)) for name in DEMO_PATHS])
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
@@ -108,6 +115,9 @@ def _job(args):
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
+    from .machine import load_machine, read_work_offset
+    from .pathfile import library_file
+
     file = Path(args.file)
     if file.suffix == ".toml" and file.exists():
         job = TomlFile.read(file)
@@ -135,6 +145,8 @@ def _job(args):
 
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
+    from .geocomp import GeometricCompensation
+
     machine, path_file, job, geometric = _job(args)
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
@@ -150,6 +162,7 @@ def simulate_command(args):
 
 def volumetric(args):
     """``contoursim volumetric MACHINE``: worst volumetric errors and error-field plots."""
+    from .machine import preset_file
     from .volumetric import volumetric_report
 
     print(volumetric_report(preset_file(args.machine), args.out))

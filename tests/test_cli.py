@@ -281,3 +281,17 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
     imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
                               capture_output=True, text=True, timeout=60)
     assert imported.stdout.strip() == str(ROOT / "contoursim" / "__init__.py")  # this checkout was tested
+
+
+def test_help_and_import_leave_the_heavy_libraries_unloaded():
+    """``contoursim --help`` and ``import contoursim`` answer at once: no python-control, scipy, numba or matplotlib."""
+    heavy = ("control", "scipy", "numba", "matplotlib")
+    code = ("import sys\nfrom contoursim.cli import main\nimport contoursim\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            f"print([m for m in {heavy!r} if m in sys.modules])\n"
+            "from contoursim import simulate, Machine\n"
+            "import contoursim.simulate\n"
+            "print(contoursim.simulate is simulate, callable(simulate), Machine.__name__)\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-2:] == ["[]", "True True Machine"]  # lazy names are the objects, not submodules
