@@ -61,7 +61,7 @@ def __dir__():
 
 
 class _Package(types.ModuleType):
-    """The package module: importing the submodule ``contoursim.simulate`` leaves ``contoursim.simulate`` the function."""
+    """The package module: importing the submodule ``contoursim.simulate`` leaves the name the function."""
 
     def __setattr__(self, name, value):
         if name in _LAZY and isinstance(value, types.ModuleType):

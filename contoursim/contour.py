@@ -99,7 +99,6 @@ class ContourError:
         if not isinstance(self.method, str):
             raise TypeError(f"method must be a string, got {type(self.method).__name__}")
         for name, value in values.items():
-            value = np.array(value)  # a copy: the caller's arrays stay writeable
             value.flags.writeable = False
             object.__setattr__(self, name, value)
 

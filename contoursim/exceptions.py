@@ -1,8 +1,9 @@
 """Exceptions raised by contoursim.
 
 Every error a user can cause is one of these, subclassing the built-in
-exception a Python programmer would expect (``ValueError`` for bad values,
-``OSError`` for a file that cannot be written), with a message that names what is wrong and where.
+exception a Python programmer would expect (``TypeError`` for a value of the
+wrong type, ``ValueError`` for bad values, ``OSError`` for a file that cannot
+be written), with a message that names what is wrong and where.
 """
 
 __all__ = ["ConfigError", "ContoursimWarning", "OutputError", "TraceFormatError", "UnstableLoopError", "PathError"]
