@@ -20,7 +20,8 @@ per turn) sampled at 5 kHz:
 * kernel, every in-loop effect on every axis (backlash with scale feedback,
   Coulomb + viscous + Stribeck friction with asymmetry and offset, a
   1.3-period feedback delay, a 90 Hz structural mode, a 0.1 µm encoder),
-  same reference, ``run()`` end to end, best of 5:
+  same reference, ``run()`` end to end, best of 7 (these runs and the
+  bare inner loop below take turns, so that they share the machine's load):
   ``kernel_all_effects_slowdown`` is its time over the plain run's; the
   same with 1 µm measurement noise on the recorded position too (outside
   the loop) is printed in the table;
@@ -32,7 +33,7 @@ per turn) sampled at 5 kHz:
   (also printed: axis-steps per CPU-second of all threads, for a loaded machine);
 * ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
   throughput over the compiled inner loop's alone (same packed rows,
-  outputs preallocated), best of 5 each.
+  outputs preallocated, no argument checks), best of 7 each.
 
 Figures are axis-steps per second: simulated samples x axes / wall seconds.
 Run: python benchmarks/bench_kernel.py
@@ -81,6 +82,18 @@ def best_of(fn, repeat, clock=time.perf_counter):
         result = fn()
         times.append(clock() - start)
     return min(times), result
+
+
+def side_by_side(fns, repeat):
+    """Best wall time of each function, calling them in turn `repeat` times (after one warm-up call each)."""
+    best = [np.inf] * len(fns)
+    for r in range(repeat + 1):
+        for i, fn in enumerate(fns):
+            start = time.perf_counter()
+            fn()
+            if r:
+                best[i] = min(best[i], time.perf_counter() - start)
+    return best
 
 
 def gain(k, inp, out):
@@ -136,12 +149,8 @@ def main():
 
     run(plain, DT, pos, vel, acc)  # warm-up: compile (or load the cache) and check the loops
     run(loaded, DT, pos, vel, acc)
-    t_plain, _ = best_of(lambda: run(plain, DT, pos, vel, acc), 5)
     effects = dict.fromkeys(AXES, ALL_EFFECTS)
-    run(plain, DT, pos, vel, acc, effects=effects)
-    t_effects, _ = best_of(lambda: run(plain, DT, pos, vel, acc, effects=effects), 5)
     noisy = dict.fromkeys(AXES, replace(ALL_EFFECTS, noise_mm=1e-3))
-    t_noisy, _ = best_of(lambda: run(plain, DT, pos, vel, acc, effects=noisy), 5)
 
     # the bare inner loop of the plain run: packed rows, outputs allocated beforehand
     rows = np.array([pack(servo, DT) for servo in plain])
@@ -152,7 +161,12 @@ def main():
         state = kernel._initial_state((3,), pos[0])
         kernel._variant_plain(rows, state, pos, vel, acc, None, empty, empty, empty, 1, *outputs)
 
-    t_inner, _ = best_of(inner_loop, 5)
+    t_plain, t_effects, t_noisy, t_inner = side_by_side([
+        lambda: run(plain, DT, pos, vel, acc),
+        lambda: run(plain, DT, pos, vel, acc, effects=effects),
+        lambda: run(plain, DT, pos, vel, acc, effects=noisy),
+        inner_loop,
+    ], 7)  # fmt: skip
 
     counter = iter(range(10**9))
 
@@ -198,7 +212,7 @@ def main():
     print(f"kernel (limit + feedforward) / python-control (same loop) = {rate_loaded / rate_pc:.0f} (target >= 1000)")
     print(f"{'kernel, every in-loop effect on (run() end to end)':58s} {N:8d} {t_effects:10.4f} {axis_steps / t_effects:14.4g}")
     print(f"{'kernel, every in-loop effect + measurement noise':58s} {N:8d} {t_noisy:10.4f} {axis_steps / t_noisy:14.4g}")
-    print(f"{'kernel, plain, bare inner loop (no checks, preallocated)':58s} {N:8d} {t_inner:10.4f} {axis_steps / t_inner:14.4g}")
+    print(f"{'kernel, plain, bare inner loop (outputs preallocated)':58s} {N:8d} {t_inner:10.4f} {axis_steps / t_inner:14.4g}")
     print(f"{'kernel, batch of 64 variants, friction + backlash':58s} {N_BATCH:8d} {t_batch:10.4f} "
           f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip
     print(f"  the same batch per CPU-second of all its threads: {B * N_BATCH * 3 / cpu_batch:.4g} axis-steps "

@@ -80,20 +80,11 @@ def _finite_scalar(name, value):
 
 
 def finite_array(name, value, ndim=None, shape=None, limit=None):
-    """Return `value` as a float ndarray after checking it: :func:`float_array`, every value finite.
+    """Return `value` as a float ndarray after checking it: :func:`float_array`, then its values.
 
-    Parameters
-    ----------
-    name : str
-        Parameter name used in error messages.
-    value : array_like
-        The values.
-    ndim : int, optional
-        Required number of dimensions.
-    shape : tuple, optional
-        Required shape; ``None`` entries match any length.
-    limit : float, optional
-        Largest magnitude allowed.
+    `name`, `value`, `ndim` and `shape` are those of :func:`float_array`;
+    every value must be finite and, given `limit`, at most `limit` in
+    magnitude.
 
     Raises
     ------

@@ -232,7 +232,6 @@ class LoopEffects:
             object.__setattr__(self, name, value)
 
 
-
 @dataclass(frozen=True)
 class Compensator:
     """A controller that sees every axis each step (cross-coupled contour control, ...).
