@@ -20,7 +20,7 @@ per turn) sampled at 5 kHz:
 * kernel, every in-loop effect on every axis (backlash with scale feedback,
   Coulomb + viscous + Stribeck friction with asymmetry and offset, a
   1.3-period feedback delay, a 90 Hz structural mode, a 0.1 µm encoder),
-  same reference, ``run()`` end to end, best of 7 (these runs and the
+  same reference, ``run()`` end to end, best of 15 (these runs and the
   bare inner loop below take turns, so that they share the machine's load):
   ``kernel_all_effects_slowdown`` is its time over the plain run's; the
   same with 1 µm measurement noise on the recorded position too (outside
@@ -33,7 +33,9 @@ per turn) sampled at 5 kHz:
   (also printed: axis-steps per CPU-second of all threads, for a loaded machine);
 * ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
   throughput over the compiled inner loop's alone (same packed rows,
-  outputs preallocated, no argument checks), best of 7 each.
+  outputs preallocated, no argument checks), best of 15 each; the same
+  ratios by thread CPU time are printed too (they do not count time the
+  process waits for a core on a loaded machine).
 
 Figures are axis-steps per second: simulated samples x axes / wall seconds.
 Run: python benchmarks/bench_kernel.py
@@ -85,15 +87,16 @@ def best_of(fn, repeat, clock=time.perf_counter):
 
 
 def side_by_side(fns, repeat):
-    """Best wall time of each function, calling them in turn `repeat` times (after one warm-up call each)."""
-    best = [np.inf] * len(fns)
+    """Best wall and thread-CPU times of each function, calling them in turn `repeat` times after a warm-up."""
+    wall, cpu = [np.inf] * len(fns), [np.inf] * len(fns)
     for r in range(repeat + 1):
         for i, fn in enumerate(fns):
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.thread_time()
             fn()
             if r:
-                best[i] = min(best[i], time.perf_counter() - start)
-    return best
+                wall[i] = min(wall[i], time.perf_counter() - start)
+                cpu[i] = min(cpu[i], time.thread_time() - start_cpu)
+    return wall, cpu
 
 
 def gain(k, inp, out):
@@ -161,12 +164,12 @@ def main():
         state = kernel._initial_state((3,), pos[0])
         kernel._variant_plain(rows, state, pos, vel, acc, None, empty, empty, empty, 1, *outputs)
 
-    t_plain, t_effects, t_noisy, t_inner = side_by_side([
+    (t_plain, t_effects, t_noisy, t_inner), cpu = side_by_side([
         lambda: run(plain, DT, pos, vel, acc),
         lambda: run(plain, DT, pos, vel, acc, effects=effects),
         lambda: run(plain, DT, pos, vel, acc, effects=noisy),
         inner_loop,
-    ], 7)  # fmt: skip
+    ], 15)  # fmt: skip
 
     counter = iter(range(10**9))
 
@@ -217,6 +220,8 @@ def main():
           f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip
     print(f"  the same batch per CPU-second of all its threads: {B * N_BATCH * 3 / cpu_batch:.4g} axis-steps "
           f"({numba.get_num_threads()} threads; the wall figure is lower when other processes share the cores)")
+    print(f"  the same four by CPU time of the thread: {cpu[0]:.4f} {cpu[1]:.4f} {cpu[2]:.4f} {cpu[3]:.4f} s: "
+          f"effects slowdown {cpu[1] / cpu[0]:.2f}, run() / inner loop {cpu[3] / cpu[0]:.2f}")
     print(f"kernel_all_effects_slowdown: {t_effects / t_plain:.2f}")
     print(f"variant_pack_ms: {1e3 * t_pack:.3f}")
     print(f"kernel_batch_axis_steps_per_s: {B * N_BATCH * 3 / t_batch:.3g}")

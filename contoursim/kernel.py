@@ -848,7 +848,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
 
     n_steps = ref_pos.shape[0]
     state = _initial_state((n,), ref_pos[0])
-    position, encoder, velocity, current = (np.empty((n_steps, n)) for _ in range(4))
+    position, encoder, velocity, current = np.empty((4, n_steps, n))  # one block, which malloc keeps for the next run
     saturated = np.empty((n_steps, n), bool)
     status = np.empty((n, 3), np.int64)
     outputs = (position, encoder, velocity, current, saturated, status)
