@@ -11,6 +11,7 @@ The main objects, by the data flow of a simulation:
 - traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format).
 """
 
+from ._version import __version__
 from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopError
 from .traces import Trace, read_trace, write_trace
 from .machine import Machine, load_machine

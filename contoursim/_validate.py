@@ -7,7 +7,7 @@ traceback from inside numpy.
 
 import numpy as np
 
-__all__ = ["as_xyz", "positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "positive", "positive_int", "nonnegative", "finite_array", "time_base", "TimeStepError"]
 
 
 class TimeStepError(ValueError):
@@ -125,3 +125,12 @@ def as_xyz(points):
     """Planar points (N, 2) with z = 0 appended, shape (N, 3); (N, 3) points unchanged."""
     points = np.asarray(points, dtype=float)
     return points if points.shape[1] == 3 else np.column_stack([points, np.zeros((len(points), 3 - points.shape[1]))])
+
+
+def positive_int(name, value):
+    """Return `value` as an int after checking it is a whole number >= 1."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be a whole number, got {value!r}")
+    if value < 1:
+        raise ValueError(f"{name} must be at least 1, got {value}")
+    return int(value)

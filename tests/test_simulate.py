@@ -98,11 +98,13 @@ def test_a_3d_path_needs_three_axes():
 
 def test_saved_trace_follows_the_csv_contract(tmp_path):
     _, result, _, _ = _circle_run(40.0, 40.0, radius=2.0, feed=5.0)
-    result.save_csv(tmp_path / "run.csv", metadata={"machine": "test"})
+    result.save_csv(tmp_path / "run.csv", metadata={"path": "circle"})
     trace = read_trace(tmp_path / "run.csv")
-    assert trace.axes == ("x", "y") and trace.metadata == {"machine": "test"}
-    np.testing.assert_allclose(trace.reference, result.trajectory.position, atol=1e-10)
-    np.testing.assert_allclose(trace.actual, result.tool_position, atol=1e-10)
+    assert trace.axes == ("x", "y")
+    assert trace.metadata["path"] == "circle" and trace.metadata["servo_period_s"] == f"{DT:g}"
+    assert float(trace.metadata["feed_mm_min"]) == pytest.approx(60 * 5.0)
+    np.testing.assert_allclose(trace.reference, result.trajectory.position, rtol=0, atol=0.5e-6 + 1e-12)
+    np.testing.assert_allclose(trace.actual, result.tool_position, rtol=0, atol=0.5e-6 + 1e-12)
     with pytest.raises(FileExistsError):
         result.save_csv(tmp_path / "run.csv")
 
