@@ -31,7 +31,7 @@ def main(out=Path("contoursim-out")):
     for key, value in result.summary().items():
         print(f"{key:>16}: {value:8.2f}")
 
-    files = save_figures(result, output_dir(out), "api_tour_circle", circle=((0, 0), 20.0))  # replaces only its own files
+    files = save_figures({"api_tour_circle": result}, output_dir(out), "api_tour_circle")  # replaces only its own files
     print("wrote", ", ".join(str(f) for f in files))
     return result
 
