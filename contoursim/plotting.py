@@ -13,7 +13,7 @@ import numpy as np
 from .output import output_dir
 
 __all__ = [
-    "envelope_indices", "fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation",
+    "circular_deviation", "envelope_indices", "fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation",
     "plot_errors_over_time", "save_figures",
 ]
 
@@ -201,15 +201,26 @@ def fit_circle_center(points):
     return solution[:2]
 
 
-def _radial_deviation(result):
-    """Ballbar evaluation of a circular test over the test proper.
+def circular_deviation(result):
+    """Ballbar evaluation of a circular test over its test proper (``trajectory.measuring``).
+
+    As ISO 230-4 and a ballbar's software do: the data-collection circle only
+    (the samples whose reference lies on the test circle, so no run-in or
+    overrun transient), the least-squares centre of the measured points
+    removed, the circularity the range of the radial deviation about it.
+
+    Parameters
+    ----------
+    result : contoursim.simulate.SimResult
+        A run on a path with a test circle (:meth:`contoursim.paths.Path.test_circle`).
 
     Returns
     -------
     dict
-        ``theta`` [rad] and ``deviation`` |p − c| − R [µm] about the
-        least-squares centre c, the ``offset`` c − nominal centre [µm],
-        ``circularity`` max − min [µm], ``radius`` [mm] and ``direction``.
+        ``theta`` [rad] and ``deviation`` |p − c| − R [µm] of the measured
+        points about the least-squares centre c, the ``offset`` c − nominal
+        centre [µm], ``circularity`` max − min deviation [µm], ``radius`` R
+        [mm] and ``direction`` ("CCW" or "CW").
     """
     circle = result.trajectory.path.test_circle()
     points = result.tool_position[result.trajectory.measuring, :2]
@@ -250,7 +261,7 @@ def plot_polar_deviation(runs, ax=None):
         if r.trajectory.path is None or r.trajectory.path.test_circle() is None:
             raise ValueError("a polar plot needs runs on a path with a full test circle (role 'test')")
     ax = _axes(ax, projection="polar")
-    tests = [_radial_deviation(r) for r in results]
+    tests = [circular_deviation(r) for r in results]
     span = max(max(float(np.abs(test["deviation"]).max()) for test in tests), 1e-3)
     division = _round_125(span / 2)  # two rings each side of zero hold every deviation
     ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.8, label="nominal radius")

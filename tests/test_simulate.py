@@ -8,6 +8,7 @@ from contoursim import paths
 from contoursim.feed import plan, sample
 from contoursim.traces import read_trace
 from contoursim.machine import Machine
+from contoursim.plotting import circular_deviation
 from contoursim.servo import AxisServo
 from contoursim.simulate import simulate
 
@@ -173,6 +174,11 @@ def test_squareness_enters_the_trace_and_geometric_compensation_removes_it():
     np.testing.assert_allclose(fixed.contour.magnitude, plain.contour.magnitude, atol=1e-9)
     # squareness moves y by α·x: the largest static error on the test circle is α·R
     assert skewed.summary()["volumetric_max_um"] == pytest.approx(1e3 * alpha * radius, rel=1e-3)
+    # a ballbar sees the ellipse: circularity (max - min radial deviation) α·R; equal servo axes only
+    # shrink the circle uniformly, so without the error (or compensated) the circle stays round
+    assert circular_deviation(skewed)["circularity"] == pytest.approx(1e3 * alpha * radius, rel=0.01)
+    assert circular_deviation(plain)["circularity"] < 0.01 * 1e3 * alpha * radius
+    assert circular_deviation(fixed)["circularity"] < 0.01 * 1e3 * alpha * radius
     assert plain.summary()["volumetric_max_um"] == 0.0
 
 
