@@ -373,16 +373,21 @@ def save_figures(runs, out_dir, name):
 
     results = list(runs.values())
     k = _shared_magnification(results)
-    drawings = [(f"{run}_path.png", (6.4, 6.8), lambda fig, r=r: plot_path_error(r, fig.add_subplot(), k))
+    # (file, size [in], margins, drawing): fixed margins that leave room for the legends, no layout search
+    path_margins = dict(left=0.12, right=0.96, top=0.90, bottom=0.16)
+    drawings = [(f"{run}_path.png", (6.4, 6.8), path_margins, lambda fig, r=r: plot_path_error(r, fig.add_subplot(), k))
                 for run, r in runs.items()]
-    drawings += [(f"{run}_errors.png", (8.0, 7.5), lambda fig, r=r: plot_errors_over_time(r, fig))
+    errors_margins = dict(left=0.1, right=0.84, top=0.95, bottom=0.07, hspace=0.12)
+    drawings += [(f"{run}_errors.png", (8.0, 7.5), errors_margins, lambda fig, r=r: plot_errors_over_time(r, fig))
                  for run, r in runs.items()]
     if all(r.trajectory.path is not None and r.trajectory.path.test_circle() is not None for r in results):
-        drawings.append((f"{name}_polar.png", (7.0, 7.6), lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"))))
+        drawings.append((f"{name}_polar.png", (7.0, 7.6), dict(left=0.08, right=0.92, top=0.88, bottom=0.2),
+                         lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"))))
     out_dir = output_dir(out_dir)
-    files = [out_dir.file(file) for file, _, _ in drawings]  # all refused before any is drawn
-    for file, (_, size, draw) in zip(files, drawings):
-        fig = Figure(figsize=size, layout="constrained")
+    files = [out_dir.file(file) for file, *_ in drawings]  # all refused before any is drawn
+    for file, (_, size, margins, draw) in zip(files, drawings):
+        fig = Figure(figsize=size)
+        fig.subplots_adjust(**margins)
         draw(fig)
         fig.savefig(file, dpi=110)
     return files
