@@ -1,7 +1,8 @@
 """Plots of simulation results: magnified path error, ballbar polar plot, errors over time.
 
 Every function draws on a Matplotlib ``Axes`` it is given (or a new figure)
-and returns that ``Axes``, like :mod:`control.ctrlplot`. The magnification
+and returns that ``Axes``, like :mod:`control.ctrlplot`; the errors over time
+take a ``Figure`` for their three stacked axes. The magnification
 factor of an exaggerated plot is always written on the plot; runs drawn side
 by side share one. Lines are thinned to what the pixels can show (the data
 itself, e.g. in the trace CSV, is untouched): :func:`envelope_indices` keeps
@@ -10,6 +11,7 @@ the smallest and largest sample of every pixel column, so no spike is lost.
 
 import numpy as np
 
+from . import _validate
 from .output import output_dir
 
 __all__ = [
@@ -151,7 +153,10 @@ def plot_path_error(result, ax=None, magnification=None):
     traj, contour = result.trajectory, result.contour
     ref = traj.position[:, :2]
     size = float(np.ptp(ref, axis=0).max())
-    k = magnification or magnification_for(size, float(contour.magnitude.max()))
+    k = magnification_for(size, float(contour.magnitude.max())) if magnification is None else \
+        _validate.positive("magnification", magnification)
+    if k < 1:
+        raise ValueError(f"magnification must be at least 1 (true scale), got {k:g}")
     shown = contour.foot[:, :2] + k * (result.tool_position[:, :2] - contour.foot[:, :2])
     step = size / (2 * _COLUMNS)
     ir, ia = _thin_curve(ref, step), _thin_curve(shown, step)
@@ -176,6 +181,10 @@ def plot_path_error(result, ax=None, magnification=None):
         _, _, bend = traj.path.derivatives(contour.s[ia])  # curvature vector, towards the centre of the bend
         if np.any(k * np.einsum("ij,ij->i", result.tool_position[ia] - contour.foot[ia], bend[:, : traj.dim]) > 1):
             notes.append(f"loops: ×{k:g} error exceeds the bend radius, not overshoot")
+        corners = traj.path.breaks[1:-1][traj.path.corner_angles() > 1e-6]  # arc length of sharp corners
+        near = np.abs(contour.s[ia, None] - corners[None, :]) < 5 * contour.magnitude[ia, None]
+        if near.any():  # the foot switches between the two sides' normals there
+            notes.append(f"near sharp corners the ×{k:g} offset turns between two normals: fans, not overshoot")
     ax.set_title(title + "".join(f"\n{n}" for n in notes), fontsize="medium")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize="small", frameon=False)
     return ax
