@@ -1,8 +1,12 @@
 """One home for argument checks: positivity, finiteness, shapes, time bases.
 
-Each check raises :class:`ValueError` (or a subclass) whose message names the
-parameter, so a bad value is reported where the user wrote it and never as a
-traceback from inside numpy.
+Each check raises, with a message that names the parameter, :class:`TypeError`
+for a value of the wrong type (text, a boolean, a complex number where a real
+number is wanted) and :class:`ValueError` (or a subclass) for a wrong value of
+the right type (negative, not finite, wrong shape), as python-control does; so
+a bad value is reported where the user wrote it and never as a traceback from
+inside numpy. Readers of files turn both into a
+:class:`~contoursim.exceptions.ConfigError` naming the file and line.
 """
 
 import numpy as np
@@ -27,7 +31,15 @@ class TimeStepError(ValueError):
 
 
 def positive(name, value):
-    """Return `value` as a float after checking it is finite and > 0."""
+    """Return `value` as a float after checking it is a finite number > 0.
+
+    Raises
+    ------
+    TypeError
+        `value` is not a real number (text and booleans are not).
+    ValueError
+        `value` is not finite, or <= 0.
+    """
     value = _finite_scalar(name, value)
     if value <= 0:
         raise ValueError(f"{name} must be positive, got {value!r}")
@@ -35,7 +47,15 @@ def positive(name, value):
 
 
 def nonnegative(name, value):
-    """Return `value` as a float after checking it is finite and >= 0."""
+    """Return `value` as a float after checking it is a finite number >= 0.
+
+    Raises
+    ------
+    TypeError
+        `value` is not a real number.
+    ValueError
+        `value` is not finite, or < 0.
+    """
     value = _finite_scalar(name, value)
     if value < 0:
         raise ValueError(f"{name} must be zero or positive, got {value!r}")
@@ -44,17 +64,17 @@ def nonnegative(name, value):
 
 def _finite_scalar(name, value):
     if isinstance(value, (str, bytes, bool, np.bool_)):  # float() would take "40" and True
-        raise ValueError(f"{name} must be a number, got {value!r}")
+        raise TypeError(f"{name} must be a number, got {value!r}")
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
+        raise TypeError(f"{name} must be a number, got {value!r}") from None
     if not np.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return value
 
 
-def finite_array(name, value, ndim=None, shape=None):
+def finite_array(name, value, ndim=None, shape=None, limit=None):
     """Return `value` as a float ndarray after checking it.
 
     Parameters
@@ -67,9 +87,18 @@ def finite_array(name, value, ndim=None, shape=None):
         Required number of dimensions.
     shape : tuple, optional
         Required shape; ``None`` entries match any length.
+    limit : float, optional
+        Largest magnitude allowed.
+
+    Raises
+    ------
+    TypeError
+        `value` holds text, booleans or complex numbers.
+    ValueError
+        Wrong dimensions or shape, a non-finite value, or one beyond `limit`.
     """
     if isinstance(value, (str, bytes)):
-        raise ValueError(f"{name} must be numeric, got {value!r}")
+        raise TypeError(f"{name} must be numeric, got {value!r}")
     try:
         kind = np.asarray(value).dtype.kind
         if kind == "O":  # e.g. a list mixing numbers and text
@@ -78,7 +107,7 @@ def finite_array(name, value, ndim=None, shape=None):
     except (TypeError, ValueError):
         arr = None
     if arr is None:
-        raise ValueError(f"{name} must be numeric (not text, booleans or complex numbers)")
+        raise TypeError(f"{name} must be numeric (not text, booleans or complex numbers)")
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
     if shape is not None:
@@ -91,6 +120,9 @@ def finite_array(name, value, ndim=None, shape=None):
     if bad.any():
         first = np.unravel_index(np.argmax(bad), arr.shape)
         raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
+    if limit is not None and np.any(np.abs(arr) > limit):
+        first = np.unravel_index(np.argmax(np.abs(arr) > limit), arr.shape)
+        raise ValueError(f"{name} holds {arr[first]:g} at index {tuple(map(int, first))}, beyond ±{limit:g}")
     return arr
 
 
@@ -128,9 +160,17 @@ def as_xyz(points):
 
 
 def positive_int(name, value):
-    """Return `value` as an int after checking it is a whole number >= 1."""
+    """Return `value` as an int after checking it is a whole number >= 1.
+
+    Raises
+    ------
+    TypeError
+        `value` is not an integer (booleans are not).
+    ValueError
+        `value` is below 1.
+    """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be a whole number, got {value!r}")
+        raise TypeError(f"{name} must be a whole number, got {value!r}")
     if value < 1:
         raise ValueError(f"{name} must be at least 1, got {value}")
     return int(value)

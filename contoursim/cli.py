@@ -6,23 +6,20 @@ a directory that holds files but was not made by contoursim is never written
 into, and in its own directories contoursim replaces only the files it wrote,
 so nothing a user keeps there is overwritten. The directory is made only
 once the job's files are read and its runs succeeded.
+
+The commands import the simulation modules (python-control, scipy, numba,
+matplotlib) when they run, so that ``contoursim --help`` answers at once.
 """
 
 import argparse
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
-from . import _validate
 from .config import TomlFile
-from .exceptions import ConfigError, UnstableLoopError
-from .feed import sample
-from .geocomp import GeometricCompensation
+from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
-from .machine import load_machine, preset_file, read_work_offset
-from .pathfile import library_file, load_path_file, read_feed_table
-from .plotting import save_figures
-from .simulate import simulate
 
 DEMO_MACHINE = "demo_mill"
 DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
@@ -53,12 +50,21 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
         ``(name, path_file, result)``: the run's name (file stem or `label`),
         the path file and the :class:`~contoursim.simulate.SimResult`.
     """
+    from .feed import sample
+    from .pathfile import load_path_file, read_feed_table
+    from .simulate import simulate
+
     path, settings = load_path_file(path_file)
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
     trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
-    result = simulate(machine, trajectory, strategies)
-    return label or Path(path_file).stem, path_file, result
+    name = label or Path(path_file).stem
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ContoursimWarning)
+        result = simulate(machine, trajectory, strategies)
+    for warning in caught:  # say which run
+        warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
+    return name, path_file, result
 
 
 def _write(out, groups, every):
@@ -74,16 +80,22 @@ def _write(out, groups, every):
     tuple
         The output folder and the table rows.
     """
+    from .plotting import save_figures
+
     out = output_dir(out)
     for name, runs in groups.items():
         for run, path_file, result in runs:
-            result.save_csv(out.file(f"{run}.csv"), metadata={"path": Path(path_file).name}, overwrite=True, every=every)
+            with out.write(f"{run}.csv") as stream:
+                result.save_csv(stream, metadata={"path": Path(path_file).name}, every=every)
         save_figures({run: result for run, _, result in runs}, out, name)
     return out, [(run, result.summary()) for runs in groups.values() for run, _, result in runs]
 
 
 def demo(args):
     """The README's main job: ISO 230-4 circles (CCW and CW, plotted together) and a free-form path on the demo machine."""
+    from .machine import load_machine
+    from .pathfile import library_file
+
     machine = load_machine(DEMO_MACHINE)
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
     out, rows = _write(args.out, groups, args.every)
@@ -103,10 +115,16 @@ def _job(args):
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
+    from .machine import load_machine, read_work_offset
+    from .pathfile import library_file
+
     file = Path(args.file)
     if file.suffix == ".toml" and file.exists():
         job = TomlFile.read(file)
-        if "machine" in job.data:
+        if job.kind() == "job":
+            if "machine" not in job.data:
+                raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
+                                '(e.g. "demo_mill"), or give a path file')
             data = job.table(allowed=_JOB_KEYS, required=("machine", "path"))
             for key in ("machine", "path"):
                 if not isinstance(data[key], str):
@@ -127,6 +145,8 @@ def _job(args):
 
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
+    from .geocomp import GeometricCompensation
+
     machine, path_file, job, geometric = _job(args)
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
@@ -142,6 +162,7 @@ def simulate_command(args):
 
 def volumetric(args):
     """``contoursim volumetric MACHINE``: worst volumetric errors and error-field plots."""
+    from .machine import preset_file
     from .volumetric import volumetric_report
 
     print(volumetric_report(preset_file(args.machine), args.out))
@@ -149,6 +170,8 @@ def volumetric(args):
 
 def _every(text):
     """``--every N``: a whole number >= 1."""
+    from . import _validate
+
     try:
         return _validate.positive_int("--every", int(text))
     except ValueError:
@@ -175,11 +198,25 @@ def main(argv=None):
         sub.choices[command].add_argument("--every", type=_every, default=1, metavar="N",
                                           help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")
     args = parser.parse_args(argv)
+
+    def show(message, category, *details):
+        if issubclass(category, ContoursimWarning):
+            print(f"contoursim {args.command}: warning: {message}", file=sys.stderr)
+        else:
+            default_show(message, category, *details)
+
     try:
-        args.run(args)
-    except (ConfigError, UnstableLoopError, ValueError, FileExistsError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", ContoursimWarning)
+            default_show, warnings.showwarning = warnings.showwarning, show
+            args.run(args)
+    except (ConfigError, UnstableLoopError, ValueError, TypeError, FileExistsError, OutputError) as exc:
         print(f"contoursim {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"contoursim {args.command}: interrupted; files already complete are kept, none is left half-written",
+              file=sys.stderr)
+        return 130
     return 0
 
 

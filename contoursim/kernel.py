@@ -90,7 +90,7 @@ class Compensator:
 
     def __post_init__(self):
         if not isinstance(self.step, Dispatcher):
-            raise ValueError(f"compensator step must be a numba @njit function, got {type(self.step).__name__}")
+            raise TypeError(f"compensator step must be a numba @njit function, got {type(self.step).__name__}")
         state = _validate.finite_array("compensator state", self.state)
         params = _validate.finite_array("compensator params", self.params)
         params.flags.writeable = False
@@ -277,7 +277,7 @@ def _axes(servos):
         raise ValueError("servos must hold at least one AxisServo")
     for name, servo in zip(names, servos):
         if not isinstance(servo, AxisServo):
-            raise ValueError(f"servos[{name!r}] must be an AxisServo, got {type(servo).__name__}")
+            raise TypeError(f"servos[{name!r}] must be an AxisServo, got {type(servo).__name__}")
     return names, servos
 
 
@@ -310,6 +310,9 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None):
 
     Raises
     ------
+    TypeError
+        A servo that is not an :class:`~contoursim.servo.AxisServo`, a
+        compensator that is not a :class:`Compensator`.
     ValueError
         Bad shapes or values, or `dt` too long for a loop.
     UnstableLoopError
@@ -336,7 +339,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None):
     ref_vel = _validate.finite_array("ref_vel", ref_vel, shape=(n_steps, n))
     ref_acc = _validate.finite_array("ref_acc", ref_acc, shape=(n_steps, n))
     if compensator is not None and not isinstance(compensator, Compensator):
-        raise ValueError(f"compensator must be a Compensator, got {type(compensator).__name__}")
+        raise TypeError(f"compensator must be a Compensator, got {type(compensator).__name__}")
 
     par = np.array([_parameters(servo, dt, name) for name, servo in zip(names, servos)])
     state = np.zeros((n, _NSTATE))

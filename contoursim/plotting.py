@@ -398,5 +398,6 @@ def save_figures(runs, out_dir, name):
         fig = Figure(figsize=size)
         fig.subplots_adjust(**margins)
         draw(fig)
-        fig.savefig(file, dpi=110)
+        with out_dir.write(file.name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=110)
     return files

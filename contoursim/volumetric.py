@@ -227,5 +227,6 @@ def _plot(chain, ideal, dp, sweep, values, rotary, out):
             at = ", ".join(_at(sweep[k], values[k][shape[k] // 2], rotary[sweep[k]]) for k in others)
             fig.suptitle(f"{chain.name}: volumetric error, axes {sweep[i]}/{sweep[j]} swept" + (f" at {at}" if at else "")
                          + (f"\n{scale_note}" if scale_note else ""))
-        fig.savefig(name, dpi=90)
+        with out.write(name.name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=90)
     return files

@@ -196,7 +196,7 @@ def test_compensator_must_be_jitted():
     def python_step(k, ref_pos, ref_vel, ref_acc, position, state, params, dpos, dvel):
         pass
 
-    with pytest.raises(ValueError, match="numba"):
+    with pytest.raises(TypeError, match="numba"):
         Compensator(python_step, np.zeros(1), np.zeros(1))
 
 
@@ -216,9 +216,9 @@ def test_reference_shapes_and_values_are_checked():
         run([servo, servo], DT, pos, pos, bad)
     with pytest.raises(ValueError, match="dt must be positive"):
         run([servo, servo], -DT, pos, pos, pos)
-    with pytest.raises(ValueError, match=r"servos\['y'\] must be an AxisServo"):
+    with pytest.raises(TypeError, match=r"servos\['y'\] must be an AxisServo"):
         run([servo, "fast"], DT, pos, pos, pos)
-    with pytest.raises(ValueError, match="compensator must be a Compensator"):
+    with pytest.raises(TypeError, match="compensator must be a Compensator"):
         run([servo, servo], DT, pos, pos, pos, compensator=offset_and_count)
 
 
