@@ -306,7 +306,8 @@ def plot_errors_over_time(result, fig=None):
     """Signed contour error, per-axis following error and motor current over time.
 
     What a servo-tuning tool shows, on linear axes: the signed in-plane
-    contour error [µm] (positive to the left of travel), each servo axis's
+    contour error [µm] (positive to the left of travel; for a 3-D path also
+    the part out of the path's plane), each servo axis's
     following error (command − actual position) [µm] and motor current
     command [A]. The test proper is shaded.
 
@@ -329,8 +330,11 @@ def plot_errors_over_time(result, fig=None):
     response = result.servo_response
     following = result.axis_command[:, result.machine.servo_columns] - response.position
     names = list(result.machine.axes)
+    contour, labels = result.contour.normal[:, None], ["contour error"]
+    if result.trajectory.dim == 3:  # a 3-D path: the part out of the path's plane too
+        contour, labels = np.column_stack([contour, result.contour.out_of_plane]), ["in plane", "out of plane"]
     series = [
-        (axes[0], 1e3 * result.contour.normal[:, None], ["contour error"], "contour error [µm]"),
+        (axes[0], 1e3 * contour, labels, "contour error [µm]"),
         (axes[1], 1e3 * following, names, "following error [µm]"),
         (axes[2], response.current, names, "motor current [A]"),
     ]
@@ -338,7 +342,7 @@ def plot_errors_over_time(result, fig=None):
     for ax, values, labels, ylabel in series:
         keep = envelope_indices(values)
         for j, label in enumerate(labels):
-            ax.plot(t[keep], values[keep, j], lw=0.9, label=label, color="C3" if len(labels) == 1 else f"C{j}")
+            ax.plot(t[keep], values[keep, j], lw=0.9, label=label, color="C3" if ax is axes[0] and j == 0 else f"C{j}")
         if _has_test(result.trajectory):
             ax.axvspan(t[test[0]], t[test[-1]], color="0.93", zorder=0, label="test proper")
         ax.axhline(0.0, color="0.5", lw=0.6)
