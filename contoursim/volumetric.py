@@ -186,9 +186,10 @@ def _plot(chain, ideal, dp, sweep, values, rotary, out):
         if j is None:
             fig = Figure(figsize=(7, 4), layout="constrained")
             ax = fig.add_subplot()
+            rot = rotary[sweep[0]]
             for c in range(3):
-                ax.plot(values[0], Dp[:, c], label=f"Δ{'xyz'[c]}")
-            ax.set_xlabel(f"axis {sweep[0]} [{'rad' if rotary[sweep[0]] else 'mm'}]")
+                ax.plot(np.rad2deg(values[0]) if rot else values[0], Dp[:, c], label=f"Δ{'xyz'[c]}")
+            ax.set_xlabel(f"axis {sweep[0]} [{'°' if rot else 'mm'}]")
             ax.set_ylabel("volumetric error [µm]")
             ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
         else:
