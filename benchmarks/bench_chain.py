@@ -3,10 +3,8 @@
 Prints, for each preset, the wall time of the exact tool pose (actual and
 ideal), the volumetric error, the first-order error and one
 geometric-compensation call (after a warm-up call on 10 samples, so numba's
-compilation is excluded); then, as ``name: value`` lines, the CPU seconds
-(best of 3) of the geometric compensation of the 7-axis machine
-(``aircraft_drilling_7axis``) and of the 3-axis one (``vertical_mill_3axis``)
-over the same 300,000 samples. Run: python benchmarks/bench_chain.py
+compilation is excluded; ``bench_user.py`` prints the compensation's figures
+for issue 8). Run: python benchmarks/bench_chain.py
 """
 
 import time
@@ -25,15 +23,6 @@ def best_of(fn, repeat=3):
         start = time.perf_counter()
         fn()
         times.append(time.perf_counter() - start)
-    return min(times)
-
-
-def best_cpu(fn, repeat=3):
-    times = []
-    for _ in range(repeat):
-        start = time.process_time()
-        fn()
-        times.append(time.process_time() - start)
     return min(times)
 
 
@@ -64,11 +53,6 @@ def main():
             best_of(lambda: comp.commands(q, t), repeat=1),
         ]
         print(f"{name:28s} {len(chain.axes):4d} " + " ".join(f"{x:8.3f}" for x in row).replace(" ", " ", 1))
-    for label, name in (("geocomp_7axis_300k_s", "aircraft_drilling_7axis"), ("geocomp_3axis_300k_s", "vertical_mill_3axis")):
-        chain = load_machine(name).chain
-        q, t = trace(chain)
-        comp = GeometricCompensation(chain)
-        print(f"{label}: {best_cpu(lambda: comp.commands(q, t)):.3f}")
 
 
 if __name__ == "__main__":

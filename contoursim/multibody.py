@@ -59,7 +59,7 @@ __all__ = [
 _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
-_UM, _URAD = 1e-3, 1e-6
+_MM_PER_UM, _RAD_PER_URAD = 1e-3, 1e-6
 
 
 def lower_body_array(parents):
@@ -863,7 +863,7 @@ _BODY_KEYS = ("name", "parent", "joint", "axis", "travel_mm", "travel_deg", "off
               "thermal", "errors")
 _TERM_KEYS = ("constant", "poly", "cyclic")
 #: Units of the six error motions at the file's edge, and their scale to mm, rad.
-_ERROR_UNITS = (("um", _UM),) * 3 + (("urad", _URAD),) * 3
+_ERROR_UNITS = (("um", _MM_PER_UM),) * 3 + (("urad", _RAD_PER_URAD),) * 3
 #: Keys of earlier versions -> the keys that replaced them.
 _RENAMED = {"tool_tip": "tool_tip_mm", "offset": "offset_mm"}
 
@@ -989,8 +989,8 @@ def _body_from_toml(toml, base, where, item, body_index):
 
     per_min = 1 / 60.0
     static = vector("static", [(c, unit, scale) for c, (unit, scale) in zip(COMPONENTS, _ERROR_UNITS)])
-    squareness = vector("squareness", [(d, "urad", _URAD) for d in _DIRECTIONS])
-    tilt = vector("tilt", [(d, "urad", _URAD) for d in _DIRECTIONS])
+    squareness = vector("squareness", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
+    tilt = vector("tilt", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
     thermal = vector("thermal", [(c, f"{unit}_per_min", scale * per_min) for c, (unit, scale) in zip(COMPONENTS, _ERROR_UNITS)])
     for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
         if values.any() and (kind != wanted or values[direction]):
@@ -1025,7 +1025,7 @@ def _body_from_toml(toml, base, where, item, body_index):
             thermal=thermal,
             travel=travel,
         )
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         if isinstance(exc, ConfigError):
             raise
         raise fail(str(exc).removeprefix(f"{item['name']}: ")) from None

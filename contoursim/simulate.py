@@ -7,12 +7,15 @@ The data flow of DESIGN.md, as one pure function::
         coordinates ─▶ tracking error, exact contour error
 """
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import kernel
+from ._version import __version__
 from .contour import exact_contour_error
+from .exceptions import ContoursimWarning
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
 
@@ -60,6 +63,18 @@ class SimResult:
         return self.tool_position - self.trajectory.position
 
     @property
+    def saturation(self):
+        """Fraction of the samples [0..1] in which each servo axis's current command was clipped at its limit.
+
+        Returns
+        -------
+        dict
+            Servo axis name -> fraction; 0 for an axis without a current limit.
+        """
+        fractions = self.servo_response.saturated.mean(axis=0)
+        return {axis: float(f) for axis, f in zip(self.machine.axes, fractions)}
+
+    @property
     def volumetric_error(self):
         """Geometric part of the tool-tip error: static tool position minus reference [mm], shape (N, d)."""
         return self.static_tool_position - self.trajectory.position
@@ -96,10 +111,42 @@ class SimResult:
         axes = CARTESIAN[: self.trajectory.dim]
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
 
-    def save_csv(self, file, metadata=None, overwrite=False):
-        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm]."""
-        extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
-        write_trace(file, self.to_trace(metadata), extra=extra, overwrite=overwrite)
+    def save_csv(self, file, metadata=None, overwrite=False, every=1):
+        """Write the trace CSV (DESIGN.md contract) with the contour error and the test proper.
+
+        Besides ``t`` [s] and the positions ``<axis>_ref``, ``<axis>`` [mm],
+        the columns ``contour`` (distance to the path) and ``contour_normal``
+        (its signed in-plane component, positive to the left of travel) [mm],
+        and ``measuring``: 1 on the test proper (``trajectory.measuring``),
+        the rows the summary table's max and RMS are taken over. Positions and
+        contour error are written to the nm, ``t`` to the ns
+        (:func:`contoursim.traces.write_trace`). The metadata lines give the
+        contoursim version, machine, servo period, feed, sampling and units,
+        then `metadata`.
+
+        Parameters
+        ----------
+        file : str, Path or text file object
+            Destination, written atomically; see :func:`contoursim.traces.write_trace`.
+        metadata : dict, optional
+            Further ``# key: value`` lines (e.g. the path file).
+        overwrite : bool
+            Replace an existing file.
+        every : int
+            Write every `every`-th sample (1: all, at the servo period).
+        """
+        columns = ", ".join(f"{a}_ref, {a}" for a in CARTESIAN[: self.trajectory.dim])
+        standard = {
+            "contoursim": __version__,
+            "machine": self.machine.name,
+            "servo_period_s": f"{self.machine.servo_period:g}",
+            "every_nth_sample": every,
+            "feed_mm_min": f"{60 * self.trajectory.feed:.6g}",
+            "units": f"t [s]; {columns}, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]",
+        }
+        extra = {"contour": self.contour.magnitude, "contour_normal": self.contour.normal,
+                 "measuring": self.trajectory.measuring}
+        write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
 
 
 def simulate(machine, trajectory, strategies=(), settle=None):
@@ -109,8 +156,9 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     ----------
     machine : Machine
     trajectory : Trajectory
-        Tool-tip reference in workpiece coordinates, sampled at the machine's
-        servo period.
+        Tool-tip reference in workpiece coordinates [mm], sampled at the
+        machine's servo period; its path speed [mm/s] must not exceed the
+        machine's ``max_feed`` [mm/s].
     strategies : sequence
         Compensation strategies applied in order to the axis commands; each
         has ``commands(q, t) -> q_corrected`` (e.g.
@@ -129,13 +177,27 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     UnstableLoopError
         An axis loop is unstable or badly damped at this servo period.
     ValueError
-        The trajectory's sampling differs from the servo period, or the path
-        does not fit the machine's axes.
+        The trajectory's sampling differs from the servo period, it is faster
+        than the machine's max feed, or the path does not fit the machine's axes.
+
+    Warns
+    -----
+    ContoursimWarning
+        An axis's current command hit its limit: the message names the axis
+        and the fraction of samples (see :attr:`SimResult.saturation`).
     """
     if abs(trajectory.dt - machine.servo_period) > 1e-9 * machine.servo_period:
         raise ValueError(
             f"the trajectory is sampled every {trajectory.dt:g} s but the servo period is "
             f"{machine.servo_period:g} s: sample the path at the servo period"
+        )
+    speed = trajectory.speed
+    if machine.max_feed is not None and speed.max() > machine.max_feed * (1 + 1e-9):
+        k = int(np.argmax(speed))
+        raise ValueError(
+            f"the trajectory reaches {60 * speed[k]:.6g} mm/min ({speed[k]:.6g} mm/s) at t = {trajectory.t[k]:.6g} s, "
+            f"above the machine's max feed {60 * machine.max_feed:.6g} mm/min: plan the path with a lower feed "
+            "(plan(..., max_feed=machine.max_feed) checks it)"
         )
     if settle is None:
         settle = 5.0 / min(servo.kp for servo in machine.axes.values())
@@ -150,4 +212,11 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     tool = machine.tool_position(actual, trajectory.t, trajectory.dim)
     static = machine.tool_position(q, trajectory.t, trajectory.dim)
     contour = exact_contour_error(trajectory, tool)
-    return SimResult(trajectory, machine, q, response, tool, static, contour, tuple(strategies))
+    result = SimResult(trajectory, machine, q, response, tool, static, contour, tuple(strategies))
+    clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
+    if clipped:
+        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{machine.axes[axis].current_limit:g} A)"
+                         for axis, f in clipped.items())
+        warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
+                      ContoursimWarning, stacklevel=2)
+    return result
