@@ -27,10 +27,13 @@ import numpy as np
 from . import _validate
 from .exceptions import ConfigError
 
-__all__ = ["COMPONENTS", "ERROR_COLUMNS", "Cyclic", "ErrorMotion", "read_error_table"]
+__all__ = ["COMPONENTS", "ERROR_COLUMNS", "ERROR_UNITS", "Cyclic", "ErrorMotion", "read_error_table"]
 
 #: The six error motions, in the order of every (..., 6) error array.
 COMPONENTS = ("dx", "dy", "dz", "ex", "ey", "ez")
+_MM_PER_UM, _RAD_PER_URAD = 1e-3, 1e-6
+#: Unit of each error motion in files (the suffix of its key or column) and its scale to mm or rad.
+ERROR_UNITS = (("um", _MM_PER_UM),) * 3 + (("urad", _RAD_PER_URAD),) * 3
 
 _TERM = re.compile(r"^(?:p(\d+)|cyclic(\d+)\.(sin|cos))$")
 
@@ -207,9 +210,8 @@ class ErrorMotion:
         return None, i, match.group(3)
 
 
-#: Error-table column -> (error motion, scale to mm or rad).
-ERROR_COLUMNS = {"dx_um": ("dx", 1e-3), "dy_um": ("dy", 1e-3), "dz_um": ("dz", 1e-3),
-                 "ex_urad": ("ex", 1e-6), "ey_urad": ("ey", 1e-6), "ez_urad": ("ez", 1e-6)}
+#: Error-table column -> (error motion, scale to mm or rad): ``dx_um`` ... ``ez_urad``.
+ERROR_COLUMNS = {f"{comp}_{unit}": (comp, scale) for comp, (unit, scale) in zip(COMPONENTS, ERROR_UNITS)}
 
 
 def read_error_table(path, rotary=False):

@@ -45,7 +45,7 @@ import numpy as np
 from . import _chainkernels, _validate
 from ._numba import njit
 from .config import FORMAT_DOC
-from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table
+from .errormotion import _RAD_PER_URAD, COMPONENTS, ERROR_COLUMNS, ERROR_UNITS, Cyclic, ErrorMotion, read_error_table
 from .exceptions import ConfigError
 
 __all__ = [
@@ -59,7 +59,6 @@ __all__ = [
 _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
-_MM_PER_UM, _RAD_PER_URAD = 1e-3, 1e-6
 
 
 def lower_body_array(parents):
@@ -862,8 +861,6 @@ _MACHINE_KEYS = ("name", "description", "tool", "workpiece", "tool_tip_mm", "too
 _BODY_KEYS = ("name", "parent", "joint", "axis", "travel_mm", "travel_deg", "offset_mm", "static", "squareness", "tilt",
               "thermal", "errors")
 _TERM_KEYS = ("constant", "poly", "cyclic")
-#: Units of the six error motions at the file's edge, and their scale to mm, rad.
-_ERROR_UNITS = (("um", _MM_PER_UM),) * 3 + (("urad", _RAD_PER_URAD),) * 3
 #: Keys of earlier versions -> the keys that replaced them.
 _RENAMED = {"tool_tip": "tool_tip_mm", "offset": "offset_mm"}
 
@@ -988,10 +985,10 @@ def _body_from_toml(toml, base, where, item, body_index):
         return out
 
     per_min = 1 / 60.0
-    static = vector("static", [(c, unit, scale) for c, (unit, scale) in zip(COMPONENTS, _ERROR_UNITS)])
+    static = vector("static", [(c, unit, scale) for c, (unit, scale) in zip(COMPONENTS, ERROR_UNITS)])
     squareness = vector("squareness", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
     tilt = vector("tilt", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
-    thermal = vector("thermal", [(c, f"{unit}_per_min", scale * per_min) for c, (unit, scale) in zip(COMPONENTS, _ERROR_UNITS)])
+    thermal = vector("thermal", [(c, f"{unit}_per_min", scale * per_min) for c, (unit, scale) in zip(COMPONENTS, ERROR_UNITS)])
     for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
         if values.any() and (kind != wanted or values[direction]):
             raise fail(f"{key} applies to a {wanted} joint, towards the other two directions", key)
@@ -1035,7 +1032,7 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
     errors = item.get("errors", {})
     if not errors:
         return (ErrorMotion(),) * 6
-    keys = {f"{comp}_{unit}": comp for comp, (unit, _) in zip(COMPONENTS, _ERROR_UNITS)}
+    keys = {column: comp for column, (comp, _) in ERROR_COLUMNS.items()}  # the same names as an error table's columns
     toml.table(*where, "errors", allowed=(*keys, "table"), renamed={comp: key for key, comp in keys.items()})
     tables = {}
     if "table" in errors:
@@ -1049,7 +1046,7 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
     to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
     period_key = "period_deg" if rotary else "period_mm"
     motion = []
-    for key, (unit, scale) in zip(keys, _ERROR_UNITS):
+    for key, (unit, scale) in zip(keys, ERROR_UNITS):
         comp = keys[key]
         spec = errors.get(key, {})
         if not isinstance(spec, dict):

@@ -284,7 +284,7 @@ def test_each_kind_of_file_where_another_is_expected_says_what_was_expected(tmp_
 
 def test_saturation_is_a_warning_naming_run_axis_and_fraction(tmp_path, capsys):
     (tmp_path / "small.toml").write_text(SMALL_PATH)
-    (tmp_path / "m.toml").write_text(MACHINE.format(kp="40.0\ncurrent_limit = 0.01"))
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp="40.0\ncurrent_limit_A = 0.01"))
     assert main(["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"),
                  "--out", str(tmp_path / "o")]) == 0
     err = capsys.readouterr().err.splitlines()
