@@ -11,7 +11,26 @@ import numpy as np
 
 from ._numba import njit
 
-__all__ = ["CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse", "newton_update"]
+__all__ = ["rotated", "CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse", "newton_update"]
+
+
+@njit(cache=True)
+def rotated(vx, vy, vz, wx, wy, wz):
+    """The vector v rotated by the rotation vector w (exact, Rodrigues).
+
+    ``v + a (w × v) + b w × (w × v)`` with a = sin θ/θ, b = (1 − cos θ)/θ²,
+    θ = |w| (their series below θ = 1e-6).
+    """
+    th2 = wx * wx + wy * wy + wz * wz
+    if th2 < 1e-12:
+        a = 1.0 - th2 / 6.0
+        b = 0.5 - th2 / 24.0
+    else:
+        th = np.sqrt(th2)
+        a = np.sin(th) / th
+        b = (1.0 - np.cos(th)) / th2
+    cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
+    return vx + a * cx + b * (wy * cz - wz * cy), vy + a * cy + b * (wz * cx - wx * cz), vz + a * cz + b * (wx * cy - wy * cx)
 
 
 #: Step kinds of a program (see :func:`tool_pose`).
@@ -62,21 +81,9 @@ def tool_pose(q, t, err, tip, axis, kind, inverse, column, vector):
             if inverse[i]:
                 px, py, pz = px - dx, py - dy, pz - dz
                 wx, wy, wz = -wx, -wy, -wz
-            th2 = wx * wx + wy * wy + wz * wz
-            if th2 > 0.0:
-                if th2 < 1e-12:
-                    a = 1.0 - th2 / 6.0
-                    b = 0.5 - th2 / 24.0
-                else:
-                    th = np.sqrt(th2)
-                    a = np.sin(th) / th
-                    b = (1.0 - np.cos(th)) / th2
-                cx, cy, cz = wy * pz - wz * py, wz * px - wx * pz, wx * py - wy * px
-                px, py, pz = (px + a * cx + b * (wy * cz - wz * cy), py + a * cy + b * (wz * cx - wx * cz),
-                              pz + a * cz + b * (wx * cy - wy * cx))
-                cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
-                vx, vy, vz = (vx + a * cx + b * (wy * cz - wz * cy), vy + a * cy + b * (wz * cx - wx * cz),
-                              vz + a * cz + b * (wx * cy - wy * cx))
+            if wx != 0.0 or wy != 0.0 or wz != 0.0:
+                px, py, pz = rotated(px, py, pz, wx, wy, wz)
+                vx, vy, vz = rotated(vx, vy, vz, wx, wy, wz)
             if not inverse[i]:
                 px, py, pz = px + dx, py + dy, pz + dz
         out[n, 0], out[n, 1], out[n, 2] = px, py, pz
@@ -87,22 +94,10 @@ def tool_pose(q, t, err, tip, axis, kind, inverse, column, vector):
 @njit(cache=True)
 def _rotate_columns(R, w):
     """R <- Rot(w) R (exact), for a 3x3 R."""
-    th2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
-    if th2 == 0.0:
+    if w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0:
         return
-    if th2 < 1e-12:
-        a = 1.0 - th2 / 6.0
-        b = 0.5 - th2 / 24.0
-    else:
-        th = np.sqrt(th2)
-        a = np.sin(th) / th
-        b = (1.0 - np.cos(th)) / th2
     for c in range(3):
-        vx, vy, vz = R[0, c], R[1, c], R[2, c]
-        cx, cy, cz = w[1] * vz - w[2] * vy, w[2] * vx - w[0] * vz, w[0] * vy - w[1] * vx
-        R[0, c] = vx + a * cx + b * (w[1] * cz - w[2] * cy)
-        R[1, c] = vy + a * cy + b * (w[2] * cx - w[0] * cz)
-        R[2, c] = vz + a * cz + b * (w[0] * cy - w[1] * cx)
+        R[0, c], R[1, c], R[2, c] = rotated(R[0, c], R[1, c], R[2, c], w[0], w[1], w[2])
 
 
 @njit(cache=True)

@@ -21,7 +21,7 @@ forward/backward pass over sections of constant velocity limit:
 A jerk-limited velocity change from v0 to v1 is symmetric in time, so it covers
 exactly (v0 + v1)/2 times its duration; the plan solves the junction velocities
 with that closed form (a quadratic or a cubic in the velocity) and the peak
-velocities by bisection. A single-feed, single-segment move is
+velocities by Newton's method on it. A single-feed, single-segment move is
 the simplest instance: one section from rest to rest, which gives the
 classical trapezoid (or triangle) and 7-phase S-curve (or its reduced forms).
 
@@ -36,7 +36,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _validate
-from ._numba import njit
 from .trajectory import Trajectory
 
 __all__ = ["FeedProfile", "FeedSettings", "plan", "sample"]
@@ -111,36 +110,28 @@ class FeedProfile:
 
 
 # --------------------------------------------------------------------------- velocity changes
-# Compiled: a G-code program or a spline has one section per block or piece. A jerk of 0 means
-# no jerk limit (trapezoidal ramps).
+# Plain Python in closed form (a program's first run compiles nothing): a G-code program or a
+# spline has one section per block or piece, a few microseconds each.
 
-@njit(cache=True)
-def _ramp_pieces(v0, v1, accel, jerk, out, row):
-    """Write the time-optimal velocity change v0 -> v1 as (duration, a_start, jerk) rows of `out` from `row`; return the next row."""
+def _ramp_pieces(v0, v1, accel, jerk):
+    """Time-optimal velocity change v0 -> v1 as (duration, a_start, jerk) pieces."""
     dv = abs(v1 - v0)
     if dv == 0.0:
-        return row
+        return []
     sign = 1.0 if v1 > v0 else -1.0
-    if jerk == 0.0:
-        out[row] = (dv / accel, sign * accel, 0.0)
-        return row + 1
+    if jerk is None:
+        return [(dv / accel, sign * accel, 0.0)]
     if dv >= accel**2 / jerk:
         tj = accel / jerk
-        out[row] = (tj, 0.0, sign * jerk)
-        out[row + 1] = (dv / accel - tj, sign * accel, 0.0)
-        out[row + 2] = (tj, sign * accel, -sign * jerk)
-        return row + 3
+        return [(tj, 0.0, sign * jerk), (dv / accel - tj, sign * accel, 0.0), (tj, sign * accel, -sign * jerk)]
     tj = math.sqrt(dv / jerk)
-    out[row] = (tj, 0.0, sign * jerk)
-    out[row + 1] = (tj, sign * jerk * tj, -sign * jerk)
-    return row + 2
+    return [(tj, 0.0, sign * jerk), (tj, sign * jerk * tj, -sign * jerk)]
 
 
-@njit(cache=True)
 def _ramp_distance(v0, v1, accel, jerk):
     """Distance of the time-optimal change v0 -> v1: (v0 + v1)/2 times its duration."""
     dv = abs(v1 - v0)
-    if jerk == 0.0:
+    if jerk is None:
         duration = dv / accel
     elif dv >= accel**2 / jerk:
         duration = dv / accel + accel / jerk
@@ -149,7 +140,27 @@ def _ramp_distance(v0, v1, accel, jerk):
     return 0.5 * (v0 + v1) * duration
 
 
-@njit(cache=True)
+def _ramp_slope(v, x, r, y, accel, jerk):
+    """d/dy of :func:`_ramp_distance` between v and x = x0 + y² (x > v), with r = sqrt(x − v).
+
+    ``2y (T/2 + (v + x) T'/2)``, T the ramp's duration; for a jerk-limited
+    ramp short of a_max T = 2r/√j and 2y T' = 2y/(r √j), finite where r = y.
+    """
+    if jerk is None or r * r >= accel**2 / jerk:
+        duration = r * r / accel + (0.0 if jerk is None else accel / jerk)
+        return y * duration + (v + x) * y / accel
+    return 2.0 * y * r / math.sqrt(jerk) + (v + x) * (y / r if r > 0 else 1.0) / math.sqrt(jerk)
+
+
+def _fitting(v, fits, lo):
+    """`v` stepped down to the largest value that still fits (rounding), not below `lo`."""
+    for _ in range(64):
+        if v <= lo or fits(v):
+            return max(v, lo)
+        v = max(v - 4e-16 * max(v, 1.0), lo)
+    return lo
+
+
 def _reach(v0, length, vmax, accel, jerk):
     """Largest v in [v0, vmax] reached from v0 within `length`: ``_ramp_distance(v0, v) <= length``, in closed form.
 
@@ -160,83 +171,93 @@ def _reach(v0, length, vmax, accel, jerk):
     """
     if _ramp_distance(v0, vmax, accel, jerk) <= length:
         return vmax
-    if jerk == 0.0:
+    if jerk is None:
         v = math.sqrt(v0 * v0 + 2.0 * accel * length)
     elif _ramp_distance(v0, v0 + accel**2 / jerk, accel, jerk) <= length:
         a2, b = 0.5 / accel, 0.5 * accel / jerk
         c = b * v0 - a2 * v0 * v0 - length
-        v = 2.0 * -c / (b + math.sqrt(b * b - 4.0 * a2 * c))  # the positive root, without cancellation
+        v = -2.0 * c / (b + math.sqrt(b * b - 4.0 * a2 * c))  # the positive root, without cancellation
     else:
         p, q = 2.0 * v0, length * math.sqrt(jerk)  # y³ + p y = q
         u = (0.5 * q + math.sqrt(0.25 * q * q + p**3 / 27.0)) ** (1.0 / 3.0)
         y = u - p / (3.0 * u)
         v = v0 + y * y
-    v = min(max(v, v0), vmax)
-    for _ in range(64):  # rounding: step down until it fits
-        if _ramp_distance(v0, v, accel, jerk) <= length or v <= v0:
-            break
-        v = max(v - 4e-16 * max(v, 1.0), v0)
-    return v
+    return _fitting(min(max(v, v0), vmax), lambda x: _ramp_distance(v0, x, accel, jerk) <= length, v0)
 
 
-@njit(cache=True)
 def _peak(v0, v1, length, vmax, accel, jerk):
-    """Largest peak in [max(v0, v1), vmax] with both ramps within `length` (bisection; both ramps grow with it)."""
-    lo, hi = max(v0, v1), vmax
-    if _ramp_distance(v0, hi, accel, jerk) + _ramp_distance(hi, v1, accel, jerk) <= length:
-        return hi
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if mid == lo or mid == hi:
-            break
-        if _ramp_distance(v0, mid, accel, jerk) + _ramp_distance(mid, v1, accel, jerk) <= length:
-            lo = mid
+    """Largest peak in [max(v0, v1), vmax] with both ramps within `length`.
+
+    Equal ends are the closed form of :func:`_reach` over half the length;
+    two trapezoidal ramps, or two that reach a_max, a quadratic. Otherwise
+    (a jerk-limited ramp short of a_max) Newton's method on the distance as a function of
+    y = sqrt(peak − max(v0, v1)), which keeps it smooth where the ramp from
+    the faster end starts (a jerk-limited ramp covers (2v + y²) y / √j),
+    inside a bracket that bisection shrinks where Newton would leave it.
+    """
+    def total(x):
+        return _ramp_distance(v0, x, accel, jerk) + _ramp_distance(x, v1, accel, jerk)
+
+    top, other = max(v0, v1), min(v0, v1)
+    if total(vmax) <= length:
+        return vmax
+    if total(top) >= length:
+        return top
+    if v0 == v1:
+        return _fitting(_reach(v0, 0.5 * length, vmax, accel, jerk), lambda x: total(x) <= length, top)
+    # both ramps trapezoidal, or both reaching a_max: (2x² − v0² − v1²)/(2a) [+ (v0 + v1 + 2x) a/(2j)] = L
+    b = 0.0 if jerk is None else 0.5 * accel / jerk
+    c = b * (v0 + v1) - (v0 * v0 + v1 * v1) / (2.0 * accel) - length
+    x = -2.0 * c / (2.0 * b + math.sqrt(4.0 * b * b - 4.0 * c / accel))  # root of x²/a + 2b x + c, no cancellation
+    if jerk is None or x - top >= accel**2 / jerk:
+        return _fitting(min(max(x, top), vmax), lambda x: total(x) <= length, top)
+    lo, hi = 0.0, math.sqrt(vmax - top)  # bracket on y: total fits at lo, not at hi
+    y = 0.5 * hi
+    for _ in range(100):
+        x = top + y * y
+        f = total(x) - length
+        if f <= 0:
+            lo = y
         else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True)
-def _section_pieces(breaks, vmax, vjunction, accel, jerk):
-    """Pieces (t0, s0, v0, a0, jerk) of the profile over sections with speed limits `vmax` and junction caps."""
-    lengths = np.diff(breaks)
-    v = vjunction.copy()
-    n = lengths.size
-    for i in range(n):  # forward: reachable from the previous junction
-        v[i + 1] = min(v[i + 1], _reach(v[i], lengths[i], vmax[i], accel, jerk))
-    for i in range(n - 1, -1, -1):  # backward: can still brake for the next junction
-        v[i] = min(v[i], _reach(v[i + 1], lengths[i], vmax[i], accel, jerk))
-    pieces = np.empty((7, 3))
-    rows = np.empty((7 * n, 5))
-    count, t = 0, 0.0
-    for i in range(n):
-        v0, v1, length = v[i], v[i + 1], lengths[i]
-        peak = _peak(v0, v1, length, vmax[i], accel, jerk)
-        cruise = length - _ramp_distance(v0, peak, accel, jerk) - _ramp_distance(peak, v1, accel, jerk)
-        k = _ramp_pieces(v0, peak, accel, jerk, pieces, 0)
-        if cruise > 0 and peak > 0:
-            pieces[k] = (cruise / peak, 0.0, 0.0)
-            k += 1
-        k = _ramp_pieces(peak, v1, accel, jerk, pieces, k)
-        s, vel = breaks[i], v0
-        for m in range(k):
-            duration, a0, j = pieces[m, 0], pieces[m, 1], pieces[m, 2]
-            if duration <= 0:
-                continue
-            rows[count] = (t, s, vel, a0, j)
-            count += 1
-            s += duration * (vel + duration * (a0 / 2 + duration * j / 6))
-            vel += duration * (a0 + duration * j / 2)
-            t += duration
-    return rows[:count], t
+            hi = y
+        slope = _ramp_slope(top, x, y, y, accel, jerk) + _ramp_slope(other, x, math.sqrt(x - other), y, accel, jerk)
+        step = f / slope if slope > 0 else math.inf
+        new = y - step if lo < y - step < hi else 0.5 * (lo + hi)
+        if abs(new - y) * (new + y) <= 2e-16 * max(top, 1.0) or new in (lo, hi):  # x = top + y² settled
+            break
+        y = new
+    return _fitting(top + y * y, lambda x: total(x) <= length, top + lo * lo)
 
 
 def _plan_sections(breaks, vmax, vjunction, accel, jerk):
     """Profile over sections [breaks[i], breaks[i+1]] with speed limits vmax[i] and junction caps."""
-    rows, duration = _section_pieces(np.asarray(breaks, float), np.asarray(vmax, float), np.array(vjunction, float),
-                                     float(accel), 0.0 if jerk is None else float(jerk))
-    t0, s0, v0, a0, j = rows.T
-    return FeedProfile(t0, s0, np.maximum(v0, 0.0), a0, j, duration, float(breaks[-1]))
+    lengths = np.diff(breaks).tolist()
+    vmax = np.asarray(vmax, float).tolist()
+    v = np.array(vjunction, dtype=float).tolist()
+    n = len(lengths)
+    for i in range(n):  # forward: reachable from the previous junction
+        v[i + 1] = min(v[i + 1], _reach(v[i], lengths[i], vmax[i], accel, jerk))
+    for i in reversed(range(n)):  # backward: can still brake for the next junction
+        v[i] = min(v[i], _reach(v[i + 1], lengths[i], vmax[i], accel, jerk))
+    rows, t = [], 0.0
+    for i in range(n):
+        v0, v1, length = v[i], v[i + 1], lengths[i]
+        peak = _peak(v0, v1, length, vmax[i], accel, jerk)
+        cruise = length - _ramp_distance(v0, peak, accel, jerk) - _ramp_distance(peak, v1, accel, jerk)
+        pieces = _ramp_pieces(v0, peak, accel, jerk)
+        if cruise > 0 and peak > 0:
+            pieces.append((cruise / peak, 0.0, 0.0))
+        pieces += _ramp_pieces(peak, v1, accel, jerk)
+        s, vel = float(breaks[i]), v0
+        for duration, a0, j in pieces:
+            if duration <= 0:
+                continue
+            rows.append((t, s, vel, a0, j))
+            s += duration * (vel + duration * (a0 / 2 + duration * j / 6))
+            vel += duration * (a0 + duration * j / 2)
+            t += duration
+    t0, s0, v0, a0, j = np.array(rows).T
+    return FeedProfile(t0, s0, np.maximum(v0, 0.0), a0, j, t, float(breaks[-1]))
 
 
 # --------------------------------------------------------------------------- planning

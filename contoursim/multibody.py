@@ -825,23 +825,10 @@ def _rotate(v, w):
 
 @njit(cache=True)
 def _rotate_kernel(v, w):
-    """v + a (w × v) + b w × (w × v) with a = sin θ/θ, b = (1 − cos θ)/θ², θ = |w|; rows of (M, 3) arrays."""
+    """Rows of (M, 3) arrays: v rotated by w (:func:`contoursim._chainkernels.rotated`)."""
     out = np.empty_like(v)
     for n in range(v.shape[0]):
-        wx, wy, wz = w[n, 0], w[n, 1], w[n, 2]
-        th2 = wx * wx + wy * wy + wz * wz
-        if th2 < 1e-12:
-            a = 1.0 - th2 / 6.0
-            b = 0.5 - th2 / 24.0
-        else:
-            th = np.sqrt(th2)
-            a = np.sin(th) / th
-            b = (1.0 - np.cos(th)) / th2
-        vx, vy, vz = v[n, 0], v[n, 1], v[n, 2]
-        cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
-        out[n, 0] = vx + a * cx + b * (wy * cz - wz * cy)
-        out[n, 1] = vy + a * cy + b * (wz * cx - wx * cz)
-        out[n, 2] = vz + a * cz + b * (wx * cy - wy * cx)
+        out[n, 0], out[n, 1], out[n, 2] = _chainkernels.rotated(v[n, 0], v[n, 1], v[n, 2], w[n, 0], w[n, 1], w[n, 2])
     return out
 
 

@@ -149,3 +149,23 @@ def test_refuses_a_motion_with_too_many_samples():
     circle = paths.circle((0, 0), 1e6)
     with pytest.raises(ValueError, match="more than the 50,000,000 allowed"):
         sample(circle, plan(circle, 1000 / 60, 1000.0), 1e-3)
+
+
+@pytest.mark.parametrize("jerk", [None, 2000.0, 50000.0])
+def test_section_peak_is_the_largest_that_fits(jerk):
+    """Between junction speeds v0, v1 the peak is the largest speed whose two ramps fit the section."""
+    from contoursim.feed import _peak, _ramp_distance
+
+    rng = np.random.default_rng(7)
+    for _ in range(500):
+        v0, v1 = rng.uniform(0, 30, 2) * (rng.random(2) > 0.2)
+        vmax = max(v0, v1) + rng.uniform(0, 30)
+        top = max(v0, v1)
+        length = _ramp_distance(v0, top, 100.0, jerk) + _ramp_distance(top, v1, 100.0, jerk) + rng.uniform(0, 3) ** 3
+
+        def total(x):
+            return _ramp_distance(v0, x, 100.0, jerk) + _ramp_distance(x, v1, 100.0, jerk)
+
+        peak = _peak(v0, v1, length, vmax, 100.0, jerk)
+        assert top <= peak <= vmax and total(peak) <= length
+        assert peak == vmax or total(peak * (1 + 1e-12)) > length
