@@ -1,22 +1,32 @@
-"""A machine follows a path: servo loops, geometric errors, tracking and contour error.
+"""A machine follows a path: servo loops, effects, geometric errors, tracking and contour error.
 
 The data flow of DESIGN.md, as one pure function::
 
-    trajectory ─▶ axis commands (ideal inverse kinematics) ─▶ strategies (pre-correction)
-        ─▶ servo kernel ─▶ axis positions ─▶ multibody chain ─▶ tool tip in workpiece
-        coordinates ─▶ tracking error, exact contour error
+    reference ─▶ axis commands (ideal inverse kinematics) ─▶ strategies (pre-correction)
+        ─▶ command-stage effects ─▶ servo kernel (servo-stage and in-loop effects)
+        ─▶ axis positions ─▶ multibody chain (geometric effects) ─▶ tool tip in workpiece
+        coordinates ─▶ tracking error, contour error
+
+The reference is a sampled path (:class:`Trajectory`) or a measured trace's
+commanded positions (:class:`~contoursim.traces.Trace`,
+:func:`measured_reference`). :func:`simulate` runs one model;
+:func:`simulate_batch` runs many variants of one structure in one kernel call.
 """
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
-from . import kernel
+from . import estimators, kernel
 from .contour import exact_contour_error
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
+from .model import as_model
+from .trajectory import Trajectory
 
-__all__ = ["SimResult", "simulate"]
+__all__ = ["SimResult", "measured_reference", "simulate", "simulate_batch"]
 
 
 @dataclass(frozen=True)
@@ -28,21 +38,28 @@ class SimResult:
     trajectory : Trajectory
         The tool-tip reference.
     machine : Machine
+        The nominal machine (``model.machine``).
     axis_command : ndarray, shape (N, n_axes)
-        Position commands sent to the servo loops (after pre-correcting
-        strategies) [mm].
+        Position commands of the interpolator after pre-correcting
+        strategies, before command-stage effects (a command delay) [mm].
     servo_response : contoursim.kernel.ServoResponse
         Servo axes' positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
         Actual tool tip in workpiece coordinates [mm].
     static_tool_position : ndarray, shape (N, d)
         Where the tool tip would be if every axis followed its command
-        exactly: the reference plus the machine's volumetric (geometric)
-        error, or what is left of it after compensation [mm].
-    contour : contoursim.contour.ContourError
-        Exact contour error of `tool_position` w.r.t. the reference path.
+        exactly: the reference plus the volumetric (geometric) error of the
+        machine and the model's geometric effects, or what is left of it
+        after compensation [mm].
+    contour : ContourError or ContourEstimate or None
+        Contour error of `tool_position`: exact, w.r.t. the reference path;
+        for a measured reference (no path) the three-point estimate
+        (:func:`contoursim.estimators.three_point`); ``None`` for a
+        single-axis reference or when not asked for.
     strategies : tuple
         The compensation strategies that were applied.
+    model : contoursim.model.Model
+        The model simulated (the machine and its effects).
     """
 
     trajectory: object
@@ -53,6 +70,7 @@ class SimResult:
     static_tool_position: np.ndarray
     contour: object
     strategies: tuple = field(default=())
+    model: object = None
 
     @property
     def tracking_error(self):
@@ -77,16 +95,19 @@ class SimResult:
         -------
         dict
             ``tracking_max_um``, ``tracking_rms_um``, ``contour_max_um``,
-            ``contour_rms_um``, ``volumetric_max_um``, ``volumetric_rms_um``.
+            ``contour_rms_um`` (without a contour error: not there),
+            ``volumetric_max_um``, ``volumetric_rms_um``.
         """
         keep = self.trajectory.measuring if measuring_only else slice(None)
         errors = dict(
             tracking=np.linalg.norm(self.tracking_error[keep], axis=1),
-            contour=self.contour.magnitude[keep],
+            contour=None if self.contour is None else self.contour.magnitude[keep],
             volumetric=np.linalg.norm(self.volumetric_error[keep], axis=1),
         )
         summary = {}
         for name, e in errors.items():
+            if e is None:
+                continue
             summary[f"{name}_max_um"] = 1e3 * float(e.max())
             summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(e**2)))
         return summary
@@ -97,28 +118,117 @@ class SimResult:
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
 
     def save_csv(self, file, metadata=None, overwrite=False):
-        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm]."""
-        extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
+        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm] when there is a contour error."""
+        extra = {}
+        if self.contour is not None:
+            extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
         write_trace(file, self.to_trace(metadata), extra=extra, overwrite=overwrite)
 
 
-def simulate(machine, trajectory, strategies=(), settle=None):
-    """Simulate `machine` following `trajectory`.
+
+
+def measured_reference(trace, servo_period):
+    """A measured trace's commanded positions as a reference at the servo period.
+
+    The trace's samples are taken as they are when it was logged at the
+    servo period (within the 0.1 % jitter a logger's time stamps may carry;
+    the times become ``t[0] + k·servo_period``); otherwise a cubic spline
+    (not-a-knot) through them is sampled every servo period from ``t[0]``
+    to the last sample. Velocity and acceleration are the spline's first
+    and second derivatives in both cases. The reference need not start or
+    end at rest; it has no continuous path (``path = None``).
 
     Parameters
     ----------
-    machine : Machine
-    trajectory : Trajectory
-        Tool-tip reference in workpiece coordinates, sampled at the machine's
-        servo period.
+    trace : contoursim.traces.Trace
+        The measured trace (its ``reference`` columns are used).
+    servo_period : float
+        The servo period [s].
+
+    Returns
+    -------
+    Trajectory
+        ``dim`` = the trace's number of axes.
+
+    Examples
+    --------
+    >>> from contoursim.traces import Trace
+    >>> t = np.arange(5) * 1e-3
+    >>> trace = Trace(t, (3.0 * t)[:, None], (3.0 * t)[:, None], ("x",))
+    >>> ref = measured_reference(trace, 5e-4)          # logged at 1 ms, servo at 0.5 ms
+    >>> ref.position[:3, 0].round(6).tolist(), ref.velocity[:3, 0].round(6).tolist()
+    ([0.0, 0.0015, 0.003], [3.0, 3.0, 3.0])
+    """
+    if not isinstance(trace, Trace):
+        raise ValueError(f"trace must be a Trace, got {type(trace).__name__}")
+    if abs(trace.dt - servo_period) <= 1e-3 * servo_period:
+        t = trace.t[0] + servo_period * np.arange(trace.t.size)
+        spline = CubicSpline(t, trace.reference)
+        position = trace.reference
+    else:
+        n = int(np.floor((trace.t[-1] - trace.t[0]) / servo_period * (1 + 1e-12))) + 1
+        t = trace.t[0] + servo_period * np.arange(n)
+        spline = CubicSpline(trace.t, trace.reference)
+        position = spline(t)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(position, axis=0), axis=1))])
+    return Trajectory(t, position, spline(t, 1), spline(t, 2), s)
+
+
+def _reference(machine, reference, settle):
+    """The reference as a Trajectory at the servo period, held `settle` seconds."""
+    if isinstance(reference, Trace):
+        reference = measured_reference(reference, machine.servo_period)
+        settle = 0.0 if settle is None else settle
+    elif not isinstance(reference, Trajectory):
+        raise ValueError(f"the reference must be a Trajectory or a Trace, got {type(reference).__name__}")
+    if abs(reference.dt - machine.servo_period) > 1e-9 * machine.servo_period:
+        raise ValueError(
+            f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
+            f"{machine.servo_period:g} s: sample the path at the servo period"
+        )
+    if settle is None:
+        settle = 5.0 / min(servo.kp for servo in machine.axes.values())
+    return reference.held(settle)
+
+
+def _commands(model, trajectory, strategies):
+    """Axis commands of the interpolator after the strategies, shape (N, n_axes) each."""
+    q, v, a = model.machine.axis_commands(trajectory)
+    for strategy in strategies:
+        q = strategy.commands(q, trajectory.t)
+    return q, v, a
+
+
+def _actual(model, q, servo_position):
+    """All axes' actual positions: the commands `q` with the servo axes at `servo_position` [mm, rad]."""
+    actual = q.copy()
+    actual[:, model.machine.servo_columns] = servo_position
+    return actual
+
+
+def simulate(model, reference, strategies=(), settle=None, contour=True):
+    """Simulate a machine, or a model (machine + effects), following a reference.
+
+    Parameters
+    ----------
+    model : Model or Machine
+        What to simulate; a Machine is a model without effects.
+    reference : Trajectory or Trace
+        A tool-tip reference in workpiece coordinates sampled at the
+        machine's servo period, or a measured trace whose commanded positions
+        are the reference (:func:`measured_reference`: resampled to the servo
+        period where needed).
     strategies : sequence
         Compensation strategies applied in order to the axis commands; each
         has ``commands(q, t) -> q_corrected`` (e.g.
         :class:`contoursim.geocomp.GeometricCompensation`).
     settle : float, optional
         Standstill appended after the reference ends, so the axes settle [s];
-        default five time constants of the slowest position loop, ``5 / min(kp)``.
-        The result's trajectory includes it.
+        default five time constants of the slowest position loop, ``5 / min(kp)``,
+        and none for a measured trace. The result's trajectory includes it.
+    contour : bool
+        Compute the contour error (exact on a path; the three-point estimate
+        on a measured reference of 2 or 3 axes).
 
     Returns
     -------
@@ -127,27 +237,133 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     Raises
     ------
     UnstableLoopError
-        An axis loop is unstable or badly damped at this servo period.
+        An axis loop (with its servo-stage effects) is unstable or badly
+        damped at this servo period.
     ValueError
-        The trajectory's sampling differs from the servo period, or the path
-        does not fit the machine's axes.
+        The trajectory's sampling differs from the servo period, the path
+        does not fit the machine's axes, or a reference to be held does not
+        end at rest.
     """
-    if abs(trajectory.dt - machine.servo_period) > 1e-9 * machine.servo_period:
-        raise ValueError(
-            f"the trajectory is sampled every {trajectory.dt:g} s but the servo period is "
-            f"{machine.servo_period:g} s: sample the path at the servo period"
-        )
-    if settle is None:
-        settle = 5.0 / min(servo.kp for servo in machine.axes.values())
-    trajectory = trajectory.held(settle)
-    q, v, a = machine.axis_commands(trajectory)
-    for strategy in strategies:
-        q = strategy.commands(q, trajectory.t)
+    model = as_model(model)
+    machine = model.machine
+    trajectory = _reference(machine, reference, settle)
+    q, v, a = _commands(model, trajectory, strategies)
+    qd, vd, ad = model.commands(q, v, a)
     servo = machine.servo_columns
-    response = kernel.run(dict(machine.axes), machine.servo_period, q[:, servo], v[:, servo], a[:, servo])
-    actual = q.copy()
-    actual[:, servo] = response.position
-    tool = machine.tool_position(actual, trajectory.t, trajectory.dim)
-    static = machine.tool_position(q, trajectory.t, trajectory.dim)
-    contour = exact_contour_error(trajectory, tool)
-    return SimResult(trajectory, machine, q, response, tool, static, contour, tuple(strategies))
+    response = kernel.run(model.servos(), machine.servo_period, qd[:, servo], vd[:, servo], ad[:, servo],
+                          effects=model.loop_effects())
+    tool = model.geometry.tool_position(_actual(model, q, response.position), trajectory.t, trajectory.dim)
+    static = model.geometry.tool_position(q, trajectory.t, trajectory.dim)
+    error = None
+    if contour and trajectory.path is not None:
+        error = exact_contour_error(trajectory, tool)
+    elif contour and trajectory.dim > 1:
+        error = estimators.three_point(trajectory.position, tool)
+    return SimResult(trajectory, machine, q, response, tool, static, error, tuple(strategies), model)
+
+
+#: Largest kernel output one chunk of a batch may hold [bytes].
+BATCH_CHUNK_BYTES = 2**27
+
+_BATCH_OUTPUTS = ("tool_position", "axis_position")
+
+
+def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64):
+    """Simulate B variants of one structure on one reference, in as few kernel calls as possible.
+
+    The variants may differ in any effect value, and in which effects they
+    have, but share the machine's axes, servo period, work offset and chain
+    (``model.with_values`` and ``model.with_effect`` make such variants). A
+    finite-difference Jacobian of P parameters is one batch of P + 1 models.
+    Variants with the same command-stage effects share one
+    :func:`contoursim.kernel.run_batch` call, made in chunks of rows so that
+    the kernel's output stays below :data:`BATCH_CHUNK_BYTES`; each row then
+    goes through its own geometric stage exactly as :func:`simulate` does it,
+    so row b equals ``simulate(models[b], reference, ...)`` bit for bit
+    (with ``every > 1`` the kernel keeps every `every`-th sample and the
+    geometric stage runs on those only: equal to the single run's samples
+    to rounding, 1e-12 mm).
+
+    Unlike :func:`simulate`, the variants' loops are not checked for
+    stability (only the nominal machine's are, once, when it is loaded): a
+    variant far from the nominal one is the caller's business.
+
+    Parameters
+    ----------
+    models : sequence of Model or Machine
+        The B variants.
+    reference : Trajectory or Trace
+        As for :func:`simulate`.
+    outputs : tuple of str
+        Any of ``"tool_position"`` (shape (B, M, d)) [mm] and
+        ``"axis_position"`` (the actual positions of all the machine's axes,
+        shape (B, M, n_axes)) [mm, rad].
+    strategies : sequence
+        As for :func:`simulate`.
+    settle : float, optional
+        As for :func:`simulate`.
+    every : int
+        Keep the samples ``k = 0, every, 2·every, …`` only (M = ceil(N / every)),
+        to bound memory.
+    dtype : numpy dtype
+        Of the returned arrays (``np.float32`` halves their memory; the
+        simulation and the geometric stage run in float64).
+
+    Returns
+    -------
+    dict
+        ``"t"`` (M,) [s] and each output asked for.
+
+    Raises
+    ------
+    ValueError
+        The variants do not share one structure; an unknown output.
+    """
+    models = [as_model(m) for m in models]
+    if not models:
+        raise ValueError("simulate_batch needs at least one model")
+    unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
+    if unknown or not outputs:
+        raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
+    every = int(every)
+    if every < 1:
+        raise ValueError(f"every must be a positive integer, got {every!r}")
+    first = models[0].machine
+    for i, m in enumerate(models):
+        machine = m.machine
+        if (machine.chain is not first.chain or machine.axis_names != first.axis_names
+                or machine.servo_period != first.servo_period or dict(machine.work_offset) != dict(first.work_offset)):
+            raise ValueError(f"models[{i}] has another structure than models[0] (axes, servo period, work offset or chain): "
+                             "a batch runs variants of one machine")
+    trajectory = _reference(first, reference, settle)
+    q, v, a = _commands(models[0], trajectory, strategies)
+    dt, servo = first.servo_period, first.servo_columns
+    keep = slice(None, None, every)
+    n_keep = len(range(*keep.indices(len(trajectory))))
+    width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
+    result = {"t": trajectory.t[keep].copy()}
+    result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in outputs})
+    groups = {}
+    for i, m in enumerate(models):
+        groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
+    chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * n_keep * servo.size))
+    t, q_kept = trajectory.t[keep], q[keep]
+    for rows in groups.values():
+        qd, vd, ad = models[rows[0]].commands(q, v, a)
+        for start in range(0, len(rows), chunk):
+            part = rows[start : start + chunk]
+            packed = np.array([_packed(models[i], dt) for i in part])
+            run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=("tool",), every=every)
+            for b, i in enumerate(part):
+                actual = _actual(models[i], q_kept, run["tool"][b])
+                if "axis_position" in result:
+                    result["axis_position"][i] = actual
+                if "tool_position" in result:
+                    result["tool_position"][i] = models[i].geometry.tool_position(actual, t, trajectory.dim)
+    return result
+
+
+def _packed(model, dt):
+    """The kernel's parameter rows of one variant, shape (n_servo, NPAR)."""
+    loop = model.loop_effects()
+    return [kernel.pack(servo, dt, loop[axis]) for axis, servo in model.servos().items()]

@@ -18,7 +18,8 @@ class Trajectory:
     t : ndarray, shape (N,)
         Sample times [s], uniform.
     position : ndarray, shape (N, d)
-        Reference (interpolator) positions [mm], d = 2 or 3.
+        Reference (interpolator) positions [mm], d = 2 or 3 (1 for a
+        single-axis measured reference).
     velocity : ndarray, shape (N, d)
         Reference velocity [mm/s] (used by velocity feedforward).
     acceleration : ndarray, shape (N, d)
@@ -47,8 +48,8 @@ class Trajectory:
         t, dt = _validate.time_base("t", self.t)
         n = t.size
         pos = _validate.finite_array("position", self.position, ndim=2)
-        if pos.shape[0] != n or pos.shape[1] not in (2, 3):
-            raise ValueError(f"position must have shape (N, 2) or (N, 3) with N = {n}, got {pos.shape}")
+        if pos.shape[0] != n or pos.shape[1] not in (1, 2, 3):
+            raise ValueError(f"position must have shape (N, d), d = 1, 2 or 3, with N = {n}, got {pos.shape}")
         d = pos.shape[1]
         vel = _validate.finite_array("velocity", self.velocity, shape=(n, d))
         acc = _validate.finite_array("acceleration", self.acceleration, shape=(n, d))
@@ -97,7 +98,7 @@ class Trajectory:
 
     @property
     def dim(self):
-        """Number of coordinates, 2 or 3."""
+        """Number of coordinates, 1, 2 or 3."""
         return self.position.shape[1]
 
     @property
