@@ -29,12 +29,12 @@ trapezoidal (Tustin) rule, and every controller reads the state sampled at
 ``t_k`` and holds its output over ``[t_k, t_k + dt)``.
 """
 
-import warnings
 from dataclasses import dataclass
+from functools import lru_cache
 
-import control as ct
 import numpy as np
 from scipy.linalg import expm
+from scipy.optimize import brentq
 
 from . import _validate
 from .exceptions import UnstableLoopError
@@ -55,6 +55,17 @@ __all__ = [
     "MIN_DAMPING_RATIO",
     "MAX_CROSSOVER_FRACTION",
 ]
+
+class _LazyControl:
+    """python-control, imported on first use: the kernel imports this module, python-control is slow to import."""
+
+    def __getattr__(self, name):
+        import control
+
+        return getattr(control, name)
+
+
+ct = _LazyControl()
 
 #: A loop whose phase margin [deg] is below this is rejected as badly damped.
 MIN_PHASE_MARGIN_DEG = 30.0
@@ -248,10 +259,10 @@ class DiscreteServo:
 
     servo: AxisServo
     dt: float
-    plant: ct.StateSpace
-    velocity_controller: ct.StateSpace
-    current_controller: ct.StateSpace | None
-    closed_loop: ct.StateSpace
+    plant: "control.StateSpace"
+    velocity_controller: "control.StateSpace"
+    current_controller: "control.StateSpace | None"
+    closed_loop: "control.StateSpace"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -600,17 +611,66 @@ def _frequency_grid(loop):
     return np.logspace(-1, np.log10(top), int(100 * (np.log10(top) + 1)) + 1)
 
 
+def _crossings(loop, omega, f):
+    """Frequencies [rad/s] where ``f(L(jω))`` changes sign on the grid `omega`, refined on the exact response."""
+
+    def g(w):
+        return f(_loop_response(loop, np.array([w])))[0]
+
+    values = f(_loop_response(loop, omega))
+    i = np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)
+    return np.array([brentq(g, omega[j], omega[j + 1], xtol=1e-12 * omega[j], rtol=1e-14) for j in i])
+
+
+def _loop_margins(loop):
+    """Margins of one loop gain from its frequency response (python-control's selection rules)."""
+    omega = _frequency_grid(loop)
+    response = _loop_response(loop, omega)
+    # gain crossovers: |L| = 1; phase crossovers: L crosses the negative real axis
+    w_gain = _crossings(loop, omega, lambda L: np.log(np.abs(L)))
+    w_phase = _crossings(loop, omega, lambda L: L.imag)
+    w_phase = w_phase[_loop_response(loop, w_phase).real < 0] if w_phase.size else w_phase
+    gm, pm, wpc, wgc = np.inf, np.inf, np.nan, np.nan
+    if w_phase.size:
+        gains = 1.0 / np.abs(_loop_response(loop, w_phase))
+        best = np.argmin(np.abs(np.log(gains)))  # the gain margin closest to 1
+        gm, wpc = gains[best], w_phase[best]
+    if w_gain.size:
+        phases = np.remainder(np.angle(_loop_response(loop, w_gain), deg=True), 360.0) - 180.0
+        best = np.argmin(np.abs(phases))  # the smallest phase margin
+        pm, wgc = phases[best], w_gain[best]
+    return dict(
+        gain_margin=float(gm),
+        phase_margin=float(pm),
+        stability_margin=float(np.min(np.abs(1.0 + response))),
+        gain_crossover=float(wgc),
+        phase_crossover=float(wpc),
+    )
+
+
+@lru_cache(maxsize=1024)
+def _margins(servo, dt):
+    """:func:`margins` for ``dt`` [s] (0: continuous), computed once per (servo, dt) in a process."""
+    result = {}
+    for name, loop in _loop_gains(_blocks(servo, dt)).items():
+        poles = ct.feedback(loop, 1).poles()
+        stable = bool(np.all(np.abs(poles) < 1)) if dt else bool(np.all(poles.real < 0))
+        result[name] = _loop_margins(loop) | dict(damping_ratio=_damping_ratio(poles, dt), stable=stable)
+    return result
+
+
 def margins(servo, dt=None):
     """Gain and phase margins of each loop of the cascade.
 
     Each loop gain (see the block diagram in the module docstring) is broken
     at its own error signal with the inner loops closed and the outer loops
     open; the current loop sees the winding with the rotor blocked. The
-    margins come from :func:`control.stability_margins` applied to the loop's
-    frequency response on a dense grid (100 points per decade up to the
-    Nyquist frequency): its polynomial method returns spurious crossovers for
-    sampled loops of fourth order and its default grid can miss a low
-    crossover.
+    crossovers are found on the loop's frequency response on a dense grid
+    (100 points per decade up to the Nyquist frequency) and refined on the
+    exact response; where there are several, the gain margin closest to 1
+    and the smallest phase margin are reported, as
+    :func:`control.stability_margins` does. The analysis runs once per
+    (servo, dt) in a process; later calls return a copy of the first result.
 
     Parameters
     ----------
@@ -625,36 +685,16 @@ def margins(servo, dt=None):
     dict
         ``{loop: {...}}`` for the loops ``'current'`` (when modelled),
         ``'velocity'`` and ``'position'``, innermost first, each with
-        ``gain_margin`` [-], ``phase_margin`` [deg], ``gain_crossover``
-        and ``phase_crossover`` [rad/s] (NaN when there is none),
-        ``stability_margin`` [-] (the smallest distance of the Nyquist curve
-        to -1 on the grid), plus
-        ``damping_ratio`` [-] (the smallest of the loop's closed-loop poles)
-        and ``stable`` (all closed-loop poles strictly inside the stability
-        region).
+        ``gain_margin`` [-] (inf when the phase never reaches -180°),
+        ``phase_margin`` [deg] (inf when the gain never crosses 1),
+        ``gain_crossover`` and ``phase_crossover`` [rad/s] (NaN when there
+        is none), ``stability_margin`` [-] (the smallest distance of the
+        Nyquist curve to -1 on the grid), plus ``damping_ratio`` [-] (the
+        smallest of the loop's closed-loop poles) and ``stable`` (all
+        closed-loop poles strictly inside the stability region).
     """
-    dt = 0 if dt is None else _validate.positive("dt", dt)
-    result = {}
-    for name, loop in _loop_gains(_blocks(servo, dt)).items():
-        omega = _frequency_grid(loop)
-        response = _loop_response(loop, omega)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # |L| is infinite at an integrator
-            gm, pm, _, wpc, wgc, _ = ct.stability_margins(
-                (np.abs(response), np.angle(response, deg=True), omega), method="frd"
-            )
-        poles = ct.feedback(loop, 1).poles()
-        stable = bool(np.all(np.abs(poles) < 1)) if dt else bool(np.all(poles.real < 0))
-        result[name] = dict(
-            gain_margin=float(gm),
-            phase_margin=float(pm),
-            stability_margin=float(np.min(np.abs(1.0 + response))),
-            gain_crossover=float(wgc),
-            phase_crossover=float(wpc),
-            damping_ratio=_damping_ratio(poles, dt),
-            stable=stable,
-        )
-    return result
+    dt = 0.0 if dt is None else _validate.positive("dt", dt)
+    return {name: dict(m) for name, m in _margins(servo, dt).items()}
 
 
 _GAIN_OF = {"current": "kc", "velocity": "kv", "position": "kp"}
