@@ -21,6 +21,7 @@ from .feed import sample
 from .geocomp import GeometricCompensation
 from .output import output_dir
 from .machine import load_machine, preset_file, read_work_offset
+from .model import as_model, load_model, with_file_effects
 from .pathfile import library_file, load_path_file, read_feed_table
 from .paths import HelicalArc
 from .plotting import save_figures
@@ -28,7 +29,7 @@ from .simulate import simulate
 
 DEMO_MACHINE = "demo_mill"
 DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
-_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation")
+_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
 
 
 def test_circle(path):
@@ -52,8 +53,8 @@ def _table(rows):
     return "\n".join(lines)
 
 
-def run_job(machine, path_file, job=None, strategies=(), label=None):
-    """Simulate `machine` on a path file.
+def run_job(model, path_file, job=None, strategies=(), label=None):
+    """Simulate `model` (a Model, or a Machine without effects) on a path file.
 
     A job file's ``[feed]`` table, when given, overrides the path file's key by key.
 
@@ -67,8 +68,9 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
     path, settings = load_path_file(path_file)
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
+    machine = as_model(model).machine
     trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
-    result = simulate(machine, trajectory, strategies)
+    result = simulate(model, trajectory, strategies)
     return label or Path(path_file).stem, path_file, result, test_circle(path)
 
 
@@ -93,11 +95,12 @@ def demo(args):
 
 
 def _job(args):
-    """Machine, path file, job file (or None) and geometric switch of ``simulate FILE``.
+    """Model, path file, job file (or None) and geometric switch of ``simulate FILE``.
 
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
     presets/library entries or files relative to the job, and optionally a
-    ``[feed]`` table, ``work_offset`` and ``geometric_compensation``) or a bare path file, run
+    ``[feed]`` table, ``work_offset``, ``geometric_compensation`` and
+    ``[[effect]]`` tables, added to the machine file's) or a bare path file, run
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
@@ -116,24 +119,28 @@ def _job(args):
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
-            machine = load_machine(near(data["machine"]))
+            model = load_model(near(data["machine"]))
+            machine = model.machine
             if "work_offset" in data:
                 machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
-            return machine, library_file(near(data["path"])), job, geometric
-    return load_machine(args.machine or DEMO_MACHINE), library_file(args.file), None, False
+            model = with_file_effects(replace(model, machine=machine), job)
+            return model, library_file(near(data["path"])), job, geometric
+    return load_model(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
-    machine, path_file, job, geometric = _job(args)
+    model, path_file, job, geometric = _job(args)
+    machine = model.machine
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
-    runs = [run_job(machine, path_file, job)]
+    runs = [run_job(model, path_file, job)]
     if geometric or args.geometric_compensation:
-        runs.append(run_job(machine, path_file, job, [GeometricCompensation(machine.chain)],
+        runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
     out, rows = _write(args.out, machine, runs)
-    print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}")
+    effects = ", ".join(repr(e) for e in model.effects) or "none"
+    print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
 

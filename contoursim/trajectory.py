@@ -77,14 +77,15 @@ class Trajectory:
         -------
         Trajectory
             The extra samples have zero velocity and acceleration and are not
-            `measuring`. Raises ValueError unless the reference ends at rest.
+            `measuring`. Raises ValueError unless the reference ends at rest
+            (or `duration` rounds to no sample).
         """
         duration = _validate.nonnegative("duration", duration)
-        if np.abs(self.velocity[-1]).max() > 0 or np.abs(self.acceleration[-1]).max() > 0:
-            raise ValueError("only a reference that ends at rest can be held")
         n = int(np.ceil(duration / self.dt - 1e-9))
         if n == 0:
             return self
+        if np.abs(self.velocity[-1]).max() > 0 or np.abs(self.acceleration[-1]).max() > 0:
+            raise ValueError("only a reference that ends at rest can be held")
         tail = np.zeros((n, self.dim))
         return Trajectory(
             np.concatenate([self.t, self.t[-1] + self.dt * np.arange(1, n + 1)]),
