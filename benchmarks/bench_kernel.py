@@ -17,6 +17,20 @@ per turn) sampled at 5 kHz:
   the first 1,000 steps (best of 2); its axis positions are compared with
   the kernel's to show that it is the same loop.
 
+* kernel, every in-loop effect on every axis (backlash with scale feedback,
+  Coulomb + viscous + Stribeck friction with asymmetry and offset, a
+  1.3-period feedback delay, a 90 Hz structural mode, 0.1 µm encoder,
+  1 µm measurement noise), same reference, ``run()`` end to end, best of 5:
+  ``kernel_all_effects_slowdown`` is its time over the plain run's;
+* ``variant_pack_ms``: ``pack`` of one new 3-axis variant (a new kv and new
+  friction and backlash values per axis, so nothing is cached), best of 200;
+* ``kernel_batch_axis_steps_per_s``: ``run_batch`` of 64 variants (friction
+  and backlash on every axis, values varying per variant) on the first
+  50,000 steps of the helix, tool position only (float64), all cores, best of 3;
+* ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
+  throughput over the compiled inner loop's alone (same packed rows,
+  outputs preallocated), best of 5 each.
+
 Figures are axis-steps per second: simulated samples x axes / wall seconds.
 Run: python benchmarks/bench_kernel.py
 """
@@ -26,12 +40,18 @@ import time
 import control as ct
 import numpy as np
 
-from contoursim.kernel import run
+from contoursim import kernel
+from contoursim.kernel import LoopEffects, pack, run, run_batch
 from contoursim.servo import AxisServo
 
 DT = 2e-4  # 5 kHz
 N = 300_000  # 60 s
 N_PYTHON_CONTROL = 1_000
+N_BATCH, B = 50_000, 64
+ALL_EFFECTS = LoopEffects(backlash_mm=0.005, backlash_feedback="scale", coulomb_N=120.0, viscous_N_s_per_m=300.0,
+                          stribeck_N=40.0, stribeck_velocity_mm_s=2.0, asymmetry_N=15.0, offset_N=-30.0,
+                          feedback_delay_s=1.3 * DT, mode_freq_hz=90.0, mode_damping_ratio=0.05, mode_mass_ratio=0.1,
+                          quantum_mm=1e-4, noise_mm=1e-3)  # fmt: skip
 AXES = ("x", "y", "z")
 BASE = dict(mass=300.0, force_constant=900.0, kv=200.0, ti=0.01, kp=40.0)
 
@@ -112,6 +132,37 @@ def main():
     run(plain, DT, pos, vel, acc)  # warm-up: compile (or load the cache) and check the loops
     run(loaded, DT, pos, vel, acc)
     t_plain, _ = best_of(lambda: run(plain, DT, pos, vel, acc), 5)
+    effects = dict.fromkeys(AXES, ALL_EFFECTS)
+    run(plain, DT, pos, vel, acc, effects=effects)
+    t_effects, _ = best_of(lambda: run(plain, DT, pos, vel, acc, effects=effects), 5)
+
+    # the bare inner loop of the plain run: packed rows, outputs allocated beforehand
+    rows = np.array([pack(servo, DT) for servo in plain])
+    outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty(3, np.int64)]
+    empty = np.zeros(0)
+
+    def inner_loop():
+        state = kernel._initial_state((3,), pos[0])
+        kernel._variant_plain(rows, state, pos, vel, acc, None, empty, empty, empty, 1, *outputs)
+
+    t_inner, _ = best_of(inner_loop, 5)
+
+    counter = iter(range(10**9))
+
+    def pack_variant():
+        i = next(counter)
+        effects = LoopEffects(coulomb_N=100.0 + i, backlash_mm=0.004 + 1e-6 * i)
+        return [pack(AxisServo(**{**BASE, "kv": 200.0 + 1e-3 * i}), DT, effects) for _ in AXES]
+
+    t_pack, _ = best_of(pack_variant, 200)
+
+    batch_rows = np.array([
+        [pack(servo, DT, LoopEffects(coulomb_N=50.0 + b, backlash_mm=0.002 + 1e-4 * b)) for servo in plain]
+        for b in range(B)
+    ])  # fmt: skip
+    refs = (pos[:N_BATCH], vel[:N_BATCH], acc[:N_BATCH])
+    run_batch(batch_rows[:2], DT, *refs)  # compile or load
+    t_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3)
     t_loaded, kernel_result = best_of(lambda: run(loaded, DT, pos, vel, acc), 5)
 
     model = python_control_model(loaded)
@@ -137,6 +188,14 @@ def main():
           f"({clamped} axis-steps clamped at the current limit)")  # fmt: skip
     print(f"plain cascade: {rate_plain / 1e6:.1f} M axis-steps/s (target >= 20 M)")
     print(f"kernel (limit + feedforward) / python-control (same loop) = {rate_loaded / rate_pc:.0f} (target >= 1000)")
+    print(f"{'kernel, every in-loop effect on (run() end to end)':58s} {N:8d} {t_effects:10.4f} {axis_steps / t_effects:14.4g}")
+    print(f"{'kernel, plain, bare inner loop (no checks, preallocated)':58s} {N:8d} {t_inner:10.4f} {axis_steps / t_inner:14.4g}")
+    print(f"{'kernel, batch of 64 variants, friction + backlash':58s} {N_BATCH:8d} {t_batch:10.4f} "
+          f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip
+    print(f"kernel_all_effects_slowdown: {t_effects / t_plain:.2f}")
+    print(f"variant_pack_ms: {1e3 * t_pack:.3f}")
+    print(f"kernel_batch_axis_steps_per_s: {B * N_BATCH * 3 / t_batch:.3g}")
+    print(f"kernel_run_vs_inner_loop: {t_inner / t_plain:.2f}")
     print(f"kernel_speedup_vs_python_control: {rate_loaded / rate_pc:.0f}")
 
 

@@ -7,7 +7,7 @@ traceback from inside numpy.
 
 import numpy as np
 
-__all__ = ["as_xyz", "positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "finite", "positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
 
 
 class TimeStepError(ValueError):
@@ -40,6 +40,11 @@ def nonnegative(name, value):
     if value < 0:
         raise ValueError(f"{name} must be zero or positive, got {value!r}")
     return value
+
+
+def finite(name, value):
+    """Return `value` as a float after checking it is a finite number (any sign)."""
+    return _finite_scalar(name, value)
 
 
 def _finite_scalar(name, value):
@@ -87,9 +92,8 @@ def finite_array(name, value, ndim=None, shape=None):
         ):
             want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        first = np.unravel_index(np.argmax(bad), arr.shape)
+    if not np.isfinite(arr).all():
+        first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
         raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
     return arr
 

@@ -33,10 +33,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import expm
 from scipy.optimize import brentq
 
 from . import _validate
+from ._numba import njit
 from .exceptions import UnstableLoopError
 
 __all__ = [
@@ -319,8 +319,49 @@ def zoh(A, B, dt):
     n, m = B.shape
     M = np.zeros((n + m, n + m))
     M[:n, :n], M[:n, n:] = A, B
-    Phi = expm(M * dt)
+    Phi = _expm(M * dt)
     return Phi[:n, :n], Phi[:n, n:]
+
+
+@njit(cache=True)
+def _matmul(a, b):
+    """``a @ b`` for small square matrices, in plain loops (a BLAS call costs more, and spawns threads)."""
+    n = a.shape[0]
+    c = np.zeros((n, n))
+    for i in range(n):
+        for k in range(n):
+            for j in range(n):
+                c[i, j] += a[i, k] * b[k, j]
+    return c
+
+
+@njit(cache=True)
+def _expm(M):
+    """Matrix exponential of a small matrix: Taylor series after scaling, then squaring.
+
+    ``e^M = (e^{M/2^s})^{2^s}`` with ``||M/2^s||_1 <= 1/2``, where the Taylor
+    series is summed until its terms no longer change the sum (at most 30
+    terms; the 20th is below ``0.5^20/20! ≈ 4e-25``).
+    """
+    n = M.shape[0]
+    norm = 0.0
+    for j in range(n):
+        norm = max(norm, np.abs(M[:, j]).sum())
+    squarings = 0
+    while norm > 0.5:
+        norm /= 2.0
+        squarings += 1
+    X = M / 2.0**squarings
+    E = np.eye(n) + X
+    term = X.copy()
+    for j in range(2, 30):
+        term = _matmul(term, X) / j
+        E += term
+        if np.abs(term).max() <= 1e-18 * np.abs(E).max():
+            break
+    for _ in range(squarings):
+        E = _matmul(E, E)
+    return E
 
 
 def _gain(k, inp, out, dt):

@@ -331,20 +331,19 @@ def test_three_point_step_runs_inside_the_servo_kernel():
     reference = np.column_stack([trajectory.position, np.zeros(len(trajectory))])
     knots, _, _ = est.distinct_samples(reference)
     n = len(trajectory)
-    # params: search parameters (4) then the knots (M x 3), flattened; state: hint, then the log
-    params = np.concatenate([est.search_params(), knots.ravel()])
+    # params: the search parameters; geometry: the knots (M x 3); state: hint, then the log
+    params = est.search_params()
 
     @njit
-    def observe(k, ref_pos, ref_vel, ref_acc, position, state, params, dpos, dvel):
-        knots = params[4:].reshape(-1, 3)
+    def observe(k, ref_pos, ref_vel, ref_acc, knots, position, state, params, dpos, dvel, dforce):
         actual = np.array([position[0], position[1], 0.0])
-        estimate, hint = est.three_point_step(knots, int(state[0]), actual, params[:4])
+        estimate, hint = est.three_point_step(knots, int(state[0]), actual, params)
         state[0] = hint
         state[1 + k] = estimate.magnitude
 
     axis = AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0)
     response = run([axis, axis], dt, trajectory.position, trajectory.velocity, trajectory.acceleration,
-                   Compensator(observe, np.zeros(n + 1), params))
+                   Compensator(observe, np.zeros(n + 1), params, knots))
     online = response.compensator_state[1:]
     offline = est.three_point(reference, np.column_stack([response.position, np.zeros(n)])).magnitude
     np.testing.assert_allclose(online, offline, rtol=0, atol=1e-15)

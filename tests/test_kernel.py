@@ -170,7 +170,7 @@ def test_saturation_flags_only_where_clamped():
 
 
 @njit
-def offset_and_count(k, ref_pos, ref_vel, ref_acc, position, state, params, dpos, dvel):
+def offset_and_count(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce):
     dpos[1] = params[0]
     state[0] += 1.0
 
@@ -193,7 +193,7 @@ def test_compensator_offset_shifts_one_axis_exactly():
 
 
 def test_compensator_must_be_jitted():
-    def python_step(k, ref_pos, ref_vel, ref_acc, position, state, params, dpos, dvel):
+    def python_step(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce):
         pass
 
     with pytest.raises(ValueError, match="numba"):

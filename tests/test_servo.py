@@ -235,3 +235,38 @@ def test_sampled_instability_is_caught():
     with pytest.raises(UnstableLoopError, match=r"velocity loop of axis 'x' is (unstable|badly damped).*ti") as err:
         axis(ti=2e-4).check(2e-4)
     assert err.value.margins is not None
+
+
+@pytest.mark.parametrize("extra", [dict(), dict(ti=0.01, damping=2000.0), dict(ti=0.01, **ELECTRICAL)])
+@pytest.mark.parametrize("dt", [None, 1e-4])
+def test_margins_equal_python_control_stability_margins(extra, dt):
+    from contoursim.servo import _blocks, _frequency_grid, _loop_gains, _loop_response
+
+    servo = axis(**extra)
+    mine = servo.margins(dt)
+    for name, loop in _loop_gains(_blocks(servo, dt or 0)).items():
+        w = _frequency_grid(loop)
+        L = _loop_response(loop, w)
+        with np.errstate(divide="ignore"):
+            gm, pm, _, wpc, wgc, _ = ct.stability_margins((np.abs(L), np.angle(L, deg=True), w), method="frd")
+        m = mine[name]
+        assert m["gain_margin"] == pytest.approx(gm, rel=1e-5), name
+        assert m["phase_margin"] == pytest.approx(pm, abs=1e-4), name
+        assert m["gain_crossover"] == pytest.approx(wgc, rel=1e-5), name
+        np.testing.assert_allclose(m["phase_crossover"], wpc, rtol=1e-5)  # NaN when the phase never reaches -180°
+
+
+def test_loop_analysis_runs_once_per_servo_and_period(monkeypatch):
+    import contoursim.servo as servo_module
+
+    calls = []
+    loop_gains = servo_module._loop_gains
+    monkeypatch.setattr(servo_module, "_loop_gains", lambda blocks: calls.append(1) or loop_gains(blocks))
+    servo = axis(kv=KV * 1.01)  # a servo no other test analysed
+    first = servo.check(2e-4, axis="x")
+    assert len(calls) == 2  # the continuous loop (sampling rule) and the sampled loop
+    first["position"]["phase_margin"] = -1.0  # a caller editing its copy changes nothing
+    again = axis(kv=KV * 1.01).check(2e-4, axis="y")  # an equal servo under another axis name
+    assert len(calls) == 2 and again["position"]["phase_margin"] > 30.0
+    servo.check(1e-4)
+    assert len(calls) == 3

@@ -1,0 +1,481 @@
+"""In-loop effects of the kernel: packed rows, python-control references, physical signatures, batches."""
+
+import subprocess
+import sys
+
+import control as ct
+import numpy as np
+import pytest
+
+from contoursim import kernel
+from contoursim.kernel import MAX_DELAY_SAMPLES, NPAR, LoopEffects, pack, run, run_batch
+from contoursim.servo import AxisServo
+
+MASS, KF, KV = 300.0, 900.0, 200.0
+ELECTRICAL = dict(inductance=5e-3, resistance=1.2, kc=5e-3 * 2 * np.pi * 800, ti_current=5e-3 / 1.2)
+DT = 1e-4
+
+
+def axis(**kw):
+    return AxisServo(**{**dict(mass=MASS, force_constant=KF, kv=KV, kp=40.0, ti=0.01), **kw})
+
+
+# --- the plant written here, in its own coordinates: carriage x1 and tool-side mass x2 ----------
+
+
+def two_mass_plant(servo, effects):
+    """Continuous plant, states (x1, v1[, x2, v2][, i]) [mm, mm/s, A]; inputs (i_cmd or u, F [N]).
+
+    Outputs x1, v1, the tool position (x2, or x1 when rigid) [and i].
+    """
+    m, c_slide = servo.mass, servo.damping
+    mode = effects.mode_freq_hz is not None
+    m2 = effects.mode_mass_ratio * m if mode else 0.0
+    m1 = m - m2
+    n_mech = 4 if mode else 2
+    n = n_mech + servo.electrical
+    A, B = np.zeros((n, n)), np.zeros((n, 2))
+    # carriage: m1·a1 = kf·i + F - c_slide·v1 + k·(x2 - x1) + c·(v2 - v1); SI forces, mm inside (x 1000)
+    A[0, 1] = 1.0
+    A[1, 1] = -c_slide / m1
+    B[1, 1] = 1000.0 / m1
+    if mode:
+        w = 2 * np.pi * effects.mode_freq_hz
+        k, c = m2 * w**2, 2 * effects.mode_damping_ratio * m2 * w  # [N/m], [N·s/m]
+        A[1, 0] += -k / m1
+        A[1, 2] += k / m1
+        A[1, 1] += -c / m1
+        A[1, 3] += c / m1
+        A[2, 3] = 1.0
+        A[3, :4] = [k / m2, c / m2, -k / m2, -c / m2]
+    if servo.electrical:
+        L = servo.inductance
+        A[1, n - 1] = 1000.0 * servo.force_constant / m1
+        A[n - 1, 1] = -servo.force_constant / 1000.0 / L
+        A[n - 1, n - 1] = -servo.resistance / L
+        B[n - 1, 0] = 1.0 / L
+    else:
+        B[1, 0] = 1000.0 * servo.force_constant / m1
+    C = np.zeros((3 + servo.electrical, n))
+    C[0, 0] = C[1, 1] = 1.0
+    C[2, 2 if mode else 0] = 1.0
+    if servo.electrical:
+        C[3, n - 1] = 1.0
+    outputs = ["x", "v", "xt"] + (["i"] if servo.electrical else [])
+    return ct.ss(A, B, C, 0, inputs=["drive", "F"], outputs=outputs)
+
+
+def packed_plant(row, servo, effects):
+    """The packed (Ad, Bd) over the present states, in the two-mass coordinates of `two_mass_plant`."""
+    Ad = row[:25].reshape(5, 5)
+    Bd = np.column_stack([row[25:30], row[30:35]])
+    mode = effects.mode_freq_hz is not None
+    states = [0, 1] + ([2, 3] if mode else []) + ([4] if servo.electrical else [])
+    Ad, Bd = Ad[np.ix_(states, states)], Bd[states]
+    T = np.eye(len(states))  # kernel coordinates (x, v, d, ḋ) = T (x1, v1, x2, v2)
+    if mode:
+        T[2, 0] = T[3, 1] = -1.0
+    Ti = np.linalg.inv(T)
+    return Ti @ Ad @ T, Ti @ Bd
+
+
+MODE = dict(mode_freq_hz=80.0, mode_damping_ratio=0.03, mode_mass_ratio=0.25)
+
+
+@pytest.mark.parametrize("extra", [dict(damping=1500.0), dict(damping=1500.0, **ELECTRICAL), dict(ti=None)])
+@pytest.mark.parametrize("effects", [LoopEffects(), LoopEffects(**MODE)])
+def test_packed_plant_equals_python_control_zoh(extra, effects):
+    servo = axis(**extra)
+    row = pack(servo, DT, effects)
+    Ad, Bd = packed_plant(row, servo, effects)
+    ref = ct.sample_system(two_mass_plant(servo, effects), DT, method="zoh")
+    np.testing.assert_allclose(Ad, ref.A, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(Bd, ref.B, rtol=1e-12, atol=1e-12 * np.abs(ref.B).max())
+    if not effects.mode_freq_hz:  # and the rigid plant is the one discretize() gives python-control
+        blocks = servo.discretize(DT)
+        np.testing.assert_allclose(Ad, blocks.plant.A, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(Bd[:, :1], blocks.plant.B, rtol=1e-12, atol=1e-12 * np.abs(blocks.plant.B).max())
+
+
+@pytest.mark.parametrize("extra", [dict(), dict(ti=None), dict(**ELECTRICAL)])
+def test_packed_controllers_equal_discretize_blocks(extra):
+    servo = axis(**extra)
+    row = pack(servo, DT)
+    d = servo.discretize(DT)
+    names = ["velocity_controller"] + (["current_controller"] if servo.electrical else [])
+    for name, base in zip(names, (kernel._VB, kernel._CB)):
+        block = getattr(d, name)
+        want = (0.0, 0.0, block.D[0, 0]) if block.nstates == 0 else (block.B[0, 0], block.C[0, 0], block.D[0, 0])
+        np.testing.assert_allclose(row[base : base + 3], want, rtol=1e-12, atol=0)
+    assert row[kernel._KP] == servo.kp and row[kernel._ELEC] == float(servo.electrical)
+
+
+# --- kernel = python-control's simulation of the same sampled loop with the same effects -------
+
+
+def reference_loop(servo, effects, start):
+    """One axis: plant (ZOH of `two_mass_plant`), discretize()'s controllers, effects as discrete nlsys.
+
+    Returns the interconnection (inputs xr, vr, ar; outputs tool, x_fb, i_cmd) and its initial state.
+    """
+    plant = ct.sample_system(two_mass_plant(servo, effects), DT, method="zoh")
+    plant = ct.ss(plant.A, plant.B, plant.C, plant.D, DT, inputs=["drive", "F"], outputs=plant.output_labels,
+                  name="plant")  # fmt: skip
+    d = servo.discretize(DT)
+    h, q = effects.backlash_mm / 2, effects.quantum_mm
+    delay = effects.feedback_delay_s / DT
+    n, f = int(np.floor(delay + 1e-9)), delay - np.floor(delay + 1e-9)
+    m = n + 2  # remembered past samples
+
+    def history(z, u):
+        """Table, encoder, and the (current, past...) encoder and velocity histories."""
+        x, v = u[0], u[1]
+        table = min(max(z[0], x - h), x + h)
+        enc = table if effects.backlash_feedback == "scale" else x
+        if q:
+            enc = q * np.floor(enc / q + 0.5)
+        return table, enc, np.concatenate([[enc], z[1 : 1 + m]]), np.concatenate([[v], z[1 + m :]])
+
+    def sensors_update(t, z, u, params):
+        table, enc, hx, hv = history(z, u)
+        return np.concatenate([[table], hx[:m], hv[:m]])
+
+    def sensors_output(t, z, u, params):
+        table, enc, hx, hv = history(z, u)
+        return [(1 - f) * hx[n] + f * hx[n + 1], (1 - f) * hv[n] + f * hv[n + 1], table + (u[2] - u[0])]
+
+    sensors = ct.nlsys(sensors_update, sensors_output, inputs=["x", "v", "xt"], outputs=["x_fb", "v_fb", "tool"],
+                       states=1 + 2 * m, dt=DT, name="sensors")  # fmt: skip
+
+    def friction_output(t, z, u, params):
+        e = effects
+        v_eps = max(kernel.FRICTION_VELOCITY_MM_S, 2000 * (e.coulomb_N + e.stribeck_N + abs(e.asymmetry_N)) * DT
+                    / (servo.mass * (1 - e.mode_mass_ratio) if e.mode_freq_hz else servo.mass))  # fmt: skip
+        s = u[0] / np.hypot(u[0], v_eps)
+        level = e.coulomb_N + e.stribeck_N * np.exp(-((u[0] / e.stribeck_velocity_mm_s) ** 2))
+        return [e.offset_N - level * s - e.viscous_N_s_per_m / 1000 * u[0] - e.asymmetry_N * abs(s)]
+
+    friction = ct.nlsys(None, friction_output, inputs=["v"], outputs=["F"], dt=DT, name="friction")
+    vb = d.velocity_controller
+    b, c, dd = (vb.B[0, 0], vb.C[0, 0], vb.D[0, 0]) if vb.nstates else (0.0, 0.0, vb.D[0, 0])
+    limit = np.inf if servo.current_limit is None else servo.current_limit
+
+    def velocity_update(t, z, u, params):
+        raw = c * z[0] + dd * u[0] + u[1]
+        return z if abs(raw) > limit and u[0] * raw > 0 else z + b * u[0]
+
+    def velocity_output(t, z, u, params):
+        return np.clip(c * z[0] + dd * u[0] + u[1], -limit, limit)
+
+    velocity = ct.nlsys(velocity_update, velocity_output, inputs=["e_v", "i_ff"], outputs=["i_cmd"], states=1,
+                        dt=DT, name="velocity")  # fmt: skip
+
+    def gain(k, inp, out):
+        return ct.ss(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[k]], DT, inputs=inp, outputs=out)
+
+    blocks = [
+        plant, sensors, friction, velocity,
+        ct.summing_junction(["xr", "-x_fb"], "e_x"),
+        gain(servo.kp, "e_x", "v_p"),
+        gain(servo.vff, "vr", "v_ff"),
+        ct.summing_junction(["v_p", "v_ff", "-v_fb"], "e_v"),
+        gain(servo.aff * servo.mass / (1000 * servo.force_constant), "ar", "i_ff"),
+    ]  # fmt: skip
+    if servo.electrical:
+        cc = d.current_controller
+        blocks += [
+            ct.ss(cc.A, cc.B, cc.C, cc.D, DT, inputs="e_i", outputs="drive", name="current"),
+            ct.summing_junction(["i_cmd", "-i"], "e_i"),
+        ]
+    else:
+        blocks.append(gain(1.0, "i_cmd", "drive"))
+    loop = ct.interconnect(blocks, inplist=["xr", "vr", "ar"], outlist=["tool", "x_fb", "i_cmd"])
+    x0 = np.zeros(loop.nstates)
+    plant_states = [i for i, label in enumerate(loop.state_labels) if label.startswith("plant_")]
+    x0[plant_states[0]] = start  # at rest at the first command: x1 (and x2)
+    if effects.mode_freq_hz is not None:
+        x0[plant_states[2]] = start
+    first = loop.state_labels.index("sensors_x[0]")
+    x0[first : first + 1 + m] = start  # the table and the encoder history
+    return loop, x0
+
+
+REVERSING = dict(coulomb_N=150.0, viscous_N_s_per_m=400.0, stribeck_N=60.0, stribeck_velocity_mm_s=2.0,
+                 asymmetry_N=25.0, offset_N=-40.0)  # fmt: skip
+EFFECTS = {
+    "none": LoopEffects(),
+    "friction": LoopEffects(**REVERSING),
+    "backlash_motor": LoopEffects(backlash_mm=0.004),
+    "backlash_scale": LoopEffects(backlash_mm=0.004, backlash_feedback="scale"),
+    "delay_whole": LoopEffects(feedback_delay_s=3 * DT),
+    "delay_fraction": LoopEffects(feedback_delay_s=2.37 * DT),
+    "mode": LoopEffects(**MODE),
+    "quantisation": LoopEffects(quantum_mm=0.0005),
+    "all": LoopEffects(backlash_mm=0.003, **REVERSING, feedback_delay_s=1.6 * DT, **MODE, quantum_mm=0.0002),
+}
+
+
+@pytest.mark.parametrize("name", list(EFFECTS))
+@pytest.mark.parametrize("extra", [dict(current_limit=3.0, vff=1.0, aff=0.8), dict(**ELECTRICAL)])
+def test_kernel_equals_python_control_reference(name, extra):
+    effects, servo = EFFECTS[name], axis(**extra)
+    n = 300
+    t = np.arange(n) * DT
+    w = 2 * np.pi * 40.0  # a 0.2 mm sine: reverses after 6.25 ms
+    pos, vel, acc = 0.2 * np.sin(w * t), 0.2 * w * np.cos(w * t), -0.2 * w**2 * np.sin(w * t)
+    result = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None], effects={"x": effects})
+    loop, x0 = reference_loop(servo, effects, pos[0])
+    ref = ct.input_output_response(loop, t, np.vstack([pos, vel, acc]), X0=x0).outputs
+    np.testing.assert_allclose(result.position[:, 0], ref[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.encoder[:, 0], ref[1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.current[:, 0], ref[2], rtol=0, atol=1e-9 * np.abs(ref[2]).max())
+    if name != "none":
+        plain = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None])
+        assert np.abs(result.position - plain.position).max() > 1e-6  # the effect shows in 300 steps
+
+
+# --- physical signatures, measured from the simulated traces --------------------------------
+
+
+def circle(radius, feed, turns, dt):
+    """CCW circle from (R, 0) at `feed` [mm/s]: t, position, velocity, acceleration (N, 2)."""
+    w = feed / radius
+    t = np.arange(int(turns * 2 * np.pi / w / dt)) * dt
+    u = np.column_stack([np.cos(w * t), np.sin(w * t)])
+    return w, t, radius * u, radius * w * np.column_stack([-u[:, 1], u[:, 0]]), -radius * w**2 * u
+
+
+def friction_bulge_peaks(coulomb, ti_values=(0.02, 0.01, 0.005)):
+    """Peak radial bulge [mm] after X's reversal at 180° on a circle with Coulomb friction on X, per ti.
+
+    X reverses at 180°: the velocity integrator must rebuild the friction force, so the radius bulges
+    just after the reversal; away from reversals PI removes the friction offset entirely.
+    """
+    dt = 2e-4
+    w, t, pos, vel, acc = circle(10.0, 2000 / 60, 1.25, dt)
+    theta = np.degrees(w * t) % 360
+    after = (t > 1.0) & (theta > 180) & (theta < 200)
+    quiet = (t > 1.0) & (theta > 60) & (theta < 120)
+    peaks = []
+    for ti in ti_values:
+        servo = axis(ti=ti)
+        plain = run([servo, servo], dt, pos, vel, acc)
+        rough = run([servo, servo], dt, pos, vel, acc, effects={"x": LoopEffects(coulomb_N=coulomb)})
+        bulge = np.hypot(*rough.position.T) - np.hypot(*plain.position.T)
+        peaks.append(np.abs(bulge[after]).max())
+        assert peaks[-1] == np.abs(bulge[(t > 1.0) & (theta > 170) & (theta < 260)]).max()  # right after 180°
+        assert np.abs(bulge[quiet]).max() < 0.02 * peaks[-1]
+    return np.array(peaks)
+
+
+def test_friction_spike_after_reversal_shrinks_with_integral_gain():
+    peaks = friction_bulge_peaks(150.0)
+    assert peaks[0] > peaks[1] > peaks[2] > 1e-3  # a few µm, shrinking with shorter ti
+
+
+def test_friction_spike_grows_with_friction_level():
+    np.testing.assert_array_less(friction_bulge_peaks(75.0, (0.01,)), friction_bulge_peaks(150.0, (0.01,)))
+
+
+def back_and_forth(dt, stroke=1.0, move=0.3, dwell=0.6):
+    """Forward `stroke` [mm] in `move` [s], dwell, back, dwell: position, velocity; index of both dwells' ends."""
+    ramp = np.linspace(0.0, stroke, int(move / dt))
+    n_dwell = int(dwell / dt)
+    pos = np.concatenate([np.zeros(n_dwell), ramp, np.full(n_dwell, stroke), ramp[::-1], np.zeros(n_dwell)])
+    return pos, np.gradient(pos, dt), 2 * n_dwell + ramp.size - 1, pos.size - 1
+
+
+@pytest.mark.parametrize("feedback", ["motor", "scale"])
+def test_backlash_lost_motion_at_reversal(feedback):
+    dt, lost = 2e-4, 0.010
+    pos, vel, forward_end, back_end = back_and_forth(dt)
+    effects = {"x": LoopEffects(backlash_mm=lost, backlash_feedback=feedback)}
+    r = run([axis()], dt, pos[:, None], vel[:, None], np.zeros((pos.size, 1)), effects=effects)
+    table_error = r.position[:, 0] - pos
+    encoder_error = r.encoder[:, 0] - pos
+    # the loop settles what it sees onto the command in both dwells
+    assert np.abs(encoder_error[[forward_end, back_end]]).max() < 1e-8
+    if feedback == "motor":  # the table lags by half the play each way: a step of the lost motion between them
+        assert table_error[back_end] - table_error[forward_end] == pytest.approx(lost, abs=1e-8)
+    else:  # the scale sees the table, so the loop takes up the play
+        assert np.abs(table_error[[forward_end, back_end]]).max() < 1e-8
+    # after the reversal the table stands still until the motor has crossed the play
+    reverse = int(np.argmax(vel < 0))
+    table = r.position[reverse:, 0]
+    stuck = int(np.argmax(table < table[0] - 1e-12))
+    assert stuck > 5
+    motor_travel = r.encoder[reverse, 0] - r.encoder[reverse + stuck, 0] if feedback == "motor" else None
+    if motor_travel is not None:
+        assert motor_travel == pytest.approx(lost, rel=0.05)
+
+
+@pytest.mark.parametrize("delay", [3e-4, 2.37e-4])
+def test_feedback_delay_ramp(delay):
+    # Steady ramp, P-PI: the loop drives what it sees to kp·(r - x_fb) = v, so the encoder it reads lags
+    # by v/kp; that reading is `delay` old, so the axis itself is v·delay further on: lag v/kp - v·delay.
+    dt, v, kp = 1e-4, 50.0, 40.0
+    t = np.arange(20000) * dt
+    ramp = (v * t)[:, None]
+    r = run([axis(kp=kp)], dt, ramp, np.full_like(ramp, v), np.zeros_like(ramp),
+            effects={"x": LoopEffects(feedback_delay_s=delay)})  # fmt: skip
+    assert ramp[-1, 0] - r.encoder[-1, 0] == pytest.approx(v / kp, rel=1e-9)
+    assert ramp[-1, 0] - r.position[-1, 0] == pytest.approx(v / kp - v * delay, rel=1e-9)
+
+
+def fft_peak_hz(signal, dt, above_hz):
+    """Frequency [Hz] of the largest spectral peak above `above_hz`, cubic trend removed, Hann window."""
+    k = np.arange(signal.size)
+    signal = signal - np.polyval(np.polyfit(k, signal, 3), k)
+    pad = 64 * signal.size
+    spectrum = np.abs(np.fft.rfft(signal * np.hanning(signal.size), pad))
+    freq = np.fft.rfftfreq(pad, dt)
+    spectrum[freq < above_hz] = 0.0
+    return freq[np.argmax(spectrum)]
+
+
+@pytest.mark.parametrize("freq", [60.0, 120.0])
+def test_mode_rings_at_its_frequency_after_acceleration(freq):
+    # Accelerate at 2 m/s² for 25 ms, then cruise: the tool-side mass rings. Its frequency lies between
+    # the mode with the carriage held (f·sqrt(1 - ζ²)) and with the carriage free (f/sqrt(1 - r)).
+    dt, a, t1, zeta, ratio = 1e-4, 2000.0, 0.025, 0.02, 0.02
+    t = np.arange(6000) * dt
+    acc = np.where(t < t1, a, 0.0)
+    vel = np.where(t < t1, a * t, a * t1)
+    pos = np.where(t < t1, a * t**2 / 2, a * t1**2 / 2 + a * t1 * (t - t1))
+    refs = pos[:, None], vel[:, None], acc[:, None]
+    effects = LoopEffects(mode_freq_hz=freq, mode_damping_ratio=zeta, mode_mass_ratio=ratio)
+    ringing = run([axis()], dt, *refs, effects={"x": effects}).position[:, 0] - run([axis()], dt, *refs).position[:, 0]
+    measured = fft_peak_hz(ringing[t > t1], dt, above_hz=20.0)
+    assert freq * np.sqrt(1 - zeta**2) * 0.995 < measured < freq / np.sqrt(1 - ratio) * 1.005
+    assert np.abs(ringing[t > t1]).max() > 0.5 * a / (2 * np.pi * freq) ** 2  # about a/ω² [mm]
+
+
+def slow_ramp(n=30000, v=7.3):
+    t = np.arange(n) * DT
+    ramp = (v * t)[:, None]
+    return ramp, np.full_like(ramp, v), np.zeros_like(ramp)
+
+
+def test_quantised_encoder():
+    # The loop sees the encoder rounded to the quantum: an error uniform on ±q/2, RMS q/√12.
+    q = 0.001
+    r = run([axis()], DT, *slow_ramp(), effects={"x": LoopEffects(quantum_mm=q)})
+    np.testing.assert_allclose(r.encoder / q, np.round(r.encoder / q), rtol=0, atol=1e-6)
+    error = (r.encoder - r.position)[1000:, 0]
+    assert np.abs(error).max() <= q / 2 * (1 + 1e-9)
+    assert np.sqrt(np.mean(error**2)) == pytest.approx(q / np.sqrt(12), rel=0.02)
+
+
+def test_measurement_noise_rms_and_determinism():
+    noise = 0.002
+    plain = run([axis(), axis()], DT, *(np.tile(r, 2) for r in slow_ramp()))
+    noisy = [
+        run([axis(), axis()], DT, *(np.tile(r, 2) for r in slow_ramp()),
+            effects={"x": LoopEffects(noise_mm=noise, seed=seed), "y": LoopEffects(noise_mm=noise, seed=seed)})
+        for seed in (7, 7, 8)
+    ]  # fmt: skip
+    recorded = noisy[0].position - plain.position
+    assert np.sqrt(np.mean(recorded**2, axis=0)) == pytest.approx([noise, noise], rel=0.02)
+    assert np.abs(recorded.mean(axis=0)).max() < 0.03 * noise
+    assert abs(np.corrcoef(recorded.T)[0, 1]) < 0.03  # the axes' noise is independent
+    np.testing.assert_array_equal(noisy[0].encoder, plain.encoder)  # outside the loop
+    np.testing.assert_array_equal(noisy[0].position, noisy[1].position)  # same seed, same noise
+    assert np.abs(noisy[2].position - noisy[0].position).max() > noise
+
+
+# --- batches ---------------------------------------------------------------------------------
+
+
+def batch_case():
+    servos = {"x": axis(**ELECTRICAL), "y": axis(kp=30.0, vff=1.0, current_limit=4.0), "z": axis(ti=None)}
+    variants = [
+        {},
+        {"x": EFFECTS["all"], "y": LoopEffects(backlash_mm=0.005, coulomb_N=80.0, noise_mm=0.001, seed=3)},
+        {"y": LoopEffects(feedback_delay_s=5.5 * DT, **MODE), "z": LoopEffects(quantum_mm=0.0001, noise_mm=0.002)},
+    ]
+    w, t, pos, vel, acc = circle(5.0, 3000 / 60, 0.3, DT)
+    refs = tuple(np.column_stack([r, 0.1 * r[:, 0]]) for r in (pos, vel, acc))
+    return servos, variants, refs
+
+
+def test_batch_row_equals_single_run_bit_for_bit():
+    servos, variants, refs = batch_case()
+    rows = np.array([[pack(s, DT, v.get(name, LoopEffects())) for name, s in servos.items()] for v in variants])
+    assert rows.shape == (3, 3, NPAR)
+    batch = run_batch(rows, DT, *refs, outputs=kernel.BATCH_OUTPUTS)
+    decimated = run_batch(rows, DT, *refs, outputs=("tool", "current"), every=7, dtype=np.float32)
+    for b, effects in enumerate(variants):
+        single = run(servos, DT, *refs, effects=effects)
+        for name, field in [("tool", "position"), ("encoder", "encoder"), ("velocity", "velocity"),
+                            ("current", "current"), ("saturated", "saturated")]:  # fmt: skip
+            np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=name)
+        np.testing.assert_array_equal(batch["saturated_count"][b], single.saturated.sum(axis=0))
+        np.testing.assert_array_equal(decimated["tool"][b], single.position[::7].astype(np.float32))
+        np.testing.assert_array_equal(decimated["current"][b], single.current[::7].astype(np.float32))
+    np.testing.assert_array_equal(decimated["t"], np.arange(refs[0].shape[0])[::7] * DT)
+    assert set(decimated) == {"t", "tool", "current", "saturated_count"}
+    assert batch["saturated_count"][:, 1].min() > 0  # the limit is reached: anti-windup is exercised
+
+
+def test_switching_effects_does_not_compile():
+    servos, variants, refs = batch_case()
+    run(servos, DT, *refs)
+    compiled = len(kernel._variant_plain.signatures)
+    for effects in variants:
+        run(servos, DT, *refs, effects=effects)
+    assert len(kernel._variant_plain.signatures) == compiled
+
+
+def test_importing_the_kernel_does_not_import_python_control():
+    code = "import sys, contoursim.kernel; print('control' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+# --- bad input -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        (dict(backlash_mm=-0.001), "backlash_mm"),
+        (dict(backlash_feedback="table"), "backlash_feedback"),
+        (dict(coulomb_N=float("nan")), "coulomb_N"),
+        (dict(asymmetry_N="10"), "asymmetry_N"),
+        (dict(stribeck_velocity_mm_s=0.0), "stribeck_velocity_mm_s"),
+        (dict(mode_freq_hz=-5.0), "mode_freq_hz"),
+        (dict(mode_damping_ratio=1.0), "mode_damping_ratio"),
+        (dict(mode_mass_ratio=0.0), "mode_mass_ratio"),
+        (dict(noise_mm=-1.0), "noise_mm"),
+        (dict(seed=-1), "seed"),
+        (dict(seed=1.5), "seed"),
+    ],
+)
+def test_bad_effects_name_the_parameter(kw, message):
+    with pytest.raises(ValueError, match=message):
+        LoopEffects(**kw)
+
+
+def test_delay_beyond_the_buffer_is_refused():
+    pack(axis(), DT, LoopEffects(feedback_delay_s=MAX_DELAY_SAMPLES * DT))
+    with pytest.raises(ValueError, match=rf"feedback_delay_s = 0.0064 s is 64 servo periods.*at most {MAX_DELAY_SAMPLES}"):
+        pack(axis(), DT, LoopEffects(feedback_delay_s=64 * DT))
+
+
+def test_bad_run_and_batch_arguments():
+    ref = np.zeros((10, 1))
+    with pytest.raises(ValueError, match="effects name axis 'y', which is not one of the axes x"):
+        run([axis()], DT, ref, ref, ref, effects={"y": LoopEffects()})
+    with pytest.raises(ValueError, match="effects must be a LoopEffects"):
+        run([axis()], DT, ref, ref, ref, effects={"x": dict(backlash_mm=0.01)})
+    rows = pack(axis(), DT)[None, None, :]
+    with pytest.raises(ValueError, match=r"rows must have shape \(B, n_axes, 62\)"):
+        run_batch(rows[..., :-1], DT, ref, ref, ref)
+    with pytest.raises(ValueError, match="outputs must name signals from tool"):
+        run_batch(rows, DT, ref, ref, ref, outputs=("position",))
+    with pytest.raises(ValueError, match="every must be a positive integer"):
+        run_batch(rows, DT, ref, ref, ref, every=0)
+    with pytest.raises(ValueError, match="dtype must be float64 or float32"):
+        run_batch(rows, DT, ref, ref, ref, dtype=np.int32)
+    with pytest.raises(ValueError, match=r"ref_vel must have shape \(10, 1\)"):
+        run_batch(rows, DT, ref, ref[:5], ref)
