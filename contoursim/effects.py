@@ -171,7 +171,18 @@ _REGISTRY = {}
 
 
 def register(kind):
-    """Register an :class:`EffectKind` under its name (a name is registered once)."""
+    """Register an :class:`EffectKind` under its name (a name is registered once).
+
+    Parameters
+    ----------
+    kind : EffectKind
+        The new kind of effect.
+
+    Returns
+    -------
+    EffectKind
+        `kind`.
+    """
     if not isinstance(kind, EffectKind):
         raise ValueError(f"register takes an EffectKind, got {type(kind).__name__}")
     if kind.name in _REGISTRY:
@@ -186,7 +197,17 @@ def effect_names():
 
 
 def effect_kind(name):
-    """The :class:`EffectKind` registered as `name`; the error lists the names there are."""
+    """The :class:`EffectKind` registered as `name`.
+
+    Parameters
+    ----------
+    name : str
+        An effect name; an unknown one raises ValueError listing the names there are.
+
+    Returns
+    -------
+    EffectKind
+    """
     try:
         return _REGISTRY[name]
     except (KeyError, TypeError):

@@ -48,7 +48,7 @@ from .errormotion import Cyclic
 from .machine import Machine, load_machine
 from .multibody import cartesian_chain
 
-__all__ = ["Model", "as_model", "load_model"]
+__all__ = ["Model", "as_model", "load_model", "with_file_effects"]
 
 _UM, _URAD = 1e-3, 1e-6
 
@@ -218,7 +218,16 @@ class Model:
 
 
 def as_model(model_or_machine):
-    """A :class:`Model` as given, or a :class:`Machine` as a model without effects."""
+    """A :class:`Model` as given, or a :class:`Machine` as a model without effects.
+
+    Parameters
+    ----------
+    model_or_machine : Model or Machine
+
+    Returns
+    -------
+    Model
+    """
     if isinstance(model_or_machine, Model):
         return model_or_machine
     if isinstance(model_or_machine, Machine):
@@ -255,6 +264,16 @@ def load_model(name_or_file, geometry=True):
 
 def with_file_effects(model, toml):
     """`model` with the ``[[effect]]`` tables of a machine or job file added (same name and axis: replaced).
+
+    Parameters
+    ----------
+    model : Model
+    toml : contoursim.config.TomlFile
+        The parsed file.
+
+    Returns
+    -------
+    Model
 
     Raises
     ------
