@@ -45,7 +45,7 @@ from . import kernel
 from .config import TomlFile
 from .effects import Effect, read_effects
 from .errormotion import Cyclic
-from .machine import Machine, load_machine
+from .machine import Machine, load_machine, preset_file
 from .multibody import cartesian_chain
 
 __all__ = ["Model", "as_model", "load_model", "with_file_effects"]
@@ -255,8 +255,6 @@ def load_model(name_or_file, geometry=True):
         Naming the file and line of a bad machine key or ``[[effect]]`` table,
         or of an effect on an axis the machine lacks.
     """
-    from .machine import preset_file
-
     file = preset_file(name_or_file)
     machine = load_machine(file, geometry=geometry, effects=True)
     return with_file_effects(Model(machine), TomlFile.read(file))

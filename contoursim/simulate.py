@@ -125,8 +125,6 @@ class SimResult:
         write_trace(file, self.to_trace(metadata), extra=extra, overwrite=overwrite)
 
 
-
-
 def measured_reference(trace, servo_period):
     """A measured trace's commanded positions as a reference at the servo period.
 
@@ -201,8 +199,11 @@ def _commands(model, trajectory, strategies):
 
 def _actual(model, q, servo_position):
     """All axes' actual positions: the commands `q` with the servo axes at `servo_position` [mm, rad]."""
+    columns = model.machine.servo_columns
+    if np.array_equal(columns, np.arange(q.shape[1])):  # every axis is a servo axis, in order
+        return servo_position
     actual = q.copy()
-    actual[:, model.machine.servo_columns] = servo_position
+    actual[:, columns] = servo_position
     return actual
 
 
@@ -284,9 +285,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     geometric stage runs on those only: equal to the single run's samples
     to rounding, 1e-12 mm).
 
-    Unlike :func:`simulate`, the variants' loops are not checked for
-    stability (only the nominal machine's are, once, when it is loaded): a
-    variant far from the nominal one is the caller's business.
+    Unlike :func:`simulate`, only the nominal machines' loops are checked
+    for stability (:func:`contoursim.servo.check`, analysed once per servo
+    in a process), not the variants' (a ``gain_mismatch`` makes a new
+    servo): a variant far from the nominal one is the caller's business.
 
     Parameters
     ----------
@@ -318,6 +320,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     ------
     ValueError
         The variants do not share one structure; an unknown output.
+    UnstableLoopError
+        A nominal machine's loop is unstable or badly damped.
     """
     models = [as_model(m) for m in models]
     if not models:
@@ -335,9 +339,12 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                 or machine.servo_period != first.servo_period or dict(machine.work_offset) != dict(first.work_offset)):
             raise ValueError(f"models[{i}] has another structure than models[0] (axes, servo period, work offset or chain): "
                              "a batch runs variants of one machine")
+    dt, servo = first.servo_period, first.servo_columns
+    for machine in {id(m.machine): m.machine for m in models}.values():
+        for axis, nominal in machine.axes.items():
+            nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory = _reference(first, reference, settle)
     q, v, a = _commands(models[0], trajectory, strategies)
-    dt, servo = first.servo_period, first.servo_columns
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))
     width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
