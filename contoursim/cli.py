@@ -139,7 +139,7 @@ def simulate_command(args):
         runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
     out, rows = _write(args.out, machine, runs)
-    effects = ", ".join(repr(e) for e in model.effects) or "none"
+    effects = ", ".join(f"{e.label} ({e.parameters[0].name} = {e.parameters[0].value:g})" for e in model.effects) or "none"
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")

@@ -193,8 +193,13 @@ def _commands(model, trajectory, strategies):
     """Axis commands of the interpolator after the strategies, shape (N, n_axes) each."""
     q, v, a = model.machine.axis_commands(trajectory)
     for strategy in strategies:
-        q = strategy.commands(q, trajectory.t)
+        q = strategy.commands(q, _elapsed(trajectory))
     return q, v, a
+
+
+def _elapsed(trajectory):
+    """Time since the reference's first sample [s], shape (N,): the clock of thermal drift and strategies."""
+    return trajectory.t - trajectory.t[0]
 
 
 def _actual(model, q, servo_position):
@@ -235,6 +240,12 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     -------
     SimResult
 
+    Notes
+    -----
+    Thermal drift, the machine's and the ``thermal_drift`` effects', runs
+    from the reference's first sample (a measured trace's clock may start
+    anywhere); strategies see that time too.
+
     Raises
     ------
     UnstableLoopError
@@ -253,8 +264,9 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     servo = machine.servo_columns
     response = kernel.run(model.servos(), machine.servo_period, qd[:, servo], vd[:, servo], ad[:, servo],
                           effects=model.loop_effects())
-    tool = model.geometry.tool_position(_actual(model, q, response.position), trajectory.t, trajectory.dim)
-    static = model.geometry.tool_position(q, trajectory.t, trajectory.dim)
+    elapsed = _elapsed(trajectory)
+    tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
+    static = model.geometry.tool_position(q, elapsed, trajectory.dim)
     error = None
     if contour and trajectory.path is not None:
         error = exact_contour_error(trajectory, tool)
@@ -354,7 +366,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     for i, m in enumerate(models):
         groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * n_keep * servo.size))
-    t, q_kept = trajectory.t[keep], q[keep]
+    elapsed, q_kept = _elapsed(trajectory)[keep], q[keep]
     for rows in groups.values():
         qd, vd, ad = models[rows[0]].commands(q, v, a)
         for start in range(0, len(rows), chunk):
@@ -366,7 +378,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                 if "axis_position" in result:
                     result["axis_position"][i] = actual
                 if "tool_position" in result:
-                    result["tool_position"][i] = models[i].geometry.tool_position(actual, t, trajectory.dim)
+                    result["tool_position"][i] = models[i].geometry.tool_position(actual, elapsed, trajectory.dim)
     return result
 
 

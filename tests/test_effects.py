@@ -287,3 +287,29 @@ def test_a_machine_file_with_effects_loads_as_a_model(tmp_path):
     file.write_text(text + '\n[[effect]]\nname = "backlash"\naxis = "w"\nlost_motion_um = 1\n')
     with pytest.raises(ConfigError, match="mill.toml, line .*axis must be one axis letter of x, y, z, got 'w'"):
         load_model(file)
+
+
+def test_thermal_drift_runs_from_the_start_of_a_measured_run():
+    t = 100.0 + np.arange(300) * DT  # the logger's clock started long before
+    xy = np.column_stack([2.0 * (t - t[0]), np.zeros_like(t)])
+    model = Model(MACHINE, (Effect("thermal_drift", "y", rate_um_per_min=60.0),))
+    result = simulate(model, Trace(t, xy, xy, ("x", "y")))
+    np.testing.assert_allclose(result.tool_position[:, 1], 1e-3 * (t - t[0]), rtol=1e-12, atol=1e-15)
+
+
+def test_the_command_line_runs_a_jobs_effects(tmp_path, capsys):
+    from contoursim.cli import main
+
+    job = tmp_path / "job.toml"
+    job.write_text('machine = "demo_mill"\npath = "iso230_4_circle_ccw"\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "plain")]) == 0
+    plain = capsys.readouterr().out
+    job.write_text(job.read_text() + '\n[[effect]]\nname = "squareness"\naxis = "xy"\nangle_urad = 200.0\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "skewed")]) == 0
+    skewed = capsys.readouterr().out
+    assert "effects: none" in plain and "effects: squareness.xy (angle_urad = 200)" in skewed
+    volumetric = [float(out.splitlines()[3].split()[-1]) for out in (plain, skewed)]
+    assert volumetric == [0.0, pytest.approx(200e-6 * 50.0 * 1e3, rel=1e-6)]  # |(0, −αx)| at x = ±R = 50 mm [µm]
+    job.write_text(job.read_text() + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 8\nfeedback = "linear"\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "bad")]) == 2
+    assert f"{job}, line 13: [[effect]] backlash.x: feedback must be one of 'motor', 'scale'" in capsys.readouterr().err
