@@ -318,7 +318,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         As for :func:`simulate`.
     every : int
         Keep the samples ``k = 0, every, 2·every, …`` only (M = ceil(N / every)),
-        to bound memory.
+        to bound memory. For a trace logged every k-th servo period,
+        ``every = k`` gives the trace's own instants.
     dtype : numpy dtype
         Of the returned arrays (``np.float32`` halves their memory; the
         simulation and the geometric stage run in float64).

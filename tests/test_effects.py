@@ -313,3 +313,13 @@ def test_the_command_line_runs_a_jobs_effects(tmp_path, capsys):
     job.write_text(job.read_text() + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 8\nfeedback = "linear"\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "bad")]) == 2
     assert f"{job}, line 13: [[effect]] backlash.x: feedback must be one of 'motor', 'scale'" in capsys.readouterr().err
+
+
+def test_a_batch_on_a_coarser_trace_returns_the_traces_instants():
+    t = 2.0 + np.arange(200) * 5 * DT  # logged every fifth servo period
+    xy = np.column_stack([3.0 * np.cos(t), 3.0 * np.sin(t)])
+    trace = Trace(t, xy, xy, ("x", "y"))
+    batch = simulate_batch([MACHINE, Model(MACHINE, (Effect("backlash", "x", lost_motion_um=5.0),))], trace, every=5)
+    np.testing.assert_allclose(batch["t"], t, rtol=0, atol=1e-9)
+    single = simulate(MACHINE, trace)
+    assert np.array_equal(batch["tool_position"][0], single.tool_position[::5])
