@@ -30,7 +30,7 @@ report (DESIGN.md) and the ``[[effect]]`` tables of machine and job files::
     feedback = "motor"
 
 Every kind of effect is an :class:`EffectKind` registered under its name
-(:func:`register`); :data:`CATALOGUE` lists the contract names, and
+(:func:`effect_kind`); :data:`CATALOGUE` lists the contract names, and
 ``quantisation`` and ``noise`` are registered besides them.
 """
 
@@ -50,7 +50,6 @@ __all__ = [
     "effect_kind",
     "effect_names",
     "read_effects",
-    "register",
 ]
 
 #: The stages of the data flow where an effect can act, in the order they run.
@@ -170,19 +169,9 @@ class EffectKind:
 _REGISTRY = {}
 
 
-def register(kind):
-    """Register an :class:`EffectKind` under its name (a name is registered once).
-
-    Parameters
-    ----------
-    kind : EffectKind
-        The new kind of effect.
-
-    Returns
-    -------
-    EffectKind
-        `kind`.
-    """
+def _register(kind):
+    """Register an :class:`EffectKind` under its name (a name is registered once); how each
+    stage realises it lives in :mod:`contoursim.model`."""
     if not isinstance(kind, EffectKind):
         raise ValueError(f"register takes an EffectKind, got {type(kind).__name__}")
     if kind.name in _REGISTRY:
@@ -353,13 +342,13 @@ def _p(name, value, unit, bounds, typical=None, vary=True, doc=""):
     return Parameter(name, value, unit, bounds, typical, vary, doc)
 
 
-register(EffectKind(
+_register(EffectKind(
     "backlash", "loop",
     (_p("lost_motion_um", 0.0, "µm", (0.0, 1000.0), (2.0, 20.0), doc="lost motion between motor/screw and table"),),
     options={"feedback": ("motor", "scale")},
     doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk)",
 ))
-register(EffectKind(
+_register(EffectKind(
     "coulomb_friction", "loop",
     (
         _p("force_N", 0.0, "N", (0.0, _INF), (5.0, 200.0), doc="Coulomb friction level while sliding"),
@@ -371,23 +360,23 @@ register(EffectKind(
     ),
     doc="friction force opposing motion in the loop: reversal spikes (quadrant glitches)",
 ))
-register(EffectKind(
+_register(EffectKind(
     "gain_mismatch", "servo",
     (_p("kp_ratio", 1.0, "-", (0.1, 10.0), (0.7, 1.3), doc="the axis's actual position gain over its nominal one"),),
     doc="one axis's position gain differs from the others",
 ))
-register(EffectKind(
+_register(EffectKind(
     "squareness", "geometry",
     (_p("angle_urad", 0.0, "µrad", (-1e5, 1e5), (20.0, 200.0), doc="out-of-squareness; positive: the angle between the positive axes exceeds 90°"),),
     n_axes=2,
     doc="out-of-squareness of two axes",
 ))
-register(EffectKind(
+_register(EffectKind(
     "scale_error", "geometry",
     (_p("ppm", 0.0, "µm/m", (-1e5, 1e5), (10.0, 100.0), doc="linear positioning error per travel"),),
     doc="linear positioning error of an axis",
 ))
-register(EffectKind(
+_register(EffectKind(
     "cyclic_error", "geometry",
     (
         _p("amplitude_um", 0.0, "µm", (0.0, 1000.0), (1.0, 5.0), doc="amplitude of the periodic positioning error"),
@@ -396,7 +385,7 @@ register(EffectKind(
     ),
     doc="periodic positioning error along the axis, period = screw lead",
 ))
-register(EffectKind(
+_register(EffectKind(
     "straightness", "geometry",
     (
         _p("peak_um", 0.0, "µm", (-1e4, 1e4), (2.0, 15.0), doc="deviation at the middle of the span, perpendicular to the motion"),
@@ -405,13 +394,13 @@ register(EffectKind(
     options={"error_direction": "axes"},
     doc="bow of one axis's motion perpendicular to it, centred on the path's origin",
 ))
-register(EffectKind(
+_register(EffectKind(
     "time_delay", ("kind", {"command": "command", "feedback": "loop"}),
     (_p("delay_s", 0.0, "s", (0.0, 0.1), (1e-4, 3e-3), doc="extra delay, fractions of the servo period interpolated"),),
     options={"kind": ("command", "feedback")},
     doc="extra command or feedback delay on one axis",
 ))
-register(EffectKind(
+_register(EffectKind(
     "thermal_drift", "geometry",
     (
         _p("rate_um_per_min", 0.0, "µm/min", (-1e4, 1e4), (1.0, 10.0), doc="drift rate along the axis at the start"),
@@ -419,7 +408,7 @@ register(EffectKind(
     ),
     doc="slow drift of an axis's position in time",
 ))
-register(EffectKind(
+_register(EffectKind(
     "vibration", "loop",
     (
         _p("freq_hz", 50.0, "Hz", (1.0, 1e4), (30.0, 150.0), doc="frequency of the structural mode (tool side on a spring)"),
@@ -428,12 +417,12 @@ register(EffectKind(
     ),
     doc="lightly damped structural mode excited by acceleration",
 ))
-register(EffectKind(
+_register(EffectKind(
     "quantisation", "loop",
     (_p("resolution_um", 0.0, "µm", (0.0, 1000.0), (0.01, 1.0), doc="encoder resolution the loop sees"),),
     doc="encoder quantisation (outside the catalogue)",
 ))
-register(EffectKind(
+_register(EffectKind(
     "noise", "loop",
     (_p("rms_um", 0.0, "µm", (0.0, 1000.0), (0.05, 0.5), doc="measurement noise on the recorded tool position"),),
     options={"seed": int},

@@ -323,3 +323,18 @@ def test_a_batch_on_a_coarser_trace_returns_the_traces_instants():
     np.testing.assert_allclose(batch["t"], t, rtol=0, atol=1e-9)
     single = simulate(MACHINE, trace)
     assert np.array_equal(batch["tool_position"][0], single.tool_position[::5])
+
+
+@pytest.mark.parametrize("name", effect_names())
+def test_every_effect_is_realised_by_its_stage(name):
+    size = effect_kind(name).parameters[0]
+    effect = Effect(name, "xy" if name == "squareness" else "y", **{size.name: size.typical[1]})
+    model = Model(MACHINE, (effect,))
+    q = np.column_stack([np.linspace(0, 1, 20), np.linspace(0, 2, 20)])
+    changed = {
+        "command": lambda: not np.array_equal(model.commands(q, q, q)[0], q),
+        "servo": lambda: model.servos() != dict(MACHINE.axes),
+        "loop": lambda: model.loop_effects()["y"] != model.loop_effects()["x"],
+        "geometry": lambda: not np.array_equal(model.geometry.tool_position(q, np.arange(20.0), 2), q),
+    }
+    assert changed[effect.stage]()
