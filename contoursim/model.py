@@ -208,9 +208,9 @@ class Model:
         bodies = list(chain.bodies)
         home = dict(zip(self.machine.axis_names, self.machine.home()))
         for e in effects:
-            j = _linear_body(chain, e.axis[0], e.label)
-            side = 1.0 if j in chain.tool_chain else -1.0
             try:
+                j = _linear_body(chain, e.axis[0])
+                side = 1.0 if j in chain.tool_chain else -1.0
                 bodies[j - 1] = _GEOMETRY[e.name](e, bodies[j - 1], side, chain, home)
             except ValueError as exc:
                 raise ValueError(f"{e.label}: {exc}") from None
@@ -301,14 +301,14 @@ def _delayed(x, shift):
     return now if frac == 0 else (1.0 - frac) * now + frac * before
 
 
-def _linear_body(chain, axis, label):
+def _linear_body(chain, axis):
     """Index of the one linear body driven by `axis`."""
     found = [j for j, b in enumerate(chain.bodies, start=1) if b.axis == axis and b.joint == "linear"]
     if len(found) != 1:
-        raise ValueError(f"{label}: a geometric effect needs exactly one linear body driven by axis {axis!r}, found {len(found)}")
+        raise ValueError(f"a geometric effect needs exactly one linear body driven by axis {axis!r}, found {len(found)}")
     j = found[0]
     if (j in chain.tool_chain) == (j in chain.work_chain):
-        raise ValueError(f"{label}: the body of axis {axis!r} moves neither the tool nor the workpiece alone")
+        raise ValueError(f"the body of axis {axis!r} moves neither the tool nor the workpiece alone")
     return j
 
 
@@ -324,7 +324,7 @@ def _add_motion(body, component, poly=(), cyclic=()):
 
 
 def _squareness(e, body, side, chain, home):
-    towards = chain.bodies[_linear_body(chain, e.axis[1], e.label) - 1].direction
+    towards = chain.bodies[_linear_body(chain, e.axis[1]) - 1].direction
     squareness = body.squareness.copy()
     squareness[towards] += e["angle_urad"] * _URAD
     return replace(body, squareness=squareness)

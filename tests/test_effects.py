@@ -338,3 +338,12 @@ def test_every_effect_is_realised_by_its_stage(name):
         "geometry": lambda: not np.array_equal(model.geometry.tool_position(q, np.arange(20.0), 2), q),
     }
     assert changed[effect.stage]()
+
+
+def test_geometric_effects_change_only_the_body_of_their_axis():
+    machine = load_machine("vertical_mill_3axis")
+    model = Model(machine, (Effect("straightness", "z", peak_um=3.0),))
+    assert model.effects[0].options["error_direction"] == "x"  # the default: the first other axis
+    changed = [a.name for a, b in zip(machine.chain.bodies, model.geometry.chain.bodies) if a is not b]
+    assert changed == ["Z"]
+    assert model.geometry.chain.bodies[4].motion[0].poly != machine.chain.bodies[4].motion[0].poly
