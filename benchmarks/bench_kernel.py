@@ -19,9 +19,11 @@ per turn) sampled at 5 kHz:
 
 * kernel, every in-loop effect on every axis (backlash with scale feedback,
   Coulomb + viscous + Stribeck friction with asymmetry and offset, a
-  1.3-period feedback delay, a 90 Hz structural mode, 0.1 µm encoder,
-  1 µm measurement noise), same reference, ``run()`` end to end, best of 5:
-  ``kernel_all_effects_slowdown`` is its time over the plain run's;
+  1.3-period feedback delay, a 90 Hz structural mode, a 0.1 µm encoder),
+  same reference, ``run()`` end to end, best of 5:
+  ``kernel_all_effects_slowdown`` is its time over the plain run's; the
+  same with 1 µm measurement noise on the recorded position too (outside
+  the loop) is printed in the table;
 * ``variant_pack_ms``: ``pack`` of one new 3-axis variant (a new kv and new
   friction and backlash values per axis, so nothing is cached), best of 200;
 * ``kernel_batch_axis_steps_per_s``: ``run_batch`` of 64 variants (friction
@@ -36,6 +38,7 @@ Run: python benchmarks/bench_kernel.py
 """
 
 import time
+from dataclasses import replace
 
 import control as ct
 import numpy as np
@@ -51,7 +54,7 @@ N_BATCH, B = 50_000, 64
 ALL_EFFECTS = LoopEffects(backlash_mm=0.005, backlash_feedback="scale", coulomb_N=120.0, viscous_N_s_per_m=300.0,
                           stribeck_N=40.0, stribeck_velocity_mm_s=2.0, asymmetry_N=15.0, offset_N=-30.0,
                           feedback_delay_s=1.3 * DT, mode_freq_hz=90.0, mode_damping_ratio=0.05, mode_mass_ratio=0.1,
-                          quantum_mm=1e-4, noise_mm=1e-3)  # fmt: skip
+                          quantum_mm=1e-4)  # fmt: skip
 AXES = ("x", "y", "z")
 BASE = dict(mass=300.0, force_constant=900.0, kv=200.0, ti=0.01, kp=40.0)
 
@@ -135,10 +138,12 @@ def main():
     effects = dict.fromkeys(AXES, ALL_EFFECTS)
     run(plain, DT, pos, vel, acc, effects=effects)
     t_effects, _ = best_of(lambda: run(plain, DT, pos, vel, acc, effects=effects), 5)
+    noisy = dict.fromkeys(AXES, replace(ALL_EFFECTS, noise_mm=1e-3))
+    t_noisy, _ = best_of(lambda: run(plain, DT, pos, vel, acc, effects=noisy), 5)
 
     # the bare inner loop of the plain run: packed rows, outputs allocated beforehand
     rows = np.array([pack(servo, DT) for servo in plain])
-    outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty(3, np.int64)]
+    outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty(3, np.int64), np.empty(3, np.int64)]
     empty = np.zeros(0)
 
     def inner_loop():
@@ -189,6 +194,7 @@ def main():
     print(f"plain cascade: {rate_plain / 1e6:.1f} M axis-steps/s (target >= 20 M)")
     print(f"kernel (limit + feedforward) / python-control (same loop) = {rate_loaded / rate_pc:.0f} (target >= 1000)")
     print(f"{'kernel, every in-loop effect on (run() end to end)':58s} {N:8d} {t_effects:10.4f} {axis_steps / t_effects:14.4g}")
+    print(f"{'kernel, every in-loop effect + measurement noise':58s} {N:8d} {t_noisy:10.4f} {axis_steps / t_noisy:14.4g}")
     print(f"{'kernel, plain, bare inner loop (no checks, preallocated)':58s} {N:8d} {t_inner:10.4f} {axis_steps / t_inner:14.4g}")
     print(f"{'kernel, batch of 64 variants, friction + backlash':58s} {N_BATCH:8d} {t_batch:10.4f} "
           f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip

@@ -7,7 +7,7 @@ traceback from inside numpy.
 
 import numpy as np
 
-__all__ = ["as_xyz", "finite", "positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "finite", "positive", "nonnegative", "float_array", "finite_array", "time_base", "TimeStepError"]
 
 
 class TimeStepError(ValueError):
@@ -60,7 +60,28 @@ def _finite_scalar(name, value):
 
 
 def finite_array(name, value, ndim=None, shape=None):
-    """Return `value` as a float ndarray after checking it.
+    """Return `value` as a float ndarray after checking it: :func:`float_array`, and every value finite.
+
+    Parameters
+    ----------
+    name : str
+        Parameter name used in error messages.
+    value : array_like
+        The values.
+    ndim : int, optional
+        Required number of dimensions.
+    shape : tuple, optional
+        Required shape; ``None`` entries match any length.
+    """
+    arr = float_array(name, value, ndim, shape)
+    if not np.isfinite(arr).all():
+        first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
+        raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
+    return arr
+
+
+def float_array(name, value, ndim=None, shape=None):
+    """Return `value` as a float ndarray after checking its type and shape (not its values).
 
     Parameters
     ----------
@@ -92,9 +113,6 @@ def finite_array(name, value, ndim=None, shape=None):
         ):
             want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
-    if not np.isfinite(arr).all():
-        first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
-        raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
     return arr
 
 
