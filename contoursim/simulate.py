@@ -327,7 +327,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     Returns
     -------
     dict
-        ``"t"`` (M,) [s] and each output asked for.
+        ``"t"`` (M,) [s], each output asked for, and ``"diverged_step"``
+        (B, n_servo): per variant and servo axis the first step whose state
+        was not finite (an unstable variant), -1 for none; a diverged
+        variant's ``tool_position`` is NaN throughout.
 
     Raises
     ------
@@ -363,6 +366,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
     result = {"t": trajectory.t[keep].copy()}
     result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in outputs})
+    result["diverged_step"] = np.empty((len(models), servo.size), np.int64)
     groups = {}
     for i, m in enumerate(models):
         groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
@@ -374,11 +378,14 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
             part = rows[start : start + chunk]
             packed = np.array([_packed(models[i], dt) for i in part])
             run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=("tool",), every=every)
+            result["diverged_step"][part] = run["diverged_step"]
             for b, i in enumerate(part):
                 actual = _actual(models[i], q_kept, run["tool"][b])
                 if "axis_position" in result:
                     result["axis_position"][i] = actual
-                if "tool_position" in result:
+                if "tool_position" in result and (run["diverged_step"][b] >= 0).any():
+                    result["tool_position"][i] = np.nan  # an unstable variant: no tool position
+                elif "tool_position" in result:
                     result["tool_position"][i] = models[i].geometry.tool_position(actual, elapsed, trajectory.dim)
     return result
 

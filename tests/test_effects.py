@@ -347,3 +347,15 @@ def test_geometric_effects_change_only_the_body_of_their_axis():
     changed = [a.name for a, b in zip(machine.chain.bodies, model.geometry.chain.bodies) if a is not b]
     assert changed == ["Z"]
     assert model.geometry.chain.bodies[4].motion[0].poly != machine.chain.bodies[4].motion[0].poly
+
+
+def test_a_batch_reports_an_unstable_variant_and_runs_the_others():
+    model = Model(MACHINE, (Effect("gain_mismatch", "x", kp_ratio=1.0), Effect("squareness", "xy", angle_urad=50.0),
+                            Effect("time_delay", "x", delay_s=5e-3, kind="feedback")))
+    variants = model.variants([{"time_delay.x.delay_s": 0.0}, {"gain_mismatch.x.kp_ratio": 10.0}])
+    reference = _circle(feed=10.0)  # 8,000 steps: the unstable loop (|λ| = 1.15) overflows
+    batch = simulate_batch(variants, reference)
+    assert batch["diverged_step"][0].tolist() == [-1, -1]
+    assert batch["diverged_step"][1, 0] > 0 and batch["diverged_step"][1, 1] == -1
+    assert np.isnan(batch["tool_position"][1]).all()
+    assert np.array_equal(batch["tool_position"][0], simulate(variants[0], reference).tool_position)
