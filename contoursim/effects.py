@@ -308,6 +308,9 @@ class Effect:
         object.__setattr__(copy, "parameters", params)
         return copy
 
+    def __hash__(self):
+        return hash((self.name, self.axis, self.parameters, tuple(self.options.items())))
+
     def __repr__(self):
         args = [f"{k}={v!r}" for k, v in {**self.values(), **self.options}.items()]
         return f"Effect({self.name!r}, {self.axis!r}, {', '.join(args)})"

@@ -51,6 +51,8 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     assert [(q.name, q.value, q.unit, q.vary) for q in p] == [
         ("amplitude_um", 2.0, "µm", True), ("period_mm", 10.0, "mm", False), ("phase_deg", 0.0, "deg", True)]
     assert Effect("squareness", "xy", angle_urad=-30.0).parameters[0].signed
+    same, other = Effect("backlash", "x", lost_motion_um=8.0), Effect("backlash", "x", lost_motion_um=8.0, feedback="scale")
+    assert len({same, Effect("backlash", "x", lost_motion_um=8.0), other}) == 2  # hashable, equal by value
 
 
 @pytest.mark.parametrize("args, kwargs, message", [
