@@ -23,9 +23,8 @@ reference (a trace of circles, R = 20 mm, 1 kHz):
 Run: python benchmarks/bench_effects.py
 """
 
-import time
-
 import numpy as np
+from bench_chain import best_of as best
 
 from contoursim import kernel
 from contoursim.effects import Effect
@@ -37,15 +36,6 @@ from contoursim.traces import Trace
 
 DT = 1e-3
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0)
-
-
-def best(fn, repeat):
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main():
