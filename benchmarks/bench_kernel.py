@@ -143,7 +143,7 @@ def main():
 
     # the bare inner loop of the plain run: packed rows, outputs allocated beforehand
     rows = np.array([pack(servo, DT) for servo in plain])
-    outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty(3, np.int64), np.empty(3, np.int64)]
+    outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty((3, 3), np.int64)]
     empty = np.zeros(0)
 
     def inner_loop():

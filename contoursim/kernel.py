@@ -111,7 +111,15 @@ _TABLE = 7  # table position behind the backlash [mm]
 _NBUF = 64  # ring buffer length of the feedback delay
 _BUFX = 8  # _NBUF encoder positions [mm]
 _BUFV = _BUFX + _NBUF  # _NBUF motor velocities [mm/s]
-_NSTATE = _BUFV + _NBUF
+_PAIR = _BUFV + _NBUF  # index of the pair of noise samples held (-1: none)
+_GAUSS = _PAIR + 1  # that pair of standard normal samples
+_NSTATE = _GAUSS + 2
+
+_CLAMPED, _DIVERGED, _BAD_REFERENCE = 0, 1, 2  # per-axis status counters of a run
+
+# Once the plant state is not finite it stays so (x keeps its value plus increments), so the
+# divergence check runs every _DIVERGENCE_CHECK steps and at the end only.
+_DIVERGENCE_CHECK = 256
 
 #: The longest feedback delay the kernel holds, in servo periods.
 MAX_DELAY_SAMPLES = _NBUF - 1
@@ -371,6 +379,14 @@ def _current_controller(b, c, d, z, e_i):
 
 
 @njit(cache=True)
+def _plant_row(p, a, r, x, v, d, w, i, u, force):
+    """Row `r` of the plant update ``Ad [x, v, d, ḋ, i] + Bu u + BF F`` (reads `p` without branching)."""
+    base = _AD + _NS * r
+    return (p[a, base] * x + p[a, base + 1] * v + p[a, base + 2] * d + p[a, base + 3] * w + p[a, base + 4] * i
+            + p[a, _BU + r] * u + p[a, _BF + r] * force)  # fmt: skip
+
+
+@njit(cache=True)
 def _disturbance(fc, fv, fs, vs, fa, f0, veps, v):
     """Disturbance force on the carriage [N]: the offset minus friction at velocity `v` [mm/s]."""
     s = v / math.sqrt(v * v + veps * veps)
@@ -393,12 +409,13 @@ def _mix(z):
 
 
 @njit(cache=True)
-def _gauss(key, k):
-    """Standard normal sample number `k` of the stream `key` (counter-based: no state, Box-Muller)."""
-    c = np.uint64(2) * np.uint64(k)
+def _gauss_pair(key, pair):
+    """Standard normal samples ``2·pair`` and ``2·pair + 1`` of the stream `key` (counter-based, Box-Muller)."""
+    c = np.uint64(2) * np.uint64(pair)
     u1 = (float(_mix(key + (c + np.uint64(1)) * _GOLDEN) >> np.uint64(11)) + 0.5) * 2.0**-53
     u2 = (float(_mix(key + (c + np.uint64(2)) * _GOLDEN) >> np.uint64(11)) + 0.5) * 2.0**-53
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+    radius, angle = math.sqrt(-2.0 * math.log(u1)), 2.0 * math.pi * u2
+    return radius * math.cos(angle), radius * math.sin(angle)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -406,15 +423,18 @@ def _gauss(key, k):
 
 
 def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_params, comp_geometry, every,
-             tool, encoder, velocity, current, saturated, counts, diverged):  # fmt: skip
+             tool, encoder, velocity, current, saturated, status):  # fmt: skip
     """Step all axes of one variant over the reference, advancing `state` and `comp_state` in place.
 
     ``par`` (n, NPAR) and ``state`` (n, _NSTATE) follow the layouts above;
     ``comp_step`` is ``None`` (pruned at compile time) or a compensator step
     function. Samples ``k = 0, every, 2·every, …`` go to the outputs of
     shape (ceil(N / every), n) that have rows (an output with no rows is not
-    asked for); `counts` (n,) gets the number of clamped steps per axis,
-    `diverged` (n,) the first step whose plant state is not finite (-1: none).
+    asked for). `status` (n, 3) gets per axis the number of clamped steps,
+    the step at which the plant state was found not finite (checked every
+    _DIVERGENCE_CHECK steps; -1: never) and the first step whose reference
+    values are not all finite (-1: none; the caller checks the reference
+    in detail then, so that a valid reference costs no separate pass).
     """
     n_steps, n_axes = ref_pos.shape
     write_tool, write_encoder = tool.shape[0] > 0, encoder.shape[0] > 0
@@ -431,8 +451,9 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
                                          par[a, _QUANTUM])  # fmt: skip
         state[a, _BUFX : _BUFX + _NBUF] = enc
         state[a, _BUFV : _BUFV + _NBUF] = state[a, 1]
-        counts[a] = 0
-        diverged[a] = -1
+        status[a, _CLAMPED] = 0
+        status[a, _DIVERGED] = -1
+        status[a, _BAD_REFERENCE] = -1
     for k in range(n_steps):
         j = k // every
         record = k - j * every == 0
@@ -452,8 +473,11 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
             if record:
                 if write_tool:
                     y = table + state[a, 2]
-                    if par[a, _NOISE] > 0.0:
-                        y += par[a, _NOISE] * _gauss(keys[a], k)
+                    if par[a, _NOISE] > 0.0:  # sample k of the axis's stream; a pair is drawn at a time
+                        if state[a, _PAIR] != k >> 1:
+                            state[a, _PAIR] = k >> 1
+                            state[a, _GAUSS], state[a, _GAUSS + 1] = _gauss_pair(keys[a], k >> 1)
+                        y += par[a, _NOISE] * state[a, _GAUSS + (k & 1)]
                     tool[j, a] = y
                 if write_encoder:
                     encoder[j, a] = x_fb[a]
@@ -471,7 +495,9 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
             i_cmd, clamped, state[a, _ZV] = _velocity_controller(
                 par[a, _VB], par[a, _VC], par[a, _VD], par[a, _ILIM], state[a, _ZV], v_cmd - v_fb[a], i_ff
             )
-            counts[a] += clamped
+            status[a, _CLAMPED] += clamped
+            if status[a, _BAD_REFERENCE] < 0 and not math.isfinite(ref_pos[k, a] + ref_vel[k, a] + ref_acc[k, a]):
+                status[a, _BAD_REFERENCE] = k
             if record:
                 if write_current:
                     current[j, a] = i_cmd
@@ -486,24 +512,18 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
             if par[a, _FRICTION] != 0.0:
                 force = _disturbance(par[a, _FC], par[a, _FV], par[a, _FS], par[a, _VS], par[a, _FA], par[a, _F0],
                                      par[a, _VEPS], v)  # fmt: skip
-            # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the blocks that are zero by construction
+            # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the rows that are zero by construction
             # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
-            for r in range(4 if par[a, _MODE] != 0.0 else 2):
-                base = _AD + _NS * r
-                value = par[a, base] * x + par[a, base + 1] * v + par[a, _BU + r] * u + par[a, _BF + r] * force
-                if par[a, _MODE] != 0.0:
-                    value += par[a, base + 2] * d + par[a, base + 3] * w
-                if electrical:
-                    value += par[a, base + 4] * i
-                state[a, r] = value
-            if electrical:
-                base = _AD + _NS * 4
-                state[a, 4] = (par[a, base] * x + par[a, base + 1] * v + par[a, base + 2] * d + par[a, base + 3] * w
-                               + par[a, base + 4] * i + par[a, _BU + 4] * u + par[a, _BF + 4] * force)  # fmt: skip
-            else:
-                state[a, 4] = u
-            if diverged[a] < 0 and not math.isfinite(state[a, 0] + state[a, 1] + state[a, 4]):
-                diverged[a] = k
+            state[a, 0] = _plant_row(par, a, 0, x, v, d, w, i, u, force)
+            state[a, 1] = _plant_row(par, a, 1, x, v, d, w, i, u, force)
+            if par[a, _MODE] != 0.0:
+                state[a, 2] = _plant_row(par, a, 2, x, v, d, w, i, u, force)
+                state[a, 3] = _plant_row(par, a, 3, x, v, d, w, i, u, force)
+            state[a, 4] = _plant_row(par, a, 4, x, v, d, w, i, u, force) if electrical else u
+        if k % _DIVERGENCE_CHECK == 0 or k == n_steps - 1:
+            for a in range(n_axes):
+                if status[a, _DIVERGED] < 0 and not math.isfinite(state[a, 0] + state[a, 1] + state[a, 4]):
+                    status[a, _DIVERGED] = k
 
 
 # Without a compensator the loop compiles once and is cached on disk. A compensator's step
@@ -514,13 +534,12 @@ _variant_compensated = njit(_variant)
 
 
 @njit(cache=True, parallel=True)
-def _batch(rows, states, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, counts,
-           diverged):  # fmt: skip
+def _batch(rows, states, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
     """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows."""
     empty = np.zeros(0)
     for b in prange(rows.shape[0]):
         _variant_plain(rows[b], states[b], ref_pos, ref_vel, ref_acc, None, empty, empty, empty, every,
-                       tool[b], encoder[b], velocity[b], current[b], saturated[b], counts[b], diverged[b])  # fmt: skip
+                       tool[b], encoder[b], velocity[b], current[b], saturated[b], status[b])  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
@@ -729,14 +748,19 @@ def _axes(servos):
     return names, servos
 
 
-def _reference(n_axes, ref_pos, ref_vel, ref_acc):
-    """The three reference arrays checked, C-contiguous float64, shape (N, n_axes)."""
-    ref_pos = _validate.finite_array("ref_pos", ref_pos, shape=(None, n_axes))
+def _reference(n_axes, ref_pos, ref_vel, ref_acc, finite):
+    """The three reference arrays checked, C-contiguous float64, shape (N, n_axes).
+
+    ``finite=False`` checks types and shapes only (:func:`run` has the kernel
+    flag non-finite values as it reads them, and calls this again then).
+    """
+    check = _validate.finite_array if finite else _validate.float_array
+    ref_pos = check("ref_pos", ref_pos, shape=(None, n_axes))
     n_steps = ref_pos.shape[0]
     if n_steps < 1:
         raise ValueError("ref_pos must hold at least one sample")
-    ref_vel = _validate.finite_array("ref_vel", ref_vel, shape=(n_steps, n_axes))
-    ref_acc = _validate.finite_array("ref_acc", ref_acc, shape=(n_steps, n_axes))
+    ref_vel = check("ref_vel", ref_vel, shape=(n_steps, n_axes))
+    ref_acc = check("ref_acc", ref_acc, shape=(n_steps, n_axes))
     return tuple(np.ascontiguousarray(r) for r in (ref_pos, ref_vel, ref_acc))
 
 
@@ -745,6 +769,7 @@ def _initial_state(shape, start):
     state = np.zeros(shape + (_NSTATE,))
     state[..., 0] = start
     state[..., _TABLE] = start
+    state[..., _PAIR] = -1.0
     return state
 
 
@@ -803,7 +828,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
     names, servos = _axes(servos)
     dt = _validate.positive("dt", dt)
     n = len(servos)
-    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc)
+    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc, finite=False)
     if compensator is not None and not isinstance(compensator, Compensator):
         raise ValueError(f"compensator must be a Compensator, got {type(compensator).__name__}")
     effects = {} if effects is None else dict(effects)
@@ -818,8 +843,8 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
     state = _initial_state((n,), ref_pos[0])
     position, encoder, velocity, current = (np.empty((n_steps, n)) for _ in range(4))
     saturated = np.empty((n_steps, n), bool)
-    diverged = np.empty(n, np.int64)
-    outputs = (position, encoder, velocity, current, saturated, np.empty(n, np.int64), diverged)
+    status = np.empty((n, 3), np.int64)
+    outputs = (position, encoder, velocity, current, saturated, status)
     if compensator is None:
         empty = np.zeros(0)
         _variant_plain(par, state, ref_pos, ref_vel, ref_acc, None, empty, empty, empty, 1, *outputs)
@@ -829,10 +854,13 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
         c = compensator
         _variant_compensated(par, state, ref_pos, ref_vel, ref_acc, c.step, comp_state, c.params, c.geometry, 1,
                              *outputs)  # fmt: skip
+    if status[:, _BAD_REFERENCE].max() >= 0:
+        _reference(n, ref_pos, ref_vel, ref_acc, finite=True)  # names the first non-finite value
+    diverged = status[:, _DIVERGED]
     if diverged.max() >= 0:
         a = int(np.argmax(diverged >= 0))
         raise UnstableLoopError(
-            f"the simulation of axis {names[a]!r} diverged at t = {diverged[a] * dt:.6g} s (step {diverged[a]}): "
+            f"the simulation of axis {names[a]!r} diverged by t = {diverged[a] * dt:.6g} s (step {diverged[a]}): "
             "its loop with these effects (or this compensator) is unstable"
         )
     return ServoResponse(np.arange(n_steps) * dt, *outputs[:5], compensator_state=comp_state)
@@ -877,9 +905,10 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
         ``"t"``: the kept sample times, shape (M,) [s], with
         ``M = ceil(N / every)``; one array (B, M, n) per requested output;
         ``"saturated_count"``: clamped steps per variant and axis over all
-        N steps, shape (B, n); ``"diverged_step"``: the first step whose
-        plant state was not finite (an unstable variant; its outputs from
-        that step on mean nothing), -1 for none, shape (B, n).
+        N steps, shape (B, n); ``"diverged_step"``: the step by which the
+        plant state was found not finite (checked every 256 steps: an
+        unstable variant, whose outputs mean nothing from up to 256 steps
+        before), -1 for none, shape (B, n).
     """
     rows = _validate.finite_array("rows", rows, ndim=3)
     rows = np.ascontiguousarray(rows)
@@ -887,7 +916,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     if width != NPAR:
         raise ValueError(f"rows must have shape (B, n_axes, {NPAR}) (rows from pack()), got {rows.shape}")
     dt = _validate.positive("dt", dt)
-    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc)
+    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc, finite=True)
     unknown = [name for name in outputs if name not in BATCH_OUTPUTS]
     if isinstance(outputs, str) or unknown:
         raise ValueError(f"outputs must name signals from {', '.join(BATCH_OUTPUTS)}, got {outputs!r}")
@@ -904,11 +933,11 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
 
     arrays = {name: out(name, dtype) for name in BATCH_OUTPUTS[:4]}
     arrays["saturated"] = out("saturated", bool)
-    counts, diverged = np.empty((n_variants, n), np.int64), np.empty((n_variants, n), np.int64)
+    status = np.empty((n_variants, n, 3), np.int64)
     states = _initial_state((n_variants, n), ref_pos[0])
-    _batch(rows, states, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), counts, diverged)
+    _batch(rows, states, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), status)
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
-    result["saturated_count"] = counts
-    result["diverged_step"] = diverged
+    result["saturated_count"] = status[..., _CLAMPED]
+    result["diverged_step"] = status[..., _DIVERGED]
     return result

@@ -486,7 +486,7 @@ def test_bad_run_and_batch_arguments():
 def test_diverging_variants_are_reported():
     ref = np.zeros((80000, 1))  # the delayed loop grows by about 1e12 per 0.2 s: inf within 8 s
     ref[1:] = 0.01
-    with pytest.raises(UnstableLoopError, match=r"simulation of axis 'x' diverged at t = .* s \(step \d+\)"):
+    with pytest.raises(UnstableLoopError, match=r"simulation of axis 'x' diverged by t = .* s \(step \d+\)"):
         run([axis()], DT, ref, np.zeros_like(ref), np.zeros_like(ref),
             effects={"x": LoopEffects(feedback_delay_s=MAX_DELAY_SAMPLES * DT)})  # fmt: skip
     rows = np.array([[pack(axis(), DT)], [pack(axis(kv=100 * KV), DT)]])  # pack does not check: kv far too high
