@@ -173,7 +173,7 @@ def _register(kind):
     """Register an :class:`EffectKind` under its name (a name is registered once); how each
     stage realises it lives in :mod:`contoursim.model`."""
     if not isinstance(kind, EffectKind):
-        raise ValueError(f"register takes an EffectKind, got {type(kind).__name__}")
+        raise TypeError(f"register takes an EffectKind, got {type(kind).__name__}")
     if kind.name in _REGISTRY:
         raise ValueError(f"an effect named {kind.name!r} is already registered")
     _REGISTRY[kind.name] = kind
@@ -240,7 +240,9 @@ class Effect:
 
     def __init__(self, name, axis, **values):
         kind = effect_kind(name)
-        if not isinstance(axis, str) or len(axis) != kind.n_axes or set(axis) - set(_AXES) or len(set(axis)) != len(axis):
+        if not isinstance(axis, str):
+            raise TypeError(f"{name}: axis must be a string of axis letters, got {axis!r}")
+        if len(axis) != kind.n_axes or set(axis) - set(_AXES) or len(set(axis)) != len(axis):
             wanted = "one axis letter" if kind.n_axes == 1 else f"{kind.n_axes} different axis letters (like 'xy')"
             raise ValueError(f"{name}: axis must be {wanted} of x, y, z, got {axis!r}")
         unknown = [k for k in values if k not in kind.parameter_names and k not in kind.options]
@@ -256,8 +258,8 @@ class Effect:
         for p in kind.parameters:
             try:
                 params.append(replace(p, value=values.get(p.name, p.value)))
-            except ValueError as exc:
-                raise ValueError(f"{name}.{axis}: {exc}") from None
+            except (TypeError, ValueError) as exc:
+                raise type(exc)(f"{name}.{axis}: {exc}") from None
         options = {}
         for key, allowed in kind.options.items():
             value = values.get(key)
@@ -321,7 +323,9 @@ def _option(name, axis, key, allowed, value):
     if allowed is int:
         if value is None:
             return 0
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{name}.{axis}: {key} must be a non-negative integer, got {value!r}")
+        if value < 0:
             raise ValueError(f"{name}.{axis}: {key} must be a non-negative integer, got {value!r}")
         return int(value)
     if allowed == "axes":
@@ -476,7 +480,7 @@ def read_effects(toml, *keys):
         values = {k: v for k, v in item.items() if k not in ("name", "axis")}
         try:
             effects.append(Effect(kind.name, item["axis"], **values))
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             message = str(exc)
             bad = next((k for k in values if repr(k) in message or message.split(": ", 1)[-1].startswith(k)), None)
             raise toml.error(f"[[effect]] {message}", *where, *((bad,) if bad else ())) from None

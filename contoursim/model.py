@@ -81,11 +81,11 @@ class Model:
 
     def __post_init__(self):
         if not isinstance(self.machine, Machine):
-            raise ValueError(f"machine must be a Machine, got {type(self.machine).__name__}")
+            raise TypeError(f"machine must be a Machine, got {type(self.machine).__name__}")
         effects = tuple(self.effects)
         for e in effects:
             if not isinstance(e, Effect):
-                raise ValueError(f"effects must be Effect objects, got {type(e).__name__}")
+                raise TypeError(f"effects must be Effect objects, got {type(e).__name__}")
         labels = [e.label for e in effects]
         repeated = sorted({label for label in labels if labels.count(label) > 1})
         if repeated:
@@ -232,7 +232,7 @@ def as_model(model_or_machine):
         return model_or_machine
     if isinstance(model_or_machine, Machine):
         return Model(model_or_machine)
-    raise ValueError(f"expected a Model or a Machine, got {type(model_or_machine).__name__}")
+    raise TypeError(f"expected a Model or a Machine, got {type(model_or_machine).__name__}")
 
 
 def load_model(name_or_file, geometry=True):
@@ -281,7 +281,7 @@ def with_file_effects(model, toml):
     for i, effect in enumerate(read_effects(toml)):
         try:
             model = model.with_effect(effect)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "effect", i, "axis") from None
     return model
 

@@ -158,7 +158,7 @@ def measured_reference(trace, servo_period):
     ([0.0, 0.0015, 0.003], [3.0, 3.0, 3.0])
     """
     if not isinstance(trace, Trace):
-        raise ValueError(f"trace must be a Trace, got {type(trace).__name__}")
+        raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
     if abs(trace.dt - servo_period) <= 1e-3 * servo_period:
         t = trace.t[0] + servo_period * np.arange(trace.t.size)
         spline = CubicSpline(t, trace.reference)
@@ -178,7 +178,7 @@ def _reference(machine, reference, settle):
         reference = measured_reference(reference, machine.servo_period)
         settle = 0.0 if settle is None else settle
     elif not isinstance(reference, Trajectory):
-        raise ValueError(f"the reference must be a Trajectory or a Trace, got {type(reference).__name__}")
+        raise TypeError(f"the reference must be a Trajectory or a Trace, got {type(reference).__name__}")
     if abs(reference.dt - machine.servo_period) > 1e-9 * machine.servo_period:
         raise ValueError(
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "

@@ -65,11 +65,19 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     (("squareness", "x"), {"angle_urad": 8.0}, "axis must be 2 different axis letters"),
     (("squareness", "xx"), {"angle_urad": 8.0}, "axis must be 2 different axis letters"),
     (("straightness", "x"), {"peak_um": 3.0, "error_direction": "x"}, "error_direction must be one of 'y', 'z'"),
-    (("noise", "x"), {"rms_um": 0.1, "seed": 1.5}, "seed must be a non-negative integer"),
-    (("backlash", "x"), {"lost_motion_um": "8"}, "lost_motion_um must be numeric"),
+    (("noise", "x"), {"rms_um": 0.1, "seed": -1}, "seed must be a non-negative integer"),
 ])
 def test_a_bad_effect_says_what_is_wrong(args, kwargs, message):
     with pytest.raises(ValueError, match=message):
+        Effect(*args, **kwargs)
+
+
+@pytest.mark.parametrize("args, kwargs, message", [
+    (("noise", "x"), {"rms_um": 0.1, "seed": 1.5}, "seed must be a non-negative integer"),
+    (("backlash", 1), {"lost_motion_um": 8.0}, "axis must be a string of axis letters"),
+])
+def test_an_effect_of_the_wrong_type_says_so(args, kwargs, message):
+    with pytest.raises(TypeError, match=message):
         Effect(*args, **kwargs)
 
 
