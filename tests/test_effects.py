@@ -369,3 +369,16 @@ def test_a_batch_reports_an_unstable_variant_and_runs_the_others():
     assert batch["diverged_step"][1, 0] > 0 and batch["diverged_step"][1, 1] == -1
     assert np.isnan(batch["tool_position"][1]).all()
     assert np.array_equal(batch["tool_position"][0], simulate(variants[0], reference).tool_position)
+
+
+def test_a_jobs_effects_add_to_and_replace_the_machine_files(tmp_path):
+    from contoursim.model import with_file_effects
+
+    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    file = tmp_path / "mill.toml"
+    file.write_text(text + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 4\n'
+                    '\n[[effect]]\nname = "scale_error"\naxis = "y"\nppm = 20\n')
+    job = TomlFile("job.toml", '[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 9\n'
+                               '\n[[effect]]\nname = "noise"\naxis = "z"\nrms_um = 0.2\n')
+    model = with_file_effects(load_model(file), job)
+    assert model.values() == {"scale_error.y.ppm": 20.0, "backlash.x.lost_motion_um": 9.0, "noise.z.rms_um": 0.2}
