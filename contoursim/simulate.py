@@ -290,7 +290,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     finite-difference Jacobian of P parameters is one batch of P + 1 models.
     Variants with the same command-stage effects share one
     :func:`contoursim.kernel.run_batch` call, made in chunks of rows so that
-    the kernel's output stays below :data:`BATCH_CHUNK_BYTES`; each row then
+    the kernel's output stays below :data:`BATCH_CHUNK_BYTES`, and variants
+    that differ only in geometric effects share one kernel row; each row then
     goes through its own geometric stage exactly as :func:`simulate` does it,
     so row b equals ``simulate(models[b], reference, ...)`` bit for bit
     (with ``every > 1`` the kernel keeps every `every`-th sample and the
@@ -374,19 +375,27 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     elapsed, q_kept = _elapsed(trajectory)[keep], q[keep]
     for rows in groups.values():
         qd, vd, ad = models[rows[0]].commands(q, v, a)
-        for start in range(0, len(rows), chunk):
-            part = rows[start : start + chunk]
-            packed = np.array([_packed(models[i], dt) for i in part])
+        # variants that differ only in their geometry share one kernel run
+        runs = {}
+        for i in rows:
+            packed = np.array(_packed(models[i], dt))
+            runs.setdefault(packed.tobytes(), (packed, []))[1].append(i)
+        distinct = list(runs.values())
+        for start in range(0, len(distinct), chunk):
+            part = distinct[start : start + chunk]
+            packed = np.array([p for p, _ in part])
             run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=("tool",), every=every)
-            result["diverged_step"][part] = run["diverged_step"]
-            for b, i in enumerate(part):
-                actual = _actual(models[i], q_kept, run["tool"][b])
-                if "axis_position" in result:
-                    result["axis_position"][i] = actual
-                if "tool_position" in result and (run["diverged_step"][b] >= 0).any():
-                    result["tool_position"][i] = np.nan  # an unstable variant: no tool position
-                elif "tool_position" in result:
-                    result["tool_position"][i] = models[i].geometry.tool_position(actual, elapsed, trajectory.dim)
+            for b, (_, same) in enumerate(part):
+                diverged = run["diverged_step"][b]
+                for i in same:
+                    result["diverged_step"][i] = diverged
+                    actual = _actual(models[i], q_kept, run["tool"][b])
+                    if "axis_position" in result:
+                        result["axis_position"][i] = actual
+                    if "tool_position" in result and (diverged >= 0).any():
+                        result["tool_position"][i] = np.nan  # an unstable variant: no tool position
+                    elif "tool_position" in result:
+                        result["tool_position"][i] = models[i].geometry.tool_position(actual, elapsed, trajectory.dim)
     return result
 
 
