@@ -11,12 +11,25 @@ The main objects, by the data flow of a simulation:
 - traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format).
 """
 
+import importlib
+import sys
+import types
+
 from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopError
-from .traces import Trace, read_trace, write_trace
-from .machine import Machine, load_machine
-from .servo import AxisServo
-from .simulate import SimResult, simulate
-from .trajectory import Trajectory
+
+# name -> submodule: imported on first use, so that ``import contoursim`` and
+# ``contoursim --help`` do not load python-control, scipy and numba
+_LAZY = {
+    "AxisServo": "servo",
+    "Machine": "machine",
+    "SimResult": "simulate",
+    "Trace": "traces",
+    "Trajectory": "trajectory",
+    "load_machine": "machine",
+    "read_trace": "traces",
+    "simulate": "simulate",
+    "write_trace": "traces",
+}
 
 __all__ = [
     "AxisServo",
@@ -33,3 +46,27 @@ __all__ = [
     "simulate",
     "write_trace",
 ]
+
+
+def __getattr__(name):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'contoursim' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+class _Package(types.ModuleType):
+    """The package module: importing the submodule ``contoursim.simulate`` leaves the name the function."""
+
+    def __setattr__(self, name, value):
+        if name in _LAZY and isinstance(value, types.ModuleType):
+            return  # the import system binds a submodule of the same name; the public name is the object in it
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

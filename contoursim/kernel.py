@@ -223,12 +223,13 @@ class LoopEffects:
             if value >= 1:
                 raise ValueError(f"{name} must be between 0 and 1 (exclusive), got {value!r}")
             checked[name] = value
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or not 0 <= self.seed < 2**53:
-            raise ValueError(f"seed must be an integer from 0 to 2**53 - 1, got {self.seed!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+            raise TypeError(f"seed must be an integer, got {self.seed!r}")
+        if not 0 <= self.seed < 2**53:
+            raise ValueError(f"seed must be from 0 to 2**53 - 1, got {self.seed!r}")
         checked["seed"] = int(self.seed)
         for name, value in checked.items():
             object.__setattr__(self, name, value)
-
 
 
 @dataclass(frozen=True)
@@ -267,7 +268,7 @@ class Compensator:
 
     def __post_init__(self):
         if not isinstance(self.step, Dispatcher):
-            raise ValueError(f"compensator step must be a numba @njit function, got {type(self.step).__name__}")
+            raise TypeError(f"compensator step must be a numba @njit function, got {type(self.step).__name__}")
         object.__setattr__(self, "state", _validate.finite_array("compensator state", self.state))
         for name in ("params", "geometry"):
             value = _validate.finite_array(f"compensator {name}", getattr(self, name)).copy()
@@ -610,8 +611,10 @@ def pack(servo, dt, effects=LoopEffects()):
 
     Raises
     ------
+    TypeError
+        `servo` is not an AxisServo or `effects` not a LoopEffects.
     ValueError
-        Bad arguments, or a feedback delay beyond :data:`MAX_DELAY_SAMPLES`.
+        A bad `dt`, or a feedback delay beyond :data:`MAX_DELAY_SAMPLES`.
 
     Notes
     -----
@@ -622,9 +625,9 @@ def pack(servo, dt, effects=LoopEffects()):
     :func:`spectral_radius` is a cheap check of a packed row.
     """
     if not isinstance(servo, AxisServo):
-        raise ValueError(f"servo must be an AxisServo, got {type(servo).__name__}")
+        raise TypeError(f"servo must be an AxisServo, got {type(servo).__name__}")
     if not isinstance(effects, LoopEffects):
-        raise ValueError(f"effects must be a LoopEffects, got {type(effects).__name__}")
+        raise TypeError(f"effects must be a LoopEffects, got {type(effects).__name__}")
     dt = _validate.positive("dt", dt)
     delay = effects.feedback_delay_s / dt
     if delay > MAX_DELAY_SAMPLES * (1 + 1e-12):
@@ -744,7 +747,7 @@ def _axes(servos):
         raise ValueError("servos must hold at least one AxisServo")
     for name, servo in zip(names, servos):
         if not isinstance(servo, AxisServo):
-            raise ValueError(f"servos[{name!r}] must be an AxisServo, got {type(servo).__name__}")
+            raise TypeError(f"servos[{name!r}] must be an AxisServo, got {type(servo).__name__}")
     return names, servos
 
 
@@ -807,6 +810,10 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
 
     Raises
     ------
+    TypeError
+        A servo that is not an :class:`~contoursim.servo.AxisServo`, a
+        compensator that is not a :class:`Compensator`, effects that are
+        not :class:`LoopEffects`.
     ValueError
         Bad shapes or values, `dt` too long for a loop, or effects naming an
         unknown axis.
@@ -830,7 +837,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
     n = len(servos)
     ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc, finite=False)
     if compensator is not None and not isinstance(compensator, Compensator):
-        raise ValueError(f"compensator must be a Compensator, got {type(compensator).__name__}")
+        raise TypeError(f"compensator must be a Compensator, got {type(compensator).__name__}")
     effects = {} if effects is None else dict(effects)
     unknown = [name for name in effects if name not in names]
     if unknown:
@@ -841,7 +848,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
 
     n_steps = ref_pos.shape[0]
     state = _initial_state((n,), ref_pos[0])
-    position, encoder, velocity, current = (np.empty((n_steps, n)) for _ in range(4))
+    position, encoder, velocity, current = np.empty((4, n_steps, n))  # one block, which malloc keeps for the next run
     saturated = np.empty((n_steps, n), bool)
     status = np.empty((n, 3), np.int64)
     outputs = (position, encoder, velocity, current, saturated, status)
@@ -920,8 +927,10 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     unknown = [name for name in outputs if name not in BATCH_OUTPUTS]
     if isinstance(outputs, str) or unknown:
         raise ValueError(f"outputs must name signals from {', '.join(BATCH_OUTPUTS)}, got {outputs!r}")
-    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-        raise ValueError(f"every must be a positive integer, got {every!r}")
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)):
+        raise TypeError(f"every must be an integer, got {every!r}")
+    if every < 1:
+        raise ValueError(f"every must be positive, got {every!r}")
     dtype = np.dtype(dtype)
     if dtype not in (np.float64, np.float32):
         raise ValueError(f"dtype must be float64 or float32, got {dtype}")

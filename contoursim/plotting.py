@@ -204,6 +204,7 @@ def save_figures(result, out_dir, name, circle=None):
         fig = plt.figure(figsize=(6.4, 6.0) if kind != "errors" else (8.0, 4.0))
         draw(result, ax=fig.add_subplot(projection="polar" if kind == "polar" else None), **kwargs)
         fig.tight_layout()
-        fig.savefig(file, dpi=110)
+        with out_dir.write(file.name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=110)
         plt.close(fig)
     return files

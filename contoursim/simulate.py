@@ -14,6 +14,7 @@ commanded positions (:class:`~contoursim.traces.Trace`,
 """
 
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,6 +22,7 @@ from scipy.interpolate import CubicSpline
 
 from . import estimators, kernel
 from .contour import exact_contour_error
+from .exceptions import ContoursimWarning
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
 from .model import as_model
@@ -51,7 +53,7 @@ class SimResult:
         exactly: the reference plus the volumetric (geometric) error of the
         machine and the model's geometric effects, or what is left of it
         after compensation [mm].
-    contour : ContourError or ContourEstimate or None
+    contour : contoursim.contour.ContourError or None
         Contour error of `tool_position`: exact, w.r.t. the reference path;
         for a measured reference (no path) the three-point estimate
         (:func:`contoursim.estimators.three_point`); ``None`` for a
@@ -76,6 +78,18 @@ class SimResult:
     def tracking_error(self):
         """Actual minus reference tool position at the same instant [mm], shape (N, d)."""
         return self.tool_position - self.trajectory.position
+
+    @property
+    def saturation(self):
+        """Fraction of the samples [0..1] in which each servo axis's current command was clipped at its limit.
+
+        Returns
+        -------
+        dict
+            Servo axis name -> fraction; 0 for an axis without a current limit.
+        """
+        fractions = self.servo_response.saturated.mean(axis=0)
+        return {axis: float(f) for axis, f in zip(self.machine.axes, fractions)}
 
     @property
     def volumetric_error(self):
@@ -118,7 +132,17 @@ class SimResult:
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
 
     def save_csv(self, file, metadata=None, overwrite=False):
-        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm] when there is a contour error."""
+        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm] when there is a contour error.
+
+        Parameters
+        ----------
+        file : str, Path or text file object
+            Destination, written atomically; see :func:`contoursim.traces.write_trace`.
+        metadata : dict, optional
+            ``# key: value`` header lines.
+        overwrite : bool
+            Replace an existing file.
+        """
         extra = {}
         if self.contour is not None:
             extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
@@ -179,6 +203,15 @@ def _reference(machine, reference, settle):
         settle = 0.0 if settle is None else settle
     elif not isinstance(reference, Trajectory):
         raise TypeError(f"the reference must be a Trajectory or a Trace, got {type(reference).__name__}")
+    else:
+        speed = reference.speed
+        if machine.max_feed is not None and speed.max() > machine.max_feed * (1 + 1e-9):
+            k = int(np.argmax(speed))
+            raise ValueError(
+                f"the trajectory reaches {60 * speed[k]:.6g} mm/min ({speed[k]:.6g} mm/s) at t = {reference.t[k]:.6g} s, "
+                f"above the machine's max feed {60 * machine.max_feed:.6g} mm/min: plan the path with a lower feed "
+                "(plan(..., max_feed=machine.max_feed) checks it)"
+            )
     if abs(reference.dt - machine.servo_period) > 1e-9 * machine.servo_period:
         raise ValueError(
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
@@ -220,10 +253,11 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     model : Model or Machine
         What to simulate; a Machine is a model without effects.
     reference : Trajectory or Trace
-        A tool-tip reference in workpiece coordinates sampled at the
-        machine's servo period, or a measured trace whose commanded positions
+        A tool-tip reference in workpiece coordinates [mm] sampled at the
+        machine's servo period, its path speed [mm/s] not above the machine's
+        ``max_feed`` [mm/s]; or a measured trace whose commanded positions
         are the reference (:func:`measured_reference`: resampled to the servo
-        period where needed).
+        period where needed; what the machine did is not refused).
     strategies : sequence
         Compensation strategies applied in order to the axis commands; each
         has ``commands(q, t) -> q_corrected`` (e.g.
@@ -240,21 +274,29 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     -------
     SimResult
 
-    Notes
-    -----
-    Thermal drift, the machine's and the ``thermal_drift`` effects', runs
-    from the reference's first sample (a measured trace's clock may start
-    anywhere); strategies see that time too.
-
     Raises
     ------
     UnstableLoopError
         An axis loop (with its servo-stage effects) is unstable or badly
         damped at this servo period.
+    TypeError
+        `model` is not a Model or a Machine, `reference` not a Trajectory or a Trace.
     ValueError
-        The trajectory's sampling differs from the servo period, the path
-        does not fit the machine's axes, or a reference to be held does not
-        end at rest.
+        The trajectory's sampling differs from the servo period, it is faster
+        than the machine's max feed, the path does not fit the machine's
+        axes, or a reference to be held does not end at rest.
+
+    Warns
+    -----
+    ContoursimWarning
+        An axis's current command hit its limit: the message names the axis
+        and the fraction of samples (see :attr:`SimResult.saturation`).
+
+    Notes
+    -----
+    Thermal drift, the machine's and the ``thermal_drift`` effects', runs
+    from the reference's first sample (a measured trace's clock may start
+    anywhere); strategies see that time too.
     """
     model = as_model(model)
     machine = model.machine
@@ -272,7 +314,15 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
         error = exact_contour_error(trajectory, tool)
     elif contour and trajectory.dim > 1:
         error = estimators.three_point(trajectory.position, tool)
-    return SimResult(trajectory, machine, q, response, tool, static, error, tuple(strategies), model)
+    result = SimResult(trajectory, machine, q, response, tool, static, error, tuple(strategies), model)
+    clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
+    if clipped:
+        servos = model.servos()
+        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A)"
+                         for axis, f in clipped.items())
+        warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
+                      ContoursimWarning, stacklevel=2)
+    return result
 
 
 #: Largest kernel output one chunk of a batch may hold [bytes].

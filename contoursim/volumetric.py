@@ -211,6 +211,7 @@ def _plot(chain, q, ideal, dp, sweep, values, out):
             others = [k for k in range(len(sweep)) if k not in (i, j)]
             at = ", ".join(f"{sweep[k]} = {values[k][shape[k] // 2]:g}" for k in others)
             fig.suptitle(f"{chain.name}: volumetric error, axes {sweep[i]}/{sweep[j]}" + (f" at {at}" if at else ""))
-        fig.savefig(name, dpi=90)
+        with out.write(name.name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=90)
         plt.close(fig)
     return files

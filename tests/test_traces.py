@@ -51,7 +51,16 @@ def test_reads_metadata_and_ignores_extra_columns(tmp_path):
         ("t,y_ref,y\n0,0,0\n0.001,1,1\n", 1, "x, x+y or x+y+z"),
         ("t,x_ref,x\n0,0,0\n0.001,abc,1\n", 3, "column 'x_ref': 'abc' is not a number"),
         ("t,x_ref,x\n0,0,0\n0.001,1,nan\n", 3, "column 'x': value nan is not finite"),
-        ("t,x_ref,x\n0,0,0\n0.001,1\n", 3, "expected 3 cells, found 2"),
+        ("t,x_ref,x\n0,0,0\n0.001,1\n", 3, "expected 3 cells (as in the header), found 2"),
+        ("t,x_ref,x\n0,0,0\n0.001,1,1,7\n", 3, "expected 3 cells (as in the header), found 4"),
+        ("t,x_ref,x\n0,0,0\n0.001,1e308,1\n", 3, "column 'x_ref': value 1e+308 is beyond ±1e+06 mm"),
+        ("t,x_ref,x\n0,0,0\n0.001,1,-2e6\n", 3, "column 'x': value -2e+06 is beyond ±1e+06 mm"),
+        ("t,x_ref,x\n0,0,0\n1e300,1,1\n", 3, "column 't': value 1e+300 is beyond ±1e+09 s"),
+        ("t;x_ref;x\n0;0;0\n0.001;1;1\n", 1, "the header 't;x_ref;x' is separated by semicolons; expected "
+                                               "comma-separated column names t, x_ref, x"),
+        ("T,X_REF,X\n0,0,0\n0.001,1,1\n", 1, "column names are case-sensitive: the header has 'T', 'X_REF', 'X'; "
+                                              "expected comma-separated column names t, x_ref, x"),
+        ("time,x_ref,x\n0,0,0\n0.001,1,1\n", 1, "missing column 't' in the header 'time,x_ref,x'; expected"),
         ("# c\nt,x_ref,x\n0,0,0\n0.002,1,1\n0.001,1,1\n", 5, "column 't' must be strictly increasing"),
         # steps 1, 1, 2, 1 ms: step 2 (rows 2 -> 3) is off, row 3 is on line 1 + 1 + 3
         ("t,x_ref,x\n0,0,0\n0.001,1,1\n0.002,1,1\n0.004,1,1\n0.005,1,1\n", 5, "column 't' must be uniformly sampled: step 2"),
@@ -76,6 +85,18 @@ def test_header_only_file_is_refused_without_a_numpy_warning(tmp_path):
         warnings.simplefilter("error")
         with pytest.raises(TraceFormatError, match="line 2: needs at least 2 data rows, found 0"):
             read_trace(tmp_path / "h.csv")
+
+
+def test_text_that_is_not_utf8_names_file_and_line(tmp_path):
+    (tmp_path / "l1.csv").write_bytes("# Messung, Maschine Nr. 3\n# Prüfling: Kreis\nt,x_ref,x\n".encode("latin-1"))
+    with pytest.raises(TraceFormatError, match=f"{tmp_path / 'l1.csv'}, line 2: byte 0xFC is not UTF-8 text"):
+        read_trace(tmp_path / "l1.csv")
+
+
+def test_trace_refuses_positions_no_machine_has():
+    t = np.arange(3) * 1e-3
+    with pytest.raises(ValueError, match=r"actual holds 1e\+308 at index \(1, 0\), beyond ±1e\+06"):
+        Trace(t, np.zeros((3, 1)), [[0.0], [1e308], [0.0]], ("x",))
 
 
 def test_byte_order_mark_before_the_header_is_accepted(tmp_path):
