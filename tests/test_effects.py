@@ -12,7 +12,7 @@ from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
 from contoursim.servo import AxisServo
 from contoursim.simulate import measured_reference, simulate, simulate_batch
-from contoursim.traces import Trace
+from contoursim.traces import Trace, read_trace
 
 DT = 1e-3
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0)
@@ -244,12 +244,16 @@ def test_simulating_a_runs_own_trace_reproduces_the_run():
     np.testing.assert_allclose(replay.contour.magnitude[keep], run.contour.magnitude[keep], atol=1e-5)
 
 
-def test_a_measured_single_axis_run_needs_neither_rest_nor_settling():
+def test_a_measured_single_axis_run_needs_neither_rest_nor_settling(tmp_path):
     t = np.arange(300) * DT
     x = 2.0 * t + 0.1  # moving from the first sample to the last
     result = simulate(Model(Machine({"x": AxisServo(**AXIS)}, DT)), Trace(t, x[:, None], x[:, None], ("x",)))
     assert len(result.trajectory) == 300 and result.contour is None
     assert set(result.summary()) == {"tracking_max_um", "tracking_rms_um", "volumetric_max_um", "volumetric_rms_um"}
+    result.save_csv(tmp_path / "run.csv")
+    saved = read_trace(tmp_path / "run.csv")
+    assert saved.axes == ("x",)
+    np.testing.assert_allclose(saved.reference[:, 0], x, rtol=0, atol=1e-6)  # written to the nm
 
 
 # -- files -------------------------------------------------------------------------------------
