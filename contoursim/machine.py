@@ -248,7 +248,7 @@ SERVO_KEYS = MappingProxyType({
 _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
 # a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")
 _SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| is| \(| \[|,| given| as well|\.|$))")
-_SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes")
+_SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes", "effect")
 
 
 def preset_names():
@@ -267,7 +267,7 @@ def preset_file(name_or_file):
     raise ConfigError(f"no machine file {str(name_or_file)!r} and no preset of that name; presets: {', '.join(preset_names())}")
 
 
-def load_machine(name_or_file, geometry=True):
+def load_machine(name_or_file, geometry=True, effects=False):
     """Load a machine from a preset name or a machine TOML file.
 
     Parameters
@@ -277,6 +277,10 @@ def load_machine(name_or_file, geometry=True):
     geometry : bool
         Read the geometric half (bodies) when the file has one; ``False``
         gives the error-free Cartesian machine of the servo axes.
+    effects : bool
+        The caller reads the file's ``[[effect]]`` tables
+        (:func:`contoursim.model.load_model` does); otherwise a file that has
+        them is refused rather than loaded without them.
 
     Returns
     -------
@@ -296,6 +300,8 @@ def load_machine(name_or_file, geometry=True):
     toml = TomlFile.read(preset_file(name_or_file))
     toml.expect("machine")
     data = toml.data
+    if "effect" in data and not effects:
+        raise toml.error("this machine file has [[effect]] tables: load it with contoursim.model.load_model", "effect")
     chain = None
     if "body" in data:
         chain = chain_from_toml(toml, extra=_SERVO_KEYS)
