@@ -38,7 +38,7 @@ CONSTANT, LINEAR, ROTARY, THERMAL, ERROR = range(5)
 
 
 @njit(cache=True)
-def tool_pose(q, t, err, tip, axis, kind, inverse, column, vector):
+def tool_pose(q, times, err, tip, axis, kind, inverse, column, vector):
     """Tool tip and tool axis in workpiece coordinates, each shape (N, 3).
 
     The chain is a program of S steps, applied in order to the tool tip and
@@ -51,7 +51,8 @@ def tool_pose(q, t, err, tip, axis, kind, inverse, column, vector):
     - CONSTANT: w = vector[:3], d = vector[3:];
     - LINEAR: d = q[n, column]·vector[3:] (vector holds sign × direction);
     - ROTARY: w = q[n, column]·vector[:3];
-    - THERMAL: w = t[n]·vector[:3], d = t[n]·vector[3:];
+    - THERMAL: w = τ·vector[:3], d = τ·vector[3:] with τ = times[column, n]
+      (the time, or its first-order form, :meth:`Body.thermal_time`);
     - ERROR: (d, w) = err[column, :, n] (a twist dx, dy, dz, ex, ey, ez).
 
     Rotations are exact (Rodrigues).
@@ -73,7 +74,7 @@ def tool_pose(q, t, err, tip, axis, kind, inverse, column, vector):
                 x = q[n, column[i]]
                 wx, wy, wz, dx, dy, dz = x * c[0], x * c[1], x * c[2], 0.0, 0.0, 0.0
             elif k == THERMAL:
-                x = t[n]
+                x = times[column[i], n]
                 wx, wy, wz, dx, dy, dz = x * c[0], x * c[1], x * c[2], x * c[3], x * c[4], x * c[5]
             else:
                 e = err[column[i]]

@@ -472,10 +472,9 @@ class MachineChain:
             Tool axis V_w (unit vector).
         """
         q, t = self._check(q, t)
-        steps, err = self._program(q, t, ideal)
+        steps, err, times = self._program(q, t, ideal)
         kind, inverse, column, vector = (np.array(x, dtype) for x, dtype in zip(zip(*steps), (np.int64, bool, np.int64, float)))
-        pose = _chainkernels.tool_pose(q, np.zeros(0) if t is None else t, err, self.tool_tip, self.tool_axis,
-                                       kind, inverse, column, vector.reshape(-1, 6))
+        pose = _chainkernels.tool_pose(q, times, err, self.tool_tip, self.tool_axis, kind, inverse, column, vector.reshape(-1, 6))
         return pose[:, :3], pose[:, 3:]
 
     def _program(self, q, t, ideal):
@@ -493,6 +492,9 @@ class MachineChain:
         steps : list of (kind, inverse, column, vector (6,))
         err : ndarray, shape (M, 6, N)
             Error motions of the moving bodies that have any [mm, rad].
+        times : ndarray, shape (T, N)
+            What the thermal drift rates multiply, one row per time constant
+            (:meth:`Body.thermal_time`) [s].
         """
         K = _chainkernels
         with_errors = [j for j, b in enumerate(self.bodies, 1) if not ideal and b.joint != "fixed" and b.has_motion_error]
@@ -500,6 +502,13 @@ class MachineChain:
         for i, j in enumerate(with_errors):
             b = self.bodies[j - 1]
             b.motion_error(q[:, self.axes.index(b.axis)], out=err[i].T)
+
+        drift_times = {}  # time constant -> what the drift rates multiply
+        for b in self.bodies:
+            if not ideal and t is not None and b.thermal.any():
+                drift_times.setdefault(b.thermal_time_constant, b.thermal_time(t))
+        constants = list(drift_times)
+        times = np.array(list(drift_times.values())).reshape(len(constants), q.shape[0])
 
         def body_steps(j):
             b = self.bodies[j - 1]
@@ -512,7 +521,7 @@ class MachineChain:
                 line = np.eye(3)[b.direction] if ideal else tilted_axis(b.direction, b.tilt)
                 steps.append((K.ROTARY, self.axes.index(b.axis), np.concatenate([b.sign * line, np.zeros(3)])))
             if not ideal and t is not None and b.thermal.any():
-                steps.append((K.THERMAL, 0, np.concatenate([b.thermal[3:], b.thermal[:3]])))
+                steps.append((K.THERMAL, constants.index(b.thermal_time_constant), np.concatenate([b.thermal[3:], b.thermal[:3]])))
             if j in with_errors:
                 steps.append((K.ERROR, with_errors.index(j), np.zeros(6)))
             return steps
@@ -522,7 +531,7 @@ class MachineChain:
             program += [(kind, False, column, vector) for kind, column, vector in reversed(body_steps(j))]
         for j in self.work_chain:  # bed -> workpiece frame
             program += [(kind, True, column, vector) for kind, column, vector in body_steps(j)]
-        return program, err
+        return program, err, times
 
     def volumetric_error(self, q, t=None):
         """Actual minus ideal tool pose at the same axis positions.
