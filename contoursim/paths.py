@@ -196,14 +196,10 @@ def _evaluate_local(kinds, rows, index, u):
     return out
 
 
-@njit(cache=True)
 def _evaluate(kinds, rows, breaks, s):
-    out = np.empty((s.size, 9))
-    for m in range(s.size):
-        k = _primitive_at(breaks, s[m])
-        u = min(max(s[m] - breaks[k], 0.0), breaks[k + 1] - breaks[k])
-        _eval_prim(kinds[k], rows[k], u, out[m])
-    return out
+    """Position, tangent and curvature vector at path arc lengths `s`, shape (M, 9): primitive k holds [breaks[k], breaks[k+1])."""
+    k = np.clip(np.searchsorted(breaks, s, side="right") - 1, 0, breaks.size - 2)
+    return _evaluate_local(kinds, rows, k, np.clip(s - breaks[k], 0.0, breaks[k + 1] - breaks[k]))
 
 
 # --------------------------------------------------------------------------- primitives
