@@ -306,9 +306,12 @@ def newton_update(q, columns, P, position, direction, target, target_direction):
     """One step ``q[:, columns] -= P r`` with the residual r = (position − target, direction − target_direction).
 
     `target_direction` of shape (0, 3) leaves the tool axis out (P then has
-    3 columns). Returns the largest |step| and its sample.
+    3 columns); a P of one sample serves every sample. Returns the largest
+    |step| and its sample.
     """
-    size, k, rows = P.shape
+    size = q.shape[0]
+    _, k, rows = P.shape
+    each = P.shape[0] > 1
     largest = 0.0
     worst = 0
     r = np.empty(rows)
@@ -318,10 +321,11 @@ def newton_update(q, columns, P, position, direction, target, target_direction):
         if rows == 6:
             for i in range(3):
                 r[3 + i] = direction[n, i] - target_direction[n, i]
+        m = n if each else 0
         for c in range(k):
             step = 0.0
             for i in range(rows):
-                step += P[n, c, i] * r[i]
+                step += P[m, c, i] * r[i]
             q[n, columns[c]] -= step
             if abs(step) > largest:
                 largest, worst = abs(step), n

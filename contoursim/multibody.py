@@ -776,7 +776,7 @@ class MachineChain:
         refresh, previous = True, None
         for _ in range(int(_validate.positive("max_iter", max_iter))):
             if refresh:  # a new Jacobian only when the last one stops the steps shrinking fast
-                J = self.axis_jacobian(q)
+                J = self.axis_jacobian(q if self.rotary_axes.any() else q[:1])  # linear axes only: one J for all
                 P = _prioritized_inverse(J[:, :rows] if mask.all() else J[:, :rows].take(columns, axis=2))
                 del J
                 refresh = False
