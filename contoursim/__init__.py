@@ -15,6 +15,7 @@ import importlib
 import sys
 import types
 
+from ._version import __version__
 from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopError
 
 # name -> submodule: imported on first use, so that ``import contoursim`` and

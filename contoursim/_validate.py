@@ -11,7 +11,8 @@ inside numpy. Readers of files turn both into a
 
 import numpy as np
 
-__all__ = ["as_xyz", "finite", "positive", "nonnegative", "float_array", "finite_array", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "finite", "positive", "positive_int", "nonnegative", "float_array", "finite_array", "time_base",
+           "TimeStepError"]
 
 
 class TimeStepError(ValueError):
@@ -177,3 +178,20 @@ def as_xyz(points):
     """Planar points (N, 2) with z = 0 appended, shape (N, 3); (N, 3) points unchanged."""
     points = np.asarray(points, dtype=float)
     return points if points.shape[1] == 3 else np.column_stack([points, np.zeros((len(points), 3 - points.shape[1]))])
+
+
+def positive_int(name, value):
+    """Return `value` as an int after checking it is a whole number >= 1.
+
+    Raises
+    ------
+    TypeError
+        `value` is not an integer (booleans are not).
+    ValueError
+        `value` is below 1.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be a whole number, got {value!r}")
+    if value < 1:
+        raise ValueError(f"{name} must be at least 1, got {value}")
+    return int(value)

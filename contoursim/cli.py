@@ -22,20 +22,8 @@ from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoo
 from .output import output_dir
 
 DEMO_MACHINE = "demo_mill"
-DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
+DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
 _JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation")
-
-
-def test_circle(path):
-    """Centre and radius of a path's full test circle (ISO 230-4), or ``None``."""
-    import numpy as np
-
-    from .paths import HelicalArc
-
-    for prim in path.primitives:
-        if isinstance(prim, HelicalArc) and prim.role == "test" and prim.rise == 0 and abs(prim.sweep) >= 2 * np.pi - 1e-9:
-            return prim.center[:2], prim.radius
-    return None
 
 
 _COLUMNS = {"tracking max": "tracking_max_um", "tracking RMS": "tracking_rms_um", "contour max": "contour_max_um",
@@ -59,9 +47,8 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
     Returns
     -------
     tuple
-        ``(name, path_file, result, circle)``: the run's name (file stem or
-        `label`), the path file, the :class:`~contoursim.simulate.SimResult`
-        and the path's test circle for the polar plot (or ``None``).
+        ``(name, path_file, result)``: the run's name (file stem or `label`),
+        the path file and the :class:`~contoursim.simulate.SimResult`.
     """
     from .feed import sample
     from .pathfile import load_path_file, read_feed_table
@@ -77,31 +64,44 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
         result = simulate(machine, trajectory, strategies)
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
-    return name, path_file, result, test_circle(path)
+    return name, path_file, result
 
 
-def _write(out, machine, runs):
-    """Write each run's trace CSV and plots into the output folder `out`; return the table rows."""
+def _write(out, groups, every):
+    """Write each run's trace CSV (every `every`-th sample) and the plots of each group of runs shown side by side.
+
+    Parameters
+    ----------
+    groups : dict of str -> list of tuple
+        Runs (from :func:`run_job`) that share plots, by the group's file stem.
+
+    Returns
+    -------
+    tuple
+        The output folder and the table rows.
+    """
     from .plotting import save_figures
 
     out = output_dir(out)
-    for name, path_file, result, circle in runs:
-        metadata = {"machine": machine.name, "path": Path(path_file).name}
-        with out.write(f"{name}.csv") as stream:
-            result.save_csv(stream, metadata=metadata)
-        save_figures(result, out, name, circle=circle)
-    return out, [(name, result.summary()) for name, _, result, _ in runs]
+    for name, runs in groups.items():
+        for run, path_file, result in runs:
+            with out.write(f"{run}.csv") as stream:
+                result.save_csv(stream, metadata={"path": Path(path_file).name}, every=every)
+        save_figures({run: result for run, _, result in runs}, out, name)
+    return out, [(run, result.summary()) for runs in groups.values() for run, _, result in runs]
 
 
 def demo(args):
-    """The README's main job: ISO 230-4 circles and a free-form path on the demo machine."""
+    """The README's main job: ISO 230-4 circles (CCW and CW, plotted together) and a free-form path on the demo machine."""
     from .machine import load_machine
     from .pathfile import library_file
 
     machine = load_machine(DEMO_MACHINE)
-    out, rows = _write(args.out, machine, [run_job(machine, library_file(name)) for name in DEMO_PATHS])
+    groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
+    out, rows = _write(args.out, groups, args.every)
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
     print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
+    print("Both over the test proper: the full test circle of the ISO 230-4 runs (the CSV's measuring = 1 rows).")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
 
@@ -154,7 +154,7 @@ def simulate_command(args):
     if geometric or args.geometric_compensation:
         runs.append(run_job(machine, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
-    out, rows = _write(args.out, machine, runs)
+    out, rows = _write(args.out, {Path(path_file).stem: runs}, args.every)
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
@@ -166,6 +166,16 @@ def volumetric(args):
     from .volumetric import volumetric_report
 
     print(volumetric_report(preset_file(args.machine), args.out))
+
+
+def _every(text):
+    """``--every N``: a whole number >= 1."""
+    from . import _validate
+
+    try:
+        return _validate.positive_int("--every", int(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number of samples, at least 1; got {text!r}") from None
 
 
 def main(argv=None):
@@ -184,6 +194,9 @@ def main(argv=None):
     p.set_defaults(run=volumetric)
     for p in sub.choices.values():
         p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
+    for command in ("demo", "simulate"):
+        sub.choices[command].add_argument("--every", type=_every, default=1, metavar="N",
+                                          help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")
     args = parser.parse_args(argv)
 
     def show(message, category, *details):

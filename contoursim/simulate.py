@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernel
+from ._version import __version__
 from .contour import exact_contour_error
 from .exceptions import ContoursimWarning
 from .traces import Trace, write_trace
@@ -110,20 +111,42 @@ class SimResult:
         axes = CARTESIAN[: self.trajectory.dim]
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
 
-    def save_csv(self, file, metadata=None, overwrite=False):
-        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm].
+    def save_csv(self, file, metadata=None, overwrite=False, every=1):
+        """Write the trace CSV (DESIGN.md contract) with the contour error and the test proper.
+
+        Besides ``t`` [s] and the positions ``<axis>_ref``, ``<axis>`` [mm],
+        the columns ``contour`` (distance to the path) and ``contour_normal``
+        (its signed in-plane component, positive to the left of travel) [mm],
+        and ``measuring``: 1 on the test proper (``trajectory.measuring``),
+        the rows the summary table's max and RMS are taken over. Positions and
+        contour error are written to the nm, ``t`` to the ns
+        (:func:`contoursim.traces.write_trace`). The metadata lines give the
+        contoursim version, machine, servo period, feed, sampling and units,
+        then `metadata`.
 
         Parameters
         ----------
         file : str, Path or text file object
             Destination, written atomically; see :func:`contoursim.traces.write_trace`.
         metadata : dict, optional
-            ``# key: value`` header lines.
+            Further ``# key: value`` lines (e.g. the path file).
         overwrite : bool
             Replace an existing file.
+        every : int
+            Write every `every`-th sample (1: all, at the servo period).
         """
-        extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
-        write_trace(file, self.to_trace(metadata), extra=extra, overwrite=overwrite)
+        columns = ", ".join(f"{a}_ref, {a}" for a in CARTESIAN[: self.trajectory.dim])
+        standard = {
+            "contoursim": __version__,
+            "machine": self.machine.name,
+            "servo_period_s": f"{self.machine.servo_period:g}",
+            "every_nth_sample": every,
+            "feed_mm_min": f"{60 * self.trajectory.feed:.6g}",
+            "units": f"t [s]; {columns}, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]",
+        }
+        extra = {"contour": self.contour.magnitude, "contour_normal": self.contour.normal,
+                 "measuring": self.trajectory.measuring}
+        write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
 
 
 def simulate(machine, trajectory, strategies=(), settle=None):

@@ -76,8 +76,21 @@ class Trace:
         return self.actual - self.reference
 
 
-def write_trace(file, trace, extra=None, overwrite=False):
+TIME_DECIMALS = 9
+"""Decimals of ``t`` in a written trace [s]: to the ns."""
+POSITION_DECIMALS = 6
+"""Decimals of positions (and other float columns) in a written trace [mm]: to the nm."""
+_CHUNK = 1 << 16  # rows formatted at once: bounds the formatter's memory
+
+
+def write_trace(file, trace, extra=None, overwrite=False, every=1):
     """Write `trace` as CSV in the measured-trace format.
+
+    Numbers are written in fixed point without trailing zeros: ``t`` to the
+    ns (:data:`TIME_DECIMALS`), positions and float `extra` columns to the nm
+    (:data:`POSITION_DECIMALS` decimals of a mm), integer and boolean `extra`
+    columns as whole numbers (``1``/``0``). A value that rounds to zero is
+    written ``0``, never ``-0`` or ``3.55e-12``.
 
     Parameters
     ----------
@@ -88,23 +101,46 @@ def write_trace(file, trace, extra=None, overwrite=False):
     trace : Trace
         What to write.
     extra : dict of str -> ndarray, shape (N,), optional
-        Further columns (e.g. contour error); readers ignore them.
+        Further columns (e.g. contour error [mm]); readers ignore them.
     overwrite : bool
         Replace an existing file.
+    every : int
+        Write every `every`-th sample, starting with the first (1: all); the
+        time base stays uniform.
+
+    Raises
+    ------
+    FileExistsError
+        `file` exists and `overwrite` is false.
+    ValueError
+        An extra column has the wrong shape, is not finite or clashes with a
+        trace column; a value is too large to write to its resolution.
     """
-    columns = {"t": trace.t}
+    every = _validate.positive_int("every", every)
+    columns = {"t": (trace.t, TIME_DECIMALS)}
     for i, axis in enumerate(trace.axes):
-        columns[f"{axis}_ref"] = trace.reference[:, i]
-        columns[axis] = trace.actual[:, i]
+        columns[f"{axis}_ref"] = (trace.reference[:, i], POSITION_DECIMALS)
+        columns[axis] = (trace.actual[:, i], POSITION_DECIMALS)
     for name, values in (extra or {}).items():
         if name in columns:
             raise ValueError(f"extra column {name!r} clashes with a trace column")
-        columns[name] = _validate.finite_array(name, values, shape=(trace.t.size,))
-    header = "".join(f"# {key}: {value}\n" for key, value in trace.metadata.items())
+        values = np.asarray(values)
+        whole = values.dtype.kind in "bui"
+        values = _validate.finite_array(name, values.astype(int) if values.dtype.kind == "b" else values, shape=(trace.t.size,))
+        columns[name] = (values, 0 if whole else POSITION_DECIMALS)
+    for name, (values, decimals) in columns.items():
+        largest = float(np.abs(values).max()) * 10.0**decimals
+        if largest >= 2.0**53:
+            raise ValueError(f"column {name!r}: {np.abs(values).max():g} is too large to write to 1e-{decimals}")
+    header = "".join(f"# {key}: {value}\n" for key, value in trace.metadata.items()) + ",".join(columns) + "\n"
+    values = [v[::every] for v, _ in columns.values()]
+    decimals = [d for _, d in columns.values()]
+    from ._fixedpoint import csv_rows  # numba, only when a trace is written
+
     with writing(file, overwrite=overwrite) as out:
         out.write(header)
-        np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", fmt="%.12g",
-                   header=",".join(columns), comments="")
+        for start in range(0, values[0].size, _CHUNK):
+            out.write(csv_rows([v[start : start + _CHUNK] for v in values], decimals).decode("ascii"))
 
 
 def read_trace(file):

@@ -41,7 +41,7 @@ def main(out="contoursim-out"):
     out = output_dir(out)                    # made by contoursim: a rerun replaces only its own files
     with out.write("circle.csv") as stream:  # the measured-trace format, written atomically
         result.save_csv(stream)
-    files = save_figures(result, out, "circle", circle=((0, 0), 20.0))
+    files = save_figures({"circle": result}, out, "circle")   # runs by name: one magnification for all
     print("wrote", out.path / "circle.csv", *files)
     return result
 

@@ -52,15 +52,31 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
             assert (tmp_path / "out" / f"{run}_{kind}.png").stat().st_size > 10_000
         trace = read_trace(tmp_path / "out" / f"{run}.csv")
         assert trace.axes == ("x", "y")
-    assert (tmp_path / "out" / "iso230_4_circle_ccw_polar.png").exists()
+    assert (tmp_path / "out" / "iso230_4_circle_polar.png").stat().st_size > 10_000  # CCW and CW overlaid
     # the circle row: tracking ≈ v/Kp = (1000/60)/36 mm on the slower axis, contour far smaller
     row = next(line for line in table.splitlines() if line.startswith("iso230_4_circle_ccw"))
     tracking_max, _, contour_max, _, volumetric_max = map(float, row.split()[1:])
     assert volumetric_max == 0.0  # the demo machine has no geometric errors
     assert tracking_max == pytest.approx(1e3 * (1000 / 60) / 36, rel=0.02)
     assert contour_max < tracking_max / 10
-    # a second run reuses its own output directory
-    assert main(["demo", "--out", str(tmp_path / "out")]) == 0
+    # the CSV tells the same story: its contour column [mm] over the measuring rows gives the table's max
+    lines = (tmp_path / "out" / "iso230_4_circle_ccw.csv").read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    names = lines[header].split(",")
+    data = np.loadtxt(lines[header + 1:], delimiter=",")
+    measuring = data[:, names.index("measuring")] == 1
+    assert 0 < measuring.sum() < len(data)  # the test circle, without run-in, overruns, run-out and settling
+    assert f"{1e3 * data[measuring, names.index('contour')].max():.2f}" == f"{contour_max:.2f}"
+    assert "# units: t [s]; x_ref, x, y_ref, y, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]" in lines
+    # a second run reuses its own output directory; --every thins the CSV, not the table
+    assert main(["demo", "--out", str(tmp_path / "out"), "--every", "10"]) == 0
+    assert capsys.readouterr().out == table
+    thinned = read_trace(tmp_path / "out" / "iso230_4_circle_ccw.csv")
+    assert len(thinned.t) == -(-len(data) // 10) and thinned.dt == pytest.approx(10 * (data[1, 0] - data[0, 0]))
+    with pytest.raises(SystemExit) as exit_:
+        main(["demo", "--out", str(tmp_path / "out"), "--every", "0"])
+    assert exit_.value.code == 2
+    assert "--every: must be a whole number of samples, at least 1; got '0'" in capsys.readouterr().err
 
 
 def test_never_writes_into_a_users_directory(tmp_path, capsys):
@@ -207,7 +223,7 @@ def test_ctrl_c_gives_one_line_exit_130_and_no_half_written_file(tmp_path, capsy
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     out = tmp_path / "out"
 
-    def interrupted(self, file, metadata=None):
+    def interrupted(self, file, metadata=None, every=1):
         file.write("t,x_ref,x\n0,0,0\n")  # a truncated trace that ends on a whole row
         raise KeyboardInterrupt
 

@@ -11,6 +11,7 @@ from contoursim.exceptions import ContoursimWarning
 from contoursim.feed import plan, sample
 from contoursim.traces import read_trace
 from contoursim.machine import Machine
+from contoursim.plotting import circular_deviation
 from contoursim.servo import AxisServo
 from contoursim.simulate import simulate
 
@@ -101,11 +102,13 @@ def test_a_3d_path_needs_three_axes():
 
 def test_saved_trace_follows_the_csv_contract(tmp_path):
     _, result, _, _ = _circle_run(40.0, 40.0, radius=2.0, feed=5.0)
-    result.save_csv(tmp_path / "run.csv", metadata={"machine": "test"})
+    result.save_csv(tmp_path / "run.csv", metadata={"path": "circle"})
     trace = read_trace(tmp_path / "run.csv")
-    assert trace.axes == ("x", "y") and trace.metadata == {"machine": "test"}
-    np.testing.assert_allclose(trace.reference, result.trajectory.position, atol=1e-10)
-    np.testing.assert_allclose(trace.actual, result.tool_position, atol=1e-10)
+    assert trace.axes == ("x", "y")
+    assert trace.metadata["path"] == "circle" and trace.metadata["servo_period_s"] == f"{DT:g}"
+    assert float(trace.metadata["feed_mm_min"]) == pytest.approx(60 * 5.0)
+    np.testing.assert_allclose(trace.reference, result.trajectory.position, rtol=0, atol=0.5e-6 + 1e-12)
+    np.testing.assert_allclose(trace.actual, result.tool_position, rtol=0, atol=0.5e-6 + 1e-12)
     with pytest.raises(FileExistsError):
         result.save_csv(tmp_path / "run.csv")
 
@@ -174,6 +177,11 @@ def test_squareness_enters_the_trace_and_geometric_compensation_removes_it():
     np.testing.assert_allclose(fixed.contour.magnitude, plain.contour.magnitude, atol=1e-9)
     # squareness moves y by α·x: the largest static error on the test circle is α·R
     assert skewed.summary()["volumetric_max_um"] == pytest.approx(1e3 * alpha * radius, rel=1e-3)
+    # a ballbar sees the ellipse: circularity (max - min radial deviation) α·R; equal servo axes only
+    # shrink the circle uniformly, so without the error (or compensated) the circle stays round
+    assert circular_deviation(skewed)["circularity"] == pytest.approx(1e3 * alpha * radius, rel=0.01)
+    assert circular_deviation(plain)["circularity"] < 0.01 * 1e3 * alpha * radius
+    assert circular_deviation(fixed)["circularity"] < 0.01 * 1e3 * alpha * radius
     assert plain.summary()["volumetric_max_um"] == 0.0
 
 

@@ -16,13 +16,58 @@ def _trace(n=50, axes=("x", "y")):
 @pytest.mark.parametrize("axes", [("x",), ("x", "y"), ("x", "y", "z")])
 def test_round_trip(tmp_path, axes):
     trace = _trace(axes=axes)
-    write_trace(tmp_path / "a.csv", trace, extra={"contour_um": np.zeros(50)})
+    write_trace(tmp_path / "a.csv", trace, extra={"contour": np.zeros(50)})
     back = read_trace(tmp_path / "a.csv")
     assert back.axes == axes
     assert back.metadata == {"machine": "test"}
     np.testing.assert_allclose(back.t, trace.t, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(back.actual, trace.actual, rtol=1e-11)
-    np.testing.assert_allclose(back.tracking_error, 1e-3, rtol=1e-8)
+    # positions are written to the nm: off by at most half a nm
+    np.testing.assert_allclose(back.actual, trace.actual, rtol=0, atol=0.5e-6 + 1e-12)
+    np.testing.assert_allclose(back.tracking_error, 1e-3, rtol=0, atol=1e-6 + 1e-12)
+
+
+def _python_fixed(value, decimals):
+    """Python's own correctly rounded fixed point, trailing zeros and the sign of zero dropped."""
+    text = f"{value:.{decimals}f}"
+    text = text.rstrip("0").rstrip(".") if "." in text else text
+    return "0" if text in ("-0", "") else text
+
+
+def test_numbers_are_fixed_point_like_pythons_format(tmp_path):
+    rng = np.random.default_rng(7)
+    t = np.arange(20_000) * 2e-4
+    x = np.concatenate([rng.normal(0, 500, 19_990), [0.0, -0.0, -3.55e-12, 1e-6, -1e-6, 4.9e-7, 123.4560004, -1.4e-6, 999.9999996, -2.5]])
+    flag = rng.random(t.size) < 0.5
+    write_trace(tmp_path / "f.csv", Trace(t, x[:, None], -x[:, None], ("x",)), extra={"flag": flag, "e": x / 7})
+    lines = (tmp_path / "f.csv").read_text().splitlines()
+    assert lines[0] == "t,x_ref,x,flag,e"
+    cells = [line.split(",") for line in lines[1:]]
+    assert [c[0] for c in cells] == [_python_fixed(v, 9) for v in t]
+    assert [c[1] for c in cells] == [_python_fixed(v, 6) for v in x]
+    assert [c[2] for c in cells] == [_python_fixed(-v, 6) for v in x]
+    assert [c[3] for c in cells] == ["1" if f else "0" for f in flag]
+    assert [c[4] for c in cells] == [_python_fixed(v, 6) for v in x / 7]
+    assert cells[-8][1:3] == ["0", "0"] and cells[-7][1:3] == ["0.000001", "-0.000001"]  # -3.55e-12, 1e-6
+
+
+def test_every_nth_sample(tmp_path):
+    trace = _trace(n=50)
+    write_trace(tmp_path / "e.csv", trace, extra={"k": np.arange(50)}, every=7)
+    back = read_trace(tmp_path / "e.csv")
+    np.testing.assert_allclose(back.t, trace.t[::7], rtol=0, atol=1e-15)
+    assert back.dt == pytest.approx(7e-3)
+    with pytest.raises(ValueError, match="every must be at least 1"):
+        write_trace(tmp_path / "z.csv", trace, every=0)
+    assert not (tmp_path / "z.csv").exists()
+
+
+def test_values_too_large_for_their_resolution_are_refused(tmp_path):
+    trace = Trace(np.arange(3.0), np.zeros((3, 1)), np.zeros((3, 1)), ("x",))
+    with pytest.raises(ValueError, match="column 'e': 1e\\+10 is too large to write to 1e-6"):
+        write_trace(tmp_path / "big.csv", trace, extra={"e": np.full(3, 1e10)})
+    with pytest.raises(ValueError, match="column 't': 1e\\+08 is too large to write to 1e-9"):
+        write_trace(tmp_path / "late.csv", Trace(1e8 + np.arange(3.0), trace.reference, trace.actual, ("x",)))
+    assert not (tmp_path / "big.csv").exists() and not (tmp_path / "late.csv").exists()
 
 
 def test_refuses_to_overwrite(tmp_path):
