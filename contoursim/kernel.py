@@ -80,6 +80,7 @@ __all__ = [
     "run",
     "run_batch",
     "spectral_radius",
+    "loop_matrices",
     "MAX_DELAY_SAMPLES",
     "NPAR",
     "BATCH_OUTPUTS",
@@ -752,12 +753,14 @@ def pack(servo, dt, effects=LoopEffects()):
     return row
 
 
-def spectral_radius(row):
-    """Largest closed-loop eigenvalue modulus of a packed axis's linear sampled loop: < 1 is stable.
+def loop_matrices(row):
+    """The linear sampled loop of a packed axis, with an extra velocity command as its input.
 
-    The cheap stability check of a variant (no python-control): the plant
-    (with its structural mode and current loop), the controllers and the
-    feedback delay, without saturation, backlash, friction and quantisation.
+    The plant (with its structural mode and current loop), the controllers
+    and the feedback delay, without saturation, backlash, friction and
+    quantisation: ``s_{k+1} = phi·s_k + b·w_k`` and ``x_fb,k = c·s_k``, with
+    ``w`` added to the velocity command [mm/s] (what a :class:`Coupling`
+    does) and ``x_fb`` the position the loop closes on [mm].
 
     Parameters
     ----------
@@ -766,14 +769,19 @@ def spectral_radius(row):
 
     Returns
     -------
-    float
-        ``max |λ|`` of the loop's state-transition matrix [-].
+    phi : ndarray, shape (S, S)
+        State transition: plant, integrators in use, delayed samples [-].
+    b : ndarray, shape (S,)
+        Input vector of the extra velocity command.
+    c : ndarray, shape (S,)
+        Output row of the fed-back position.
     """
     p = _validate.finite_array("row", row, shape=(NPAR,))
     electrical, integral = p[_ELEC] != 0.0, p[_VC] != 0.0
     n_delay, f = int(p[_DELAY_N]), p[_DELAY_F]
     depth = n_delay + 1 if (n_delay or f) else 0  # past samples of x and v the loop reads
-    # state: plant (5), then the integrators in use, then the delayed x and v samples (k-1 .. k-depth)
+    # state: plant (5), then the integrators in use, then the delayed x and v samples (k-1 .. k-depth);
+    # the input w rides along as entry `size` of every row vector
     zv, zc = _NS, _NS + integral
     hx = zc + electrical
     hv = hx + depth
@@ -783,7 +791,7 @@ def spectral_radius(row):
 
     def sample(signal, history, back):
         """Row picking the plant state `signal` (0: x, 1: v) `back` samples ago."""
-        r = np.zeros(size)
+        r = np.zeros(size + 1)
         r[signal if back == 0 else history + back - 1] = 1.0
         return r
 
@@ -791,6 +799,7 @@ def spectral_radius(row):
         return (1.0 - f) * sample(signal, history, n_delay) + (f * sample(signal, history, n_delay + 1) if f else 0.0)
 
     e_v = -p[_KP] * fed_back(0, hx) - fed_back(1, hv)
+    e_v[size] = 1.0
     i_cmd = p[_VD] * e_v
     if integral:
         i_cmd[zv] += p[_VC]
@@ -800,7 +809,7 @@ def spectral_radius(row):
         e_i[4] -= 1.0
         u = p[_CD] * e_i
         u[zc] += p[_CC]
-    phi = np.zeros((size, size))
+    phi = np.zeros((size, size + 1))
     phi[:_NS, :_NS] = Ad
     phi[:_NS] += Bu[:, None] * u
     if integral:
@@ -812,7 +821,26 @@ def spectral_radius(row):
     for history, signal in ((hx, 0), (hv, 1)):
         for j in range(depth):
             phi[history + j] = sample(signal, history, j)
-    return float(np.abs(np.linalg.eigvals(phi)).max())
+    return phi[:, :size], phi[:, size], fed_back(0, hx)[:size]
+
+
+def spectral_radius(row):
+    """Largest closed-loop eigenvalue modulus of a packed axis's linear sampled loop: < 1 is stable.
+
+    The cheap stability check of a variant (no python-control): the loop of
+    :func:`loop_matrices`.
+
+    Parameters
+    ----------
+    row : array_like, shape (NPAR,)
+        One axis's row from :func:`pack`.
+
+    Returns
+    -------
+    float
+        ``max |λ|`` of the loop's state-transition matrix [-].
+    """
+    return float(np.abs(np.linalg.eigvals(loop_matrices(row)[0])).max())
 
 
 # ---------------------------------------------------------------------------------------------

@@ -2,8 +2,9 @@
 
 The data flow of DESIGN.md, as one pure function::
 
-    trajectory ─▶ axis commands (ideal inverse kinematics) ─▶ strategies (pre-correction)
-        ─▶ servo kernel ─▶ axis positions ─▶ multibody chain ─▶ tool tip in workpiece
+    trajectory ─▶ axis commands (ideal inverse kinematics) ─▶ strategies: target (geometric
+        compensation), drive settings (feedforward), pre-filter (ZPETC) ─▶ servo kernel, with a
+        cross-coupled controller in the loop ─▶ axis positions ─▶ multibody chain ─▶ tool tip in workpiece
         coordinates ─▶ tracking error, exact contour error
 """
 
@@ -13,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernel
+from .compensation import Composition
 from ._version import __version__
 from .contour import exact_contour_error
 from .exceptions import ContoursimWarning
@@ -32,8 +34,9 @@ class SimResult:
         The tool-tip reference.
     machine : Machine
     axis_command : ndarray, shape (N, n_axes)
-        Position commands sent to the servo loops (after pre-correcting
-        strategies) [mm].
+        Where the strategies want the axes: the axis commands after the
+        target stages (geometric compensation), before a feedforward
+        pre-filter (ZPETC) [mm].
     servo_response : contoursim.kernel.ServoResponse
         Servo axes' positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
@@ -159,10 +162,13 @@ def simulate(machine, trajectory, strategies=(), settle=None):
         Tool-tip reference in workpiece coordinates [mm], sampled at the
         machine's servo period; its path speed [mm/s] must not exceed the
         machine's ``max_feed`` [mm/s].
-    strategies : sequence
-        Compensation strategies applied in order to the axis commands; each
-        has ``commands(q, t) -> q_corrected`` (e.g.
-        :class:`contoursim.geocomp.GeometricCompensation`).
+    strategies : sequence of contoursim.compensation.Strategy
+        Compensation strategies, composed by
+        :class:`contoursim.compensation.Composition` (e.g.
+        :class:`~contoursim.compensation.Feedforward`,
+        :class:`~contoursim.compensation.ZPETC`,
+        :class:`~contoursim.compensation.CrossCoupled`,
+        :class:`~contoursim.geocomp.GeometricCompensation`).
     settle : float, optional
         Standstill appended after the reference ends, so the axes settle [s];
         default five time constants of the slowest position loop, ``5 / min(kp)``.
@@ -175,7 +181,8 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     Raises
     ------
     UnstableLoopError
-        An axis loop is unstable or badly damped at this servo period.
+        An axis loop is unstable or badly damped at this servo period, or a
+        cross-coupled controller destabilises it.
     ValueError
         The trajectory's sampling differs from the servo period, it is faster
         than the machine's max feed, or the path does not fit the machine's axes.
@@ -202,17 +209,19 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     if settle is None:
         settle = 5.0 / min(servo.kp for servo in machine.axes.values())
     trajectory = trajectory.held(settle)
-    q, v, a = machine.axis_commands(trajectory)
-    for strategy in strategies:
-        q = strategy.commands(q, trajectory.t)
-    servo = machine.servo_columns
-    response = kernel.run(dict(machine.axes), machine.servo_period, q[:, servo], v[:, servo], a[:, servo])
+    composition = Composition(strategies)
+    q, v, a = composition.target(*machine.axis_commands(trajectory), trajectory.t)
+    servo, dt = machine.servo_columns, machine.servo_period
+    servos = composition.drive(machine.axes)
+    coupling = composition.coupling(q[:, servo], servos, dt)
+    commands = composition.prefilter(q[:, servo], v[:, servo], a[:, servo], servos, dt)
+    response = kernel.run(servos, dt, *commands, coupling=coupling)
     actual = q.copy()
     actual[:, servo] = response.position
     tool = machine.tool_position(actual, trajectory.t, trajectory.dim)
     static = machine.tool_position(q, trajectory.t, trajectory.dim)
     contour = exact_contour_error(trajectory, tool)
-    result = SimResult(trajectory, machine, q, response, tool, static, contour, tuple(strategies))
+    result = SimResult(trajectory, machine, q, response, tool, static, contour, composition.strategies)
     clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
     if clipped:
         axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{machine.axes[axis].current_limit:g} A)"
