@@ -307,14 +307,18 @@ class CrossCoupled(Strategy):
     ----------
     estimator : {"arc", "linear"}, default "arc"
     kp : float, optional
-        Coupling gain [1/s]. Default: the smallest position gain ``Kp`` of
-        the coupled axes, so that across the path the loop gain doubles.
+        Coupling gain [1/s]. Default from the axis loops: across the path
+        the position gain becomes ``K = Kp + kp``; with the velocity loop
+        taken as a first-order lag of bandwidth ``ωv = kv·kf/m`` [rad/s]
+        the contour loop is ``s^2 + ωv·s + ωv·K``, damped at ``ζ = 0.7``
+        for ``K = ωv/2``. So ``kp = ωv/2 - Kp`` with the slowest velocity
+        loop and the smallest position gain of the coupled axes (at least
+        ``Kp``: never less than doubling the gain across the path).
     ki : float, optional
-        Integral gain [1/s^2]. Default ``(Kp + kp)^2 / 4``: the PI corner
-        ``ki/(Kp + kp)`` a quarter of the contour loop's crossover
-        ``Kp + kp`` (about 76° of phase from the coupling and the position
-        loop, less the velocity loop's lag, which the linear check below
-        bounds).
+        Integral gain [1/s^2]. Default ``K^2 / 4``: the PI corner ``ki/K``
+        a quarter of the contour loop's gain ``K``, which removes the
+        steady contour error on a line or an arc at a cost of about 14° of
+        phase.
     kd : float, default 0
         Derivative gain [-].
     model : mapping str -> AxisServo, optional
@@ -360,8 +364,10 @@ class CrossCoupled(Strategy):
 
     def gains(self, servos):
         """``(kp, ki, kd)`` of the coupling for the coupled `servos` (mapping axis -> AxisServo)."""
-        position_gain = min(servo.kp for servo in _model(self.model, servos).values())
-        kp = position_gain if self.kp is None else self.kp
+        model = _model(self.model, servos).values()
+        position_gain = min(servo.kp for servo in model)
+        velocity_bandwidth = min(servo.kv_mm * servo.force_gain for servo in model)
+        kp = max(velocity_bandwidth / 2.0 - position_gain, position_gain) if self.kp is None else self.kp
         ki = (position_gain + kp) ** 2 / 4.0 if self.ki is None else self.ki
         return kp, ki, self.kd
 
