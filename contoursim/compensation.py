@@ -446,6 +446,9 @@ def coupled_spectral_radius(rows, kp, ki, kd, dt, normal):
     phi[z] = dt * eps
     phi[z, z] += 1.0
     phi[prev] = eps
+    if ki == 0.0:  # no integrator: its state (an eigenvalue 1 that nothing reads) is not part of the loop
+        keep = np.arange(total) != z
+        phi = phi[keep][:, keep]
     return float(np.abs(np.linalg.eigvals(phi)).max())
 
 
