@@ -1,4 +1,4 @@
-"""Command line: ``contoursim demo | simulate | volumetric``.
+"""Command line: ``contoursim demo | simulate | compare | volumetric``.
 
 Every job prints a summary table to stdout and writes plots and traces to
 ``--out`` (default ``./contoursim-out``) through :func:`contoursim.output.output_dir`:
@@ -160,6 +160,47 @@ def simulate_command(args):
     print(f"\nplots and traces written to {out}/")
 
 
+def compare_command(args):
+    """``contoursim compare FILE [--strategies a,b] [--json R.json]``: compensation strategies side by side."""
+    import json
+
+    from .comparison import compare
+    from .compensation import STRATEGY_NAMES
+    from .feed import sample
+    from .output import atomic_write
+    from .pathfile import load_path_file, read_feed_table
+    from .plotting import save_comparison_figures
+
+    machine, path_file, job, geometric = _job(args)
+    if geometric:
+        raise job.error("compare runs the strategies of --strategies: compose geometric compensation there "
+                        "(e.g. --strategies none,geometric,geometric+ccc_arc)", "geometric_compensation")
+    names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
+    report = Path(args.json) if args.json else None
+    if report is not None and report.exists():  # replace only a comparison JSON, never a file the user keeps
+        try:
+            ours = isinstance(json.loads(report.read_text(encoding="utf-8")).get("runs"), dict)
+        except (ValueError, UnicodeDecodeError, AttributeError):
+            ours = False
+        if not ours:
+            raise FileExistsError(f"{report} exists and is not a comparison JSON; refusing to overwrite it")
+    path, settings = load_path_file(path_file)
+    if job is not None and "feed" in job.data:
+        settings = read_feed_table(job, base=settings)
+    trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+    comparison = compare(machine, trajectory, names)
+    stem = Path(path_file).stem
+    out = output_dir(args.out)
+    save_comparison_figures(comparison, out, stem)
+    print(f"contoursim compare — machine: {machine.name}, path: {Path(path_file).name}; errors over the test proper")
+    print(comparison.table())
+    if report is not None:
+        with atomic_write(report) as stream:
+            stream.write(comparison.to_json() + "\n")
+        print(f"\ncomparison written to {report}")
+    print(f"plots written to {out}/")
+
+
 def volumetric(args):
     """``contoursim volumetric MACHINE``: worst volumetric errors and error-field plots."""
     from .machine import preset_file
@@ -189,6 +230,14 @@ def main(argv=None):
     p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
     p.add_argument("--geometric-compensation", action="store_true", help="also run with geometric compensation")
     p.set_defaults(run=simulate_command)
+    p = sub.add_parser("compare", help="compensation strategies side by side on a job file or a path file")
+    p.add_argument("file", help="job .toml, path .toml or G-code .nc (a file, or a name in the trajectories library)")
+    p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
+    p.add_argument("--strategies", metavar="A,B,...",
+                   help="strategies to run, comma-separated (default: none,feedforward,zpetc,ccc_linear,ccc_arc,"
+                        "feedforward+ccc_arc); parts joined by '+' compose, 'geometric' too")
+    p.add_argument("--json", metavar="R.json", help="write the comparison (JSON) to this file")
+    p.set_defaults(run=compare_command)
     p = sub.add_parser("volumetric", help="volumetric error map of a machine preset or file")
     p.add_argument("machine", help="machine preset name or file")
     p.set_defaults(run=volumetric)
