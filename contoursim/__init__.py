@@ -7,7 +7,10 @@ The main objects, by the data flow of a simulation:
   :func:`~contoursim.pathfile.load_path_file`, :func:`~contoursim.gcode.read_gcode`;
 - servo: :class:`AxisServo` (python-control models), :func:`contoursim.kernel.run`;
 - machine: :class:`Machine`, :func:`load_machine` (servo axes + multibody geometry);
-- :func:`simulate` -> :class:`SimResult` (tracking and exact contour error);
+- effects: :class:`Effect` (the catalogue, :mod:`contoursim.effects`), :class:`Model`
+  (a machine plus effects), :func:`load_model` (a machine file with its ``[[effect]]`` tables);
+- :func:`simulate` -> :class:`SimResult` (tracking and exact contour error), on a path or a
+  measured trace; :func:`simulate_batch` (variants of one model in one compiled call);
 - traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format).
 """
 
@@ -22,20 +25,26 @@ from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopEr
 # ``contoursim --help`` do not load python-control, scipy and numba
 _LAZY = {
     "AxisServo": "servo",
+    "Effect": "effects",
     "Machine": "machine",
+    "Model": "model",
     "SimResult": "simulate",
     "Trace": "traces",
     "Trajectory": "trajectory",
     "load_machine": "machine",
+    "load_model": "model",
     "read_trace": "traces",
     "simulate": "simulate",
+    "simulate_batch": "simulate",
     "write_trace": "traces",
 }
 
 __all__ = [
     "AxisServo",
     "ConfigError",
+    "Effect",
     "Machine",
+    "Model",
     "PathError",
     "SimResult",
     "Trace",
@@ -43,8 +52,10 @@ __all__ = [
     "Trajectory",
     "UnstableLoopError",
     "load_machine",
+    "load_model",
     "read_trace",
     "simulate",
+    "simulate_batch",
     "write_trace",
 ]
 

@@ -23,7 +23,7 @@ from .output import output_dir
 
 DEMO_MACHINE = "demo_mill"
 DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
-_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation")
+_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
 
 
 _COLUMNS = {"tracking max": "tracking_max_um", "tracking RMS": "tracking_rms_um", "contour max": "contour_max_um",
@@ -39,8 +39,21 @@ def _table(rows):
     return "\n".join(lines)
 
 
-def run_job(machine, path_file, job=None, strategies=(), label=None):
-    """Simulate `machine` on a path file.
+def _trajectory(model, path_file, job=None):
+    """The path file's reference at the model's servo period; a job's ``[feed]`` overrides the file's key by key."""
+    from .feed import sample
+    from .model import as_model
+    from .pathfile import load_path_file, read_feed_table
+
+    path, settings = load_path_file(path_file)
+    if job is not None and "feed" in job.data:
+        settings = read_feed_table(job, base=settings)
+    machine = as_model(model).machine
+    return sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+
+
+def run_job(model, path_file, job=None, strategies=(), label=None):
+    """Simulate `model` (a Model, or a Machine without effects) on a path file.
 
     A job file's ``[feed]`` table, when given, overrides the path file's key by key.
 
@@ -50,18 +63,13 @@ def run_job(machine, path_file, job=None, strategies=(), label=None):
         ``(name, path_file, result)``: the run's name (file stem or `label`),
         the path file and the :class:`~contoursim.simulate.SimResult`.
     """
-    from .feed import sample
-    from .pathfile import load_path_file, read_feed_table
     from .simulate import simulate
 
-    path, settings = load_path_file(path_file)
-    if job is not None and "feed" in job.data:
-        settings = read_feed_table(job, base=settings)
-    trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+    trajectory = _trajectory(model, path_file, job)
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
-        result = simulate(machine, trajectory, strategies)
+        result = simulate(model, trajectory, strategies)
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
     return name, path_file, result
@@ -107,15 +115,17 @@ def demo(args):
 
 
 def _job(args):
-    """Machine, path file, job file (or None) and geometric switch of ``simulate FILE``.
+    """Model, path file, job file (or None) and geometric switch of ``simulate FILE``.
 
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
     presets/library entries or files relative to the job, and optionally a
-    ``[feed]`` table, ``work_offset`` and ``geometric_compensation``) or a bare path file, run
+    ``[feed]`` table, ``work_offset``, ``geometric_compensation`` and
+    ``[[effect]]`` tables, added to the machine file's) or a bare path file, run
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
-    from .machine import load_machine, read_work_offset
+    from .machine import read_work_offset
+    from .model import load_model, with_file_effects
     from .pathfile import library_file
 
     file = Path(args.file)
@@ -136,26 +146,30 @@ def _job(args):
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
-            machine = load_machine(near(data["machine"]))
+            model = load_model(near(data["machine"]))
+            machine = model.machine
             if "work_offset" in data:
                 machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
-            return machine, library_file(near(data["path"])), job, geometric
-    return load_machine(args.machine or DEMO_MACHINE), library_file(args.file), None, False
+            model = with_file_effects(replace(model, machine=machine), job)
+            return model, library_file(near(data["path"])), job, geometric
+    return load_model(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
     from .geocomp import GeometricCompensation
 
-    machine, path_file, job, geometric = _job(args)
+    model, path_file, job, geometric = _job(args)
+    machine = model.machine
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
-    runs = [run_job(machine, path_file, job)]
+    runs = [run_job(model, path_file, job)]
     if geometric or args.geometric_compensation:
-        runs.append(run_job(machine, path_file, job, [GeometricCompensation(machine.chain)],
+        runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
     out, rows = _write(args.out, {Path(path_file).stem: runs}, args.every)
-    print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}")
+    effects = ", ".join(f"{e.label} ({e.parameters[0].name} = {e.parameters[0].value:g})" for e in model.effects) or "none"
+    print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
 
@@ -166,12 +180,10 @@ def compare_command(args):
 
     from .comparison import compare
     from .compensation import STRATEGY_NAMES
-    from .feed import sample
     from .output import atomic_write
-    from .pathfile import load_path_file, read_feed_table
     from .plotting import save_comparison_figures
 
-    machine, path_file, job, geometric = _job(args)
+    model, path_file, job, geometric = _job(args)
     if geometric:
         raise job.error("compare runs the strategies of --strategies: compose geometric compensation there "
                         "(e.g. --strategies none,geometric,geometric+ccc_arc)", "geometric_compensation")
@@ -184,14 +196,10 @@ def compare_command(args):
             ours = False
         if not ours:
             raise FileExistsError(f"{report} exists and is not a comparison JSON; refusing to overwrite it")
-    path, settings = load_path_file(path_file)
-    if job is not None and "feed" in job.data:
-        settings = read_feed_table(job, base=settings)
-    trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
-    comparison = compare(machine, trajectory, names)
-    stem = Path(path_file).stem
+    comparison = compare(model, _trajectory(model, path_file, job), names)
     out = output_dir(args.out)
-    save_comparison_figures(comparison, out, stem)
+    save_comparison_figures(comparison, out, Path(path_file).stem)
+    machine = comparison.runs[names[0]].machine
     print(f"contoursim compare — machine: {machine.name}, path: {Path(path_file).name}; errors over the test proper")
     print(comparison.table())
     if report is not None:

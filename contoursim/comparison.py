@@ -16,6 +16,7 @@ import numpy as np
 
 from .compensation import STRATEGY_NAMES, strategies_named
 from .exceptions import ContoursimWarning, UnstableLoopError
+from .model import as_model
 from .simulate import simulate
 
 __all__ = ["Comparison", "compare", "JSON_KEYS"]
@@ -70,19 +71,21 @@ class Comparison:
         return "\n".join(lines)
 
 
-def compare(machine, trajectory, names=STRATEGY_NAMES, model=None):
-    """Run each named strategy on `machine` following `trajectory`.
+def compare(model, trajectory, names=STRATEGY_NAMES, design=None):
+    """Run each named strategy on `model` following `trajectory`.
 
     Parameters
     ----------
-    machine : Machine
+    model : Model or Machine
+        What is simulated (a machine with its effects).
     trajectory : Trajectory
         Sampled at the machine's servo period.
     names : sequence of str
         Strategy names (:func:`contoursim.compensation.strategies_named`),
         e.g. those of :data:`contoursim.compensation.STRATEGY_NAMES`.
-    model : mapping str -> AxisServo, optional
-        The servo model the strategies design from (default: the machine's own).
+    design : mapping str -> AxisServo, optional
+        The servo model the strategies design from (default: the simulated
+        servos themselves, a perfect model).
 
     Returns
     -------
@@ -106,13 +109,14 @@ def compare(machine, trajectory, names=STRATEGY_NAMES, model=None):
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise ValueError(f"strategy {twice[0]!r} is named twice")
-    strategies = {name: strategies_named(name, model, machine.chain) for name in names}  # all checked first
+    chain = as_model(model).machine.chain  # the geometric compensation's model: the machine file's errors
+    strategies = {name: strategies_named(name, design, chain) for name in names}  # all checked first
     runs = {}
     for name, chosen in strategies.items():
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ContoursimWarning)
             try:
-                runs[name] = simulate(machine, trajectory, chosen)
+                runs[name] = simulate(model, trajectory, chosen)
             except UnstableLoopError as exc:
                 raise UnstableLoopError(f"strategy {name}: {exc}", margins=exc.margins) from None
         for warning in caught:

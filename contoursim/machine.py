@@ -225,7 +225,7 @@ class Machine:
 
 
 _PRESETS = "presets"
-_SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes")
+_SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes", "effect")
 
 
 def preset_names():
@@ -244,7 +244,7 @@ def preset_file(name_or_file):
     raise ConfigError(f"no machine file {str(name_or_file)!r} and no preset of that name; presets: {', '.join(preset_names())}")
 
 
-def load_machine(name_or_file, geometry=True):
+def load_machine(name_or_file, geometry=True, effects=False):
     """Load a machine from a preset name or a machine TOML file.
 
     Parameters
@@ -254,6 +254,10 @@ def load_machine(name_or_file, geometry=True):
     geometry : bool
         Read the geometric half (bodies) when the file has one; ``False``
         gives the error-free Cartesian machine of the servo axes.
+    effects : bool
+        The caller reads the file's ``[[effect]]`` tables
+        (:func:`contoursim.model.load_model` does); otherwise a file that has
+        them is refused rather than loaded without them.
 
     Returns
     -------
@@ -273,6 +277,8 @@ def load_machine(name_or_file, geometry=True):
     toml = TomlFile.read(preset_file(name_or_file))
     toml.expect("machine")
     data = toml.data
+    if "effect" in data and not effects:
+        raise toml.error("this machine file has [[effect]] tables: load it with contoursim.model.load_model", "effect")
     chain = None
     if "body" in data:
         chain = chain_from_toml(toml, extra=_SERVO_KEYS)

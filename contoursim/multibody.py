@@ -16,7 +16,8 @@ characteristic matrices (seed 000 eq. 1.41, seed 004 eq. 6 and 15)::
   a rotary joint a rotation by q about its axis line. With a squareness
   (tilt) error the rotary axis line is the tilted unit vector ``l`` of seed
   001 (l_a, l_b, l_c) and M is the Rodrigues rotation about ``l``;
-- ``D``: thermal drift, its own matrix (seed 004): rates [mm/s, rad/s] × t;
+- ``D``: thermal drift, its own matrix (seed 004): rates [mm/s, rad/s] × t,
+  or × τ·(1 − exp(−t/τ)) for a first-order drift with time constant τ;
 - ``E``: motion error, the six error motions ``dx, dy, dz, ex, ey, ez`` of
   the axis as functions of q, plus the linear-axis squareness, which enters
   the translation column as ``−ξ·S`` (seed 004 eq. 9 and 11; ξ the carriage
@@ -52,6 +53,7 @@ __all__ = [
     "MachineChain",
     "lower_body_array",
     "tilted_axis",
+    "cartesian_chain",
     "chain_from_toml",
 ]
 
@@ -163,6 +165,10 @@ class Body:
         Rotary joint: squareness of the axis line s_k,d [rad] (seed 001).
     thermal : ndarray, shape (6,)
         Thermal drift rates dx, dy, dz [mm/s], ex, ey, ez [rad/s].
+    thermal_time_constant : float
+        0 (default): the drift grows linearly in time, ``rate·t``; τ > 0 [s]:
+        first order, ``rate·τ·(1 − exp(−t/τ))`` (rate at the start, levels
+        off at rate·τ).
     travel : tuple of float, optional
         Axis travel (min, max) [mm or rad].
     """
@@ -179,6 +185,7 @@ class Body:
     squareness: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tilt: np.ndarray = field(default_factory=lambda: np.zeros(3))
     thermal: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    thermal_time_constant: float = 0.0
     travel: tuple = None
 
     def __post_init__(self):
@@ -202,6 +209,8 @@ class Body:
             raise ValueError(f"{self.name}: tilt applies to a rotary joint, towards the other two directions")
         if self.joint == "fixed" and any(not m.is_zero for m in self.motion):
             raise ValueError(f"{self.name}: a fixed body has no error motions (use static)")
+        object.__setattr__(self, "thermal_time_constant",
+                           _validate.nonnegative(f"{self.name}.thermal_time_constant", self.thermal_time_constant))
         if self.travel is not None:
             lo, hi = _validate.finite_array(f"{self.name}.travel", self.travel, shape=(2,))
             if not lo < hi:
@@ -270,7 +279,12 @@ class Body:
         """Thermal drift twist, shape (n, 6), at times `t` (s, shape (n,)); zeros when t is None."""
         if t is None or not self.thermal.any():
             return np.zeros((n, 6))
-        return t[:, None] * self.thermal
+        return self.thermal_time(t)[:, None] * self.thermal
+
+    def thermal_time(self, t):
+        """What the drift rates multiply: ``t``, or ``τ·(1 − exp(−t/τ))`` for a first-order drift [s]."""
+        tau = self.thermal_time_constant
+        return t if tau == 0 else -tau * np.expm1(-t / tau)
 
     def tilt_twist(self, q):
         """First-order equivalent of the axis-line tilt: a twist after the ideal rotation, shape (N, 6).
@@ -613,7 +627,7 @@ class MachineChain:
             elif group == "thermal" and rest in COMPONENTS:
                 if t is None:
                     raise ValueError(f"{name}: thermal parameters need the times t")
-                basis[:, COMPONENTS.index(rest)] = t
+                basis[:, COMPONENTS.index(rest)] = b.thermal_time(t)
             elif group == "squareness" and rest in _DIRECTIONS and b.joint == "linear":
                 if _DIRECTIONS.index(rest) == b.direction:
                     raise ValueError(f"{name}: squareness is towards the other two directions")
@@ -831,6 +845,36 @@ def _cross(a, b):
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     return out
+
+
+def cartesian_chain(axes=("x", "y", "z")):
+    """The error-free chain of a Cartesian machine: each axis moves the tool along its own direction.
+
+    The home of geometric effects on a machine described by its servo axes
+    alone: body X on the bed, Y on X, Z on Y, the tool on the last; the
+    workpiece is the bed. With zero errors the tool tip is ``(x, y, z)``.
+
+    Parameters
+    ----------
+    axes : tuple of str
+        ``("x",)``, ``("x", "y")`` or ``("x", "y", "z")``.
+
+    Returns
+    -------
+    MachineChain
+
+    Examples
+    --------
+    >>> chain = cartesian_chain(("x", "y"))
+    >>> chain.tool_pose(np.array([[3.0, 4.0]]))[0].tolist()
+    [[3.0, 4.0, 0.0]]
+    """
+    axes = tuple(axes)
+    if axes not in (("x",), ("x", "y"), ("x", "y", "z")):
+        raise ValueError(f"a Cartesian chain has axes x, y (, z) in that order, got {axes}")
+    bodies = [Body(a.upper(), parent=i, joint="linear", direction=i, axis=a) for i, a in enumerate(axes)]
+    bodies.append(Body("tool", parent=len(axes)))
+    return MachineChain(tuple(bodies), tool=len(bodies), workpiece=0, axes=axes, name="Cartesian")
 
 
 # -- TOML machine description ----------------------------------------------

@@ -1,27 +1,38 @@
-"""A machine follows a path: servo loops, geometric errors, tracking and contour error.
+"""A machine follows a path: servo loops, effects, geometric errors, tracking and contour error.
 
 The data flow of DESIGN.md, as one pure function::
 
-    trajectory ─▶ axis commands (ideal inverse kinematics) ─▶ strategies: target (geometric
-        compensation), drive settings (feedforward), pre-filter (ZPETC) ─▶ servo kernel, with a
-        cross-coupled controller in the loop ─▶ axis positions ─▶ multibody chain ─▶ tool tip in workpiece
-        coordinates ─▶ tracking error, exact contour error
+    reference ─▶ axis commands (ideal inverse kinematics) ─▶ strategies (target: geometric
+        compensation; drive settings: feedforward; pre-filter: ZPETC)
+        ─▶ command-stage effects ─▶ servo kernel (servo-stage and in-loop effects; a
+        cross-coupled controller in the loop)
+        ─▶ axis positions ─▶ multibody chain (geometric effects) ─▶ tool tip in workpiece
+        coordinates ─▶ tracking error, contour error
+
+The reference is a sampled path (:class:`Trajectory`) or a measured trace's
+commanded positions (:class:`~contoursim.traces.Trace`,
+:func:`measured_reference`). :func:`simulate` runs one model;
+:func:`simulate_batch` runs many variants of one structure in one kernel call.
 """
 
+import os
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
-from . import kernel
+from . import estimators, kernel
 from .compensation import Composition
 from ._version import __version__
 from .contour import exact_contour_error
 from .exceptions import ContoursimWarning
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
+from .model import as_model
+from .trajectory import Trajectory
 
-__all__ = ["SimResult", "simulate"]
+__all__ = ["SimResult", "measured_reference", "simulate", "simulate_batch"]
 
 
 @dataclass(frozen=True)
@@ -33,22 +44,30 @@ class SimResult:
     trajectory : Trajectory
         The tool-tip reference.
     machine : Machine
+        The nominal machine (``model.machine``).
     axis_command : ndarray, shape (N, n_axes)
-        Where the strategies want the axes: the axis commands after the
-        target stages (geometric compensation), before a feedforward
-        pre-filter (ZPETC) [mm].
+        Where the strategies want the axes: the interpolator's commands
+        after the target stages (geometric compensation), before a
+        feedforward pre-filter (ZPETC) and command-stage effects (a command
+        delay) [mm].
     servo_response : contoursim.kernel.ServoResponse
         Servo axes' positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
         Actual tool tip in workpiece coordinates [mm].
     static_tool_position : ndarray, shape (N, d)
         Where the tool tip would be if every axis followed its command
-        exactly: the reference plus the machine's volumetric (geometric)
-        error, or what is left of it after compensation [mm].
-    contour : contoursim.contour.ContourError
-        Exact contour error of `tool_position` w.r.t. the reference path.
+        exactly: the reference plus the volumetric (geometric) error of the
+        machine and the model's geometric effects, or what is left of it
+        after compensation [mm].
+    contour : contoursim.contour.ContourError or None
+        Contour error of `tool_position`: exact, w.r.t. the reference path;
+        for a measured reference (no path) the three-point estimate
+        (:func:`contoursim.estimators.three_point`); ``None`` for a
+        single-axis reference or when not asked for.
     strategies : tuple
         The compensation strategies that were applied.
+    model : contoursim.model.Model
+        The model simulated (the machine and its effects).
     """
 
     trajectory: object
@@ -59,6 +78,7 @@ class SimResult:
     static_tool_position: np.ndarray
     contour: object
     strategies: tuple = field(default=())
+    model: object = None
 
     @property
     def tracking_error(self):
@@ -95,16 +115,19 @@ class SimResult:
         -------
         dict
             ``tracking_max_um``, ``tracking_rms_um``, ``contour_max_um``,
-            ``contour_rms_um``, ``volumetric_max_um``, ``volumetric_rms_um``.
+            ``contour_rms_um`` (without a contour error: not there),
+            ``volumetric_max_um``, ``volumetric_rms_um``.
         """
         keep = self.trajectory.measuring if measuring_only else slice(None)
         errors = dict(
             tracking=np.linalg.norm(self.tracking_error[keep], axis=1),
-            contour=self.contour.magnitude[keep],
+            contour=None if self.contour is None else self.contour.magnitude[keep],
             volumetric=np.linalg.norm(self.volumetric_error[keep], axis=1),
         )
         summary = {}
         for name, e in errors.items():
+            if e is None:
+                continue
             summary[f"{name}_max_um"] = 1e3 * float(e.max())
             summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(e**2)))
         return summary
@@ -115,12 +138,13 @@ class SimResult:
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
 
     def save_csv(self, file, metadata=None, overwrite=False, every=1):
-        """Write the trace CSV (DESIGN.md contract) with the contour error and the test proper.
+        """Write the trace CSV (DESIGN.md contract) with the contour error (if any) and the test proper.
 
         Besides ``t`` [s] and the positions ``<axis>_ref``, ``<axis>`` [mm],
         the columns ``contour`` (distance to the path) and ``contour_normal``
         (its signed in-plane component, positive to the left of travel) [mm],
-        and ``measuring``: 1 on the test proper (``trajectory.measuring``),
+        (without a contour error, as for a single-axis measured reference:
+        not there) and ``measuring``: 1 on the test proper (``trajectory.measuring``),
         the rows the summary table's max and RMS are taken over. Positions and
         contour error are written to the nm, ``t`` to the ns
         (:func:`contoursim.traces.write_trace`). The metadata lines give the
@@ -139,29 +163,135 @@ class SimResult:
             Write every `every`-th sample (1: all, at the servo period).
         """
         columns = ", ".join(f"{a}_ref, {a}" for a in CARTESIAN[: self.trajectory.dim])
+        contour = "" if self.contour is None else ", contour, contour_normal"
         standard = {
             "contoursim": __version__,
             "machine": self.machine.name,
             "servo_period_s": f"{self.machine.servo_period:g}",
             "every_nth_sample": every,
             "feed_mm_min": f"{60 * self.trajectory.feed:.6g}",
-            "units": f"t [s]; {columns}, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]",
+            "units": f"t [s]; {columns}{contour} [mm]; measuring [1 = test proper, 0 = not]",
         }
-        extra = {"contour": self.contour.magnitude, "contour_normal": self.contour.normal,
-                 "measuring": self.trajectory.measuring}
+        extra = {} if self.contour is None else {"contour": self.contour.magnitude, "contour_normal": self.contour.normal}
+        extra["measuring"] = self.trajectory.measuring
         write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
 
 
-def simulate(machine, trajectory, strategies=(), settle=None):
-    """Simulate `machine` following `trajectory`.
+def measured_reference(trace, servo_period):
+    """A measured trace's commanded positions as a reference at the servo period.
+
+    The trace's samples are taken as they are when it was logged at the
+    servo period (within the 0.1 % jitter a logger's time stamps may carry;
+    the times become ``t[0] + k·servo_period``); otherwise a cubic spline
+    (not-a-knot) through them is sampled every servo period from ``t[0]``
+    to the last sample. Velocity and acceleration are the spline's first
+    and second derivatives in both cases. The reference need not start or
+    end at rest; it has no continuous path (``path = None``).
 
     Parameters
     ----------
-    machine : Machine
-    trajectory : Trajectory
-        Tool-tip reference in workpiece coordinates [mm], sampled at the
-        machine's servo period; its path speed [mm/s] must not exceed the
-        machine's ``max_feed`` [mm/s].
+    trace : contoursim.traces.Trace
+        The measured trace (its ``reference`` columns are used).
+    servo_period : float
+        The servo period [s].
+
+    Returns
+    -------
+    Trajectory
+        ``dim`` = the trace's number of axes.
+
+    Examples
+    --------
+    >>> from contoursim.traces import Trace
+    >>> t = np.arange(5) * 1e-3
+    >>> trace = Trace(t, (3.0 * t)[:, None], (3.0 * t)[:, None], ("x",))
+    >>> ref = measured_reference(trace, 5e-4)          # logged at 1 ms, servo at 0.5 ms
+    >>> ref.position[:3, 0].round(6).tolist(), ref.velocity[:3, 0].round(6).tolist()
+    ([0.0, 0.0015, 0.003], [3.0, 3.0, 3.0])
+    """
+    if not isinstance(trace, Trace):
+        raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
+    if abs(trace.dt - servo_period) <= 1e-3 * servo_period:
+        t = trace.t[0] + servo_period * np.arange(trace.t.size)
+        spline = CubicSpline(t, trace.reference)
+        position = trace.reference
+    else:
+        n = int(np.floor((trace.t[-1] - trace.t[0]) / servo_period * (1 + 1e-12))) + 1
+        t = trace.t[0] + servo_period * np.arange(n)
+        spline = CubicSpline(trace.t, trace.reference)
+        position = spline(t)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(position, axis=0), axis=1))])
+    return Trajectory(t, position, spline(t, 1), spline(t, 2), s)
+
+
+def _reference(machine, reference, settle):
+    """The reference as a Trajectory at the servo period, held `settle` seconds."""
+    if isinstance(reference, Trace):
+        reference = measured_reference(reference, machine.servo_period)
+        settle = 0.0 if settle is None else settle
+    elif not isinstance(reference, Trajectory):
+        raise TypeError(f"the reference must be a Trajectory or a Trace, got {type(reference).__name__}")
+    else:
+        speed = reference.speed
+        if machine.max_feed is not None and speed.max() > machine.max_feed * (1 + 1e-9):
+            k = int(np.argmax(speed))
+            raise ValueError(
+                f"the trajectory reaches {60 * speed[k]:.6g} mm/min ({speed[k]:.6g} mm/s) at t = {reference.t[k]:.6g} s, "
+                f"above the machine's max feed {60 * machine.max_feed:.6g} mm/min: plan the path with a lower feed "
+                "(plan(..., max_feed=machine.max_feed) checks it)"
+            )
+    if abs(reference.dt - machine.servo_period) > 1e-9 * machine.servo_period:
+        raise ValueError(
+            f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
+            f"{machine.servo_period:g} s: sample the path at the servo period"
+        )
+    if settle is None:
+        settle = 5.0 / min(servo.kp for servo in machine.axes.values())
+    return reference.held(settle)
+
+
+def _target(model, trajectory, composition):
+    """Axis commands of the interpolator after the strategies' target stages, shape (N, n_axes) each."""
+    return composition.target(*model.machine.axis_commands(trajectory), _elapsed(trajectory))
+
+
+def _sent(model, composition, servos, target):
+    """The commands the servo axes get: the strategies' pre-filter, then the command-stage effects."""
+    q, v, a = (x.copy() for x in target)
+    columns, dt = model.machine.servo_columns, model.machine.servo_period
+    q[:, columns], v[:, columns], a[:, columns] = composition.prefilter(q[:, columns], v[:, columns], a[:, columns],
+                                                                        servos, dt)  # fmt: skip
+    return model.commands(q, v, a)
+
+
+def _elapsed(trajectory):
+    """Time since the reference's first sample [s], shape (N,): the clock of thermal drift and strategies."""
+    return trajectory.t - trajectory.t[0]
+
+
+def _actual(model, q, servo_position):
+    """All axes' actual positions: the commands `q` with the servo axes at `servo_position` [mm, rad]."""
+    columns = model.machine.servo_columns
+    if np.array_equal(columns, np.arange(q.shape[1])):  # every axis is a servo axis, in order
+        return servo_position
+    actual = q.copy()
+    actual[:, columns] = servo_position
+    return actual
+
+
+def simulate(model, reference, strategies=(), settle=None, contour=True):
+    """Simulate a machine, or a model (machine + effects), following a reference.
+
+    Parameters
+    ----------
+    model : Model or Machine
+        What to simulate; a Machine is a model without effects.
+    reference : Trajectory or Trace
+        A tool-tip reference in workpiece coordinates [mm] sampled at the
+        machine's servo period, its path speed [mm/s] not above the machine's
+        ``max_feed`` [mm/s]; or a measured trace whose commanded positions
+        are the reference (:func:`measured_reference`: resampled to the servo
+        period where needed; what the machine did is not refused).
     strategies : sequence of contoursim.compensation.Strategy
         Compensation strategies, composed by
         :class:`contoursim.compensation.Composition` (e.g.
@@ -171,8 +301,11 @@ def simulate(machine, trajectory, strategies=(), settle=None):
         :class:`~contoursim.geocomp.GeometricCompensation`).
     settle : float, optional
         Standstill appended after the reference ends, so the axes settle [s];
-        default five time constants of the slowest position loop, ``5 / min(kp)``.
-        The result's trajectory includes it.
+        default five time constants of the slowest position loop, ``5 / min(kp)``,
+        and none for a measured trace. The result's trajectory includes it.
+    contour : bool
+        Compute the contour error (exact on a path; the three-point estimate
+        on a measured reference of 2 or 3 axes).
 
     Returns
     -------
@@ -181,51 +314,189 @@ def simulate(machine, trajectory, strategies=(), settle=None):
     Raises
     ------
     UnstableLoopError
-        An axis loop is unstable or badly damped at this servo period, or a
-        cross-coupled controller destabilises it.
+        An axis loop (with its servo-stage effects) is unstable or badly
+        damped at this servo period, or a cross-coupled controller
+        destabilises it.
+    TypeError
+        `model` is not a Model or a Machine, `reference` not a Trajectory or a Trace.
     ValueError
         The trajectory's sampling differs from the servo period, it is faster
-        than the machine's max feed, or the path does not fit the machine's axes.
+        than the machine's max feed, the path does not fit the machine's
+        axes, or a reference to be held does not end at rest.
 
     Warns
     -----
     ContoursimWarning
         An axis's current command hit its limit: the message names the axis
         and the fraction of samples (see :attr:`SimResult.saturation`).
+
+    Notes
+    -----
+    Thermal drift, the machine's and the ``thermal_drift`` effects', runs
+    from the reference's first sample (a measured trace's clock may start
+    anywhere); strategies see that time too.
     """
-    if abs(trajectory.dt - machine.servo_period) > 1e-9 * machine.servo_period:
-        raise ValueError(
-            f"the trajectory is sampled every {trajectory.dt:g} s but the servo period is "
-            f"{machine.servo_period:g} s: sample the path at the servo period"
-        )
-    speed = trajectory.speed
-    if machine.max_feed is not None and speed.max() > machine.max_feed * (1 + 1e-9):
-        k = int(np.argmax(speed))
-        raise ValueError(
-            f"the trajectory reaches {60 * speed[k]:.6g} mm/min ({speed[k]:.6g} mm/s) at t = {trajectory.t[k]:.6g} s, "
-            f"above the machine's max feed {60 * machine.max_feed:.6g} mm/min: plan the path with a lower feed "
-            "(plan(..., max_feed=machine.max_feed) checks it)"
-        )
-    if settle is None:
-        settle = 5.0 / min(servo.kp for servo in machine.axes.values())
-    trajectory = trajectory.held(settle)
+    model = as_model(model)
+    machine = model.machine
+    trajectory = _reference(machine, reference, settle)
     composition = Composition(strategies)
-    q, v, a = composition.target(*machine.axis_commands(trajectory), trajectory.t)
+    q, v, a = _target(model, trajectory, composition)
     servo, dt = machine.servo_columns, machine.servo_period
-    servos = composition.drive(machine.axes)
+    servos = composition.drive(model.servos())
     coupling = composition.coupling(q[:, servo], servos, dt)
-    commands = composition.prefilter(q[:, servo], v[:, servo], a[:, servo], servos, dt)
-    response = kernel.run(servos, dt, *commands, coupling=coupling)
-    actual = q.copy()
-    actual[:, servo] = response.position
-    tool = machine.tool_position(actual, trajectory.t, trajectory.dim)
-    static = machine.tool_position(q, trajectory.t, trajectory.dim)
-    contour = exact_contour_error(trajectory, tool)
-    result = SimResult(trajectory, machine, q, response, tool, static, contour, composition.strategies)
+    qd, vd, ad = _sent(model, composition, servos, (q, v, a))
+    response = kernel.run(servos, dt, qd[:, servo], vd[:, servo], ad[:, servo], coupling=coupling,
+                          effects=model.loop_effects())
+    elapsed = _elapsed(trajectory)
+    tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
+    static = model.geometry.tool_position(q, elapsed, trajectory.dim)
+    error = None
+    if contour and trajectory.path is not None:
+        error = exact_contour_error(trajectory, tool)
+    elif contour and trajectory.dim > 1:
+        error = estimators.three_point(trajectory.position, tool)
+    result = SimResult(trajectory, machine, q, response, tool, static, error, composition.strategies, model)
     clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
     if clipped:
-        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{machine.axes[axis].current_limit:g} A)"
+        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A)"
                          for axis, f in clipped.items())
         warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
                       ContoursimWarning, stacklevel=2)
     return result
+
+
+#: Largest kernel output one chunk of a batch may hold [bytes].
+BATCH_CHUNK_BYTES = 2**27
+
+_BATCH_OUTPUTS = ("tool_position", "axis_position")
+
+
+def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64):
+    """Simulate B variants of one structure on one reference, in as few kernel calls as possible.
+
+    The variants may differ in any effect value, and in which effects they
+    have, but share the machine's axes, servo period, work offset and chain
+    (``model.with_values`` and ``model.with_effect`` make such variants). A
+    finite-difference Jacobian of P parameters is one batch of P + 1 models.
+    Variants with the same command-stage effects share one
+    :func:`contoursim.kernel.run_batch` call, made in chunks of rows so that
+    the kernel's output stays below :data:`BATCH_CHUNK_BYTES`, and variants
+    that differ only in geometric effects share one kernel row; each row then
+    goes through its own geometric stage exactly as :func:`simulate` does it,
+    so row b equals ``simulate(models[b], reference, ...)`` bit for bit
+    (with ``every > 1`` the kernel keeps every `every`-th sample and the
+    geometric stage runs on those only: equal to the single run's samples
+    to rounding, 1e-12 mm).
+
+    Unlike :func:`simulate`, only the nominal machines' loops are checked
+    for stability (:func:`contoursim.servo.check`, analysed once per servo
+    in a process), not the variants' (a ``gain_mismatch`` makes a new
+    servo): a variant far from the nominal one is the caller's business.
+
+    Parameters
+    ----------
+    models : sequence of Model or Machine
+        The B variants.
+    reference : Trajectory or Trace
+        As for :func:`simulate`.
+    outputs : tuple of str
+        Any of ``"tool_position"`` (shape (B, M, d)) [mm] and
+        ``"axis_position"`` (the actual positions of all the machine's axes,
+        shape (B, M, n_axes)) [mm, rad].
+    strategies : sequence
+        As for :func:`simulate`, without a cross-coupled controller (the
+        batch kernel runs none).
+    settle : float, optional
+        As for :func:`simulate`.
+    every : int
+        Keep the samples ``k = 0, every, 2·every, …`` only (M = ceil(N / every)),
+        to bound memory. For a trace logged every k-th servo period,
+        ``every = k`` gives the trace's own instants.
+    dtype : numpy dtype
+        Of the returned arrays (``np.float32`` halves their memory; the
+        simulation and the geometric stage run in float64).
+
+    Returns
+    -------
+    dict
+        ``"t"`` (M,) [s], each output asked for, and ``"diverged_step"``
+        (B, n_servo): per variant and servo axis the first step whose state
+        was not finite (an unstable variant), -1 for none; a diverged
+        variant's ``tool_position`` is NaN throughout.
+
+    Raises
+    ------
+    ValueError
+        The variants do not share one structure; an unknown output; a
+        cross-coupled controller among the strategies.
+    UnstableLoopError
+        A nominal machine's loop is unstable or badly damped.
+    """
+    models = [as_model(m) for m in models]
+    if not models:
+        raise ValueError("simulate_batch needs at least one model")
+    composition = Composition(strategies)
+    coupled = [s.name for s in composition.strategies if s.kind == "coupling"]
+    if coupled:
+        raise ValueError(f"simulate_batch runs no cross-coupled controller ({coupled[0]}): use simulate")
+    unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
+    if unknown or not outputs:
+        raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
+    every = int(every)
+    if every < 1:
+        raise ValueError(f"every must be a positive integer, got {every!r}")
+    first = models[0].machine
+    for i, m in enumerate(models):
+        machine = m.machine
+        if (machine.chain is not first.chain or machine.axis_names != first.axis_names
+                or machine.servo_period != first.servo_period or dict(machine.work_offset) != dict(first.work_offset)):
+            raise ValueError(f"models[{i}] has another structure than models[0] (axes, servo period, work offset or chain): "
+                             "a batch runs variants of one machine")
+    dt, servo = first.servo_period, first.servo_columns
+    for machine in {id(m.machine): m.machine for m in models}.values():
+        for axis, nominal in machine.axes.items():
+            nominal.check(dt, axis)  # analysed once per servo in a process
+    trajectory = _reference(first, reference, settle)
+    q, v, a = _target(models[0], trajectory, composition)
+    keep = slice(None, None, every)
+    n_keep = len(range(*keep.indices(len(trajectory))))
+    width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
+    result = {"t": trajectory.t[keep].copy()}
+    result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in outputs})
+    result["diverged_step"] = np.empty((len(models), servo.size), np.int64)
+    groups = {}
+    for i, m in enumerate(models):
+        groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
+    chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * n_keep * servo.size))
+    elapsed, q_kept = _elapsed(trajectory)[keep], q[keep]
+    for rows in groups.values():
+        # the pre-filter designs from the first variant of the group (pass a `model` to the strategy to fix it)
+        qd, vd, ad = _sent(models[rows[0]], composition, composition.drive(models[rows[0]].servos()), (q, v, a))
+        # variants that differ only in their geometry share one kernel run
+        runs = {}
+        for i in rows:
+            packed = np.array(_packed(models[i], dt, composition))
+            runs.setdefault(packed.tobytes(), (packed, []))[1].append(i)
+        distinct = list(runs.values())
+        for start in range(0, len(distinct), chunk):
+            part = distinct[start : start + chunk]
+            packed = np.array([p for p, _ in part])
+            run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=("tool",), every=every)
+            for b, (_, same) in enumerate(part):
+                diverged = run["diverged_step"][b]
+                for i in same:
+                    result["diverged_step"][i] = diverged
+                    actual = _actual(models[i], q_kept, run["tool"][b])
+                    if "axis_position" in result:
+                        result["axis_position"][i] = actual
+                    if "tool_position" in result and (diverged >= 0).any():
+                        result["tool_position"][i] = np.nan  # an unstable variant: no tool position
+                    elif "tool_position" in result:
+                        result["tool_position"][i] = models[i].geometry.tool_position(actual, elapsed, trajectory.dim)
+    return result
+
+
+def _packed(model, dt, composition):
+    """The kernel's parameter rows of one variant with the strategies' drive settings, shape (n_servo, NPAR)."""
+    loop = model.loop_effects()
+    return [kernel.pack(servo, dt, loop[axis]) for axis, servo in composition.drive(model.servos()).items()]

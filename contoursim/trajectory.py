@@ -18,7 +18,8 @@ class Trajectory:
     t : ndarray, shape (N,)
         Sample times [s], uniform.
     position : ndarray, shape (N, d)
-        Reference (interpolator) positions [mm], d = 2 or 3.
+        Reference (interpolator) positions [mm], d = 2 or 3 (1 for a
+        single-axis measured reference).
     velocity : ndarray, shape (N, d)
         Reference velocity [mm/s] (used by velocity feedforward).
     acceleration : ndarray, shape (N, d)
@@ -50,8 +51,8 @@ class Trajectory:
         t, dt = _validate.time_base("t", self.t)
         n = t.size
         pos = _validate.finite_array("position", self.position, ndim=2)
-        if pos.shape[0] != n or pos.shape[1] not in (2, 3):
-            raise ValueError(f"position must have shape (N, 2) or (N, 3) with N = {n}, got {pos.shape}")
+        if pos.shape[0] != n or pos.shape[1] not in (1, 2, 3):
+            raise ValueError(f"position must have shape (N, d), d = 1, 2 or 3, with N = {n}, got {pos.shape}")
         d = pos.shape[1]
         vel = _validate.finite_array("velocity", self.velocity, shape=(n, d))
         acc = _validate.finite_array("acceleration", self.acceleration, shape=(n, d))
@@ -80,14 +81,15 @@ class Trajectory:
         -------
         Trajectory
             The extra samples have zero velocity and acceleration and are not
-            `measuring`. Raises ValueError unless the reference ends at rest.
+            `measuring`. Raises ValueError unless the reference ends at rest
+            (or `duration` rounds to no sample).
         """
         duration = _validate.nonnegative("duration", duration)
-        if np.abs(self.velocity[-1]).max() > 0 or np.abs(self.acceleration[-1]).max() > 0:
-            raise ValueError("only a reference that ends at rest can be held")
         n = int(np.ceil(duration / self.dt - 1e-9))
         if n == 0:
             return self
+        if np.abs(self.velocity[-1]).max() > 0 or np.abs(self.acceleration[-1]).max() > 0:
+            raise ValueError("only a reference that ends at rest can be held")
         tail = np.zeros((n, self.dim))
         return Trajectory(
             np.concatenate([self.t, self.t[-1] + self.dt * np.arange(1, n + 1)]),
@@ -101,7 +103,7 @@ class Trajectory:
 
     @property
     def dim(self):
-        """Number of coordinates, 2 or 3."""
+        """Number of coordinates, 1, 2 or 3."""
         return self.position.shape[1]
 
     @property

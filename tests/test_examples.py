@@ -18,7 +18,7 @@ from contoursim.output import output_dir
 
 EXAMPLES = ROOT / "examples"
 JOBS = sorted(EXAMPLES.glob("*.toml"))
-CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py"}
+CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py", "effects_gallery.py"}
 
 
 def _figure(text, pattern):
@@ -98,6 +98,22 @@ def test_emps_example_prints_the_measured_following_error(real_data, capsys):
     assert measured == pytest.approx(0.578, abs=0.001)  # PROVENANCE.md's figure
     assert _figure(printed, r"RMS, simulated: ([\d.]+) mm") == pytest.approx(measured, rel=0.05)
     assert _figure(printed, r"difference\s+: ([\d.]+) µm") < 0.05 * 1e3 * measured
+
+
+def test_effects_gallery_prints_the_ballbar_sizes_of_the_closed_forms(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["effects_gallery.py", str(tmp_path / "out")])
+    runpy.run_path(str(EXAMPLES / "effects_gallery.py"), run_name="__main__")
+    printed = capsys.readouterr().out
+    radius = 25.0  # [mm]
+    closed_forms = {  # peak-to-peak radial deviation [µm], the same both ways
+        "backlash.x": 8.0,  # ±(lost motion / 2)·cos θ: the table lags by half the play either side of the motor
+        "squareness.xy": 150e-6 * radius * 1e3,  # −(αR/2)·sin 2θ
+        "scale_error.x": 100e-6 * radius * 1e3,  # R·k·cos²θ
+    }
+    for label, size in closed_forms.items():
+        for direction in ("radial deviation CCW", "p-p, CW"):
+            assert _figure(printed, rf"{re.escape(label)}\s+.*{direction}\s+([\d.]+) µm") == pytest.approx(size, rel=0.01)
+    assert (tmp_path / "out" / "effects_gallery.png").exists()
 
 
 def test_example_never_replaces_a_users_file(tmp_path, monkeypatch):
