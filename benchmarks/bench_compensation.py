@@ -30,16 +30,17 @@ import warnings
 import numpy as np
 
 from contoursim.comparison import compare
+from contoursim.effects import Effect
 from contoursim.exceptions import ContoursimWarning
 from contoursim.feed import sample
-from contoursim.kernel import LoopEffects
 from contoursim.machine import Machine
+from contoursim.model import Model
 from contoursim.pathfile import load_path_file
 from contoursim.servo import AxisServo
 
 DT = 2e-4  # servo period [s]
 FORCE_CONSTANT = 942.0  # [N/A]
-CURRENT_LIMIT_A = 0.45  # realistic row's amplifier limit [A]
+CURRENT_LIMIT_A = 0.38  # realistic row's amplifier limit [A]
 
 
 def axis(mass, velocity_hz, kp, ti, **kw):
@@ -77,11 +78,11 @@ def main():
     machine = Machine({"x": dataclasses.replace(NOMINAL["x"], mass=1.1 * NOMINAL["x"].mass, current_limit=CURRENT_LIMIT_A),
                        "y": dataclasses.replace(NOMINAL["y"], force_constant=0.9 * FORCE_CONSTANT,
                                                 current_limit=CURRENT_LIMIT_A)}, DT)  # fmt: skip
-    effects = {"x": LoopEffects(coulomb_N=40.0, noise_mm=1e-4, seed=1),
-               "y": LoopEffects(coulomb_N=60.0, noise_mm=1e-4, seed=2)}  # fmt: skip
+    effects = (Effect("coulomb_friction", "x", force_N=40.0), Effect("coulomb_friction", "y", force_N=60.0),
+               Effect("noise", "x", rms_um=0.1, seed=1), Effect("noise", "y", rms_um=0.1, seed=2))  # fmt: skip
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ContoursimWarning)  # saturation: the table says it
-        realistic = compare(machine, trajectory, model=NOMINAL, effects=effects)
+        realistic = compare(Model(machine, effects), trajectory, design=NOMINAL)
     table("Table 2 — realistic (model 10 % off, Coulomb friction 40/60 N, 0.1 µm noise, "
           f"current limit ±{CURRENT_LIMIT_A:g} A)", realistic)
     print()
