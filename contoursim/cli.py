@@ -22,6 +22,7 @@ from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoo
 from .output import output_dir
 
 DEMO_MACHINE = "demo_mill"
+DEMO_STRATEGIES = ("feedforward", "ccc_arc", "feedforward+ccc_arc")  # the demo's compact comparison, on its free-form run
 DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
 _JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
 
@@ -101,16 +102,25 @@ def _write(out, groups, every):
 
 def demo(args):
     """The README's main job: ISO 230-4 circles (CCW and CW, plotted together) and a free-form path on the demo machine."""
+    from .comparison import Comparison
+    from .compensation import strategies_named
     from .machine import load_machine
     from .pathfile import library_file
+    from .simulate import simulate
 
     machine = load_machine(DEMO_MACHINE)
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
+    (_, free_form, plain), = groups["butterfly"]
+    compared = {"none": plain}
+    compared.update((name, simulate(machine, plain.trajectory, strategies_named(name), settle=0.0))
+                    for name in DEMO_STRATEGIES)  # on the same reference, already held at its end
     out, rows = _write(args.out, groups, args.every)
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
     print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
     print("Both over the test proper: the full test circle of the ISO 230-4 runs (the CSV's measuring = 1 rows).")
     print(_table(rows))
+    print(f"\nCompensation strategies on {Path(free_form).stem} (all of them, with plots: contoursim compare {Path(free_form).stem}):")
+    print(Comparison(compared).table())
     print(f"\nplots and traces written to {out}/")
 
 

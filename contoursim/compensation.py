@@ -51,6 +51,7 @@ __all__ = [
     "Strategy",
     "Feedforward",
     "ZPETC",
+    "zpetc_commands",
     "CrossCoupled",
     "Composition",
     "STRATEGY_NAMES",
