@@ -517,8 +517,8 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
     ``cstate`` (_C_NSTATE,) are the coupling's (kind 0: none). Samples
     ``k = 0, every, 2·every, …`` go to the outputs of shape
     (ceil(N / every), n) (`estimate`: (ceil(N / every), 3)) that have rows
-    (an output with no rows is not asked for). `status` (n, 3) gets per axis the number of clamped steps,
-    the step at which the plant state was found not finite (checked every
+    (an output with no rows is not asked for). `status` (n, 3) gets per
+    axis the number of clamped steps, the step at which the plant state was found not finite (checked every
     _DIVERGENCE_CHECK steps; -1: never) and the first step whose reference
     values are not all finite (-1: none; the caller checks the reference
     in detail then, so that a valid reference costs no separate pass).
