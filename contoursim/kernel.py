@@ -307,7 +307,7 @@ class Coupling:
     def __post_init__(self):
         if self.estimator not in COUPLING_ESTIMATORS:
             raise ValueError(f"estimator must be one of {', '.join(COUPLING_ESTIMATORS)}, got {self.estimator!r}")
-        path = _validate.finite_array("coupling path", self.path, ndim=2)
+        path = _validate.finite_array("coupling path", self.path, ndim=2).copy()  # ours to make read-only
         if path.shape[1] not in (2, 3):
             raise ValueError(f"a coupling needs 2 or 3 axes (x, y[, z]), got a path with {path.shape[1]} columns")
         for name in ("kp", "ki", "kd"):
@@ -969,7 +969,8 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
         cpar, knots, knot_of_sample, cstate = _no_coupling()
         estimate = np.empty((0, 3))
     else:
-        cpar, knots, knot_of_sample = coupling.params.copy(), coupling.knots, coupling.knot_of_sample
+        # writeable copies: the kernel compiles for one array type (a read-only array is another)
+        cpar, knots, knot_of_sample = coupling.params.copy(), coupling.knots.copy(), coupling.knot_of_sample.copy()
         cpar[_C_DT], cstate = dt, np.zeros(_C_NSTATE)
         estimate = np.empty((n_steps, 3))
     outputs = (position, encoder, velocity, current, saturated, estimate, status)
