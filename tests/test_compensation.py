@@ -168,3 +168,38 @@ def test_strategies_compose_and_refuse_two_of_a_kind():
 def test_cross_coupling_needs_two_axes():
     with pytest.raises(ValueError, match="cross-coupled control needs 2 or 3 servo axes, the machine has 1"):
         cp.CrossCoupled().coupling(np.zeros((10, 1)), {"x": AxisServo(kp=40.0, **AXIS)}, DT)
+
+
+def _helix_machine_and_trajectory():
+    axes = {"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=36.0, **AXIS), "z": AxisServo(kp=30.0, **AXIS)}
+    path = paths.helix(center=(0, 0, 0), radius=10.0, pitch=5.0, turns=1.0)
+    return Machine(axes, DT), sample(path, plan(path, feed=50.0, accel=1000.0, jerk=50000.0), DT)
+
+
+def test_arc_coupling_in_3d_corrects_the_out_of_plane_part_and_estimates_as_offline():
+    from contoursim import estimators as est
+
+    machine, trajectory = _helix_machine_and_trajectory()
+    none = simulate(machine, trajectory)
+    coupled = simulate(machine, trajectory, [cp.CrossCoupled("arc")])
+    measuring = none.trajectory.measuring  # with the settling time held at the end
+    for part in ("out_of_plane", "normal"):  # both components of the error vector fall
+        before = np.abs(getattr(none.contour, part)[measuring]).max()
+        after = np.abs(getattr(coupled.contour, part)[measuring]).max()
+        assert before > 1e-3 and after < 0.3 * before
+    response = coupled.servo_response
+    offline = est.three_point(coupled.axis_command, response.encoder)
+    np.testing.assert_allclose(response.contour_estimate, offline.vector, rtol=0, atol=1e-15)
+    assert np.abs(offline.out_of_plane).max() > 1e-5  # the vector has an out-of-plane part
+
+
+def test_batch_applies_the_drive_and_prefilter_stages_like_simulate():
+    from contoursim.simulate import simulate_batch
+
+    machine, trajectory = _circle_machine_and_trajectory()
+    for strategies in ([cp.Feedforward()], [cp.ZPETC()]):
+        single = simulate(machine, trajectory, strategies).tool_position
+        batch = simulate_batch([machine], trajectory, strategies=strategies)["tool_position"][0]
+        np.testing.assert_array_equal(batch, single)
+    with pytest.raises(ValueError, match=r"simulate_batch runs no cross-coupled controller \(ccc_arc\)"):
+        simulate_batch([machine], trajectory, strategies=[cp.CrossCoupled()])
