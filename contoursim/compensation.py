@@ -66,13 +66,19 @@ STRATEGY_NAMES = ("none", "feedforward", "zpetc", "ccc_linear", "ccc_arc", "feed
 class Strategy(abc.ABC):
     """What a compensation strategy may change; every stage leaves things unchanged unless overridden.
 
-    Subclasses set ``name`` (as in :data:`STRATEGY_NAMES`) and ``kind``:
-    ``"target"``, ``"feedforward"`` or ``"coupling"`` (the composition rule
-    of :class:`Composition`).
+    A subclass says what it is (``name``, ``kind``) and overrides the
+    stages where it acts.
     """
 
-    name: str = ""
-    kind: str = ""
+    @property
+    @abc.abstractmethod
+    def name(self):
+        """Its name in a comparison (as in :data:`STRATEGY_NAMES`)."""
+
+    @property
+    @abc.abstractmethod
+    def kind(self):
+        """``"target"``, ``"feedforward"`` or ``"coupling"``: the composition rule of :class:`Composition`."""
 
     def target(self, q, v, a, t):
         """Where the axes should go: axis positions [mm, rad], velocities, accelerations, each (N, n_axes)."""
@@ -491,22 +497,26 @@ class Composition:
         return "+".join(s.name for s in self.strategies) or "none"
 
     def target(self, q, v, a, t):
+        """Every target stage in turn (see :meth:`Strategy.target`)."""
         for strategy in self.strategies:
             q, v, a = strategy.target(q, v, a, t)
         return q, v, a
 
     def drive(self, servos):
+        """Every drive stage in turn (see :meth:`Strategy.drive`)."""
         servos = dict(servos)
         for strategy in self.strategies:
             servos = strategy.drive(servos)
         return servos
 
     def prefilter(self, q, v, a, servos, dt):
+        """Every pre-filter stage in turn (see :meth:`Strategy.prefilter`)."""
         for strategy in self.strategies:
             q, v, a = strategy.prefilter(q, v, a, servos, dt)
         return q, v, a
 
     def coupling(self, path, servos, dt):
+        """The cross-coupled controller's :class:`~contoursim.kernel.Coupling`, or ``None`` (see :meth:`Strategy.coupling`)."""
         for strategy in self.strategies:
             coupling = strategy.coupling(path, servos, dt)
             if coupling is not None:
