@@ -329,8 +329,8 @@ class CrossCoupled(Strategy):
     kd : float, default 0
         Derivative gain [-].
     model : mapping str -> AxisServo, optional
-        Servos the default gains and the stability check use (default: the
-        simulated machine's).
+        Servos the default gains are derived from (default: the simulated
+        machine's).
     up : array_like, shape (3,), default (0, 0, 1)
         Orients the local plane normal.
     window : int, default 4
@@ -339,7 +339,8 @@ class CrossCoupled(Strategy):
     Notes
     -----
     Before a run, :meth:`coupling` checks the linear coupled loop: the
-    sampled loops of the coupled axes with the coupling closed along a set
+    simulated axes' sampled loops (without their in-loop effects) with the
+    coupling closed along a set
     of straight-line directions (:func:`coupled_spectral_radius`); a
     spectral radius >= 1 raises :class:`~contoursim.exceptions.UnstableLoopError`
     naming the gains and the direction. What the linear check cannot see
@@ -383,8 +384,7 @@ class CrossCoupled(Strategy):
         if len(coupled) < 2:
             raise ValueError(f"cross-coupled control needs 2 or 3 servo axes, the machine has {len(servos)}")
         kp, ki, kd = self.gains(coupled)
-        model = _model(self.model, coupled)
-        rows = [kernel.pack(servo, dt) for servo in model.values()]
+        rows = [kernel.pack(servo, dt) for servo in coupled.values()]  # the loops as simulated, not as modelled
         radius, direction = max(
             ((coupled_spectral_radius(rows, kp, ki, kd, dt, d), d) for d in _directions(len(coupled))),
             key=lambda pair: pair[0],
