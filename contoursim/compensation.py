@@ -492,6 +492,11 @@ class Composition:
         self.strategies = strategies
 
     @property
+    def prefilters(self):
+        """Whether a strategy pre-filters the commands (see :meth:`Strategy.prefilter`)."""
+        return any(type(s).prefilter is not Strategy.prefilter for s in self.strategies)
+
+    @property
     def name(self):
         """``"+"``-joined strategy names, ``"none"`` for none."""
         return "+".join(s.name for s in self.strategies) or "none"

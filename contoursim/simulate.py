@@ -257,6 +257,8 @@ def _target(model, trajectory, composition):
 
 def _sent(model, composition, servos, target):
     """The commands the servo axes get: the strategies' pre-filter, then the command-stage effects."""
+    if not composition.prefilters:
+        return model.commands(*target)
     q, v, a = (x.copy() for x in target)
     columns, dt = model.machine.servo_columns, model.machine.servo_period
     q[:, columns], v[:, columns], a[:, columns] = composition.prefilter(q[:, columns], v[:, columns], a[:, columns],
