@@ -863,8 +863,10 @@ def _axes(servos):
 
 
 def _reference(n_axes, ref_pos, ref_vel, ref_acc, finite):
-    """The three reference arrays checked, C-contiguous float64, shape (N, n_axes).
+    """The three reference arrays checked, as read-only C-contiguous float64 views, shape (N, n_axes).
 
+    Read-only always (a view costs nothing), so that the compiled kernel has one
+    signature whether the caller's arrays are writeable or not (numba types them apart).
     ``finite=False`` checks types and shapes only (:func:`run` has the kernel
     flag non-finite values as it reads them, and calls this again then).
     """
@@ -875,7 +877,13 @@ def _reference(n_axes, ref_pos, ref_vel, ref_acc, finite):
         raise ValueError("ref_pos must hold at least one sample")
     ref_vel = check("ref_vel", ref_vel, shape=(n_steps, n_axes))
     ref_acc = check("ref_acc", ref_acc, shape=(n_steps, n_axes))
-    return tuple(np.ascontiguousarray(r) for r in (ref_pos, ref_vel, ref_acc))
+    return tuple(_read_only(np.ascontiguousarray(r)) for r in (ref_pos, ref_vel, ref_acc))
+
+
+def _read_only(array):
+    view = array.view()
+    view.flags.writeable = False
+    return view
 
 
 def _initial_state(shape, start):
