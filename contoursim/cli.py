@@ -64,13 +64,15 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
         ``(name, path_file, result)``: the run's name (file stem or `label`),
         the path file and the :class:`~contoursim.simulate.SimResult`.
     """
-    from .simulate import simulate
+    from .model import as_model
+    from .simulate import default_settle, simulate
 
-    trajectory = _trajectory(model, path_file, job)
+    # held here as simulate would hold it, so that the reference before holding is freed before the run
+    trajectory = _trajectory(model, path_file, job).held(default_settle(as_model(model).machine))
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
-        result = simulate(model, trajectory, strategies)
+        result = simulate(model, trajectory, strategies, settle=0.0)  # held already
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
     return name, path_file, result

@@ -222,6 +222,10 @@ def _foot_points(kinds, rows, breaks, closed, knot_s, idx, act):
 
 # --------------------------------------------------------------------------- public function
 
+#: Actual points whose foot frames :func:`exact_contour_error` holds at once [points].
+_BLOCK = 1 << 16
+
+
 def _binormal(path, prim, tangent, kvec):
     """Plane normal b at each foot: the path's plane, an arc's axis, the osculating binormal, else z."""
     if path.plane_normal is not None:
@@ -279,18 +283,23 @@ def exact_contour_error(trajectory, actual, window=8):
     act3 = np.ascontiguousarray(_validate.as_xyz(act))
     knots, first, _ = distinct(np.ascontiguousarray(_validate.as_xyz(trajectory.position)))
     idx = nearest_knots(knots, act3, int(window))
-    frame, s, prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s[first], idx, act3)
-    foot, tangent, kvec = frame[:, :3], frame[:, 3:6], frame[:, 6:9]
-    b = _binormal(path, prim, tangent, kvec)
-    left = np.cross(b, tangent)
-    left /= np.linalg.norm(left, axis=1, keepdims=True)
-    b_perp = np.cross(tangent, left)
-    delta = act3 - foot
-    return ContourError(
-        magnitude=np.linalg.norm(delta, axis=1),
-        vector=-delta[:, :d],
-        foot=foot[:, :d],
-        s=s,
-        normal=np.sum(delta * left, axis=1),
-        out_of_plane=np.sum(delta * b_perp, axis=1),
-    )
+    knot_s = trajectory.s[first]
+    del knots, first
+    n = act3.shape[0]
+    magnitude, s, normal, out_of_plane = np.empty((4, n))
+    vector, foot = np.empty((2, n, d))
+    for lo in range(0, n, _BLOCK):  # in blocks: the (block, 9) foot frames and their products stay small
+        part = slice(lo, lo + _BLOCK)
+        frame, s[part], prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, knot_s, idx[part],
+                                            act3[part])
+        tangent = frame[:, 3:6]
+        b = _binormal(path, prim, tangent, frame[:, 6:9])
+        left = np.cross(b, tangent)
+        left /= np.linalg.norm(left, axis=1, keepdims=True)
+        delta = act3[part] - frame[:, :3]
+        magnitude[part] = np.linalg.norm(delta, axis=1)
+        vector[part] = -delta[:, :d]
+        foot[part] = frame[:, :d]
+        normal[part] = np.sum(delta * left, axis=1)
+        out_of_plane[part] = np.sum(delta * np.cross(tangent, left), axis=1)
+    return ContourError(magnitude=magnitude, vector=vector, foot=foot, s=s, normal=normal, out_of_plane=out_of_plane)

@@ -431,10 +431,11 @@ def sample(path, profile, dt):
     t = np.arange(n + 1) * dt
     s, sdot, sddot = profile.evaluate(t)
     s[-1], sdot[-1], sddot[-1] = path.length, 0.0, 0.0
-    pos, tangent, kvec = path.derivatives(s)
+    d = path.dim
+    pos, tangent, kvec = (x[:, :d] for x in path.derivatives(s))
     vel = tangent * sdot[:, None]
     acc = tangent * sddot[:, None] + kvec * (sdot**2)[:, None]
     roles = np.array(path.roles)
     measuring = roles[path.segment_index(s)] == "test" if "test" in path.roles else None
-    d = path.dim
-    return Trajectory(t, pos[:, :d], vel[:, :d], acc[:, :d], s, path=path, measuring=measuring)
+    # a copy of the positions, so that the (N, 9) evaluation the three came from is freed
+    return Trajectory(t, pos.copy(), vel, acc, s, path=path, measuring=measuring)

@@ -32,7 +32,7 @@ from .machine import CARTESIAN, Machine
 from .model import as_model
 from .trajectory import Trajectory
 
-__all__ = ["SimResult", "measured_reference", "simulate", "simulate_batch"]
+__all__ = ["SimResult", "default_settle", "measured_reference", "simulate", "simulate_batch"]
 
 
 @dataclass(frozen=True)
@@ -245,9 +245,15 @@ def _reference(machine, reference, settle):
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
             f"{machine.servo_period:g} s: sample the path at the servo period"
         )
-    if settle is None:
-        settle = 5.0 / min(servo.kp for servo in machine.axes.values())
-    return reference.held(settle)
+    return reference.held(default_settle(machine) if settle is None else settle)
+
+
+def default_settle(machine):
+    """The standstill :func:`simulate` appends to a path's reference by default: ``5 / min(kp)`` [s].
+
+    Five time constants of the machine's slowest position loop.
+    """
+    return 5.0 / min(servo.kp for servo in machine.axes.values())
 
 
 def _target(model, trajectory, composition):
@@ -266,16 +272,40 @@ def _sent(model, composition, servos, target):
     return model.commands(q, v, a)
 
 
+def _servo_run(model, composition, trajectory):
+    """Target commands (N, n_axes), the servo kernel's response to what is sent, and the servos with the drive settings.
+
+    The velocity and acceleration commands and what is sent are freed on return.
+    """
+    q, v, a = _target(model, trajectory, composition)
+    dt = model.machine.servo_period
+    servos = composition.drive(model.servos())
+    coupling = composition.coupling(_servo_part(model, q), servos, dt)
+    qd, vd, ad = (_servo_part(model, x) for x in _sent(model, composition, servos, (q, v, a)))
+    return q, kernel.run(servos, dt, qd, vd, ad, coupling=coupling, effects=model.loop_effects()), servos
+
+
 def _elapsed(trajectory):
     """Time since the reference's first sample [s], shape (N,): the clock of thermal drift and strategies."""
     return trajectory.t - trajectory.t[0]
 
 
+def _every_axis_servo(model):
+    """Whether every axis of the machine is a servo axis, in order (the servo columns are all columns)."""
+    columns = model.machine.servo_columns
+    return np.array_equal(columns, np.arange(len(model.machine.axis_names)))
+
+
+def _servo_part(model, x):
+    """The servo axes' columns of axis signals `x` (N, n_axes): `x` itself when they are all its columns."""
+    return x if _every_axis_servo(model) else x[:, model.machine.servo_columns]
+
+
 def _actual(model, q, servo_position):
     """All axes' actual positions: the commands `q` with the servo axes at `servo_position` [mm, rad]."""
-    columns = model.machine.servo_columns
-    if np.array_equal(columns, np.arange(q.shape[1])):  # every axis is a servo axis, in order
+    if _every_axis_servo(model):
         return servo_position
+    columns = model.machine.servo_columns
     actual = q.copy()
     actual[:, columns] = servo_position
     return actual
@@ -303,8 +333,8 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
         :class:`~contoursim.geocomp.GeometricCompensation`).
     settle : float, optional
         Standstill appended after the reference ends, so the axes settle [s];
-        default five time constants of the slowest position loop, ``5 / min(kp)``,
-        and none for a measured trace. The result's trajectory includes it.
+        default five time constants of the slowest position loop
+        (:func:`default_settle`), and none for a measured trace. The result's trajectory includes it.
     contour : bool
         Compute the contour error (exact on a path; the three-point estimate
         on a measured reference of 2 or 3 axes).
@@ -342,13 +372,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     machine = model.machine
     trajectory = _reference(machine, reference, settle)
     composition = Composition(strategies)
-    q, v, a = _target(model, trajectory, composition)
-    servo, dt = machine.servo_columns, machine.servo_period
-    servos = composition.drive(model.servos())
-    coupling = composition.coupling(q[:, servo], servos, dt)
-    qd, vd, ad = _sent(model, composition, servos, (q, v, a))
-    response = kernel.run(servos, dt, qd[:, servo], vd[:, servo], ad[:, servo], coupling=coupling,
-                          effects=model.loop_effects())
+    q, response, servos = _servo_run(model, composition, trajectory)
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
