@@ -1,10 +1,16 @@
 """Feed profiles against closed forms worked out by hand; sampling on the path."""
 
+import tracemalloc
+
 import numpy as np
 import pytest
 
-from contoursim import paths
+from contoursim import feed, paths
 from contoursim.feed import FeedSettings, plan, sample
+from contoursim.machine import load_machine
+from contoursim.output import output_dir
+from contoursim.plotting import save_figures
+from contoursim.simulate import default_settle, simulate
 
 
 def _differences(profile, dt):
@@ -138,17 +144,47 @@ def test_exact_stop_at_every_sharp_corner():
         assert trajectory.speed[near].min() < accel * dt
 
 
-def test_refuses_a_motion_with_too_many_samples():
+def test_refuses_a_motion_whose_run_needs_more_memory_than_is_available(monkeypatch):
     # 100 mm at 0.001 mm/min lasts 6e6 s: 6e9 samples at 1 ms (48 GB per column), refused before allocating
     path = paths.line((0, 0), (100, 0))
     profile = plan(path, 1e-3 / 60, 100.0)
     assert profile.duration == pytest.approx(100 / (1e-3 / 60), rel=1e-6)
-    with pytest.raises(ValueError, match=r"lasts 6e\+06 s: at dt = 0\.001 s that is 6e\+09 samples"):
+    with pytest.raises(ValueError, match=r"lasts 6e\+06 s: at dt = 0\.001 s that is 6e\+09 samples, a run of them "
+                                         r"needs about 2\.7e\+03 GB of memory and [0-9.e+]+ GB are available"):
         sample(path, profile, 1e-3)
-    # a circle of radius 1e6 mm at 1000 mm/min: 3.8e5 s, 3.8e8 samples at 1 ms
-    circle = paths.circle((0, 0), 1e6)
-    with pytest.raises(ValueError, match="more than the 50,000,000 allowed"):
-        sample(circle, plan(circle, 1000 / 60, 1000.0), 1e-3)
+    # 1.00001 s of a line at 1 ms: 1002 samples, 451 kB; refused with 400 kB available, sampled with 500 kB
+    line = paths.line((0, 0), (10, 0))
+    profile = plan(line, 10.0, 1e6)
+    assert profile.duration == pytest.approx(1.0, abs=1e-3)
+    monkeypatch.setattr(feed, "_available_memory", lambda: 400_000)
+    with pytest.raises(ValueError, match=r"that is 1002 samples, a run of them needs about 0\.000451 GB of memory "
+                                         r"and 0\.0004 GB are available"):
+        sample(line, profile, 1e-3)
+    monkeypatch.setattr(feed, "_available_memory", lambda: 500_000)
+    assert len(sample(line, profile, 1e-3)) == 1002
+    monkeypatch.setattr(feed, "_available_memory", lambda: None)  # unknown: not refused
+    assert len(sample(line, profile, 1e-3)) == 1002
+
+
+@pytest.mark.parametrize("path", [paths.circle((0, 0), 5.0), paths.helix((0, 0, 0), 5.0, 2.0, 1.0)],
+                         ids=["circle", "helix"])
+def test_the_memory_a_sample_is_allowed_covers_a_run(path, tmp_path):
+    """sample's limit: a run (reference, simulation, exact contour error, trace CSV, plots) allocates less than the figure."""
+    machine = load_machine("demo_mill")
+    profile = plan(path, 0.5, 1000.0)
+    simulate(machine, sample(path, profile, machine.servo_period))  # numba functions loaded before measuring
+    tracemalloc.start()
+    try:
+        trajectory = sample(path, profile, machine.servo_period).held(default_settle(machine))
+        result = simulate(machine, trajectory, settle=0.0)
+        del trajectory
+        result.save_csv(tmp_path / "run.csv")
+        save_figures({"run": result}, output_dir(tmp_path / "out"), "run")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert len(result.trajectory) > 100_000
+    assert peak < feed.RUN_BYTES_PER_SAMPLE * len(result.trajectory)
 
 
 @pytest.mark.parametrize("jerk", [None, 2000.0, 50000.0])
