@@ -5,7 +5,8 @@ Prints one ``name: value`` line per target:
 - ``demo_warm_s``: CPU seconds of ``contoursim demo`` with a warm numba cache;
 - ``help_s``: CPU seconds of ``contoursim --help``;
 - ``first_run_s``: CPU seconds of ``contoursim demo`` with an empty numba cache
-  (``NUMBA_CACHE_DIR`` set to a fresh folder for that process);
+  and no stored loop analysis (``NUMBA_CACHE_DIR`` and ``CONTOURSIM_CACHE_DIR``
+  set to fresh folders for that process);
 - ``bytes_per_step``: peak memory (max RSS) growth of a 1 M-step CLI simulate,
   from just before the run to its end, divided by the steps it wrote;
 - ``cli_1M_s``: CPU seconds of ``contoursim simulate`` of a 1 M-step circle,
@@ -127,7 +128,8 @@ def main():
         cli_cpu(["demo", "--out", str(tmp / "warmup")])  # fills the numba cache
         print(f"demo_warm_s: {cli_cpu(['demo', '--out', str(tmp / 'demo')]):.2f}")
         print(f"help_s: {cli_cpu(['--help']):.2f}")
-        cold = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / "empty_numba_cache"))
+        cold = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / "empty_numba_cache"),
+                    CONTOURSIM_CACHE_DIR=str(tmp / "empty_contoursim_cache"))
         print(f"first_run_s: {cli_cpu(['demo', '--out', str(tmp / 'first')], env=cold):.2f}")
 
         circle = tmp / "circle_1M.toml"

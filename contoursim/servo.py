@@ -30,8 +30,13 @@ trapezoidal (Tustin) rule, and every controller reads the state sampled at
 """
 
 import dataclasses
+import hashlib
+import importlib.util
+import json
+import os
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -691,14 +696,56 @@ def _loop_margins(loop):
     )
 
 
-@lru_cache(maxsize=1024)
-def _margins(servo, dt):
-    """:func:`margins` for ``dt`` [s] (0: continuous), computed once per (servo, dt) in a process."""
+def _analysed(servo, dt):
+    """:func:`margins` for ``dt`` [s] (0: continuous), analysed with python-control."""
     result = {}
     for name, loop in _loop_gains(_blocks(servo, dt)).items():
         poles = ct.feedback(loop, 1).poles()
         stable = bool(np.all(np.abs(poles) < 1)) if dt else bool(np.all(poles.real < 0))
         result[name] = _loop_margins(loop) | dict(damping_ratio=_damping_ratio(poles, dt), stable=stable)
+    return result
+
+
+def _cache_dir():
+    """Folder of contoursim's stored loop analyses: ``CONTOURSIM_CACHE_DIR``, else ``contoursim`` in the user cache folder.
+
+    The user cache folder is ``XDG_CACHE_HOME`` when set, else ``~/.cache``.
+    """
+    if os.environ.get("CONTOURSIM_CACHE_DIR"):
+        return Path(os.environ["CONTOURSIM_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "contoursim"
+
+
+def _analysis_key(servo, dt):
+    """What an analysis depends on: the servo's parameters, `dt`, this module's code and the python-control installed."""
+    control = importlib.util.find_spec("control")
+    stat = os.stat(control.origin)
+    source = Path(__file__).read_bytes()
+    text = repr((servo, float(dt), hashlib.sha256(source).hexdigest(), control.origin, stat.st_size, stat.st_mtime_ns))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@lru_cache(maxsize=1024)
+def _margins(servo, dt):
+    """:func:`margins` for ``dt`` [s] (0: continuous), analysed once per (servo, dt) and stored (:func:`_cache_dir`).
+
+    A stored analysis is read back only under its key (:func:`_analysis_key`):
+    other parameters, another version of this module or of python-control
+    analyse anew. A folder that cannot be written stores nothing.
+    """
+    file = _cache_dir() / "margins" / f"{_analysis_key(servo, dt)}.json"
+    try:
+        return json.loads(file.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        pass
+    result = _analysed(servo, dt)
+    try:
+        file.parent.mkdir(parents=True, exist_ok=True)
+        partial = file.with_name(f"{file.stem}.{os.getpid()}.tmp")
+        partial.write_text(json.dumps(result), encoding="utf-8")
+        os.replace(partial, file)  # complete or absent, when processes analyse at once
+    except OSError:
+        pass
     return result
 
 
@@ -713,7 +760,8 @@ def margins(servo, dt=None):
     exact response; where there are several, the gain margin closest to 1
     and the smallest phase margin are reported, as
     :func:`control.stability_margins` does. The analysis runs once per
-    (servo, dt) in a process; later calls return a copy of the first result.
+    (servo, dt) and is stored on disk (``CONTOURSIM_CACHE_DIR``, else ``~/.cache/contoursim``; a later process reads it
+    back without importing python-control); later calls return a copy of it.
 
     Parameters
     ----------

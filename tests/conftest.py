@@ -7,6 +7,14 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data" / "real"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def analysis_cache(tmp_path_factory):
+    """Loop analyses stored in a folder of this session (and its subprocesses): the tests analyse, not read a user's store."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("CONTOURSIM_CACHE_DIR", str(tmp_path_factory.mktemp("contoursim_cache")))
+        yield
+
+
 @pytest.fixture
 def real_data():
     """The measured data folder beside the repository (../shared/data/real).

@@ -1,11 +1,21 @@
 """AxisServo: plant, loops and margins against hand-derived closed forms and python-control."""
 
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import control as ct
 import numpy as np
 import pytest
 
+from contoursim import servo as servo_module
 from contoursim.exceptions import UnstableLoopError
 from contoursim.servo import AxisServo, zoh
+
+ROOT = Path(__file__).resolve().parents[1]
 
 # A ball-screw axis: 300 kg, 900 N/A, velocity loop crossing over at kv·kf/m = 600 rad/s.
 MASS, KF, KV = 300.0, 900.0, 200.0
@@ -274,3 +284,26 @@ def test_loop_analysis_runs_once_per_servo_and_period(monkeypatch):
     assert len(calls) == 2 and again["position"]["phase_margin"] > 30.0
     servo.check(1e-4)
     assert len(calls) == 3
+
+
+def test_an_analysis_is_stored_and_a_later_process_reads_it_back_without_python_control(tmp_path, monkeypatch):
+    monkeypatch.setenv("CONTOURSIM_CACHE_DIR", str(tmp_path))
+    servo_module._margins.cache_clear()  # analysed in this process, not remembered from another test
+    servo, dt = axis(kp=37.0, ti=0.011, **ELECTRICAL), 2e-4
+    analysed = servo_module.margins(servo, dt)
+    assert len(list((tmp_path / "margins").glob("*.json"))) == 1
+    code = ("import json, sys\nfrom contoursim.servo import AxisServo, margins\n"
+            f"m = margins(AxisServo(**{dataclasses.asdict(servo)!r}), {dt!r})\n"
+            "print(json.dumps([m, 'control' in sys.modules]))")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                          capture_output=True, text=True, timeout=120, check=True)
+    stored, imported_control = json.loads(done.stdout)
+    assert stored == json.loads(json.dumps(analysed)) and not imported_control  # the same figures, no analysis
+    # another parameter, or a damaged file, is analysed anew
+    other = axis(kp=38.0, ti=0.011, **ELECTRICAL)
+    assert servo_module.margins(other, dt)["position"]["gain_crossover"] != analysed["position"]["gain_crossover"]
+    assert len(list((tmp_path / "margins").glob("*.json"))) == 2
+    for stored_file in (tmp_path / "margins").glob("*.json"):
+        stored_file.write_text("{")
+    servo_module._margins.cache_clear()
+    assert servo_module.margins(servo, dt) == analysed
