@@ -199,6 +199,8 @@ def _evaluate_local(kinds, rows, index, u):
 def _evaluate(kinds, rows, breaks, s):
     """Position, tangent and curvature vector at path arc lengths `s`, shape (M, 9): primitive k holds [breaks[k], breaks[k+1])."""
     k = np.clip(np.searchsorted(breaks, s, side="right") - 1, 0, breaks.size - 2)
+    kinds, rows = kinds.view(), rows.view()
+    kinds.flags.writeable = rows.flags.writeable = False  # as a Path holds them: one compiled signature
     return _evaluate_local(kinds, rows, k, np.clip(s - breaks[k], 0.0, breaks[k + 1] - breaks[k]))
 
 
@@ -504,6 +506,7 @@ class Path:
                 raise PathError(f"segment {k} is a {type(p).__name__}, not a Line, HelicalArc or SplinePiece")
         kinds = np.array([p.kind for p in prims], dtype=np.int64)
         rows = np.array([p.row for p in prims])
+        kinds.flags.writeable = rows.flags.writeable = False  # read-only before the compiled evaluation: one signature
         lengths = np.array([p.length for p in prims])
         index = np.arange(len(prims))
         ends = _evaluate_local(kinds, rows, np.repeat(index, 2), np.column_stack([np.zeros(len(prims)), lengths]).ravel())

@@ -214,3 +214,12 @@ def test_corner_angles_at_every_junction():
                         paths.arc(center=(10, 5), radius=5, start_angle=-np.pi / 2, sweep=np.pi / 2),
                         paths.line((15, 5), (15, 0)))
     np.testing.assert_allclose(joined.corner_angles(), [0.0, np.pi], atol=1e-9)
+
+
+def test_building_and_evaluating_paths_compiles_one_signature():
+    """Primitives are evaluated read-only, as a path holds them: building, a primitive and the path share one signature."""
+    spline = paths.spline(np.array([[0.0, 0.0], [5.0, 2.0], [10.0, 0.0], [15.0, 3.0]]))
+    for path in (paths.join(paths.line((-5, 0), (0, 0)), spline), paths.helix((0, 0, 0), 5.0, 2.0, 1.0)):
+        path.derivatives(np.linspace(0.0, path.length, 50))
+        path.primitives[0].evaluate(np.array([0.0, 1.0]))
+    assert len(paths._evaluate_local.signatures) == 1
