@@ -281,10 +281,10 @@ def exact_contour_error(trajectory, actual, window=8):
     if int(window) < 1:
         raise ValueError(f"window must be at least 1, got {window!r}")
     act3 = np.ascontiguousarray(_validate.as_xyz(act))
-    knots, first, _ = distinct(np.ascontiguousarray(_validate.as_xyz(trajectory.position)))
+    knots, first = distinct(np.ascontiguousarray(_validate.as_xyz(trajectory.position)))[:2]
     idx = nearest_knots(knots, act3, int(window))
     knot_s = trajectory.s[first]
-    del knots, first
+    del knots, first  # before the foot points' arrays are made
     n = act3.shape[0]
     magnitude, s, normal, out_of_plane = np.empty((4, n))
     vector, foot = np.empty((2, n, d))

@@ -249,9 +249,16 @@ def _reference(machine, reference, settle):
 
 
 def default_settle(machine):
-    """The standstill :func:`simulate` appends to a path's reference by default: ``5 / min(kp)`` [s].
+    """The standstill :func:`simulate` appends to a path's reference by default [s].
 
-    Five time constants of the machine's slowest position loop.
+    Parameters
+    ----------
+    machine : Machine
+
+    Returns
+    -------
+    float
+        Five time constants of the machine's slowest position loop, ``5 / min(kp)`` [s].
     """
     return 5.0 / min(servo.kp for servo in machine.axes.values())
 
