@@ -1,0 +1,144 @@
+"""Nominal servo identification from a measured trace: what a diagnosis compares against without a model.
+
+Users often do not know their drives' parameters. From the commanded and
+measured positions alone, :func:`identify_machine` fits a cascade of a P
+position loop around a P velocity loop with velocity feedforward:
+
+- ONE position gain ``kp`` [1/s] shared by all axes (NC position gains are
+  normally set equal; a gain identified per axis would silently absorb a
+  ``gain_mismatch``, which the diagnosis must be able to name);
+- ONE velocity-feedforward fraction ``vff`` [-] shared by all axes (set in
+  the NC, like the gain);
+- per axis, the velocity-loop bandwidth ``ω_v`` [rad/s]: with the plant's
+  mass and force constant fixed at :data:`MASS` and :data:`FORCE_CONSTANT`,
+  ``kv = ω_v·MASS/FORCE_CONSTANT``. The position loop's damping follows
+  from ``kp/ω_v``.
+
+A position trace carries no force, so the mass is not identifiable: forces
+of in-loop effects fitted on an identified machine (``force_N`` of
+``coulomb_friction``) are in the units of this assumed axis and say only
+how the effect compares between axes and runs.
+
+The fit: starting values from a regression of the tracking error on the
+commanded velocity and acceleration (a P/P cascade lags by
+``e ≈ (1 − vff)·v/kp + (1/(kp·ω_v) − (1 − vff)²/kp²)·a``), then
+:func:`scipy.optimize.least_squares` on the tracking error through the
+simulator, each finite-difference Jacobian one :func:`simulate_batch` call.
+"""
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .machine import Machine
+from .servo import AxisServo
+from .simulate import measured_reference, simulate_batch
+
+__all__ = ["MASS", "FORCE_CONSTANT", "identify_machine", "servo_period_for"]
+
+#: Moving mass assumed for an identified axis [kg] (not identifiable from positions).
+MASS = 100.0
+#: Force constant assumed for an identified axis [N/A]: with MASS, kv [A·s/m] = ω_v [rad/s].
+FORCE_CONSTANT = 100.0
+
+_FD_STEP = 1e-3
+
+
+def servo_period_for(dt):
+    """The servo period to simulate a trace sampled every `dt` [s]: `dt` up to 1 ms, else `dt` divided to 1 ms or less."""
+    return dt / max(1, int(np.ceil(dt / 1e-3 - 1e-9)))
+
+
+def _machine(axes, period, x):
+    """The machine of parameter vector ``x = (log kp, vff, log ω_v per axis)``."""
+    kp, vff = float(np.exp(x[0])), float(x[1])
+    servos = {a: AxisServo(mass=MASS, force_constant=FORCE_CONSTANT, kv=float(np.exp(w)) * MASS / FORCE_CONSTANT,
+                           kp=kp, vff=vff) for a, w in zip(axes, x[2:])}
+    return Machine(servos, period, name="identified from the trace")
+
+
+def _start(trace, reference, period):
+    """Starting parameters from the regression of the tracking error on commanded v and a."""
+    n = len(trace.t)
+    v, a = (_on_trace(trace, reference.t, x) for x in (reference.velocity, reference.acceleration))
+    error = -trace.tracking_error  # lag: reference − actual [mm]
+    slopes, curv = [], []
+    for i in range(trace.reference.shape[1]):
+        design = np.column_stack([v[:, i], a[:, i], np.ones(n)])
+        coef = np.linalg.lstsq(design, error[:, i], rcond=None)[0]
+        slopes.append(coef[0])
+        curv.append(coef[1])
+    slope = float(np.median(slopes))
+    nyquist = np.pi / period
+    kp = 1.0 / slope if 1.0 / nyquist < slope < 10.0 else 30.0
+    x = [np.log(kp), 0.0]
+    for b in curv:
+        inv = b + 1.0 / kp**2  # 1/(kp·ω_v)
+        w = 1.0 / (kp * inv) if inv > 0 else 10.0 * kp
+        x.append(np.log(np.clip(w, 3.0 * kp, 0.2 * nyquist)))
+    return np.array(x)
+
+
+def identify_machine(trace, servo_period=None, progress=None):
+    """Identify the nominal servo loop of each axis of a trace (see the module docstring).
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+        The measured trace.
+    servo_period : float, optional
+        Servo period of the identified machine [s]; default
+        :func:`servo_period_for` the trace's sample period.
+    progress : callable, optional
+        Called with one line of text per fit iteration.
+
+    Returns
+    -------
+    Machine
+        Axes named as the trace's, each an :class:`AxisServo` with
+        ``mass = MASS``, ``force_constant = FORCE_CONSTANT``, the shared
+        ``kp`` and ``vff`` and its own ``kv``.
+    """
+    period = servo_period_for(trace.dt) if servo_period is None else float(servo_period)
+    reference = measured_reference(trace, period)
+    axes = trace.axes
+    x0 = _start(trace, reference, period)
+    nyquist = np.pi / period
+    lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * len(axes))
+    upper = np.array([np.log(0.5 * nyquist), 0.99] + [np.log(0.5 * nyquist)] * len(axes))
+    x0 = np.clip(x0, lower + 1e-6, upper - 1e-6)
+    measured = trace.actual
+    scale = max(float(np.std(trace.tracking_error)), 1e-6)
+    cache = {}
+
+    def outputs(xs):
+        tool = simulate_batch([_machine(axes, period, x) for x in xs], reference, settle=0.0)["tool_position"]
+        return [_on_trace(trace, reference.t, y) for y in tool]
+
+    def fun(x):
+        key = x.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = ((measured - outputs([x])[0]) / scale).ravel()
+        return cache[key]
+
+    def jac(x):
+        steps = [_FD_STEP * (1 if x[j] + _FD_STEP <= upper[j] else -1) for j in range(x.size)]
+        rows = [x + h * np.eye(x.size)[j] for j, h in enumerate(steps)]
+        r0 = fun(x)
+        cols = [((measured - y) / scale).ravel() for y in outputs(rows)]
+        if progress is not None:
+            progress(f"identify: kp = {np.exp(x[0]):.2f} 1/s, vff = {x[1]:.3f}, "
+                     f"RMS {1e3 * scale * np.sqrt(np.mean(r0**2)):.3g} µm")
+        return np.column_stack([(c - r0) / h for c, h in zip(cols, steps)])
+
+    fit = least_squares(fun, x0, jac=jac, bounds=(lower, upper), x_scale=1.0, max_nfev=40)
+    return _machine(axes, period, fit.x)
+
+
+def _on_trace(trace, t_sim, y):
+    """Simulated outputs `y` (M, d) on the servo grid `t_sim`, at the trace's samples, shape (N, d)."""
+    n = len(trace.t)
+    if len(t_sim) == n and abs((t_sim[-1] - t_sim[0]) - (trace.t[-1] - trace.t[0])) <= 1e-3 * trace.dt * n:
+        return y[:n]
+    t = np.clip(trace.t, t_sim[0], t_sim[-1])
+    return np.column_stack([np.interp(t, t_sim, y[:, i]) for i in range(y.shape[1])])
