@@ -50,6 +50,7 @@ from .identify import _on_trace, identify_machine
 from .kernel import MAX_DELAY_SAMPLES
 from .machine import Machine
 from .model import Model, as_model
+from .plotting import fit_circle_center
 from .simulate import measured_reference, simulate_batch
 
 __all__ = ["SIGNIFICANT", "Diagnosis", "Step", "diagnose", "locate", "noise_level"]
@@ -332,21 +333,28 @@ def locate(trace, reference, residual):
 
 
 def _circle(position):
-    """``(centre, radius)`` when the first two axes' reference runs a full circle, else ``None``."""
+    """``(centre, radius)`` when most of the first two axes' reference runs one full circle, else ``None``.
+
+    The circle is fitted (algebraically) to the points near it, narrowing
+    from 20 % to 0.03 % of the radius, so that run-in and run-out arcs or
+    approach moves do not pull it; half the samples must lie on it.
+    """
     if position.shape[1] < 2:
         return None
     p = position[:, :2]
-    design = np.column_stack([2 * p, np.ones(len(p))])
-    sol = np.linalg.lstsq(design, np.sum(p**2, axis=1), rcond=None)[0]
-    center = sol[:2]
-    radius = np.sqrt(max(sol[2] + center @ center, 0.0))
-    rel = p - center
-    r = np.linalg.norm(rel, axis=1)
-    if radius <= 0 or np.median(np.abs(r - radius)) > 0.01 * radius:
+    on = np.ones(len(p), bool)
+    for tol in (np.inf, 0.2, 0.05, 0.01, 1e-3, 3e-4):
+        if on.sum() < 3:
+            return None
+        center = fit_circle_center(p[on])
+        r = np.linalg.norm(p - center, axis=1)
+        radius = float(np.median(r[on]))
+        on = np.abs(r - radius) < tol * radius
+    if radius <= 0 or on.mean() < 0.5:
         return None
-    on = np.abs(r - radius) < 0.01 * radius
-    angle = np.unwrap(np.arctan2(rel[on, 1], rel[on, 0]))
-    if angle.size == 0 or np.ptp(angle) < 2 * np.pi * 0.95:
+    rel = p[on] - center
+    angle = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))
+    if np.ptp(angle) < 2 * np.pi * 0.95:
         return None
     return np.concatenate([center, np.zeros(position.shape[1] - 2)]), radius
 
@@ -773,12 +781,13 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     noise = noise_level(trace.actual - before)
     warnings = []
     scored = np.ones(len(trace.t), bool)
-    if np.any(np.abs(trace.actual[0] - before[0]) > 5 * noise):
+    speed = np.linalg.norm(reference.velocity, axis=1)
+    if speed[0] > 1e-3 * speed.max():
         # the simulation starts at rest on the reference, the machine did not: leave its transient out
-        skip = 5.0 / min(model.machine.axes[a].kp for a in trace.axes)
+        skip = min(5.0 * max(_settling_time(model.machine.axes[a]) for a in trace.axes), 0.1 * (trace.t[-1] - trace.t[0]))
         scored = trace.t >= trace.t[0] + skip
         warnings.append(f"the trace does not start at rest on its reference: the first {skip:.3g} s "
-                        "(five position-loop time constants) are left out of the fit and the figures")
+                        "(five time constants of the slowest closed-loop pole) are left out of the fit and the figures")
     if identified:
         warnings.append("the nominal machine was identified from the trace with an assumed mass "
                         "(forces such as force_N are relative to that axis, not in real newtons)")
@@ -828,6 +837,13 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
     return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, problem.fitted(), scored,
                      where, tuple(warnings))
+
+
+def _settling_time(servo):
+    """Time constant of the slowest pole of an axis's closed position loop [s]."""
+    from .servo import closed_loop
+
+    return 1.0 / float(np.min(-np.real(closed_loop(servo, feedforward=False).poles())))
 
 
 def _constant_force(problem, effect):
@@ -898,3 +914,186 @@ def synthetic_trace(model, trajectory, mismatch=0.03, noise_um=0.1, quantum_um=0
         actual = np.round(actual / (quantum_um * _UM)) * (quantum_um * _UM)
     axes = ("x", "y", "z")[: trajectory.dim]
     return Trace(result.trajectory.t[keep], result.trajectory.position[keep], actual, axes, {"synthetic": "true"})
+
+
+# -- figures -----------------------------------------------------------------------------------
+
+def plot_residuals(diagnosis, fig=None):
+    """Residual over time per axis before (nominal model) and after the diagnosis [µm], with the noise band.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    fig : matplotlib.figure.Figure, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    trace, keep = diagnosis.trace, diagnosis.scored
+    d = len(trace.axes)
+    fig = fig or plt.figure(figsize=(8.0, 2.2 + 1.8 * d), layout="constrained")
+    axes = fig.subplots(d, 1, sharex=True, squeeze=False)[:, 0]
+    for i, (ax, axis) in enumerate(zip(axes, trace.axes)):
+        before = diagnosis.residual_before[:, i]
+        ax.plot(trace.t[keep], 1e3 * (before - before[keep].mean())[keep], color="C0", lw=0.7,
+                label="before: nominal model (zero offset removed)")
+        ax.plot(trace.t[keep], 1e3 * diagnosis.residual_after[keep, i], color="C3", lw=0.7, label="after: " + (
+            ", ".join(e.label for e in diagnosis.effects) or "nominal refit only"))
+        ax.axhspan(-diagnosis.noise_um[i], diagnosis.noise_um[i], color="0.85", label="noise ±1σ")
+        ax.set_ylabel(f"{axis}: measured − simulated [µm]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize="small", loc="upper right")
+    axes[0].set_title("Residual before and after the diagnosis")
+    axes[-1].set_xlabel("t [s]")
+    return fig
+
+
+def plot_magnified(diagnosis, ax=None):
+    """The trace magnified, before and after the diagnosis.
+
+    With two or more axes: the XY reference path, and the residual
+    (measured − simulated) along the path normal drawn magnified on it,
+    ``reference + k·(r·n)·n``, for the nominal model (zero offset removed)
+    and after the diagnosis. With one axis: the following error
+    (reference − position) over time, measured and simulated both ways [µm].
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    ax : matplotlib.axes.Axes, optional
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    import matplotlib.pyplot as plt
+
+    from .plotting import magnification_for
+
+    trace, keep = diagnosis.trace, diagnosis.scored
+    ax = ax or plt.figure(figsize=(7.0, 6.0), layout="constrained").add_subplot()
+    after = "after: " + (", ".join(e.label for e in diagnosis.effects) or "nominal refit only")
+    if len(trace.axes) == 1:
+        runs = (("measured", "k", trace.actual), ("nominal model", "C0", diagnosis.simulated_before),
+                (after, "C3", diagnosis.simulated_after))
+        for label, color, y in runs:
+            ax.plot(trace.t[keep], 1e3 * (trace.reference - y)[keep, 0], color=color, lw=0.7, label=label)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(f"{trace.axes[0]}: following error [µm]")
+        ax.set_title("Following error, measured and simulated")
+    else:
+        ref = trace.reference[keep, :2]
+        before = diagnosis.residual_before[keep, :2]
+        runs = (("before: nominal model", "C0", before - before.mean(axis=0)), (after, "C3", diagnosis.residual_after[keep, :2]))
+        normals = [(label, color, path_normal(ref, r)) for label, color, r in runs]
+        size = float(np.max(np.ptp(ref, axis=0)))
+        k = magnification_for(size, max(float(np.percentile(np.abs(n), 99)) for *_, n in normals))
+        tangent = np.gradient(ref, axis=0)
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
+        unit = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+        ax.plot(ref[:, 0], ref[:, 1], color="0.5", lw=0.8, ls="--", label="reference")
+        for label, color, normal in normals:
+            p = ref + k * normal[:, None] * unit
+            ax.plot(p[:, 0], p[:, 1], color=color, lw=0.8, label=label)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{trace.axes[0]} [mm]")
+        ax.set_ylabel(f"{trace.axes[1]} [mm]")
+        ax.set_title(f"Residual (measured − simulated) along the path normal, magnified ×{k:g}")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
+    return ax
+
+
+def plot_polar(diagnosis, ax=None):
+    """Polar plot of a circle test: the radial residual (measured − simulated) before and after the diagnosis [µm].
+
+    Drawn against the reference's angle over the samples whose reference
+    has been on the test circle for five time constants of the slowest
+    closed-loop pole (not on a run-in arc), the zero on the dashed circle: the shape a ballbar
+    technician reads, of what the nominal model misses and of what is left.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    ax : matplotlib.axes.Axes with polar projection, optional
+
+    Returns
+    -------
+    matplotlib.axes.Axes or None
+        ``None`` when the trace is not a circle test.
+    """
+    import matplotlib.pyplot as plt
+
+    trace, keep = diagnosis.trace, diagnosis.scored
+    circle = _circle(trace.reference[keep])
+    if circle is None:
+        return None
+    center, radius = circle
+    ax = ax or plt.figure(figsize=(6.4, 6.6), layout="constrained").add_subplot(projection="polar")
+    rel = trace.reference[keep, :2] - center[:2]
+    r = np.linalg.norm(rel, axis=1)
+    on = np.abs(r - radius) < 1e-3 * radius
+    lag = int(np.ceil(5.0 * max(_settling_time(diagnosis.model.machine.axes[a]) for a in trace.axes) / trace.dt))
+    on[lag:] &= np.convolve(~on, np.ones(lag + 1), mode="full")[: on.size][lag:] == 0
+    on[:lag] = False
+    if not on.any():
+        return None
+    theta = np.arctan2(rel[on, 1], rel[on, 0])
+    unit = rel[on] / r[on, None]
+    before = diagnosis.residual_before[keep][on, :2]
+    before = before - before.mean(axis=0)  # the instrument's zero, as the refit removes it
+    devs = [("before: nominal model", "C0", before), ("after: " + (", ".join(e.label for e in diagnosis.effects)
+            or "nominal refit only"), "C3", diagnosis.residual_after[keep][on, :2])]
+    devs = [(label, color, 1e3 * np.sum(d * unit, axis=1)) for label, color, d in devs]
+    span = max(max(float(np.abs(d).max()) for *_, d in devs), 1e-3)
+    for label, color, dev in devs:
+        ax.plot(theta, dev, color=color, lw=0.8, label=label)
+    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.6)
+    ax.set_rorigin(-2.5 * span)
+    ax.set_ylim(-1.2 * span, 1.2 * span)
+    ax.set_rlabel_position(67.5)
+    ax.set_title(f"Circle R = {radius:.4g} mm: radial residual, measured − simulated [µm]; dashed: zero",
+                 fontsize="medium")
+    ax.legend(fontsize="small", loc="lower left", bbox_to_anchor=(-0.1, -0.12))
+    return ax
+
+
+def save_figures(diagnosis, out):
+    """Write the diagnosis figures as PNG files into the output folder `out`.
+
+    ``diagnosis_residual.png`` (:func:`plot_residuals`),
+    ``diagnosis_trace.png`` (:func:`plot_magnified`) and, for a circle
+    test, ``diagnosis_polar.png`` (:func:`plot_polar`).
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    out : str, Path or contoursim.output.OutputDir
+        Created if missing; a file there that contoursim did not write is never replaced.
+
+    Returns
+    -------
+    list of pathlib.Path
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .output import output_dir
+
+    out = output_dir(out)
+    figures = [("diagnosis_residual.png", plot_residuals(diagnosis)), ("diagnosis_trace.png", plot_magnified(diagnosis).figure)]
+    polar = plot_polar(diagnosis)
+    if polar is not None:
+        figures.append(("diagnosis_polar.png", polar.figure))
+    written = []
+    for name, fig in figures:
+        file = out.file(name)
+        fig.savefig(file, dpi=110)
+        plt.close(fig)
+        written.append(file)
+    return written
