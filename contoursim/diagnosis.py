@@ -13,14 +13,17 @@ The workflow (:func:`diagnose`):
 3. **Refit the nominal model**: real machines differ from their nominal
    model by a few % in masses, damping and gains, and a measuring instrument
    has its own zero. These nuisance parameters — one position-gain scale
-   shared by all axes, per axis the velocity-loop gain, the damping, the
-   integral time and the feedforward where the model has them, and a
-   constant offset — act almost linearly on the trace: their sensitivities
+   shared by all axes; per axis the velocity-loop gain, the mass where
+   acceleration feedforward uses it, the feedforward fraction where there
+   is one, the damping and integral time where the velocity loop has an
+   integrator (without one, damping sets the loop's steady lag per axis and
+   would absorb a ``gain_mismatch``); and a constant offset per axis (the
+   instrument's zero) — act almost linearly on the trace: their sensitivities
    (one :func:`~contoursim.simulate.simulate_batch` call of finite
    differences) are projected out of every residual below, so an effect is
    named only for what a slightly wrong nominal model cannot explain.
 4. **Name**: every catalogue effect on every axis it can act on is a
-   candidate. All candidates' starting grids run in one batch (per stage);
+   candidate. All candidates' starting grids run in one batch;
    the best row of each starts :func:`scipy.optimize.least_squares` (bounds
    from the catalogue) whose finite-difference Jacobian is one batch per
    iteration. Geometric candidates reuse the loop's axis positions (no
@@ -64,6 +67,9 @@ _NUISANCE_STEP = 0.02  # relative step of the nominal parameters' finite differe
 _FD_STEP = 1e-3  # relative step of the candidates' finite differences
 _GRID = 4  # starting values per size parameter over its typical range (each sign)
 _UM = 1e-3
+_REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
+_CONFIRM = 3  # leading candidates rescored with the nominal model refitted around each
+_REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
 
 
 def noise_level(residual):
@@ -137,6 +143,8 @@ class Diagnosis:
         The final model, nominal parameters refitted, at the trace's samples [mm].
     scored : ndarray of bool, shape (N,)
         The samples the fit scored (all but a start transient the simulation cannot reproduce).
+    refitted : Model
+        The final model: the nominal machine with its servo parameters refitted, and the effects named.
     where : tuple of str
         Where the nominal residual concentrates and what it correlates with (:func:`locate`).
     warnings : tuple of str
@@ -152,6 +160,7 @@ class Diagnosis:
     simulated_before: np.ndarray
     simulated_after: np.ndarray
     scored: np.ndarray
+    refitted: Model
     where: tuple = ()
     warnings: tuple = field(default=())
 
@@ -188,6 +197,11 @@ class Diagnosis:
             "residual_max_after_um": _max_um(after),
             "noise_um": {a: float(n) for a, n in zip(self.trace.axes, self.noise_um)},
             "nominal_identified": self.identified,
+            "nominal_refit": {
+                f"{axis}.{name}": {"nominal": getattr(servo, name), "refit": getattr(self.refitted.machine.axes[axis], name)}
+                for axis, servo in self.model.machine.axes.items() for name in _REFIT_FIELDS
+                if getattr(servo, name) != getattr(self.refitted.machine.axes[axis], name)
+            },
             "steps": [{"label": s.label, "rms_um": s.rms_um, "max_um": s.max_um,
                        "delta_bic": None if np.isnan(s.delta_bic) else s.delta_bic} for s in self.steps],
             "where": list(self.where),
@@ -445,19 +459,34 @@ class _Problem:
         """The whitened, projected residual of prediction `y`."""
         return self.project(self.whitened(y))
 
-    def set_base(self, model):
-        """Make `model` the base: its prediction, axis positions and the nominal refit's sensitivities."""
+    def set_base(self, model, refit=0):
+        """Make `model` the base: its prediction, axis positions and the nominal refit's sensitivities.
+
+        With `refit` > 0, that many Gauss–Newton steps first move the base's
+        nominal parameters to their least-squares values (the linear
+        projection then only handles what is left), so that a nominal model
+        off by more than a few % is refitted rather than linearised.
+        """
+        for step in range(refit + 1):
+            self._linearise(model)
+            if step == refit or not self.changes:
+                break
+            d = self.trace.actual.shape[1]
+            coef = np.linalg.lstsq(self.columns, self.whitened(self.base_prediction), rcond=None)[0][d:]
+            model = _refitted(model, self.changes, coef)
+
+    def _linearise(self, model):
         self.base = None
         run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0)
         self.axis_position = run["axis_position"][0]
         self.base_prediction = _on_trace(self.trace, self.reference.t, run["tool_position"][0])
-        variants = _nuisance_variants(model, self.trace.axes)
+        self.changes = _nuisance_changes(model, self.trace.axes)
         n, d = self.trace.actual.shape
         columns = [(np.eye(d)[i] * self.weight).ravel() for i in range(d)]  # instrument zero per axis
-        if variants:
-            ys = self.predict(variants)
+        if self.changes:
+            ys = self.predict([_with_servos(model, change) for change in self.changes])
             r0 = self.whitened(self.base_prediction)
-            columns += [(r0 - self.whitened(y)) / _NUISANCE_STEP for y in ys]
+            columns += [r0 - self.whitened(y) for y in ys]  # the prediction's change for each nominal step, whitened
         s = self.columns = np.column_stack(columns)
         u, sv, _ = np.linalg.svd(s, full_matrices=False)
         self.basis = u[:, sv > 1e-8 * sv[0]]
@@ -480,31 +509,46 @@ class _Problem:
         return np.divide(r.reshape(n, d), self.weight, out=np.zeros((n, d)), where=self.weight > 0)
 
 
-def _nuisance_variants(model, axes):
-    """Variants of `model`'s machine with one nominal parameter of `axes` changed by :data:`_NUISANCE_STEP` each."""
-    machine = model.machine
-    variants = []
-
-    def variant(**changes):
-        servos = dict(machine.axes)
-        for axis, fields in changes.items():
-            servos[axis] = replace(servos[axis], **fields)
-        m = Machine(servos, machine.servo_period, machine.chain, machine.name, machine.max_feed, dict(machine.work_offset))
-        variants.append(Model(m, model.effects))
-
+def _nuisance_changes(model, axes):
+    """The nominal refit's steps: one dict ``{axis: {field: stepped value}}`` per nominal parameter of `axes`."""
+    servos = model.machine.axes
     h = 1.0 + _NUISANCE_STEP
-    variant(**{a: {"kp": s.kp * h} for a, s in machine.axes.items()})
+    changes = [{a: {"kp": s.kp * h} for a, s in servos.items()}]  # one position gain for all axes
     for a in axes:
-        s = machine.axes[a]
-        variant(**{a: {"kv": s.kv * h}})
-        variant(**{a: {"damping": s.damping * h if s.damping > 0 else _NUISANCE_STEP * s.kv * s.force_constant}})
-        if s.ti is not None:
-            variant(**{a: {"ti": s.ti * h}})
+        s = servos[a]
+        changes.append({a: {"kv": s.kv * h}})
+        if s.ti is not None:  # without an integrator, damping sets the velocity loop's steady lag: a gain in disguise
+            changes.append({a: {"damping": s.damping * h if s.damping > 0 else _NUISANCE_STEP * s.kv * s.force_constant}})
+            changes.append({a: {"ti": s.ti * h}})
         if s.aff > 0:
-            variant(**{a: {"mass": s.mass * h}})
+            changes.append({a: {"mass": s.mass * h}})
         if s.vff > 0:
-            variant(**{a: {"vff": min(s.vff * h, 1.0) if s.vff * h <= 1 else s.vff / h}})
-    return variants
+            changes.append({a: {"vff": s.vff * h if s.vff * h <= 1 else s.vff / h}})
+    return changes
+
+
+def _with_servos(model, change):
+    """`model` with some servo fields changed, ``{axis: {field: value}}`` (same chain: one structure for a batch)."""
+    machine = model.machine
+    servos = dict(machine.axes)
+    for axis, fields in change.items():
+        servos[axis] = replace(servos[axis], **fields)
+    m = Machine(servos, machine.servo_period, machine.chain, machine.name, machine.max_feed, dict(machine.work_offset))
+    return Model(m, model.effects)
+
+
+def _refitted(model, changes, coef):
+    """`model` moved by `coef` times each change (a Gauss–Newton step), each field kept within ±50 % (vff in [0, 1])."""
+    new = {}
+    for change, c in zip(changes, coef):
+        for axis, fields in change.items():
+            for field, stepped in fields.items():
+                old = getattr(model.machine.axes[axis], field)
+                value = old + c * (stepped - old)
+                scale = old if old > 0 else abs(stepped)
+                value = float(np.clip(value, max(0.0, old - 0.5 * scale), old + 0.5 * scale))
+                new.setdefault(axis, {})[field] = min(value, 1.0) if field == "vff" else value
+    return _with_servos(model, new)
 
 
 @dataclass
@@ -798,8 +842,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
     where = locate(trace, problem.reference, np.where(scored[:, None], trace.actual - before - raw.mean(axis=0), 0.0))
-    base = model
     for round_ in range(max_effects):
+        base = problem.base
         rss0 = float(problem.base_residual @ problem.base_residual)
         if rss0 <= problem.n * (1 + 3 * np.sqrt(2.0 / problem.n)):
             say("the residual is white noise of the estimated level: stopping")
@@ -814,6 +858,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                 f"{_options(cand.effect):<26} RMS {_rms_um(problem.unwhiten(cand.residual)):8.3f} µm")
         _rescore(problem, cands)
         cands.sort(key=lambda c: -c.delta_bic)
+        _confirm(problem, [c for c in cands[:_CONFIRM] if c.delta_bic > SIGNIFICANT])
+        cands.sort(key=lambda c: -c.delta_bic)
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
             say("nothing significant left: stopping")
             break
@@ -824,19 +870,44 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                 f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
                 f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
                 f"{_separating_test(best.fit, rival.fit)}")
-        base = base.with_effect(best.fit)
-        problem.set_base(base)
+        problem.set_base(base.with_effect(best.fit), refit=_REFIT_STEPS)
         if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
             best.fit = _constant_force(problem, best.fit)
-            base = base.with_effect(best.fit)
-            problem.set_base(base)
+            problem.set_base(problem.base.with_effect(best.fit))
             warnings.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
                             "measurement's zero offset; without an integrator in the velocity loop the two "
                             "cannot be told apart")
         steps.append(_step(problem, best.fit.label, best.fit, best.uncertainty, best.delta_bic))
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
     return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, problem.fitted(), scored,
-                     where, tuple(warnings))
+                     problem.base, where, tuple(warnings))
+
+
+def _confirm(problem, cands):
+    """Rescore the leading candidates with the nominal model refitted around each (Gauss–Newton, not linearised).
+
+    The candidates were compared with the nominal refit linearised at the
+    nominal model; when that is off by more than a few % (an identified
+    model, a large hidden effect), two near-equivalent candidates can swap.
+    Refitting the nominal parameters with each candidate in place decides
+    between them on what each explains after all.
+    """
+    if len(cands) < 2:
+        return
+    base = problem.base
+    rss0 = float(problem.base_residual @ problem.base_residual)
+    d = problem.trace.actual.shape[1]
+    scored = []
+    for cand in cands:
+        problem.set_base(base.with_effect(cand.fit), refit=_REFIT_STEPS)
+        cand.residual = problem.base_residual
+        scored.append(cand)
+    problem.set_base(base)
+    best = min(scored, key=lambda c: float(c.residual @ c.residual))
+    tau = _tau(best.residual.reshape(-1, d)[problem.scored], d)
+    for cand in scored:
+        cand.cost = float(cand.residual @ cand.residual)
+        cand.delta_bic = float(_delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau))
 
 
 def _settling_time(servo):
