@@ -56,19 +56,26 @@ from .model import Model, as_model
 from .plotting import fit_circle_center
 from .simulate import measured_reference, simulate_batch
 
-__all__ = ["SIGNIFICANT", "Diagnosis", "Step", "diagnose", "locate", "noise_level"]
+__all__ = [
+    "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal",
+    "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
+]
 
 #: ΔBIC an effect must exceed to be named (2·ln Bayes factor > 10: "very strong", Kass & Raftery 1995).
 SIGNIFICANT = 10.0
 #: Most effects named in one diagnosis.
 MAX_EFFECTS = 3
+#: The residual is at the noise floor when its RMS is within this factor of the noise estimated from the
+#: trace (the estimate itself is good to a few % on quantised, non-Gaussian noise): nothing more is named.
+NOISE_FLOOR = 1.1
+#: How well a nominal servo parameter is known (1σ, relative): the prior of the nominal refit.
+NOMINAL_SPREAD = 0.05
 
 _NUISANCE_STEP = 0.02  # relative step of the nominal parameters' finite differences
 _FD_STEP = 1e-3  # relative step of the candidates' finite differences
 _GRID = 4  # starting values per size parameter over its typical range (each sign)
 _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
-_CONFIRM = 3  # leading candidates rescored with the nominal model refitted around each
 _REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
 
 
@@ -255,6 +262,17 @@ def path_normal(reference, residual):
     +90°; in space the magnitude of the part perpendicular to the tangent.
     The tangent is the commanded positions' central difference; where the
     reference stands still the whole residual counts.
+
+    Parameters
+    ----------
+    reference : ndarray, shape (N, d)
+        Commanded positions [mm].
+    residual : ndarray, shape (N, d)
+        Measured minus simulated positions [mm].
+
+    Returns
+    -------
+    ndarray, shape (N,) or None
     """
     if reference.shape[1] < 2:
         return None
@@ -391,7 +409,7 @@ def _spatial_period(q, r):
     travel = np.ptp(q)
     if travel <= 0:
         return None, 0.0
-    periods = np.geomspace(max(travel / 200, 0.5), travel / 2, 60) if travel / 2 > 0.5 else ()
+    periods = np.geomspace(max(travel / 200, 0.5), travel / 2, 60) if travel > 1.0 else ()
     best = (None, 0.0)
     var = float(r @ r)
     for period in periods:
@@ -410,13 +428,13 @@ def _spatial_period(q, r):
 class _Problem:
     """A measured trace against variants of one model: predictions, whitening, nominal refit."""
 
-    def __init__(self, trace, model, noise, scored, progress):
+    def __init__(self, trace, model, noise, scored):
         self.trace = trace
         self.reference = measured_reference(trace, model.machine.servo_period)
         self.scored = scored  # samples the fit scores, shape (N,)
         self.weight = scored[:, None] / noise  # 1/σ per axis on scored samples, 0 elsewhere [1/mm], (N, d)
         self.n = int(scored.sum()) * len(noise)  # residual entries scored
-        self.progress = progress
+        self.nominal = model.machine  # the prior of the nominal refit is centred here
         self.base = None
         self.set_base(model)
 
@@ -451,13 +469,26 @@ class _Problem:
         """``(measured − y)/σ`` per axis, flattened, shape (N·d,)."""
         return ((self.trace.actual - y) * self.weight).ravel()
 
-    def project(self, r):
-        """`r` without what the nominal refit explains."""
-        return r - self.basis @ (self.basis.T @ r)
+    def coefficients(self, r):
+        """The nominal refit of a whitened residual `r`: zero offsets [steps of σ], then each nominal step's factor."""
+        return self.solve @ r - self.pull
 
     def residual(self, y):
-        """The whitened, projected residual of prediction `y`."""
-        return self.project(self.whitened(y))
+        """The residual of prediction `y` after the nominal refit: whitened misfit, then the prior's terms.
+
+        Shape (N·d + d + K,): what the refit leaves of the whitened residual,
+        then the refit's coefficients over their prior widths (a nominal
+        parameter is known to :data:`NOMINAL_SPREAD`; zero offsets are free).
+        """
+        with np.errstate(over="ignore", invalid="ignore"):  # a variant that went unstable: made large by _finite
+            r = self.whitened(y)
+            c = self.coefficients(r)
+            return np.concatenate([r - self.columns @ c, self.prior * (c + self.shift)])
+
+    def samples(self, r):
+        """The misfit part of a :meth:`residual`, per sample, shape (N, d)."""
+        n, d = self.trace.actual.shape
+        return r[: n * d].reshape(n, d)
 
     def set_base(self, model, refit=0):
         """Make `model` the base: its prediction, axis positions and the nominal refit's sensitivities.
@@ -472,8 +503,7 @@ class _Problem:
             if step == refit or not self.changes:
                 break
             d = self.trace.actual.shape[1]
-            coef = np.linalg.lstsq(self.columns, self.whitened(self.base_prediction), rcond=None)[0][d:]
-            model = _refitted(model, self.changes, coef)
+            model = _refitted(model, self.changes, self.coefficients(self.whitened(self.base_prediction))[d:])
 
     def _linearise(self, model):
         self.base = None
@@ -488,25 +518,29 @@ class _Problem:
             r0 = self.whitened(self.base_prediction)
             columns += [r0 - self.whitened(y) for y in ys]  # the prediction's change for each nominal step, whitened
         s = self.columns = np.column_stack(columns)
-        u, sv, _ = np.linalg.svd(s, full_matrices=False)
-        self.basis = u[:, sv > 1e-8 * sv[0]]
+        self.prior = np.concatenate([np.zeros(d), np.full(len(self.changes), _NUISANCE_STEP / NOMINAL_SPREAD)])
+        # ridge: the prior on the nominal parameters, centred on the nominal machine (the base may have moved from it)
+        self.shift = np.concatenate([np.zeros(d), [_steps_from(self.nominal, model.machine, c) for c in self.changes]])
+        normal = s.T @ s + np.diag(self.prior**2)
+        self.solve = np.linalg.solve(normal, s.T)
+        self.pull = np.linalg.solve(normal, self.prior**2 * self.shift)
         self.base = model
         self.base_residual = self.residual(self.base_prediction)
 
     def zero_offset(self):
         """The instrument zero of each axis the nominal refit finds [mm], shape (d,)."""
         d = self.trace.actual.shape[1]
-        return np.linalg.lstsq(self.columns, self.whitened(self.base_prediction), rcond=None)[0][:d]
+        return self.coefficients(self.whitened(self.base_prediction))[:d]
 
     def fitted(self):
         """The base's prediction with the nominal refit (and instrument zero) added [mm], shape (N, d)."""
         r = self.whitened(self.base_prediction)
-        return self.base_prediction + self.unwhiten(self.basis @ (self.basis.T @ r))
+        return self.base_prediction + self.unwhiten(self.columns @ self.coefficients(r))
 
     def unwhiten(self, r):
-        """A whitened residual vector as positions [mm], shape (N, d); 0 on samples not scored."""
+        """A whitened vector (its first N·d entries) as positions [mm], shape (N, d); 0 on samples not scored."""
         n, d = self.trace.actual.shape
-        return np.divide(r.reshape(n, d), self.weight, out=np.zeros((n, d)), where=self.weight > 0)
+        return np.divide(r[: n * d].reshape(n, d), self.weight, out=np.zeros((n, d)), where=self.weight > 0)
 
 
 def _nuisance_changes(model, axes):
@@ -516,15 +550,19 @@ def _nuisance_changes(model, axes):
     changes = [{a: {"kp": s.kp * h} for a, s in servos.items()}]  # one position gain for all axes
     for a in axes:
         s = servos[a]
-        changes.append({a: {"kv": s.kv * h}})
-        if s.ti is not None:  # without an integrator, damping sets the velocity loop's steady lag: a gain in disguise
-            changes.append({a: {"damping": s.damping * h if s.damping > 0 else _NUISANCE_STEP * s.kv * s.force_constant}})
-            changes.append({a: {"ti": s.ti * h}})
+        changes.append({a: {"kv": s.kv * h}})  # the velocity loop's gain over the mass: its bandwidth
         if s.aff > 0:
             changes.append({a: {"mass": s.mass * h}})
         if s.vff > 0:
             changes.append({a: {"vff": s.vff * h if s.vff * h <= 1 else s.vff / h}})
     return changes
+
+
+def _steps_from(nominal, machine, change):
+    """How far `machine` is from `nominal` in the parameters of one nominal step, in units of that step (mean over its fields)."""
+    steps = [(getattr(machine.axes[a], f) - getattr(nominal.axes[a], f)) / (v - getattr(machine.axes[a], f))
+             for a, fields in change.items() for f, v in fields.items()]
+    return float(np.mean(steps))
 
 
 def _with_servos(model, change):
@@ -636,9 +674,8 @@ def _spectral_peak(t, r, fmax):
     return float(f[band][np.argmax(spec[band])]) if np.any(band) else None
 
 
-def _tau(r, d):
-    """Integrated autocorrelation time of a whitened residual (axes interleaved, `d` of them), in samples."""
-    x = r.reshape(-1, d)
+def _tau(x, d):
+    """Integrated autocorrelation time of a whitened residual `x`, shape (N, d), in samples (the largest of its axes)."""
     taus = []
     for i in range(d):
         y = x[:, i] - x[:, i].mean()
@@ -668,6 +705,9 @@ def _bounds(problem, cand):
     elif effect.name == "time_delay":
         top = 0.1 if effect.options["kind"] == "command" else (MAX_DELAY_SAMPLES - 1) * problem.reference.dt
         limits["delay_s"] = (0.0, top)
+    elif effect.name == "cyclic_error":  # at least two periods within the travel, else it is not cyclic
+        travel = float(np.ptp(problem.trace.reference[:, problem.trace.axes.index(effect.axis)]))
+        limits["period_mm"] = (params["period_mm"].bounds[0], max(travel / 2, 2 * params["period_mm"].bounds[0]))
     lower = np.array([limits.get(n, params[n].bounds)[0] for n in cand.free])
     upper = np.array([limits.get(n, params[n].bounds)[1] for n in cand.free])
     return lower, upper
@@ -685,7 +725,7 @@ def _score(problem, cand, r, tau=None):
     """
     cand.cost = float(r @ r)
     d = problem.trace.actual.shape[1]
-    cand.tau = _tau(r.reshape(-1, d)[problem.scored], d)
+    cand.tau = _tau(problem.samples(r)[problem.scored], d)
     rss0 = float(problem.base_residual @ problem.base_residual)
     cand.delta_bic = float(_delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau or cand.tau))
 
@@ -717,7 +757,7 @@ def _rescore(problem, cands):
         return
     best = min(cands, key=lambda c: float(c.residual @ c.residual))
     d = problem.trace.actual.shape[1]
-    tau = _tau(best.residual.reshape(-1, d)[problem.scored], d)
+    tau = _tau(problem.samples(best.residual)[problem.scored], d)
     for cand in cands:
         _score(problem, cand, cand.residual, tau)
 
@@ -837,7 +877,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                         "(forces such as force_N are relative to that axis, not in real newtons)")
     if len(trace.axes) == 1:
         warnings.append("one axis: gain_mismatch cannot be told from the nominal position gain and is not a candidate")
-    problem = _Problem(trace, model, noise, scored, say)
+    problem = _Problem(trace, model, noise, scored)
     raw = (trace.actual - before)[scored]
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
@@ -845,8 +885,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     for round_ in range(max_effects):
         base = problem.base
         rss0 = float(problem.base_residual @ problem.base_residual)
-        if rss0 <= problem.n * (1 + 3 * np.sqrt(2.0 / problem.n)):
-            say("the residual is white noise of the estimated level: stopping")
+        if rss0 <= problem.n * NOISE_FLOOR**2:
+            say("the residual is at the noise floor: stopping")
             break
         cands = _candidates(problem, base)
         say(f"[effect {round_ + 1}] starting values of {len(cands)} candidates (one batch)")
@@ -858,8 +898,6 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                 f"{_options(cand.effect):<26} RMS {_rms_um(problem.unwhiten(cand.residual)):8.3f} µm")
         _rescore(problem, cands)
         cands.sort(key=lambda c: -c.delta_bic)
-        _confirm(problem, [c for c in cands[:_CONFIRM] if c.delta_bic > SIGNIFICANT])
-        cands.sort(key=lambda c: -c.delta_bic)
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
             say("nothing significant left: stopping")
             break
@@ -870,7 +908,12 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                 f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
                 f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
                 f"{_separating_test(best.fit, rival.fit)}")
+        # the nominal parameters refitted with the effect in place, then the effect refitted around them
         problem.set_base(base.with_effect(best.fit), refit=_REFIT_STEPS)
+        problem.set_base(Model(problem.base.machine, base.effects))
+        best.x = np.array([best.fit[name] for name in best.free])
+        _refine(problem, best, problem.base)
+        problem.set_base(problem.base.with_effect(best.fit), refit=_REFIT_STEPS)
         if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
             best.fit = _constant_force(problem, best.fit)
             problem.set_base(problem.base.with_effect(best.fit))
@@ -881,33 +924,6 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
     return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, problem.fitted(), scored,
                      problem.base, where, tuple(warnings))
-
-
-def _confirm(problem, cands):
-    """Rescore the leading candidates with the nominal model refitted around each (Gauss–Newton, not linearised).
-
-    The candidates were compared with the nominal refit linearised at the
-    nominal model; when that is off by more than a few % (an identified
-    model, a large hidden effect), two near-equivalent candidates can swap.
-    Refitting the nominal parameters with each candidate in place decides
-    between them on what each explains after all.
-    """
-    if len(cands) < 2:
-        return
-    base = problem.base
-    rss0 = float(problem.base_residual @ problem.base_residual)
-    d = problem.trace.actual.shape[1]
-    scored = []
-    for cand in cands:
-        problem.set_base(base.with_effect(cand.fit), refit=_REFIT_STEPS)
-        cand.residual = problem.base_residual
-        scored.append(cand)
-    problem.set_base(base)
-    best = min(scored, key=lambda c: float(c.residual @ c.residual))
-    tau = _tau(best.residual.reshape(-1, d)[problem.scored], d)
-    for cand in scored:
-        cand.cost = float(cand.residual @ cand.residual)
-        cand.delta_bic = float(_delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau))
 
 
 def _settling_time(servo):

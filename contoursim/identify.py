@@ -44,7 +44,18 @@ _FD_STEP = 1e-3
 
 
 def servo_period_for(dt):
-    """The servo period to simulate a trace sampled every `dt` [s]: `dt` up to 1 ms, else `dt` divided to 1 ms or less."""
+    """The servo period to simulate a trace sampled every `dt`: `dt` up to 1 ms, else `dt` divided to 1 ms or less.
+
+    Parameters
+    ----------
+    dt : float
+        The trace's sample period [s].
+
+    Returns
+    -------
+    float
+        The servo period [s].
+    """
     return dt / max(1, int(np.ceil(dt / 1e-3 - 1e-9)))
 
 
