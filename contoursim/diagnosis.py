@@ -13,15 +13,19 @@ The workflow (:func:`diagnose`):
 3. **Refit the nominal model**: real machines differ from their nominal
    model by a few % in masses, damping and gains, and a measuring instrument
    has its own zero. These nuisance parameters — one position-gain scale
-   shared by all axes; per axis the velocity-loop gain, the mass where
-   acceleration feedforward uses it, the feedforward fraction where there
-   is one, the damping and integral time where the velocity loop has an
-   integrator (without one, damping sets the loop's steady lag per axis and
-   would absorb a ``gain_mismatch``); and a constant offset per axis (the
-   instrument's zero) — act almost linearly on the trace: their sensitivities
-   (one :func:`~contoursim.simulate.simulate_batch` call of finite
-   differences) are projected out of every residual below, so an effect is
-   named only for what a slightly wrong nominal model cannot explain.
+   shared by all axes (a per-axis one would absorb a ``gain_mismatch``);
+   per axis the velocity-loop gain (with the mass, the velocity loop's
+   bandwidth), the mass where acceleration feedforward uses it and the
+   feedforward fraction where there is one; and a constant offset per axis
+   (the instrument's zero) — act almost linearly on the trace. Their
+   sensitivities (one :func:`~contoursim.simulate.simulate_batch` call of
+   finite differences) are refitted in every residual below by ridge
+   regression: each servo parameter is known to :data:`NOMINAL_SPREAD` (a
+   Gaussian prior centred on the nominal machine), the offsets are free.
+   An effect is named only for what a slightly wrong nominal model cannot
+   explain; once it is named, the nominal parameters are refitted by
+   Gauss–Newton with it in place and its own parameters fitted again
+   around them.
 4. **Name**: every catalogue effect on every axis it can act on is a
    candidate. All candidates' starting grids run in one batch;
    the best row of each starts :func:`scipy.optimize.least_squares` (bounds
@@ -36,8 +40,8 @@ The workflow (:func:`diagnose`):
    model error counts for less than white noise). The best is accepted when
    ``ΔBIC > SIGNIFICANT`` (very strong evidence on the Kass–Raftery scale);
    the search repeats for a second and a third effect and stops when
-   nothing is significant or the residual is white noise of the estimated
-   level. Two candidates within :data:`SIGNIFICANT` of each other are
+   nothing is significant or the residual is at the noise floor
+   (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
    reported as ambiguous, with the test that would separate them.
 """
 
