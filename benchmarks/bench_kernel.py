@@ -19,25 +19,33 @@ per turn) sampled at 5 kHz:
 
 * kernel, every in-loop effect on every axis (backlash with scale feedback,
   Coulomb + viscous + Stribeck friction with asymmetry and offset, a
-  1.3-period feedback delay, a 90 Hz structural mode, 0.1 µm encoder,
-  1 µm measurement noise), same reference, ``run()`` end to end, best of 5:
-  ``kernel_all_effects_slowdown`` is its time over the plain run's;
+  1.3-period feedback delay, a 90 Hz structural mode, a 0.1 µm encoder),
+  same reference, ``run()`` end to end, best of 15 (these runs and the
+  bare inner loop below take turns, so that they share the machine's load):
+  ``kernel_all_effects_slowdown`` is its time over the plain run's; the
+  same with 1 µm measurement noise on the recorded position too (outside
+  the loop) is printed in the table;
 * ``variant_pack_ms``: ``pack`` of one new 3-axis variant (a new kv and new
   friction and backlash values per axis, so nothing is cached), best of 200;
 * ``kernel_batch_axis_steps_per_s``: ``run_batch`` of 64 variants (friction
   and backlash on every axis, values varying per variant) on the first
-  50,000 steps of the helix, tool position only (float64), all cores, best of 3;
+  50,000 steps of the helix, tool position only (float64), all cores, best of 3
+  (also printed: axis-steps per CPU-second of all threads, for a loaded machine);
 * ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
   throughput over the compiled inner loop's alone (same packed rows,
-  outputs preallocated), best of 5 each.
+  outputs preallocated, no argument checks), best of 15 each; the same
+  ratios by thread CPU time are printed too (they do not count time the
+  process waits for a core on a loaded machine).
 
 Figures are axis-steps per second: simulated samples x axes / wall seconds.
 Run: python benchmarks/bench_kernel.py
 """
 
 import time
+from dataclasses import replace
 
 import control as ct
+import numba
 import numpy as np
 
 from contoursim import kernel
@@ -51,7 +59,7 @@ N_BATCH, B = 50_000, 64
 ALL_EFFECTS = LoopEffects(backlash_mm=0.005, backlash_feedback="scale", coulomb_N=120.0, viscous_N_s_per_m=300.0,
                           stribeck_N=40.0, stribeck_velocity_mm_s=2.0, asymmetry_N=15.0, offset_N=-30.0,
                           feedback_delay_s=1.3 * DT, mode_freq_hz=90.0, mode_damping_ratio=0.05, mode_mass_ratio=0.1,
-                          quantum_mm=1e-4, noise_mm=1e-3)  # fmt: skip
+                          quantum_mm=1e-4)  # fmt: skip
 AXES = ("x", "y", "z")
 BASE = dict(mass=300.0, force_constant=900.0, kv=200.0, ti=0.01, kp=40.0)
 
@@ -69,13 +77,26 @@ def helix(n):
     return pos, vel, acc
 
 
-def best_of(fn, repeat):
+def best_of(fn, repeat, clock=time.perf_counter):
     times = []
     for _ in range(repeat):
-        start = time.perf_counter()
+        start = clock()
         result = fn()
-        times.append(time.perf_counter() - start)
+        times.append(clock() - start)
     return min(times), result
+
+
+def side_by_side(fns, repeat):
+    """Best wall and thread-CPU times of each function, calling them in turn `repeat` times after a warm-up."""
+    wall, cpu = [np.inf] * len(fns), [np.inf] * len(fns)
+    for r in range(repeat + 1):
+        for i, fn in enumerate(fns):
+            start, start_cpu = time.perf_counter(), time.thread_time()
+            fn()
+            if r:
+                wall[i] = min(wall[i], time.perf_counter() - start)
+                cpu[i] = min(cpu[i], time.thread_time() - start_cpu)
+    return wall, cpu
 
 
 def gain(k, inp, out):
@@ -131,21 +152,24 @@ def main():
 
     run(plain, DT, pos, vel, acc)  # warm-up: compile (or load the cache) and check the loops
     run(loaded, DT, pos, vel, acc)
-    t_plain, _ = best_of(lambda: run(plain, DT, pos, vel, acc), 5)
     effects = dict.fromkeys(AXES, ALL_EFFECTS)
-    run(plain, DT, pos, vel, acc, effects=effects)
-    t_effects, _ = best_of(lambda: run(plain, DT, pos, vel, acc, effects=effects), 5)
+    noisy = dict.fromkeys(AXES, replace(ALL_EFFECTS, noise_mm=1e-3))
 
     # the bare inner loop of the plain run: packed rows, outputs allocated beforehand
     rows = np.array([pack(servo, DT) for servo in plain])
-    outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty(3, np.int64)]
+    outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty((3, 3), np.int64)]
     empty = np.zeros(0)
 
     def inner_loop():
         state = kernel._initial_state((3,), pos[0])
         kernel._variant_plain(rows, state, pos, vel, acc, None, empty, empty, empty, 1, *outputs)
 
-    t_inner, _ = best_of(inner_loop, 5)
+    (t_plain, t_effects, t_noisy, t_inner), cpu = side_by_side([
+        lambda: run(plain, DT, pos, vel, acc),
+        lambda: run(plain, DT, pos, vel, acc, effects=effects),
+        lambda: run(plain, DT, pos, vel, acc, effects=noisy),
+        inner_loop,
+    ], 15)  # fmt: skip
 
     counter = iter(range(10**9))
 
@@ -163,6 +187,7 @@ def main():
     refs = (pos[:N_BATCH], vel[:N_BATCH], acc[:N_BATCH])
     run_batch(batch_rows[:2], DT, *refs)  # compile or load
     t_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3)
+    cpu_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3, clock=time.process_time)
     t_loaded, kernel_result = best_of(lambda: run(loaded, DT, pos, vel, acc), 5)
 
     model = python_control_model(loaded)
@@ -189,9 +214,14 @@ def main():
     print(f"plain cascade: {rate_plain / 1e6:.1f} M axis-steps/s (target >= 20 M)")
     print(f"kernel (limit + feedforward) / python-control (same loop) = {rate_loaded / rate_pc:.0f} (target >= 1000)")
     print(f"{'kernel, every in-loop effect on (run() end to end)':58s} {N:8d} {t_effects:10.4f} {axis_steps / t_effects:14.4g}")
-    print(f"{'kernel, plain, bare inner loop (no checks, preallocated)':58s} {N:8d} {t_inner:10.4f} {axis_steps / t_inner:14.4g}")
+    print(f"{'kernel, every in-loop effect + measurement noise':58s} {N:8d} {t_noisy:10.4f} {axis_steps / t_noisy:14.4g}")
+    print(f"{'kernel, plain, bare inner loop (outputs preallocated)':58s} {N:8d} {t_inner:10.4f} {axis_steps / t_inner:14.4g}")
     print(f"{'kernel, batch of 64 variants, friction + backlash':58s} {N_BATCH:8d} {t_batch:10.4f} "
           f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip
+    print(f"  the same batch per CPU-second of all its threads: {B * N_BATCH * 3 / cpu_batch:.4g} axis-steps "
+          f"({numba.get_num_threads()} threads; the wall figure is lower when other processes share the cores)")
+    print(f"  the same four by CPU time of the thread: {cpu[0]:.4f} {cpu[1]:.4f} {cpu[2]:.4f} {cpu[3]:.4f} s: "
+          f"effects slowdown {cpu[1] / cpu[0]:.2f}, run() / inner loop {cpu[3] / cpu[0]:.2f}")
     print(f"kernel_all_effects_slowdown: {t_effects / t_plain:.2f}")
     print(f"variant_pack_ms: {1e3 * t_pack:.3f}")
     print(f"kernel_batch_axis_steps_per_s: {B * N_BATCH * 3 / t_batch:.3g}")

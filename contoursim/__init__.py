@@ -7,21 +7,44 @@ The main objects, by the data flow of a simulation:
   :func:`~contoursim.pathfile.load_path_file`, :func:`~contoursim.gcode.read_gcode`;
 - servo: :class:`AxisServo` (python-control models), :func:`contoursim.kernel.run`;
 - machine: :class:`Machine`, :func:`load_machine` (servo axes + multibody geometry);
-- :func:`simulate` -> :class:`SimResult` (tracking and exact contour error);
+- effects: :class:`Effect` (the catalogue, :mod:`contoursim.effects`), :class:`Model`
+  (a machine plus effects), :func:`load_model` (a machine file with its ``[[effect]]`` tables);
+- :func:`simulate` -> :class:`SimResult` (tracking and exact contour error), on a path or a
+  measured trace; :func:`simulate_batch` (variants of one model in one compiled call);
 - traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format).
 """
 
+import importlib
+import sys
+import types
+
+from ._version import __version__
 from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopError
-from .traces import Trace, read_trace, write_trace
-from .machine import Machine, load_machine
-from .servo import AxisServo
-from .simulate import SimResult, simulate
-from .trajectory import Trajectory
+
+# name -> submodule: imported on first use, so that ``import contoursim`` and
+# ``contoursim --help`` do not load python-control, scipy and numba
+_LAZY = {
+    "AxisServo": "servo",
+    "Effect": "effects",
+    "Machine": "machine",
+    "Model": "model",
+    "SimResult": "simulate",
+    "Trace": "traces",
+    "Trajectory": "trajectory",
+    "load_machine": "machine",
+    "load_model": "model",
+    "read_trace": "traces",
+    "simulate": "simulate",
+    "simulate_batch": "simulate",
+    "write_trace": "traces",
+}
 
 __all__ = [
     "AxisServo",
     "ConfigError",
+    "Effect",
     "Machine",
+    "Model",
     "PathError",
     "SimResult",
     "Trace",
@@ -29,7 +52,33 @@ __all__ = [
     "Trajectory",
     "UnstableLoopError",
     "load_machine",
+    "load_model",
     "read_trace",
     "simulate",
+    "simulate_batch",
     "write_trace",
 ]
+
+
+def __getattr__(name):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'contoursim' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+class _Package(types.ModuleType):
+    """The package module: importing the submodule ``contoursim.simulate`` leaves the name the function."""
+
+    def __setattr__(self, name, value):
+        if name in _LAZY and isinstance(value, types.ModuleType):
+            return  # the import system binds a submodule of the same name; the public name is the object in it
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

@@ -1,13 +1,18 @@
 """One home for argument checks: positivity, finiteness, shapes, time bases.
 
-Each check raises :class:`ValueError` (or a subclass) whose message names the
-parameter, so a bad value is reported where the user wrote it and never as a
-traceback from inside numpy.
+Each check raises, with a message that names the parameter, :class:`TypeError`
+for a value of the wrong type (text, a boolean, a complex number where a real
+number is wanted) and :class:`ValueError` (or a subclass) for a wrong value of
+the right type (negative, not finite, wrong shape), as python-control does; so
+a bad value is reported where the user wrote it and never as a traceback from
+inside numpy. Readers of files turn both into a
+:class:`~contoursim.exceptions.ConfigError` naming the file and line.
 """
 
 import numpy as np
 
-__all__ = ["as_xyz", "finite", "positive", "nonnegative", "finite_array", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "finite", "positive", "positive_int", "nonnegative", "float_array", "finite_array", "time_base",
+           "TimeStepError"]
 
 
 class TimeStepError(ValueError):
@@ -27,7 +32,15 @@ class TimeStepError(ValueError):
 
 
 def positive(name, value):
-    """Return `value` as a float after checking it is finite and > 0."""
+    """Return `value` as a float after checking it is a finite number > 0.
+
+    Raises
+    ------
+    TypeError
+        `value` is not a real number (text and booleans are not).
+    ValueError
+        `value` is not finite, or <= 0.
+    """
     value = _finite_scalar(name, value)
     if value <= 0:
         raise ValueError(f"{name} must be positive, got {value!r}")
@@ -35,7 +48,15 @@ def positive(name, value):
 
 
 def nonnegative(name, value):
-    """Return `value` as a float after checking it is finite and >= 0."""
+    """Return `value` as a float after checking it is a finite number >= 0.
+
+    Raises
+    ------
+    TypeError
+        `value` is not a real number.
+    ValueError
+        `value` is not finite, or < 0.
+    """
     value = _finite_scalar(name, value)
     if value < 0:
         raise ValueError(f"{name} must be zero or positive, got {value!r}")
@@ -49,18 +70,42 @@ def finite(name, value):
 
 def _finite_scalar(name, value):
     if isinstance(value, (str, bytes, bool, np.bool_)):  # float() would take "40" and True
-        raise ValueError(f"{name} must be a number, got {value!r}")
+        raise TypeError(f"{name} must be a number, got {value!r}")
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
+        raise TypeError(f"{name} must be a number, got {value!r}") from None
     if not np.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return value
 
 
-def finite_array(name, value, ndim=None, shape=None):
-    """Return `value` as a float ndarray after checking it.
+def finite_array(name, value, ndim=None, shape=None, limit=None):
+    """Return `value` as a float ndarray after checking it: :func:`float_array`, then its values.
+
+    `name`, `value`, `ndim` and `shape` are those of :func:`float_array`;
+    every value must be finite and, given `limit`, at most `limit` in
+    magnitude.
+
+    Raises
+    ------
+    TypeError
+        `value` holds text, booleans or complex numbers.
+    ValueError
+        Wrong dimensions or shape, a non-finite value, or one beyond `limit`.
+    """
+    arr = float_array(name, value, ndim, shape)
+    if not np.isfinite(arr).all():
+        first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
+        raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
+    if limit is not None and np.any(np.abs(arr) > limit):
+        first = np.unravel_index(np.argmax(np.abs(arr) > limit), arr.shape)
+        raise ValueError(f"{name} holds {arr[first]:g} at index {tuple(map(int, first))}, beyond ±{limit:g}")
+    return arr
+
+
+def float_array(name, value, ndim=None, shape=None):
+    """Return `value` as a float ndarray after checking its type and shape (not its values).
 
     Parameters
     ----------
@@ -72,9 +117,16 @@ def finite_array(name, value, ndim=None, shape=None):
         Required number of dimensions.
     shape : tuple, optional
         Required shape; ``None`` entries match any length.
+
+    Raises
+    ------
+    TypeError
+        `value` holds text, booleans or complex numbers.
+    ValueError
+        Wrong dimensions or shape.
     """
     if isinstance(value, (str, bytes)):
-        raise ValueError(f"{name} must be numeric, got {value!r}")
+        raise TypeError(f"{name} must be numeric, got {value!r}")
     try:
         kind = np.asarray(value).dtype.kind
         if kind == "O":  # e.g. a list mixing numbers and text
@@ -83,7 +135,7 @@ def finite_array(name, value, ndim=None, shape=None):
     except (TypeError, ValueError):
         arr = None
     if arr is None:
-        raise ValueError(f"{name} must be numeric (not text, booleans or complex numbers)")
+        raise TypeError(f"{name} must be numeric (not text, booleans or complex numbers)")
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
     if shape is not None:
@@ -92,9 +144,6 @@ def finite_array(name, value, ndim=None, shape=None):
         ):
             want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
-    if not np.isfinite(arr).all():
-        first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
-        raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
     return arr
 
 
@@ -129,3 +178,20 @@ def as_xyz(points):
     """Planar points (N, 2) with z = 0 appended, shape (N, 3); (N, 3) points unchanged."""
     points = np.asarray(points, dtype=float)
     return points if points.shape[1] == 3 else np.column_stack([points, np.zeros((len(points), 3 - points.shape[1]))])
+
+
+def positive_int(name, value):
+    """Return `value` as an int after checking it is a whole number >= 1.
+
+    Raises
+    ------
+    TypeError
+        `value` is not an integer (booleans are not).
+    ValueError
+        `value` is below 1.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be a whole number, got {value!r}")
+    if value < 1:
+        raise ValueError(f"{name} must be at least 1, got {value}")
+    return int(value)

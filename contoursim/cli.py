@@ -6,38 +6,24 @@ a directory that holds files but was not made by contoursim is never written
 into, and in its own directories contoursim replaces only the files it wrote,
 so nothing a user keeps there is overwritten. The directory is made only
 once the job's files are read and its runs succeeded.
+
+The commands import the simulation modules (python-control, scipy, numba,
+matplotlib) when they run, so that ``contoursim --help`` answers at once.
 """
 
 import argparse
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from .config import TomlFile
-from .exceptions import ConfigError, UnstableLoopError
-from .feed import sample
-from .geocomp import GeometricCompensation
+from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
-from .machine import load_machine, preset_file, read_work_offset
-from .model import as_model, load_model, with_file_effects
-from .pathfile import library_file, load_path_file, read_feed_table
-from .paths import HelicalArc
-from .plotting import save_figures
-from .simulate import simulate
 
 DEMO_MACHINE = "demo_mill"
-DEMO_PATHS = ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml", "butterfly.toml")
+DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
 _JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
-
-
-def test_circle(path):
-    """Centre and radius of a path's full test circle (ISO 230-4), or ``None``."""
-    for prim in path.primitives:
-        if isinstance(prim, HelicalArc) and prim.role == "test" and prim.rise == 0 and abs(prim.sweep) >= 2 * np.pi - 1e-9:
-            return prim.center[:2], prim.radius
-    return None
 
 
 _COLUMNS = {"tracking max": "tracking_max_um", "tracking RMS": "tracking_rms_um", "contour max": "contour_max_um",
@@ -61,35 +47,63 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     Returns
     -------
     tuple
-        ``(name, path_file, result, circle)``: the run's name (file stem or
-        `label`), the path file, the :class:`~contoursim.simulate.SimResult`
-        and the path's test circle for the polar plot (or ``None``).
+        ``(name, path_file, result)``: the run's name (file stem or `label`),
+        the path file and the :class:`~contoursim.simulate.SimResult`.
     """
+    from .feed import sample
+    from .model import as_model
+    from .pathfile import load_path_file, read_feed_table
+    from .simulate import simulate
+
     path, settings = load_path_file(path_file)
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
     machine = as_model(model).machine
     trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
-    result = simulate(model, trajectory, strategies)
-    return label or Path(path_file).stem, path_file, result, test_circle(path)
+    name = label or Path(path_file).stem
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ContoursimWarning)
+        result = simulate(model, trajectory, strategies)
+    for warning in caught:  # say which run
+        warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
+    return name, path_file, result
 
 
-def _write(out, machine, runs):
-    """Write each run's trace CSV and plots into the output folder `out`; return the table rows."""
+def _write(out, groups, every):
+    """Write each run's trace CSV (every `every`-th sample) and the plots of each group of runs shown side by side.
+
+    Parameters
+    ----------
+    groups : dict of str -> list of tuple
+        Runs (from :func:`run_job`) that share plots, by the group's file stem.
+
+    Returns
+    -------
+    tuple
+        The output folder and the table rows.
+    """
+    from .plotting import save_figures
+
     out = output_dir(out)
-    for name, path_file, result, circle in runs:
-        metadata = {"machine": machine.name, "path": Path(path_file).name}
-        result.save_csv(out.file(f"{name}.csv"), metadata=metadata, overwrite=True)
-        save_figures(result, out, name, circle=circle)
-    return out, [(name, result.summary()) for name, _, result, _ in runs]
+    for name, runs in groups.items():
+        for run, path_file, result in runs:
+            with out.write(f"{run}.csv") as stream:
+                result.save_csv(stream, metadata={"path": Path(path_file).name}, every=every)
+        save_figures({run: result for run, _, result in runs}, out, name)
+    return out, [(run, result.summary()) for runs in groups.values() for run, _, result in runs]
 
 
 def demo(args):
-    """The README's main job: ISO 230-4 circles and a free-form path on the demo machine."""
+    """The README's main job: ISO 230-4 circles (CCW and CW, plotted together) and a free-form path on the demo machine."""
+    from .machine import load_machine
+    from .pathfile import library_file
+
     machine = load_machine(DEMO_MACHINE)
-    out, rows = _write(args.out, machine, [run_job(machine, library_file(name)) for name in DEMO_PATHS])
+    groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
+    out, rows = _write(args.out, groups, args.every)
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
     print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
+    print("Both over the test proper: the full test circle of the ISO 230-4 runs (the CSV's measuring = 1 rows).")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
 
@@ -104,10 +118,17 @@ def _job(args):
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
+    from .machine import read_work_offset
+    from .model import load_model, with_file_effects
+    from .pathfile import library_file
+
     file = Path(args.file)
     if file.suffix == ".toml" and file.exists():
         job = TomlFile.read(file)
-        if "machine" in job.data:
+        if job.kind() == "job":
+            if "machine" not in job.data:
+                raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
+                                '(e.g. "demo_mill"), or give a path file')
             data = job.table(allowed=_JOB_KEYS, required=("machine", "path"))
             for key in ("machine", "path"):
                 if not isinstance(data[key], str):
@@ -130,6 +151,8 @@ def _job(args):
 
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
+    from .geocomp import GeometricCompensation
+
     model, path_file, job, geometric = _job(args)
     machine = model.machine
     if (geometric or args.geometric_compensation) and machine.chain is None:
@@ -138,8 +161,8 @@ def simulate_command(args):
     if geometric or args.geometric_compensation:
         runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
-    out, rows = _write(args.out, machine, runs)
-    effects = ", ".join(repr(e) for e in model.effects) or "none"
+    out, rows = _write(args.out, {Path(path_file).stem: runs}, args.every)
+    effects = ", ".join(f"{e.label} ({e.parameters[0].name} = {e.parameters[0].value:g})" for e in model.effects) or "none"
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
@@ -147,6 +170,7 @@ def simulate_command(args):
 
 def volumetric(args):
     """``contoursim volumetric MACHINE``: worst volumetric errors and error-field plots."""
+    from .machine import preset_file
     from .volumetric import volumetric_report
 
     print(volumetric_report(preset_file(args.machine), args.out))
@@ -157,6 +181,8 @@ def diagnose_command(args):
     import json
 
     from .diagnosis import diagnose, save_figures
+    from .model import load_model
+    from .output import writing
     from .traces import read_trace
 
     trace = read_trace(args.file)
@@ -174,10 +200,21 @@ def diagnose_command(args):
     result = diagnose(trace, model, progress=lambda line: print(line, file=sys.stderr, flush=True))
     print(result.report())
     if report is not None:
-        report.write_text(result.to_json() + "\n", encoding="utf-8")
+        with writing(report, overwrite=True) as stream:
+            stream.write(result.to_json() + "\n")
         print(f"report written to {report}")
     save_figures(result, args.out)
     print(f"plots written to {args.out}/")
+
+
+def _every(text):
+    """``--every N``: a whole number >= 1."""
+    from . import _validate
+
+    try:
+        return _validate.positive_int("--every", int(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number of samples, at least 1; got {text!r}") from None
 
 
 def main(argv=None):
@@ -201,12 +238,29 @@ def main(argv=None):
     p.set_defaults(run=diagnose_command)
     for p in sub.choices.values():
         p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
+    for command in ("demo", "simulate"):
+        sub.choices[command].add_argument("--every", type=_every, default=1, metavar="N",
+                                          help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")
     args = parser.parse_args(argv)
+
+    def show(message, category, *details):
+        if issubclass(category, ContoursimWarning):
+            print(f"contoursim {args.command}: warning: {message}", file=sys.stderr)
+        else:
+            default_show(message, category, *details)
+
     try:
-        args.run(args)
-    except (ConfigError, UnstableLoopError, ValueError, FileExistsError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", ContoursimWarning)
+            default_show, warnings.showwarning = warnings.showwarning, show
+            args.run(args)
+    except (ConfigError, UnstableLoopError, ValueError, TypeError, FileExistsError, OutputError) as exc:
         print(f"contoursim {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"contoursim {args.command}: interrupted; files already complete are kept, none is left half-written",
+              file=sys.stderr)
+        return 130
     return 0
 
 

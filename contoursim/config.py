@@ -12,7 +12,42 @@ from pathlib import Path
 
 from .exceptions import ConfigError
 
-__all__ = ["TomlFile"]
+__all__ = ["TomlFile", "read_text"]
+
+# what each kind of file looks like, for a message when one is given where another is expected
+_KINDS = {
+    "job": 'names a machine and a path (machine = "demo_mill", path = "iso230_4_circle_ccw": presets, library '
+           "names or files), optionally with [feed], work_offset and geometric_compensation",
+    "path": 'describes a path: a [path] table (type = "circle", ...) and a [feed] table',
+    "machine": "describes a machine: servo_period_ms and an [axes.<name>] table per servo axis, optionally "
+               "[[body]] tables for its geometry (the presets in contoursim/presets/ are examples)",
+}
+
+
+def read_text(file, error=ConfigError):
+    """The UTF-8 text of `file` (a leading byte-order mark dropped), with errors naming the file.
+
+    Parameters
+    ----------
+    file : str or Path
+        The file.
+    error : type
+        The :class:`ConfigError` subclass to raise.
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read, or is not UTF-8 text (naming the line).
+    """
+    try:
+        raw = Path(file).read_bytes()
+    except OSError as exc:
+        raise error(f"cannot read the file: {exc.strerror}", str(file)) from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise error(f"byte 0x{raw[exc.start]:02X} is not UTF-8 text: save the file as UTF-8", str(file), line) from None
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
 _KEY = re.compile(r"""^\s*("[^"]*"|'[^']*'|[A-Za-z0-9_\-]+(?:\s*\.\s*[A-Za-z0-9_\-]+)*)\s*=""")
@@ -48,12 +83,41 @@ class TomlFile:
     @classmethod
     def read(cls, path):
         """Read and parse the TOML file at `path`."""
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ConfigError(f"cannot read the file: {exc.strerror}", str(path)) from None
-        return cls(str(path), text)
+        return cls(str(path), read_text(path))
+
+    def kind(self):
+        """What the file is by its top-level keys: ``"job"``, ``"path"``, ``"machine"`` or ``None``.
+
+        A job file has ``machine`` or a ``path`` string; a path file a
+        ``[path]`` or ``[feed]`` table; a machine file ``[axes]``, ``[[body]]``
+        or ``servo_period_ms``.
+        """
+        data = self.data
+        if "machine" in data or isinstance(data.get("path"), str):
+            return "job"
+        if "path" in data or "feed" in data:
+            return "path"
+        if any(key in data for key in ("axes", "body", "servo_period_ms")):
+            return "machine"
+        return None
+
+    def expect(self, kind):
+        """Check that the file is of `kind` (see :meth:`kind`), saying what such a file looks like if not.
+
+        Parameters
+        ----------
+        kind : {"job", "path", "machine"}
+
+        Raises
+        ------
+        ConfigError
+            The file is empty or of another kind.
+        """
+        found = self.kind()
+        if not self.data:
+            raise self.error(f"the file is empty; a {kind} file {_KINDS[kind]}")
+        if found not in (None, kind):
+            raise self.error(f"this is a {found} file, not a {kind} file; a {kind} file {_KINDS[kind]}")
 
     def line_of(self, *keys):
         """1-based line that defines the key path `keys`, or ``None``.

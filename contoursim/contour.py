@@ -34,18 +34,19 @@ __all__ = ["ContourError", "exact_contour_error"]
 
 @dataclass(frozen=True)
 class ContourError:
-    """Contour error of N actual points against a reference path.
+    """Contour error of N actual points against a reference path: exact, or estimated from samples.
+
+    The one result type of :func:`exact_contour_error` and of every offline
+    estimator in :mod:`contoursim.estimators` (whose step functions return
+    one sample of it as a :class:`~contoursim.estimators.StepEstimate` tuple).
 
     Parameters
     ----------
     magnitude : ndarray, shape (N,)
         Distance to the path [mm], >= 0.
     vector : ndarray, shape (N, d)
-        From the actual point to its nearest path point (the correction) [mm].
-    foot : ndarray, shape (N, d)
-        Nearest path points [mm].
-    s : ndarray, shape (N,)
-        Arc length of the foot points [mm].
+        From the actual point to its (estimated) foot point on the path: the
+        correction [mm]; d is 2 or 3.
     normal : ndarray, shape (N,)
         Signed in-plane component (P_a - foot) . n_left [mm], n_left = b x T
         normalised: positive to the left of the direction of travel, so a CCW
@@ -54,26 +55,55 @@ class ContourError:
         Component (P_a - foot) . b [mm] along the path's plane normal b (for
         helices and 3-D curves, b made orthogonal to T, so that
         normal^2 + out_of_plane^2 = magnitude^2 wherever the foot is not a
-        path end).
+        path end); zero for planar estimates.
+    foot : ndarray, shape (N, d), optional
+        Nearest path points [mm]. Exact only (``None`` for estimates).
+    s : ndarray, shape (N,), optional
+        Arc length of the foot points [mm]. Exact only.
+    index : ndarray of int, shape (N,), optional
+        The reference sample each estimate is anchored to: the nearest sample
+        found by the windowed search (three-point, Newton) or the commanded
+        sample (linear). ``None`` for the exact and circular results.
+    method : str
+        What produced it: ``"exact"``, ``"linear"``, ``"circular"``,
+        ``"three_point"`` or ``"newton"``.
     """
 
     magnitude: np.ndarray
     vector: np.ndarray
-    foot: np.ndarray
-    s: np.ndarray
     normal: np.ndarray
     out_of_plane: np.ndarray
+    foot: np.ndarray = None
+    s: np.ndarray = None
+    index: np.ndarray = None
+    method: str = "exact"
 
     def __post_init__(self):
-        n = np.shape(self.magnitude)[0]
-        d = np.shape(self.vector)[1]
-        for name, shape in dict(magnitude=(n,), vector=(n, d), foot=(n, d), s=(n,), normal=(n,),
-                                out_of_plane=(n,)).items():
-            value = _validate.finite_array(name, getattr(self, name), shape=shape)
+        magnitude = _validate.finite_array("magnitude", self.magnitude, ndim=1)
+        n = magnitude.size
+        vector = _validate.finite_array("vector", self.vector, ndim=2)
+        if vector.shape[0] != n or vector.shape[1] not in (2, 3):
+            raise ValueError(f"vector must have shape ({n}, 2) or ({n}, 3), got {vector.shape}")
+        shapes = dict(normal=(n,), out_of_plane=(n,), foot=(n, vector.shape[1]), s=(n,))
+        values = dict(magnitude=magnitude, vector=vector)
+        for name, shape in shapes.items():
+            if getattr(self, name) is not None or name in ("normal", "out_of_plane"):
+                values[name] = _validate.finite_array(name, getattr(self, name), shape=shape)
+        if self.index is not None:
+            index = np.asarray(self.index)
+            if index.shape != (n,) or index.dtype.kind not in "iu":
+                raise TypeError(f"index must be an integer array of shape ({n},), got {index.dtype} {index.shape}")
+            values["index"] = index
+        if np.any(magnitude < 0):
+            raise ValueError("magnitude must be non-negative")
+        if not isinstance(self.method, str):
+            raise TypeError(f"method must be a string, got {type(self.method).__name__}")
+        for name, value in values.items():
             value.flags.writeable = False
             object.__setattr__(self, name, value)
-        if np.any(self.magnitude < 0):
-            raise ValueError("magnitude must be non-negative")
+
+    def __len__(self):
+        return self.magnitude.size
 
 
 # --------------------------------------------------------------------------- compiled refinement

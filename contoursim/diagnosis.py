@@ -1181,10 +1181,8 @@ def save_figures(diagnosis, out):
     polar = plot_polar(diagnosis)
     if polar is not None:
         figures.append(("diagnosis_polar.png", polar.figure))
-    written = []
     for name, fig in figures:
-        file = out.file(name)
-        fig.savefig(file, dpi=110)
+        with out.write(name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=110)
         plt.close(fig)
-        written.append(file)
-    return written
+    return [out.path / name for name, _ in figures]

@@ -30,7 +30,7 @@ report (DESIGN.md) and the ``[[effect]]`` tables of machine and job files::
     feedback = "motor"
 
 Every kind of effect is an :class:`EffectKind` registered under its name
-(:func:`register`); :data:`CATALOGUE` lists the contract names, and
+(:func:`effect_kind`); :data:`CATALOGUE` lists the contract names, and
 ``quantisation`` and ``noise`` are registered besides them.
 """
 
@@ -50,7 +50,6 @@ __all__ = [
     "effect_kind",
     "effect_names",
     "read_effects",
-    "register",
 ]
 
 #: The stages of the data flow where an effect can act, in the order they run.
@@ -170,21 +169,11 @@ class EffectKind:
 _REGISTRY = {}
 
 
-def register(kind):
-    """Register an :class:`EffectKind` under its name (a name is registered once).
-
-    Parameters
-    ----------
-    kind : EffectKind
-        The new kind of effect.
-
-    Returns
-    -------
-    EffectKind
-        `kind`.
-    """
+def _register(kind):
+    """Register an :class:`EffectKind` under its name (a name is registered once); how each
+    stage realises it lives in :mod:`contoursim.model`."""
     if not isinstance(kind, EffectKind):
-        raise ValueError(f"register takes an EffectKind, got {type(kind).__name__}")
+        raise TypeError(f"register takes an EffectKind, got {type(kind).__name__}")
     if kind.name in _REGISTRY:
         raise ValueError(f"an effect named {kind.name!r} is already registered")
     _REGISTRY[kind.name] = kind
@@ -251,7 +240,9 @@ class Effect:
 
     def __init__(self, name, axis, **values):
         kind = effect_kind(name)
-        if not isinstance(axis, str) or len(axis) != kind.n_axes or set(axis) - set(_AXES) or len(set(axis)) != len(axis):
+        if not isinstance(axis, str):
+            raise TypeError(f"{name}: axis must be a string of axis letters, got {axis!r}")
+        if len(axis) != kind.n_axes or set(axis) - set(_AXES) or len(set(axis)) != len(axis):
             wanted = "one axis letter" if kind.n_axes == 1 else f"{kind.n_axes} different axis letters (like 'xy')"
             raise ValueError(f"{name}: axis must be {wanted} of x, y, z, got {axis!r}")
         unknown = [k for k in values if k not in kind.parameter_names and k not in kind.options]
@@ -267,8 +258,8 @@ class Effect:
         for p in kind.parameters:
             try:
                 params.append(replace(p, value=values.get(p.name, p.value)))
-            except ValueError as exc:
-                raise ValueError(f"{name}.{axis}: {exc}") from None
+            except (TypeError, ValueError) as exc:
+                raise type(exc)(f"{name}.{axis}: {exc}") from None
         options = {}
         for key, allowed in kind.options.items():
             value = values.get(key)
@@ -319,6 +310,9 @@ class Effect:
         object.__setattr__(copy, "parameters", params)
         return copy
 
+    def __hash__(self):
+        return hash((self.name, self.axis, self.parameters, tuple(self.options.items())))
+
     def __repr__(self):
         args = [f"{k}={v!r}" for k, v in {**self.values(), **self.options}.items()]
         return f"Effect({self.name!r}, {self.axis!r}, {', '.join(args)})"
@@ -329,7 +323,9 @@ def _option(name, axis, key, allowed, value):
     if allowed is int:
         if value is None:
             return 0
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{name}.{axis}: {key} must be a non-negative integer, got {value!r}")
+        if value < 0:
             raise ValueError(f"{name}.{axis}: {key} must be a non-negative integer, got {value!r}")
         return int(value)
     if allowed == "axes":
@@ -353,13 +349,13 @@ def _p(name, value, unit, bounds, typical=None, vary=True, doc=""):
     return Parameter(name, value, unit, bounds, typical, vary, doc)
 
 
-register(EffectKind(
+_register(EffectKind(
     "backlash", "loop",
     (_p("lost_motion_um", 0.0, "µm", (0.0, 1000.0), (2.0, 20.0), doc="lost motion between motor/screw and table"),),
     options={"feedback": ("motor", "scale")},
     doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk)",
 ))
-register(EffectKind(
+_register(EffectKind(
     "coulomb_friction", "loop",
     (
         _p("force_N", 0.0, "N", (0.0, _INF), (5.0, 200.0), doc="Coulomb friction level while sliding"),
@@ -371,23 +367,23 @@ register(EffectKind(
     ),
     doc="friction force opposing motion in the loop: reversal spikes (quadrant glitches)",
 ))
-register(EffectKind(
+_register(EffectKind(
     "gain_mismatch", "servo",
     (_p("kp_ratio", 1.0, "-", (0.1, 10.0), (0.7, 1.3), doc="the axis's actual position gain over its nominal one"),),
     doc="one axis's position gain differs from the others",
 ))
-register(EffectKind(
+_register(EffectKind(
     "squareness", "geometry",
     (_p("angle_urad", 0.0, "µrad", (-1e5, 1e5), (20.0, 200.0), doc="out-of-squareness; positive: the angle between the positive axes exceeds 90°"),),
     n_axes=2,
     doc="out-of-squareness of two axes",
 ))
-register(EffectKind(
+_register(EffectKind(
     "scale_error", "geometry",
     (_p("ppm", 0.0, "µm/m", (-1e5, 1e5), (10.0, 100.0), doc="linear positioning error per travel"),),
     doc="linear positioning error of an axis",
 ))
-register(EffectKind(
+_register(EffectKind(
     "cyclic_error", "geometry",
     (
         _p("amplitude_um", 0.0, "µm", (0.0, 1000.0), (1.0, 5.0), doc="amplitude of the periodic positioning error"),
@@ -396,7 +392,7 @@ register(EffectKind(
     ),
     doc="periodic positioning error along the axis, period = screw lead",
 ))
-register(EffectKind(
+_register(EffectKind(
     "straightness", "geometry",
     (
         _p("peak_um", 0.0, "µm", (-1e4, 1e4), (2.0, 15.0), doc="deviation at the middle of the span, perpendicular to the motion"),
@@ -405,13 +401,13 @@ register(EffectKind(
     options={"error_direction": "axes"},
     doc="bow of one axis's motion perpendicular to it, centred on the path's origin",
 ))
-register(EffectKind(
+_register(EffectKind(
     "time_delay", ("kind", {"command": "command", "feedback": "loop"}),
     (_p("delay_s", 0.0, "s", (0.0, 0.1), (1e-4, 3e-3), doc="extra delay, fractions of the servo period interpolated"),),
     options={"kind": ("command", "feedback")},
     doc="extra command or feedback delay on one axis",
 ))
-register(EffectKind(
+_register(EffectKind(
     "thermal_drift", "geometry",
     (
         _p("rate_um_per_min", 0.0, "µm/min", (-1e4, 1e4), (1.0, 10.0), doc="drift rate along the axis at the start"),
@@ -419,7 +415,7 @@ register(EffectKind(
     ),
     doc="slow drift of an axis's position in time",
 ))
-register(EffectKind(
+_register(EffectKind(
     "vibration", "loop",
     (
         _p("freq_hz", 50.0, "Hz", (1.0, 1e4), (30.0, 150.0), doc="frequency of the structural mode (tool side on a spring)"),
@@ -428,12 +424,12 @@ register(EffectKind(
     ),
     doc="lightly damped structural mode excited by acceleration",
 ))
-register(EffectKind(
+_register(EffectKind(
     "quantisation", "loop",
     (_p("resolution_um", 0.0, "µm", (0.0, 1000.0), (0.01, 1.0), doc="encoder resolution the loop sees"),),
     doc="encoder quantisation (outside the catalogue)",
 ))
-register(EffectKind(
+_register(EffectKind(
     "noise", "loop",
     (_p("rms_um", 0.0, "µm", (0.0, 1000.0), (0.05, 0.5), doc="measurement noise on the recorded tool position"),),
     options={"seed": int},
@@ -484,7 +480,7 @@ def read_effects(toml, *keys):
         values = {k: v for k, v in item.items() if k not in ("name", "axis")}
         try:
             effects.append(Effect(kind.name, item["axis"], **values))
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             message = str(exc)
             bad = next((k for k in values if repr(k) in message or message.split(": ", 1)[-1].startswith(k)), None)
             raise toml.error(f"[[effect]] {message}", *where, *((bad,) if bad else ())) from None

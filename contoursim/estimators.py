@@ -5,8 +5,9 @@ reference path. The exact value (distance to the continuous path) needs the
 path's geometry; a servo controller sees only the interpolator's samples, so it
 estimates the error from the reference samples around the current position.
 
-Every estimator returns a :class:`ContourEstimate` with the field names of
-:class:`contoursim.contour.ContourError`:
+Every offline estimator returns a :class:`contoursim.contour.ContourError`,
+the type of the exact result too, with ``foot`` and ``s`` left out (``None``)
+and ``index`` and ``method`` saying where and how it was estimated:
 
 - ``magnitude`` -- the estimated contour error [mm], >= 0;
 - ``vector`` -- from the actual point to the estimated foot point on the path:
@@ -48,16 +49,15 @@ magnitude differently from the exact computation (which uses the axis).
 """
 
 from collections import namedtuple
-from dataclasses import dataclass
 
 import numpy as np
 from ._numba import njit
 
 from . import _validate
+from .contour import ContourError, exact_contour_error
 from .nearest import distinct, nearest_knot
 
 __all__ = [
-    "ContourEstimate",
     "StepEstimate",
     "distinct_samples",
     "search_params",
@@ -74,7 +74,10 @@ __all__ = [
 ]
 
 StepEstimate = namedtuple("StepEstimate", "magnitude normal out_of_plane vx vy vz")
-StepEstimate.__doc__ = """One estimate from a step function.
+StepEstimate.__doc__ = """One sample of a :class:`~contoursim.contour.ContourError`, from a step function.
+
+A tuple of scalars (the vector as vx, vy, vz), so that compiled code makes
+and passes it without allocating.
 
 Parameters
 ----------
@@ -90,60 +93,6 @@ vx, vy, vz : float
 
 _LINEAR, _CIRCULAR, _THREE_POINT, _NEWTON = 0, 1, 2, 3
 _STRAIGHT = 1e-10  # |a x b| <= _STRAIGHT |a||b|: the three points are collinear [rad]
-
-
-@dataclass(frozen=True)
-class ContourEstimate:
-    """Contour error estimated over a trace.
-
-    Parameters
-    ----------
-    magnitude : ndarray, shape (N,)
-        Contour error [mm], >= 0.
-    vector : ndarray, shape (N, d)
-        From the actual point to the estimated foot point [mm]: the correction
-        direction.
-    normal : ndarray, shape (N,)
-        Signed in-plane part [mm], positive to the left of travel (b x T).
-    out_of_plane : ndarray, shape (N,)
-        Part along the local plane normal b [mm]; zero for planar (d = 2) traces.
-    index : ndarray of int, shape (N,), optional
-        The reference sample each estimate is anchored to: the nearest sample
-        found by the windowed search (three-point, Newton) or the commanded
-        sample (linear). ``None`` for the exact and circular estimators.
-    method : str
-        Which estimator produced it.
-    """
-
-    magnitude: np.ndarray
-    vector: np.ndarray
-    normal: np.ndarray
-    out_of_plane: np.ndarray
-    index: np.ndarray = None
-    method: str = ""
-
-    def __post_init__(self):
-        mag = _validate.finite_array("magnitude", self.magnitude, ndim=1)
-        n = mag.size
-        values = dict(
-            magnitude=mag,
-            vector=_validate.finite_array("vector", self.vector, ndim=2),
-            normal=_validate.finite_array("normal", self.normal, shape=(n,)),
-            out_of_plane=_validate.finite_array("out_of_plane", self.out_of_plane, shape=(n,)),
-        )
-        if values["vector"].shape[0] != n or values["vector"].shape[1] not in (2, 3):
-            raise ValueError(f"vector must have shape ({n}, 2) or ({n}, 3), got {values['vector'].shape}")
-        if self.index is not None:
-            index = np.asarray(self.index)
-            if index.shape != (n,) or index.dtype.kind not in "iu":
-                raise ValueError(f"index must be an integer array of shape ({n},), got {index.dtype} {index.shape}")
-            values["index"] = index
-        for name, value in values.items():
-            value.flags.writeable = False
-            object.__setattr__(self, name, value)
-
-    def __len__(self):
-        return self.magnitude.size
 
 
 # --------------------------------------------------------------------------
@@ -641,12 +590,10 @@ def exact(trajectory, actual):
 
     Returns
     -------
-    ContourEstimate
+    contoursim.contour.ContourError
+        With ``foot`` and ``s``, ``method="exact"``.
     """
-    from .contour import exact_contour_error
-
-    err = exact_contour_error(trajectory, actual)
-    return ContourEstimate(err.magnitude, err.vector, err.normal, err.out_of_plane, method="exact")
+    return exact_contour_error(trajectory, actual)
 
 
 def linear(reference, actual, up=(0.0, 0.0, 1.0)):
@@ -663,7 +610,7 @@ def linear(reference, actual, up=(0.0, 0.0, 1.0)):
 
     Returns
     -------
-    ContourEstimate
+    contoursim.contour.ContourError
         ``index`` is the commanded sample k itself.
     """
     ref = _points("reference", reference)
@@ -687,7 +634,7 @@ def circular(actual, center, radius, normal=(0.0, 0.0, 1.0), direction="ccw"):
 
     Returns
     -------
-    ContourEstimate
+    contoursim.contour.ContourError
         For travel counter-clockwise about `normal`, ``normal`` = R - |P - c|
         in the plane.
     """
@@ -714,7 +661,7 @@ def three_point(reference, actual, up=(0.0, 0.0, 1.0), window=4):
 
     Returns
     -------
-    ContourEstimate
+    contoursim.contour.ContourError
         ``index`` is the nearest reference sample found for each actual point.
     """
     return _searching(_THREE_POINT, "three_point", reference, actual, up, window)
@@ -737,7 +684,7 @@ def newton(reference, actual, up=(0.0, 0.0, 1.0), window=4):
 
     Returns
     -------
-    ContourEstimate
+    contoursim.contour.ContourError
         ``index`` is the nearest reference sample found for each actual point.
     """
     return _searching(_NEWTON, "newton", reference, actual, up, window)
@@ -759,7 +706,7 @@ def _run(method, knots, hints, follow, actual, params):
 
 
 def _result(out, index, dim, method):
-    return ContourEstimate(out[:, 0], out[:, 3 : 3 + dim], out[:, 1], out[:, 2], index=index, method=method)
+    return ContourError(out[:, 0], out[:, 3 : 3 + dim], out[:, 1], out[:, 2], index=index, method=method)
 
 
 def _points(name, value, like=None):

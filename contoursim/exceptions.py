@@ -1,11 +1,12 @@
 """Exceptions raised by contoursim.
 
 Every error a user can cause is one of these, subclassing the built-in
-exception a Python programmer would expect (``ValueError`` for bad values),
-with a message that names what is wrong and where.
+exception a Python programmer would expect (``TypeError`` for a value of the
+wrong type, ``ValueError`` for bad values, ``OSError`` for a file that cannot
+be written), with a message that names what is wrong and where.
 """
 
-__all__ = ["ConfigError", "TraceFormatError", "UnstableLoopError", "PathError"]
+__all__ = ["ConfigError", "ContoursimWarning", "OutputError", "TraceFormatError", "UnstableLoopError", "PathError"]
 
 
 class ConfigError(ValueError):
@@ -41,6 +42,22 @@ class TraceFormatError(ConfigError):
         The CSV file.
     line : int, optional
         The 1-based line of the offending row or header.
+    """
+
+
+class OutputError(OSError):
+    """A result file or the output folder cannot be written (permissions, full disk, ...).
+
+    The message names the file and the reason, e.g.
+    ``cannot write out/circle.csv: Permission denied``.
+    """
+
+
+class ContoursimWarning(UserWarning):
+    """Something the user should know about a result that is still produced.
+
+    E.g. G-code words that were ignored, or a servo axis whose current
+    command was clipped at its limit. The command line prints each as one line.
     """
 
 

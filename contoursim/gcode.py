@@ -1,12 +1,30 @@
-"""A reader for the G-code subset that describes contours: G0/G1/G2/G3 with F.
+"""A reader for G-code contouring programs: the moves G0/G1/G2/G3 with F, and what a controller accepts around them.
 
-Supported words: ``G0 G1 G2 G3`` (modal motion), ``G17 G18 G19`` (arc plane
-XY, ZX, YZ), ``G90 G91`` (absolute / incremental X Y Z), ``G21`` (mm; ``G20``
-is rejected), ``X Y Z``, arc centre ``I J K`` (always relative to the arc's
-start) or radius ``R`` (negative for the arc over 180°), ``F`` (feed, mm/min,
-modal), ``N`` (line numbers), ``M2``/``M30`` (program end: the rest is
-ignored). Comments ``( ... )`` and ``; ...`` and ``%`` lines are skipped.
-An arc with a move along the plane's normal axis is a helix.
+Words that shape the path: ``G0 G1 G2 G3`` (modal motion), ``G17 G18 G19``
+(arc plane XY, ZX, YZ), ``G90 G91`` (absolute / incremental X Y Z), ``X Y Z``,
+arc centre ``I J K`` (always relative to the arc's start) or radius ``R``
+(negative for the arc over 180°), ``F`` (feed, mm/min, modal), ``M2``/``M30``
+(program end: the rest is ignored). An arc with a move along the plane's
+normal axis is a helix.
+
+The modes the model assumes are accepted: ``G21`` (mm), ``G94`` (feed per
+minute), ``G40`` and ``G49`` (no cutter or tool length compensation), ``G80``
+(no canned cycle). Accepted and ignored, because they move no axis of the
+contour: ``%`` lines, comments ``( ... )`` and ``; ...``, sequence numbers
+``N``, program numbers ``O``, spindle speed ``S``, tool ``T`` with its offsets
+``D``/``H``, M codes other than the program end (spindle ``M3 M4 M5``, coolant
+``M7 M8 M9``, tool change ``M6``, stops ``M0 M1`` ...), ``G43`` (tool length
+compensation: the path is the tool tip's), work offsets ``G54``-``G59`` (the
+path's origin is the work offset), path modes ``G61 G64`` (the planner's own
+corner rule applies), and the dwell ``G4`` (with its ``P``/``X`` time, which is
+not a move; the path does not stop there). Home returns and machine-coordinate
+moves (``G28 G30 G53``) are ignored before the first and after the last feed
+move; between feed moves they are refused. What was ignored (all but ``N``) is
+listed in :attr:`Program.ignored` and in one
+:class:`~contoursim.exceptions.ContoursimWarning`. Refused with a message
+naming file and line: inch units (``G20``), cutter radius compensation
+(``G41 G42``), feed per revolution or inverse time (``G93 G95``), subprogram
+calls (``M98 M99``), any other word.
 
 Rapid moves: G0 moves before the first feed move (G1/G2/G3) only position
 the tool: the path starts where the first feed move starts. G0 moves after
@@ -18,23 +36,39 @@ Zero-length moves are skipped.
 Arcs whose start and end radii (about the programmed centre) differ by less
 than `arc_tolerance` are accepted, the centre moved onto the perpendicular
 bisector of the chord so that the arc passes through both points exactly.
+
+Files are read as UTF-8 (a byte-order mark is dropped) or, failing that, as
+Latin-1, so a comment written on an older controller or editor reads too.
 """
 
 import os
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path as _FilePath
 
 import numpy as np
 
 from . import _validate
-from .exceptions import ConfigError, PathError
+from .exceptions import ConfigError, ContoursimWarning, PathError
 from .paths import Line, Path, _arc_from_point
 
 __all__ = ["Program", "read_gcode"]
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
+_MODEL_G = (21, 40, 49, 80, 94)  # mm, no cutter or tool length compensation, no canned cycle, feed per minute
+_IGNORED_G = {4: "G4 dwell", 43: "G43", 54: "G54", 55: "G55", 56: "G56", 57: "G57", 58: "G58", 59: "G59",
+              61: "G61", 64: "G64"}
+_MACHINE_MOVES = (28, 30, 53)  # home returns, machine coordinates: ignored outside the contour
+_REFUSED_G = {20: "inch programs are not supported (G20): convert to mm and use G21",
+              41: "cutter radius compensation (G41) is not supported: program the tool-centre path with G40",
+              42: "cutter radius compensation (G42) is not supported: program the tool-centre path with G40",
+              93: "inverse-time feed (G93) is not supported: program F in mm/min (G94)",
+              95: "feed per revolution (G95) is not supported: program F in mm/min (G94)"}
+_IGNORED_LETTERS = "ONSTDH"  # program and sequence numbers, spindle, tool and its offsets
+_SUPPORTED = ("G0-G3, G4, G17-G19, G21, G28, G30, G40, G43, G49, G53-G59, G61, G64, G80, G90, G91, G94, "
+              "X Y Z I J K R F, O N S T D H, M codes but M98/M99")
 
 
 @dataclass(frozen=True)
@@ -51,12 +85,16 @@ class Program:
         Source line of each primitive (1-based).
     source : str
         File name, or "<gcode>" for text.
+    ignored : tuple of str
+        The words that move no axis and were ignored (``"S12000"``, ``"M3"``,
+        ``"G54"`` ...), each once, in the order they first appear.
     """
 
     path: Path
     feeds: np.ndarray
     lines: np.ndarray
     source: str = "<gcode>"
+    ignored: tuple = ()
 
     def __post_init__(self):
         k = len(self.path.primitives)
@@ -73,12 +111,16 @@ def _text_and_source(file_or_text):
     if isinstance(file_or_text, os.PathLike) or (isinstance(file_or_text, str) and "\n" not in file_or_text):
         file = _FilePath(file_or_text)
         try:
-            return file.read_text(), str(file)
+            raw = file.read_bytes()
         except OSError as exc:
             raise ConfigError(f"cannot read the G-code file: {exc.strerror}", source=str(file)) from None
+        try:
+            return raw.decode("utf-8-sig"), str(file)
+        except UnicodeDecodeError:
+            return raw.decode("latin-1"), str(file)
     if not isinstance(file_or_text, str):
         raise TypeError(f"file_or_text must be a file name or G-code text, got {type(file_or_text).__name__}")
-    return file_or_text, "<gcode>"
+    return file_or_text.removeprefix("\ufeff"), "<gcode>"
 
 
 def _words(raw, fail):
@@ -115,20 +157,27 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     -------
     Program
         The path (dimension 2 if it stays in the XY plane at Z = 0), the feed
-        of each primitive [mm/s] and its source line.
+        of each primitive [mm/s], its source line and the ignored words.
 
     Raises
     ------
     ConfigError
         Naming the file and line: unknown or repeated word, inch units, arc
-        radii that disagree, missing F before the first feed move, ...
+        without its centre or with radii that disagree, missing F before the
+        first feed move, ...
+
+    Warns
+    -----
+    ContoursimWarning
+        Listing, in one line, the words that move no axis and were ignored.
     """
     text, source = _text_and_source(file_or_text)
     rapid_feed = _validate.positive("rapid_feed", rapid_feed)
     arc_tolerance = _validate.positive("arc_tolerance", arc_tolerance)
     here = _validate.finite_array("start", start, shape=(3,))
     motion, plane, absolute, feed, cutting = None, 2, True, None, False
-    prims, feeds, lines = [], [], []
+    prims, feeds, lines, ignored = [], [], [], {}
+    machine_move = None  # line of a G28/G30/G53 after the first feed move
 
     for number, raw in enumerate(text.splitlines(), 1):
         def fail(message):
@@ -137,21 +186,30 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         if raw.strip().startswith("%"):
             continue
         words = _words(raw, fail)
-        values, gcodes = {}, []
+        values, gcodes, mcodes = {}, [], []
         for letter, value in words:
             if letter == "G":
                 gcodes.append(value)
-            elif letter in "XYZIJKRFNM":
+            elif letter == "M":
+                mcodes.append(value)
+            elif letter in "XYZIJKRFP" + _IGNORED_LETTERS:
                 if letter in values:
                     fail(f"word {letter} appears twice in one block")
                 values[letter] = value
             else:
-                fail(f"unknown word {letter}{value:g} (supported: G0-G3, G17-G19, G21, G90, G91, "
-                     "X Y Z I J K R F N, M2, M30)")
-        if "M" in values:
-            if values["M"] not in (2, 30):
-                fail(f"unknown word M{values['M']:g} (only M2 and M30, program end, are supported)")
+                fail(f"unknown word {letter}{value:g} (supported: {_SUPPORTED})")
+        for letter in _IGNORED_LETTERS:
+            if letter in values and letter != "N":
+                ignored.setdefault(f"{letter}{values.pop(letter):g}", None)
+        values.pop("N", None)
+        for m in mcodes:
+            if m in (98, 99):
+                fail(f"subprogram calls (M{m:g}) are not supported: write the moves out in one program")
+            if m not in (2, 30):
+                ignored.setdefault(f"M{m:g}", None)
+        if any(m in (2, 30) for m in mcodes):
             break
+        nonmodal = None  # G4, G28, G30, G53: this block moves no axis of the contour
         for g in gcodes:
             if g in (0, 1, 2, 3):
                 motion = int(g)
@@ -159,10 +217,21 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 plane = _PLANES[int(g)]
             elif g in (90, 91):
                 absolute = g == 90
-            elif g == 20:
-                fail("inch programs are not supported (G20): convert to mm and use G21")
-            elif g != 21:
-                fail(f"unknown word G{g:g} (supported: G0-G3, G17-G19, G21, G90, G91)")
+            elif g in _MODEL_G:
+                pass
+            elif g in _REFUSED_G:
+                fail(_REFUSED_G[g])
+            elif g in _IGNORED_G or g in _MACHINE_MOVES:
+                ignored.setdefault(_IGNORED_G.get(g, f"G{g:g}"), None)
+                nonmodal = g if g in (4, *_MACHINE_MOVES) else nonmodal
+            else:
+                fail(f"unknown word G{g:g} (supported: {_SUPPORTED})")
+        if nonmodal is not None:
+            if cutting and nonmodal != 4:
+                machine_move = machine_move or number
+            continue
+        if "P" in values:
+            fail("P belongs to a dwell (G4)")
         if "F" in values:
             if values["F"] <= 0:
                 fail(f"F must be positive, got {values['F']:g}")
@@ -181,6 +250,9 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 target[i] = values[a] if absolute else here[i] + values[a]
         if motion > 0 and feed is None:
             fail("missing F before the first feed move")
+        if motion > 0 and machine_move is not None:
+            raise ConfigError(f"a home return or machine-coordinate move (G28/G30/G53) between feed moves is not "
+                              f"supported (next feed move on line {number})", source=source, line=machine_move)
         if motion == 0 and not cutting:
             here = target
             continue
@@ -202,7 +274,9 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         raise ConfigError("the program has no feed move (G1, G2 or G3)", source=source)
     while prims[-1].role == "rapid":
         prims.pop(), feeds.pop(), lines.pop()
-    return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), source)
+    if ignored:
+        warnings.warn(f"{source}: ignored (no contour motion): {' '.join(ignored)}", ContoursimWarning, stacklevel=2)
+    return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), source, tuple(ignored))
 
 
 def _arc(start, end, values, normal_axis, ccw, tolerance, fail):
@@ -224,6 +298,9 @@ def _arc(start, end, values, normal_axis, ccw, tolerance, fail):
         left = np.cross(axis, chord / (2 * half))
         center = start + chord / 2 + (1 if ccw else -1) * np.sign(r) * height * left
     else:
+        centre = [a for a, i in zip("IJK", inplane) if i]
+        if not any(a in values for a in centre):
+            fail(f"the arc centre is missing: give {'/'.join(centre)} (relative to the arc's start) or R")
         offset = np.array([values.get(a, 0.0) for a in "IJK"]) * inplane
         center = start + offset
         r_start = np.linalg.norm(offset)

@@ -59,7 +59,7 @@ class GeometricCompensation:
 
     def __post_init__(self):
         if not isinstance(self.chain, MachineChain):
-            raise ValueError(f"chain must be a MachineChain, got {type(self.chain).__name__}")
+            raise TypeError(f"chain must be a MachineChain, got {type(self.chain).__name__}")
         object.__setattr__(self, "tol", _validate.positive("tol", self.tol))
         object.__setattr__(self, "max_iter", int(_validate.positive("max_iter", self.max_iter)))
 

@@ -34,15 +34,15 @@ table format asks.
 """
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from . import _validate
+from .output import writing
 
 __all__ = ["PositioningFigures", "PositioningTest", "positioning_figures", "write_error_table"]
 
-_UM = 1e3  # [µm/mm]
+_UM_PER_MM = 1e3  # [µm/mm]
 
 
 @dataclass(frozen=True)
@@ -201,9 +201,9 @@ def write_error_table(file, axis, figures, source=None, overwrite=False):
 
     Parameters
     ----------
-    file : str or Path
-        The CSV to write. An existing file is only replaced when `overwrite`
-        is true.
+    file : str, Path or text file object
+        The CSV to write (atomically, see :func:`contoursim.output.atomic_write`).
+        An existing file is only replaced when `overwrite` is true.
     axis : str
         ``"x"``, ``"y"`` or ``"z"``: the column is this axis's positioning
         error ``d<axis>``.
@@ -223,22 +223,19 @@ def write_error_table(file, axis, figures, source=None, overwrite=False):
         raise ValueError(f"axis must be 'x', 'y' or 'z', got {axis!r}")
     if not isinstance(figures, PositioningFigures):
         raise TypeError(f"figures must be PositioningFigures, got {type(figures).__name__}")
-    file = Path(file)
-    if file.exists() and not overwrite:
-        raise FileExistsError(f"{file} exists; refusing to overwrite it")
     f = figures
     summary = ", ".join(
-        f"{label} = {_UM * value:.2f}"
+        f"{label} = {_UM_PER_MM * value:.2f}"
         for label, value in (("B_mean", f.reversal_mean), ("B", f.reversal_max), ("E", f.systematic),
                              ("M", f.mean_range), ("R", f.repeatability), ("A", f.accuracy))
     )
-    rows = "".join(f"{float(p)!r},{float(_UM * d)!r}\n" for p, d in zip(f.targets, f.mean_bidirectional))
+    rows = "".join(f"{float(p)!r},{float(_UM_PER_MM * d)!r}\n" for p, d in zip(f.targets, f.mean_bidirectional))
     origin = f", from {source}" if source else ""
-    file.write_text(
-        f"# ISO 230-2 positioning test, {axis.upper()} axis: mean bidirectional positional deviation\n"
-        f"# (measured - target){origin}\n"
-        f"# {summary} µm\n"
-        f"# position in mm, d{axis} in µm\n"
-        f"position,d{axis}\n" + rows,
-        encoding="utf-8",
-    )
+    with writing(file, overwrite=overwrite) as out:
+        out.write(
+            f"# ISO 230-2 positioning test, {axis.upper()} axis: mean bidirectional positional deviation\n"
+            f"# (measured - target){origin}\n"
+            f"# {summary} µm\n"
+            f"# position in mm, d{axis} in µm\n"
+            f"position,d{axis}\n" + rows
+        )

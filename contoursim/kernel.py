@@ -65,6 +65,7 @@ from numba.core.dispatcher import Dispatcher
 
 from . import _validate
 from ._numba import njit
+from .exceptions import UnstableLoopError
 from .servo import AxisServo, zoh
 
 __all__ = [
@@ -74,6 +75,7 @@ __all__ = [
     "pack",
     "run",
     "run_batch",
+    "spectral_radius",
     "MAX_DELAY_SAMPLES",
     "NPAR",
     "BATCH_OUTPUTS",
@@ -100,7 +102,8 @@ _DELAY_N, _DELAY_F = 57, 58  # feedback delay: whole periods, fraction of a peri
 _QUANTUM = 59  # encoder resolution [mm] (0: none)
 _NOISE = 60  # measurement noise on the tool position [mm RMS]
 _SEED = 61  # noise seed
-NPAR = 62  #: length of one axis's parameter row from :func:`pack`
+_MODE = 62  # 1.0 when the axis has a structural mode
+NPAR = 63  #: length of one axis's parameter row from :func:`pack`
 
 # Per-axis state ----------------------------------------------------------------------------
 _ZV, _ZC = 5, 6  # velocity / current controller integrators [mm], [A·s]
@@ -108,7 +111,15 @@ _TABLE = 7  # table position behind the backlash [mm]
 _NBUF = 64  # ring buffer length of the feedback delay
 _BUFX = 8  # _NBUF encoder positions [mm]
 _BUFV = _BUFX + _NBUF  # _NBUF motor velocities [mm/s]
-_NSTATE = _BUFV + _NBUF
+_PAIR = _BUFV + _NBUF  # index of the pair of noise samples held (-1: none)
+_GAUSS = _PAIR + 1  # that pair of standard normal samples
+_NSTATE = _GAUSS + 2
+
+_CLAMPED, _DIVERGED, _BAD_REFERENCE = 0, 1, 2  # per-axis status counters of a run
+
+# Once the plant state is not finite it stays so (x keeps its value plus increments), so the
+# divergence check runs every _DIVERGENCE_CHECK steps and at the end only.
+_DIVERGENCE_CHECK = 256
 
 #: The longest feedback delay the kernel holds, in servo periods.
 MAX_DELAY_SAMPLES = _NBUF - 1
@@ -212,12 +223,13 @@ class LoopEffects:
             if value >= 1:
                 raise ValueError(f"{name} must be between 0 and 1 (exclusive), got {value!r}")
             checked[name] = value
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or not 0 <= self.seed < 2**53:
-            raise ValueError(f"seed must be an integer from 0 to 2**53 - 1, got {self.seed!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+            raise TypeError(f"seed must be an integer, got {self.seed!r}")
+        if not 0 <= self.seed < 2**53:
+            raise ValueError(f"seed must be from 0 to 2**53 - 1, got {self.seed!r}")
         checked["seed"] = int(self.seed)
         for name, value in checked.items():
             object.__setattr__(self, name, value)
-
 
 
 @dataclass(frozen=True)
@@ -256,7 +268,7 @@ class Compensator:
 
     def __post_init__(self):
         if not isinstance(self.step, Dispatcher):
-            raise ValueError(f"compensator step must be a numba @njit function, got {type(self.step).__name__}")
+            raise TypeError(f"compensator step must be a numba @njit function, got {type(self.step).__name__}")
         object.__setattr__(self, "state", _validate.finite_array("compensator state", self.state))
         for name in ("params", "geometry"):
             value = _validate.finite_array(f"compensator {name}", getattr(self, name)).copy()
@@ -288,6 +300,11 @@ class ServoResponse:
         True where the current command was clamped at the current limit.
     compensator_state : ndarray or None
         The compensator's state after the last step; ``None`` without one.
+
+    Notes
+    -----
+    Types and shapes are checked, values are not: :func:`run` refuses a
+    simulation whose state stopped being finite.
     """
 
     t: np.ndarray
@@ -299,14 +316,13 @@ class ServoResponse:
     compensator_state: np.ndarray | None = None
 
     def __post_init__(self):
-        t = _validate.finite_array("t", self.t, ndim=1)
-        position = _validate.finite_array("position", self.position, ndim=2)
-        shape = (t.size, position.shape[1])
-        arrays = dict(t=t, position=position, saturated=np.asarray(self.saturated, bool))
-        for name in ("encoder", "velocity", "current"):
-            arrays[name] = _validate.finite_array(name, getattr(self, name), shape=shape)
-        if arrays["position"].shape != shape or arrays["saturated"].shape != shape:
-            raise ValueError(f"position and saturated must have shape {shape}")
+        t = _validate.float_array("t", self.t, ndim=1)
+        shape = (t.size, _validate.float_array("position", self.position, ndim=2).shape[1])
+        arrays = dict(t=t, saturated=np.asarray(self.saturated, bool))
+        for name in ("position", "encoder", "velocity", "current"):
+            arrays[name] = _validate.float_array(name, getattr(self, name), shape=shape)
+        if arrays["saturated"].shape != shape:
+            raise ValueError(f"saturated must have shape {shape}, got {arrays['saturated'].shape}")
         for name, value in arrays.items():
             value.flags.writeable = False
             object.__setattr__(self, name, value)
@@ -364,13 +380,21 @@ def _current_controller(b, c, d, z, e_i):
 
 
 @njit(cache=True)
+def _plant_row(p, a, r, x, v, d, w, i, u, force):
+    """Row `r` of the plant update ``Ad [x, v, d, ḋ, i] + Bu u + BF F`` (reads `p` without branching)."""
+    base = _AD + _NS * r
+    return (p[a, base] * x + p[a, base + 1] * v + p[a, base + 2] * d + p[a, base + 3] * w + p[a, base + 4] * i
+            + p[a, _BU + r] * u + p[a, _BF + r] * force)  # fmt: skip
+
+
+@njit(cache=True)
 def _disturbance(fc, fv, fs, vs, fa, f0, veps, v):
     """Disturbance force on the carriage [N]: the offset minus friction at velocity `v` [mm/s]."""
     s = v / math.sqrt(v * v + veps * veps)
     level = fc
-    if fs != 0.0:
-        r = v / vs
-        level += fs * math.exp(-r * r)
+    r2 = (v / vs) ** 2
+    if fs != 0.0 and r2 < 36.0:  # beyond, exp(-r2) < 2.4e-16: below float64 resolution of the static level
+        level += fs * math.exp(-r2)
     return f0 - level * s - fv * v - fa * abs(s)
 
 
@@ -386,12 +410,13 @@ def _mix(z):
 
 
 @njit(cache=True)
-def _gauss(key, k):
-    """Standard normal sample number `k` of the stream `key` (counter-based: no state, Box-Muller)."""
-    c = np.uint64(2) * np.uint64(k)
+def _gauss_pair(key, pair):
+    """Standard normal samples ``2·pair`` and ``2·pair + 1`` of the stream `key` (counter-based, Box-Muller)."""
+    c = np.uint64(2) * np.uint64(pair)
     u1 = (float(_mix(key + (c + np.uint64(1)) * _GOLDEN) >> np.uint64(11)) + 0.5) * 2.0**-53
     u2 = (float(_mix(key + (c + np.uint64(2)) * _GOLDEN) >> np.uint64(11)) + 0.5) * 2.0**-53
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+    radius, angle = math.sqrt(-2.0 * math.log(u1)), 2.0 * math.pi * u2
+    return radius * math.cos(angle), radius * math.sin(angle)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -399,14 +424,18 @@ def _gauss(key, k):
 
 
 def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_params, comp_geometry, every,
-             tool, encoder, velocity, current, saturated, counts):  # fmt: skip
+             tool, encoder, velocity, current, saturated, status):  # fmt: skip
     """Step all axes of one variant over the reference, advancing `state` and `comp_state` in place.
 
     ``par`` (n, NPAR) and ``state`` (n, _NSTATE) follow the layouts above;
     ``comp_step`` is ``None`` (pruned at compile time) or a compensator step
     function. Samples ``k = 0, every, 2·every, …`` go to the outputs of
     shape (ceil(N / every), n) that have rows (an output with no rows is not
-    asked for); `counts` (n,) gets the number of clamped steps per axis.
+    asked for). `status` (n, 3) gets per axis the number of clamped steps,
+    the step at which the plant state was found not finite (checked every
+    _DIVERGENCE_CHECK steps; -1: never) and the first step whose reference
+    values are not all finite (-1: none; the caller checks the reference
+    in detail then, so that a valid reference costs no separate pass).
     """
     n_steps, n_axes = ref_pos.shape
     write_tool, write_encoder = tool.shape[0] > 0, encoder.shape[0] > 0
@@ -417,14 +446,15 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
     dvel = np.zeros(n_axes)
     dforce = np.zeros(n_axes)
     keys = np.empty(n_axes, np.uint64)
-    s = np.empty(_NS)
     for a in range(n_axes):  # at rest: the delay buffers hold the first encoder reading
         keys[a] = _mix(np.uint64(par[a, _SEED]) * np.uint64(n_axes + 1) + np.uint64(a))
         state[a, _TABLE], enc = _sensors(state[a, 0], state[a, _TABLE], par[a, _HALF_PLAY], par[a, _SCALE] != 0.0,
                                          par[a, _QUANTUM])  # fmt: skip
         state[a, _BUFX : _BUFX + _NBUF] = enc
         state[a, _BUFV : _BUFV + _NBUF] = state[a, 1]
-        counts[a] = 0
+        status[a, _CLAMPED] = 0
+        status[a, _DIVERGED] = -1
+        status[a, _BAD_REFERENCE] = -1
     for k in range(n_steps):
         j = k // every
         record = k - j * every == 0
@@ -432,17 +462,23 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
             table, enc = _sensors(state[a, 0], state[a, _TABLE], par[a, _HALF_PLAY], par[a, _SCALE] != 0.0,
                                   par[a, _QUANTUM])  # fmt: skip
             state[a, _TABLE] = table
-            slot = k % _NBUF
-            state[a, _BUFX + slot] = enc
-            state[a, _BUFV + slot] = state[a, 1]
             n, f = int(par[a, _DELAY_N]), par[a, _DELAY_F]
-            x_fb[a] = _delayed(state, a, _BUFX, k, n, f)
-            v_fb[a] = _delayed(state, a, _BUFV, k, n, f)
+            if n == 0 and f == 0.0:
+                x_fb[a], v_fb[a] = enc, state[a, 1]
+            else:
+                slot = k % _NBUF
+                state[a, _BUFX + slot] = enc
+                state[a, _BUFV + slot] = state[a, 1]
+                x_fb[a] = _delayed(state, a, _BUFX, k, n, f)
+                v_fb[a] = _delayed(state, a, _BUFV, k, n, f)
             if record:
                 if write_tool:
                     y = table + state[a, 2]
-                    if par[a, _NOISE] > 0.0:
-                        y += par[a, _NOISE] * _gauss(keys[a], k)
+                    if par[a, _NOISE] > 0.0:  # sample k of the axis's stream; a pair is drawn at a time
+                        if state[a, _PAIR] != k >> 1:
+                            state[a, _PAIR] = k >> 1
+                            state[a, _GAUSS], state[a, _GAUSS + 1] = _gauss_pair(keys[a], k >> 1)
+                        y += par[a, _NOISE] * state[a, _GAUSS + (k & 1)]
                     tool[j, a] = y
                 if write_encoder:
                     encoder[j, a] = x_fb[a]
@@ -454,34 +490,41 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
             dforce[:] = 0.0
             comp_step(k, ref_pos, ref_vel, ref_acc, comp_geometry, x_fb, comp_state, comp_params, dpos, dvel, dforce)
         for a in range(n_axes):
+            x, v, d, w, i = state[a, 0], state[a, 1], state[a, 2], state[a, 3], state[a, 4]
             v_cmd = _velocity_command(par, a, ref_pos[k, a] + dpos[a], ref_vel[k, a], x_fb[a]) + dvel[a]
             i_ff = par[a, _AFF] * ref_acc[k, a] + par[a, _AMP] * dforce[a]
             i_cmd, clamped, state[a, _ZV] = _velocity_controller(
                 par[a, _VB], par[a, _VC], par[a, _VD], par[a, _ILIM], state[a, _ZV], v_cmd - v_fb[a], i_ff
             )
-            counts[a] += clamped
+            status[a, _CLAMPED] += clamped
+            if status[a, _BAD_REFERENCE] < 0 and not math.isfinite(ref_pos[k, a] + ref_vel[k, a] + ref_acc[k, a]):
+                status[a, _BAD_REFERENCE] = k
             if record:
                 if write_current:
                     current[j, a] = i_cmd
                 if write_saturated:
                     saturated[j, a] = clamped
-            if par[a, _ELEC] == 0.0:
-                u = i_cmd
+            electrical = par[a, _ELEC] != 0.0
+            if electrical:
+                u, state[a, _ZC] = _current_controller(par[a, _CB], par[a, _CC], par[a, _CD], state[a, _ZC], i_cmd - i)
             else:
-                u, state[a, _ZC] = _current_controller(
-                    par[a, _CB], par[a, _CC], par[a, _CD], state[a, _ZC], i_cmd - state[a, 4]
-                )
+                u = i_cmd
             force = 0.0
             if par[a, _FRICTION] != 0.0:
                 force = _disturbance(par[a, _FC], par[a, _FV], par[a, _FS], par[a, _VS], par[a, _FA], par[a, _F0],
-                                     par[a, _VEPS], state[a, 1])  # fmt: skip
-            for r in range(_NS):
-                s[r] = state[a, r]
-            for r in range(_NS):
-                value = par[a, _BU + r] * u + par[a, _BF + r] * force
-                for c in range(_NS):
-                    value += par[a, _AD + _NS * r + c] * s[c]
-                state[a, r] = value
+                                     par[a, _VEPS], v)  # fmt: skip
+            # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the rows that are zero by construction
+            # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
+            state[a, 0] = _plant_row(par, a, 0, x, v, d, w, i, u, force)
+            state[a, 1] = _plant_row(par, a, 1, x, v, d, w, i, u, force)
+            if par[a, _MODE] != 0.0:
+                state[a, 2] = _plant_row(par, a, 2, x, v, d, w, i, u, force)
+                state[a, 3] = _plant_row(par, a, 3, x, v, d, w, i, u, force)
+            state[a, 4] = _plant_row(par, a, 4, x, v, d, w, i, u, force) if electrical else u
+        if k % _DIVERGENCE_CHECK == 0 or k == n_steps - 1:
+            for a in range(n_axes):
+                if status[a, _DIVERGED] < 0 and not math.isfinite(state[a, 0] + state[a, 1] + state[a, 4]):
+                    status[a, _DIVERGED] = k
 
 
 # Without a compensator the loop compiles once and is cached on disk. A compensator's step
@@ -492,12 +535,12 @@ _variant_compensated = njit(_variant)
 
 
 @njit(cache=True, parallel=True)
-def _batch(rows, states, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, counts):
+def _batch(rows, states, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
     """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows."""
     empty = np.zeros(0)
     for b in prange(rows.shape[0]):
         _variant_plain(rows[b], states[b], ref_pos, ref_vel, ref_acc, None, empty, empty, empty, every,
-                       tool[b], encoder[b], velocity[b], current[b], saturated[b], counts[b])  # fmt: skip
+                       tool[b], encoder[b], velocity[b], current[b], saturated[b], status[b])  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
@@ -568,20 +611,23 @@ def pack(servo, dt, effects=LoopEffects()):
 
     Raises
     ------
+    TypeError
+        `servo` is not an AxisServo or `effects` not a LoopEffects.
     ValueError
-        Bad arguments, or a feedback delay beyond :data:`MAX_DELAY_SAMPLES`.
+        A bad `dt`, or a feedback delay beyond :data:`MAX_DELAY_SAMPLES`.
 
     Notes
     -----
     `pack` does not check the loop (that is what makes a variant cheap): a
     variant with new gains, masses or effects may be unstable, and its
     stability is the caller's business. :func:`run` checks each AxisServo's
-    nominal linear loop (:func:`contoursim.servo.check`, once per servo).
+    nominal linear loop (:func:`contoursim.servo.check`, once per servo);
+    :func:`spectral_radius` is a cheap check of a packed row.
     """
     if not isinstance(servo, AxisServo):
-        raise ValueError(f"servo must be an AxisServo, got {type(servo).__name__}")
+        raise TypeError(f"servo must be an AxisServo, got {type(servo).__name__}")
     if not isinstance(effects, LoopEffects):
-        raise ValueError(f"effects must be a LoopEffects, got {type(effects).__name__}")
+        raise TypeError(f"effects must be a LoopEffects, got {type(effects).__name__}")
     dt = _validate.positive("dt", dt)
     delay = effects.feedback_delay_s / dt
     if delay > MAX_DELAY_SAMPLES * (1 + 1e-12):
@@ -590,12 +636,13 @@ def pack(servo, dt, effects=LoopEffects()):
             f"the kernel holds at most {MAX_DELAY_SAMPLES} periods ({MAX_DELAY_SAMPLES * dt:g} s)"
         )
     A, B, states = _continuous_plant(servo, effects)
+    row = np.zeros(NPAR)
+    row[_MODE] = float(effects.mode_freq_hz is not None)
     Ad, Bd = zoh(A, B, dt)
     full_Ad, full_Bd = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
     full_Ad[np.ix_(states, states)], full_Bd[states] = Ad, Bd
     if not servo.electrical:
         full_Bd[4, 0] = 1.0  # ideal current loop: the current state holds the command of the period
-    row = np.zeros(NPAR)
     row[_AD : _AD + _NS * _NS] = full_Ad.ravel()
     row[_BU : _BU + _NS] = full_Bd[:, 0]
     row[_BF : _BF + _NS] = full_Bd[:, 1]
@@ -622,6 +669,69 @@ def pack(servo, dt, effects=LoopEffects()):
     return row
 
 
+def spectral_radius(row):
+    """Largest closed-loop eigenvalue modulus of a packed axis's linear sampled loop: < 1 is stable.
+
+    The cheap stability check of a variant (no python-control): the plant
+    (with its structural mode and current loop), the controllers and the
+    feedback delay, without saturation, backlash, friction and quantisation.
+
+    Parameters
+    ----------
+    row : array_like, shape (NPAR,)
+        One axis's row from :func:`pack`.
+
+    Returns
+    -------
+    float
+        ``max |λ|`` of the loop's state-transition matrix [-].
+    """
+    p = _validate.finite_array("row", row, shape=(NPAR,))
+    electrical, integral = p[_ELEC] != 0.0, p[_VC] != 0.0
+    n_delay, f = int(p[_DELAY_N]), p[_DELAY_F]
+    depth = n_delay + 1 if (n_delay or f) else 0  # past samples of x and v the loop reads
+    # state: plant (5), then the integrators in use, then the delayed x and v samples (k-1 .. k-depth)
+    zv, zc = _NS, _NS + integral
+    hx = zc + electrical
+    hv = hx + depth
+    size = hv + depth
+    Ad = p[_AD : _AD + _NS * _NS].reshape(_NS, _NS)
+    Bu = p[_BU : _BU + _NS]
+
+    def sample(signal, history, back):
+        """Row picking the plant state `signal` (0: x, 1: v) `back` samples ago."""
+        r = np.zeros(size)
+        r[signal if back == 0 else history + back - 1] = 1.0
+        return r
+
+    def fed_back(signal, history):
+        return (1.0 - f) * sample(signal, history, n_delay) + (f * sample(signal, history, n_delay + 1) if f else 0.0)
+
+    e_v = -p[_KP] * fed_back(0, hx) - fed_back(1, hv)
+    i_cmd = p[_VD] * e_v
+    if integral:
+        i_cmd[zv] += p[_VC]
+    u = i_cmd
+    if electrical:
+        e_i = i_cmd.copy()
+        e_i[4] -= 1.0
+        u = p[_CD] * e_i
+        u[zc] += p[_CC]
+    phi = np.zeros((size, size))
+    phi[:_NS, :_NS] = Ad
+    phi[:_NS] += Bu[:, None] * u
+    if integral:
+        phi[zv] = p[_VB] * e_v
+        phi[zv, zv] += 1.0
+    if electrical:
+        phi[zc] = p[_CB] * e_i
+        phi[zc, zc] += 1.0
+    for history, signal in ((hx, 0), (hv, 1)):
+        for j in range(depth):
+            phi[history + j] = sample(signal, history, j)
+    return float(np.abs(np.linalg.eigvals(phi)).max())
+
+
 # ---------------------------------------------------------------------------------------------
 # Runs
 
@@ -637,18 +747,23 @@ def _axes(servos):
         raise ValueError("servos must hold at least one AxisServo")
     for name, servo in zip(names, servos):
         if not isinstance(servo, AxisServo):
-            raise ValueError(f"servos[{name!r}] must be an AxisServo, got {type(servo).__name__}")
+            raise TypeError(f"servos[{name!r}] must be an AxisServo, got {type(servo).__name__}")
     return names, servos
 
 
-def _reference(n_axes, ref_pos, ref_vel, ref_acc):
-    """The three reference arrays checked, C-contiguous float64, shape (N, n_axes)."""
-    ref_pos = _validate.finite_array("ref_pos", ref_pos, shape=(None, n_axes))
+def _reference(n_axes, ref_pos, ref_vel, ref_acc, finite):
+    """The three reference arrays checked, C-contiguous float64, shape (N, n_axes).
+
+    ``finite=False`` checks types and shapes only (:func:`run` has the kernel
+    flag non-finite values as it reads them, and calls this again then).
+    """
+    check = _validate.finite_array if finite else _validate.float_array
+    ref_pos = check("ref_pos", ref_pos, shape=(None, n_axes))
     n_steps = ref_pos.shape[0]
     if n_steps < 1:
         raise ValueError("ref_pos must hold at least one sample")
-    ref_vel = _validate.finite_array("ref_vel", ref_vel, shape=(n_steps, n_axes))
-    ref_acc = _validate.finite_array("ref_acc", ref_acc, shape=(n_steps, n_axes))
+    ref_vel = check("ref_vel", ref_vel, shape=(n_steps, n_axes))
+    ref_acc = check("ref_acc", ref_acc, shape=(n_steps, n_axes))
     return tuple(np.ascontiguousarray(r) for r in (ref_pos, ref_vel, ref_acc))
 
 
@@ -657,6 +772,7 @@ def _initial_state(shape, start):
     state = np.zeros(shape + (_NSTATE,))
     state[..., 0] = start
     state[..., _TABLE] = start
+    state[..., _PAIR] = -1.0
     return state
 
 
@@ -694,11 +810,16 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
 
     Raises
     ------
+    TypeError
+        A servo that is not an :class:`~contoursim.servo.AxisServo`, a
+        compensator that is not a :class:`Compensator`, effects that are
+        not :class:`LoopEffects`.
     ValueError
         Bad shapes or values, `dt` too long for a loop, or effects naming an
         unknown axis.
     UnstableLoopError
-        An axis's sampled loop is unstable or badly damped.
+        An axis's sampled loop is unstable or badly damped, or the simulation
+        with its effects or compensator diverged.
 
     Examples
     --------
@@ -714,9 +835,9 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
     names, servos = _axes(servos)
     dt = _validate.positive("dt", dt)
     n = len(servos)
-    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc)
+    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc, finite=False)
     if compensator is not None and not isinstance(compensator, Compensator):
-        raise ValueError(f"compensator must be a Compensator, got {type(compensator).__name__}")
+        raise TypeError(f"compensator must be a Compensator, got {type(compensator).__name__}")
     effects = {} if effects is None else dict(effects)
     unknown = [name for name in effects if name not in names]
     if unknown:
@@ -727,9 +848,10 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
 
     n_steps = ref_pos.shape[0]
     state = _initial_state((n,), ref_pos[0])
-    position, encoder, velocity, current = (np.empty((n_steps, n)) for _ in range(4))
+    position, encoder, velocity, current = np.empty((4, n_steps, n))  # one block, which malloc keeps for the next run
     saturated = np.empty((n_steps, n), bool)
-    outputs = (position, encoder, velocity, current, saturated, np.empty(n, np.int64))
+    status = np.empty((n, 3), np.int64)
+    outputs = (position, encoder, velocity, current, saturated, status)
     if compensator is None:
         empty = np.zeros(0)
         _variant_plain(par, state, ref_pos, ref_vel, ref_acc, None, empty, empty, empty, 1, *outputs)
@@ -739,6 +861,15 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
         c = compensator
         _variant_compensated(par, state, ref_pos, ref_vel, ref_acc, c.step, comp_state, c.params, c.geometry, 1,
                              *outputs)  # fmt: skip
+    if status[:, _BAD_REFERENCE].max() >= 0:
+        _reference(n, ref_pos, ref_vel, ref_acc, finite=True)  # names the first non-finite value
+    diverged = status[:, _DIVERGED]
+    if diverged.max() >= 0:
+        a = int(np.argmax(diverged >= 0))
+        raise UnstableLoopError(
+            f"the simulation of axis {names[a]!r} diverged by t = {diverged[a] * dt:.6g} s (step {diverged[a]}): "
+            "its loop with these effects (or this compensator) is unstable"
+        )
     return ServoResponse(np.arange(n_steps) * dt, *outputs[:5], compensator_state=comp_state)
 
 
@@ -781,7 +912,10 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
         ``"t"``: the kept sample times, shape (M,) [s], with
         ``M = ceil(N / every)``; one array (B, M, n) per requested output;
         ``"saturated_count"``: clamped steps per variant and axis over all
-        N steps, shape (B, n).
+        N steps, shape (B, n); ``"diverged_step"``: the step by which the
+        plant state was found not finite (checked every 256 steps: an
+        unstable variant, whose outputs mean nothing from up to 256 steps
+        before), -1 for none, shape (B, n).
     """
     rows = _validate.finite_array("rows", rows, ndim=3)
     rows = np.ascontiguousarray(rows)
@@ -789,12 +923,14 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     if width != NPAR:
         raise ValueError(f"rows must have shape (B, n_axes, {NPAR}) (rows from pack()), got {rows.shape}")
     dt = _validate.positive("dt", dt)
-    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc)
+    ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc, finite=True)
     unknown = [name for name in outputs if name not in BATCH_OUTPUTS]
     if isinstance(outputs, str) or unknown:
         raise ValueError(f"outputs must name signals from {', '.join(BATCH_OUTPUTS)}, got {outputs!r}")
-    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-        raise ValueError(f"every must be a positive integer, got {every!r}")
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)):
+        raise TypeError(f"every must be an integer, got {every!r}")
+    if every < 1:
+        raise ValueError(f"every must be positive, got {every!r}")
     dtype = np.dtype(dtype)
     if dtype not in (np.float64, np.float32):
         raise ValueError(f"dtype must be float64 or float32, got {dtype}")
@@ -806,10 +942,11 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
 
     arrays = {name: out(name, dtype) for name in BATCH_OUTPUTS[:4]}
     arrays["saturated"] = out("saturated", bool)
-    counts = np.empty((n_variants, n), np.int64)
+    status = np.empty((n_variants, n, 3), np.int64)
     states = _initial_state((n_variants, n), ref_pos[0])
-    _batch(rows, states, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), counts)
+    _batch(rows, states, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), status)
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
-    result["saturated_count"] = counts
+    result["saturated_count"] = status[..., _CLAMPED]
+    result["diverged_step"] = status[..., _DIVERGED]
     return result

@@ -75,7 +75,7 @@ class Machine:
             raise ValueError("a machine needs at least one servo axis")
         for name, servo in axes.items():
             if not isinstance(servo, AxisServo):
-                raise ValueError(f"axis {name!r} must be an AxisServo, got {type(servo).__name__}")
+                raise TypeError(f"axis {name!r} must be an AxisServo, got {type(servo).__name__}")
         if self.chain is None:
             if tuple(axes) != CARTESIAN[: len(axes)]:
                 raise ValueError(f"a machine without a chain has axes x, y (, z) in that order, got {tuple(axes)}")
@@ -275,6 +275,7 @@ def load_machine(name_or_file, geometry=True, effects=False):
     from .multibody import chain_from_toml
 
     toml = TomlFile.read(preset_file(name_or_file))
+    toml.expect("machine")
     data = toml.data
     if "effect" in data and not effects:
         raise toml.error("this machine file has [[effect]] tables: load it with contoursim.model.load_model", "effect")
@@ -291,7 +292,7 @@ def load_machine(name_or_file, geometry=True, effects=False):
         period = _validate.positive("servo_period_ms", data["servo_period_ms"]) * 1e-3
         max_feed = data.get("max_feed_mm_min")
         max_feed = None if max_feed is None else _validate.positive("max_feed_mm_min", max_feed) / 60.0
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise toml.error(str(exc), str(exc).split()[0]) from None
     fields = AxisServo.__dataclass_fields__
     required = [name for name, f in fields.items() if f.default is MISSING]
@@ -315,7 +316,7 @@ def load_machine(name_or_file, geometry=True, effects=False):
     try:
         return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
                        max_feed=max_feed, work_offset=offset)
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise toml.error(str(exc), "axes") from None
 
 

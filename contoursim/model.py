@@ -45,7 +45,7 @@ from . import kernel
 from .config import TomlFile
 from .effects import Effect, read_effects
 from .errormotion import Cyclic
-from .machine import Machine, load_machine
+from .machine import Machine, load_machine, preset_file
 from .multibody import cartesian_chain
 
 __all__ = ["Model", "as_model", "load_model", "with_file_effects"]
@@ -81,11 +81,11 @@ class Model:
 
     def __post_init__(self):
         if not isinstance(self.machine, Machine):
-            raise ValueError(f"machine must be a Machine, got {type(self.machine).__name__}")
+            raise TypeError(f"machine must be a Machine, got {type(self.machine).__name__}")
         effects = tuple(self.effects)
         for e in effects:
             if not isinstance(e, Effect):
-                raise ValueError(f"effects must be Effect objects, got {type(e).__name__}")
+                raise TypeError(f"effects must be Effect objects, got {type(e).__name__}")
         labels = [e.label for e in effects]
         repeated = sorted({label for label in labels if labels.count(label) > 1})
         if repeated:
@@ -208,9 +208,9 @@ class Model:
         bodies = list(chain.bodies)
         home = dict(zip(self.machine.axis_names, self.machine.home()))
         for e in effects:
-            j = _linear_body(chain, e.axis[0], e.label)
-            side = 1.0 if j in chain.tool_chain else -1.0
             try:
+                j = _linear_body(chain, e.axis[0])
+                side = 1.0 if j in chain.tool_chain else -1.0
                 bodies[j - 1] = _GEOMETRY[e.name](e, bodies[j - 1], side, chain, home)
             except ValueError as exc:
                 raise ValueError(f"{e.label}: {exc}") from None
@@ -232,7 +232,7 @@ def as_model(model_or_machine):
         return model_or_machine
     if isinstance(model_or_machine, Machine):
         return Model(model_or_machine)
-    raise ValueError(f"expected a Model or a Machine, got {type(model_or_machine).__name__}")
+    raise TypeError(f"expected a Model or a Machine, got {type(model_or_machine).__name__}")
 
 
 def load_model(name_or_file, geometry=True):
@@ -255,8 +255,6 @@ def load_model(name_or_file, geometry=True):
         Naming the file and line of a bad machine key or ``[[effect]]`` table,
         or of an effect on an axis the machine lacks.
     """
-    from .machine import preset_file
-
     file = preset_file(name_or_file)
     machine = load_machine(file, geometry=geometry, effects=True)
     return with_file_effects(Model(machine), TomlFile.read(file))
@@ -283,7 +281,7 @@ def with_file_effects(model, toml):
     for i, effect in enumerate(read_effects(toml)):
         try:
             model = model.with_effect(effect)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "effect", i, "axis") from None
     return model
 
@@ -303,14 +301,14 @@ def _delayed(x, shift):
     return now if frac == 0 else (1.0 - frac) * now + frac * before
 
 
-def _linear_body(chain, axis, label):
+def _linear_body(chain, axis):
     """Index of the one linear body driven by `axis`."""
     found = [j for j, b in enumerate(chain.bodies, start=1) if b.axis == axis and b.joint == "linear"]
     if len(found) != 1:
-        raise ValueError(f"{label}: a geometric effect needs exactly one linear body driven by axis {axis!r}, found {len(found)}")
+        raise ValueError(f"a geometric effect needs exactly one linear body driven by axis {axis!r}, found {len(found)}")
     j = found[0]
     if (j in chain.tool_chain) == (j in chain.work_chain):
-        raise ValueError(f"{label}: the body of axis {axis!r} moves neither the tool nor the workpiece alone")
+        raise ValueError(f"the body of axis {axis!r} moves neither the tool nor the workpiece alone")
     return j
 
 
@@ -326,7 +324,7 @@ def _add_motion(body, component, poly=(), cyclic=()):
 
 
 def _squareness(e, body, side, chain, home):
-    towards = chain.bodies[_linear_body(chain, e.axis[1], e.label) - 1].direction
+    towards = chain.bodies[_linear_body(chain, e.axis[1]) - 1].direction
     squareness = body.squareness.copy()
     squareness[towards] += e["angle_urad"] * _URAD
     return replace(body, squareness=squareness)

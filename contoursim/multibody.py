@@ -60,7 +60,7 @@ __all__ = [
 _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
-_UM, _URAD = 1e-3, 1e-6
+_MM_PER_UM, _RAD_PER_URAD = 1e-3, 1e-6
 
 
 def lower_body_array(parents):
@@ -1001,10 +1001,10 @@ def _body_from_toml(toml, base, where, item, body_index):
         return out
 
     per_min = 1 / 60.0
-    lin_ang = (_UM,) * 3 + (_URAD,) * 3
+    lin_ang = (_MM_PER_UM,) * 3 + (_RAD_PER_URAD,) * 3
     static = vector("static", COMPONENTS, lin_ang, 6)
-    squareness = vector("squareness", _DIRECTIONS, _URAD, 3)
-    tilt = vector("tilt", _DIRECTIONS, _URAD, 3)
+    squareness = vector("squareness", _DIRECTIONS, _RAD_PER_URAD, 3)
+    tilt = vector("tilt", _DIRECTIONS, _RAD_PER_URAD, 3)
     thermal = vector("thermal", COMPONENTS, tuple(s * per_min for s in lin_ang), 6)
     for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
         if values.any() and (kind != wanted or values[direction]):
@@ -1036,7 +1036,7 @@ def _body_from_toml(toml, base, where, item, body_index):
             thermal=thermal,
             travel=travel,
         )
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         if isinstance(exc, ConfigError):
             raise
         raise fail(str(exc).removeprefix(f"{item['name']}: ")) from None
@@ -1059,7 +1059,7 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
     to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
     motion = []
     for i, comp in enumerate(COMPONENTS):
-        scale = _UM if i < 3 else _URAD
+        scale = _MM_PER_UM if i < 3 else _RAD_PER_URAD
         spec = errors.get(comp, {})
         if not isinstance(spec, dict):
             raise fail(f"errors.{comp} must be a table of constant / poly / cyclic", "errors", comp)

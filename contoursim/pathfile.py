@@ -116,6 +116,7 @@ def load_path_file(file):
     if file.suffix.lower() != ".toml":
         raise ConfigError(f"unknown path file type {file.suffix!r}: use .toml or .nc", source=str(file))
     toml = TomlFile.read(file)
+    toml.expect("path")
     top = toml.table(allowed=("name", "description", "path", "feed"))
     for key in ("name", "description"):
         if not isinstance(top.get(key, ""), str):
@@ -136,7 +137,7 @@ def _path(toml):
             continue
         try:
             kwargs[arguments[key]] = _angle(key, value) if key.endswith("_deg") else value
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "path", key) from None
     try:
         return build(**kwargs)
@@ -172,6 +173,6 @@ def read_feed_table(toml, base=None):
         argument, convert = _FEED[key]
         try:
             settings[argument] = convert(key, value)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "feed", key) from None
     return FeedSettings(**settings)

@@ -544,6 +544,22 @@ class Path:
         s = _validate.finite_array("s", s, ndim=1)
         return np.clip(np.searchsorted(self.breaks, s, side="right") - 1, 0, len(self.primitives) - 1)
 
+    def test_circle(self):
+        """The full test circle of a circular test (ISO 230-4), or ``None``.
+
+        Returns
+        -------
+        HelicalArc or None
+            The path's one primitive with role ``"test"`` when it is a full
+            circle (``|sweep| = 2π``) in the XY plane; its ``center``,
+            ``radius`` and the sign of its ``sweep`` (CCW positive) describe
+            the test.
+        """
+        tests = [p for p in self.primitives if p.role == "test"]
+        if len(tests) == 1 and isinstance(tests[0], HelicalArc) and tests[0].in_xy_plane:
+            return tests[0] if abs(abs(tests[0].sweep) - 2 * np.pi) < 1e-9 else None
+        return None
+
     def corner_angles(self):
         """Angle between the end tangent of each primitive and the start tangent of the next [rad].
 
@@ -744,17 +760,22 @@ def helix(center, radius, pitch, turns, direction="ccw", normal=(0, 0, 1), start
     return Path((HelicalArc(c, e1, e2, radius, start_angle, sweep, pitch / (2 * np.pi), role),))
 
 
-def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi / 2, run_radius=None, start_angle=0.0):
-    """ISO 230-4 circular test: tangential run-in arc, the full test circle, tangential run-out arc.
+def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi / 2, run_radius=None, start_angle=0.0,
+                    overrun=np.pi / 4):
+    """ISO 230-4 circular test: run-in, overrun, the full test circle, overrun, run-out.
 
     The run-in and run-out are arcs of radius `run_radius` inside the test
-    circle, internally tangent to it at the test's start point and turning in
-    the same direction, so the tangent is continuous at both joins (the
-    curvature steps from 1/run_radius to 1/radius). The run-in turns
-    `run_angle` onto the circle; the full 360° circle follows (role "test");
-    the run-out turns `run_angle` off it. With the defaults (start at angle 0,
-    run radius R/2, 90°) a CCW test about (0, 0) starts at (R/2, -R/2), joins
-    the circle at (R, 0) and ends at (R/2, R/2).
+    circle, internally tangent to it and turning in the same direction, so the
+    tangent is continuous at both joins (the curvature steps from
+    1/run_radius to 1/radius). The run-in turns `run_angle` onto the circle
+    `overrun` before the test's start point; the circle is then followed for
+    `overrun`, the full 360° (role "test": the data-collection arc), and
+    `overrun` again before the run-out turns `run_angle` off it. As a
+    ballbar test's overshoot arcs do, the overruns keep the transient of the
+    curvature step at the joins out of the data-collection arc. With the
+    defaults (start at angle 0, run radius R/2, 90° run arcs, 45° overruns) a
+    CCW test about (0, 0) joins the circle at -45°, measures from 0° to 360°
+    and leaves it at 45°.
 
     Parameters
     ----------
@@ -770,11 +791,15 @@ def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi 
         Radius of the run-in and run-out arcs [mm], below R; R/2 by default.
     start_angle : float
         Angle of the point where the test circle starts and ends [rad].
+    overrun : float
+        Angle travelled on the test circle before and after the full 360°
+        [rad], in [0, π].
 
     Returns
     -------
     Path
-        Three primitives with roles "run-in", "test", "run-out".
+        Roles "run-in" (run-in arc, overrun), "test", "run-out" (overrun,
+        run-out arc); without overruns when `overrun` is 0.
     """
     c = _vector("center", center)
     radius = _scalar(_validate.positive, "radius", radius)
@@ -784,14 +809,25 @@ def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi 
     run_angle = _scalar(_validate.positive, "run_angle", run_angle)
     if run_angle > 2 * np.pi:
         raise PathError(f"run_angle must be at most 2π rad, got {run_angle}")
+    overrun = _scalar(_validate.nonnegative, "overrun", overrun)
+    if overrun > np.pi:
+        raise PathError(f"overrun must be at most π rad, got {overrun}")
     start_angle = _number("start_angle", start_angle)
     sign = _direction(direction)
     e1, e2 = np.eye(3)[0], np.eye(3)[1]
-    c_run = c + (radius - run_radius) * np.array([np.cos(start_angle), np.sin(start_angle), 0.0])
+    join_in, join_out = start_angle - sign * overrun, start_angle + sign * overrun
+    run_in = c + (radius - run_radius) * np.array([np.cos(join_in), np.sin(join_in), 0.0])
+    run_out = c + (radius - run_radius) * np.array([np.cos(join_out), np.sin(join_out), 0.0])
+    overruns = (
+        (HelicalArc(c, e1, e2, radius, join_in, sign * overrun, 0.0, "run-in"),),
+        (HelicalArc(c, e1, e2, radius, start_angle, sign * overrun, 0.0, "run-out"),),
+    ) if overrun > 0 else ((), ())
     return Path((
-        HelicalArc(c_run, e1, e2, run_radius, start_angle - sign * run_angle, sign * run_angle, 0.0, "run-in"),
+        HelicalArc(run_in, e1, e2, run_radius, join_in - sign * run_angle, sign * run_angle, 0.0, "run-in"),
+        *overruns[0],
         HelicalArc(c, e1, e2, radius, start_angle, sign * 2 * np.pi, 0.0, "test"),
-        HelicalArc(c_run, e1, e2, run_radius, start_angle, sign * run_angle, 0.0, "run-out"),
+        *overruns[1],
+        HelicalArc(run_out, e1, e2, run_radius, join_out, sign * run_angle, 0.0, "run-out"),
     ))
 
 

@@ -1,15 +1,26 @@
-"""Plots of a simulation result: magnified path error, ballbar polar plot, errors over time.
+"""Plots of simulation results: magnified path error, ballbar polar plot, errors over time.
 
 Every function draws on a Matplotlib ``Axes`` it is given (or a new figure)
-and returns that ``Axes``, like :mod:`control.ctrlplot`. The magnification
-factor of an exaggerated plot is always written on the plot.
+and returns that ``Axes``, like :mod:`control.ctrlplot`; the errors over time
+take a ``Figure`` for their three stacked axes. The magnification
+factor of an exaggerated plot is always written on the plot; runs drawn side
+by side share one. Lines are thinned to what the pixels can show (the data
+itself, e.g. in the trace CSV, is untouched): :func:`envelope_indices` keeps
+the smallest and largest sample of every pixel column, so no spike is lost.
 """
 
 import numpy as np
 
+from . import _validate
 from .output import output_dir
 
-__all__ = ["fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation", "plot_errors_over_time", "save_figures"]
+__all__ = [
+    "circular_deviation", "envelope_indices", "fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation",
+    "plot_errors_over_time", "save_figures",
+]
+
+_COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
+_RUN_COLOURS = ("C3", "C0", "C2", "C4")  # runs overlaid: red first, as a single run is drawn
 
 
 def _axes(ax, **subplot):
@@ -17,64 +28,165 @@ def _axes(ax, **subplot):
         return ax
     import matplotlib.pyplot as plt
 
-    return plt.figure(figsize=(6.4, 6.0)).add_subplot(**subplot)
+    return plt.figure(figsize=(6.4, 6.6), layout="constrained").add_subplot(**subplot)
+
+
+def _round_125(x):
+    """The smallest of 1, 2, 5 times a power of ten that is >= x (x > 0)."""
+    decade = 10.0 ** np.floor(np.log10(x))
+    return float(next(m * decade for m in (1.0, 2.0, 5.0, 10.0) if m * decade >= x * (1 - 1e-12)))
+
+
+def _num(value, decimals=2):
+    """`value` with `decimals` decimals, never as "-0.00"."""
+    return f"{round(float(value), decimals) + 0.0:.{decimals}f}"
 
 
 def magnification_for(size, error, fraction=0.08):
-    """A round magnification that draws the largest error as `fraction` of `size`.
+    """A round magnification that draws the largest error as about `fraction` of `size`.
 
     Parameters
     ----------
     size : float
-        Extent of the path [mm].
+        Extent of the drawing [mm].
     error : float
         Largest error to show [mm].
     fraction : float
-        Share of `size` the magnified largest error should take.
+        Share of `size` the magnified largest error should take at most.
 
     Returns
     -------
     float
-        1, 2 or 5 times a power of ten; 1 when `error` is zero.
+        1, 2 or 5 times a power of ten, never below 1: an error already
+        larger than `fraction` of `size` is drawn at true scale (1).
 
     Examples
     --------
     >>> magnification_for(100.0, 0.01)      # 0.01 mm drawn as ~8 mm
     500.0
+    >>> magnification_for(100.0, 40.0)      # no shrinking "×0.2": true scale
+    1.0
     """
     if error <= 0:
         return 1.0
     raw = fraction * size / error
+    if raw < 1:
+        return 1.0
     decade = 10.0 ** np.floor(np.log10(raw))
     return float(max(m for m in (1.0, 2.0, 5.0) if m * decade <= raw) * decade)
+
+
+def envelope_indices(values, columns=_COLUMNS):
+    """Indices of the samples that draw `values` as it looks at `columns` pixel columns.
+
+    The samples are cut into `columns` equal runs; of each run the smallest
+    and the largest value (of every series) are kept, with the first and
+    last sample, so spikes survive and the line looks as the full data does.
+
+    Parameters
+    ----------
+    values : ndarray, shape (N,) or (N, k)
+        One series or k series over the same samples, in drawing order.
+    columns : int
+        Number of runs (about the plot's width in pixels or more).
+
+    Returns
+    -------
+    ndarray of int
+        Sorted sample indices; all of them when N <= 2 columns.
+
+    Examples
+    --------
+    >>> y = np.zeros(10_000); y[1234] = 5.0
+    >>> i = envelope_indices(y, columns=100)
+    >>> len(i) <= 202 and 1234 in i
+    True
+    """
+    values = np.asarray(values, float).reshape(len(values), -1)
+    n = len(values)
+    if n <= 2 * columns:
+        return np.arange(n)
+    size = -(-n // columns)
+    whole = n // size * size
+    runs = values[:whole].reshape(-1, size, values.shape[1])
+    start = np.arange(0, whole, size)[:, None]
+    picked = [start + runs.argmin(axis=1), start + runs.argmax(axis=1), [0, n - 1], np.arange(whole, n)]
+    return np.unique(np.concatenate([np.ravel(p) for p in picked]))
+
+
+def _thin_curve(points, step):
+    """Indices of points along a curve, about `step` apart along it (and the last one) [same units]."""
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    first = np.flatnonzero(np.diff(np.floor(travelled / step), prepend=-1.0) > 0)
+    return np.union1d(first, [len(points) - 1])
+
+
+def _has_test(trajectory):
+    """True when the path marks a test proper (primitives with role "test") to tell apart from the rest."""
+    return trajectory.path is not None and "test" in trajectory.path.roles
+
+
+def _shared_magnification(results):
+    """One magnification for `results` drawn side by side: from the largest contour error of all."""
+    size = max(float(np.ptp(r.trajectory.position[:, :2], axis=0).max()) for r in results)
+    return magnification_for(size, max(float(r.contour.magnitude.max()) for r in results))
 
 
 def plot_path_error(result, ax=None, magnification=None):
     """Reference path and the actual path with its contour error magnified.
 
     The magnified path is ``foot + k·(actual − foot)``: each actual point is
-    moved away from its nearest path point by `k` times its contour error.
+    moved away from its nearest path point, along the path's normal, by `k`
+    times its contour error. Where ``k·ε`` exceeds the path's local radius of
+    curvature on the inside of a bend (tight lobes), the drawn curve loops:
+    the title says so, as such loops are not overshoot. The start is marked
+    and an arrow gives the direction of travel; a 3-D path is drawn in XY.
 
     Parameters
     ----------
     result : contoursim.simulate.SimResult
     ax : matplotlib.axes.Axes, optional
     magnification : float, optional
-        Factor k [-]; chosen by :func:`magnification_for` when omitted.
+        Factor k [-], at least 1; chosen by :func:`magnification_for` when omitted.
     """
     ax = _axes(ax)
-    ref = result.trajectory.position
-    foot = result.contour.foot
-    size = float(np.ptp(ref[:, :2], axis=0).max())
-    k = magnification or magnification_for(size, float(result.contour.magnitude.max()))
-    shown = foot + k * (result.tool_position - foot)
-    ax.plot(ref[:, 0], ref[:, 1], color="0.6", lw=1.0, label="reference")
-    ax.plot(shown[:, 0], shown[:, 1], color="C3", lw=1.0, label=f"actual, contour error ×{k:g}")
+    traj, contour = result.trajectory, result.contour
+    ref = traj.position[:, :2]
+    size = float(np.ptp(ref, axis=0).max())
+    k = magnification_for(size, float(contour.magnitude.max())) if magnification is None else \
+        _validate.positive("magnification", magnification)
+    if k < 1:
+        raise ValueError(f"magnification must be at least 1 (true scale), got {k:g}")
+    shown = contour.foot[:, :2] + k * (result.tool_position[:, :2] - contour.foot[:, :2])
+    step = size / (2 * _COLUMNS)
+    ir, ia = _thin_curve(ref, step), _thin_curve(shown, step)
+    ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=1.0, label="reference")
+    label = f"actual, contour error ×{k:g} along the path normal" if k > 1 else "actual (true scale)"
+    ax.plot(shown[ia, 0], shown[ia, 1], color="C3", lw=1.0, label=label)
+    ax.plot(*ref[0], "o", color="k", ms=5, label="start")
+    ahead = int(np.searchsorted(traj.s, traj.s[0] + 0.04 * size))
+    if 0 < ahead < len(ref):
+        ax.annotate("", xy=ref[ahead], xytext=ref[0], arrowprops=dict(arrowstyle="-|>", color="k", lw=1.0))
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    ax.set_title(f"Contour error magnified ×{k:g} (max {1e3 * result.contour.magnitude.max():.2f} µm)")
-    ax.legend(loc="upper right", fontsize="small")
+    largest = 1e3 * contour.magnitude[traj.measuring].max()
+    title = f"Contour error ×{k:g}: max {largest:.2f} µm" if k > 1 else f"Contour error at true scale: max {largest:.2f} µm"
+    if _has_test(traj):
+        title += " on the test proper"
+    notes = []
+    if traj.dim == 3 and np.ptp(traj.position[:, 2]) > 0:
+        notes.append("3-D path shown in XY (z not drawn)")
+    if k > 1 and traj.path is not None:
+        _, _, bend = traj.path.derivatives(contour.s[ia])  # curvature vector, towards the centre of the bend
+        if np.any(k * np.einsum("ij,ij->i", result.tool_position[ia] - contour.foot[ia], bend[:, : traj.dim]) > 1):
+            notes.append(f"loops: ×{k:g} error exceeds the bend radius, not overshoot")
+        corners = traj.path.breaks[1:-1][traj.path.corner_angles() > 1e-6]  # arc length of sharp corners
+        near = np.abs(contour.s[ia, None] - corners[None, :]) < 5 * contour.magnitude[ia, None]
+        if near.any():  # the foot switches between the two sides' normals there
+            notes.append(f"near sharp corners the ×{k:g} offset turns between two normals: fans, not overshoot")
+    ax.set_title(title + "".join(f"\n{n}" for n in notes), fontsize="medium")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize="small", frameon=False)
     return ax
 
 
@@ -98,87 +210,167 @@ def fit_circle_center(points):
     return solution[:2]
 
 
-def plot_polar_deviation(result, center, radius, ax=None):
-    """Ballbar-style polar plot of the radial deviation over the test circle.
+def circular_deviation(result):
+    """Ballbar evaluation of a circular test over its test proper (``trajectory.measuring``).
 
-    Only the samples whose nearest path point lies on the test proper (the
-    primitives with role ``"test"``, e.g. the full circle of an ISO 230-4
-    test without its run-in and run-out arcs) are shown. As a ballbar's
-    software does, the centre offset is removed first (the
-    least-squares centre of the measured circle, :func:`fit_circle_center`)
-    and given in the title; the radial axis is the deviation |p − c| − R [µm]
-    with its zero on the dashed circle.
+    As ISO 230-4 and a ballbar's software do: the data-collection circle only
+    (the samples whose reference lies on the test circle, so no run-in or
+    overrun transient), the least-squares centre of the measured points
+    removed, the circularity the range of the radial deviation about it.
 
     Parameters
     ----------
     result : contoursim.simulate.SimResult
-    center : array_like, shape (2,)
-        Nominal circle centre [mm].
-    radius : float
-        Nominal radius R [mm].
-    ax : matplotlib.axes.Axes with polar projection, optional
-    """
-    from matplotlib.ticker import MaxNLocator
+        A run on a path with a test circle (:meth:`contoursim.paths.Path.test_circle`).
 
-    ax = _axes(ax, projection="polar")
-    path = result.trajectory.path
-    on_test = np.asarray(path.roles)[path.segment_index(result.contour.s)] == "test"
-    points = result.tool_position[on_test if on_test.any() else slice(None), :2]
+    Returns
+    -------
+    dict
+        ``theta`` [rad] and ``deviation`` |p − c| − R [µm] of the measured
+        points about the least-squares centre c, the ``offset`` c − nominal
+        centre [µm], ``circularity`` max − min deviation [µm], ``radius`` R
+        [mm] and ``direction`` ("CCW" or "CW").
+    """
+    circle = result.trajectory.path.test_circle()
+    points = result.tool_position[result.trajectory.measuring, :2]
     fitted = fit_circle_center(points)
-    offset = 1e3 * (fitted - np.asarray(center, float))
     rel = points - fitted
-    theta = np.arctan2(rel[:, 1], rel[:, 0])
-    dev = 1e3 * (np.hypot(rel[:, 0], rel[:, 1]) - radius)
-    span = max(float(np.abs(dev).max()), 1e-3)
-    ax.plot(theta, dev, color="C3", lw=1.0)
-    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.8)
-    ax.set_rorigin(-2.5 * span)
-    ax.set_ylim(-1.2 * span, 1.2 * span)
-    ax.yaxis.set_major_locator(MaxNLocator(4, symmetric=True))
+    deviation = 1e3 * (np.hypot(rel[:, 0], rel[:, 1]) - circle.radius)
+    return dict(theta=np.arctan2(rel[:, 1], rel[:, 0]), deviation=deviation, offset=1e3 * (fitted - circle.center[:2]),
+                circularity=float(np.ptp(deviation)), radius=circle.radius, direction="CCW" if circle.sweep > 0 else "CW")
+
+
+def plot_polar_deviation(runs, ax=None):
+    """Ballbar polar plot of circular tests, runs overlaid (e.g. CW and CCW).
+
+    Each run is evaluated over its test proper (``trajectory.measuring``: the
+    data-collection circle of an ISO 230-4 test, without run-in, overruns and
+    run-out) as a ballbar's software does: the least-squares centre of the
+    measured points is removed (offset in the legend) and the radial axis is
+    the deviation |p − c| − R [µm], zero on the dashed nominal circle. The
+    circularity is the range of that deviation (max − min). The rings are a
+    round number of µm apart, given in the title.
+
+    Parameters
+    ----------
+    runs : SimResult or dict of str -> SimResult
+        One run, or runs by name, whose path has a test circle
+        (:meth:`contoursim.paths.Path.test_circle`). Runs of different
+        directions are labelled by direction, others by name too.
+    ax : matplotlib.axes.Axes with polar projection, optional
+
+    Raises
+    ------
+    ValueError
+        A run's path has no test circle.
+    """
+    runs = dict(runs) if isinstance(runs, dict) else {"": runs}
+    results = list(runs.values())
+    for r in results:
+        if r.trajectory.path is None or r.trajectory.path.test_circle() is None:
+            raise ValueError("a polar plot needs runs on a path with a full test circle (role 'test')")
+    ax = _axes(ax, projection="polar")
+    tests = [circular_deviation(r) for r in results]
+    span = max(max(float(np.abs(test["deviation"]).max()) for test in tests), 1e-3)
+    division = _round_125(span / 2)  # two rings each side of zero hold every deviation
+    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.8, label="nominal radius")
+    directions = [test["direction"] for test in tests]
+    by_direction = len(set(directions)) == len(tests)
+    for i, (name, test) in enumerate(zip(runs, tests)):
+        keep = envelope_indices(test["deviation"])
+        label = test["direction"] if by_direction else f"{name} ({test['direction']})"
+        ax.plot(test["theta"][keep], test["deviation"][keep], color=_RUN_COLOURS[i % len(_RUN_COLOURS)], lw=1.0,
+                label=f"{label}: circularity {test['circularity']:.2f} µm\n"
+                      f"centre offset ({_num(test['offset'][0])}, {_num(test['offset'][1])}) µm removed")
+    ax.set_rorigin(-5 * division)
+    ax.set_ylim(-2 * division, 2 * division)
+    ax.set_yticks(division * np.arange(-2, 3))
+    ax.set_yticklabels([f"{v:g}" for v in division * np.arange(-2, 3)], fontsize="small", color="0.4")
     ax.set_rlabel_position(67.5)
+    ax.grid(True, color="0.85", lw=0.6)
+    for spine in ax.spines.values():  # no solid circle that could be read as a reference
+        spine.set_edgecolor("none")  # (the inner one is made visible again at each draw)
+    first = results[0]
+    feeds = sorted({f"{60 * r.trajectory.feed:.4g}" for r in results})
+    radii = sorted({f"{test['radius']:g}" for test in tests})
     ax.set_title(
-        f"Radial deviation from R = {radius:g} mm [µm], dashed: zero\n"
-        f"min {dev.min():.2f} µm, max {dev.max():.2f} µm; "
-        f"centre offset ({offset[0]:.2f}, {offset[1]:.2f}) µm removed",
+        f"{first.machine.name or 'machine'}: circular test R = {', '.join(radii)} mm, F = {', '.join(feeds)} mm/min\n"
+        f"{' and '.join(dict.fromkeys(directions))}; radial deviation, {division:g} µm/div",
         fontsize="medium",
     )
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.04), fontsize="small", frameon=False)
     return ax
 
 
-def plot_errors_over_time(result, ax=None):
-    """Tracking error |e| and contour error ε over time [µm], on a log scale.
+def plot_errors_over_time(result, fig=None):
+    """Signed contour error, per-axis following error and motor current over time.
+
+    What a servo-tuning tool shows, on linear axes: the signed in-plane
+    contour error [µm] (positive to the left of travel; for a 3-D path also
+    the part out of the path's plane), each servo axis's
+    following error (command − actual position) [µm] and motor current
+    command [A]. The test proper is shaded.
 
     Parameters
     ----------
     result : contoursim.simulate.SimResult
-    ax : matplotlib.axes.Axes, optional
+    fig : matplotlib.figure.Figure, optional
+        Where to draw three stacked axes; a new figure when omitted.
+
+    Returns
+    -------
+    ndarray of matplotlib.axes.Axes, shape (3,)
     """
-    ax = _axes(ax)
+    if fig is None:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=(8.0, 7.5), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
     t = result.trajectory.t
-    ax.plot(t, 1e3 * np.linalg.norm(result.tracking_error, axis=1), label="tracking error |e|")
-    ax.plot(t, 1e3 * result.contour.magnitude, label="contour error ε")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("error [µm]")
-    ax.set_yscale("symlog", linthresh=0.1)
-    ax.set_title("Tracking vs contour error")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize="small")
-    return ax
+    response = result.servo_response
+    following = result.axis_command[:, result.machine.servo_columns] - response.position
+    names = list(result.machine.axes)
+    contour, labels = result.contour.normal[:, None], ["contour error"]
+    if result.trajectory.dim == 3:  # a 3-D path: the part out of the path's plane too
+        contour, labels = np.column_stack([contour, result.contour.out_of_plane]), ["in plane", "out of plane"]
+    series = [
+        (axes[0], 1e3 * contour, labels, "contour error [µm]"),
+        (axes[1], 1e3 * following, names, "following error [µm]"),
+        (axes[2], response.current, names, "motor current [A]"),
+    ]
+    test = np.flatnonzero(result.trajectory.measuring)
+    for ax, values, labels, ylabel in series:
+        keep = envelope_indices(values)
+        for j, label in enumerate(labels):
+            ax.plot(t[keep], values[keep, j], lw=0.9, label=label, color="C3" if ax is axes[0] and j == 0 else f"C{j}")
+        if _has_test(result.trajectory):
+            ax.axvspan(t[test[0]], t[test[-1]], color="0.93", zorder=0, label="test proper")
+        ax.axhline(0.0, color="0.5", lw=0.6)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
+    axes[0].set_title("Contour error (signed, + left of travel), following error and current", fontsize="medium")
+    axes[-1].set_xlabel("t [s]")
+    return axes
 
 
-def save_figures(result, out_dir, name, circle=None):
-    """Write the standard plots of `result` as PNG files into `out_dir`.
+def save_figures(runs, out_dir, name):
+    """Write the standard plots of runs shown side by side as PNG files into `out_dir`.
+
+    Per run ``<run>_path.png`` (:func:`plot_path_error`, one magnification
+    for all `runs`) and ``<run>_errors.png`` (:func:`plot_errors_over_time`);
+    when the runs are circular tests, one ``<name>_polar.png`` with all of
+    them overlaid (:func:`plot_polar_deviation`).
 
     Parameters
     ----------
-    result : contoursim.simulate.SimResult
+    runs : dict of str -> contoursim.simulate.SimResult
+        The runs, by file name stem.
     out_dir : str, pathlib.Path or contoursim.output.OutputDir
         The output folder (see :func:`contoursim.output.output_dir`): created if
         missing; a file there that contoursim did not write is never replaced.
     name : str
-        File name stem.
-    circle : tuple (center, radius), optional
-        When given, the polar radial-deviation plot is drawn too.
+        File name stem of the polar plot.
 
     Returns
     -------
@@ -190,20 +382,26 @@ def save_figures(result, out_dir, name, circle=None):
     FileExistsError
         A plot's file exists and contoursim did not write it.
     """
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    drawings = [("path", plot_path_error, {}), ("errors", plot_errors_over_time, {})]
-    if circle is not None:
-        drawings.append(("polar", plot_polar_deviation, dict(center=circle[0], radius=circle[1])))
+    results = list(runs.values())
+    k = _shared_magnification(results)
+    # (file, size [in], margins, drawing): fixed margins that leave room for the legends, no layout search
+    path_margins = dict(left=0.12, right=0.96, top=0.90, bottom=0.16)
+    drawings = [(f"{run}_path.png", (6.4, 6.8), path_margins, lambda fig, r=r: plot_path_error(r, fig.add_subplot(), k))
+                for run, r in runs.items()]
+    errors_margins = dict(left=0.1, right=0.84, top=0.95, bottom=0.07, hspace=0.12)
+    drawings += [(f"{run}_errors.png", (8.0, 7.5), errors_margins, lambda fig, r=r: plot_errors_over_time(r, fig))
+                 for run, r in runs.items()]
+    if all(r.trajectory.path is not None and r.trajectory.path.test_circle() is not None for r in results):
+        drawings.append((f"{name}_polar.png", (7.0, 7.6), dict(left=0.08, right=0.92, top=0.88, bottom=0.2),
+                         lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"))))
     out_dir = output_dir(out_dir)
-    files = [out_dir.file(f"{name}_{kind}.png") for kind, _, _ in drawings]  # all refused before any is drawn
-    for file, (kind, draw, kwargs) in zip(files, drawings):
-        fig = plt.figure(figsize=(6.4, 6.0) if kind != "errors" else (8.0, 4.0))
-        draw(result, ax=fig.add_subplot(projection="polar" if kind == "polar" else None), **kwargs)
-        fig.tight_layout()
-        fig.savefig(file, dpi=110)
-        plt.close(fig)
+    files = [out_dir.file(file) for file, *_ in drawings]  # all refused before any is drawn
+    for file, (_, size, margins, draw) in zip(files, drawings):
+        fig = Figure(figsize=size)
+        fig.subplots_adjust(**margins)
+        draw(fig)
+        with out_dir.write(file.name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=110)
     return files

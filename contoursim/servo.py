@@ -33,7 +33,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import brentq
 
 from . import _validate
 from ._numba import njit
@@ -55,6 +54,7 @@ __all__ = [
     "MIN_DAMPING_RATIO",
     "MAX_CROSSOVER_FRACTION",
 ]
+
 
 class _LazyControl:
     """python-control, imported on first use: the kernel imports this module, python-control is slow to import."""
@@ -654,6 +654,7 @@ def _frequency_grid(loop):
 
 def _crossings(loop, omega, f):
     """Frequencies [rad/s] where ``f(L(jω))`` changes sign on the grid `omega`, refined on the exact response."""
+    from scipy.optimize import brentq  # slow to import; only the analysis needs it
 
     def g(w):
         return f(_loop_response(loop, np.array([w])))[0]

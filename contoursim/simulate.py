@@ -14,13 +14,16 @@ commanded positions (:class:`~contoursim.traces.Trace`,
 """
 
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from . import estimators, kernel
+from ._version import __version__
 from .contour import exact_contour_error
+from .exceptions import ContoursimWarning
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
 from .model import as_model
@@ -51,7 +54,7 @@ class SimResult:
         exactly: the reference plus the volumetric (geometric) error of the
         machine and the model's geometric effects, or what is left of it
         after compensation [mm].
-    contour : ContourError or ContourEstimate or None
+    contour : contoursim.contour.ContourError or None
         Contour error of `tool_position`: exact, w.r.t. the reference path;
         for a measured reference (no path) the three-point estimate
         (:func:`contoursim.estimators.three_point`); ``None`` for a
@@ -76,6 +79,18 @@ class SimResult:
     def tracking_error(self):
         """Actual minus reference tool position at the same instant [mm], shape (N, d)."""
         return self.tool_position - self.trajectory.position
+
+    @property
+    def saturation(self):
+        """Fraction of the samples [0..1] in which each servo axis's current command was clipped at its limit.
+
+        Returns
+        -------
+        dict
+            Servo axis name -> fraction; 0 for an axis without a current limit.
+        """
+        fractions = self.servo_response.saturated.mean(axis=0)
+        return {axis: float(f) for axis, f in zip(self.machine.axes, fractions)}
 
     @property
     def volumetric_error(self):
@@ -117,14 +132,44 @@ class SimResult:
         axes = CARTESIAN[: self.trajectory.dim]
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
 
-    def save_csv(self, file, metadata=None, overwrite=False):
-        """Write the trace CSV (DESIGN.md contract) plus contour-error columns [µm] when there is a contour error."""
-        extra = {}
-        if self.contour is not None:
-            extra = {"contour_um": 1e3 * self.contour.magnitude, "contour_normal_um": 1e3 * self.contour.normal}
-        write_trace(file, self.to_trace(metadata), extra=extra, overwrite=overwrite)
+    def save_csv(self, file, metadata=None, overwrite=False, every=1):
+        """Write the trace CSV (DESIGN.md contract) with the contour error (if any) and the test proper.
 
+        Besides ``t`` [s] and the positions ``<axis>_ref``, ``<axis>`` [mm],
+        the columns ``contour`` (distance to the path) and ``contour_normal``
+        (its signed in-plane component, positive to the left of travel) [mm],
+        (without a contour error, as for a single-axis measured reference:
+        not there) and ``measuring``: 1 on the test proper (``trajectory.measuring``),
+        the rows the summary table's max and RMS are taken over. Positions and
+        contour error are written to the nm, ``t`` to the ns
+        (:func:`contoursim.traces.write_trace`). The metadata lines give the
+        contoursim version, machine, servo period, feed, sampling and units,
+        then `metadata`.
 
+        Parameters
+        ----------
+        file : str, Path or text file object
+            Destination, written atomically; see :func:`contoursim.traces.write_trace`.
+        metadata : dict, optional
+            Further ``# key: value`` lines (e.g. the path file).
+        overwrite : bool
+            Replace an existing file.
+        every : int
+            Write every `every`-th sample (1: all, at the servo period).
+        """
+        columns = ", ".join(f"{a}_ref, {a}" for a in CARTESIAN[: self.trajectory.dim])
+        contour = "" if self.contour is None else ", contour, contour_normal"
+        standard = {
+            "contoursim": __version__,
+            "machine": self.machine.name,
+            "servo_period_s": f"{self.machine.servo_period:g}",
+            "every_nth_sample": every,
+            "feed_mm_min": f"{60 * self.trajectory.feed:.6g}",
+            "units": f"t [s]; {columns}{contour} [mm]; measuring [1 = test proper, 0 = not]",
+        }
+        extra = {} if self.contour is None else {"contour": self.contour.magnitude, "contour_normal": self.contour.normal}
+        extra["measuring"] = self.trajectory.measuring
+        write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
 
 
 def measured_reference(trace, servo_period):
@@ -160,7 +205,7 @@ def measured_reference(trace, servo_period):
     ([0.0, 0.0015, 0.003], [3.0, 3.0, 3.0])
     """
     if not isinstance(trace, Trace):
-        raise ValueError(f"trace must be a Trace, got {type(trace).__name__}")
+        raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
     if abs(trace.dt - servo_period) <= 1e-3 * servo_period:
         t = trace.t[0] + servo_period * np.arange(trace.t.size)
         spline = CubicSpline(t, trace.reference)
@@ -180,7 +225,16 @@ def _reference(machine, reference, settle):
         reference = measured_reference(reference, machine.servo_period)
         settle = 0.0 if settle is None else settle
     elif not isinstance(reference, Trajectory):
-        raise ValueError(f"the reference must be a Trajectory or a Trace, got {type(reference).__name__}")
+        raise TypeError(f"the reference must be a Trajectory or a Trace, got {type(reference).__name__}")
+    else:
+        speed = reference.speed
+        if machine.max_feed is not None and speed.max() > machine.max_feed * (1 + 1e-9):
+            k = int(np.argmax(speed))
+            raise ValueError(
+                f"the trajectory reaches {60 * speed[k]:.6g} mm/min ({speed[k]:.6g} mm/s) at t = {reference.t[k]:.6g} s, "
+                f"above the machine's max feed {60 * machine.max_feed:.6g} mm/min: plan the path with a lower feed "
+                "(plan(..., max_feed=machine.max_feed) checks it)"
+            )
     if abs(reference.dt - machine.servo_period) > 1e-9 * machine.servo_period:
         raise ValueError(
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
@@ -195,14 +249,22 @@ def _commands(model, trajectory, strategies):
     """Axis commands of the interpolator after the strategies, shape (N, n_axes) each."""
     q, v, a = model.machine.axis_commands(trajectory)
     for strategy in strategies:
-        q = strategy.commands(q, trajectory.t)
+        q = strategy.commands(q, _elapsed(trajectory))
     return q, v, a
+
+
+def _elapsed(trajectory):
+    """Time since the reference's first sample [s], shape (N,): the clock of thermal drift and strategies."""
+    return trajectory.t - trajectory.t[0]
 
 
 def _actual(model, q, servo_position):
     """All axes' actual positions: the commands `q` with the servo axes at `servo_position` [mm, rad]."""
+    columns = model.machine.servo_columns
+    if np.array_equal(columns, np.arange(q.shape[1])):  # every axis is a servo axis, in order
+        return servo_position
     actual = q.copy()
-    actual[:, model.machine.servo_columns] = servo_position
+    actual[:, columns] = servo_position
     return actual
 
 
@@ -214,10 +276,11 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     model : Model or Machine
         What to simulate; a Machine is a model without effects.
     reference : Trajectory or Trace
-        A tool-tip reference in workpiece coordinates sampled at the
-        machine's servo period, or a measured trace whose commanded positions
+        A tool-tip reference in workpiece coordinates [mm] sampled at the
+        machine's servo period, its path speed [mm/s] not above the machine's
+        ``max_feed`` [mm/s]; or a measured trace whose commanded positions
         are the reference (:func:`measured_reference`: resampled to the servo
-        period where needed).
+        period where needed; what the machine did is not refused).
     strategies : sequence
         Compensation strategies applied in order to the axis commands; each
         has ``commands(q, t) -> q_corrected`` (e.g.
@@ -239,10 +302,24 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     UnstableLoopError
         An axis loop (with its servo-stage effects) is unstable or badly
         damped at this servo period.
+    TypeError
+        `model` is not a Model or a Machine, `reference` not a Trajectory or a Trace.
     ValueError
-        The trajectory's sampling differs from the servo period, the path
-        does not fit the machine's axes, or a reference to be held does not
-        end at rest.
+        The trajectory's sampling differs from the servo period, it is faster
+        than the machine's max feed, the path does not fit the machine's
+        axes, or a reference to be held does not end at rest.
+
+    Warns
+    -----
+    ContoursimWarning
+        An axis's current command hit its limit: the message names the axis
+        and the fraction of samples (see :attr:`SimResult.saturation`).
+
+    Notes
+    -----
+    Thermal drift, the machine's and the ``thermal_drift`` effects', runs
+    from the reference's first sample (a measured trace's clock may start
+    anywhere); strategies see that time too.
     """
     model = as_model(model)
     machine = model.machine
@@ -252,14 +329,23 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     servo = machine.servo_columns
     response = kernel.run(model.servos(), machine.servo_period, qd[:, servo], vd[:, servo], ad[:, servo],
                           effects=model.loop_effects())
-    tool = model.geometry.tool_position(_actual(model, q, response.position), trajectory.t, trajectory.dim)
-    static = model.geometry.tool_position(q, trajectory.t, trajectory.dim)
+    elapsed = _elapsed(trajectory)
+    tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
+    static = model.geometry.tool_position(q, elapsed, trajectory.dim)
     error = None
     if contour and trajectory.path is not None:
         error = exact_contour_error(trajectory, tool)
     elif contour and trajectory.dim > 1:
         error = estimators.three_point(trajectory.position, tool)
-    return SimResult(trajectory, machine, q, response, tool, static, error, tuple(strategies), model)
+    result = SimResult(trajectory, machine, q, response, tool, static, error, tuple(strategies), model)
+    clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
+    if clipped:
+        servos = model.servos()
+        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A)"
+                         for axis, f in clipped.items())
+        warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
+                      ContoursimWarning, stacklevel=2)
+    return result
 
 
 #: Largest kernel output one chunk of a batch may hold [bytes].
@@ -277,16 +363,18 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     finite-difference Jacobian of P parameters is one batch of P + 1 models.
     Variants with the same command-stage effects share one
     :func:`contoursim.kernel.run_batch` call, made in chunks of rows so that
-    the kernel's output stays below :data:`BATCH_CHUNK_BYTES`; each row then
+    the kernel's output stays below :data:`BATCH_CHUNK_BYTES`, and variants
+    that differ only in geometric effects share one kernel row; each row then
     goes through its own geometric stage exactly as :func:`simulate` does it,
     so row b equals ``simulate(models[b], reference, ...)`` bit for bit
     (with ``every > 1`` the kernel keeps every `every`-th sample and the
     geometric stage runs on those only: equal to the single run's samples
     to rounding, 1e-12 mm).
 
-    Unlike :func:`simulate`, the variants' loops are not checked for
-    stability (only the nominal machine's are, once, when it is loaded): a
-    variant far from the nominal one is the caller's business.
+    Unlike :func:`simulate`, only the nominal machines' loops are checked
+    for stability (:func:`contoursim.servo.check`, analysed once per servo
+    in a process), not the variants' (a ``gain_mismatch`` makes a new
+    servo): a variant far from the nominal one is the caller's business.
 
     Parameters
     ----------
@@ -304,7 +392,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         As for :func:`simulate`.
     every : int
         Keep the samples ``k = 0, every, 2·every, …`` only (M = ceil(N / every)),
-        to bound memory.
+        to bound memory. For a trace logged every k-th servo period,
+        ``every = k`` gives the trace's own instants.
     dtype : numpy dtype
         Of the returned arrays (``np.float32`` halves their memory; the
         simulation and the geometric stage run in float64).
@@ -312,12 +401,17 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     Returns
     -------
     dict
-        ``"t"`` (M,) [s] and each output asked for.
+        ``"t"`` (M,) [s], each output asked for, and ``"diverged_step"``
+        (B, n_servo): per variant and servo axis the first step whose state
+        was not finite (an unstable variant), -1 for none; a diverged
+        variant's ``tool_position`` is NaN throughout.
 
     Raises
     ------
     ValueError
         The variants do not share one structure; an unknown output.
+    UnstableLoopError
+        A nominal machine's loop is unstable or badly damped.
     """
     models = [as_model(m) for m in models]
     if not models:
@@ -335,31 +429,46 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                 or machine.servo_period != first.servo_period or dict(machine.work_offset) != dict(first.work_offset)):
             raise ValueError(f"models[{i}] has another structure than models[0] (axes, servo period, work offset or chain): "
                              "a batch runs variants of one machine")
+    dt, servo = first.servo_period, first.servo_columns
+    for machine in {id(m.machine): m.machine for m in models}.values():
+        for axis, nominal in machine.axes.items():
+            nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory = _reference(first, reference, settle)
     q, v, a = _commands(models[0], trajectory, strategies)
-    dt, servo = first.servo_period, first.servo_columns
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))
     width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
     result = {"t": trajectory.t[keep].copy()}
     result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in outputs})
+    result["diverged_step"] = np.empty((len(models), servo.size), np.int64)
     groups = {}
     for i, m in enumerate(models):
         groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * n_keep * servo.size))
-    t, q_kept = trajectory.t[keep], q[keep]
+    elapsed, q_kept = _elapsed(trajectory)[keep], q[keep]
     for rows in groups.values():
         qd, vd, ad = models[rows[0]].commands(q, v, a)
-        for start in range(0, len(rows), chunk):
-            part = rows[start : start + chunk]
-            packed = np.array([_packed(models[i], dt) for i in part])
+        # variants that differ only in their geometry share one kernel run
+        runs = {}
+        for i in rows:
+            packed = np.array(_packed(models[i], dt))
+            runs.setdefault(packed.tobytes(), (packed, []))[1].append(i)
+        distinct = list(runs.values())
+        for start in range(0, len(distinct), chunk):
+            part = distinct[start : start + chunk]
+            packed = np.array([p for p, _ in part])
             run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=("tool",), every=every)
-            for b, i in enumerate(part):
-                actual = _actual(models[i], q_kept, run["tool"][b])
-                if "axis_position" in result:
-                    result["axis_position"][i] = actual
-                if "tool_position" in result:
-                    result["tool_position"][i] = models[i].geometry.tool_position(actual, t, trajectory.dim)
+            for b, (_, same) in enumerate(part):
+                diverged = run["diverged_step"][b]
+                for i in same:
+                    result["diverged_step"][i] = diverged
+                    actual = _actual(models[i], q_kept, run["tool"][b])
+                    if "axis_position" in result:
+                        result["axis_position"][i] = actual
+                    if "tool_position" in result and (diverged >= 0).any():
+                        result["tool_position"][i] = np.nan  # an unstable variant: no tool position
+                    elif "tool_position" in result:
+                        result["tool_position"][i] = models[i].geometry.tool_position(actual, elapsed, trajectory.dim)
     return result
 
 

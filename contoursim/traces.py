@@ -6,21 +6,29 @@ increasing and uniform, and for each axis the pair ``<axis>_ref``, ``<axis>``
 [mm] for the axis sets ``x``, ``x, y`` or ``x, y, z``. ``*_ref`` are the
 commanded (interpolator) positions, the others the measured tool positions.
 Extra columns are ignored on reading.
+
+Values must be physically meaningful: positions within ±1e6 mm
+(:data:`MAX_POSITION`, a kilometre, far beyond any machine's travel) and
+times within ±1e9 s (:data:`MAX_TIME`, about 30 years), so that differences of
+positions stay exact to the nm and never overflow.
 """
 
 import io
 from collections import Counter
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from . import _validate
+from .config import read_text
 from .exceptions import TraceFormatError
+from .output import writing
 
 __all__ = ["Trace", "read_trace", "write_trace"]
 
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
+MAX_POSITION = 1e6  # [mm]: largest |position| in a trace
+MAX_TIME = 1e9  # [s]: largest |t| in a trace
 
 
 @dataclass(frozen=True)
@@ -30,11 +38,11 @@ class Trace:
     Parameters
     ----------
     t : ndarray, shape (N,)
-        Sample times [s], strictly increasing and uniform.
+        Sample times [s], strictly increasing and uniform, within ±:data:`MAX_TIME`.
     reference : ndarray, shape (N, d)
-        Commanded positions [mm].
+        Commanded positions [mm], within ±:data:`MAX_POSITION`.
     actual : ndarray, shape (N, d)
-        Measured tool positions [mm].
+        Measured tool positions [mm], within ±:data:`MAX_POSITION`.
     axes : tuple of str
         Axis names of the d columns: ``("x",)``, ``("x", "y")`` or ``("x", "y", "z")``.
     metadata : dict
@@ -48,13 +56,13 @@ class Trace:
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        t, dt = _validate.time_base("t", self.t)
+        t, dt = _validate.time_base("t", _validate.finite_array("t", self.t, ndim=1, limit=MAX_TIME))
         axes = tuple(self.axes)
         if axes not in AXIS_SETS:
             raise ValueError(f"axes must be one of {AXIS_SETS}, got {axes}")
         shape = (t.size, len(axes))
-        reference = _validate.finite_array("reference", self.reference, shape=shape)
-        actual = _validate.finite_array("actual", self.actual, shape=shape)
+        reference = _validate.finite_array("reference", self.reference, shape=shape, limit=MAX_POSITION)
+        actual = _validate.finite_array("actual", self.actual, shape=shape, limit=MAX_POSITION)
         for name, value in dict(t=t, reference=reference, actual=actual).items():
             value = np.array(value)  # a copy: the caller's arrays stay writeable
             value.flags.writeable = False
@@ -68,36 +76,71 @@ class Trace:
         return self.actual - self.reference
 
 
-def write_trace(file, trace, extra=None, overwrite=False):
+TIME_DECIMALS = 9
+"""Decimals of ``t`` in a written trace [s]: to the ns."""
+POSITION_DECIMALS = 6
+"""Decimals of positions (and other float columns) in a written trace [mm]: to the nm."""
+_CHUNK = 1 << 16  # rows formatted at once: bounds the formatter's memory
+
+
+def write_trace(file, trace, extra=None, overwrite=False, every=1):
     """Write `trace` as CSV in the measured-trace format.
+
+    Numbers are written in fixed point without trailing zeros: ``t`` to the
+    ns (:data:`TIME_DECIMALS`), positions and float `extra` columns to the nm
+    (:data:`POSITION_DECIMALS` decimals of a mm), integer and boolean `extra`
+    columns as whole numbers (``1``/``0``). A value that rounds to zero is
+    written ``0``, never ``-0`` or ``3.55e-12``.
 
     Parameters
     ----------
-    file : str or Path
-        Destination. An existing file is only replaced when `overwrite` is true.
+    file : str, Path or text file object
+        Destination. A file is written atomically (see
+        :func:`contoursim.output.atomic_write`); an existing one is only
+        replaced when `overwrite` is true.
     trace : Trace
         What to write.
     extra : dict of str -> ndarray, shape (N,), optional
-        Further columns (e.g. contour error); readers ignore them.
+        Further columns (e.g. contour error [mm]); readers ignore them.
     overwrite : bool
         Replace an existing file.
+    every : int
+        Write every `every`-th sample, starting with the first (1: all); the
+        time base stays uniform.
+
+    Raises
+    ------
+    FileExistsError
+        `file` exists and `overwrite` is false.
+    ValueError
+        An extra column has the wrong shape, is not finite or clashes with a
+        trace column; a value is too large to write to its resolution.
     """
-    file = Path(file)
-    if file.exists() and not overwrite:
-        raise FileExistsError(f"{file} exists; refusing to overwrite it")
-    columns = {"t": trace.t}
+    every = _validate.positive_int("every", every)
+    columns = {"t": (trace.t, TIME_DECIMALS)}
     for i, axis in enumerate(trace.axes):
-        columns[f"{axis}_ref"] = trace.reference[:, i]
-        columns[axis] = trace.actual[:, i]
+        columns[f"{axis}_ref"] = (trace.reference[:, i], POSITION_DECIMALS)
+        columns[axis] = (trace.actual[:, i], POSITION_DECIMALS)
     for name, values in (extra or {}).items():
         if name in columns:
             raise ValueError(f"extra column {name!r} clashes with a trace column")
-        columns[name] = _validate.finite_array(name, values, shape=(trace.t.size,))
-    header = "".join(f"# {key}: {value}\n" for key, value in trace.metadata.items())
-    with open(file, "w", encoding="utf-8", newline="") as out:
+        values = np.asarray(values)
+        whole = values.dtype.kind in "bui"
+        values = _validate.finite_array(name, values.astype(int) if values.dtype.kind == "b" else values, shape=(trace.t.size,))
+        columns[name] = (values, 0 if whole else POSITION_DECIMALS)
+    for name, (values, decimals) in columns.items():
+        largest = float(np.abs(values).max()) * 10.0**decimals
+        if largest >= 2.0**53:
+            raise ValueError(f"column {name!r}: {np.abs(values).max():g} is too large to write to 1e-{decimals}")
+    header = "".join(f"# {key}: {value}\n" for key, value in trace.metadata.items()) + ",".join(columns) + "\n"
+    values = [v[::every] for v, _ in columns.values()]
+    decimals = [d for _, d in columns.values()]
+    from ._fixedpoint import csv_rows  # numba, only when a trace is written
+
+    with writing(file, overwrite=overwrite) as out:
         out.write(header)
-        np.savetxt(out, np.column_stack(list(columns.values())), delimiter=",", fmt="%.12g",
-                   header=",".join(columns), comments="")
+        for start in range(0, values[0].size, _CHUNK):
+            out.write(csv_rows([v[start : start + _CHUNK] for v in values], decimals).decode("ascii"))
 
 
 def read_trace(file):
@@ -116,16 +159,13 @@ def read_trace(file):
     ------
     TraceFormatError
         Naming the file, line and column of the first problem: a missing
-        column, a non-numeric or non-finite cell, a ragged row, non-monotonic
-        or non-uniform time.
+        column (saying what the header holds), a non-numeric, non-finite or
+        out-of-range cell (see :data:`MAX_POSITION`, :data:`MAX_TIME`), a row
+        with more or fewer cells than the header, non-monotonic or non-uniform
+        time, text that is not UTF-8.
     """
     source = str(file)
-    try:
-        lines = Path(file).read_text(encoding="utf-8-sig").splitlines()  # -sig: a leading BOM (Excel) is dropped
-    except OSError as exc:
-        raise TraceFormatError(f"cannot read the file: {exc.strerror}", source) from None
-    except UnicodeDecodeError:
-        raise TraceFormatError("not a text file", source) from None
+    lines = read_text(file, TraceFormatError).splitlines()  # a leading BOM (Excel) is dropped
 
     metadata = {}
     first = 0
@@ -148,7 +188,7 @@ def read_trace(file):
 
     axes = tuple(a for a in ("x", "y", "z") if a in names or f"{a}_ref" in names)
     if "t" not in names:
-        raise fail("missing column 't' in the header")
+        raise fail(_header_problem(names))
     if axes not in AXIS_SETS:
         raise fail(f"the axes present ({', '.join(axes) or 'none'}) must be x, x+y or x+y+z")
     for axis in axes:
@@ -163,7 +203,8 @@ def read_trace(file):
         body = body[:-1]
     if len(body) < 2:
         raise fail(f"needs at least 2 data rows, found {len(body)}")
-    data = _parse_rows(body, len(names), index, names, lambda msg, row: fail(msg, header_line + 1 + row))
+    limits = np.array([MAX_TIME] + [MAX_POSITION] * (len(wanted) - 1))
+    data = _parse_rows(body, len(names), index, names, limits, lambda msg, row: fail(msg, header_line + 1 + row))
     try:
         _validate.time_base("column 't'", data[:, 0])
     except _validate.TimeStepError as exc:  # step k ends on data row k + 1
@@ -171,8 +212,28 @@ def read_trace(file):
     return Trace(data[:, 0], data[:, 1::2], data[:, 2::2], axes, metadata)
 
 
-def _parse_rows(body, width, index, names, fail):
-    """Parse the numeric rows; on any problem, name the first bad cell."""
+def _header_problem(names):
+    """What is wrong with a header that has no column 't', saying what was found and what is expected."""
+    expected = "expected comma-separated column names t, x_ref, x (then y_ref, y, z_ref, z), in lower case"
+    found = ",".join(names)
+    for separator, label in ((";", "semicolons"), ("\t", "tabs")):
+        if separator in found:
+            return f"the header {found!r} is separated by {label}; {expected}"
+    if any(name.lower() == "t" for name in names):
+        upper = [name for name in names if name != name.lower()]
+        return f"column names are case-sensitive: the header has {', '.join(map(repr, upper))}; {expected}"
+    return f"missing column 't' in the header {found!r}; {expected}"
+
+
+def _parse_rows(body, width, index, names, limits, fail):
+    """Parse the numeric rows; on any problem, name the first bad cell.
+
+    `limits` are the largest magnitudes allowed in the columns `index`.
+    """
+    cells = np.array([text.count(",") + 1 for text in body])
+    if np.any(cells != width):
+        row = int(np.argmax(cells != width))
+        raise fail(f"expected {width} cells (as in the header), found {cells[row]}", row)
     try:
         data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)
     except ValueError:
@@ -180,8 +241,6 @@ def _parse_rows(body, width, index, names, fail):
     if data is None or data.shape[0] != len(body):
         for row, text in enumerate(body):
             cells = text.split(",")
-            if len(cells) != width:
-                raise fail(f"expected {width} cells, found {len(cells)}", row)
             for col in index:
                 try:
                     float(cells[col])
@@ -192,4 +251,10 @@ def _parse_rows(body, width, index, names, fail):
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
         raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
+    bad = np.abs(data) > limits
+    if bad.any():
+        row, col = np.unravel_index(np.argmax(bad), data.shape)
+        unit = "s" if col == 0 else "mm"
+        raise fail(f"column '{names[index[col]]}': value {data[row, col]:g} is beyond ±{limits[col]:g} {unit}, "
+                   "not a position or time a trace can hold", row)
     return data

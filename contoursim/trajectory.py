@@ -31,9 +31,12 @@ class Trajectory:
         error is the distance to it. ``None`` for a reference known only by
         its samples (a measured trace).
     measuring : ndarray of bool, shape (N,), optional
-        Samples that belong to the test proper (e.g. the full circle of an
-        ISO 230-4 test, without its run-in and run-out arcs). All samples when
-        omitted.
+        The test proper: the samples whose reference lies on the path's
+        primitives with role ``"test"`` (:func:`contoursim.feed.sample`), e.g.
+        the data-collection circle of an ISO 230-4 test without its run-in,
+        overrun and run-out arcs. All samples when omitted. The one definition
+        the summary table, the trace CSV (column ``measuring``) and the polar
+        plot use.
     """
 
     t: np.ndarray
@@ -55,8 +58,9 @@ class Trajectory:
         acc = _validate.finite_array("acceleration", self.acceleration, shape=(n, d))
         s = _validate.finite_array("s", self.s, shape=(n,))
         measuring = np.ones(n, bool) if self.measuring is None else np.asarray(self.measuring, bool)
-        if measuring.shape != (n,):
-            raise ValueError(f"measuring must have shape ({n},), got {measuring.shape}")
+        if measuring.shape != (n,) or not measuring.any():
+            raise ValueError(f"measuring must have shape ({n},) and mark at least one sample, got {measuring.sum()} "
+                             f"of shape {measuring.shape}")
         for name, value in dict(t=t, position=pos, velocity=vel, acceleration=acc, s=s, measuring=measuring).items():
             value.flags.writeable = False
             object.__setattr__(self, name, value)
@@ -106,6 +110,11 @@ class Trajectory:
     def speed(self):
         """Path speed |v| [mm/s], shape (N,)."""
         return np.linalg.norm(self.velocity, axis=1)
+
+    @property
+    def feed(self):
+        """Highest path speed over the test proper (`measuring`) [mm/s]: the programmed feed where the plan reaches it."""
+        return float(self.speed[self.measuring].max())
 
     @property
     def tangent(self):

@@ -124,7 +124,7 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     if out_dir is not None:
         out = output_dir(out_dir)
         ideal = chain.tool_pose(q, t, ideal=True)[0]
-        files = _plot(chain, q, ideal, dp, sweep, values, out)
+        files = _plot(chain, ideal, dp, sweep, values, rotary, out)
         text += "\nplots: " + ", ".join(str(f) for f in files) + "\n"
     return text
 
@@ -155,12 +155,22 @@ def _span(v, rot):
     return f"{lo:g}..{hi:g}{'°' if rot else ' mm'}"
 
 
-def _plot(chain, q, ideal, dp, sweep, values, out):
-    """One figure per pair of swept axes (middle of the others): arrows and colour maps."""
-    import matplotlib
+_EXTREME_ASPECT = 5.0  # a plane whose sides differ more than this is drawn stretched, not to scale
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def _at(axis, value, rotary):
+    """``axis = value`` with its unit: mm, or degrees for a rotary axis (given in rad)."""
+    return f"{axis} = {np.rad2deg(value):g}°" if rotary else f"{axis} = {value:g} mm"
+
+
+def _plot(chain, ideal, dp, sweep, values, rotary, out):
+    """One figure per pair of swept axes (middle of the others): arrows and colour maps.
+
+    A plane is drawn to scale (equal aspect) unless its sides differ by more
+    than :data:`_EXTREME_ASPECT` (e.g. 4000 x 150 mm), where the panels are
+    stretched to be readable and say so. Colour bars are as tall as their plots.
+    """
+    from matplotlib.figure import Figure
 
     shape = tuple(len(v) for v in values)
     P = ideal.reshape(shape + (3,))
@@ -174,21 +184,28 @@ def _plot(chain, q, ideal, dp, sweep, values, out):
             index[j] = slice(None)
         Pp, Dp = P[tuple(index)], D[tuple(index)]
         if j is None:
-            fig, ax = plt.subplots(figsize=(7, 4), layout="constrained")
+            fig = Figure(figsize=(7, 4), layout="constrained")
+            ax = fig.add_subplot()
+            rot = rotary[sweep[0]]
             for c in range(3):
-                ax.plot(values[0], Dp[:, c], label=f"Δ{'xyz'[c]}")
-            ax.set_xlabel(f"axis {sweep[0]}")
+                ax.plot(np.rad2deg(values[0]) if rot else values[0], Dp[:, c], label=f"Δ{'xyz'[c]}")
+            ax.set_xlabel(f"axis {sweep[0]} [{'°' if rot else 'mm'}]")
             ax.set_ylabel("volumetric error [µm]")
-            ax.legend()
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
         else:
             spread = np.ptp(Pp.reshape(-1, 3), axis=0)
             u, w = np.argsort(spread)[::-1][:2]
             u, w = sorted((u, w))
             X, Y = Pp[..., u], Pp[..., w]
-            size = max(np.ptp(X), np.ptp(Y))
+            sides = sorted((np.ptp(X), np.ptp(Y)))
+            to_scale = sides[1] <= _EXTREME_ASPECT * sides[0]
+            scale_note = "" if to_scale else \
+                f"stretched, not to scale: {'xyz'[u]} spans {np.ptp(X):.4g} mm, {'xyz'[w]} {np.ptp(Y):.4g} mm"
+            ratio = np.ptp(Y) / np.ptp(X) if to_scale else 0.75  # of each panel's height to its width
+            fig = Figure(figsize=(11, min(9.0, 2 * (4.2 * ratio + 0.9) + 0.8)), layout="constrained")
             biggest = np.max(np.hypot(Dp[..., u], Dp[..., w])) * 1e-3
-            mag = magnification_for(size, biggest)
-            fig, axs = plt.subplots(2, 2, figsize=(11, 9), layout="constrained")
+            mag = magnification_for(sides[1] if to_scale else sides[0], biggest)
+            axs = fig.subplots(2, 2)
             ax = axs[0, 0]
             ax.plot(X, Y, color="0.8", lw=0.6)
             ax.plot(X.T, Y.T, color="0.8", lw=0.6)
@@ -196,21 +213,21 @@ def _plot(chain, q, ideal, dp, sweep, values, out):
             ax.plot(Xa, Ya, color="C3", lw=0.8)
             ax.plot(Xa.T, Ya.T, color="C3", lw=0.8)
             ax.quiver(X, Y, Dp[..., u], Dp[..., w], angles="xy", scale_units="xy", scale=1 / (mag * 1e-3), width=0.003)
-            ax.set_aspect("equal")
-            ax.set_title(f"error field, {'xyz'[u]}{'xyz'[w]} plane\narrows and deformed grid (red) magnified ×{mag:g}")
-            ax.set_xlabel(f"workpiece {'xyz'[u]} [mm]")
-            ax.set_ylabel(f"workpiece {'xyz'[w]} [mm]")
+            scale = f"magnified ×{mag:g}" if mag > 1 else "at true scale"
+            ax.set_title(f"error field in the {'xyz'[u]}{'xyz'[w]} plane [mm]\narrows and deformed grid (red) {scale}")
             for c, axc in zip(range(3), (axs[0, 1], axs[1, 0], axs[1, 1])):
                 m = axc.pcolormesh(X, Y, Dp[..., c], shading="gouraud", cmap="RdBu_r",
                                    vmin=-np.abs(Dp[..., c]).max(), vmax=np.abs(Dp[..., c]).max())
-                fig.colorbar(m, ax=axc, label=f"Δ{'xyz'[c]} [µm]")
-                axc.set_aspect("equal")
-                axc.set_title(f"Δ{'xyz'[c]}, range {Dp[..., c].min():+.2f} … {Dp[..., c].max():+.2f} µm")
-                axc.set_xlabel(f"workpiece {'xyz'[u]} [mm]")
-                axc.set_ylabel(f"workpiece {'xyz'[w]} [mm]")
+                fig.colorbar(m, cax=axc.inset_axes([1.03, 0.0, 0.04, 1.0]), label=f"Δ{'xyz'[c]} [µm]")
+                axc.set_title(f"Δ{'xyz'[c]} [µm]: {Dp[..., c].min():+.2f} … {Dp[..., c].max():+.2f}")
+            for a in axs.flat:
+                a.set_aspect("equal" if to_scale else "auto")
+                a.set_xlabel(f"workpiece {'xyz'[u]} [mm]")
+                a.set_ylabel(f"workpiece {'xyz'[w]} [mm]")
             others = [k for k in range(len(sweep)) if k not in (i, j)]
-            at = ", ".join(f"{sweep[k]} = {values[k][shape[k] // 2]:g}" for k in others)
-            fig.suptitle(f"{chain.name}: volumetric error, axes {sweep[i]}/{sweep[j]}" + (f" at {at}" if at else ""))
-        fig.savefig(name, dpi=90)
-        plt.close(fig)
+            at = ", ".join(_at(sweep[k], values[k][shape[k] // 2], rotary[sweep[k]]) for k in others)
+            fig.suptitle(f"{chain.name}: volumetric error, axes {sweep[i]}/{sweep[j]} swept" + (f" at {at}" if at else "")
+                         + (f"\n{scale_note}" if scale_note else ""))
+        with out.write(name.name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=90)
     return files

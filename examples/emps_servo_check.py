@@ -42,11 +42,11 @@ def compare(file=DATA):
     return -result.tracking_error[:, 0], -trace.tracking_error[:, 0]
 
 
-def main():
-    if not DATA.exists():
-        print(f"skipped: the EMPS data is not at {DATA} (it ships beside the repository, not with it)")
-        return
-    simulated, measured = compare()
+def main(file=DATA):
+    """Print the measured and simulated following error of the EMPS axis (data file `file`)."""
+    if not Path(file).exists():
+        raise SystemExit(f"the EMPS data is not at {file}: it ships beside the repository, not in it")
+    simulated, measured = compare(file)
     rms = lambda x: float(np.sqrt(np.mean(x**2)))  # noqa: E731
     print(f"following error RMS, measured : {rms(measured):.4f} mm")
     print(f"following error RMS, simulated: {rms(simulated):.4f} mm")

@@ -39,7 +39,7 @@ FILES = {
     "y": "y__report_target_y.md_ISO230.dat",
     "z": "z__report_z.md_ISO230.dat",
 }
-UM = 1e3  # [µm/mm]
+UM_PER_MM = 1e3  # [µm/mm]
 
 _LINE = re.compile(r"^([A-Z][A-Z0-9_]*)(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?=(.*)$")
 _ARRAYS = {"TGT_DATA": 1, "REF_DATA_FWD": 2, "REF_DATA_BWD": 2}  # name: number of indices
@@ -168,21 +168,22 @@ def axis_machine(folder, axis, table, travel):
         The machine TOML.
     chain : contoursim.multibody.MachineChain
     """
-    file = output_dir(folder).file(f"{axis}_iso230_2_axis.toml")
-    file.write_text(
-        f'name = "one-axis {axis.upper()} slide, ISO 230-2 table"\n'
-        f'tool = "{axis.upper()}"\n'
-        'workpiece = "bed"\n\n'
-        "[[body]]\n"
-        f'name = "{axis.upper()}"\n'
-        'parent = "bed"\n'
-        f'joint = "linear {axis}"\n'
-        f'axis = "{axis}"\n'
-        f"travel = [{travel[0]:g}, {travel[1]:g}]\n"
-        "[body.errors]\n"
-        f'table = "{table}"                 # measured positioning error d{axis}(q)\n',
-        encoding="utf-8",
-    )
+    folder = output_dir(folder)
+    file = folder.file(f"{axis}_iso230_2_axis.toml")
+    with folder.write(file.name) as stream:
+        stream.write(
+            f'name = "one-axis {axis.upper()} slide, ISO 230-2 table"\n'
+            f'tool = "{axis.upper()}"\n'
+            'workpiece = "bed"\n\n'
+            "[[body]]\n"
+            f'name = "{axis.upper()}"\n'
+            'parent = "bed"\n'
+            f'joint = "linear {axis}"\n'
+            f'axis = "{axis}"\n'
+            f"travel = [{travel[0]:g}, {travel[1]:g}]\n"
+            "[body.errors]\n"
+            f'table = "{table}"                 # measured positioning error d{axis}(q)\n'
+        )
     return file, chain_from_toml(TomlFile.read(file))
 
 
@@ -204,20 +205,19 @@ def positioning_error(chain, q):
     return chain.volumetric_error(np.asarray(q, float)[:, None])[0]
 
 
-def main(out=Path("contoursim-out")):
-    """Print the ISO 230-2 table of X, Y, Z; write error tables and one-axis machines into `out`."""
-    if not DATA.is_dir():
-        print(f"skipped: the ISO 230-2 data is not at {DATA} (it ships beside the repository, not with it)")
-        return
+def main(out=Path("contoursim-out"), data=DATA):
+    """Print the ISO 230-2 table of X, Y, Z (files in `data`); write error tables and one-axis machines into `out`."""
+    if not Path(data).is_dir():
+        raise SystemExit(f"the ISO 230-2 data is not at {data}: it ships beside the repository, not in it")
     out = output_dir(out)
     for axis, name in FILES.items():
-        figures = positioning_figures(read_iso230_dat(DATA / name))
+        figures = positioning_figures(read_iso230_dat(Path(data) / name))
         print(f"\n{axis.upper()} axis ({name}), deviation = measured - target [µm], ↑ = REF_DATA_FWD")
         print(f"{'target mm':>10} {'x̄↑':>8} {'x̄↓':>8} {'x̄':>8} {'B_i':>8} {'R↑_i':>7} {'R↓_i':>7}")
         columns = (figures.mean_up, figures.mean_down, figures.mean_bidirectional, figures.reversal)
         for i, target in enumerate(figures.targets):
-            means = " ".join(f"{UM * c[i]:8.1f}" for c in columns)
-            print(f"{target:10.1f} {means} {4 * UM * figures.s_up[i]:7.1f} {4 * UM * figures.s_down[i]:7.1f}")
+            means = " ".join(f"{UM_PER_MM * c[i]:8.1f}" for c in columns)
+            print(f"{target:10.1f} {means} {4 * UM_PER_MM * figures.s_up[i]:7.1f} {4 * UM_PER_MM * figures.s_down[i]:7.1f}")
         quoted = {
             "mean reversal B̄": figures.reversal_mean, "reversal B = max|B_i|": figures.reversal_max,
             "systematic E": figures.systematic, "range of x̄ M": figures.mean_range,
@@ -226,9 +226,10 @@ def main(out=Path("contoursim-out")):
             "drift cycle 1→n": figures.drift,
         }
         for label, value in quoted.items():
-            print(f"  {label:<24} {UM * value:8.1f} µm")
+            print(f"  {label:<24} {UM_PER_MM * value:8.1f} µm")
         table = f"{axis}_iso230_2.csv"
-        write_error_table(out.file(table), axis, figures, source=name, overwrite=True)  # replaces only its own file
+        with out.write(table) as stream:  # replaces only its own file
+            write_error_table(stream, axis, figures, source=name)
         travel = (figures.targets[0], figures.targets[-1])
         file, chain = axis_machine(out, axis, table, travel)
         q = np.linspace(*travel, 8 * (figures.targets.size - 1) + 1)  # the targets and 7 points between each pair
@@ -236,8 +237,8 @@ def main(out=Path("contoursim-out")):
         k = "xyz".index(axis)
         gap = np.abs(error[:, k] - np.interp(q, figures.targets, figures.mean_bidirectional)).max()
         off_axis = np.abs(np.delete(error, k, axis=1)).max()
-        print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM * gap:.1e} µm "
-              f"at {q.size} positions; off-axis error {UM * off_axis:.1e} µm")
+        print(f"  chain {file.name}: |d{axis}(q) - interpolated x̄| <= {UM_PER_MM * gap:.1e} µm "
+              f"at {q.size} positions; off-axis error {UM_PER_MM * off_axis:.1e} µm")
     print(f"\nerror tables and machines written to {out}/")
 
 

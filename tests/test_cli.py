@@ -1,9 +1,15 @@
 """The command line: the demo, simulate on job and path files, and what bad input gives."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from contoursim.cli import main
+from contoursim.simulate import SimResult
 from contoursim.traces import read_trace
 
 SMALL_PATH = """
@@ -46,15 +52,31 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
             assert (tmp_path / "out" / f"{run}_{kind}.png").stat().st_size > 10_000
         trace = read_trace(tmp_path / "out" / f"{run}.csv")
         assert trace.axes == ("x", "y")
-    assert (tmp_path / "out" / "iso230_4_circle_ccw_polar.png").exists()
+    assert (tmp_path / "out" / "iso230_4_circle_polar.png").stat().st_size > 10_000  # CCW and CW overlaid
     # the circle row: tracking ≈ v/Kp = (1000/60)/36 mm on the slower axis, contour far smaller
     row = next(line for line in table.splitlines() if line.startswith("iso230_4_circle_ccw"))
     tracking_max, _, contour_max, _, volumetric_max = map(float, row.split()[1:])
     assert volumetric_max == 0.0  # the demo machine has no geometric errors
     assert tracking_max == pytest.approx(1e3 * (1000 / 60) / 36, rel=0.02)
     assert contour_max < tracking_max / 10
-    # a second run reuses its own output directory
-    assert main(["demo", "--out", str(tmp_path / "out")]) == 0
+    # the CSV tells the same story: its contour column [mm] over the measuring rows gives the table's max
+    lines = (tmp_path / "out" / "iso230_4_circle_ccw.csv").read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    names = lines[header].split(",")
+    data = np.loadtxt(lines[header + 1:], delimiter=",")
+    measuring = data[:, names.index("measuring")] == 1
+    assert 0 < measuring.sum() < len(data)  # the test circle, without run-in, overruns, run-out and settling
+    assert f"{1e3 * data[measuring, names.index('contour')].max():.2f}" == f"{contour_max:.2f}"
+    assert "# units: t [s]; x_ref, x, y_ref, y, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]" in lines
+    # a second run reuses its own output directory; --every thins the CSV, not the table
+    assert main(["demo", "--out", str(tmp_path / "out"), "--every", "10"]) == 0
+    assert capsys.readouterr().out == table
+    thinned = read_trace(tmp_path / "out" / "iso230_4_circle_ccw.csv")
+    assert len(thinned.t) == -(-len(data) // 10) and thinned.dt == pytest.approx(10 * (data[1, 0] - data[0, 0]))
+    with pytest.raises(SystemExit) as exit_:
+        main(["demo", "--out", str(tmp_path / "out"), "--every", "0"])
+    assert exit_.value.code == 2
+    assert "--every: must be a whole number of samples, at least 1; got '0'" in capsys.readouterr().err
 
 
 def test_never_writes_into_a_users_directory(tmp_path, capsys):
@@ -182,3 +204,110 @@ def test_job_work_offset_moves_the_path_on_the_machine(tmp_path, capsys):
     job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { w = 1 }\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
     assert f"{job}, line 3: unknown key 'w' in [work_offset]" in capsys.readouterr().err
+
+
+def test_unwritable_output_gives_one_line(tmp_path, capsys, monkeypatch):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+
+    def denied(file, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(file))
+
+    monkeypatch.setattr("contoursim.output.open", denied, raising=False)  # a read-only folder, even for root
+    assert main(["simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [f"contoursim simulate: error: cannot write {tmp_path / 'o' / 'small.csv'}: "
+                                        "Permission denied"]
+
+
+def test_ctrl_c_gives_one_line_exit_130_and_no_half_written_file(tmp_path, capsys, monkeypatch):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    out = tmp_path / "out"
+
+    def interrupted(self, file, metadata=None, every=1):
+        file.write("t,x_ref,x\n0,0,0\n")  # a truncated trace that ends on a whole row
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(SimResult, "save_csv", interrupted)
+    assert main(["simulate", str(tmp_path / "small.toml"), "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("contoursim simulate: interrupted")
+    assert sorted(p.name for p in out.iterdir()) == [".contoursim-out"]  # nothing half-written, nothing listed
+    assert "small.csv" not in (out / ".contoursim-out").read_text()
+
+
+def test_real_gcode_runs_and_says_in_one_line_what_it_ignored(tmp_path, capsys):
+    (tmp_path / "part.nc").write_text("%\nO1234\nN10 G21 G90 G54\nN20 T1 M6\nN30 S12000 M3\nN40 G0 X0 Y0 M8\n"
+                                      "N50 G1 X2 F600\nN60 G2 X4 Y0 I1 J0\nN70 M30\n%\n")
+    assert main(["simulate", str(tmp_path / "part.nc"), "--out", str(tmp_path / "o")]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [f"contoursim simulate: warning: {tmp_path / 'part.nc'}: ignored "
+                                         "(no contour motion): O1234 G54 T1 M6 S12000 M3 M8"]
+    assert "part " in captured.out
+
+
+def test_each_kind_of_file_where_another_is_expected_says_what_was_expected(tmp_path, capsys):
+    job, path, machine = tmp_path / "job.toml", tmp_path / "path.toml", tmp_path / "m.toml"
+    job.write_text('path = "iso230_4_circle_ccw"\n')  # a job file that forgot its machine
+    path.write_text(SMALL_PATH)
+    machine.write_text(MACHINE.format(kp=40.0))
+    out = ["--out", str(tmp_path / "o")]
+    assert main(["simulate", str(job), *out]) == 2
+    assert f"{job}: a job file names its machine: add machine = " in capsys.readouterr().err
+    assert main(["simulate", "rounded_square", "--machine", str(path), *out]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: this is a path file, not a machine file; a machine file describes a machine: " in err
+    assert main(["simulate", str(machine), *out]) == 2
+    assert f"{machine}: this is a machine file, not a path file; a path file describes a path: " in capsys.readouterr().err
+    assert main(["simulate", "rounded_square", "--machine", str(job), *out]) == 2
+    assert f"{job}: this is a job file, not a machine file" in capsys.readouterr().err
+    job.write_text("")
+    assert main(["simulate", "rounded_square", "--machine", str(job), *out]) == 2
+    assert f"{job}: the file is empty; a machine file describes a machine" in capsys.readouterr().err
+    machine.write_bytes('# Maschine für Prüfung\nname = "x"\n'.encode("latin-1"))
+    assert main(["simulate", "rounded_square", "--machine", str(machine), *out]) == 2
+    assert f"{machine}, line 1: byte 0xFC is not UTF-8 text" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_saturation_is_a_warning_naming_run_axis_and_fraction(tmp_path, capsys):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp="40.0\ncurrent_limit = 0.01"))
+    assert main(["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"),
+                 "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("contoursim simulate: warning: small: the current command hit its "
+                                               "limit on axis x in ")
+    assert err[0].endswith("% of the samples (limit ±0.01 A): the errors include the saturation")
+
+
+@pytest.mark.parametrize("where", ["root", "elsewhere"])
+def test_the_command_as_a_user_runs_it(where, tmp_path):
+    """``python -m contoursim`` in a fresh process, from the repository root and from another folder."""
+    cwd = ROOT if where == "root" else tmp_path
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}  # this checkout's contoursim, as if installed
+    run = lambda *args: subprocess.run([sys.executable, "-m", "contoursim", *args], cwd=cwd, env=env,  # noqa: E731
+                                       capture_output=True, text=True, timeout=300)
+    helped = run("--help")
+    assert helped.returncode == 0 and "simulate" in helped.stdout and not helped.stderr
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    done = run("simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    assert "small " in done.stdout and not done.stderr
+    assert read_trace(tmp_path / "out" / "small.csv").axes == ("x", "y")
+    imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
+                              capture_output=True, text=True, timeout=60)
+    assert imported.stdout.strip() == str(ROOT / "contoursim" / "__init__.py")  # this checkout was tested
+
+
+def test_help_and_import_leave_the_heavy_libraries_unloaded():
+    """``contoursim --help`` and ``import contoursim`` answer at once: no python-control, scipy, numba or matplotlib."""
+    heavy = ("control", "scipy", "numba", "matplotlib")
+    code = ("import sys\nfrom contoursim.cli import main\nimport contoursim\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            f"print([m for m in {heavy!r} if m in sys.modules])\n"
+            "from contoursim import simulate, Machine\n"
+            "import contoursim.simulate\n"
+            "print(contoursim.simulate is simulate, callable(simulate), Machine.__name__)\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-2:] == ["[]", "True True Machine"]  # lazy names are the objects, not submodules

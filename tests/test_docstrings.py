@@ -37,14 +37,18 @@ def _documented(doc):
     return names
 
 
+def _own_init(cls):
+    """Whether a contoursim class in `cls`'s hierarchy defines its constructor."""
+    return any("__init__" in vars(c) or "__new__" in vars(c) for c in cls.__mro__ if c.__module__.startswith("contoursim"))
+
+
 @pytest.mark.parametrize("qualname, obj", OBJECTS, ids=[q for q, _ in OBJECTS])
 def test_parameters_are_documented(qualname, obj):
     doc = inspect.getdoc(obj) or ""
     assert doc, f"{qualname} has no docstring"
-    try:
-        signature = inspect.signature(obj)
-    except (TypeError, ValueError):
-        return
+    if inspect.isclass(obj) and issubclass(obj, BaseException) and not _own_init(obj):
+        return  # it takes the built-in exception's message: none of its parameters are ours
+    signature = inspect.signature(obj)  # every other public object has one: a failure here is a finding
     wanted = [p for p in signature.parameters if p not in ("self", "cls")]
     missing = [p for p in wanted if p not in _documented(doc)]
     assert not missing, f"{qualname}: parameters not documented: {missing}"

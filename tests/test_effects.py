@@ -12,7 +12,7 @@ from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
 from contoursim.servo import AxisServo
 from contoursim.simulate import measured_reference, simulate, simulate_batch
-from contoursim.traces import Trace
+from contoursim.traces import Trace, read_trace
 
 DT = 1e-3
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0)
@@ -51,6 +51,8 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     assert [(q.name, q.value, q.unit, q.vary) for q in p] == [
         ("amplitude_um", 2.0, "µm", True), ("period_mm", 10.0, "mm", False), ("phase_deg", 0.0, "deg", True)]
     assert Effect("squareness", "xy", angle_urad=-30.0).parameters[0].signed
+    same, other = Effect("backlash", "x", lost_motion_um=8.0), Effect("backlash", "x", lost_motion_um=8.0, feedback="scale")
+    assert len({same, Effect("backlash", "x", lost_motion_um=8.0), other}) == 2  # hashable, equal by value
 
 
 @pytest.mark.parametrize("args, kwargs, message", [
@@ -63,11 +65,19 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     (("squareness", "x"), {"angle_urad": 8.0}, "axis must be 2 different axis letters"),
     (("squareness", "xx"), {"angle_urad": 8.0}, "axis must be 2 different axis letters"),
     (("straightness", "x"), {"peak_um": 3.0, "error_direction": "x"}, "error_direction must be one of 'y', 'z'"),
-    (("noise", "x"), {"rms_um": 0.1, "seed": 1.5}, "seed must be a non-negative integer"),
-    (("backlash", "x"), {"lost_motion_um": "8"}, "lost_motion_um must be numeric"),
+    (("noise", "x"), {"rms_um": 0.1, "seed": -1}, "seed must be a non-negative integer"),
 ])
 def test_a_bad_effect_says_what_is_wrong(args, kwargs, message):
     with pytest.raises(ValueError, match=message):
+        Effect(*args, **kwargs)
+
+
+@pytest.mark.parametrize("args, kwargs, message", [
+    (("noise", "x"), {"rms_um": 0.1, "seed": 1.5}, "seed must be a non-negative integer"),
+    (("backlash", 1), {"lost_motion_um": 8.0}, "axis must be a string of axis letters"),
+])
+def test_an_effect_of_the_wrong_type_says_so(args, kwargs, message):
+    with pytest.raises(TypeError, match=message):
         Effect(*args, **kwargs)
 
 
@@ -234,12 +244,16 @@ def test_simulating_a_runs_own_trace_reproduces_the_run():
     np.testing.assert_allclose(replay.contour.magnitude[keep], run.contour.magnitude[keep], atol=1e-5)
 
 
-def test_a_measured_single_axis_run_needs_neither_rest_nor_settling():
+def test_a_measured_single_axis_run_needs_neither_rest_nor_settling(tmp_path):
     t = np.arange(300) * DT
     x = 2.0 * t + 0.1  # moving from the first sample to the last
     result = simulate(Model(Machine({"x": AxisServo(**AXIS)}, DT)), Trace(t, x[:, None], x[:, None], ("x",)))
     assert len(result.trajectory) == 300 and result.contour is None
     assert set(result.summary()) == {"tracking_max_um", "tracking_rms_um", "volumetric_max_um", "volumetric_rms_um"}
+    result.save_csv(tmp_path / "run.csv")
+    saved = read_trace(tmp_path / "run.csv")
+    assert saved.axes == ("x",)
+    np.testing.assert_allclose(saved.reference[:, 0], x, rtol=0, atol=1e-6)  # written to the nm
 
 
 # -- files -------------------------------------------------------------------------------------
@@ -287,3 +301,88 @@ def test_a_machine_file_with_effects_loads_as_a_model(tmp_path):
     file.write_text(text + '\n[[effect]]\nname = "backlash"\naxis = "w"\nlost_motion_um = 1\n')
     with pytest.raises(ConfigError, match="mill.toml, line .*axis must be one axis letter of x, y, z, got 'w'"):
         load_model(file)
+
+
+def test_thermal_drift_runs_from_the_start_of_a_measured_run():
+    t = 100.0 + np.arange(300) * DT  # the logger's clock started long before
+    xy = np.column_stack([2.0 * (t - t[0]), np.zeros_like(t)])
+    model = Model(MACHINE, (Effect("thermal_drift", "y", rate_um_per_min=60.0),))
+    result = simulate(model, Trace(t, xy, xy, ("x", "y")))
+    np.testing.assert_allclose(result.tool_position[:, 1], 1e-3 * (t - t[0]), rtol=1e-12, atol=1e-15)
+
+
+def test_the_command_line_runs_a_jobs_effects(tmp_path, capsys):
+    from contoursim.cli import main
+
+    job = tmp_path / "job.toml"
+    job.write_text('machine = "demo_mill"\npath = "iso230_4_circle_ccw"\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "plain")]) == 0
+    plain = capsys.readouterr().out
+    job.write_text(job.read_text() + '\n[[effect]]\nname = "squareness"\naxis = "xy"\nangle_urad = 200.0\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "skewed")]) == 0
+    skewed = capsys.readouterr().out
+    assert "effects: none" in plain and "effects: squareness.xy (angle_urad = 200)" in skewed
+    volumetric = [float(out.splitlines()[3].split()[-1]) for out in (plain, skewed)]
+    assert volumetric == [0.0, pytest.approx(200e-6 * 50.0 * 1e3, rel=1e-6)]  # |(0, −αx)| at x = ±R = 50 mm [µm]
+    job.write_text(job.read_text() + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 8\nfeedback = "linear"\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "bad")]) == 2
+    assert f"{job}, line 13: [[effect]] backlash.x: feedback must be one of 'motor', 'scale'" in capsys.readouterr().err
+
+
+def test_a_batch_on_a_coarser_trace_returns_the_traces_instants():
+    t = 2.0 + np.arange(200) * 5 * DT  # logged every fifth servo period
+    xy = np.column_stack([3.0 * np.cos(t), 3.0 * np.sin(t)])
+    trace = Trace(t, xy, xy, ("x", "y"))
+    batch = simulate_batch([MACHINE, Model(MACHINE, (Effect("backlash", "x", lost_motion_um=5.0),))], trace, every=5)
+    np.testing.assert_allclose(batch["t"], t, rtol=0, atol=1e-9)
+    single = simulate(MACHINE, trace)
+    assert np.array_equal(batch["tool_position"][0], single.tool_position[::5])
+
+
+@pytest.mark.parametrize("name", effect_names())
+def test_every_effect_is_realised_by_its_stage(name):
+    size = effect_kind(name).parameters[0]
+    effect = Effect(name, "xy" if name == "squareness" else "y", **{size.name: size.typical[1]})
+    model = Model(MACHINE, (effect,))
+    q = np.column_stack([np.linspace(0, 1, 20), np.linspace(0, 2, 20)])
+    changed = {
+        "command": lambda: not np.array_equal(model.commands(q, q, q)[0], q),
+        "servo": lambda: model.servos() != dict(MACHINE.axes),
+        "loop": lambda: model.loop_effects()["y"] != model.loop_effects()["x"],
+        "geometry": lambda: not np.array_equal(model.geometry.tool_position(q, np.arange(20.0), 2), q),
+    }
+    assert changed[effect.stage]()
+
+
+def test_geometric_effects_change_only_the_body_of_their_axis():
+    machine = load_machine("vertical_mill_3axis")
+    model = Model(machine, (Effect("straightness", "z", peak_um=3.0),))
+    assert model.effects[0].options["error_direction"] == "x"  # the default: the first other axis
+    changed = [a.name for a, b in zip(machine.chain.bodies, model.geometry.chain.bodies) if a is not b]
+    assert changed == ["Z"]
+    assert model.geometry.chain.bodies[4].motion[0].poly != machine.chain.bodies[4].motion[0].poly
+
+
+def test_a_batch_reports_an_unstable_variant_and_runs_the_others():
+    model = Model(MACHINE, (Effect("gain_mismatch", "x", kp_ratio=1.0), Effect("squareness", "xy", angle_urad=50.0),
+                            Effect("time_delay", "x", delay_s=5e-3, kind="feedback")))
+    variants = model.variants([{"time_delay.x.delay_s": 0.0}, {"gain_mismatch.x.kp_ratio": 10.0}])
+    reference = _circle(feed=10.0)  # 8,000 steps: the unstable loop (|λ| = 1.15) overflows
+    batch = simulate_batch(variants, reference)
+    assert batch["diverged_step"][0].tolist() == [-1, -1]
+    assert batch["diverged_step"][1, 0] > 0 and batch["diverged_step"][1, 1] == -1
+    assert np.isnan(batch["tool_position"][1]).all()
+    assert np.array_equal(batch["tool_position"][0], simulate(variants[0], reference).tool_position)
+
+
+def test_a_jobs_effects_add_to_and_replace_the_machine_files(tmp_path):
+    from contoursim.model import with_file_effects
+
+    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    file = tmp_path / "mill.toml"
+    file.write_text(text + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 4\n'
+                    '\n[[effect]]\nname = "scale_error"\naxis = "y"\nppm = 20\n')
+    job = TomlFile("job.toml", '[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 9\n'
+                               '\n[[effect]]\nname = "noise"\naxis = "z"\nrms_um = 0.2\n')
+    model = with_file_effects(load_model(file), job)
+    assert model.values() == {"scale_error.y.ppm": 20.0, "backlash.x.lost_motion_um": 9.0, "noise.z.rms_um": 0.2}

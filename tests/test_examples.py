@@ -1,36 +1,128 @@
-"""Every example script runs (examples never rot) and says what it claims."""
+"""Every example script runs (examples never rot) and prints what it claims.
 
+Examples that need the measured data beside the repository (../shared) get
+it through the ``real_data`` fixture: they fail in CI without it and skip with
+a reason elsewhere; run without it, the scripts themselves stop with a message
+saying where the data lives.
+"""
+
+import re
 import runpy
 import sys
 
-import numpy as np
 import pytest
 
 from conftest import ROOT
 
 from contoursim.output import output_dir
 
-EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
-JOBS = sorted((ROOT / "examples").glob("*.toml"))
+EXAMPLES = ROOT / "examples"
+JOBS = sorted(EXAMPLES.glob("*.toml"))
+CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py", "effects_gallery.py"}
 
 
-@pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
-def test_example_runs(script, tmp_path, monkeypatch):
+def _figure(text, pattern):
+    """The number the regular expression `pattern` captures in `text`."""
+    match = re.search(pattern, text)
+    assert match, f"{pattern!r} not in the output:\n{text}"
+    return float(match.group(1))
+
+
+def test_every_example_script_is_checked_here():
+    assert {p.name for p in EXAMPLES.glob("*.py")} == CHECKED
+
+
+def _readme_tour():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    return re.search(r"## API tour\n\n```python\n(.*?)```", readme, re.S).group(1)
+
+
+def test_api_tour_agrees_with_the_readme_prints_v_over_kp_and_runs_twice(tmp_path, monkeypatch, capsys):
+    tour = (EXAMPLES / "api_tour.py").read_text(encoding="utf-8")
+    script_lines = [line.strip() for line in tour.splitlines()]
+    readme_lines = [line.strip() for line in _readme_tour().splitlines() if line.strip()]
+    missing = [line for line in readme_lines if line not in script_lines and "output_dir(" not in line]
+    assert not missing, f"README lines not in examples/api_tour.py: {missing}"
+
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "argv", [str(script), str(tmp_path / "out")])
-    runpy.run_path(str(script), run_name="__main__")
+    for _ in range(2):  # the second run replaces its own files
+        exec(compile(_readme_tour(), "README.md", "exec"), {})
+        monkeypatch.setattr(sys, "argv", ["api_tour.py", str(tmp_path / "out")])
+        runpy.run_path(str(EXAMPLES / "api_tour.py"), run_name="__main__")
+    assert {"circle.csv", "circle_path.png"} <= {p.name for p in (tmp_path / "contoursim-out").iterdir()}
+    printed = capsys.readouterr().out
+    # the slower axis (y, Kp = 36 1/s) lags v/Kp behind at 3000 mm/min
+    assert _figure(printed, r"tracking_max_um:\s+([\d.]+)") == pytest.approx(1e3 * 50 / 36, rel=0.01)
+    assert _figure(printed, r"contour_max_um:\s+([\d.]+)") < _figure(printed, r"tracking_max_um:\s+([\d.]+)") / 5
+    assert _figure(printed, r"axis x: position-loop bandwidth ([\d.]+) Hz") > 0
 
 
-@pytest.mark.parametrize("script, written", [("api_tour.py", "api_tour_circle_path.png"), ("iso230_2_error_table.py", "x_iso230_2.csv")])
-def test_example_never_replaces_a_users_file(script, written, tmp_path, monkeypatch, request):
-    if script.startswith("iso230_2"):
-        request.getfixturevalue("real_data")  # that example needs the measured data
+def test_estimators_tour_prints_the_accuracy_the_readme_claims(capsys):
+    runpy.run_path(str(EXAMPLES / "estimators_tour.py"), run_name="__main__")
+    printed = capsys.readouterr().out
+    exact = _figure(printed, r"exact contour error: max ([\d.]+) µm")
+    assert exact == pytest.approx(98.71, abs=0.01)  # the demo's butterfly row in the README
+    assert _figure(printed, r"linear: max \|estimate - exact\| = ([\d.e+-]+) µm") > exact  # 1.7× max ε
+    for name in ("three_point", "newton"):
+        assert _figure(printed, rf"{name}: max \|estimate - exact\| = ([\d.e+-]+) µm") < 1e-4 * exact
+
+
+def test_examples_without_their_data_say_where_it_lives(tmp_path):
+    for script, arguments in (("iso230_2_error_table.py", (tmp_path / "out", tmp_path / "nodata")),
+                              ("emps_servo_check.py", (tmp_path / "nodata.mat",))):
+        with pytest.raises(SystemExit, match=f"data is not at {tmp_path / 'nodata'}.*: it ships beside the repository"):
+            runpy.run_path(str(EXAMPLES / script))["main"](*arguments)
+    assert not (tmp_path / "out").exists()
+
+
+def test_iso230_2_example_prints_the_ecmc_reports_figures(real_data, tmp_path, capsys):
+    from test_real_iso230_2 import REPORT  # the ecmc tool's report.md [mm], independent of this code
+
+    runpy.run_path(str(EXAMPLES / "iso230_2_error_table.py"))["main"](tmp_path / "out", real_data / "psi_ess_target_iso230_2")
+    printed = capsys.readouterr().out
+    for axis, block in zip("xyz", re.split(r"\n[XYZ] axis", printed)[1:]):
+        b_avg, b, m, a = (1e3 * v for v in REPORT[axis][:4])
+        printed_to_01 = dict(abs=0.05 + 0.006)  # printed to 0.1 µm; the report to 0.01 µm
+        assert _figure(block, r"mean reversal B̄\s+([-\d.]+) µm") == pytest.approx(-b_avg, **printed_to_01)  # labels swapped
+        assert _figure(block, r"reversal B = max\|B_i\|\s+([-\d.]+) µm") == pytest.approx(b, **printed_to_01)
+        assert _figure(block, r"range of x̄ M\s+([-\d.]+) µm") == pytest.approx(m, **printed_to_01)
+        assert _figure(block, r"accuracy A\s+([-\d.]+) µm") == pytest.approx(a, **printed_to_01)
+        assert _figure(block, r"interpolated x̄\| <= ([\d.e+-]+) µm") < 1e-6  # the chain reproduces the table
+    assert (tmp_path / "out" / "x_iso230_2.csv").exists()
+
+
+def test_emps_example_prints_the_measured_following_error(real_data, capsys):
+    runpy.run_path(str(EXAMPLES / "emps_servo_check.py"))["main"](real_data / "emps" / "DATA_EMPS.mat")
+    printed = capsys.readouterr().out
+    measured = _figure(printed, r"RMS, measured : ([\d.]+) mm")
+    assert measured == pytest.approx(0.578, abs=0.001)  # PROVENANCE.md's figure
+    assert _figure(printed, r"RMS, simulated: ([\d.]+) mm") == pytest.approx(measured, rel=0.05)
+    assert _figure(printed, r"difference\s+: ([\d.]+) µm") < 0.05 * 1e3 * measured
+
+
+def test_effects_gallery_prints_the_ballbar_sizes_of_the_closed_forms(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["effects_gallery.py", str(tmp_path / "out")])
+    runpy.run_path(str(EXAMPLES / "effects_gallery.py"), run_name="__main__")
+    printed = capsys.readouterr().out
+    radius = 25.0  # [mm]
+    closed_forms = {  # peak-to-peak radial deviation [µm], the same both ways
+        "backlash.x": 8.0,  # ±(lost motion / 2)·cos θ: the table lags by half the play either side of the motor
+        "squareness.xy": 150e-6 * radius * 1e3,  # −(αR/2)·sin 2θ
+        "scale_error.x": 100e-6 * radius * 1e3,  # R·k·cos²θ
+    }
+    for label, size in closed_forms.items():
+        for direction in ("radial deviation CCW", "p-p, CW"):
+            assert _figure(printed, rf"{re.escape(label)}\s+.*{direction}\s+([\d.]+) µm") == pytest.approx(size, rel=0.01)
+    assert (tmp_path / "out" / "effects_gallery.png").exists()
+
+
+def test_example_never_replaces_a_users_file(tmp_path, monkeypatch):
     out = output_dir(tmp_path / "out")  # a folder contoursim made ...
-    (tmp_path / "out" / written).write_text("mine")  # ... holding a user's file under a name the example writes
-    monkeypatch.setattr(sys, "argv", [script, str(out)])
-    with pytest.raises(FileExistsError, match=f"{written} exists and contoursim did not write it"):
-        runpy.run_path(str(ROOT / "examples" / script), run_name="__main__")
-    assert (tmp_path / "out" / written).read_text() == "mine"
+    (tmp_path / "out" / "circle.csv").write_text("mine")  # ... holding a user's file under a name the example writes
+    monkeypatch.setattr(sys, "argv", ["api_tour.py", str(out)])
+    with pytest.raises(FileExistsError, match="circle.csv exists and contoursim did not write it"):
+        runpy.run_path(str(EXAMPLES / "api_tour.py"), run_name="__main__")
+    assert (tmp_path / "out" / "circle.csv").read_text() == "mine"
 
 
 @pytest.mark.parametrize("job", JOBS, ids=[p.name for p in JOBS])
@@ -39,18 +131,3 @@ def test_example_job_runs(job, tmp_path, capsys):
 
     assert main(["simulate", str(job), "--out", str(tmp_path)]) == 0
     assert "contoursim simulate" in capsys.readouterr().out
-
-
-def test_emps_model_matches_the_measured_axis(real_data):
-    """The P-P loop rebuilt from EMPS's documented parameters reproduces its measured following error.
-
-    Independent reference: the benchmark's own measurement. The residual is
-    the Coulomb friction the nominal model leaves out (PROVENANCE: ≈0.02 mm
-    sign(v) term).
-    """
-    module = runpy.run_path(str(ROOT / "examples" / "emps_servo_check.py"))
-    simulated, measured = module["compare"](real_data / "emps" / "DATA_EMPS.mat")
-    rms = lambda x: np.sqrt(np.mean(x**2))  # noqa: E731
-    assert rms(measured) == pytest.approx(0.578, abs=0.001)  # PROVENANCE.md's figure
-    assert rms(simulated) == pytest.approx(rms(measured), rel=0.05)
-    assert rms(simulated - measured) < 0.05 * rms(measured)

@@ -99,7 +99,7 @@ def test_sampled_circle_lies_on_the_path_with_analytic_derivatives():
     assert traj.dim == 2 and np.all(np.diff(traj.t) == pytest.approx(dt))
     assert traj.s[-1] == path.length and traj.speed[-1] == 0.0
     on = traj.measuring
-    assert np.all(path.segment_index(traj.s[on]) == 1) and on.sum() == pytest.approx(2 * np.pi * radius / feed / dt, abs=2)
+    assert np.all(path.segment_index(traj.s[on]) == 2) and on.sum() == pytest.approx(2 * np.pi * radius / feed / dt, abs=2)
     np.testing.assert_allclose(np.linalg.norm(traj.position[on], axis=1), radius, atol=1e-9)
     # on the test circle (cruise): |a| = v^2 / R, velocity matches central differences
     np.testing.assert_allclose(np.linalg.norm(traj.acceleration[on], axis=1), feed**2 / radius, rtol=1e-9)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from contoursim.exceptions import ConfigError
+from contoursim.exceptions import ConfigError, ContoursimWarning
 from contoursim.gcode import read_gcode
 
 POCKET = """%
@@ -75,8 +75,16 @@ def test_arc_centre_is_moved_onto_the_bisector():
 
 @pytest.mark.parametrize("text, line, message", [
     ("G21\nG20 G1 X1 F100\n", 2, "inch programs are not supported"),
-    ("G1 X1 F100\nS1000 M3\n", 2, "unknown word S1000"),
-    ("G1 X1 F100\nG54\n", 2, "unknown word G54"),
+    ("G1 X1 F100\nE5\n", 2, "unknown word E5"),
+    ("G1 X1 F100\nG10 L2 P1 X0\n", 2, "unknown word L2"),
+    ("G1 X1 F100\nG7\n", 2, "unknown word G7"),
+    ("G1 X1 F100\nG41 D1 X2\n", 2, "cutter radius compensation \\(G41\\) is not supported"),
+    ("G1 X1 F100\nG95 X2 F0.1\n", 2, "feed per revolution"),
+    ("G1 X1 F100\nM98 P1000\n", 2, "subprogram calls \\(M98\\)"),
+    ("G1 X1 F100\nG1 X2 P3\n", 2, "P belongs to a dwell"),
+    ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 2, "G28/G30/G53\\) between feed moves is not supported \\(next feed move on line 3"),
+    ("G0 X10 Y0\nG2 X20 Y0 F100\n", 2, "the arc centre is missing: give I/J \\(relative to the arc's start\\) or R"),
+    ("G18 G0 X10 Y0\nG2 X20 Y0 J5 F100\n", 2, "the arc centre is missing: give I/K"),
     ("G0 X1\n\nG1 X2\n", 3, "missing F before the first feed move"),
     ("G0 X10\nG2 X0 Y10.1 I-10 F100\n", 2, "start radius 10 mm and end radius 10.1 mm differ"),
     ("G1 X1 F100\nG1 X2 I3\n", 2, "only belong to arc moves"),
@@ -97,3 +105,51 @@ def test_errors_name_the_file(tmp_path):
     with pytest.raises(ConfigError, match="part.nc, line 2: missing F") as info:
         read_gcode(file)
     assert info.value.source == str(file)
+
+
+REAL = """%
+O1234 (POCKET FINISH)
+N10 G21 G17 G40 G49 G80 G90 G94
+N20 G91 G28 Z0
+N30 G90 G54 T1 M6
+N40 S12000 M3
+N50 G0 G43 H1 Z50. M8
+N60 G0 X-30. Y0
+N70 G1 Y-12. F600
+N80 G3 X-22. Y-20. I8. J0
+N90 G4 P500 ; dwell 0.5 s (X would be the time too, not a move)
+N100 G04 X0.5
+N110 G1 X22.
+N120 G0 Z50. M9
+N130 M5
+N140 G91 G28 Z0
+N150 M30
+%
+"""
+
+
+def test_a_real_program_reads_and_lists_what_it_ignored():
+    words = "O1234 G28 T1 M6 G54 S12000 M3 H1 M8 G43".split() + ["G4 dwell", "M9", "M5"]
+    with pytest.warns(ContoursimWarning) as record:
+        program = read_gcode(REAL)
+    assert [str(w.message) for w in record] == [f"<gcode>: ignored (no contour motion): {' '.join(words)}"]
+    assert program.ignored == tuple(words)
+    # G91 in the G28 block stays modal: G90 on N30 restores absolute; the dwell's X is a time, not a move
+    assert program.lines.tolist() == [9, 10, 13]
+    np.testing.assert_allclose(program.path.start, [-30, 0, 50])
+    np.testing.assert_allclose(program.path.end, [22, -20, 50])
+
+
+def test_a_program_that_ignores_nothing_warns_nothing(recwarn):
+    read_gcode("G0 X0 Y0\nG1 X10 F600\n")
+    assert not recwarn.list
+
+
+def test_latin1_comment_and_byte_order_mark_are_read(tmp_path):
+    (tmp_path / "l1.nc").write_bytes("(Kontur für Prüfteil)\nG0 X0 Y0\nG1 X10 F600\n".encode("latin-1"))
+    (tmp_path / "bom.nc").write_bytes("G0 X0 Y0\nG1 X10 F600 (µm)\n".encode("utf-8-sig"))
+    for name in ("l1.nc", "bom.nc"):
+        np.testing.assert_allclose(read_gcode(tmp_path / name).path.end, [10, 0, 0])
+    with pytest.raises(ConfigError, match=f"{tmp_path / 'l1.nc'}, line 3: cannot read 'Gü'"):
+        (tmp_path / "l1.nc").write_bytes("G0 X0 Y0\nG1 X10 F600\nGü\n".encode("latin-1"))
+        read_gcode(tmp_path / "l1.nc")

@@ -53,7 +53,7 @@ def test_error_free_machine_leaves_commands_unchanged():
 
 
 def test_bad_arguments():
-    with pytest.raises(ValueError, match="chain must be a MachineChain"):
+    with pytest.raises(TypeError, match="chain must be a MachineChain"):
         GeometricCompensation("vertical_mill_3axis")
     with pytest.raises(ValueError, match="tol must be positive"):
         GeometricCompensation(load_machine("diamond_lathe"), tol=0)

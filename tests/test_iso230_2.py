@@ -31,7 +31,7 @@ import pytest
 from contoursim.errormotion import read_error_table
 from contoursim.iso230_2 import PositioningTest, positioning_figures, write_error_table
 
-UM = 1e3  # [µm/mm]
+UM_PER_MM = 1e3  # [µm/mm]
 TARGETS = np.array([0.0, 10.0, 20.0])
 UP_UM = np.array([[3, 4, 5], [8, 10, 12], [-1, 2, 5]], float)
 DOWN_UM = np.array([[-2, 0, 2], [6, 7, 8], [4, 5, 6]], float)
@@ -39,19 +39,19 @@ HAND = 1e-9  # [µm]: the figures are exact; this is round-off of mm values near
 
 
 def hand_test():
-    return PositioningTest(TARGETS, TARGETS[:, None] + UP_UM / UM, TARGETS[:, None] + DOWN_UM / UM)
+    return PositioningTest(TARGETS, TARGETS[:, None] + UP_UM / UM_PER_MM, TARGETS[:, None] + DOWN_UM / UM_PER_MM)
 
 
 def test_per_target_figures_by_hand():
     f = positioning_figures(hand_test())
     np.testing.assert_array_equal(f.targets, TARGETS)
-    np.testing.assert_allclose(UM * f.mean_up, [4, 10, 2], rtol=0, atol=HAND)
-    np.testing.assert_allclose(UM * f.mean_down, [0, 7, 5], rtol=0, atol=HAND)
-    np.testing.assert_allclose(UM * f.s_up, [1, 2, 3], rtol=0, atol=HAND)
-    np.testing.assert_allclose(UM * f.s_down, [2, 1, 1], rtol=0, atol=HAND)
-    np.testing.assert_allclose(UM * f.reversal, [4, 3, -3], rtol=0, atol=HAND)
-    np.testing.assert_allclose(UM * f.mean_bidirectional, [2, 8.5, 3.5], rtol=0, atol=HAND)
-    np.testing.assert_allclose(UM * f.deviation_down, DOWN_UM, rtol=0, atol=HAND)
+    np.testing.assert_allclose(UM_PER_MM * f.mean_up, [4, 10, 2], rtol=0, atol=HAND)
+    np.testing.assert_allclose(UM_PER_MM * f.mean_down, [0, 7, 5], rtol=0, atol=HAND)
+    np.testing.assert_allclose(UM_PER_MM * f.s_up, [1, 2, 3], rtol=0, atol=HAND)
+    np.testing.assert_allclose(UM_PER_MM * f.s_down, [2, 1, 1], rtol=0, atol=HAND)
+    np.testing.assert_allclose(UM_PER_MM * f.reversal, [4, 3, -3], rtol=0, atol=HAND)
+    np.testing.assert_allclose(UM_PER_MM * f.mean_bidirectional, [2, 8.5, 3.5], rtol=0, atol=HAND)
+    np.testing.assert_allclose(UM_PER_MM * f.deviation_down, DOWN_UM, rtol=0, atol=HAND)
 
 
 @pytest.mark.parametrize(
@@ -69,7 +69,7 @@ def test_per_target_figures_by_hand():
     ],
 )
 def test_axis_figures_by_hand(name, by_hand):
-    assert UM * getattr(positioning_figures(hand_test()), name) == pytest.approx(by_hand, abs=HAND)
+    assert UM_PER_MM * getattr(positioning_figures(hand_test()), name) == pytest.approx(by_hand, abs=HAND)
 
 
 def test_bidirectional_repeatability_term_can_decide():
@@ -78,9 +78,9 @@ def test_bidirectional_repeatability_term_can_decide():
     # 2s↑ + 2s↓ + |B_i| = 2 + 4 + 4, above every 4s (R↑ = R↓ = 8).
     up = UP_UM.copy()
     up[2] = [1, 2, 3]
-    f = positioning_figures(PositioningTest(TARGETS, TARGETS[:, None] + up / UM, TARGETS[:, None] + DOWN_UM / UM))
-    assert UM * f.repeatability == pytest.approx(10, abs=HAND)
-    assert UM * max(f.repeatability_up, f.repeatability_down) == pytest.approx(8, abs=HAND)
+    f = positioning_figures(PositioningTest(TARGETS, TARGETS[:, None] + up / UM_PER_MM, TARGETS[:, None] + DOWN_UM / UM_PER_MM))
+    assert UM_PER_MM * f.repeatability == pytest.approx(10, abs=HAND)
+    assert UM_PER_MM * max(f.repeatability_up, f.repeatability_down) == pytest.approx(8, abs=HAND)
 
 
 def test_results_are_read_only():
@@ -127,7 +127,7 @@ def test_error_table_reads_back_as_the_mean_bidirectional_deviation(tmp_path):
     assert list(read_error_table(file)) == ["dy"]
     position, dy = read_error_table(file)["dy"]
     np.testing.assert_array_equal(position, TARGETS)
-    np.testing.assert_allclose(UM * dy, [2, 8.5, 3.5], rtol=0, atol=HAND)  # x̄_i by hand [µm]
+    np.testing.assert_allclose(UM_PER_MM * dy, [2, 8.5, 3.5], rtol=0, atol=HAND)  # x̄_i by hand [µm]
 
 
 def test_error_table_refuses_to_overwrite(tmp_path):
@@ -138,7 +138,7 @@ def test_error_table_refuses_to_overwrite(tmp_path):
         write_error_table(file, "x", f)
     assert file.read_text() == "kept\n"
     write_error_table(str(file), "x", f, overwrite=True)
-    assert read_error_table(file)["dx"][1] == pytest.approx(np.array([2, 8.5, 3.5]) / UM, abs=HAND / UM)
+    assert read_error_table(file)["dx"][1] == pytest.approx(np.array([2, 8.5, 3.5]) / UM_PER_MM, abs=HAND / UM_PER_MM)
 
 
 @pytest.mark.parametrize("axis, figures, error", [("a", None, ValueError), ("X", None, ValueError), ("x", "table", TypeError)])

@@ -196,7 +196,7 @@ def test_compensator_must_be_jitted():
     def python_step(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce):
         pass
 
-    with pytest.raises(ValueError, match="numba"):
+    with pytest.raises(TypeError, match="numba"):
         Compensator(python_step, np.zeros(1), np.zeros(1))
 
 
@@ -216,9 +216,9 @@ def test_reference_shapes_and_values_are_checked():
         run([servo, servo], DT, pos, pos, bad)
     with pytest.raises(ValueError, match="dt must be positive"):
         run([servo, servo], -DT, pos, pos, pos)
-    with pytest.raises(ValueError, match=r"servos\['y'\] must be an AxisServo"):
+    with pytest.raises(TypeError, match=r"servos\['y'\] must be an AxisServo"):
         run([servo, "fast"], DT, pos, pos, pos)
-    with pytest.raises(ValueError, match="compensator must be a Compensator"):
+    with pytest.raises(TypeError, match="compensator must be a Compensator"):
         run([servo, servo], DT, pos, pos, pos, compensator=offset_and_count)
 
 
@@ -228,3 +228,23 @@ def test_loop_problems_name_the_axis():
         run({"x": axis(), "c": axis(kp=2000.0)}, 2e-4, pos, pos, pos)
     with pytest.raises(ValueError, match="dt = 0.005 s is too long for the velocity loop of axis 'x'"):
         run([axis(), axis()], 5e-3, pos, pos, pos)
+
+
+@njit
+def push(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce):
+    dforce[0] = params[0]
+
+
+def test_compensator_force_correction_cancels_a_known_force():
+    # The force correction enters as drive current dforce/kf: it cancels an offset force of the same size,
+    # and alone it shifts a P-P axis at rest by F/(kf·kv·kp) (the velocity loop's current balances it).
+    from contoursim.kernel import LoopEffects
+
+    force, servo = 50.0, axis(kp=40.0)
+    ref = np.zeros((30000, 1))
+    plain = run([servo], DT, ref, ref, ref)
+    compensated = run([servo], DT, ref, ref, ref, compensator=Compensator(push, np.zeros(1), np.array([force])),
+                      effects={"x": LoopEffects(offset_N=-force)})  # fmt: skip
+    np.testing.assert_allclose(compensated.position, plain.position, rtol=0, atol=1e-12)
+    pushed = run([servo], DT, ref, ref, ref, compensator=Compensator(push, np.zeros(1), np.array([force])))
+    assert pushed.position[-1, 0] == pytest.approx(force / (KF * KV / 1000 * 40.0), rel=1e-6)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from contoursim import kernel
+from contoursim.exceptions import UnstableLoopError
 from contoursim.kernel import MAX_DELAY_SAMPLES, NPAR, LoopEffects, pack, run, run_batch
 from contoursim.servo import AxisServo
 
@@ -413,7 +414,8 @@ def test_batch_row_equals_single_run_bit_for_bit():
         np.testing.assert_array_equal(decimated["tool"][b], single.position[::7].astype(np.float32))
         np.testing.assert_array_equal(decimated["current"][b], single.current[::7].astype(np.float32))
     np.testing.assert_array_equal(decimated["t"], np.arange(refs[0].shape[0])[::7] * DT)
-    assert set(decimated) == {"t", "tool", "current", "saturated_count"}
+    assert set(decimated) == {"t", "tool", "current", "saturated_count", "diverged_step"}
+    assert (batch["diverged_step"] == -1).all()
     assert batch["saturated_count"][:, 1].min() > 0  # the limit is reached: anti-windup is exercised
 
 
@@ -441,18 +443,22 @@ def test_importing_the_kernel_does_not_import_python_control():
         (dict(backlash_mm=-0.001), "backlash_mm"),
         (dict(backlash_feedback="table"), "backlash_feedback"),
         (dict(coulomb_N=float("nan")), "coulomb_N"),
-        (dict(asymmetry_N="10"), "asymmetry_N"),
         (dict(stribeck_velocity_mm_s=0.0), "stribeck_velocity_mm_s"),
         (dict(mode_freq_hz=-5.0), "mode_freq_hz"),
         (dict(mode_damping_ratio=1.0), "mode_damping_ratio"),
         (dict(mode_mass_ratio=0.0), "mode_mass_ratio"),
         (dict(noise_mm=-1.0), "noise_mm"),
         (dict(seed=-1), "seed"),
-        (dict(seed=1.5), "seed"),
     ],
 )
 def test_bad_effects_name_the_parameter(kw, message):
     with pytest.raises(ValueError, match=message):
+        LoopEffects(**kw)
+
+
+@pytest.mark.parametrize("kw, message", [(dict(asymmetry_N="10"), "asymmetry_N"), (dict(seed=1.5), "seed")])
+def test_wrong_types_of_effects_are_type_errors(kw, message):
+    with pytest.raises(TypeError, match=message):
         LoopEffects(**kw)
 
 
@@ -466,16 +472,55 @@ def test_bad_run_and_batch_arguments():
     ref = np.zeros((10, 1))
     with pytest.raises(ValueError, match="effects name axis 'y', which is not one of the axes x"):
         run([axis()], DT, ref, ref, ref, effects={"y": LoopEffects()})
-    with pytest.raises(ValueError, match="effects must be a LoopEffects"):
+    with pytest.raises(TypeError, match="effects must be a LoopEffects"):
         run([axis()], DT, ref, ref, ref, effects={"x": dict(backlash_mm=0.01)})
     rows = pack(axis(), DT)[None, None, :]
-    with pytest.raises(ValueError, match=r"rows must have shape \(B, n_axes, 62\)"):
+    with pytest.raises(ValueError, match=r"rows must have shape \(B, n_axes, 63\)"):
         run_batch(rows[..., :-1], DT, ref, ref, ref)
     with pytest.raises(ValueError, match="outputs must name signals from tool"):
         run_batch(rows, DT, ref, ref, ref, outputs=("position",))
-    with pytest.raises(ValueError, match="every must be a positive integer"):
+    with pytest.raises(ValueError, match="every must be positive"):
         run_batch(rows, DT, ref, ref, ref, every=0)
+    with pytest.raises(TypeError, match="every must be an integer"):
+        run_batch(rows, DT, ref, ref, ref, every=2.0)
     with pytest.raises(ValueError, match="dtype must be float64 or float32"):
         run_batch(rows, DT, ref, ref, ref, dtype=np.int32)
     with pytest.raises(ValueError, match=r"ref_vel must have shape \(10, 1\)"):
         run_batch(rows, DT, ref, ref[:5], ref)
+
+
+def test_diverging_variants_are_reported():
+    ref = np.zeros((80000, 1))  # the delayed loop grows by about 1e12 per 0.2 s: inf within 8 s
+    ref[1:] = 0.01
+    with pytest.raises(UnstableLoopError, match=r"simulation of axis 'x' diverged by t = .* s \(step \d+\)"):
+        run([axis()], DT, ref, np.zeros_like(ref), np.zeros_like(ref),
+            effects={"x": LoopEffects(feedback_delay_s=MAX_DELAY_SAMPLES * DT)})  # fmt: skip
+    rows = np.array([[pack(axis(), DT)], [pack(axis(kv=100 * KV), DT)]])  # pack does not check: kv far too high
+    result = run_batch(rows, DT, ref, np.zeros_like(ref), np.zeros_like(ref))
+    assert result["diverged_step"][0, 0] == -1 and result["diverged_step"][1, 0] > 0
+    assert np.isfinite(result["tool"][0]).all()
+
+
+# --- the cheap stability check of a packed variant --------------------------------------------
+
+
+@pytest.mark.parametrize("extra", [dict(), dict(ti=None), dict(**ELECTRICAL), dict(kp=2000.0)])
+def test_spectral_radius_equals_python_control_closed_loop_poles(extra):
+    servo = axis(**extra)
+    want = np.abs(servo.discretize(DT).closed_loop.poles()).max()
+    assert kernel.spectral_radius(pack(servo, DT)) == pytest.approx(want, abs=1e-12)
+
+
+@pytest.mark.parametrize("delay", [30.0, 37.5, 45.0])
+def test_spectral_radius_with_delay_is_the_simulated_growth_rate(delay):
+    # A loop made unstable by the feedback delay: its simulated oscillation grows by the radius per step.
+    row = pack(axis(), DT, LoopEffects(feedback_delay_s=delay * DT))
+    rho = kernel.spectral_radius(row)
+    assert rho > 1.0
+    ref = np.full((12000, 1), 1e-6)
+    ref[0] = 0.0
+    x = run_batch(row[None, None], DT, ref, np.zeros_like(ref), np.zeros_like(ref))["tool"][0, :, 0] - 1e-6
+    window, k1, k2 = 500, 6000, 11000
+    growth = (np.abs(x[k2 : k2 + window]).max() / np.abs(x[k1 : k1 + window]).max()) ** (1 / (k2 - k1))
+    assert growth == pytest.approx(rho, rel=2e-4)
+    assert kernel.spectral_radius(pack(axis(), DT, LoopEffects(feedback_delay_s=3 * DT))) < 1.0

@@ -65,14 +65,27 @@ def test_helix_closed_form():
 
 def test_iso230_4_circle_geometry():
     path = paths.iso230_4_circle(50.0, center=(10.0, 0.0), direction="cw")
-    assert path.roles == ("run-in", "test", "run-out")
-    assert path.breaks[2] - path.breaks[1] == pytest.approx(2 * np.pi * 50, rel=1e-15)
-    np.testing.assert_allclose(path.start[:2], [35.0, 25.0], atol=1e-12)  # (R/2, +R/2) for CW
-    np.testing.assert_allclose(path.primitives[1].start[:2], [60.0, 0.0], atol=1e-12)
-    np.testing.assert_allclose(path.end[:2], [35.0, -25.0], atol=1e-12)
+    assert path.roles == ("run-in", "run-in", "test", "run-out", "run-out")
+    assert path.breaks[3] - path.breaks[2] == pytest.approx(2 * np.pi * 50, rel=1e-15)
+    np.testing.assert_allclose(np.diff(path.breaks)[[1, 3]], np.pi / 4 * 50, rtol=1e-14)  # 45° overruns
+    # CW: the run-in arc (radius R/2, 90°) joins the circle 45° before the test's start point (R, 0)
+    join = np.array([10.0, 0.0]) + 50 * np.array([np.cos(np.pi / 4), np.sin(np.pi / 4)])
+    np.testing.assert_allclose(path.primitives[1].start[:2], join, atol=1e-12)
+    np.testing.assert_allclose(path.primitives[2].start[:2], [60.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(path.start[:2], [10.0, 25 * np.sqrt(2)], atol=1e-12)  # 90° on from the join, radius 25
+    np.testing.assert_allclose(path.end[:2], [10.0, -25 * np.sqrt(2)], atol=1e-12)
     np.testing.assert_allclose(path.corner_angles(), 0.0, atol=1e-7)  # tangential joins
-    s = np.linspace(path.breaks[1], path.breaks[2], 9)
+    s = np.linspace(path.breaks[1], path.breaks[4], 9)
     np.testing.assert_allclose(np.linalg.norm(path.evaluate(s)[0][:, :2] - [10, 0], axis=1), 50.0, rtol=1e-14)
+    test = path.test_circle()
+    assert test is path.primitives[2] and test.sweep == pytest.approx(-2 * np.pi) and test.radius == 50.0
+    bare = paths.iso230_4_circle(50.0, overrun=0.0)
+    assert bare.roles == ("run-in", "test", "run-out")
+    np.testing.assert_allclose(bare.start[:2], [25.0, -25.0], atol=1e-12)
+    assert paths.circle((0, 0), 5.0).test_circle() is None  # no primitive with role "test"
+    assert paths.helix((0, 0, 0), 5.0, 1.0, 1, role="test").test_circle() is None  # not a flat circle
+    with pytest.raises(PathError, match="overrun must be at most π"):
+        paths.iso230_4_circle(50.0, overrun=4.0)
 
 
 def test_polyline_blends_are_tangent_fillets():

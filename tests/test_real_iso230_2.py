@@ -27,7 +27,7 @@ from contoursim.iso230_2 import positioning_figures, write_error_table
 
 EXAMPLE = runpy.run_path(str(ROOT / "examples" / "iso230_2_error_table.py"))
 FOLDER = "psi_ess_target_iso230_2"
-UM = 1e3  # [µm/mm]
+UM_PER_MM = 1e3  # [µm/mm]
 
 
 def figures_of(real_data, axis):
@@ -58,12 +58,12 @@ def test_figures_match_provenance(real_data, axis):
     # B_i = x̄↑ − x̄↓ is negative: the slide stops short in the direction it
     # comes from (lost motion). PROVENANCE quotes the magnitude.
     assert np.all(s.reversal < 0)
-    assert UM * abs(s.reversal_mean) == pytest.approx(ref["B"][0], abs=ref["B"][1])
-    assert UM * s.systematic == pytest.approx(ref["E"][0], abs=ref["E"][1])
-    assert UM * max(s.repeatability_up, s.repeatability_down) == pytest.approx(ref["R"][0], abs=ref["R"][1])
+    assert UM_PER_MM * abs(s.reversal_mean) == pytest.approx(ref["B"][0], abs=ref["B"][1])
+    assert UM_PER_MM * s.systematic == pytest.approx(ref["E"][0], abs=ref["E"][1])
+    assert UM_PER_MM * max(s.repeatability_up, s.repeatability_down) == pytest.approx(ref["R"][0], abs=ref["R"][1])
     if ref["B_range"]:
         (lo_min, lo_max), (hi_min, hi_max) = ref["B_range"]
-        b = UM * np.abs(s.reversal)
+        b = UM_PER_MM * np.abs(s.reversal)
         assert lo_min <= b.min() < lo_max and hi_min <= b.max() < hi_max
 
 
@@ -86,7 +86,8 @@ def test_figures_match_the_ecmc_report(real_data, axis):
 def test_chain_reproduces_the_mean_bidirectional_deviation(real_data, tmp_path, axis):
     s = figures_of(real_data, axis)
     out = output_dir(tmp_path)
-    write_error_table(out.file("table.csv"), axis, s, source=EXAMPLE["FILES"][axis])
+    with out.write("table.csv") as stream:
+        write_error_table(stream, axis, s, source=EXAMPLE["FILES"][axis])
     _, chain = EXAMPLE["axis_machine"](out, axis, "table.csv", (s.targets[0], s.targets[-1]))
     k = "xyz".index(axis)
 

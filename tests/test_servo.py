@@ -186,7 +186,6 @@ def test_check_accepts_typical_axes():
         (dict(current_limit=0.0), "current_limit"),
         (dict(vff=1.5), "vff"),
         (dict(aff=-0.1), "aff"),
-        (dict(kv="fast"), "kv"),
         (dict(resistance=1.0), "inductance"),
         (dict(inductance=5e-3, resistance=1.0, ti_current=1e-3), "kc"),
         (dict(inductance=-5e-3, resistance=1.0, kc=10.0, ti_current=1e-3), "inductance"),
@@ -195,6 +194,11 @@ def test_check_accepts_typical_axes():
 def test_bad_parameters_name_the_parameter(kw, name):
     with pytest.raises(ValueError, match=name):
         axis(**kw)
+
+
+def test_a_wrong_type_is_a_type_error():
+    with pytest.raises(TypeError, match="kv must be a number, got 'fast'"):
+        axis(kv="fast")
 
 
 def test_mass_is_required():

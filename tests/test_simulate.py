@@ -1,13 +1,17 @@
 """The whole pipeline (path -> servo kernel -> tool -> contour error) against independent references."""
 
+import warnings
+
 import control as ct
 import numpy as np
 import pytest
 
 from contoursim import paths
+from contoursim.exceptions import ContoursimWarning
 from contoursim.feed import plan, sample
 from contoursim.traces import read_trace
 from contoursim.machine import Machine
+from contoursim.plotting import circular_deviation
 from contoursim.servo import AxisServo
 from contoursim.simulate import simulate
 
@@ -98,11 +102,13 @@ def test_a_3d_path_needs_three_axes():
 
 def test_saved_trace_follows_the_csv_contract(tmp_path):
     _, result, _, _ = _circle_run(40.0, 40.0, radius=2.0, feed=5.0)
-    result.save_csv(tmp_path / "run.csv", metadata={"machine": "test"})
+    result.save_csv(tmp_path / "run.csv", metadata={"path": "circle"})
     trace = read_trace(tmp_path / "run.csv")
-    assert trace.axes == ("x", "y") and trace.metadata == {"machine": "test"}
-    np.testing.assert_allclose(trace.reference, result.trajectory.position, atol=1e-10)
-    np.testing.assert_allclose(trace.actual, result.tool_position, atol=1e-10)
+    assert trace.axes == ("x", "y")
+    assert trace.metadata["path"] == "circle" and trace.metadata["servo_period_s"] == f"{DT:g}"
+    assert float(trace.metadata["feed_mm_min"]) == pytest.approx(60 * 5.0)
+    np.testing.assert_allclose(trace.reference, result.trajectory.position, rtol=0, atol=0.5e-6 + 1e-12)
+    np.testing.assert_allclose(trace.actual, result.tool_position, rtol=0, atol=0.5e-6 + 1e-12)
     with pytest.raises(FileExistsError):
         result.save_csv(tmp_path / "run.csv")
 
@@ -171,6 +177,11 @@ def test_squareness_enters_the_trace_and_geometric_compensation_removes_it():
     np.testing.assert_allclose(fixed.contour.magnitude, plain.contour.magnitude, atol=1e-9)
     # squareness moves y by α·x: the largest static error on the test circle is α·R
     assert skewed.summary()["volumetric_max_um"] == pytest.approx(1e3 * alpha * radius, rel=1e-3)
+    # a ballbar sees the ellipse: circularity (max - min radial deviation) α·R; equal servo axes only
+    # shrink the circle uniformly, so without the error (or compensated) the circle stays round
+    assert circular_deviation(skewed)["circularity"] == pytest.approx(1e3 * alpha * radius, rel=0.01)
+    assert circular_deviation(plain)["circularity"] < 0.01 * 1e3 * alpha * radius
+    assert circular_deviation(fixed)["circularity"] < 0.01 * 1e3 * alpha * radius
     assert plain.summary()["volumetric_max_um"] == 0.0
 
 
@@ -196,3 +207,44 @@ def test_paths_are_placed_at_the_work_offset_and_kept_inside_the_travel():
     lathe = load_machine("diamond_lathe")
     with pytest.raises(ValueError, match=r"linear axes \(x, z\) cannot move the tool along the path"):
         lathe.axis_commands(sample(path, plan(path, feed=20.0, accel=1000.0), lathe.servo_period))
+
+
+def test_saturation_is_reported_by_axis_and_fraction():
+    """A current limit below what the path's acceleration needs must clip; a generous one must not.
+
+    The ramp up to feed needs a force m·a = 300 kg · 2 m/s² = 600 N, i.e. 0.64 A at
+    942 N/A (plus the damping's 0.5 N·s/mm · v). At 0.2 A the x axis cannot follow;
+    at 20 A (30× the need) nothing clips.
+    """
+    path = paths.line((0, 0), (20, 0))
+    trajectory = sample(path, plan(path, feed=40.0, accel=2000.0), DT)
+    axes = lambda limit: {"x": AxisServo(current_limit=limit, **AXIS), "y": AxisServo(**AXIS)}  # noqa: E731
+    with pytest.warns(ContoursimWarning) as record:
+        starved = simulate(Machine(axes(0.2), DT), trajectory)
+    fraction = starved.saturation["x"]
+    assert starved.saturation["y"] == 0.0 and 0 < fraction < 1
+    clipped = np.abs(starved.servo_response.current[:, 0]) >= 0.2 * (1 - 1e-12)
+    assert fraction == pytest.approx(clipped.mean())
+    assert [str(w.message) for w in record] == [
+        f"the current command hit its limit on axis x in {100 * fraction:.3g} % of the samples (limit ±0.2 A): "
+        "the errors include the saturation"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ample = simulate(Machine(axes(20.0), DT), trajectory)
+    assert ample.saturation == {"x": 0.0, "y": 0.0}
+    # unclipped, the lag is v/Kp = 1 mm; clipped, the axis falls further behind
+    assert ample.summary()["tracking_max_um"] == pytest.approx(1e3 * 40.0 / 40.0, rel=0.02)
+    assert starved.summary()["tracking_max_um"] > 1.1 * ample.summary()["tracking_max_um"]
+
+
+def test_the_api_refuses_a_path_faster_than_the_machine_allows_like_the_cli():
+    machine = Machine({"x": AxisServo(**AXIS), "y": AxisServo(**AXIS)}, DT, max_feed=5000 / 60)  # [mm/s]
+    path = paths.line((0, 0), (50, 0))
+    fast = sample(path, plan(path, feed=6000 / 60, accel=2000.0), DT)
+    with pytest.raises(ValueError, match=r"the trajectory reaches 6000 mm/min \(100 mm/s\) at t = .* s, above the "
+                                         r"machine's max feed 5000 mm/min"):
+        simulate(machine, fast)
+    with pytest.raises(ValueError, match=r"feed 100 mm/s \(6000 mm/min, segment 0\) exceeds max_feed"):
+        plan(path, feed=6000 / 60, accel=2000.0, max_feed=machine.max_feed)
+    at_limit = sample(path, plan(path, feed=5000 / 60, accel=2000.0), DT)
+    assert simulate(machine, at_limit).trajectory.speed.max() == pytest.approx(5000 / 60)

@@ -16,13 +16,58 @@ def _trace(n=50, axes=("x", "y")):
 @pytest.mark.parametrize("axes", [("x",), ("x", "y"), ("x", "y", "z")])
 def test_round_trip(tmp_path, axes):
     trace = _trace(axes=axes)
-    write_trace(tmp_path / "a.csv", trace, extra={"contour_um": np.zeros(50)})
+    write_trace(tmp_path / "a.csv", trace, extra={"contour": np.zeros(50)})
     back = read_trace(tmp_path / "a.csv")
     assert back.axes == axes
     assert back.metadata == {"machine": "test"}
     np.testing.assert_allclose(back.t, trace.t, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(back.actual, trace.actual, rtol=1e-11)
-    np.testing.assert_allclose(back.tracking_error, 1e-3, rtol=1e-8)
+    # positions are written to the nm: off by at most half a nm
+    np.testing.assert_allclose(back.actual, trace.actual, rtol=0, atol=0.5e-6 + 1e-12)
+    np.testing.assert_allclose(back.tracking_error, 1e-3, rtol=0, atol=1e-6 + 1e-12)
+
+
+def _python_fixed(value, decimals):
+    """Python's own correctly rounded fixed point, trailing zeros and the sign of zero dropped."""
+    text = f"{value:.{decimals}f}"
+    text = text.rstrip("0").rstrip(".") if "." in text else text
+    return "0" if text in ("-0", "") else text
+
+
+def test_numbers_are_fixed_point_like_pythons_format(tmp_path):
+    rng = np.random.default_rng(7)
+    t = np.arange(20_000) * 2e-4
+    x = np.concatenate([rng.normal(0, 500, 19_990), [0.0, -0.0, -3.55e-12, 1e-6, -1e-6, 4.9e-7, 123.4560004, -1.4e-6, 999.9999996, -2.5]])
+    flag = rng.random(t.size) < 0.5
+    write_trace(tmp_path / "f.csv", Trace(t, x[:, None], -x[:, None], ("x",)), extra={"flag": flag, "e": x / 7})
+    lines = (tmp_path / "f.csv").read_text().splitlines()
+    assert lines[0] == "t,x_ref,x,flag,e"
+    cells = [line.split(",") for line in lines[1:]]
+    assert [c[0] for c in cells] == [_python_fixed(v, 9) for v in t]
+    assert [c[1] for c in cells] == [_python_fixed(v, 6) for v in x]
+    assert [c[2] for c in cells] == [_python_fixed(-v, 6) for v in x]
+    assert [c[3] for c in cells] == ["1" if f else "0" for f in flag]
+    assert [c[4] for c in cells] == [_python_fixed(v, 6) for v in x / 7]
+    assert cells[-8][1:3] == ["0", "0"] and cells[-7][1:3] == ["0.000001", "-0.000001"]  # -3.55e-12, 1e-6
+
+
+def test_every_nth_sample(tmp_path):
+    trace = _trace(n=50)
+    write_trace(tmp_path / "e.csv", trace, extra={"k": np.arange(50)}, every=7)
+    back = read_trace(tmp_path / "e.csv")
+    np.testing.assert_allclose(back.t, trace.t[::7], rtol=0, atol=1e-15)
+    assert back.dt == pytest.approx(7e-3)
+    with pytest.raises(ValueError, match="every must be at least 1"):
+        write_trace(tmp_path / "z.csv", trace, every=0)
+    assert not (tmp_path / "z.csv").exists()
+
+
+def test_values_too_large_for_their_resolution_are_refused(tmp_path):
+    trace = Trace(np.arange(3.0), np.zeros((3, 1)), np.zeros((3, 1)), ("x",))
+    with pytest.raises(ValueError, match="column 'e': 1e\\+10 is too large to write to 1e-6"):
+        write_trace(tmp_path / "big.csv", trace, extra={"e": np.full(3, 1e10)})
+    with pytest.raises(ValueError, match="column 't': 1e\\+08 is too large to write to 1e-9"):
+        write_trace(tmp_path / "late.csv", Trace(1e8 + np.arange(3.0), trace.reference, trace.actual, ("x",)))
+    assert not (tmp_path / "big.csv").exists() and not (tmp_path / "late.csv").exists()
 
 
 def test_refuses_to_overwrite(tmp_path):
@@ -51,7 +96,16 @@ def test_reads_metadata_and_ignores_extra_columns(tmp_path):
         ("t,y_ref,y\n0,0,0\n0.001,1,1\n", 1, "x, x+y or x+y+z"),
         ("t,x_ref,x\n0,0,0\n0.001,abc,1\n", 3, "column 'x_ref': 'abc' is not a number"),
         ("t,x_ref,x\n0,0,0\n0.001,1,nan\n", 3, "column 'x': value nan is not finite"),
-        ("t,x_ref,x\n0,0,0\n0.001,1\n", 3, "expected 3 cells, found 2"),
+        ("t,x_ref,x\n0,0,0\n0.001,1\n", 3, "expected 3 cells (as in the header), found 2"),
+        ("t,x_ref,x\n0,0,0\n0.001,1,1,7\n", 3, "expected 3 cells (as in the header), found 4"),
+        ("t,x_ref,x\n0,0,0\n0.001,1e308,1\n", 3, "column 'x_ref': value 1e+308 is beyond ±1e+06 mm"),
+        ("t,x_ref,x\n0,0,0\n0.001,1,-2e6\n", 3, "column 'x': value -2e+06 is beyond ±1e+06 mm"),
+        ("t,x_ref,x\n0,0,0\n1e300,1,1\n", 3, "column 't': value 1e+300 is beyond ±1e+09 s"),
+        ("t;x_ref;x\n0;0;0\n0.001;1;1\n", 1, "the header 't;x_ref;x' is separated by semicolons; expected "
+                                               "comma-separated column names t, x_ref, x"),
+        ("T,X_REF,X\n0,0,0\n0.001,1,1\n", 1, "column names are case-sensitive: the header has 'T', 'X_REF', 'X'; "
+                                              "expected comma-separated column names t, x_ref, x"),
+        ("time,x_ref,x\n0,0,0\n0.001,1,1\n", 1, "missing column 't' in the header 'time,x_ref,x'; expected"),
         ("# c\nt,x_ref,x\n0,0,0\n0.002,1,1\n0.001,1,1\n", 5, "column 't' must be strictly increasing"),
         # steps 1, 1, 2, 1 ms: step 2 (rows 2 -> 3) is off, row 3 is on line 1 + 1 + 3
         ("t,x_ref,x\n0,0,0\n0.001,1,1\n0.002,1,1\n0.004,1,1\n0.005,1,1\n", 5, "column 't' must be uniformly sampled: step 2"),
@@ -76,6 +130,18 @@ def test_header_only_file_is_refused_without_a_numpy_warning(tmp_path):
         warnings.simplefilter("error")
         with pytest.raises(TraceFormatError, match="line 2: needs at least 2 data rows, found 0"):
             read_trace(tmp_path / "h.csv")
+
+
+def test_text_that_is_not_utf8_names_file_and_line(tmp_path):
+    (tmp_path / "l1.csv").write_bytes("# Messung, Maschine Nr. 3\n# Prüfling: Kreis\nt,x_ref,x\n".encode("latin-1"))
+    with pytest.raises(TraceFormatError, match=f"{tmp_path / 'l1.csv'}, line 2: byte 0xFC is not UTF-8 text"):
+        read_trace(tmp_path / "l1.csv")
+
+
+def test_trace_refuses_positions_no_machine_has():
+    t = np.arange(3) * 1e-3
+    with pytest.raises(ValueError, match=r"actual holds 1e\+308 at index \(1, 0\), beyond ±1e\+06"):
+        Trace(t, np.zeros((3, 1)), [[0.0], [1e308], [0.0]], ("x",))
 
 
 def test_byte_order_mark_before_the_header_is_accepted(tmp_path):

@@ -12,7 +12,7 @@ from contoursim import _validate
 @pytest.mark.parametrize("value", ["40", b"40", True, np.True_])
 def test_scalar_checks_refuse_text_and_booleans(check, value):
     # float("40") == 40.0 and float(True) == 1.0: the checks must not let them through
-    with pytest.raises(ValueError, match=f"kp must be a number, got {value!r}"):
+    with pytest.raises(TypeError, match=f"kp must be a number, got {value!r}"):
         check("kp", value)
 
 
@@ -23,7 +23,7 @@ def test_scalar_checks_take_numbers():
 
 @pytest.mark.parametrize("value", ["1.5", ["1", "2"], [True, False], np.array([1.0 + 2.0j]), np.array([1.0, "a"], object)])
 def test_array_check_refuses_text_booleans_and_complex(value):
-    with pytest.raises(ValueError, match="travel must be numeric"):
+    with pytest.raises(TypeError, match="travel must be numeric"):
         _validate.finite_array("travel", value)
 
 

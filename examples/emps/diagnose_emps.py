@@ -32,13 +32,14 @@ DATA = HERE.parents[2] / "shared" / "data" / "real" / "emps" / "DATA_EMPS.mat"
 REFERENCE_FORCE_N, REFERENCE_OFFSET_N = 20.39, 3.16  # Fc, and −offset of the benchmark's equation
 
 
-def convert(mat, file):
-    """Write DATA_EMPS.mat as a trace CSV [s, mm]; returns the file."""
+def convert(mat, out, name="emps.csv"):
+    """Write DATA_EMPS.mat as the trace CSV `name` [s, mm] into the output folder `out`; returns its path."""
     d = scipy.io.loadmat(mat, squeeze_me=True)
     trace = Trace(d["t"], 1e3 * d["qg"][:, None], 1e3 * d["qm"][:, None], ("x",),
                   {"source": "EMPS benchmark DATA_EMPS.mat (Janot, Gautier, Brunot 2019)", "x": "motor encoder qm"})
-    write_trace(file, trace, overwrite=True)
-    return file
+    with out.write(name) as stream:
+        write_trace(stream, trace)
+    return out.path / name
 
 
 def main(out=Path("contoursim-out"), data=DATA):
@@ -46,10 +47,11 @@ def main(out=Path("contoursim-out"), data=DATA):
         print(f"skipped: the EMPS data is not at {data} (it ships beside the repository, not with it)")
         return None
     out = output_dir(out)
-    trace = read_trace(convert(data, out.file("emps.csv")))
+    trace = read_trace(convert(data, out))
     result = diagnose(trace, load_model(HERE / "emps_axis.toml"), progress=lambda line: print(line, file=sys.stderr))
     print(result.report())
-    out.file("emps_report.json").write_text(result.to_json() + "\n", encoding="utf-8")
+    with out.write("emps_report.json") as stream:
+        stream.write(result.to_json() + "\n")
     save_figures(result, out)
     friction = next((e for e in result.effects if e.name == "coulomb_friction"), None)
     if friction is not None:
