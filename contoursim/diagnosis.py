@@ -13,10 +13,11 @@ The workflow (:func:`diagnose`):
 3. **Refit the nominal model**: real machines differ from their nominal
    model by a few % in masses, damping and gains, and a measuring instrument
    has its own zero. These nuisance parameters — one position-gain scale
-   shared by all axes (a per-axis one would absorb a ``gain_mismatch``);
-   per axis the velocity-loop gain (with the mass, the velocity loop's
-   bandwidth), the mass where acceleration feedforward uses it and the
-   feedforward fraction where there is one; and a constant offset per axis
+   shared by all axes (a per-axis one would absorb a ``gain_mismatch``),
+   and likewise one velocity-feedforward fraction where there is one; per
+   axis the velocity-loop gain (with the mass, the velocity loop's
+   bandwidth) and the mass where acceleration feedforward uses it; and a
+   constant offset per axis
    (the instrument's zero) — act almost linearly on the trace. Their
    sensitivities (one :func:`~contoursim.simulate.simulate_batch` call of
    finite differences) are refitted in every residual below by ridge
@@ -53,7 +54,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .effects import Effect, effect_kind
-from .identify import _on_trace, identify_machine
+from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identify_machine
 from .kernel import MAX_DELAY_SAMPLES
 from .machine import Machine
 from .model import Model, as_model
@@ -65,8 +66,6 @@ __all__ = [
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
 
-#: ΔBIC an effect must exceed to be named (2·ln Bayes factor > 10: "very strong", Kass & Raftery 1995).
-SIGNIFICANT = 10.0
 #: Most effects named in one diagnosis.
 MAX_EFFECTS = 3
 #: The residual is at the noise floor when its RMS is within this factor of the noise estimated from the
@@ -450,7 +449,7 @@ class _Problem:
         if loop:
             for start in range(0, len(loop), 64):
                 part = loop[start : start + 64]
-                tool = simulate_batch(part, self.reference, outputs=("tool_position",), settle=0.0)["tool_position"]
+                tool = simulate_batch(part, self.reference, outputs=("tool_position",), settle=0.0, check=False)["tool_position"]
                 out += [_on_trace(self.trace, self.reference.t, y) for y in tool]
         loop_results = iter(out)
         results = []
@@ -511,7 +510,7 @@ class _Problem:
 
     def _linearise(self, model):
         self.base = None
-        run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0)
+        run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0, check=False)
         self.axis_position = run["axis_position"][0]
         self.base_prediction = _on_trace(self.trace, self.reference.t, run["tool_position"][0])
         self.changes = _nuisance_changes(model, self.trace.axes)
@@ -552,13 +551,14 @@ def _nuisance_changes(model, axes):
     servos = model.machine.axes
     h = 1.0 + _NUISANCE_STEP
     changes = [{a: {"kp": s.kp * h} for a, s in servos.items()}]  # one position gain for all axes
+    feedforward = {a: {"vff": s.vff * h if s.vff * h <= 1 else s.vff / h} for a, s in servos.items() if s.vff > 0}
+    if feedforward:  # one fraction for all axes too: per axis it would set each axis's steady lag, a gain in disguise
+        changes.append(feedforward)
     for a in axes:
         s = servos[a]
         changes.append({a: {"kv": s.kv * h}})  # the velocity loop's gain over the mass: its bandwidth
         if s.aff > 0:
             changes.append({a: {"mass": s.mass * h}})
-        if s.vff > 0:
-            changes.append({a: {"vff": s.vff * h if s.vff * h <= 1 else s.vff / h}})
     return changes
 
 
@@ -678,28 +678,6 @@ def _spectral_peak(t, r, fmax):
     return float(f[band][np.argmax(spec[band])]) if np.any(band) else None
 
 
-def _tau(x, d):
-    """Integrated autocorrelation time of a whitened residual `x`, shape (N, d), in samples (the largest of its axes)."""
-    taus = []
-    for i in range(d):
-        y = x[:, i] - x[:, i].mean()
-        n = len(y)
-        f = np.fft.rfft(y, 2 * n)
-        acf = np.fft.irfft(f * np.conj(f))[:n]
-        if acf[0] <= 0:
-            continue
-        acf = acf / acf[0]
-        negative = np.flatnonzero(acf <= 0)
-        stop = negative[0] if negative.size else n
-        taus.append(1.0 + 2.0 * acf[1:stop].sum())
-    return float(np.clip(max(taus, default=1.0), 1.0, len(x) / 10))
-
-
-def _delta_bic(rss0, rss1, n, k, tau):
-    n_eff = n / tau
-    return n_eff * np.log(rss0 / max(rss1, 1e-300)) - k * np.log(n_eff)
-
-
 def _bounds(problem, cand):
     """Lower and upper bounds of `cand`'s free parameters: the catalogue's, the servo period's limits."""
     effect, params = cand.effect, {p.name: p for p in cand.effect.parameters}
@@ -729,9 +707,9 @@ def _score(problem, cand, r, tau=None):
     """
     cand.cost = float(r @ r)
     d = problem.trace.actual.shape[1]
-    cand.tau = _tau(problem.samples(r)[problem.scored], d)
+    cand.tau = autocorrelation_time(problem.samples(r)[problem.scored])
     rss0 = float(problem.base_residual @ problem.base_residual)
-    cand.delta_bic = float(_delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau or cand.tau))
+    cand.delta_bic = float(delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau or cand.tau))
 
 
 def _start(problem, cands, model):
@@ -761,7 +739,7 @@ def _rescore(problem, cands):
         return
     best = min(cands, key=lambda c: float(c.residual @ c.residual))
     d = problem.trace.actual.shape[1]
-    tau = _tau(problem.samples(best.residual)[problem.scored], d)
+    tau = autocorrelation_time(problem.samples(best.residual)[problem.scored])
     for cand in cands:
         _score(problem, cand, cand.residual, tau)
 
@@ -865,7 +843,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         raise ValueError(f"the model has no servo axis {missing[0]!r} for the trace's column {missing[0]!r}; "
                          f"its axes are {', '.join(model.machine.axes)}")
     reference = measured_reference(trace, model.machine.servo_period)
-    before = _on_trace(trace, reference.t, simulate_batch([model], reference, settle=0.0)["tool_position"][0])
+    before = _on_trace(trace, reference.t, simulate_batch([model], reference, settle=0.0, check=not identified)["tool_position"][0])
     noise = noise_level(trace.actual - before)
     warnings = []
     scored = np.ones(len(trace.t), bool)

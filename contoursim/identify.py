@@ -23,7 +23,10 @@ The fit: starting values from a regression of the tracking error on the
 commanded velocity and acceleration (a P/P cascade lags by
 ``e ≈ (1 − vff)·v/kp + (1/(kp·ω_v) − (1 − vff)²/kp²)·a``), then
 :func:`scipy.optimize.least_squares` on the tracking error through the
-simulator, each finite-difference Jacobian one :func:`simulate_batch` call.
+simulator, each finite-difference Jacobian one :func:`simulate_batch` call:
+first without feedforward, then with it, kept only when it is significant
+(:func:`delta_bic`): kp and vff set the steady lag together, and only the
+transients tell them apart.
 """
 
 import numpy as np
@@ -33,8 +36,10 @@ from .machine import Machine
 from .servo import AxisServo
 from .simulate import measured_reference, simulate_batch
 
-__all__ = ["MASS", "FORCE_CONSTANT", "identify_machine", "servo_period_for"]
+__all__ = ["FORCE_CONSTANT", "MASS", "SIGNIFICANT", "autocorrelation_time", "delta_bic", "identify_machine", "servo_period_for"]
 
+#: ΔBIC a parameter or an effect must add to be kept (2·ln Bayes factor > 10: "very strong", Kass & Raftery 1995).
+SIGNIFICANT = 10.0
 #: Moving mass assumed for an identified axis [kg] (not identifiable from positions).
 MASS = 100.0
 #: Force constant assumed for an identified axis [N/A]: with MASS, kv [A·s/m] = ω_v [rad/s].
@@ -122,7 +127,7 @@ def identify_machine(trace, servo_period=None, progress=None):
     cache = {}
 
     def outputs(xs):
-        tool = simulate_batch([_machine(axes, period, x) for x in xs], reference, settle=0.0)["tool_position"]
+        tool = simulate_batch([_machine(axes, period, x) for x in xs], reference, settle=0.0, check=False)["tool_position"]
         return [_on_trace(trace, reference.t, y) for y in tool]
 
     def fun(x):
@@ -142,8 +147,79 @@ def identify_machine(trace, servo_period=None, progress=None):
                      f"RMS {1e3 * scale * np.sqrt(np.mean(r0**2)):.3g} µm")
         return np.column_stack([(c - r0) / h for c, h in zip(cols, steps)])
 
-    fit = least_squares(fun, x0, jac=jac, bounds=(lower, upper), x_scale=1.0, max_nfev=40)
-    return _machine(axes, period, fit.x)
+    def fitted(x, free):
+        """Least squares over the coordinates `free` of `x`, the others held."""
+        def part(z):
+            full = x.copy()
+            full[free] = z
+            return full
+
+        fit = least_squares(lambda z: fun(part(z)), x[free], jac=lambda z: jac(part(z))[:, free],
+                            bounds=(lower[free], upper[free]), x_scale=1.0, max_nfev=40)
+        return part(fit.x)
+
+    # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
+    # transients show it (ΔBIC over the fit without it), else a valley of (kp, vff) pairs fits alike
+    x0[1] = 0.0
+    x1 = fitted(x0, np.array([j != 1 for j in range(x0.size)]))
+    r1 = fun(x1).copy()
+    x2 = fitted(x1, np.ones(x0.size, bool))
+    r2 = fun(x2)
+    tau = autocorrelation_time(r2.reshape(len(trace.t), len(axes)))
+    keep = delta_bic(float(r1 @ r1), float(r2 @ r2), r2.size, 1, tau) > SIGNIFICANT
+    return _machine(axes, period, x2 if keep else x1)
+
+
+def autocorrelation_time(x):
+    """Integrated autocorrelation time of a residual, in samples: the largest of its axes' (at least 1).
+
+    ``τ = 1 + 2·Σ ρ_k``, summed until the autocorrelation ρ first turns
+    negative; N/τ is the residual's number of effectively independent samples.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, d)
+
+    Returns
+    -------
+    float
+        Between 1 and N/10.
+    """
+    taus = []
+    for y in np.asarray(x, dtype=float).T:
+        y = y - y.mean()
+        n = len(y)
+        f = np.fft.rfft(y, 2 * n)
+        acf = np.fft.irfft(f * np.conj(f))[:n]
+        if acf[0] <= 0:
+            continue
+        acf = acf / acf[0]
+        negative = np.flatnonzero(acf <= 0)
+        stop = negative[0] if negative.size else n
+        taus.append(1.0 + 2.0 * acf[1:stop].sum())
+    return float(np.clip(max(taus, default=1.0), 1.0, len(x) / 10))
+
+
+def delta_bic(rss0, rss1, n, k, tau):
+    """BIC gain of a model with `k` more parameters: ``n_eff·ln(rss0/rss1) − k·ln(n_eff)``, ``n_eff = n/tau``.
+
+    Parameters
+    ----------
+    rss0, rss1 : float
+        Residual sums of squares without and with the parameters.
+    n : int
+        Residual entries.
+    k : int
+        Parameters added.
+    tau : float
+        Autocorrelation time of the residual (:func:`autocorrelation_time`).
+
+    Returns
+    -------
+    float
+    """
+    n_eff = n / tau
+    return n_eff * np.log(rss0 / max(rss1, 1e-300)) - k * np.log(n_eff)
 
 
 def _on_trace(trace, t_sim, y):
