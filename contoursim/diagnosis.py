@@ -198,7 +198,8 @@ class Diagnosis:
             "effects": [
                 {"name": e.name, "axis": e.axis, "parameters": e.values(),
                  **({"options": dict(e.options)} if e.options else {}),
-                 "uncertainty": s.uncertainty, "delta_bic": s.delta_bic}
+                 "uncertainty": {k: v if np.isfinite(v) else None for k, v in s.uncertainty.items()},
+                 "delta_bic": s.delta_bic}
                 for s in self.steps for e in [s.effect] if e is not None
             ],
             "residual_rms_before_um": _rms_um(before),
@@ -987,6 +988,11 @@ def synthetic_trace(model, trajectory, mismatch=0.03, noise_um=0.1, quantum_um=0
 
 # -- figures -----------------------------------------------------------------------------------
 
+def _after(diagnosis):
+    """Legend label of the final model."""
+    return "after: " + (", ".join(e.label for e in diagnosis.effects) or "nominal refit only")
+
+
 def plot_residuals(diagnosis, fig=None):
     """Residual over time per axis before (nominal model) and after the diagnosis [µm], with the noise band.
 
@@ -1009,8 +1015,7 @@ def plot_residuals(diagnosis, fig=None):
         before = diagnosis.residual_before[:, i]
         ax.plot(trace.t[keep], 1e3 * (before - before[keep].mean())[keep], color="C0", lw=0.7,
                 label="before: nominal model (zero offset removed)")
-        ax.plot(trace.t[keep], 1e3 * diagnosis.residual_after[keep, i], color="C3", lw=0.7, label="after: " + (
-            ", ".join(e.label for e in diagnosis.effects) or "nominal refit only"))
+        ax.plot(trace.t[keep], 1e3 * diagnosis.residual_after[keep, i], color="C3", lw=0.7, label=_after(diagnosis))
         ax.axhspan(-diagnosis.noise_um[i], diagnosis.noise_um[i], color="0.85", label="noise ±1σ")
         ax.set_ylabel(f"{axis}: measured − simulated [µm]")
         ax.grid(True, alpha=0.3)
@@ -1044,7 +1049,7 @@ def plot_magnified(diagnosis, ax=None):
 
     trace, keep = diagnosis.trace, diagnosis.scored
     ax = ax or plt.figure(figsize=(7.0, 6.0), layout="constrained").add_subplot()
-    after = "after: " + (", ".join(e.label for e in diagnosis.effects) or "nominal refit only")
+    after = _after(diagnosis)
     if len(trace.axes) == 1:
         runs = (("measured", "k", trace.actual), ("nominal model", "C0", diagnosis.simulated_before),
                 (after, "C3", diagnosis.simulated_after))
@@ -1114,8 +1119,7 @@ def plot_polar(diagnosis, ax=None):
     unit = rel[on] / r[on, None]
     before = diagnosis.residual_before[keep][on, :2]
     before = before - before.mean(axis=0)  # the instrument's zero, as the refit removes it
-    devs = [("before: nominal model", "C0", before), ("after: " + (", ".join(e.label for e in diagnosis.effects)
-            or "nominal refit only"), "C3", diagnosis.residual_after[keep][on, :2])]
+    devs = [("before: nominal model", "C0", before), (_after(diagnosis), "C3", diagnosis.residual_after[keep][on, :2])]
     devs = [(label, color, 1e3 * np.sum(d * unit, axis=1)) for label, color, d in devs]
     span = max(max(float(np.abs(d).max()) for *_, d in devs), 1e-3)
     for label, color, dev in devs:
