@@ -82,18 +82,23 @@ _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is 
 _REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
 
 
-def noise_level(residual):
+def noise_level(residual, measured=None):
     """Measurement noise per axis, from the residual's high-frequency part [mm].
 
     ``σ = 1.4826·MAD(Δ²r)/√6``: the second difference removes the smooth
     part of the residual (model error), white noise of level σ gives
     ``var(Δ²r) = 6σ²``, and the median absolute deviation ignores the few
-    samples at steps and spikes.
+    samples at steps and spikes. Positions logged with a resolution q
+    (the smallest step between the values an axis takes) carry at least
+    the rounding noise ``q/√12``, which coarse logs hide from the second
+    differences (most are zero).
 
     Parameters
     ----------
     residual : ndarray, shape (N, d)
         Measured minus simulated positions [mm].
+    measured : ndarray, shape (N, d), optional
+        The measured positions [mm], for their resolution.
 
     Returns
     -------
@@ -102,7 +107,12 @@ def noise_level(residual):
     """
     d2 = np.diff(np.asarray(residual, dtype=float), n=2, axis=0)
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-    return np.maximum(1.4826 * mad / np.sqrt(6.0), 1e-6)
+    sigma = 1.4826 * mad / np.sqrt(6.0)
+    if measured is not None:
+        steps = [np.diff(np.unique(x)) for x in np.asarray(measured, dtype=float).T]
+        quantum = np.array([s.min() if s.size else 0.0 for s in steps])
+        sigma = np.maximum(sigma, quantum / np.sqrt(12.0))
+    return np.maximum(sigma, 1e-6)
 
 
 @dataclass(frozen=True)
@@ -243,9 +253,13 @@ class Diagnosis:
             lines.append(f"{s.label:<28}{text:<52}{s.rms_um:>10.3f}{s.max_um:>10.3f}{bic:>10}")
         noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
         lines.append(f"noise floor [µm RMS]: {noise}")
-        if not self.effects:
+        if not self.effects and self.steps[-1].rms_um <= NOISE_FLOOR * float(np.linalg.norm(self.noise_um)):
             lines.append("no effect named: the measurement is explained by the nominal model within noise "
                          "(and the nominal parameters' usual spread)")
+        elif not self.effects:
+            lines.append(f"no effect named: no catalogue effect explains the residual significantly; it stays at "
+                         f"{self.steps[-1].rms_um:.3g} µm RMS against a noise floor of "
+                         f"{float(np.linalg.norm(self.noise_um)):.3g} µm (see where it is and what it correlates with)")
         lines += [f"where: {w}" for w in self.where]
         lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
@@ -845,7 +859,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                          f"its axes are {', '.join(model.machine.axes)}")
     reference = measured_reference(trace, model.machine.servo_period)
     before = _on_trace(trace, reference.t, simulate_batch([model], reference, settle=0.0, check=not identified)["tool_position"][0])
-    noise = noise_level(trace.actual - before)
+    noise = noise_level(trace.actual - before, trace.actual)
     warnings = []
     scored = np.ones(len(trace.t), bool)
     speed = np.linalg.norm(reference.velocity, axis=1)
