@@ -760,8 +760,8 @@ def _rescore(problem, cands):
 
 
 def _finite(r):
-    """`r` with non-finite entries (a variant that went unstable) made large."""
-    return np.where(np.isfinite(r), r, 1e6)
+    """`r` with what a variant that went unstable left (non-finite or absurd entries) held at ±1e6 noise levels."""
+    return np.clip(np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6), -1e6, 1e6)
 
 
 def _refine(problem, cand, model):
