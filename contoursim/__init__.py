@@ -9,6 +9,10 @@ The main objects, by the data flow of a simulation:
 - machine: :class:`Machine`, :func:`load_machine` (servo axes + multibody geometry);
 - effects: :class:`Effect` (the catalogue, :mod:`contoursim.effects`), :class:`Model`
   (a machine plus effects), :func:`load_model` (a machine file with its ``[[effect]]`` tables);
+- compensation strategies (:mod:`contoursim.compensation`): :class:`Feedforward`,
+  :class:`ZPETC`, :class:`CrossCoupled` (in the loop), composable with each other and with
+  :class:`~contoursim.geocomp.GeometricCompensation`; :func:`~contoursim.comparison.compare`
+  runs them side by side;
 - :func:`simulate` -> :class:`SimResult` (tracking and exact contour error), on a path or a
   measured trace; :func:`simulate_batch` (variants of one model in one compiled call);
 - traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format).
@@ -25,6 +29,9 @@ from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopEr
 # ``contoursim --help`` do not load python-control, scipy and numba
 _LAZY = {
     "AxisServo": "servo",
+    "CrossCoupled": "compensation",
+    "Feedforward": "compensation",
+    "ZPETC": "compensation",
     "Effect": "effects",
     "Machine": "machine",
     "Model": "model",
@@ -42,7 +49,9 @@ _LAZY = {
 __all__ = [
     "AxisServo",
     "ConfigError",
+    "CrossCoupled",
     "Effect",
+    "Feedforward",
     "Machine",
     "Model",
     "PathError",
@@ -51,6 +60,7 @@ __all__ = [
     "TraceFormatError",
     "Trajectory",
     "UnstableLoopError",
+    "ZPETC",
     "load_machine",
     "load_model",
     "read_trace",

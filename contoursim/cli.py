@@ -1,4 +1,4 @@
-"""Command line: ``contoursim demo | simulate | volumetric | diagnose``.
+"""Command line: ``contoursim demo | simulate | compare | volumetric | diagnose``.
 
 Every job prints a summary table to stdout and writes plots and traces to
 ``--out`` (default ``./contoursim-out``) through :func:`contoursim.output.output_dir`:
@@ -22,6 +22,7 @@ from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoo
 from .output import output_dir
 
 DEMO_MACHINE = "demo_mill"
+DEMO_STRATEGIES = ("feedforward", "ccc_arc", "feedforward+ccc_arc")  # the demo's compact comparison, on its free-form run
 DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
 _JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
 
@@ -39,6 +40,19 @@ def _table(rows):
     return "\n".join(lines)
 
 
+def _trajectory(model, path_file, job=None):
+    """The path file's reference at the model's servo period; a job's ``[feed]`` overrides the file's key by key."""
+    from .feed import sample
+    from .model import as_model
+    from .pathfile import load_path_file, read_feed_table
+
+    path, settings = load_path_file(path_file)
+    if job is not None and "feed" in job.data:
+        settings = read_feed_table(job, base=settings)
+    machine = as_model(model).machine
+    return sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+
+
 def run_job(model, path_file, job=None, strategies=(), label=None):
     """Simulate `model` (a Model, or a Machine without effects) on a path file.
 
@@ -50,16 +64,9 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
         ``(name, path_file, result)``: the run's name (file stem or `label`),
         the path file and the :class:`~contoursim.simulate.SimResult`.
     """
-    from .feed import sample
-    from .model import as_model
-    from .pathfile import load_path_file, read_feed_table
     from .simulate import simulate
 
-    path, settings = load_path_file(path_file)
-    if job is not None and "feed" in job.data:
-        settings = read_feed_table(job, base=settings)
-    machine = as_model(model).machine
-    trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+    trajectory = _trajectory(model, path_file, job)
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
@@ -95,16 +102,25 @@ def _write(out, groups, every):
 
 def demo(args):
     """The README's main job: ISO 230-4 circles (CCW and CW, plotted together) and a free-form path on the demo machine."""
+    from .comparison import Comparison
+    from .compensation import strategies_named
     from .machine import load_machine
     from .pathfile import library_file
+    from .simulate import simulate
 
     machine = load_machine(DEMO_MACHINE)
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
+    (_, free_form, plain), = groups["butterfly"]
+    compared = {"none": plain}
+    compared.update((name, simulate(machine, plain.trajectory, strategies_named(name), settle=0.0))
+                    for name in DEMO_STRATEGIES)  # on the same reference, already held at its end
     out, rows = _write(args.out, groups, args.every)
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
     print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
     print("Both over the test proper: the full test circle of the ISO 230-4 runs (the CSV's measuring = 1 rows).")
     print(_table(rows))
+    print(f"\nCompensation strategies on {Path(free_form).stem} (all of them, with plots: contoursim compare {Path(free_form).stem}):")
+    print(Comparison(compared).table())
     print(f"\nplots and traces written to {out}/")
 
 
@@ -168,6 +184,41 @@ def simulate_command(args):
     print(f"\nplots and traces written to {out}/")
 
 
+def compare_command(args):
+    """``contoursim compare FILE [--strategies a,b] [--json R.json]``: compensation strategies side by side."""
+    import json
+
+    from .comparison import compare
+    from .compensation import STRATEGY_NAMES
+    from .output import atomic_write
+    from .plotting import save_comparison_figures
+
+    model, path_file, job, geometric = _job(args)
+    if geometric:
+        raise job.error("compare runs the strategies of --strategies: compose geometric compensation there "
+                        "(e.g. --strategies none,geometric,geometric+ccc_arc)", "geometric_compensation")
+    names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
+    report = Path(args.json) if args.json else None
+    if report is not None and report.exists():  # replace only a comparison JSON, never a file the user keeps
+        try:
+            ours = isinstance(json.loads(report.read_text(encoding="utf-8")).get("runs"), dict)
+        except (ValueError, UnicodeDecodeError, AttributeError):
+            ours = False
+        if not ours:
+            raise FileExistsError(f"{report} exists and is not a comparison JSON; refusing to overwrite it")
+    comparison = compare(model, _trajectory(model, path_file, job), names)
+    out = output_dir(args.out)
+    save_comparison_figures(comparison, out, Path(path_file).stem)
+    machine = comparison.runs[names[0]].machine
+    print(f"contoursim compare — machine: {machine.name}, path: {Path(path_file).name}; errors over the test proper")
+    print(comparison.table())
+    if report is not None:
+        with atomic_write(report) as stream:
+            stream.write(comparison.to_json() + "\n")
+        print(f"\ncomparison written to {report}")
+    print(f"plots written to {out}/")
+
+
 def volumetric(args):
     """``contoursim volumetric MACHINE``: worst volumetric errors and error-field plots."""
     from .machine import preset_file
@@ -228,6 +279,14 @@ def main(argv=None):
     p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
     p.add_argument("--geometric-compensation", action="store_true", help="also run with geometric compensation")
     p.set_defaults(run=simulate_command)
+    p = sub.add_parser("compare", help="compensation strategies side by side on a job file or a path file")
+    p.add_argument("file", help="job .toml, path .toml or G-code .nc (a file, or a name in the trajectories library)")
+    p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
+    p.add_argument("--strategies", metavar="A,B,...",
+                   help="strategies to run, comma-separated (default: none,feedforward,zpetc,ccc_linear,ccc_arc,"
+                        "feedforward+ccc_arc); parts joined by '+' compose, 'geometric' too")
+    p.add_argument("--json", metavar="R.json", help="write the comparison (JSON) to this file")
+    p.set_defaults(run=compare_command)
     p = sub.add_parser("volumetric", help="volumetric error map of a machine preset or file")
     p.add_argument("machine", help="machine preset name or file")
     p.set_defaults(run=volumetric)

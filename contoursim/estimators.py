@@ -168,20 +168,28 @@ def _binormal(t, x, straight, up):
 
 
 @njit(cache=True)
-def _arc_estimate(anchor, t, b, kappa, p):
-    """Distance from p to the circle through `anchor` with tangent t, plane normal b.
+def _arc_parts(anchor, t, b, kappa, p):
+    """Signed in-plane distance, out-of-plane distance and in-plane unit normal at the foot.
 
-    kappa [1/mm] is the curvature signed about b (> 0: centre to the left of
-    travel, on the side of b x t); kappa = 0 is the straight line. With
-    d = in-plane offset of p from the anchor and l = b x t, the signed in-plane
-    distance r - L (L = |O - P'|, O = anchor + l / kappa) is written as
+    Distance from p to the circle through `anchor` with tangent t, plane
+    normal b; kappa [1/mm] is the curvature signed about b (> 0: centre to
+    the left of travel, on the side of b x t); kappa = 0 is the straight line.
+    With d = in-plane offset of p from the anchor and l = b x t, the signed
+    in-plane distance r - L (L = |O - P'|, O = anchor + l / kappa) is written as
 
         normal = (2 d.l - kappa |d|^2) / (1 + |l - kappa d|),
 
     which is r - L multiplied out so that it stays exact as kappa -> 0 (no
     cancellation between two large radii, no threshold between arc and line).
-    The foot point lies along (l - kappa d) / |l - kappa d|, the in-plane normal
-    at the foot.
+    The foot point lies along lf = (l - kappa d) / |l - kappa d|, the in-plane
+    normal at the foot; p = foot + normal·lf + h·b.
+
+    Returns
+    -------
+    normal, h : float
+        [mm]
+    lf : tuple of 3 floats
+        Unit in-plane normal at the foot, pointing to the left of travel [-].
     """
     e = _sub(p, anchor)
     h = _dot(e, b)
@@ -191,6 +199,13 @@ def _arc_estimate(anchor, t, b, kappa, p):
     nq = _norm(q)
     normal = (2.0 * _dot(d, left) - kappa * _dot(d, d)) / (1.0 + nq)
     lf = _scale(1.0 / nq, q) if nq > 0.0 else left
+    return normal, h, lf
+
+
+@njit(cache=True)
+def _arc_estimate(anchor, t, b, kappa, p):
+    """Distance from p to the circle through `anchor` with tangent t, plane normal b (see ``_arc_parts``)."""
+    normal, h, lf = _arc_parts(anchor, t, b, kappa, p)
     return StepEstimate(
         np.sqrt(normal * normal + h * h),
         normal,
@@ -259,9 +274,17 @@ def linear_step(knots, hint, actual, params):
     up = _up(params)
     p = (actual[0], actual[1], actual[2])
     j = min(max(hint, 0), m - 1)
-    pj = _row(knots, j)
     if m == 1:
-        return _point_estimate(pj, p, up), j
+        return _point_estimate(_row(knots, j), p, up), j
+    anchor, t, b, kappa = _linear_arc(knots, j, up)
+    return _arc_estimate(anchor, t, b, kappa, p), j
+
+
+@njit(cache=True)
+def _linear_arc(knots, j, up):
+    """``(anchor, t, b, kappa)`` of the linear estimate at knot j (of M >= 2): the tangent line there."""
+    m = knots.shape[0]
+    pj = _row(knots, j)
     a = _sub(pj, _row(knots, max(j - 1, 0)))
     c = _sub(_row(knots, min(j + 1, m - 1)), pj)
     chord = _axpy(1.0, a, c)
@@ -269,7 +292,7 @@ def linear_step(knots, hint, actual, params):
     t = _scale(1.0 / nc, chord) if nc > 0.0 else _unit(a, (1.0, 0.0, 0.0))  # a cusp: incoming direction
     x = _cross(a, c)
     straight = _dot(x, x) <= _STRAIGHT**2 * _dot(a, a) * _dot(c, c)
-    return _arc_estimate(pj, t, _binormal(t, x, straight, up), 0.0, p), j
+    return pj, t, _binormal(t, x, straight, up), 0.0
 
 
 @njit(cache=True)
@@ -354,10 +377,17 @@ def three_point_step(knots, hint, actual, params):
     n = nearest_knot(knots, hint, p, int(params[3]))
     if m == 1:
         return _point_estimate(_row(knots, 0), p, up), n
+    anchor, t, b, kappa = _three_point_arc(knots, n, up)
+    return _arc_estimate(anchor, t, b, kappa, p), n
+
+
+@njit(cache=True)
+def _three_point_arc(knots, n, up):
+    """``(anchor, t, b, kappa)`` of the circle through the knots n-1, n, n+1 (of M >= 2), see :func:`three_point_step`."""
+    m = knots.shape[0]
     if m == 2:
         t = _unit(_sub(_row(knots, 1), _row(knots, 0)), (1.0, 0.0, 0.0))
-        b = _binormal(t, t, True, up)
-        return _arc_estimate(_row(knots, n), t, b, 0.0, p), n
+        return _row(knots, n), t, _binormal(t, t, True, up), 0.0
     i = min(max(n, 1), m - 2)
     pn = _row(knots, i)
     a = _sub(pn, _row(knots, i - 1))
@@ -369,12 +399,12 @@ def three_point_step(knots, hint, actual, params):
     if ww <= 1e-24 * aa * cc * (aa + cc):
         # a cusp: P_{n+1} = P_{n-1}, the path reverses at P_n; use the incoming line
         t = _unit(a, (1.0, 0.0, 0.0))
-        return _arc_estimate(pn, t, _binormal(t, x, True, up), 0.0, p), n
+        return pn, t, _binormal(t, x, True, up), 0.0
     nw = np.sqrt(ww)
     t = _scale(1.0 / nw, w)
     straight = _dot(x, x) <= _STRAIGHT**2 * aa * cc
     b = _binormal(t, x, straight, up)
-    return _arc_estimate(pn, t, b, 2.0 * _dot(x, b) / nw, p), n
+    return pn, t, b, 2.0 * _dot(x, b) / nw
 
 
 @njit(cache=True)

@@ -6,20 +6,24 @@ tool axis) to where the ideal machine would have put it. The target is the
 ideal chain's pose; the commands come from the actual chain's inverse
 kinematics by Gauss-Newton iteration (:meth:`MachineChain.inverse`).
 
-Like every compensation strategy it is an object passed to the simulation;
-it has no state between calls.
+Like every compensation strategy (:mod:`contoursim.compensation`) it is an
+object passed to the simulation; it acts on the target of the axes, before
+the loop, and has no state between calls.
 """
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from . import _validate
+from .compensation import Strategy
 from .multibody import MachineChain
 
 __all__ = ["GeometricCompensation"]
 
 
 @dataclass(frozen=True)
-class GeometricCompensation:
+class GeometricCompensation(Strategy):
     """Pre-correct axis commands with a model of the machine's geometric errors.
 
     Parameters
@@ -56,6 +60,7 @@ class GeometricCompensation:
     max_iter: int = 10
 
     name = "geometric"
+    kind = "target"
 
     def __post_init__(self):
         if not isinstance(self.chain, MachineChain):
@@ -90,3 +95,23 @@ class GeometricCompensation:
             tol=self.tol,
             max_iter=self.max_iter,
         )
+
+    def target(self, q, v, a, t):
+        """The pre-corrected commands, with the correction's derivatives added to `v` and `a`.
+
+        Parameters
+        ----------
+        q, v, a : ndarray, shape (N, n_axes)
+            Ideal axis positions [mm, rad], velocities and accelerations.
+        t : ndarray, shape (N,)
+            Times [s] (uniform).
+
+        Returns
+        -------
+        q, v, a : ndarray, shape (N, n_axes)
+            So that feedforward sees the corrected motion.
+        """
+        corrected = self.commands(q, t)
+        dq = np.gradient(corrected - q, t, axis=0) if len(t) > 1 else np.zeros_like(q)
+        ddq = np.gradient(dq, t, axis=0) if len(t) > 1 else np.zeros_like(q)
+        return corrected, v + dq, a + ddq

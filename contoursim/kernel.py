@@ -13,9 +13,10 @@ Two steps, two costs:
   gains, masses, delays) is the caller's business; :func:`run` checks the
   nominal linear loop of each AxisServo it is given.
 
-One compiled kernel steps every combination of effects (a fixed parameter
-layout where zero means off), so switching effects on or off never compiles
-anything; it is cached on disk (:mod:`contoursim._numba`).
+One compiled kernel steps every combination of effects and of cross-coupled
+control (fixed parameter layouts where zero means off; the coupling's
+reference path is data of its own), so switching effects or coupling on or
+off never compiles anything; it is cached on disk (:mod:`contoursim._numba`).
 
 The plant of one axis (states ``x, v, d, ḋ, i``)::
 
@@ -42,8 +43,9 @@ output is held over ``[t_k, t_k+1)``):
    samples (ring buffers in the state, at most :data:`MAX_DELAY_SAMPLES`);
 4. recorded: the tool position (table + deflection, plus measurement noise
    of `noise_mm` RMS), the fed-back encoder position, ``v``;
-5. a :class:`Compensator`, if any, sees every axis's fed-back position and
-   corrects the position, velocity and force commands;
+5. a cross-coupled contour controller (:class:`Coupling`), if any, estimates
+   the contour error of the fed-back axis positions against its reference
+   path and adds a correction to every axis's velocity command;
 6. position P + velocity feedforward, velocity PI + acceleration
    feedforward, current clamp with anti-windup, current PI (when modelled);
 7. the disturbance force: the constant offset minus friction (see
@@ -61,21 +63,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import prange
-from numba.core.dispatcher import Dispatcher
 
 from . import _validate
 from ._numba import njit
+from .estimators import _arc_parts, _linear_arc, _three_point_arc, distinct_samples, search_params
+from .nearest import nearest_knot
 from .exceptions import UnstableLoopError
 from .servo import AxisServo, zoh
 
 __all__ = [
-    "Compensator",
+    "Coupling",
+    "COUPLING_ESTIMATORS",
     "LoopEffects",
     "ServoResponse",
     "pack",
     "run",
     "run_batch",
     "spectral_radius",
+    "loop_matrices",
     "MAX_DELAY_SAMPLES",
     "NPAR",
     "BATCH_OUTPUTS",
@@ -232,46 +237,90 @@ class LoopEffects:
             object.__setattr__(self, name, value)
 
 
+#: Contour-error estimators a :class:`Coupling` can run every servo period.
+COUPLING_ESTIMATORS = ("linear", "arc")
+
+# Coupling parameter layout (float64) and state
+_C_KIND = 0  # 0: none, 1: linear (tangent at the commanded sample), 2: three-point arc (searched)
+_C_KP, _C_KI, _C_KD = 1, 2, 3  # coupling PID: [1/s], [1/s^2], [-]
+_C_UP = 4  # 3 entries: the direction that orients the plane normal
+_C_WINDOW = 7  # search window [knots]
+_C_DT = 8  # servo period [s] (set by run)
+_C_NPAR = 9
+_C_ZN, _C_ZH, _C_EN, _C_EH, _C_HINT = 0, 1, 2, 3, 4  # integrators, previous errors [mm·s], [mm], knot
+_C_NSTATE = 5
+
+
 @dataclass(frozen=True)
-class Compensator:
-    """A controller that sees every axis each step (cross-coupled contour control, ...).
+class Coupling:
+    """A cross-coupled contour controller acting inside the loop every servo period (Koren's CCC).
+
+    Each step it estimates the contour error of the fed-back axis positions
+    ``P`` (the first 2 or 3 axes as x, y, z) against its reference path,
+    ``P = foot + ε_n·n + ε_h·b`` (``n`` the in-plane normal at the foot, to
+    the left of travel; ``b`` the local plane normal; :mod:`contoursim.estimators`),
+    and adds to the axes' velocity commands [mm/s]
+
+        Δv = -(u_n·n + u_h·b),   u = kp·ε + ki·∫ε dt + kd·dε/dt
+
+    for each of the two components (integrator by the trapezoidal rule,
+    like the kernel's PI; derivative by the backward difference). With the
+    linear estimator ``n = (-sin θ, cos θ)`` in the plane: Koren's variable
+    gains ``Cx = -sin θ``, ``Cy = cos θ``.
 
     Parameters
     ----------
-    step : numba-jitted function
-        ``step(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce)``,
-        called once per servo period before the axis controllers, with the
-        step index ``k``, the full reference arrays (shape (N, n), [mm],
-        [mm/s], [mm/s^2]), the reference geometry (read only) and the
-        fed-back axis positions ``position`` (shape (n,), [mm]) sampled at
-        ``t_k``. It writes per-axis corrections to the position commands
-        ``dpos`` [mm], the velocity commands ``dvel`` [mm/s] and the force
-        ``dforce`` [N] (added to the current command as ``dforce /
-        force_constant``, so it passes the current limit and the current
-        loop like any drive force); all shape (n,), zeroed before each call.
-        It may update its own ``state`` array in place and must not keep
-        state anywhere else.
-    state : ndarray of float
-        Initial state (any shape). The kernel works on a copy and returns the
-        final state in :attr:`ServoResponse.compensator_state`.
-    params : ndarray of float
-        Parameters (any shape), read only.
-    geometry : ndarray of float, optional
-        Reference geometry the step reads (any shape, e.g. path knots), read
-        only; empty by default.
+    estimator : {"linear", "arc"}
+        ``"linear"``: the tangent line at the commanded sample (Koren);
+        ``"arc"``: the three-point circumscribed arc around the nearest
+        reference sample, searched from the previous one (seed 003), with
+        its out-of-plane part.
+    path : array_like, shape (N, n)
+        Where the axes should be at each servo step [mm] (the target path,
+        without feedforward pre-filtering), one row per reference sample.
+    kp : float
+        Coupling gain [1/s].
+    ki : float, default 0
+        Integral gain [1/s^2].
+    kd : float, default 0
+        Derivative gain [-].
+    up : array_like, shape (3,), default (0, 0, 1)
+        Orients the local plane normal (:func:`contoursim.estimators.search_params`).
+    window : int, default 4
+        Search window of the arc estimator [samples].
+
+    Notes
+    -----
+    The path's distinct samples (``knots``) and the sample each servo step
+    commands (``knot_of_sample``) are computed once here and passed to the
+    compiled kernel as arrays of their own.
     """
 
-    step: Dispatcher
-    state: np.ndarray
-    params: np.ndarray
-    geometry: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    estimator: str
+    path: np.ndarray
+    kp: float
+    ki: float = 0.0
+    kd: float = 0.0
+    up: tuple = (0.0, 0.0, 1.0)
+    window: int = 4
 
     def __post_init__(self):
-        if not isinstance(self.step, Dispatcher):
-            raise TypeError(f"compensator step must be a numba @njit function, got {type(self.step).__name__}")
-        object.__setattr__(self, "state", _validate.finite_array("compensator state", self.state))
-        for name in ("params", "geometry"):
-            value = _validate.finite_array(f"compensator {name}", getattr(self, name)).copy()
+        if self.estimator not in COUPLING_ESTIMATORS:
+            raise ValueError(f"estimator must be one of {', '.join(COUPLING_ESTIMATORS)}, got {self.estimator!r}")
+        path = _validate.finite_array("coupling path", self.path, ndim=2).copy()  # ours to make read-only
+        if path.shape[1] not in (2, 3):
+            raise ValueError(f"a coupling needs 2 or 3 axes (x, y[, z]), got a path with {path.shape[1]} columns")
+        for name in ("kp", "ki", "kd"):
+            object.__setattr__(self, name, _validate.nonnegative(name, getattr(self, name)))
+        params = np.zeros(_C_NPAR)
+        params[_C_KIND] = 1.0 + COUPLING_ESTIMATORS.index(self.estimator)
+        params[_C_KP], params[_C_KI], params[_C_KD] = self.kp, self.ki, self.kd
+        params[_C_UP : _C_WINDOW + 1] = search_params(self.up, self.window)
+        knots, _, knot_of_sample = distinct_samples(path)
+        if len(knots) < 3:
+            raise ValueError("the coupling's path must pass through at least 3 distinct positions")
+        for name, value in (("path", path), ("params", params), ("knots", knots), ("knot_of_sample", knot_of_sample)):
+            value = np.ascontiguousarray(value)
             value.flags.writeable = False
             object.__setattr__(self, name, value)
 
@@ -298,8 +347,10 @@ class ServoResponse:
         output plus acceleration feedforward, after saturation.
     saturated : ndarray of bool, shape (N, n)
         True where the current command was clamped at the current limit.
-    compensator_state : ndarray or None
-        The compensator's state after the last step; ``None`` without one.
+    contour_estimate : ndarray, shape (N, 3), or None
+        The contour error the :class:`Coupling` estimated at each step: the
+        vector from the fed-back axis position to the foot point [mm];
+        ``None`` without a coupling.
 
     Notes
     -----
@@ -313,7 +364,7 @@ class ServoResponse:
     velocity: np.ndarray
     current: np.ndarray
     saturated: np.ndarray
-    compensator_state: np.ndarray | None = None
+    contour_estimate: np.ndarray | None = None
 
     def __post_init__(self):
         t = _validate.float_array("t", self.t, ndim=1)
@@ -323,6 +374,9 @@ class ServoResponse:
             arrays[name] = _validate.float_array(name, getattr(self, name), shape=shape)
         if arrays["saturated"].shape != shape:
             raise ValueError(f"saturated must have shape {shape}, got {arrays['saturated'].shape}")
+        if self.contour_estimate is not None:
+            arrays["contour_estimate"] = _validate.float_array("contour_estimate", self.contour_estimate,
+                                                               shape=(t.size, 3))
         for name, value in arrays.items():
             value.flags.writeable = False
             object.__setattr__(self, name, value)
@@ -423,16 +477,48 @@ def _gauss_pair(key, pair):
 # All axes, all steps
 
 
-def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_params, comp_geometry, every,
-             tool, encoder, velocity, current, saturated, status):  # fmt: skip
-    """Step all axes of one variant over the reference, advancing `state` and `comp_state` in place.
+@njit(cache=True)
+def _coupling_step(k, cpar, knots, knot_of_sample, cstate, x_fb, dvel):
+    """One step of the cross-coupled controller (see :class:`Coupling`).
+
+    Writes the velocity corrections into `dvel`, advances `cstate` and
+    returns the estimated contour-error vector (from the fed-back position
+    to the foot point) [mm].
+    """
+    n_axes = x_fb.shape[0]
+    p = (x_fb[0], x_fb[1], x_fb[2] if n_axes > 2 else 0.0)
+    up = (cpar[_C_UP], cpar[_C_UP + 1], cpar[_C_UP + 2])
+    if cpar[_C_KIND] == 1.0:
+        anchor, t, b, kappa = _linear_arc(knots, knot_of_sample[k], up)
+    else:
+        j = nearest_knot(knots, int(cstate[_C_HINT]), p, int(cpar[_C_WINDOW]))
+        cstate[_C_HINT] = j
+        anchor, t, b, kappa = _three_point_arc(knots, j, up)
+    e_n, e_h, lf = _arc_parts(anchor, t, b, kappa, p)
+    dt = cpar[_C_DT]
+    kp, ki, kd = cpar[_C_KP], cpar[_C_KI], cpar[_C_KD]
+    u_n = kp * e_n + ki * (cstate[_C_ZN] + 0.5 * dt * e_n) + kd * (e_n - cstate[_C_EN]) / dt
+    u_h = kp * e_h + ki * (cstate[_C_ZH] + 0.5 * dt * e_h) + kd * (e_h - cstate[_C_EH]) / dt
+    cstate[_C_ZN] += dt * e_n
+    cstate[_C_ZH] += dt * e_h
+    cstate[_C_EN], cstate[_C_EH] = e_n, e_h
+    for a in range(min(n_axes, 3)):
+        dvel[a] = -(u_n * lf[a] + u_h * b[a])
+    return -(e_n * lf[0] + e_h * b[0]), -(e_n * lf[1] + e_h * b[1]), -(e_n * lf[2] + e_h * b[2])
+
+
+@njit(cache=True)
+def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
+             tool, encoder, velocity, current, saturated, estimate, status):  # fmt: skip
+    """Step all axes of one variant over the reference, advancing `state` and `cstate` in place.
 
     ``par`` (n, NPAR) and ``state`` (n, _NSTATE) follow the layouts above;
-    ``comp_step`` is ``None`` (pruned at compile time) or a compensator step
-    function. Samples ``k = 0, every, 2·every, …`` go to the outputs of
-    shape (ceil(N / every), n) that have rows (an output with no rows is not
-    asked for). `status` (n, 3) gets per axis the number of clamped steps,
-    the step at which the plant state was found not finite (checked every
+    ``cpar`` (_C_NPAR,), ``knots`` (M, 3), ``knot_of_sample`` (N,) and
+    ``cstate`` (_C_NSTATE,) are the coupling's (kind 0: none). Samples
+    ``k = 0, every, 2·every, …`` go to the outputs of shape
+    (ceil(N / every), n) (`estimate`: (ceil(N / every), 3)) that have rows
+    (an output with no rows is not asked for). `status` (n, 3) gets per
+    axis the number of clamped steps, the step at which the plant state was found not finite (checked every
     _DIVERGENCE_CHECK steps; -1: never) and the first step whose reference
     values are not all finite (-1: none; the caller checks the reference
     in detail then, so that a valid reference costs no separate pass).
@@ -440,11 +526,10 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
     n_steps, n_axes = ref_pos.shape
     write_tool, write_encoder = tool.shape[0] > 0, encoder.shape[0] > 0
     write_velocity, write_current, write_saturated = velocity.shape[0] > 0, current.shape[0] > 0, saturated.shape[0] > 0
+    write_estimate, coupled = estimate.shape[0] > 0, cpar[_C_KIND] != 0.0
     x_fb = np.empty(n_axes)
     v_fb = np.empty(n_axes)
-    dpos = np.zeros(n_axes)
     dvel = np.zeros(n_axes)
-    dforce = np.zeros(n_axes)
     keys = np.empty(n_axes, np.uint64)
     for a in range(n_axes):  # at rest: the delay buffers hold the first encoder reading
         keys[a] = _mix(np.uint64(par[a, _SEED]) * np.uint64(n_axes + 1) + np.uint64(a))
@@ -484,15 +569,14 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
                     encoder[j, a] = x_fb[a]
                 if write_velocity:
                     velocity[j, a] = state[a, 1]
-        if comp_step is not None:
-            dpos[:] = 0.0
-            dvel[:] = 0.0
-            dforce[:] = 0.0
-            comp_step(k, ref_pos, ref_vel, ref_acc, comp_geometry, x_fb, comp_state, comp_params, dpos, dvel, dforce)
+        if coupled:
+            ex, ey, ez = _coupling_step(k, cpar, knots, knot_of_sample, cstate, x_fb, dvel)
+            if record and write_estimate:
+                estimate[j, 0], estimate[j, 1], estimate[j, 2] = ex, ey, ez
         for a in range(n_axes):
             x, v, d, w, i = state[a, 0], state[a, 1], state[a, 2], state[a, 3], state[a, 4]
-            v_cmd = _velocity_command(par, a, ref_pos[k, a] + dpos[a], ref_vel[k, a], x_fb[a]) + dvel[a]
-            i_ff = par[a, _AFF] * ref_acc[k, a] + par[a, _AMP] * dforce[a]
+            v_cmd = _velocity_command(par, a, ref_pos[k, a], ref_vel[k, a], x_fb[a]) + dvel[a]
+            i_ff = par[a, _AFF] * ref_acc[k, a]
             i_cmd, clamped, state[a, _ZV] = _velocity_controller(
                 par[a, _VB], par[a, _VC], par[a, _VD], par[a, _ILIM], state[a, _ZV], v_cmd - v_fb[a], i_ff
             )
@@ -527,20 +611,20 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, comp_step, comp_state, comp_
                     status[a, _DIVERGED] = k
 
 
-# Without a compensator the loop compiles once and is cached on disk. A compensator's step
-# function is a type of its own, which numba cannot cache across sessions (the cache would
-# grow by one entry per session), so that variant compiles in memory, once per function.
-_variant_plain = njit(cache=True)(_variant)
-_variant_compensated = njit(_variant)
+@njit(cache=True)
+def _no_coupling():
+    """Coupling arguments of :func:`_variant` that switch it off (kind 0)."""
+    return np.zeros(_C_NPAR), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(_C_NSTATE)
 
 
 @njit(cache=True, parallel=True)
 def _batch(rows, states, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
-    """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows."""
-    empty = np.zeros(0)
+    """:func:`_variant` (without coupling) for each row of `rows` (B, n, NPAR), in parallel over the rows."""
+    cpar, knots, knot_of_sample, cstate = _no_coupling()
+    no_estimate = np.empty((0, 3))
     for b in prange(rows.shape[0]):
-        _variant_plain(rows[b], states[b], ref_pos, ref_vel, ref_acc, None, empty, empty, empty, every,
-                       tool[b], encoder[b], velocity[b], current[b], saturated[b], status[b])  # fmt: skip
+        _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
+                 tool[b], encoder[b], velocity[b], current[b], saturated[b], no_estimate, status[b])  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
@@ -669,12 +753,14 @@ def pack(servo, dt, effects=LoopEffects()):
     return row
 
 
-def spectral_radius(row):
-    """Largest closed-loop eigenvalue modulus of a packed axis's linear sampled loop: < 1 is stable.
+def loop_matrices(row):
+    """The linear sampled loop of a packed axis, with an extra velocity command as its input.
 
-    The cheap stability check of a variant (no python-control): the plant
-    (with its structural mode and current loop), the controllers and the
-    feedback delay, without saturation, backlash, friction and quantisation.
+    The plant (with its structural mode and current loop), the controllers
+    and the feedback delay, without saturation, backlash, friction and
+    quantisation: ``s_{k+1} = phi·s_k + b·w_k`` and ``x_fb,k = c·s_k``, with
+    ``w`` added to the velocity command [mm/s] (what a :class:`Coupling`
+    does) and ``x_fb`` the position the loop closes on [mm].
 
     Parameters
     ----------
@@ -683,14 +769,19 @@ def spectral_radius(row):
 
     Returns
     -------
-    float
-        ``max |λ|`` of the loop's state-transition matrix [-].
+    phi : ndarray, shape (S, S)
+        State transition: plant, integrators in use, delayed samples [-].
+    b : ndarray, shape (S,)
+        Input vector of the extra velocity command.
+    c : ndarray, shape (S,)
+        Output row of the fed-back position.
     """
     p = _validate.finite_array("row", row, shape=(NPAR,))
     electrical, integral = p[_ELEC] != 0.0, p[_VC] != 0.0
     n_delay, f = int(p[_DELAY_N]), p[_DELAY_F]
     depth = n_delay + 1 if (n_delay or f) else 0  # past samples of x and v the loop reads
-    # state: plant (5), then the integrators in use, then the delayed x and v samples (k-1 .. k-depth)
+    # state: plant (5), then the integrators in use, then the delayed x and v samples (k-1 .. k-depth);
+    # the input w rides along as entry `size` of every row vector
     zv, zc = _NS, _NS + integral
     hx = zc + electrical
     hv = hx + depth
@@ -700,7 +791,7 @@ def spectral_radius(row):
 
     def sample(signal, history, back):
         """Row picking the plant state `signal` (0: x, 1: v) `back` samples ago."""
-        r = np.zeros(size)
+        r = np.zeros(size + 1)
         r[signal if back == 0 else history + back - 1] = 1.0
         return r
 
@@ -708,6 +799,7 @@ def spectral_radius(row):
         return (1.0 - f) * sample(signal, history, n_delay) + (f * sample(signal, history, n_delay + 1) if f else 0.0)
 
     e_v = -p[_KP] * fed_back(0, hx) - fed_back(1, hv)
+    e_v[size] = 1.0
     i_cmd = p[_VD] * e_v
     if integral:
         i_cmd[zv] += p[_VC]
@@ -717,7 +809,7 @@ def spectral_radius(row):
         e_i[4] -= 1.0
         u = p[_CD] * e_i
         u[zc] += p[_CC]
-    phi = np.zeros((size, size))
+    phi = np.zeros((size, size + 1))
     phi[:_NS, :_NS] = Ad
     phi[:_NS] += Bu[:, None] * u
     if integral:
@@ -729,7 +821,26 @@ def spectral_radius(row):
     for history, signal in ((hx, 0), (hv, 1)):
         for j in range(depth):
             phi[history + j] = sample(signal, history, j)
-    return float(np.abs(np.linalg.eigvals(phi)).max())
+    return phi[:, :size], phi[:, size], fed_back(0, hx)[:size]
+
+
+def spectral_radius(row):
+    """Largest closed-loop eigenvalue modulus of a packed axis's linear sampled loop: < 1 is stable.
+
+    The cheap stability check of a variant (no python-control): the loop of
+    :func:`loop_matrices`.
+
+    Parameters
+    ----------
+    row : array_like, shape (NPAR,)
+        One axis's row from :func:`pack`.
+
+    Returns
+    -------
+    float
+        ``max |λ|`` of the loop's state-transition matrix [-].
+    """
+    return float(np.abs(np.linalg.eigvals(loop_matrices(row)[0])).max())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -752,8 +863,10 @@ def _axes(servos):
 
 
 def _reference(n_axes, ref_pos, ref_vel, ref_acc, finite):
-    """The three reference arrays checked, C-contiguous float64, shape (N, n_axes).
+    """The three reference arrays checked, as read-only C-contiguous float64 views, shape (N, n_axes).
 
+    Read-only always (a view costs nothing), so that the compiled kernel has one
+    signature whether the caller's arrays are writeable or not (numba types them apart).
     ``finite=False`` checks types and shapes only (:func:`run` has the kernel
     flag non-finite values as it reads them, and calls this again then).
     """
@@ -764,7 +877,13 @@ def _reference(n_axes, ref_pos, ref_vel, ref_acc, finite):
         raise ValueError("ref_pos must hold at least one sample")
     ref_vel = check("ref_vel", ref_vel, shape=(n_steps, n_axes))
     ref_acc = check("ref_acc", ref_acc, shape=(n_steps, n_axes))
-    return tuple(np.ascontiguousarray(r) for r in (ref_pos, ref_vel, ref_acc))
+    return tuple(_read_only(np.ascontiguousarray(r)) for r in (ref_pos, ref_vel, ref_acc))
+
+
+def _read_only(array):
+    view = array.view()
+    view.flags.writeable = False
+    return view
 
 
 def _initial_state(shape, start):
@@ -776,7 +895,7 @@ def _initial_state(shape, start):
     return state
 
 
-def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
+def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
     """Simulate all axes' servo loops, with their in-loop effects, on a sampled reference.
 
     Every axis's nominal loop is checked first (:func:`contoursim.servo.check`:
@@ -797,9 +916,9 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
         Velocity commands [mm/s] (used by velocity feedforward).
     ref_acc : array_like, shape (N, n)
         Acceleration commands [mm/s^2] (used by acceleration feedforward).
-    compensator : Compensator, optional
-        Sees every axis each step and corrects the position, velocity and
-        force commands.
+    coupling : Coupling, optional
+        Cross-coupled contour controller: estimates the contour error every
+        step and corrects the velocity commands of the first 2 or 3 axes.
     effects : mapping str -> LoopEffects, optional
         In-loop and sensor effects by axis name (axes not named, or named
         with ``None``, have none).
@@ -812,14 +931,14 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
     ------
     TypeError
         A servo that is not an :class:`~contoursim.servo.AxisServo`, a
-        compensator that is not a :class:`Compensator`, effects that are
-        not :class:`LoopEffects`.
+        coupling that is not a :class:`Coupling`, effects that are not
+        :class:`LoopEffects`.
     ValueError
         Bad shapes or values, `dt` too long for a loop, or effects naming an
         unknown axis.
     UnstableLoopError
         An axis's sampled loop is unstable or badly damped, or the simulation
-        with its effects or compensator diverged.
+        with its effects or coupling diverged.
 
     Examples
     --------
@@ -836,8 +955,11 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
     dt = _validate.positive("dt", dt)
     n = len(servos)
     ref_pos, ref_vel, ref_acc = _reference(n, ref_pos, ref_vel, ref_acc, finite=False)
-    if compensator is not None and not isinstance(compensator, Compensator):
-        raise TypeError(f"compensator must be a Compensator, got {type(compensator).__name__}")
+    if coupling is not None and not isinstance(coupling, Coupling):
+        raise TypeError(f"coupling must be a Coupling, got {type(coupling).__name__}")
+    if coupling is not None and coupling.path.shape != (ref_pos.shape[0], min(n, 3)):
+        raise ValueError(f"the coupling's path must have shape ({ref_pos.shape[0]}, {min(n, 3)}) "
+                         f"(one row per reference sample, the first {min(n, 3)} axes), got {coupling.path.shape}")
     effects = {} if effects is None else dict(effects)
     unknown = [name for name in effects if name not in names]
     if unknown:
@@ -851,16 +973,16 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
     position, encoder, velocity, current = np.empty((4, n_steps, n))  # one block, which malloc keeps for the next run
     saturated = np.empty((n_steps, n), bool)
     status = np.empty((n, 3), np.int64)
-    outputs = (position, encoder, velocity, current, saturated, status)
-    if compensator is None:
-        empty = np.zeros(0)
-        _variant_plain(par, state, ref_pos, ref_vel, ref_acc, None, empty, empty, empty, 1, *outputs)
-        comp_state = None
+    if coupling is None:
+        cpar, knots, knot_of_sample, cstate = _no_coupling()
+        estimate = np.empty((0, 3))
     else:
-        comp_state = compensator.state.copy()
-        c = compensator
-        _variant_compensated(par, state, ref_pos, ref_vel, ref_acc, c.step, comp_state, c.params, c.geometry, 1,
-                             *outputs)  # fmt: skip
+        # writeable copies: the kernel compiles for one array type (a read-only array is another)
+        cpar, knots, knot_of_sample = coupling.params.copy(), coupling.knots.copy(), coupling.knot_of_sample.copy()
+        cpar[_C_DT], cstate = dt, np.zeros(_C_NSTATE)
+        estimate = np.empty((n_steps, 3))
+    outputs = (position, encoder, velocity, current, saturated, estimate, status)
+    _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, 1, *outputs)
     if status[:, _BAD_REFERENCE].max() >= 0:
         _reference(n, ref_pos, ref_vel, ref_acc, finite=True)  # names the first non-finite value
     diverged = status[:, _DIVERGED]
@@ -868,9 +990,9 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, compensator=None, effects=None):
         a = int(np.argmax(diverged >= 0))
         raise UnstableLoopError(
             f"the simulation of axis {names[a]!r} diverged by t = {diverged[a] * dt:.6g} s (step {diverged[a]}): "
-            "its loop with these effects (or this compensator) is unstable"
+            "its loop with these effects (or this coupling) is unstable"
         )
-    return ServoResponse(np.arange(n_steps) * dt, *outputs[:5], compensator_state=comp_state)
+    return ServoResponse(np.arange(n_steps) * dt, *outputs[:5], contour_estimate=None if coupling is None else estimate)
 
 
 def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, dtype=np.float64):

@@ -16,7 +16,8 @@ from .output import output_dir
 
 __all__ = [
     "circular_deviation", "envelope_indices", "fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation",
-    "plot_errors_over_time", "save_figures",
+    "plot_errors_over_time", "save_figures", "plot_compared_paths", "plot_compared_contour_error",
+    "plot_compared_figures", "save_comparison_figures",
 ]
 
 _COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
@@ -382,8 +383,6 @@ def save_figures(runs, out_dir, name):
     FileExistsError
         A plot's file exists and contoursim did not write it.
     """
-    from matplotlib.figure import Figure
-
     results = list(runs.values())
     k = _shared_magnification(results)
     # (file, size [in], margins, drawing): fixed margins that leave room for the legends, no layout search
@@ -396,8 +395,15 @@ def save_figures(runs, out_dir, name):
     if all(r.trajectory.path is not None and r.trajectory.path.test_circle() is not None for r in results):
         drawings.append((f"{name}_polar.png", (7.0, 7.6), dict(left=0.08, right=0.92, top=0.88, bottom=0.2),
                          lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"))))
+    return _draw(drawings, out_dir)
+
+
+def _draw(drawings, out_dir):
+    """Draw and write ``(file, size [in], margins, drawing)`` PNGs; all refused before any is drawn."""
+    from matplotlib.figure import Figure
+
     out_dir = output_dir(out_dir)
-    files = [out_dir.file(file) for file, *_ in drawings]  # all refused before any is drawn
+    files = [out_dir.file(file) for file, *_ in drawings]
     for file, (_, size, margins, draw) in zip(files, drawings):
         fig = Figure(figsize=size)
         fig.subplots_adjust(**margins)
@@ -405,3 +411,147 @@ def save_figures(runs, out_dir, name):
         with out_dir.write(file.name, binary=True) as stream:
             fig.savefig(stream, format="png", dpi=110)
     return files
+
+
+# ---------------------------------------------------------------------------------------------
+# Strategies compared (contoursim compare)
+
+
+def plot_compared_paths(runs, ax=None, magnification=None):
+    """The actual paths of several runs (strategies) on one reference, contour errors magnified alike.
+
+    Each run is drawn as in :func:`plot_path_error` (``foot + k·(actual − foot)``)
+    with one factor k for all, chosen from the largest contour error of all
+    runs: a run whose error is orders of magnitude smaller lies on the
+    reference at that scale, which is the comparison.
+
+    Parameters
+    ----------
+    runs : dict of str -> contoursim.simulate.SimResult
+        Runs on the same reference, by name.
+    ax : matplotlib.axes.Axes, optional
+    magnification : float, optional
+        Factor k [-], at least 1.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    ax = _axes(ax)
+    results = list(runs.values())
+    first = results[0]
+    ref = first.trajectory.position[:, :2]
+    size = float(np.ptp(ref, axis=0).max())
+    k = _shared_magnification(results) if magnification is None else _validate.positive("magnification", magnification)
+    step = size / (2 * _COLUMNS)
+    ir = _thin_curve(ref, step)
+    ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=2.0, label="reference")
+    for i, (name, result) in enumerate(runs.items()):
+        foot = result.contour.foot[:, :2]
+        shown = foot + k * (result.tool_position[:, :2] - foot)
+        ia = _thin_curve(shown, step)
+        largest = 1e3 * result.contour.magnitude[result.trajectory.measuring].max()
+        ax.plot(shown[ia, 0], shown[ia, 1], color=f"C{i}", lw=0.9, label=f"{name} (max {largest:.3g} µm)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    scale = f"×{k:g} along the path normal" if k > 1 else "at true scale"
+    ax.set_title(f"Contour error of each strategy, {scale} (one factor for all)", fontsize="medium")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize="small", frameon=False)
+    return ax
+
+
+def plot_compared_contour_error(runs, ax=None):
+    """Contour error magnitude over time of several runs, on a log scale [µm].
+
+    Parameters
+    ----------
+    runs : dict of str -> contoursim.simulate.SimResult
+    ax : matplotlib.axes.Axes, optional
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    ax = _axes(ax)
+    for i, (name, result) in enumerate(runs.items()):
+        t, error = result.trajectory.t, 1e3 * result.contour.magnitude
+        keep = envelope_indices(error)
+        ax.plot(t[keep], np.maximum(error[keep], 1e-6), lw=0.8, color=f"C{i}", label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("contour error [µm] (log)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.set_title("Contour error over time", fontsize="medium")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
+    return ax
+
+
+def plot_compared_figures(figures, fig=None):
+    """Bar chart of a comparison's table: errors [µm] on a log scale, and the peak current [A].
+
+    Parameters
+    ----------
+    figures : dict of str -> dict
+        Strategy name -> :attr:`contoursim.comparison.Comparison.figures` entry.
+    fig : matplotlib.figure.Figure, optional
+
+    Returns
+    -------
+    ndarray of matplotlib.axes.Axes, shape (2,)
+    """
+    if fig is None:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=(9.0, 6.5), layout="constrained")
+    errors_ax, current_ax = fig.subplots(2, 1, height_ratios=(2, 1))
+    names = list(figures)
+    x = np.arange(len(names))
+    keys = (("contour_max_um", "contour max"), ("contour_rms_um", "contour RMS"),
+            ("tracking_max_um", "tracking max"), ("tracking_rms_um", "tracking RMS"))  # fmt: skip
+    width = 0.8 / len(keys)
+    for j, (key, label) in enumerate(keys):
+        values = [max(figures[n][key], 1e-6) for n in names]
+        errors_ax.bar(x + (j - (len(keys) - 1) / 2) * width, values, width, label=label, color=f"C{j}")
+    errors_ax.set_yscale("log")
+    errors_ax.set_ylabel("error [µm] (log)")
+    errors_ax.set_xticks(x, names, rotation=12)
+    errors_ax.grid(True, axis="y", which="both", alpha=0.3)
+    errors_ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
+    errors_ax.set_title("Errors over the test proper and peak current, by strategy", fontsize="medium")
+    currents = [figures[n]["peak_current_A"] for n in names]
+    hatches = ["//" if figures[n]["saturated"] else "" for n in names]
+    current_ax.bar(x, currents, 0.5, color="0.55", hatch=hatches)
+    current_ax.set_ylabel("peak current [A]")
+    current_ax.set_xticks(x, names, rotation=12)
+    current_ax.grid(True, axis="y", alpha=0.3)
+    current_ax.set_title("Peak current command (hatched: the amplifier saturated)", fontsize="medium")
+    return np.array([errors_ax, current_ax])
+
+
+def save_comparison_figures(comparison, out_dir, name):
+    """Write ``<name>_compare_path.png``, ``<name>_compare_contour.png`` and ``<name>_compare_table.png``.
+
+    Parameters
+    ----------
+    comparison : contoursim.comparison.Comparison
+    out_dir : str, pathlib.Path or contoursim.output.OutputDir
+        As for :func:`save_figures`.
+    name : str
+        File name stem.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+    """
+    runs = comparison.runs
+    drawings = [
+        (f"{name}_compare_path.png", (7.0, 8.0), dict(left=0.12, right=0.96, top=0.93, bottom=0.2),
+         lambda fig: plot_compared_paths(runs, fig.add_subplot())),
+        (f"{name}_compare_contour.png", (9.0, 4.8), dict(left=0.09, right=0.78, top=0.92, bottom=0.11),
+         lambda fig: plot_compared_contour_error(runs, fig.add_subplot())),
+        (f"{name}_compare_table.png", (9.5, 6.5), dict(left=0.08, right=0.8, top=0.94, bottom=0.07, hspace=0.3),
+         lambda fig: plot_compared_figures(comparison.figures, fig)),
+    ]  # fmt: skip
+    return _draw(drawings, out_dir)

@@ -29,6 +29,7 @@ trapezoidal (Tustin) rule, and every controller reads the state sampled at
 ``t_k`` and holds its output over ``[t_k, t_k + dt)``.
 """
 
+import dataclasses
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -736,6 +737,8 @@ def margins(servo, dt=None):
         closed-loop poles strictly inside the stability region).
     """
     dt = 0.0 if dt is None else _validate.positive("dt", dt)
+    if servo.vff or servo.aff:  # feedforward does not enter a loop gain: one analysis per feedback loop
+        servo = dataclasses.replace(servo, vff=0.0, aff=0.0)
     return {name: dict(m) for name, m in _margins(servo, dt).items()}
 
 

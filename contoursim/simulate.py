@@ -2,8 +2,10 @@
 
 The data flow of DESIGN.md, as one pure function::
 
-    reference ─▶ axis commands (ideal inverse kinematics) ─▶ strategies (pre-correction)
-        ─▶ command-stage effects ─▶ servo kernel (servo-stage and in-loop effects)
+    reference ─▶ axis commands (ideal inverse kinematics) ─▶ strategies (target: geometric
+        compensation; drive settings: feedforward; pre-filter: ZPETC)
+        ─▶ command-stage effects ─▶ servo kernel (servo-stage and in-loop effects; a
+        cross-coupled controller in the loop)
         ─▶ axis positions ─▶ multibody chain (geometric effects) ─▶ tool tip in workpiece
         coordinates ─▶ tracking error, contour error
 
@@ -21,6 +23,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from . import estimators, kernel
+from .compensation import Composition
 from ._version import __version__
 from .contour import exact_contour_error
 from .exceptions import ContoursimWarning
@@ -43,8 +46,10 @@ class SimResult:
     machine : Machine
         The nominal machine (``model.machine``).
     axis_command : ndarray, shape (N, n_axes)
-        Position commands of the interpolator after pre-correcting
-        strategies, before command-stage effects (a command delay) [mm].
+        Where the strategies want the axes: the interpolator's commands
+        after the target stages (geometric compensation), before a
+        feedforward pre-filter (ZPETC) and command-stage effects (a command
+        delay) [mm].
     servo_response : contoursim.kernel.ServoResponse
         Servo axes' positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
@@ -245,12 +250,20 @@ def _reference(machine, reference, settle):
     return reference.held(settle)
 
 
-def _commands(model, trajectory, strategies):
-    """Axis commands of the interpolator after the strategies, shape (N, n_axes) each."""
-    q, v, a = model.machine.axis_commands(trajectory)
-    for strategy in strategies:
-        q = strategy.commands(q, _elapsed(trajectory))
-    return q, v, a
+def _target(model, trajectory, composition):
+    """Axis commands of the interpolator after the strategies' target stages, shape (N, n_axes) each."""
+    return composition.target(*model.machine.axis_commands(trajectory), _elapsed(trajectory))
+
+
+def _sent(model, composition, servos, target):
+    """The commands the servo axes get: the strategies' pre-filter, then the command-stage effects."""
+    if not composition.prefilters:
+        return model.commands(*target)
+    q, v, a = (x.copy() for x in target)
+    columns, dt = model.machine.servo_columns, model.machine.servo_period
+    q[:, columns], v[:, columns], a[:, columns] = composition.prefilter(q[:, columns], v[:, columns], a[:, columns],
+                                                                        servos, dt)  # fmt: skip
+    return model.commands(q, v, a)
 
 
 def _elapsed(trajectory):
@@ -281,10 +294,13 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
         ``max_feed`` [mm/s]; or a measured trace whose commanded positions
         are the reference (:func:`measured_reference`: resampled to the servo
         period where needed; what the machine did is not refused).
-    strategies : sequence
-        Compensation strategies applied in order to the axis commands; each
-        has ``commands(q, t) -> q_corrected`` (e.g.
-        :class:`contoursim.geocomp.GeometricCompensation`).
+    strategies : sequence of contoursim.compensation.Strategy
+        Compensation strategies, composed by
+        :class:`contoursim.compensation.Composition` (e.g.
+        :class:`~contoursim.compensation.Feedforward`,
+        :class:`~contoursim.compensation.ZPETC`,
+        :class:`~contoursim.compensation.CrossCoupled`,
+        :class:`~contoursim.geocomp.GeometricCompensation`).
     settle : float, optional
         Standstill appended after the reference ends, so the axes settle [s];
         default five time constants of the slowest position loop, ``5 / min(kp)``,
@@ -301,7 +317,8 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     ------
     UnstableLoopError
         An axis loop (with its servo-stage effects) is unstable or badly
-        damped at this servo period.
+        damped at this servo period, or a cross-coupled controller
+        destabilises it.
     TypeError
         `model` is not a Model or a Machine, `reference` not a Trajectory or a Trace.
     ValueError
@@ -324,10 +341,13 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     model = as_model(model)
     machine = model.machine
     trajectory = _reference(machine, reference, settle)
-    q, v, a = _commands(model, trajectory, strategies)
-    qd, vd, ad = model.commands(q, v, a)
-    servo = machine.servo_columns
-    response = kernel.run(model.servos(), machine.servo_period, qd[:, servo], vd[:, servo], ad[:, servo],
+    composition = Composition(strategies)
+    q, v, a = _target(model, trajectory, composition)
+    servo, dt = machine.servo_columns, machine.servo_period
+    servos = composition.drive(model.servos())
+    coupling = composition.coupling(q[:, servo], servos, dt)
+    qd, vd, ad = _sent(model, composition, servos, (q, v, a))
+    response = kernel.run(servos, dt, qd[:, servo], vd[:, servo], ad[:, servo], coupling=coupling,
                           effects=model.loop_effects())
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
@@ -337,10 +357,9 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
         error = exact_contour_error(trajectory, tool)
     elif contour and trajectory.dim > 1:
         error = estimators.three_point(trajectory.position, tool)
-    result = SimResult(trajectory, machine, q, response, tool, static, error, tuple(strategies), model)
+    result = SimResult(trajectory, machine, q, response, tool, static, error, composition.strategies, model)
     clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
     if clipped:
-        servos = model.servos()
         axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A)"
                          for axis, f in clipped.items())
         warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
@@ -388,7 +407,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         ``"axis_position"`` (the actual positions of all the machine's axes,
         shape (B, M, n_axes)) [mm, rad].
     strategies : sequence
-        As for :func:`simulate`.
+        As for :func:`simulate`, without a cross-coupled controller (the
+        batch kernel runs none).
     settle : float, optional
         As for :func:`simulate`.
     every : int
@@ -414,13 +434,18 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     Raises
     ------
     ValueError
-        The variants do not share one structure; an unknown output.
+        The variants do not share one structure; an unknown output; a
+        cross-coupled controller among the strategies.
     UnstableLoopError
         A nominal machine's loop is unstable or badly damped.
     """
     models = [as_model(m) for m in models]
     if not models:
         raise ValueError("simulate_batch needs at least one model")
+    composition = Composition(strategies)
+    coupled = [s.name for s in composition.strategies if s.kind == "coupling"]
+    if coupled:
+        raise ValueError(f"simulate_batch runs no cross-coupled controller ({coupled[0]}): use simulate")
     unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
     if unknown or not outputs:
         raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
@@ -439,7 +464,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory = _reference(first, reference, settle)
-    q, v, a = _commands(models[0], trajectory, strategies)
+    q, v, a = _target(models[0], trajectory, composition)
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))
     width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
@@ -452,11 +477,12 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * n_keep * servo.size))
     elapsed, q_kept = _elapsed(trajectory)[keep], q[keep]
     for rows in groups.values():
-        qd, vd, ad = models[rows[0]].commands(q, v, a)
+        # the pre-filter designs from the first variant of the group (pass a `model` to the strategy to fix it)
+        qd, vd, ad = _sent(models[rows[0]], composition, composition.drive(models[rows[0]].servos()), (q, v, a))
         # variants that differ only in their geometry share one kernel run
         runs = {}
         for i in rows:
-            packed = np.array(_packed(models[i], dt))
+            packed = np.array(_packed(models[i], dt, composition))
             runs.setdefault(packed.tobytes(), (packed, []))[1].append(i)
         distinct = list(runs.values())
         for start in range(0, len(distinct), chunk):
@@ -477,7 +503,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     return result
 
 
-def _packed(model, dt):
-    """The kernel's parameter rows of one variant, shape (n_servo, NPAR)."""
+def _packed(model, dt, composition):
+    """The kernel's parameter rows of one variant with the strategies' drive settings, shape (n_servo, NPAR)."""
     loop = model.loop_effects()
-    return [kernel.pack(servo, dt, loop[axis]) for axis, servo in model.servos().items()]
+    return [kernel.pack(servo, dt, loop[axis]) for axis, servo in composition.drive(model.servos()).items()]

@@ -53,6 +53,12 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
         trace = read_trace(tmp_path / "out" / f"{run}.csv")
         assert trace.axes == ("x", "y")
     assert (tmp_path / "out" / "iso230_4_circle_polar.png").stat().st_size > 10_000  # CCW and CW overlaid
+    # the compact comparison on the free-form run: its none row is the butterfly run itself
+    butterfly = next(line for line in table.splitlines() if line.startswith("butterfly "))
+    none = next(line for line in table.splitlines() if line.startswith("none "))
+    assert float(none.split()[1]) == pytest.approx(float(butterfly.split()[3]), rel=1e-3)
+    both = next(line for line in table.splitlines() if line.startswith("feedforward+ccc_arc "))
+    assert float(both.split()[1]) < 0.01 * float(none.split()[1])
     # the circle row: tracking ≈ v/Kp = (1000/60)/36 mm on the slower axis, contour far smaller
     row = next(line for line in table.splitlines() if line.startswith("iso230_4_circle_ccw"))
     tracking_max, _, contour_max, _, volumetric_max = map(float, row.split()[1:])
@@ -311,3 +317,50 @@ def test_help_and_import_leave_the_heavy_libraries_unloaded():
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[-2:] == ["[]", "True True Machine"]  # lazy names are the objects, not submodules
+
+
+def test_compare_prints_the_table_and_writes_the_json_and_plots(tmp_path, capsys):
+    import json
+
+    from contoursim.compensation import STRATEGY_NAMES
+
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL_PATH)
+    report = tmp_path / "r.json"
+    assert main(["compare", str(path), "--json", str(report), "--out", str(tmp_path / "out")]) == 0
+    table = capsys.readouterr().out
+    runs = json.loads(report.read_text())["runs"]
+    assert list(runs) == list(STRATEGY_NAMES)  # the contract's names, in order
+    for name, figures in runs.items():
+        assert set(figures) == {"contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um",
+                                "peak_current_A", "saturated"}
+        assert isinstance(figures["saturated"], bool) and figures["peak_current_A"] > 0
+        row = next(line for line in table.splitlines() if line.split()[:1] == [name])
+        assert float(row.split()[1]) == pytest.approx(figures["contour_max_um"], rel=1e-3)
+    assert runs["feedforward+ccc_arc"]["contour_max_um"] < 0.1 * runs["none"]["contour_max_um"]
+    for kind in ("path", "contour", "table"):
+        assert (tmp_path / "out" / f"small_compare_{kind}.png").stat().st_size > 10_000
+    # a second run replaces its own JSON; a file that is not a comparison is never overwritten
+    assert main(["compare", str(path), "--strategies", "none, ccc_arc", "--json", str(report),
+                 "--out", str(tmp_path / "out")]) == 0
+    assert list(json.loads(report.read_text())["runs"]) == ["none", "ccc_arc"]
+    keep = tmp_path / "notes.json"
+    keep.write_text('{"mine": 1}')
+    capsys.readouterr()
+    assert main(["compare", str(path), "--json", str(keep), "--out", str(tmp_path / "out")]) == 2
+    assert "notes.json exists and is not a comparison JSON" in capsys.readouterr().err
+    assert keep.read_text() == '{"mine": 1}'
+
+
+@pytest.mark.parametrize("strategies, message", [
+    ("none,pid", "unknown strategy 'pid'"),
+    ("feedforward+zpetc", "feedforward and zpetc are both a feedforward"),
+    ("none,none", "strategy 'none' is named twice"),
+    ("geometric", "needs a machine with a geometric error model"),
+])
+def test_compare_refuses_bad_strategy_names(tmp_path, capsys, strategies, message):
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL_PATH)
+    assert main(["compare", str(path), "--strategies", strategies, "--out", str(tmp_path / "out")]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

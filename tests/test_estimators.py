@@ -313,40 +313,29 @@ def test_exact_delegates_to_the_continuous_path():
     np.testing.assert_allclose(est.three_point(ref.position, act).normal, got.normal, rtol=0, atol=1e-12)
 
 
-def test_three_point_step_runs_inside_the_servo_kernel():
-    """The online estimator plugs into the kernel's compensator hook and sees what the kernel sees.
+def test_in_loop_arc_estimate_equals_the_offline_estimator():
+    """The kernel's cross-coupled controller estimates what the offline estimator does on the same samples.
 
-    A compensator that only observes (no correction) runs three_point_step
-    every servo period on the fed-back axis positions and logs its estimate;
-    the log equals the offline estimate over the kernel's output trace.
+    A coupling with zero gains only observes: every servo period it runs the
+    three-point arc estimate on the fed-back axis positions and logs it; the
+    log equals the offline estimate over the kernel's output trace, and the
+    loop is the uncoupled one bit for bit.
     """
     from contoursim import paths
     from contoursim.feed import plan, sample
-    from contoursim.kernel import Compensator, run
+    from contoursim.kernel import Coupling, run
     from contoursim.servo import AxisServo
 
     dt = 2e-4
     path = paths.circle(center=(0, 0), radius=10.0, direction="ccw")
     trajectory = sample(path, plan(path, feed=30.0, accel=1000.0), dt)
-    reference = np.column_stack([trajectory.position, np.zeros(len(trajectory))])
-    knots, _, _ = est.distinct_samples(reference)
     n = len(trajectory)
-    # params: the search parameters; geometry: the knots (M x 3); state: hint, then the log
-    params = est.search_params()
-
-    @njit
-    def observe(k, ref_pos, ref_vel, ref_acc, knots, position, state, params, dpos, dvel, dforce):
-        actual = np.array([position[0], position[1], 0.0])
-        estimate, hint = est.three_point_step(knots, int(state[0]), actual, params)
-        state[0] = hint
-        state[1 + k] = estimate.magnitude
-
     axis = AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0)
-    response = run([axis, axis], dt, trajectory.position, trajectory.velocity, trajectory.acceleration,
-                   Compensator(observe, np.zeros(n + 1), params, knots))
-    online = response.compensator_state[1:]
-    offline = est.three_point(reference, np.column_stack([response.position, np.zeros(n)])).magnitude
-    np.testing.assert_allclose(online, offline, rtol=0, atol=1e-15)
-    np.testing.assert_array_equal(response.position, run([axis, axis], dt, trajectory.position,
-                                                         trajectory.velocity, trajectory.acceleration).position)
-    assert offline.max() > 1e-3  # there is an error to estimate
+    refs = (trajectory.position, trajectory.velocity, trajectory.acceleration)
+    for estimator, offline in (("arc", est.three_point), ("linear", est.linear)):
+        response = run([axis, axis], dt, *refs, coupling=Coupling(estimator, trajectory.position, kp=0.0))
+        reference = np.column_stack([trajectory.position, np.zeros(n)])
+        expected = offline(reference, np.column_stack([response.encoder, np.zeros(n)]))
+        np.testing.assert_allclose(response.contour_estimate, expected.vector, rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(response.position, run([axis, axis], dt, *refs).position)
+        assert expected.magnitude.max() > 1e-3  # there is an error to estimate

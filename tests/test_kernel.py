@@ -3,10 +3,9 @@
 import control as ct
 import numpy as np
 import pytest
-from numba import njit
 
 from contoursim.exceptions import UnstableLoopError
-from contoursim.kernel import Compensator, run
+from contoursim.kernel import run
 from contoursim.servo import AxisServo
 
 MASS, KF, KV = 300.0, 900.0, 200.0
@@ -166,40 +165,6 @@ def test_saturation_flags_only_where_clamped():
     assert not result.saturated.any()
 
 
-# --- compensator hook ------------------------------------------------------------------------
-
-
-@njit
-def offset_and_count(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce):
-    dpos[1] = params[0]
-    state[0] += 1.0
-
-
-def test_compensator_offset_shifts_one_axis_exactly():
-    offset = 0.0125
-    servo = axis(kp=40.0, ti=0.01, damping=C)
-    t = np.arange(20000) * DT
-    pos = np.column_stack([V * t, -0.5 * V * t])
-    vel = np.column_stack([np.full_like(t, V), np.full_like(t, -0.5 * V)])
-    acc = np.zeros_like(pos)
-    initial = np.array([0.0])
-    comp = Compensator(offset_and_count, initial, np.array([offset]))
-    plain = run([servo, servo], DT, pos, vel, acc)
-    shifted = run([servo, servo], DT, pos, vel, acc, compensator=comp)
-    np.testing.assert_array_equal(shifted.position[:, 0], plain.position[:, 0])
-    assert shifted.position[-1, 1] - plain.position[-1, 1] == pytest.approx(offset, rel=1e-9)
-    assert shifted.compensator_state[0] == len(t)  # one call per step, state returned
-    assert initial[0] == 0.0 and plain.compensator_state is None  # the caller's state is not touched
-
-
-def test_compensator_must_be_jitted():
-    def python_step(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce):
-        pass
-
-    with pytest.raises(TypeError, match="numba"):
-        Compensator(python_step, np.zeros(1), np.zeros(1))
-
-
 # --- bad input -------------------------------------------------------------------------------
 
 
@@ -218,8 +183,8 @@ def test_reference_shapes_and_values_are_checked():
         run([servo, servo], -DT, pos, pos, pos)
     with pytest.raises(TypeError, match=r"servos\['y'\] must be an AxisServo"):
         run([servo, "fast"], DT, pos, pos, pos)
-    with pytest.raises(TypeError, match="compensator must be a Compensator"):
-        run([servo, servo], DT, pos, pos, pos, compensator=offset_and_count)
+    with pytest.raises(TypeError, match="coupling must be a Coupling"):
+        run([servo, servo], DT, pos, pos, pos, coupling="arc")
 
 
 def test_loop_problems_name_the_axis():
@@ -228,23 +193,3 @@ def test_loop_problems_name_the_axis():
         run({"x": axis(), "c": axis(kp=2000.0)}, 2e-4, pos, pos, pos)
     with pytest.raises(ValueError, match="dt = 0.005 s is too long for the velocity loop of axis 'x'"):
         run([axis(), axis()], 5e-3, pos, pos, pos)
-
-
-@njit
-def push(k, ref_pos, ref_vel, ref_acc, geometry, position, state, params, dpos, dvel, dforce):
-    dforce[0] = params[0]
-
-
-def test_compensator_force_correction_cancels_a_known_force():
-    # The force correction enters as drive current dforce/kf: it cancels an offset force of the same size,
-    # and alone it shifts a P-P axis at rest by F/(kf·kv·kp) (the velocity loop's current balances it).
-    from contoursim.kernel import LoopEffects
-
-    force, servo = 50.0, axis(kp=40.0)
-    ref = np.zeros((30000, 1))
-    plain = run([servo], DT, ref, ref, ref)
-    compensated = run([servo], DT, ref, ref, ref, compensator=Compensator(push, np.zeros(1), np.array([force])),
-                      effects={"x": LoopEffects(offset_N=-force)})  # fmt: skip
-    np.testing.assert_allclose(compensated.position, plain.position, rtol=0, atol=1e-12)
-    pushed = run([servo], DT, ref, ref, ref, compensator=Compensator(push, np.zeros(1), np.array([force])))
-    assert pushed.position[-1, 0] == pytest.approx(force / (KF * KV / 1000 * 40.0), rel=1e-6)

@@ -419,13 +419,15 @@ def test_batch_row_equals_single_run_bit_for_bit():
     assert batch["saturated_count"][:, 1].min() > 0  # the limit is reached: anti-windup is exercised
 
 
-def test_switching_effects_does_not_compile():
+def test_switching_effects_and_coupling_does_not_compile():
     servos, variants, refs = batch_case()
     run(servos, DT, *refs)
-    compiled = len(kernel._variant_plain.signatures)
+    compiled = len(kernel._variant.signatures)
     for effects in variants:
         run(servos, DT, *refs, effects=effects)
-    assert len(kernel._variant_plain.signatures) == compiled
+        for estimator in kernel.COUPLING_ESTIMATORS:
+            run(servos, DT, *refs, coupling=kernel.Coupling(estimator, refs[0], kp=20.0, ki=100.0), effects=effects)
+    assert len(kernel._variant.signatures) == compiled
 
 
 def test_importing_the_kernel_does_not_import_python_control():

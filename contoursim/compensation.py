@@ -1,0 +1,569 @@
+"""Compensation strategies: feedforward, ZPETC, cross-coupled contour control, and their compositions.
+
+A strategy is an object passed to :func:`contoursim.simulate.simulate`
+(``strategies=[...]``). It acts at one or more stages of the data flow, each
+a method of :class:`Strategy` that leaves things unchanged by default:
+
+============  ==========================================  ==========================================
+stage         method                                      strategies
+============  ==========================================  ==========================================
+target        ``target(q, v, a, t)``: where the axes       :class:`~contoursim.geocomp.GeometricCompensation`
+              should go
+drive         ``drive(servos)``: the drives' settings      :class:`Feedforward` (velocity and
+                                                          acceleration feedforward gains)
+pre-filter    ``prefilter(q, v, a, servos, dt)``: the      :class:`ZPETC`
+              commands sent, not the target
+in the loop   ``coupling(path, servos, dt)``: a            :class:`CrossCoupled`
+              :class:`contoursim.kernel.Coupling`
+============  ==========================================  ==========================================
+
+Strategies compose (:class:`Composition`): any number of target stages,
+applied in order; at most one feedforward (:class:`Feedforward` or
+:class:`ZPETC`: two inverses of one loop would each undo what the other
+did); at most one cross-coupled controller.
+
+Feedforward is one mechanism: the drive's own velocity and acceleration
+feedforward paths (:class:`contoursim.servo.AxisServo` ``vff``/``aff``,
+stepped by the kernel). A machine file's ``vff``/``aff`` say how the drives
+are set up (the ``none`` strategy keeps them); :class:`Feedforward` sets
+them for a comparison, and :class:`ZPETC` switches them off because its
+pre-filter replaces them.
+
+A strategy designs from a *model* of the axes (``model``: axis name ->
+AxisServo); by default the simulated machine's own servos (a perfect
+model). Passing the nominal servos while simulating another machine gives
+the model mismatch a real controller lives with.
+"""
+
+import abc
+import dataclasses
+import math
+from collections.abc import Mapping
+from functools import lru_cache
+
+import numpy as np
+
+from . import _validate, kernel
+from .exceptions import UnstableLoopError
+from .servo import AxisServo
+
+__all__ = [
+    "Strategy",
+    "Feedforward",
+    "ZPETC",
+    "zpetc_commands",
+    "CrossCoupled",
+    "Composition",
+    "STRATEGY_NAMES",
+    "strategies_named",
+    "coupled_spectral_radius",
+]
+
+#: The comparison's strategy names (DESIGN.md contract), in the order ``contoursim compare`` runs them.
+STRATEGY_NAMES = ("none", "feedforward", "zpetc", "ccc_linear", "ccc_arc", "feedforward+ccc_arc")
+
+
+class Strategy(abc.ABC):
+    """What a compensation strategy may change; every stage leaves things unchanged unless overridden.
+
+    A subclass says what it is (``name``, ``kind``) and overrides the
+    stages where it acts.
+    """
+
+    @property
+    @abc.abstractmethod
+    def name(self):
+        """Its name in a comparison (as in :data:`STRATEGY_NAMES`)."""
+
+    @property
+    @abc.abstractmethod
+    def kind(self):
+        """``"target"``, ``"feedforward"`` or ``"coupling"``: the composition rule of :class:`Composition`."""
+
+    def target(self, q, v, a, t):
+        """Where the axes should go: axis positions [mm, rad], velocities, accelerations, each (N, n_axes)."""
+        return q, v, a
+
+    def drive(self, servos):
+        """The drives' settings: mapping axis name -> AxisServo, returned changed or as is."""
+        return servos
+
+    def prefilter(self, q, v, a, servos, dt):
+        """The commands sent to the servo axes (N, n_servo) for the target `q, v, a` (N, n_servo)."""
+        return q, v, a
+
+    def coupling(self, path, servos, dt):
+        """A :class:`contoursim.kernel.Coupling` acting in the loop, or ``None``."""
+        return None
+
+
+def _model(model, servos):
+    """The servos a strategy designs from: `model` (for the axes it names) or the simulated ones."""
+    if model is None:
+        return dict(servos)
+    missing = [axis for axis in servos if axis not in model]
+    if missing:
+        raise ValueError(f"the strategy's model has no servo for axis {missing[0]!r}")
+    return {axis: model[axis] for axis in servos}
+
+
+def _check_model(model):
+    if model is None:
+        return None
+    if not isinstance(model, Mapping):
+        raise TypeError(f"model must be a mapping axis name -> AxisServo, got {type(model).__name__}")
+    for axis, servo in model.items():
+        if not isinstance(servo, AxisServo):
+            raise TypeError(f"model[{axis!r}] must be an AxisServo, got {type(servo).__name__}")
+    return dict(model)
+
+
+# ---------------------------------------------------------------------------------------------
+# Feedforward
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Feedforward(Strategy):
+    """Velocity and acceleration feedforward: the drives' own ``vff``/``aff`` paths, switched on.
+
+    The position controller's velocity command gets ``velocity · v_ref`` and
+    the current command ``acceleration · m·a_ref/kf`` (mass and force
+    constant of the model), so that an exact model leaves only the sampling
+    and the velocity loop's own lag to the feedback.
+
+    Parameters
+    ----------
+    velocity : float, default 1
+        Velocity feedforward gain [-], 0..1.
+    acceleration : float, default 1
+        Acceleration feedforward gain [-], 0..1, on the model's ``m/kf``.
+    model : mapping str -> AxisServo, optional
+        Servos the acceleration feedforward is computed from (default: the
+        simulated machine's). The drive gets ``aff = acceleration ·
+        (m/kf)_model / (m/kf)_machine``, which must not exceed 1.
+    """
+
+    velocity: float = 1.0
+    acceleration: float = 1.0
+    model: Mapping | None = None
+
+    name = "feedforward"
+    kind = "feedforward"
+
+    def __post_init__(self):
+        for gain in ("velocity", "acceleration"):
+            value = _validate.nonnegative(gain, getattr(self, gain))
+            if value > 1:
+                raise ValueError(f"{gain} must be between 0 and 1 (a fraction of full feedforward), got {value!r}")
+            object.__setattr__(self, gain, value)
+        object.__setattr__(self, "model", _check_model(self.model))
+
+    def drive(self, servos):
+        model = _model(self.model, servos)
+        driven = {}
+        for axis, servo in servos.items():
+            ratio = (model[axis].mass / model[axis].force_constant) / (servo.mass / servo.force_constant)
+            aff = self.acceleration * ratio
+            if aff > 1 + 1e-12:
+                raise ValueError(
+                    f"the feedforward model of axis {axis!r} has {100 * (ratio - 1):.3g} % more mass per force "
+                    f"constant than the machine: acceleration feedforward would be {aff:.4g} > 1"
+                )
+            driven[axis] = dataclasses.replace(servo, vff=self.velocity, aff=min(aff, 1.0))
+        return driven
+
+
+# ---------------------------------------------------------------------------------------------
+# ZPETC
+
+#: A closed-loop zero with ``|z|`` at least this is not inverted by ZPETC (besides any on the negative
+#: real half-plane with ``|z| > ZPETC_NEGATIVE_RADIUS``).
+ZPETC_RADIUS = 1.0
+#: Zeros on the left half of the z-plane beyond this radius ring at the Nyquist frequency when inverted.
+ZPETC_NEGATIVE_RADIUS = 0.5
+
+
+@lru_cache(maxsize=64)
+def _zpetc_filter(servo, dt):
+    """``(den, num, fir, delay)`` of Tomizuka's ZPETC for the sampled loop x_ref -> x of `servo`.
+
+    The sampled closed loop (:func:`contoursim.servo.discretize`, feedforward
+    off) is ``G(z) = z^-d · k·B_a(z^-1)·B_u(z^-1) / A(z^-1)``, with ``B_a``
+    the zeros that may be cancelled and ``B_u`` those that may not. The
+    pre-filter is
+
+        F(z) = z^d · A(z^-1) · B_u(z) / (k · B_a(z^-1) · B_u(1)^2),
+
+    so that ``G·F = B_u(z^-1)·B_u(z) / B_u(1)^2``: zero phase at every
+    frequency and unit gain at DC. Returned as the causal IIR part
+    ``A/(k·B_a)`` (``num``/``den`` in powers of z^-1), the non-causal FIR
+    ``B_u(z)/B_u(1)^2`` (coefficients of z^0, z^1, ...) and the advance d.
+    """
+    import scipy.linalg
+
+    loop = dataclasses.replace(servo, vff=0.0, aff=0.0).discretize(dt).closed_loop
+    A, B, C, D = loop.A, loop.B[:, [0]], loop.C[[0]], loop.D[[0]][:, [0]]
+    poles = np.linalg.eigvals(A)
+    n = A.shape[0]
+    pencil = np.block([[A, B], [C, D]])
+    singular = np.zeros_like(pencil)
+    singular[:n, :n] = np.eye(n)
+    with np.errstate(all="ignore"):
+        zeros = scipy.linalg.eigvals(pencil, singular)
+    zeros = zeros[np.isfinite(zeros) & (np.abs(zeros) < 1e8)]
+    delay = n - zeros.size
+    unacceptable = (np.abs(zeros) >= ZPETC_RADIUS) | ((zeros.real < 0) & (np.abs(zeros) > ZPETC_NEGATIVE_RADIUS))
+    dc = (C @ np.linalg.solve(np.eye(n) - A, B) + D).item()
+    a_poly = np.poly(poles).real
+    ba_poly = np.poly(zeros[~unacceptable]).real
+    bu_poly = np.poly(zeros[unacceptable]).real
+    # G(1) = k·B_a(1)·B_u(1)/A(1) fixes the gain k
+    k = dc * a_poly.sum() / (ba_poly.sum() * bu_poly.sum())
+    return ba_poly * k, a_poly, bu_poly / bu_poly.sum() ** 2, delay
+
+
+def zpetc_commands(servo, dt, q):
+    """ZPETC pre-filtered position commands for one axis (see :class:`ZPETC`).
+
+    Parameters
+    ----------
+    servo : AxisServo
+        The model of the axis (its feedforward gains are ignored).
+    dt : float
+        Servo period [s].
+    q : ndarray, shape (N,)
+        Target positions [mm], at rest before the first sample and after the last.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Commands [mm] the sampled loop turns into `q` with zero phase error.
+    """
+    from scipy.signal import lfilter
+
+    den, num, fir, delay = _zpetc_filter(servo, float(dt))
+    start, end = q[0], q[-1]
+    ahead = fir.size - 1 + delay
+    held = np.concatenate([q - start, np.full(ahead, end - start)])
+    causal = lfilter(num, den, held)
+    # non-causal FIR over the future samples, then the advance by the loop's delay
+    shifted = sum(c * causal[j : j + q.size + delay] for j, c in enumerate(fir))
+    return start + shifted[delay : delay + q.size]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ZPETC(Strategy):
+    """Tomizuka's zero-phase-error tracking controller: the sampled closed loop's inverse, before the loop.
+
+    Each servo axis's command is pre-filtered by the stable part of the
+    inverse of its sampled closed loop ``x_ref -> x`` (exactly the loop the
+    kernel steps: ZOH plant, Tustin controllers), with the zeros that cannot
+    be inverted (outside or on the unit circle, or near -1 where the ZOH puts
+    its sampling zeros: they would ring at the Nyquist frequency) compensated
+    in phase only; the filter looks ahead a few servo periods (the loop's
+    delay and the non-invertible zeros), as the interpolator's look-ahead
+    allows. The drives' own velocity and acceleration feedforward is switched
+    off: the pre-filter takes its place. The velocity and acceleration
+    commands become the central differences of the filtered position.
+
+    Parameters
+    ----------
+    model : mapping str -> AxisServo, optional
+        Servos the inverse is built from (default: the simulated machine's).
+
+    References
+    ----------
+    M. Tomizuka, "Zero phase error tracking algorithm for digital control",
+    ASME J. Dyn. Syst. Meas. Control 109 (1987) 65-68.
+    """
+
+    model: Mapping | None = None
+
+    name = "zpetc"
+    kind = "feedforward"
+
+    def __post_init__(self):
+        object.__setattr__(self, "model", _check_model(self.model))
+
+    def drive(self, servos):
+        return {axis: dataclasses.replace(servo, vff=0.0, aff=0.0) for axis, servo in servos.items()}
+
+    def prefilter(self, q, v, a, servos, dt):
+        model = _model(self.model, servos)
+        q = np.column_stack([zpetc_commands(model[axis], dt, q[:, i]) for i, axis in enumerate(servos)])
+        v = np.gradient(q, dt, axis=0)
+        return q, v, np.gradient(v, dt, axis=0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Cross-coupled control
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class CrossCoupled(Strategy):
+    """Koren's cross-coupled contour controller, every servo period inside the loop.
+
+    The contour error of the fed-back position of the first 2 or 3 servo
+    axes is estimated every period (``"linear"``: the tangent at the
+    commanded sample, Koren's variable gains ``Cx = -sin θ``, ``Cy = cos θ``;
+    ``"arc"``: the three-point circumscribed arc with its out-of-plane part,
+    seed 003) and a PID of it is added to the velocity commands along the
+    path normal (:class:`contoursim.kernel.Coupling`).
+
+    Parameters
+    ----------
+    estimator : {"arc", "linear"}, default "arc"
+    kp : float, optional
+        Coupling gain [1/s]. Default from the axis loops: across the path
+        the position gain becomes ``K = Kp + kp``; with the velocity loop
+        taken as a first-order lag of bandwidth ``ωv = kv·kf/m`` [rad/s]
+        the contour loop is ``s^2 + ωv·s + ωv·K``, damped at ``ζ = 0.7``
+        for ``K = ωv/2``. So ``kp = ωv/2 - Kp`` with the slowest velocity
+        loop and the smallest position gain of the coupled axes (at least
+        ``Kp``: never less than doubling the gain across the path).
+    ki : float, optional
+        Integral gain [1/s^2]. Default ``K^2 / 4``: the PI corner ``ki/K``
+        a quarter of the contour loop's gain ``K``, which removes the
+        steady contour error on a line or an arc at a cost of about 14° of
+        phase.
+    kd : float, default 0
+        Derivative gain [-].
+    model : mapping str -> AxisServo, optional
+        Servos the default gains are derived from (default: the simulated
+        machine's).
+    up : array_like, shape (3,), default (0, 0, 1)
+        Orients the local plane normal.
+    window : int, default 4
+        Search window of the arc estimate [samples].
+
+    Notes
+    -----
+    Before a run, :meth:`coupling` checks the linear coupled loop: the
+    simulated axes' sampled loops (without their in-loop effects) with the
+    coupling closed along a set
+    of straight-line directions (:func:`coupled_spectral_radius`); a
+    spectral radius >= 1 raises :class:`~contoursim.exceptions.UnstableLoopError`
+    naming the gains and the direction. What the linear check cannot see
+    (saturation, friction) the kernel's divergence detection reports.
+    """
+
+    estimator: str = "arc"
+    kp: float | None = None
+    ki: float | None = None
+    kd: float = 0.0
+    model: Mapping | None = None
+    up: tuple = (0.0, 0.0, 1.0)
+    window: int = 4
+
+    kind = "coupling"
+
+    def __post_init__(self):
+        if self.estimator not in kernel.COUPLING_ESTIMATORS:
+            raise ValueError(f"estimator must be one of {', '.join(kernel.COUPLING_ESTIMATORS)}, got {self.estimator!r}")
+        for gain in ("kp", "ki"):
+            if getattr(self, gain) is not None:
+                object.__setattr__(self, gain, _validate.nonnegative(gain, getattr(self, gain)))
+        object.__setattr__(self, "kd", _validate.nonnegative("kd", self.kd))
+        object.__setattr__(self, "model", _check_model(self.model))
+
+    @property
+    def name(self):
+        return f"ccc_{self.estimator}"
+
+    def gains(self, servos):
+        """``(kp, ki, kd)`` of the coupling for the coupled `servos` (mapping axis -> AxisServo)."""
+        model = _model(self.model, servos).values()
+        position_gain = min(servo.kp for servo in model)
+        velocity_bandwidth = min(servo.kv_mm * servo.force_gain for servo in model)
+        kp = max(velocity_bandwidth / 2.0 - position_gain, position_gain) if self.kp is None else self.kp
+        ki = (position_gain + kp) ** 2 / 4.0 if self.ki is None else self.ki
+        return kp, ki, self.kd
+
+    def coupling(self, path, servos, dt):
+        coupled = dict(list(servos.items())[:3])
+        if len(coupled) < 2:
+            raise ValueError(f"cross-coupled control needs 2 or 3 servo axes, the machine has {len(servos)}")
+        kp, ki, kd = self.gains(coupled)
+        rows = [kernel.pack(servo, dt) for servo in coupled.values()]  # the loops as simulated, not as modelled
+        radius, direction = max(
+            ((coupled_spectral_radius(rows, kp, ki, kd, dt, d), d) for d in _directions(len(coupled))),
+            key=lambda pair: pair[0],
+        )
+        if radius >= 1.0:
+            along = ", ".join(f"{c:.3g}" for c in direction)
+            raise UnstableLoopError(
+                f"cross-coupled control with kp = {kp:g} 1/s, ki = {ki:g} 1/s^2, kd = {kd:g} destabilises the loop "
+                f"of axes {', '.join(coupled)}: with the coupling closed across a line of normal ({along}) the "
+                f"sampled loop's spectral radius is {radius:.6g} >= 1; lower the coupling gains"
+            )
+        return kernel.Coupling(self.estimator, path[:, : len(coupled)], kp, ki, kd, self.up, self.window)
+
+
+def _directions(n):
+    """Unit normals of the straight lines the stability check closes the coupling across."""
+    angles = np.radians(np.arange(0.0, 180.0, 15.0))
+    if n == 2:
+        return [np.array([math.cos(a), math.sin(a)]) for a in angles]
+    return [np.array([math.cos(a) * math.cos(e), math.sin(a) * math.cos(e), math.sin(e)])
+            for a in angles for e in np.radians((0.0, 30.0, 60.0))] + [np.array([0.0, 0.0, 1.0])]  # fmt: skip
+
+
+def coupled_spectral_radius(rows, kp, ki, kd, dt, normal):
+    """Spectral radius of the sampled axis loops with the cross-coupled controller closed across a line.
+
+    On a straight line of unit normal `normal` the coupling is linear and
+    time-invariant: ``ε = normal · (x_fb - x_ref)``, ``u = kp·ε + ki·∫ε dt +
+    kd·dε/dt`` (trapezoidal integral, backward difference, as in the
+    kernel) and every axis's velocity command gets ``-normal_a · u``.
+
+    Parameters
+    ----------
+    rows : sequence of ndarray, shape (NPAR,)
+        The coupled axes' packed rows (:func:`contoursim.kernel.pack`).
+    kp, ki, kd : float
+        Coupling gains [1/s], [1/s^2], [-].
+    dt : float
+        Servo period [s].
+    normal : array_like, shape (len(rows),)
+        Unit normal of the line in the coupled axes [-].
+
+    Returns
+    -------
+    float
+        ``max |λ|`` of the coupled loop's transition matrix; < 1 is stable.
+    """
+    loops = [kernel.loop_matrices(row) for row in rows]
+    sizes = [phi.shape[0] for phi, _, _ in loops]
+    total = sum(sizes) + 2  # the axes, then the coupling's integrator and previous error
+    z, prev = total - 2, total - 1
+    phi = np.zeros((total, total))
+    eps = np.zeros(total)  # ε as a row over the state
+    start = 0
+    for (phi_a, _, c_a), n_a, size in zip(loops, normal, sizes):
+        phi[start : start + size, start : start + size] = phi_a
+        eps[start : start + size] = n_a * c_a
+        start += size
+    u = (kp + 0.5 * ki * dt + kd / dt) * eps
+    u[z] += ki
+    u[prev] -= kd / dt
+    start = 0
+    for (_, b_a, _), n_a, size in zip(loops, normal, sizes):
+        phi[start : start + size] -= n_a * np.outer(b_a, u)
+        start += size
+    phi[z] = dt * eps
+    phi[z, z] += 1.0
+    phi[prev] = eps
+    if ki == 0.0:  # no integrator: its state (an eigenvalue 1 that nothing reads) is not part of the loop
+        keep = np.arange(total) != z
+        phi = phi[keep][:, keep]
+    return float(np.abs(np.linalg.eigvals(phi)).max())
+
+
+# ---------------------------------------------------------------------------------------------
+# Composition
+
+
+class Composition:
+    """Several strategies acting together, each stage in the order given (see the module docstring).
+
+    Parameters
+    ----------
+    strategies : sequence of Strategy
+        At most one feedforward (:class:`Feedforward`, :class:`ZPETC`) and
+        one cross-coupled controller; any number of target stages.
+
+    Raises
+    ------
+    TypeError
+        An element is not a :class:`Strategy`.
+    ValueError
+        Two feedforwards or two cross-coupled controllers.
+    """
+
+    def __init__(self, strategies=()):
+        strategies = tuple(strategies)
+        for i, strategy in enumerate(strategies):
+            if not isinstance(strategy, Strategy):
+                raise TypeError(f"strategies[{i}] must be a compensation Strategy, got {type(strategy).__name__}")
+        for kind in ("feedforward", "coupling"):
+            same = [s.name for s in strategies if s.kind == kind]
+            if len(same) > 1:
+                raise ValueError(f"strategies {' and '.join(same)} are both a {kind}: choose one")
+        self.strategies = strategies
+
+    @property
+    def prefilters(self):
+        """Whether a strategy pre-filters the commands (see :meth:`Strategy.prefilter`)."""
+        return any(type(s).prefilter is not Strategy.prefilter for s in self.strategies)
+
+    @property
+    def name(self):
+        """``"+"``-joined strategy names, ``"none"`` for none."""
+        return "+".join(s.name for s in self.strategies) or "none"
+
+    def target(self, q, v, a, t):
+        """Every target stage in turn (see :meth:`Strategy.target`)."""
+        for strategy in self.strategies:
+            q, v, a = strategy.target(q, v, a, t)
+        return q, v, a
+
+    def drive(self, servos):
+        """Every drive stage in turn (see :meth:`Strategy.drive`)."""
+        servos = dict(servos)
+        for strategy in self.strategies:
+            servos = strategy.drive(servos)
+        return servos
+
+    def prefilter(self, q, v, a, servos, dt):
+        """Every pre-filter stage in turn (see :meth:`Strategy.prefilter`)."""
+        for strategy in self.strategies:
+            q, v, a = strategy.prefilter(q, v, a, servos, dt)
+        return q, v, a
+
+    def coupling(self, path, servos, dt):
+        """The cross-coupled controller's :class:`~contoursim.kernel.Coupling`, or ``None`` (see :meth:`Strategy.coupling`)."""
+        for strategy in self.strategies:
+            coupling = strategy.coupling(path, servos, dt)
+            if coupling is not None:
+                return coupling
+        return None
+
+
+def strategies_named(name, model=None, chain=None):
+    """The strategies behind a comparison name such as ``"feedforward+ccc_arc"``.
+
+    Parameters
+    ----------
+    name : str
+        ``"+"``-joined parts from ``none``, ``feedforward``, ``zpetc``,
+        ``ccc_linear``, ``ccc_arc`` and ``geometric``.
+    model : mapping str -> AxisServo, optional
+        The servo model the strategies design from (default: the simulated machine's).
+    chain : MachineChain, optional
+        The geometric error model, needed by ``geometric``.
+
+    Returns
+    -------
+    tuple of Strategy
+    """
+    from .geocomp import GeometricCompensation
+
+    makers = {
+        "none": lambda: None,
+        "feedforward": lambda: Feedforward(model=model),
+        "zpetc": lambda: ZPETC(model=model),
+        "ccc_linear": lambda: CrossCoupled("linear", model=model),
+        "ccc_arc": lambda: CrossCoupled("arc", model=model),
+        "geometric": lambda: None if chain is None else GeometricCompensation(chain),
+    }
+    strategies = []
+    for part in name.split("+"):
+        if part not in makers:
+            raise ValueError(f"unknown strategy {part!r} in {name!r}: use {', '.join(makers)}, joined by '+'")
+        made = makers[part]()
+        if part == "geometric" and made is None:
+            raise ValueError("the geometric strategy needs a machine with a geometric error model (bodies)")
+        if made is not None:
+            strategies.append(made)
+    Composition(strategies)  # checks the combination
+    return tuple(strategies)

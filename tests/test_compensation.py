@@ -1,0 +1,205 @@
+"""Compensation strategies against python-control, Koren's steady state and Tomizuka's zero phase."""
+
+import control as ct
+import numpy as np
+import pytest
+
+from contoursim import compensation as cp
+from contoursim import kernel, paths
+from contoursim.exceptions import UnstableLoopError
+from contoursim.feed import plan, sample
+from contoursim.machine import Machine
+from contoursim.servo import AxisServo
+from contoursim.simulate import simulate
+
+DT = 2e-4
+AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, damping=500.0)
+
+
+def _line_reference(angle, speed, n_steps):
+    """A ramp at `speed` [mm/s] along `angle` from the origin: positions, velocities, accelerations."""
+    t = np.arange(n_steps) * DT
+    direction = np.array([np.cos(angle), np.sin(angle)])
+    return speed * t[:, None] * direction, np.tile(speed * direction, (n_steps, 1)), np.zeros((n_steps, 2))
+
+
+def _python_control_coupled_loop(servos, normal, kp, ki, kd):
+    """Both axes' sampled cascades (python-control) with Koren's PID coupling across a line, wired by name.
+
+    The axes have vff = 1, so their ``v_ref`` input is the velocity command:
+    the coupling's output is added to the reference velocity there.
+    """
+    blocks = []
+    for axis, servo in servos.items():
+        loop = servo.discretize(DT).closed_loop
+        blocks.append(ct.ss(loop.A, loop.B, loop.C, loop.D, DT, inputs=[f"r{axis}", f"vc{axis}", f"a{axis}"],
+                            outputs=[f"x{axis}", f"v{axis}", f"i{axis}"], name=f"axis_{axis}"))
+        blocks.append(ct.summing_junction([f"vr{axis}", f"w{axis}"], f"vc{axis}", dt=DT, name=f"sum_{axis}"))
+    # ε = n·(x - r); states: integral of ε, previous ε; u = kp ε + ki (z + dt/2 ε) + kd (ε - ε_prev)/dt; w = -n u
+    n = np.asarray(normal)
+    eps = np.concatenate([n, -n])  # over inputs x_x, x_y, r_x, r_y
+    A = np.array([[1.0, 0.0], [0.0, 0.0]])
+    B = np.vstack([DT * eps, eps])
+    c_u = np.array([[ki, -kd / DT]])
+    d_u = (kp + ki * DT / 2 + kd / DT) * eps[None, :]
+    coupling = ct.ss(A, B, -n[:, None] * c_u, -n[:, None] * d_u, DT, inputs=["xx", "xy", "rx", "ry"],
+                     outputs=["wx", "wy"], name="coupling")
+    inputs = ["rx", "ry", "vrx", "vry", "ax", "ay"]
+    return ct.interconnect(blocks + [coupling], inplist=inputs, inputs=inputs, outlist=["xx", "xy"],
+                           outputs=["xx", "xy"], ignore_outputs=["vx", "vy", "ix", "iy"])
+
+
+def test_coupled_loop_equals_python_control_interconnection():
+    servos = {"x": AxisServo(kp=40.0, vff=1.0, **AXIS), "y": AxisServo(kp=30.0, vff=1.0, **AXIS)}
+    angle, kp, ki, kd = np.radians(30.0), 60.0, 2000.0, 0.05
+    ref = _line_reference(angle, 50.0, 3000)
+    ref[1][:200] = 0.0  # the velocity feedforward starts late: a contour error to correct
+    normal = np.array([-np.sin(angle), np.cos(angle)])  # left of travel
+    coupled = kernel.run(servos, DT, *ref, coupling=kernel.Coupling("linear", ref[0], kp, ki, kd))
+    system = _python_control_coupled_loop(servos, normal, kp, ki, kd)
+    u = np.column_stack([ref[0], ref[1], ref[2]]).T
+    expected = ct.forced_response(system, np.arange(len(ref[0])) * DT, u).outputs.T
+    plain = kernel.run(servos, DT, *ref)
+    assert np.abs(plain.position @ normal).max() > 1e-3  # the coupling has something to do
+    np.testing.assert_allclose(coupled.position, expected, rtol=0, atol=1e-9)
+    # the linear check is the same loop's largest pole
+    rows = [kernel.pack(servo, DT) for servo in servos.values()]
+    assert cp.coupled_spectral_radius(rows, kp, ki, kd, DT, normal) == pytest.approx(
+        np.abs(system.poles()).max(), rel=1e-9)
+
+
+@pytest.mark.parametrize("estimator", ["linear", "arc"])
+def test_koren_integral_coupling_removes_the_steady_contour_error_on_a_45_degree_line(estimator):
+    """Mismatched position gains skew the lag off the line: v·(1/kp_y - 1/kp_x)·sin 45°·cos 45°.
+
+    The integrating coupling drives the contour error to zero while the
+    tracking error (the lag along the line, v/kp) stays.
+    """
+    kp_x, kp_y, speed = 40.0, 30.0, 50.0
+    servos = {"x": AxisServo(kp=kp_x, **AXIS), "y": AxisServo(kp=kp_y, **AXIS)}
+    ref = _line_reference(np.pi / 4, speed, 15000)
+    normal = np.array([-1.0, 1.0]) / np.sqrt(2)
+    plain = kernel.run(servos, DT, *ref)
+    coupling = cp.CrossCoupled(estimator, kp=40.0, ki=400.0).coupling(ref[0], servos, DT)
+    coupled = kernel.run(servos, DT, *ref, coupling=coupling)
+    skew = speed * (1 / kp_y - 1 / kp_x) / 2  # |n·e| in steady state without coupling [mm]
+    assert np.abs((plain.position - ref[0])[-1] @ normal) == pytest.approx(skew, rel=1e-3)
+    assert np.abs((coupled.position - ref[0])[-1] @ normal) < 1e-6 * skew
+    tracking = np.linalg.norm(coupled.position[-1] - ref[0][-1])
+    assert tracking > 0.5 * speed / kp_x  # the lag along the line stays
+
+
+def test_proportional_coupling_only_shrinks_the_steady_contour_error():
+    servos = {"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=30.0, **AXIS)}
+    ref = _line_reference(np.pi / 4, 50.0, 15000)
+    normal = np.array([-1.0, 1.0]) / np.sqrt(2)
+    coupling = cp.CrossCoupled("linear", kp=40.0, ki=0.0).coupling(ref[0], servos, DT)
+    plain, coupled = kernel.run(servos, DT, *ref), kernel.run(servos, DT, *ref, coupling=coupling)
+    before, after = (abs((r.position[-1] - ref[0][-1]) @ normal) for r in (plain, coupled))
+    assert 0.1 * before < after < 0.9 * before
+
+
+def _circle_machine_and_trajectory(feed=100.0):
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=36.0, **AXIS)}, DT)
+    path = paths.circle(center=(0, 0), radius=10.0, direction="ccw", start_angle=0.0)
+    return machine, sample(path, plan(path, feed=feed, accel=2000.0, jerk=50000.0), DT)
+
+
+def test_zpetc_tracking_error_falls_by_orders_of_magnitude():
+    machine, trajectory = _circle_machine_and_trajectory()
+    none = simulate(machine, trajectory).summary()
+    zpetc = simulate(machine, trajectory, [cp.ZPETC()]).summary()
+    assert zpetc["tracking_max_um"] < 1e-3 * none["tracking_max_um"]
+    assert zpetc["contour_max_um"] < 1e-2 * none["contour_max_um"]
+
+
+def test_zpetc_times_the_python_control_loop_has_zero_phase_and_unit_dc_gain():
+    servo = AxisServo(kp=40.0, **AXIS)
+    den, num, fir, delay = cp._zpetc_filter(servo, DT)
+    omega = np.linspace(1.0, 0.9 * np.pi / DT, 200)
+    z = np.exp(1j * omega * DT)
+    filt = (np.polyval(num[::-1], 1 / z) / np.polyval(den[::-1], 1 / z)) * np.polyval(fir[::-1], z) * z**delay
+    loop = servo.discretize(DT).closed_loop
+    G = ct.frequency_response(ct.ss(loop.A, loop.B[:, [0]], loop.C[[0]], loop.D[[0]][:, [0]], DT), omega)
+    product = G.complex.ravel() * filt
+    np.testing.assert_allclose(product.imag, 0.0, atol=1e-9)
+    assert product.real.min() > 0.0
+    assert product[0].real == pytest.approx(1.0, abs=1e-6)
+
+
+def test_feedforward_sets_the_drive_gains_from_its_model():
+    servo = AxisServo(kp=40.0, **AXIS)
+    heavier = AxisServo(kp=40.0, **{**AXIS, "mass": 1.1 * AXIS["mass"]})
+    driven = cp.Feedforward(model={"x": servo}).drive({"x": heavier})["x"]
+    assert driven.vff == 1.0 and driven.aff == pytest.approx(1 / 1.1)
+    with pytest.raises(ValueError, match="acceleration feedforward would be 1.1 > 1"):
+        cp.Feedforward(model={"x": heavier}).drive({"x": servo})
+
+
+def test_default_coupling_gains_follow_the_axis_loops():
+    servos = {"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=36.0, **{**AXIS, "kv": 60.0})}
+    omega_v = 60.0 / 1000 * 1000 * 942.0 / 300.0  # kv·kf/m of the slower velocity loop [rad/s]
+    kp, ki, kd = cp.CrossCoupled().gains(servos)
+    assert kp == pytest.approx(omega_v / 2 - 36.0) and ki == pytest.approx((omega_v / 2) ** 2 / 4) and kd == 0.0
+
+
+def test_a_destabilising_coupling_is_reported_with_the_reason():
+    machine, trajectory = _circle_machine_and_trajectory()
+    with pytest.raises(UnstableLoopError, match=r"kp = 3000 1/s.*destabilises the loop of axes x, y.*spectral radius"):
+        simulate(machine, trajectory, [cp.CrossCoupled("arc", kp=3000.0)])
+
+
+def test_strategies_compose_and_refuse_two_of_a_kind():
+    machine, trajectory = _circle_machine_and_trajectory()
+    both = simulate(machine, trajectory, cp.strategies_named("feedforward+ccc_arc")).summary()
+    ff = simulate(machine, trajectory, cp.strategies_named("feedforward")).summary()
+    assert both["contour_max_um"] < 0.5 * ff["contour_max_um"]
+    with pytest.raises(ValueError, match="feedforward and zpetc are both a feedforward"):
+        cp.strategies_named("feedforward+zpetc")
+    with pytest.raises(ValueError, match="ccc_linear and ccc_arc are both a coupling"):
+        cp.Composition([cp.CrossCoupled("linear"), cp.CrossCoupled("arc")])
+    with pytest.raises(ValueError, match="unknown strategy 'pid'"):
+        cp.strategies_named("none+pid")
+    with pytest.raises(TypeError, match=r"strategies\[0\] must be a compensation Strategy"):
+        simulate(machine, trajectory, ["ccc_arc"])
+    assert [cp.Composition(cp.strategies_named(name)).name for name in cp.STRATEGY_NAMES] == list(cp.STRATEGY_NAMES)
+
+
+def test_cross_coupling_needs_two_axes():
+    with pytest.raises(ValueError, match="cross-coupled control needs 2 or 3 servo axes, the machine has 1"):
+        cp.CrossCoupled().coupling(np.zeros((10, 1)), {"x": AxisServo(kp=40.0, **AXIS)}, DT)
+
+
+def _helix_machine_and_trajectory():
+    axes = {"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=36.0, **AXIS), "z": AxisServo(kp=30.0, **AXIS)}
+    path = paths.helix(center=(0, 0, 0), radius=10.0, pitch=5.0, turns=1.0)
+    return Machine(axes, DT), sample(path, plan(path, feed=50.0, accel=1000.0, jerk=50000.0), DT)
+
+
+def test_arc_coupling_in_3d_corrects_the_out_of_plane_part_and_estimates_as_offline():
+    from contoursim import estimators as est
+
+    machine, trajectory = _helix_machine_and_trajectory()
+    none = simulate(machine, trajectory)
+    coupled = simulate(machine, trajectory, [cp.CrossCoupled("arc")])
+    measuring = none.trajectory.measuring  # with the settling time held at the end
+    for part in ("out_of_plane", "normal"):  # both components of the error vector fall
+        before = np.abs(getattr(none.contour, part)[measuring]).max()
+        after = np.abs(getattr(coupled.contour, part)[measuring]).max()
+        assert before > 1e-3 and after < 0.3 * before
+    response = coupled.servo_response
+    offline = est.three_point(coupled.axis_command, response.encoder)
+    np.testing.assert_allclose(response.contour_estimate, offline.vector, rtol=0, atol=1e-15)
+    assert np.abs(offline.out_of_plane).max() > 1e-5  # the vector has an out-of-plane part
+
+
+def test_batch_applies_the_drive_and_prefilter_stages_like_simulate():
+    from contoursim.simulate import simulate_batch
+
+    machine, trajectory = _circle_machine_and_trajectory()
+    for strategies in ([cp.Feedforward()], [cp.ZPETC()]):
+        single = simulate(machine, trajectory, strategies).tool_position
+        batch = simulate_batch([machine], trajectory, strategies=strategies)["tool_position"][0]
+        np.testing.assert_array_equal(batch, single)
+    with pytest.raises(ValueError, match=r"simulate_batch runs no cross-coupled controller \(ccc_arc\)"):
+        simulate_batch([machine], trajectory, strategies=[cp.CrossCoupled()])
