@@ -111,6 +111,18 @@ def test_two_hidden_effects_are_both_named(machine):
     assert steps[-1].rms_um < steps[-2].rms_um < steps[1].rms_um  # the gap shrinks at each step
 
 
+def test_other_discretisation_fast_logging_and_time_stamp_jitter(machine):
+    """Truth stepped at 0.25 ms and logged every 0.25 ms with jittered time stamps; the nominal model runs at 0.5 ms."""
+    mill = load_machine("demo_mill")
+    truth = Machine({a: mill.axes[a] for a in "xy"}, 2.5e-4)
+    path = paths.iso230_4_circle(10.0, direction="cw")
+    reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), 2.5e-4)
+    trace = synthetic_trace(Model(truth, (Effect("backlash", "x", lost_motion_um=6.0),)), reference, seed=3)
+    jitter = np.random.default_rng(0).uniform(-2e-4, 2e-4, trace.t.size) * trace.dt  # within read_trace's 0.1 %
+    result = diagnose(Trace(trace.t + jitter, trace.reference, trace.actual, trace.axes), Model(machine))
+    assert_found(result, Effect("backlash", "x", lost_motion_um=6.0), "lost_motion_um")
+
+
 def test_noise_level_from_the_second_differences():
     """White noise of known level on a smooth signal with a few steps: σ comes back within a few %."""
     rng = np.random.default_rng(1)
