@@ -137,15 +137,15 @@ def identify_machine(trace, servo_period=None, progress=None):
             cache[key] = ((measured - outputs([x])[0]) / scale).ravel()
         return cache[key]
 
-    def jac(x):
-        steps = [_FD_STEP * (1 if x[j] + _FD_STEP <= upper[j] else -1) for j in range(x.size)]
-        rows = [x + h * np.eye(x.size)[j] for j, h in enumerate(steps)]
+    def jac(x, free):
+        steps = {j: _FD_STEP * (1 if x[j] + _FD_STEP <= upper[j] else -1) for j in np.flatnonzero(free)}
+        rows = [x + h * np.eye(x.size)[j] for j, h in steps.items()]
         r0 = fun(x)
         cols = [((measured - y) / scale).ravel() for y in outputs(rows)]
         if progress is not None:
             progress(f"identify: kp = {np.exp(x[0]):.2f} 1/s, vff = {x[1]:.3f}, "
                      f"RMS {1e3 * scale * np.sqrt(np.mean(r0**2)):.3g} µm")
-        return np.column_stack([(c - r0) / h for c, h in zip(cols, steps)])
+        return np.column_stack([(c - r0) / h for c, h in zip(cols, steps.values())])
 
     def fitted(x, free):
         """Least squares over the coordinates `free` of `x`, the others held."""
@@ -154,7 +154,7 @@ def identify_machine(trace, servo_period=None, progress=None):
             full[free] = z
             return full
 
-        fit = least_squares(lambda z: fun(part(z)), x[free], jac=lambda z: jac(part(z))[:, free],
+        fit = least_squares(lambda z: fun(part(z)), x[free], jac=lambda z: jac(part(z), free),
                             bounds=(lower[free], upper[free]), x_scale=1.0, max_nfev=40)
         return part(fit.x)
 
