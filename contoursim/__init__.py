@@ -15,7 +15,9 @@ The main objects, by the data flow of a simulation:
   runs them side by side;
 - :func:`simulate` -> :class:`SimResult` (tracking and exact contour error), on a path or a
   measured trace; :func:`simulate_batch` (variants of one model in one compiled call);
-- traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format).
+- traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format);
+- diagnosis: :func:`diagnose` -> :class:`Diagnosis` (which catalogue effects a nominal model
+  lacks to explain a measured trace; :mod:`contoursim.diagnosis`).
 """
 
 import importlib
@@ -30,6 +32,7 @@ from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopEr
 _LAZY = {
     "AxisServo": "servo",
     "CrossCoupled": "compensation",
+    "Diagnosis": "diagnosis",
     "Feedforward": "compensation",
     "ZPETC": "compensation",
     "Effect": "effects",
@@ -38,6 +41,7 @@ _LAZY = {
     "SimResult": "simulate",
     "Trace": "traces",
     "Trajectory": "trajectory",
+    "diagnose": "diagnosis",
     "load_machine": "machine",
     "load_model": "model",
     "read_trace": "traces",
@@ -50,6 +54,7 @@ __all__ = [
     "AxisServo",
     "ConfigError",
     "CrossCoupled",
+    "Diagnosis",
     "Effect",
     "Feedforward",
     "Machine",
@@ -61,6 +66,7 @@ __all__ = [
     "Trajectory",
     "UnstableLoopError",
     "ZPETC",
+    "diagnose",
     "load_machine",
     "load_model",
     "read_trace",
