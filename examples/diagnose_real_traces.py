@@ -33,9 +33,9 @@ from contoursim.traces import Trace, read_trace, write_trace
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
 
-def tue(name, every=4):
+def tue(data, name, every=4):
     """A TU/e feedforward run as a one-axis trace [s, rad as mm]."""
-    d = scipy.io.loadmat(DATA / "tue_sperte_motion_setup" / "feedforward" / f"{name}.mat", squeeze_me=True)
+    d = scipy.io.loadmat(data / "tue_sperte_motion_setup" / "feedforward" / f"{name}.mat", squeeze_me=True)
     reference, error = (np.asarray(d[k], float).ravel() for k in ("reference", "error"))
     t = np.arange(reference.size) / 4000.0
     keep = slice(None, None, every)
@@ -43,9 +43,9 @@ def tue(name, every=4):
                  {"source": f"TU/e SPERTE feedforward/{name}.mat, every {every}th sample", "units": "rad written as mm"})
 
 
-def umich(experiment):
+def umich(data, experiment):
     """A U. Michigan experiment as a three-axis trace [s, mm] (10 Hz, no time column: row × 0.1 s)."""
-    with open(DATA / "umich_cnc_mill" / f"experiment_{experiment}.csv", newline="") as f:
+    with open(data / "umich_cnc_mill" / f"experiment_{experiment}.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     column = lambda key: np.array([float(r[key]) for r in rows])  # noqa: E731
     reference = np.column_stack([column(f"{a}1_CommandPosition") for a in "XYZ"])
@@ -55,9 +55,9 @@ def umich(experiment):
 
 
 RUNS = {
-    "tue_no_action": lambda: tue("no_action"),
-    "tue_coulomb_feedforward": lambda: tue("Kfc_only(0.0047124)"),
-    "umich_experiment_04": lambda: umich("04"),
+    "tue_no_action": lambda data: tue(data, "no_action"),
+    "tue_coulomb_feedforward": lambda data: tue(data, "Kfc_only(0.0047124)"),
+    "umich_experiment_04": lambda data: umich(data, "04"),
 }
 
 
@@ -66,15 +66,15 @@ def report_keys(effect):
     return [p.name for p, default in zip(effect.parameters, effect.kind.parameters) if p.value != default.value]
 
 
-def main(out=Path("contoursim-out")):
-    if not DATA.is_dir():
-        print(f"skipped: the measured data is not at {DATA} (it ships beside the repository, not with it)")
-        return {}
+def main(out=Path("contoursim-out"), data=DATA):
+    if not Path(data).is_dir():
+        raise SystemExit(f"the measured data is not at {data}: it ships beside the repository, not in it")
+    data = Path(data)
     out = output_dir(out)
     results = {}
     for name, load in RUNS.items():
         with out.write(f"{name}.csv") as stream:
-            write_trace(stream, load())
+            write_trace(stream, load(data))
         result = diagnose(read_trace(out.path / f"{name}.csv"))
         report = result.to_dict()
         named = ", ".join(f"{e.label} ({', '.join(f'{k} = {e[k]:.3g}' for k in report_keys(e))})"

@@ -204,3 +204,20 @@ def test_emps_real_axis_names_coulomb_friction_first(real_data, tmp_path):
     report = json.loads((tmp_path / "out" / "emps_report.json").read_text())
     assert report["residual_rms_after_um"] < 0.3 * report["residual_rms_before_um"]
     assert read_trace(tmp_path / "out" / "emps.csv").axes == ("x",)
+
+
+def test_real_traces_example_names_friction_only_without_the_friction_feedforward(real_data, tmp_path, capsys):
+    """TU/e rig: friction named with feedback only, not once its Coulomb feedforward is on; the 10 Hz mill: nothing."""
+    example = runpy.run_path(str(ROOT / "examples" / "diagnose_real_traces.py"))
+    results = example["main"](tmp_path / "out", real_data)
+    assert results["tue_no_action"].effects[0].name == "coulomb_friction"
+    assert "coulomb_friction" not in {e.name for e in results["tue_coulomb_feedforward"].effects}
+    assert results["umich_experiment_04"].effects == ()
+    assert "umich_experiment_04: named nothing" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("script", ["diagnose_real_traces.py", "emps/diagnose_emps.py"])
+def test_real_data_examples_without_their_data_say_where_it_lives(script, tmp_path):
+    with pytest.raises(SystemExit, match=f"data is not at {tmp_path / 'nodata'}.*: it ships beside the repository"):
+        runpy.run_path(str(ROOT / "examples" / script))["main"](tmp_path / "out", tmp_path / "nodata")
+    assert not (tmp_path / "out").exists()

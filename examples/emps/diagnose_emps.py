@@ -44,8 +44,7 @@ def convert(mat, out, name="emps.csv"):
 
 def main(out=Path("contoursim-out"), data=DATA):
     if not Path(data).exists():
-        print(f"skipped: the EMPS data is not at {data} (it ships beside the repository, not with it)")
-        return None
+        raise SystemExit(f"the EMPS data is not at {data}: it ships beside the repository, not in it")
     out = output_dir(out)
     trace = read_trace(convert(data, out))
     result = diagnose(trace, load_model(HERE / "emps_axis.toml"), progress=lambda line: print(line, file=sys.stderr))
