@@ -31,7 +31,7 @@ from contoursim.effects import Effect
 from contoursim.machine import Machine
 from contoursim.model import Model
 from contoursim.servo import AxisServo
-from contoursim.simulate import measured_reference, simulate_batch
+from contoursim.simulation import measured_reference, simulate_batch
 from contoursim.traces import Trace
 
 DT = 1e-3
