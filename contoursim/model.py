@@ -44,13 +44,12 @@ import numpy as np
 from . import kernel
 from .config import TomlFile
 from .effects import Effect, read_effects
-from .errormotion import Cyclic
+from .errormotion import _MM_PER_UM, _RAD_PER_URAD, Cyclic
 from .machine import Machine, load_machine, preset_file
 from .multibody import cartesian_chain
 
 __all__ = ["Model", "as_model", "load_model", "with_file_effects"]
 
-_MM_PER_UM, _RAD_PER_URAD = 1e-3, 1e-6
 
 
 @dataclass(frozen=True)
