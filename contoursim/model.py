@@ -51,7 +51,6 @@ from .multibody import cartesian_chain
 __all__ = ["Model", "as_model", "load_model", "with_file_effects"]
 
 
-
 @dataclass(frozen=True)
 class Model:
     """A nominal machine plus effects.
