@@ -12,7 +12,10 @@ Prints one ``name: value`` line per target:
   CSV and plots included;
 - ``geocomp_7axis_300k_s``, ``geocomp_3axis_300k_s``: CPU seconds of one
   geometric compensation of 300 k samples (7-axis and 3-axis presets);
-- ``spline_20k_s``: CPU seconds to build and plan a 20 k-point spline.
+- ``spline_20k_s``: CPU seconds to build and plan a 20 k-point spline;
+- ``gcode_plan_us_per_block``: CPU µs per block to plan a 5,000-block G-code
+  program (G1 moves around a 100 mm polygon, the feed changing every block,
+  jerk-limited).
 
 CLI figures are the children's CPU time (``resource.getrusage(RUSAGE_CHILDREN)``,
 user + system), import included, as a user waits for them; library figures are
@@ -86,6 +89,21 @@ print(time.process_time() - start)
 """
 
 
+GCODE = """
+import time
+import numpy as np
+from contoursim.feed import plan
+from contoursim.gcode import read_gcode
+
+u = np.linspace(0, 2 * np.pi, 5_001)
+blocks = [f"G1 X{50 * np.cos(a):.4f} Y{50 * np.sin(a):.4f} F{1000 + 500 * (k % 3)}" for k, a in enumerate(u[1:])]
+program = read_gcode("\\n".join(["G21 G90 G17", "G0 X50 Y0", *blocks, "M30", ""]))
+start = time.process_time()
+plan(program.path, program.feeds, 1000.0, 50_000.0)
+print(1e6 * (time.process_time() - start) / len(program.feeds))
+"""
+
+
 def cli_cpu(args, env=None):
     """CPU seconds (user + system) of ``python -m contoursim ARGS`` in a fresh process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -123,6 +141,7 @@ def main():
         print(f"geocomp_7axis_300k_s: {script_output(GEOCOMP, 'aircraft_drilling_7axis', warm=True):.3f}")
         print(f"geocomp_3axis_300k_s: {script_output(GEOCOMP, 'vertical_mill_3axis', warm=True):.3f}")
         print(f"spline_20k_s: {script_output(SPLINE, warm=True):.3f}")
+        print(f"gcode_plan_us_per_block: {script_output(GCODE, warm=True):.1f}")
 
 
 if __name__ == "__main__":

@@ -21,8 +21,6 @@ The main objects, by the data flow of a simulation:
 """
 
 import importlib
-import sys
-import types
 
 from ._version import __version__
 from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopError
@@ -38,15 +36,15 @@ _LAZY = {
     "Effect": "effects",
     "Machine": "machine",
     "Model": "model",
-    "SimResult": "simulate",
+    "SimResult": "simulation",
     "Trace": "traces",
     "Trajectory": "trajectory",
     "diagnose": "diagnosis",
     "load_machine": "machine",
     "load_model": "model",
     "read_trace": "traces",
-    "simulate": "simulate",
-    "simulate_batch": "simulate",
+    "simulate": "simulation",
+    "simulate_batch": "simulation",
     "write_trace": "traces",
 }
 
@@ -87,14 +85,3 @@ def __getattr__(name):
 def __dir__():
     return sorted(set(globals()) | set(_LAZY))
 
-
-class _Package(types.ModuleType):
-    """The package module: importing the submodule ``contoursim.simulate`` leaves the name the function."""
-
-    def __setattr__(self, name, value):
-        if name in _LAZY and isinstance(value, types.ModuleType):
-            return  # the import system binds a submodule of the same name; the public name is the object in it
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

@@ -62,9 +62,9 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     -------
     tuple
         ``(name, path_file, result)``: the run's name (file stem or `label`),
-        the path file and the :class:`~contoursim.simulate.SimResult`.
+        the path file and the :class:`~contoursim.simulation.SimResult`.
     """
-    from .simulate import simulate
+    from .simulation import simulate
 
     trajectory = _trajectory(model, path_file, job)
     name = label or Path(path_file).stem
@@ -106,7 +106,7 @@ def demo(args):
     from .compensation import strategies_named
     from .machine import load_machine
     from .pathfile import library_file
-    from .simulate import simulate
+    from .simulation import simulate
 
     machine = load_machine(DEMO_MACHINE)
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}

@@ -12,7 +12,10 @@ from pathlib import Path
 
 from .exceptions import ConfigError
 
-__all__ = ["TomlFile", "read_text"]
+__all__ = ["FORMAT_DOC", "TomlFile", "read_text"]
+
+#: Where messages send a user for the keys of every file.
+FORMAT_DOC = "README.md, section 'File format'"
 
 # what each kind of file looks like, for a message when one is given where another is expected
 _KINDS = {
@@ -161,8 +164,8 @@ class TomlFile:
         """A :class:`ConfigError` for `message` located at key path `keys`."""
         return ConfigError(message, self.source, self.line_of(*keys) if keys else None)
 
-    def table(self, *keys, allowed=None, required=()):
-        """The table at `keys`, checked for unknown and missing keys.
+    def table(self, *keys, allowed=None, required=(), renamed=None):
+        """The table at `keys`, checked for unknown, renamed and missing keys.
 
         Parameters
         ----------
@@ -172,6 +175,9 @@ class TomlFile:
             Keys the table may hold; any other key is reported with its line.
         required : iterable of str
             Keys the table must hold.
+        renamed : mapping str -> str, optional
+            Old key -> the key that replaced it; an old key is reported with
+            its line and the name to use instead.
         """
         value = self.data
         for i, key in enumerate(keys):
@@ -184,9 +190,13 @@ class TomlFile:
         if allowed is not None:
             allowed = set(allowed) | set(required)
             for key in value:
+                if key in (renamed or {}):
+                    raise self.error(f"key '{key}' in [{_dotted(keys)}] is now '{renamed[key]}' (units in the key name): "
+                                     f"rename it; every key is listed in {FORMAT_DOC}", *keys, key)
                 if key not in allowed:
                     raise self.error(
-                        f"unknown key '{key}' in [{_dotted(keys)}]; expected one of: {', '.join(sorted(allowed))}",
+                        f"unknown key '{key}' in [{_dotted(keys)}]; expected one of: {', '.join(sorted(allowed))} "
+                        f"(see {FORMAT_DOC})",
                         *keys,
                         key,
                     )

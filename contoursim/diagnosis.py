@@ -7,7 +7,7 @@ The workflow (:func:`diagnose`):
    (:func:`contoursim.identify.identify_machine`: one position gain shared
    by all axes, so that a ``gain_mismatch`` stays visible).
 2. **Compare**: simulate the nominal model on the measured reference
-   (:func:`~contoursim.simulate.measured_reference`); residual = measured −
+   (:func:`~contoursim.simulation.measured_reference`); residual = measured −
    simulated, per axis and along the path normal; :func:`locate` says where
    it concentrates and what it correlates with.
 3. **Refit the nominal model**: real machines differ from their nominal
@@ -19,7 +19,7 @@ The workflow (:func:`diagnose`):
    bandwidth) and the mass where acceleration feedforward uses it; and a
    constant offset per axis
    (the instrument's zero) — act almost linearly on the trace. Their
-   sensitivities (one :func:`~contoursim.simulate.simulate_batch` call of
+   sensitivities (one :func:`~contoursim.simulation.simulate_batch` call of
    finite differences) are refitted in every residual below by ridge
    regression: each servo parameter is known to :data:`NOMINAL_SPREAD` (a
    Gaussian prior centred on the nominal machine), the offsets are free.
@@ -59,7 +59,7 @@ from .kernel import MAX_DELAY_SAMPLES
 from .machine import Machine
 from .model import Model, as_model
 from .plotting import fit_circle_center
-from .simulate import measured_reference, simulate_batch
+from .simulation import measured_reference, simulate_batch
 
 __all__ = [
     "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal",
@@ -980,7 +980,7 @@ def synthetic_trace(model, trajectory, mismatch=0.03, noise_um=0.1, quantum_um=0
     contoursim.traces.Trace
         Axes x, y (, z) as the trajectory's dimension.
     """
-    from .simulate import simulate
+    from .simulation import simulate
     from .traces import Trace
 
     model = as_model(model)

@@ -27,10 +27,13 @@ import numpy as np
 from . import _validate
 from .exceptions import ConfigError
 
-__all__ = ["COMPONENTS", "Cyclic", "ErrorMotion", "read_error_table"]
+__all__ = ["COMPONENTS", "ERROR_COLUMNS", "ERROR_UNITS", "Cyclic", "ErrorMotion", "read_error_table"]
 
 #: The six error motions, in the order of every (..., 6) error array.
 COMPONENTS = ("dx", "dy", "dz", "ex", "ey", "ez")
+_MM_PER_UM, _RAD_PER_URAD = 1e-3, 1e-6
+#: Unit of each error motion in files (the suffix of its key or column) and its scale to mm or rad.
+ERROR_UNITS = (("um", _MM_PER_UM),) * 3 + (("urad", _RAD_PER_URAD),) * 3
 
 _TERM = re.compile(r"^(?:p(\d+)|cyclic(\d+)\.(sin|cos))$")
 
@@ -120,13 +123,19 @@ class ErrorMotion:
         ndarray, shape (N,)
             The error motion [mm] or [rad].
         """
-        q = np.asarray(q, dtype=float)
-        out = np.polynomial.polynomial.polyval(q, self.poly) if self.poly else np.zeros_like(q)
+        q = np.ascontiguousarray(q, dtype=float)
+        out = np.full_like(q, self.poly[-1] if self.poly else 0.0)
+        for c in self.poly[-2::-1]:  # Horner, in place
+            out *= q
+            out += c
         for term in self.cyclic:
             phase = (2 * np.pi / term.period) * q
-            out = out + term.sin * np.sin(phase) + term.cos * np.cos(phase)
+            if term.sin:
+                out += term.sin * np.sin(phase)
+            if term.cos:
+                out += term.cos * np.cos(phase)
         if self.table is not None:
-            out = out + np.interp(q, *self.table)
+            out += np.interp(q, *self.table)
         return out
 
     @property
@@ -201,13 +210,17 @@ class ErrorMotion:
         return None, i, match.group(3)
 
 
+#: Error-table column -> (error motion, scale to mm or rad): ``dx_um`` ... ``ez_urad``.
+ERROR_COLUMNS = {f"{comp}_{unit}": (comp, scale) for comp, (unit, scale) in zip(COMPONENTS, ERROR_UNITS)}
+
+
 def read_error_table(path, rotary=False):
     """Read a laser-run error table (ISO 230-2 style) from a CSV file.
 
-    Format: optional leading ``#`` lines, a header row with a ``position``
-    column [mm, or deg for a rotary axis] and any of the columns ``dx, dy, dz``
-    [µm] and ``ex, ey, ez`` [µrad]; one numeric row per target position,
-    positions strictly increasing.
+    Format: optional leading ``#`` lines, a header row with a
+    ``position_mm`` column (``position_deg`` for a rotary axis) and any of
+    the columns ``dx_um, dy_um, dz_um, ex_urad, ey_urad, ez_urad``; one
+    numeric row per target position, positions strictly increasing.
 
     Parameters
     ----------
@@ -224,7 +237,8 @@ def read_error_table(path, rotary=False):
     Raises
     ------
     ConfigError
-        Naming the file, line and column of the problem.
+        Naming the file, line and column of the problem; a column of an
+        earlier version (``position``, ``dx``) with the name that replaced it.
     """
     path = Path(path)
     source = str(path)
@@ -236,10 +250,15 @@ def read_error_table(path, rotary=False):
     if start is None:
         raise ConfigError("the error table has no header row", source)
     header = [h.strip() for h in next(csv.reader([lines[start]]))]
-    unknown = [h for h in header if h != "position" and h not in COMPONENTS]
-    if "position" not in header or unknown:
+    position = "position_deg" if rotary else "position_mm"
+    renamed = {"position": position, **{comp: column for column, (comp, _) in ERROR_COLUMNS.items()}}
+    old = [h for h in header if h in renamed]
+    if old:
+        raise ConfigError(f"column '{old[0]}' is now '{renamed[old[0]]}' (units in the column name): rename it", source, start + 1)
+    unknown = [h for h in header if h != position and h not in ERROR_COLUMNS]
+    if position not in header or unknown:
         raise ConfigError(
-            f"the header must hold 'position' and any of {', '.join(COMPONENTS)}; got {', '.join(header)}",
+            f"the header must hold '{position}' and any of {', '.join(ERROR_COLUMNS)}; got {', '.join(header)}",
             source,
             start + 1,
         )
@@ -261,17 +280,13 @@ def read_error_table(path, rotary=False):
     if len(rows) < 2:
         raise ConfigError("the error table needs at least 2 rows", source)
     data = np.array([v for _, v in rows])
-    pos = data[:, header.index("position")]
+    pos = data[:, header.index(position)]
     step = np.diff(pos)
     if np.any(step <= 0):
         i = int(np.argmax(step <= 0)) + 1
         raise ConfigError("positions must be strictly increasing", source, rows[i][0])
     pos = np.deg2rad(pos) if rotary else pos
-    return {
-        h: (pos, data[:, j] * (1e-3 if h.startswith("d") else 1e-6))
-        for j, h in enumerate(header)
-        if h != "position"
-    }
+    return {ERROR_COLUMNS[h][0]: (pos, data[:, j] * ERROR_COLUMNS[h][1]) for j, h in enumerate(header) if h != position}
 
 
 def _is_number(text):

@@ -19,8 +19,9 @@ forward/backward pass over sections of constant velocity limit:
    acceleration pulse when the change is too small to reach a_max).
 
 A jerk-limited velocity change from v0 to v1 is symmetric in time, so it covers
-exactly (v0 + v1)/2 times its duration; the plan solves the peak velocities
-with that closed form and bisection. A single-feed, single-segment move is
+exactly (v0 + v1)/2 times its duration; the plan solves the junction velocities
+with that closed form (a quadratic or a cubic in the velocity) and the peak
+velocities by Newton's method on it. A single-feed, single-segment move is
 the simplest instance: one section from rest to rest, which gives the
 classical trapezoid (or triangle) and 7-phase S-curve (or its reduced forms).
 
@@ -109,6 +110,8 @@ class FeedProfile:
 
 
 # --------------------------------------------------------------------------- velocity changes
+# Plain Python in closed form (a program's first run compiles nothing): a G-code program or a
+# spline has one section per block or piece, a few microseconds each.
 
 def _ramp_pieces(v0, v1, accel, jerk):
     """Time-optimal velocity change v0 -> v1 as (duration, a_start, jerk) pieces."""
@@ -137,41 +140,115 @@ def _ramp_distance(v0, v1, accel, jerk):
     return 0.5 * (v0 + v1) * duration
 
 
-def _largest(fits, lo, hi):
-    """Largest v in [lo, hi] with fits(v), for fits monotone (true below a threshold), by bisection."""
-    if fits(hi):
-        return hi
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if mid in (lo, hi):
-            break
-        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+def _ramp_slope(v, x, r, y, accel, jerk):
+    """d/dy of :func:`_ramp_distance` between v and x = x0 + y² (x > v), with r = sqrt(x − v).
+
+    ``2y (T/2 + (v + x) T'/2)``, T the ramp's duration; for a jerk-limited
+    ramp short of a_max T = 2r/√j and 2y T' = 2y/(r √j), finite where r = y.
+    """
+    if jerk is None or r * r >= accel**2 / jerk:
+        duration = r * r / accel + (0.0 if jerk is None else accel / jerk)
+        return y * duration + (v + x) * y / accel
+    return 2.0 * y * r / math.sqrt(jerk) + (v + x) * (y / r if r > 0 else 1.0) / math.sqrt(jerk)
+
+
+def _fitting(v, fits, lo):
+    """`v` stepped down to the largest value that still fits (rounding), not below `lo`."""
+    for _ in range(64):
+        if v <= lo or fits(v):
+            return max(v, lo)
+        v = max(v - 4e-16 * max(v, 1.0), lo)
     return lo
+
+
+def _reach(v0, length, vmax, accel, jerk):
+    """Largest v in [v0, vmax] reached from v0 within `length`: ``_ramp_distance(v0, v) <= length``, in closed form.
+
+    Without a jerk limit ``v² = v0² + 2 a L``. With one, a ramp that reaches
+    a_max (dv >= a²/j) covers ``(v² − v0²)/(2a) + (v0 + v) a/(2j)``, a
+    quadratic in v; a shorter one covers ``(2 v0 + y²) y / √j`` with
+    y = √(v − v0), a cubic in y (Cardano, one real root).
+    """
+    if _ramp_distance(v0, vmax, accel, jerk) <= length:
+        return vmax
+    if jerk is None:
+        v = math.sqrt(v0 * v0 + 2.0 * accel * length)
+    elif _ramp_distance(v0, v0 + accel**2 / jerk, accel, jerk) <= length:
+        a2, b = 0.5 / accel, 0.5 * accel / jerk
+        c = b * v0 - a2 * v0 * v0 - length
+        v = -2.0 * c / (b + math.sqrt(b * b - 4.0 * a2 * c))  # the positive root, without cancellation
+    else:
+        p, q = 2.0 * v0, length * math.sqrt(jerk)  # y³ + p y = q
+        u = (0.5 * q + math.sqrt(0.25 * q * q + p**3 / 27.0)) ** (1.0 / 3.0)
+        y = u - p / (3.0 * u)
+        v = v0 + y * y
+    return _fitting(min(max(v, v0), vmax), lambda x: _ramp_distance(v0, x, accel, jerk) <= length, v0)
+
+
+def _peak(v0, v1, length, vmax, accel, jerk):
+    """Largest peak in [max(v0, v1), vmax] with both ramps within `length`.
+
+    Equal ends are the closed form of :func:`_reach` over half the length;
+    two trapezoidal ramps, or two that reach a_max, a quadratic. Otherwise
+    (a jerk-limited ramp short of a_max) Newton's method on the distance as a function of
+    y = sqrt(peak − max(v0, v1)), which keeps it smooth where the ramp from
+    the faster end starts (a jerk-limited ramp covers (2v + y²) y / √j),
+    inside a bracket that bisection shrinks where Newton would leave it.
+    """
+    def total(x):
+        return _ramp_distance(v0, x, accel, jerk) + _ramp_distance(x, v1, accel, jerk)
+
+    top, other = max(v0, v1), min(v0, v1)
+    if total(vmax) <= length:
+        return vmax
+    if total(top) >= length:
+        return top
+    if v0 == v1:
+        return _fitting(_reach(v0, 0.5 * length, vmax, accel, jerk), lambda x: total(x) <= length, top)
+    # both ramps trapezoidal, or both reaching a_max: (2x² − v0² − v1²)/(2a) [+ (v0 + v1 + 2x) a/(2j)] = L
+    b = 0.0 if jerk is None else 0.5 * accel / jerk
+    c = b * (v0 + v1) - (v0 * v0 + v1 * v1) / (2.0 * accel) - length
+    x = -2.0 * c / (2.0 * b + math.sqrt(4.0 * b * b - 4.0 * c / accel))  # root of x²/a + 2b x + c, no cancellation
+    if jerk is None or x - top >= accel**2 / jerk:
+        return _fitting(min(max(x, top), vmax), lambda x: total(x) <= length, top)
+    lo, hi = 0.0, math.sqrt(vmax - top)  # bracket on y: total fits at lo, not at hi
+    y = 0.5 * hi
+    for _ in range(100):
+        x = top + y * y
+        f = total(x) - length
+        if f <= 0:
+            lo = y
+        else:
+            hi = y
+        slope = _ramp_slope(top, x, y, y, accel, jerk) + _ramp_slope(other, x, math.sqrt(x - other), y, accel, jerk)
+        step = f / slope if slope > 0 else math.inf
+        new = y - step if lo < y - step < hi else 0.5 * (lo + hi)
+        if abs(new - y) * (new + y) <= 2e-16 * max(top, 1.0) or new in (lo, hi):  # x = top + y² settled
+            break
+        y = new
+    return _fitting(top + y * y, lambda x: total(x) <= length, top + lo * lo)
 
 
 def _plan_sections(breaks, vmax, vjunction, accel, jerk):
     """Profile over sections [breaks[i], breaks[i+1]] with speed limits vmax[i] and junction caps."""
-    lengths = np.diff(breaks)
-    v = np.array(vjunction, dtype=float)
-    n = lengths.size
+    lengths = np.diff(breaks).tolist()
+    vmax = np.asarray(vmax, float).tolist()
+    v = np.array(vjunction, dtype=float).tolist()
+    n = len(lengths)
     for i in range(n):  # forward: reachable from the previous junction
-        v[i + 1] = min(v[i + 1], _largest(lambda x: _ramp_distance(v[i], x, accel, jerk) <= lengths[i], v[i], vmax[i]))
+        v[i + 1] = min(v[i + 1], _reach(v[i], lengths[i], vmax[i], accel, jerk))
     for i in reversed(range(n)):  # backward: can still brake for the next junction
-        v[i] = min(v[i], _largest(lambda x: _ramp_distance(x, v[i + 1], accel, jerk) <= lengths[i], v[i + 1], vmax[i]))
+        v[i] = min(v[i], _reach(v[i + 1], lengths[i], vmax[i], accel, jerk))
     rows, t = [], 0.0
     for i in range(n):
         v0, v1, length = v[i], v[i + 1], lengths[i]
-
-        def fits(peak):
-            return _ramp_distance(v0, peak, accel, jerk) + _ramp_distance(peak, v1, accel, jerk) <= length
-
-        peak = _largest(fits, max(v0, v1), vmax[i])
+        peak = _peak(v0, v1, length, vmax[i], accel, jerk)
         cruise = length - _ramp_distance(v0, peak, accel, jerk) - _ramp_distance(peak, v1, accel, jerk)
         pieces = _ramp_pieces(v0, peak, accel, jerk)
         if cruise > 0 and peak > 0:
             pieces.append((cruise / peak, 0.0, 0.0))
         pieces += _ramp_pieces(peak, v1, accel, jerk)
-        s, vel = breaks[i], v0
+        s, vel = float(breaks[i]), v0
         for duration, a0, j in pieces:
             if duration <= 0:
                 continue

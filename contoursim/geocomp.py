@@ -31,7 +31,9 @@ class GeometricCompensation(Strategy):
     chain : MachineChain
         The machine model (errors as identified or measured).
     tol : float
-        Stop iterating when no axis command changes by more than this [mm or rad].
+        Stop iterating when no axis command changes by more than this, or
+        when the changes still to come are estimated below it [mm or rad]
+        (see :meth:`MachineChain.inverse`).
     max_iter : int
         Iteration limit.
 

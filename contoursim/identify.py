@@ -34,7 +34,7 @@ from scipy.optimize import least_squares
 
 from .machine import Machine
 from .servo import AxisServo
-from .simulate import measured_reference, simulate_batch
+from .simulation import measured_reference, simulate_batch
 
 __all__ = ["FORCE_CONSTANT", "MASS", "SIGNIFICANT", "autocorrelation_time", "delta_bic", "identify_machine", "servo_period_for"]
 

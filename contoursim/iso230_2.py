@@ -194,7 +194,7 @@ def write_error_table(file, axis, figures, source=None, overwrite=False):
     """Write the mean bidirectional positional deviation x̄_i as an error table.
 
     The CSV has ``#`` header lines (what it is, the axis figures in µm), then
-    columns ``position`` [mm] and ``d<axis>`` [µm], one row per target: the
+    columns ``position_mm`` and ``d<axis>_um``, one row per target: the
     format :func:`contoursim.errormotion.read_error_table` reads, so a machine
     body's ``[body.errors] table = ...`` carries the measured positioning
     error, interpolated linearly between the targets.
@@ -236,6 +236,5 @@ def write_error_table(file, axis, figures, source=None, overwrite=False):
             f"# ISO 230-2 positioning test, {axis.upper()} axis: mean bidirectional positional deviation\n"
             f"# (measured - target){origin}\n"
             f"# {summary} µm\n"
-            f"# position in mm, d{axis} in µm\n"
-            f"position,d{axis}\n" + rows
+            f"position_mm,d{axis}_um\n" + rows
         )

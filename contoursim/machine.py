@@ -1,17 +1,18 @@
 """A machine: servo axes at a common servo period, and optionally their geometry.
 
-A machine file (TOML) holds both halves. The servo half::
+A machine file (TOML) holds both halves; every key carries its unit in its
+name (the README section "File format" lists them all). The servo half::
 
     name = "demo mill"
     servo_period_ms = 0.2
     max_feed_mm_min = 30000  # optional: paths planned faster are refused
 
-    [axes.x]                 # keys are the AxisServo parameters, SI units
-    mass = 300.0             # [kg]
-    force_constant = 942.0   # [N/A]
-    kv = 120.0               # [A·s/m]
-    ti = 0.01                # [s]
-    kp = 40.0                # [1/s]
+    [axes.x]                 # file keys -> AxisServo parameters: see SERVO_KEYS
+    mass_kg = 300.0
+    force_constant_N_per_A = 942.0
+    kv_A_s_per_m = 120.0
+    ti_s = 0.01
+    kp_per_s = 40.0
 
 and, optionally, the geometric half — bodies, joints and their errors, read
 by :func:`contoursim.multibody.chain_from_toml` (see that function for the
@@ -20,6 +21,7 @@ x, y (, z). With bodies, axes without a ``[axes.*]`` table (rotary tables on
 a contouring test, say) follow their commands exactly.
 """
 
+import re
 from dataclasses import MISSING, dataclass
 from importlib import resources
 from pathlib import Path
@@ -32,7 +34,7 @@ from .config import TomlFile
 from .exceptions import ConfigError, UnstableLoopError
 from .servo import AxisServo
 
-__all__ = ["CARTESIAN", "Machine", "load_machine", "preset_names", "read_work_offset"]
+__all__ = ["CARTESIAN", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
 
 CARTESIAN = ("x", "y", "z")
 
@@ -225,6 +227,27 @@ class Machine:
 
 
 _PRESETS = "presets"
+
+#: ``[axes.<name>]`` file key -> :class:`~contoursim.servo.AxisServo` parameter (SI, the key's unit).
+SERVO_KEYS = MappingProxyType({
+    "mass_kg": "mass",
+    "force_constant_N_per_A": "force_constant",
+    "kv_A_s_per_m": "kv",
+    "kp_per_s": "kp",
+    "ti_s": "ti",
+    "damping_N_s_per_m": "damping",
+    "current_limit_A": "current_limit",
+    "vff": "vff",
+    "aff": "aff",
+    "inductance_H": "inductance",
+    "resistance_ohm": "resistance",
+    "kc_V_per_A": "kc",
+    "ti_current_s": "ti_current",
+})
+#: Keys of earlier versions -> the keys that replaced them.
+_RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
+# a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")
+_SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| is| \(| \[|,| given| as well|\.|$))")
 _SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes", "effect")
 
 
@@ -295,24 +318,24 @@ def load_machine(name_or_file, geometry=True, effects=False):
     except (TypeError, ValueError) as exc:
         raise toml.error(str(exc), str(exc).split()[0]) from None
     fields = AxisServo.__dataclass_fields__
-    required = [name for name, f in fields.items() if f.default is MISSING]
+    required = [key for key, name in SERVO_KEYS.items() if fields[name].default is MISSING]
     servos = {}
     for axis in toml.table("axes"):
-        table = toml.table("axes", axis, allowed=fields, required=required)
+        table = toml.table("axes", axis, allowed=SERVO_KEYS, required=required, renamed=_RENAMED)
         try:
-            servos[axis] = AxisServo(**table)
+            servos[axis] = AxisServo(**{SERVO_KEYS[key]: value for key, value in table.items()})
         except (TypeError, ValueError) as exc:
-            bad = next((key for key in table if str(exc).startswith(key)), None)
+            bad = next((key for key in table if str(exc).startswith(SERVO_KEYS[key])), None)
             keys = ("axes", axis, bad) if bad else ("axes", axis)
-            raise toml.error(f"axis {axis}: {exc}", *keys) from None
+            raise toml.error(f"axis {axis}: {_file_names(exc)}", *keys) from None
     offset = read_work_offset(toml, chain) if "work_offset" in data and geometry else None
     for axis, servo in servos.items():  # refuse loops that cannot run at this period, pointing at the file
         try:
             servo.check(period, axis)
         except UnstableLoopError as exc:
-            raise UnstableLoopError(f"{toml.source}, line {toml.line_of('axes', axis)}: {exc}", exc.margins) from None
+            raise UnstableLoopError(f"{toml.source}, line {toml.line_of('axes', axis)}: {_file_names(exc)}", exc.margins) from None
         except ValueError as exc:
-            raise toml.error(str(exc), "servo_period_ms") from None
+            raise toml.error(_file_names(exc), "servo_period_ms") from None
     try:
         return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
                        max_feed=max_feed, work_offset=offset)
@@ -320,13 +343,19 @@ def load_machine(name_or_file, geometry=True, effects=False):
         raise toml.error(str(exc), "axes") from None
 
 
+def _file_names(exc):
+    """The message of `exc` with AxisServo parameter names replaced by the file keys."""
+    return _SERVO_NAME.sub(lambda match: _RENAMED[match.group(0)], str(exc))
+
+
 def read_work_offset(toml, chain):
-    """The ``work_offset = { x = 250, c = 90 }`` table of a machine or job file [mm; deg for rotary axes].
+    """The ``work_offset = { x_mm = 250, c_deg = 90 }`` table of a machine or job file.
 
     Parameters
     ----------
     toml : contoursim.config.TomlFile
-        The file holding a top-level ``work_offset`` table.
+        The file holding a top-level ``work_offset`` table: one key per axis,
+        its name and unit, ``<axis>_mm`` (linear) or ``<axis>_deg`` (rotary).
     chain : contoursim.multibody.MachineChain or None
         The machine's geometry; a work offset needs one.
 
@@ -337,10 +366,11 @@ def read_work_offset(toml, chain):
     """
     if chain is None:
         raise toml.error("work_offset needs a machine with geometry ([[body]] tables)", "work_offset")
-    table = toml.table("work_offset", allowed=chain.axes)
+    keys = {f"{axis}_deg" if chain.axis_kind(axis) == "rotary" else f"{axis}_mm": axis for axis in chain.axes}
+    table = toml.table("work_offset", allowed=keys, renamed={axis: key for key, axis in keys.items()})
     offset = {}
-    for axis, value in table.items():
+    for key, value in table.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            raise toml.error(f"work_offset.{axis} must be a finite number, got {value!r}", "work_offset", axis)
-        offset[axis] = np.radians(value) if chain.axis_kind(axis) == "rotary" else float(value)
+            raise toml.error(f"work_offset.{key} must be a finite number, got {value!r}", "work_offset", key)
+        offset[keys[key]] = np.radians(value) if key.endswith("_deg") else float(value)
     return offset

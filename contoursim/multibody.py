@@ -42,10 +42,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from ._numba import njit
 
-from . import _validate
-from .errormotion import COMPONENTS, Cyclic, ErrorMotion, read_error_table
+from . import _chainkernels, _validate
+from ._numba import njit
+from .config import FORMAT_DOC
+from .errormotion import _RAD_PER_URAD, COMPONENTS, ERROR_COLUMNS, ERROR_UNITS, Cyclic, ErrorMotion, read_error_table
 from .exceptions import ConfigError
 
 __all__ = [
@@ -60,7 +61,6 @@ __all__ = [
 _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
-_MM_PER_UM, _RAD_PER_URAD = 1e-3, 1e-6
 
 
 def lower_body_array(parents):
@@ -257,22 +257,32 @@ class Body:
         arr[names[group].index(rest)] = value
         return replace(self, **{group: arr})
 
-    def motion_error(self, q):
+    @property
+    def has_motion_error(self):
+        """True when :meth:`motion_error` is not identically zero."""
+        return bool(self.squareness.any()) or not all(m.is_zero for m in self.motion)
+
+    def motion_error(self, q, out=None):
         """Motion error twist (dx, dy, dz, ex, ey, ez) at positions `q`, squareness included.
 
         Parameters
         ----------
         q : ndarray, shape (N,)
             Axis positions [mm or rad].
+        out : ndarray, shape (N, 6), optional
+            Where to write the result.
 
         Returns
         -------
         ndarray, shape (N, 6)
             [mm, rad], in the body's frame after its ideal motion.
         """
-        out = np.stack([m(q) for m in self.motion], axis=-1)
-        if self.squareness.any():
-            out[:, :3] -= (self.sign * q)[:, None] * self.squareness
+        q = np.ascontiguousarray(q, dtype=float)
+        out = np.empty((q.size, 6)) if out is None else out
+        for i, m in enumerate(self.motion):
+            out[:, i] = 0.0 if m.is_zero else m(q)
+        for i in np.flatnonzero(self.squareness):
+            out[:, i] -= (self.sign * self.squareness[i]) * q
         return out
 
     def thermal_drift(self, t, n):
@@ -367,6 +377,22 @@ class MachineChain:
         object.__setattr__(self, "tool_tip", tip)
         object.__setattr__(self, "tool_chain", self.chain_to(self.tool))
         object.__setattr__(self, "work_chain", self.chain_to(self.workpiece))
+        object.__setattr__(self, "arrays", self._arrays())
+
+    def _arrays(self):
+        """The chain as flat arrays, one entry per body, for :func:`contoursim._chainkernels.axis_jacobian`."""
+        bodies = self.bodies
+        return dict(
+            parent=np.array([b.parent for b in bodies], np.int64),
+            kind=np.array([("fixed", "linear", "rotary").index(b.joint) for b in bodies], np.int64),
+            column=np.array([-1 if b.axis is None else self.axes.index(b.axis) for b in bodies], np.int64),
+            direction=np.array([b.direction for b in bodies], np.int64),
+            sign=np.array([b.sign for b in bodies], float),
+            offset=np.array([b.offset for b in bodies], float).reshape(len(bodies), 3),
+            # +1 on the tool branch only, -1 on the workpiece branch only, 0 on both (or neither)
+            side=np.array([float(j in self.tool_chain) - float(j in self.work_chain) for j in range(1, len(bodies) + 1)]),
+            order=np.argsort(np.count_nonzero(self.lower, axis=0), kind="stable").astype(np.int64),
+        )
 
     # -- topology ---------------------------------------------------------
 
@@ -446,22 +472,66 @@ class MachineChain:
             Tool axis V_w (unit vector).
         """
         q, t = self._check(q, t)
-        n = q.shape[0]
-        pv = np.empty((n, 2, 3))  # tool tip and tool axis, rotated together
-        pv[:, 0], pv[:, 1] = self.tool_tip, self.tool_axis
+        steps, err, times = self._program(q, t, ideal)
+        kind, inverse, column, vector = (np.array(x, dtype) for x, dtype in zip(zip(*steps), (np.int64, bool, np.int64, float)))
+        pose = _chainkernels.tool_pose(q, times, err, self.tool_tip, self.tool_axis, kind, inverse, column, vector.reshape(-1, 6))
+        return pose[:, :3], pose[:, 3:]
+
+    def _program(self, q, t, ideal):
+        """The steps of :func:`contoursim._chainkernels.tool_pose` and the error motions they read.
+
+        Body j's transform to its parent is the product of the characteristic
+        matrices S ΔS M D E (module docstring), each a step (rotation w, then
+        translation d) with w, d fixed or read from q, t or the error
+        motions. The tool tip goes out from the tool frame through the tool
+        branch's bodies, last step first, then in through the workpiece
+        branch's bodies, inverted.
+
+        Returns
+        -------
+        steps : list of (kind, inverse, column, vector (6,))
+        err : ndarray, shape (M, 6, N)
+            Error motions of the moving bodies that have any [mm, rad].
+        times : ndarray, shape (T, N)
+            What the thermal drift rates multiply, one row per time constant
+            (:meth:`Body.thermal_time`) [s].
+        """
+        K = _chainkernels
+        with_errors = [j for j, b in enumerate(self.bodies, 1) if not ideal and b.joint != "fixed" and b.has_motion_error]
+        err = np.empty((len(with_errors), 6, q.shape[0]))  # each component contiguous
+        for i, j in enumerate(with_errors):
+            b = self.bodies[j - 1]
+            b.motion_error(q[:, self.axes.index(b.axis)], out=err[i].T)
+
+        drift_times = {}  # time constant -> what the drift rates multiply
+        for b in self.bodies:
+            if not ideal and t is not None and b.thermal.any():
+                drift_times.setdefault(b.thermal_time_constant, b.thermal_time(t))
+        constants = list(drift_times)
+        times = np.array(list(drift_times.values())).reshape(len(constants), q.shape[0])
+
+        def body_steps(j):
+            b = self.bodies[j - 1]
+            steps = [(K.CONSTANT, 0, np.concatenate([np.zeros(3), b.offset]))]
+            if not ideal and b.static.any():
+                steps.append((K.CONSTANT, 0, np.concatenate([b.static[3:], b.static[:3]])))
+            if b.joint == "linear":
+                steps.append((K.LINEAR, self.axes.index(b.axis), np.concatenate([np.zeros(3), b.sign * np.eye(3)[b.direction]])))
+            elif b.joint == "rotary":
+                line = np.eye(3)[b.direction] if ideal else tilted_axis(b.direction, b.tilt)
+                steps.append((K.ROTARY, self.axes.index(b.axis), np.concatenate([b.sign * line, np.zeros(3)])))
+            if not ideal and t is not None and b.thermal.any():
+                steps.append((K.THERMAL, constants.index(b.thermal_time_constant), np.concatenate([b.thermal[3:], b.thermal[:3]])))
+            if j in with_errors:
+                steps.append((K.ERROR, with_errors.index(j), np.zeros(6)))
+            return steps
+
+        program = []
         for j in reversed(self.tool_chain):  # tool frame -> bed
-            for w, d in reversed(self._steps(j, q, t, ideal)):
-                if w is not None:
-                    pv = _rotate(pv, np.asarray(w)[..., None, :])
-                if d is not None:
-                    pv[:, 0] += d
+            program += [(kind, False, column, vector) for kind, column, vector in reversed(body_steps(j))]
         for j in self.work_chain:  # bed -> workpiece frame
-            for w, d in self._steps(j, q, t, ideal):
-                if d is not None:
-                    pv[:, 0] -= d
-                if w is not None:
-                    pv = _rotate(pv, -np.asarray(w)[..., None, :])
-        return pv[:, 0].copy(), pv[:, 1].copy()
+            program += [(kind, True, column, vector) for kind, column, vector in body_steps(j)]
+        return program, err, times
 
     def volumetric_error(self, q, t=None):
         """Actual minus ideal tool pose at the same axis positions.
@@ -483,29 +553,6 @@ class MachineChain:
         pa, va = self.tool_pose(q, t)
         pi, vi = self.tool_pose(q, t, ideal=True)
         return pa - pi, va - vi
-
-    def _steps(self, j, q, t, ideal):
-        """Characteristic matrices of body j as (rotation vector, translation) pairs, left to right."""
-        b = self.bodies[j - 1]
-        n = q.shape[0]
-        steps = [(None, b.offset)]
-        if not ideal and b.static.any():
-            steps.append((b.static[3:], b.static[:3]))
-        if b.joint != "fixed":
-            xi = b.sign * q[:, self.axes.index(b.axis)]
-            if b.joint == "linear":
-                steps.append((None, xi[:, None] * np.eye(3)[b.direction]))
-            else:
-                line = np.eye(3)[b.direction] if ideal else tilted_axis(b.direction, b.tilt)
-                steps.append((xi[:, None] * line, None))
-        if not ideal and b.thermal.any() and t is not None:
-            drift = b.thermal_drift(t, n)
-            steps.append((drift[:, 3:], drift[:, :3]))
-        if not ideal and b.joint != "fixed":
-            err = b.motion_error(q[:, self.axes.index(b.axis)])
-            if err.any():
-                steps.append((err[:, 3:], err[:, :3]))
-        return steps
 
     # -- first-order model ------------------------------------------------
 
@@ -656,15 +703,11 @@ class MachineChain:
             d(P_w, V_w)/dq [mm/mm, mm/rad, 1/mm, 1/rad].
         """
         q, _ = self._check(q, None)
-        effect = self._effects(q)
-        out = np.zeros((q.shape[0], 6, len(self.axes)))
-        for j in set(self.tool_chain) ^ set(self.work_chain):
-            b = self.bodies[j - 1]
-            if b.joint != "fixed":
-                twist = np.zeros(6)
-                twist[b.direction + (3 if b.joint == "rotary" else 0)] = b.sign
-                out[:, :, self.axes.index(b.axis)] += effect(j, "static", twist)
-        return out
+        a = self.arrays
+        return _chainkernels.axis_jacobian(
+            q, len(self.axes), self.tool, self.workpiece, self.tool_tip, self.tool_axis, a["order"], a["parent"],
+            a["kind"], a["column"], a["direction"], a["sign"], a["offset"], a["side"],
+        )
 
     # -- inverse kinematics -----------------------------------------------
 
@@ -673,9 +716,12 @@ class MachineChain:
 
         Each step solves the least-squares problem with the ideal chain's axis
         Jacobian, position first and the tool axis in the freedom left (see
-        :func:`_prioritized_step`); on the ideal chain of a Cartesian machine the
+        :func:`_prioritized_inverse`); on the ideal chain of a Cartesian machine the
         first step is exact (the map is affine), on the actual chain the
-        residual shrinks by about the relative error size per step.
+        residual shrinks by about the errors' relative size and slope per step. The
+        Jacobian is kept while the steps shrink at least tenfold each (as
+        they do on the actual chain, whose errors are small) and evaluated
+        anew where they do not.
 
         Parameters
         ----------
@@ -694,7 +740,9 @@ class MachineChain:
         ideal : bool
             Invert the error-free chain.
         tol : float
-            Stop when no axis moves more than this [mm or rad].
+            Stop when no axis moves more than this [mm or rad], or when the
+            steps still to come are estimated below it: steps shrinking by a
+            ratio ρ < 0.1 sum to at most ρ/(1 − ρ) times the last one.
         max_iter : int
             Iteration limit.
 
@@ -722,17 +770,27 @@ class MachineChain:
             if unknown:
                 raise ValueError(f"free: unknown axes {sorted(unknown)}; the axes are {list(self.axes)}")
             mask = np.array([a in free for a in self.axes])
-        rows = slice(0, 6) if tool_axis is not None else slice(0, 3)
+        rows = 6 if tool_axis is not None else 3
+        columns = np.flatnonzero(mask)
+        target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
+        refresh, previous = True, None
         for _ in range(int(_validate.positive("max_iter", max_iter))):
+            if refresh:  # a new Jacobian only when the last one stops the steps shrinking fast
+                J = self.axis_jacobian(q if self.rotary_axes.any() else q[:1])  # linear axes only: one J for all
+                P = _prioritized_inverse(J[:, :rows] if mask.all() else J[:, :rows].take(columns, axis=2))
+                del J
+                refresh = False
             p, v = self.tool_pose(q, t, ideal=ideal)
-            r = p - position if tool_axis is None else np.concatenate([p - position, v - tool_axis], axis=1)
-            J = self.axis_jacobian(q)[:, rows][:, :, mask]
-            step = _prioritized_step(J, r)
-            q[:, mask] -= step
-            if np.max(np.abs(step), initial=0.0) <= tol:
+            largest, worst = _chainkernels.newton_update(q, columns, P, p, v, position, target_axis)
+            if largest <= tol:
                 return q
-        worst = int(np.argmax(np.abs(step).max(axis=1)))
-        raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {np.abs(step[worst]).max():.3g})")
+            if previous is not None:
+                ratio = largest / previous  # the contraction of a linearly converging iteration ...
+                if ratio < 0.1 and largest * ratio / (1 - ratio) <= tol:  # ... bounds the steps still to come
+                    return q
+                refresh = ratio >= 0.1
+            previous = None if refresh else largest
+        raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {largest:.3g})")
 
     # -- helpers ----------------------------------------------------------
 
@@ -752,8 +810,8 @@ class MachineChain:
         raise ValueError(f"unknown parameter {name!r}: no body named {body!r}")
 
 
-def _prioritized_step(J, r, rcond=1e-4):
-    """Per-sample least-squares step for ``J·step = r``: position rows first, tool axis second.
+def _prioritized_inverse(J, rcond=1e-4):
+    """Per-sample least-squares operator P of ``J·step = r`` (step = P r): position rows first, tool axis second.
 
     The position rows (0-2) are solved in the least-squares sense; the
     tool-axis rows (3-5, if present) only in the null space the position
@@ -769,41 +827,14 @@ def _prioritized_step(J, r, rcond=1e-4):
     ----------
     J : ndarray, shape (N, 3 or 6, k)
         Axis Jacobian [mm/mm, mm/rad; 1/mm, 1/rad].
-    r : ndarray, shape (N, 3 or 6)
-        Residual [mm; -].
     rcond : float
         Eigenvalue threshold of the column-scaled normal equations.
 
     Returns
     -------
-    ndarray, shape (N, k)
+    ndarray, shape (N, k, 3 or 6)
     """
-    x, null = _solve(J[:, :3], r[:, :3], rcond, 1.0)
-    Jo = J[:, 3:]
-    if Jo.size and Jo.any():
-        A = Jo @ null
-        strongest = np.sqrt(np.sum(Jo * Jo, axis=1)).max(axis=1, keepdims=True) + 1e-300
-        x2, _ = _solve(A, r[:, 3:] - (Jo @ x[..., None])[..., 0], rcond, strongest)
-        x = x + (null @ x2[..., None])[..., 0]
-    return x
-
-
-def _solve(A, b, rcond, floor):
-    """Least-squares x for A x = b per sample, and the projector onto the dropped directions.
-
-    Columns are divided by their norm but at least by `floor` (scalar or
-    (N, 1)); eigenvalues of the scaled normal equations below `rcond` are
-    dropped.
-    """
-    s = np.maximum(np.sqrt(np.sum(A * A, axis=1)), floor)
-    As = A / s[:, None, :]
-    At = np.swapaxes(As, 1, 2)
-    lam, V = np.linalg.eigh(At @ As)
-    keep = lam > rcond
-    inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
-    g = (np.swapaxes(V, 1, 2) @ (At @ b[..., None]))[..., 0]
-    null = (V * (~keep)[:, None, :]) @ np.swapaxes(V, 1, 2)  # in scaled variables
-    return (V @ (inv * g)[..., None])[..., 0] / s, null * s[:, None, :] / s[:, :, None]
+    return _chainkernels.prioritized_inverse(np.ascontiguousarray(J, dtype=float), rcond)
 
 
 def _rotate(v, w):
@@ -817,23 +848,10 @@ def _rotate(v, w):
 
 @njit(cache=True)
 def _rotate_kernel(v, w):
-    """v + a (w × v) + b w × (w × v) with a = sin θ/θ, b = (1 − cos θ)/θ², θ = |w|; rows of (M, 3) arrays."""
+    """Rows of (M, 3) arrays: v rotated by w (:func:`contoursim._chainkernels.rotated`)."""
     out = np.empty_like(v)
     for n in range(v.shape[0]):
-        wx, wy, wz = w[n, 0], w[n, 1], w[n, 2]
-        th2 = wx * wx + wy * wy + wz * wz
-        if th2 < 1e-12:
-            a = 1.0 - th2 / 6.0
-            b = 0.5 - th2 / 24.0
-        else:
-            th = np.sqrt(th2)
-            a = np.sin(th) / th
-            b = (1.0 - np.cos(th)) / th2
-        vx, vy, vz = v[n, 0], v[n, 1], v[n, 2]
-        cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
-        out[n, 0] = vx + a * cx + b * (wy * cz - wz * cy)
-        out[n, 1] = vy + a * cy + b * (wz * cx - wx * cz)
-        out[n, 2] = vz + a * cz + b * (wx * cy - wy * cx)
+        out[n, 0], out[n, 1], out[n, 2] = _chainkernels.rotated(v[n, 0], v[n, 1], v[n, 2], w[n, 0], w[n, 1], w[n, 2])
     return out
 
 
@@ -879,9 +897,12 @@ def cartesian_chain(axes=("x", "y", "z")):
 
 # -- TOML machine description ----------------------------------------------
 
-_MACHINE_KEYS = ("name", "description", "tool", "workpiece", "tool_tip", "tool_axis", "axis_order", "body")
-_BODY_KEYS = ("name", "parent", "joint", "axis", "travel", "offset", "static", "squareness", "tilt", "thermal", "errors")
+_MACHINE_KEYS = ("name", "description", "tool", "workpiece", "tool_tip_mm", "tool_axis", "axis_order", "body")
+_BODY_KEYS = ("name", "parent", "joint", "axis", "travel_mm", "travel_deg", "offset_mm", "static", "squareness", "tilt",
+              "thermal", "errors")
 _TERM_KEYS = ("constant", "poly", "cyclic")
+#: Keys of earlier versions -> the keys that replaced them.
+_RENAMED = {"tool_tip": "tool_tip_mm", "offset": "offset_mm"}
 
 
 def chain_from_toml(toml, *keys, extra=()):
@@ -889,13 +910,13 @@ def chain_from_toml(toml, *keys, extra=()):
 
     This is the geometric half of a machine file (see
     :func:`contoursim.machine.load_machine`, which also reads the servo
-    half). The description reads like the machine (units at this edge: mm, deg, µm,
-    µrad, µm/min)::
+    half). The description reads like the machine; every key carries its
+    unit (the README section "File format" lists them all)::
 
         name = "3-axis vertical mill"
         tool = "tool"                 # the body carrying the tool
         workpiece = "table"
-        tool_tip = [0, 0, 0]          # optional tip in the tool body's frame [mm]
+        tool_tip_mm = [0, 0, 0]       # optional tip in the tool body's frame
         tool_axis = [0, 0, 1]         # optional
         axis_order = ["x", "y", "z"]  # optional column order of q
 
@@ -904,19 +925,21 @@ def chain_from_toml(toml, *keys, extra=()):
         parent = "Y"                  # a body name or "bed"
         joint = "linear -x"           # fixed | linear [-]x|y|z | rotary [-]x|y|z
         axis = "x"                    # the commanded axis driving it
-        travel = [0, 500]             # [mm] or [deg]
-        offset = [0, 0, 0]            # [mm]
-        static = { dz = 5 }           # assembly error [µm] / [µrad]
-        squareness = { y = 20 }       # linear joint [µrad], positive: angle > 90°
-        tilt = { x = 10, y = -5 }     # rotary joint axis-line squareness [µrad] (seed 001)
-        thermal = { dx = 2 }          # drift rate [µm/min] / [µrad/min]
+        travel_mm = [0, 500]          # travel_deg for a rotary joint
+        offset_mm = [0, 0, 0]
+        static = { dz_um = 5, ex_urad = 2 }        # assembly error
+        squareness = { y_urad = 20 }               # linear joint, positive: angle > 90°
+        tilt = { x_urad = 10, y_urad = -5 }        # rotary joint axis-line squareness (seed 001)
+        thermal = { dx_um_per_min = 2 }            # drift rate (ex_urad_per_min ...)
         [body.errors]
         table = "x_laser.csv"         # optional ISO 230-2 table, relative to this file
-        dx = { poly = [0, 12e-3], cyclic = [{ amplitude = 1.5, period = 10, phase_deg = 0 }] }
-        ey = { constant = 8 }         # [µrad]
+        dx_um = { poly = [0, 12e-3], cyclic = [{ amplitude_um = 1.5, period_mm = 10, phase_deg = 0 }] }
+        ey_urad = { constant = 8 }
 
-    Polynomial coefficients are per mm^k (per deg^k for a rotary axis),
-    cyclic periods in mm (deg).
+    An error motion's ``constant`` and ``poly`` are in the unit of its key,
+    polynomial coefficients per mm^k (per deg^k for a rotary axis); a cyclic
+    term's amplitude is in the same unit and its period in mm (``period_deg``
+    for a rotary axis).
 
     Parameters
     ----------
@@ -934,15 +957,17 @@ def chain_from_toml(toml, *keys, extra=()):
     Raises
     ------
     ConfigError
-        Naming the file and line of an unknown key or a bad value.
+        Naming the file and line of an unknown key or a bad value; a key of
+        an earlier version is named with the key that replaced it.
     """
-    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"))
+    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"), renamed=_RENAMED)
     raw = top["body"]
     if not isinstance(raw, list) or not raw:
         raise toml.error("body must be an array of tables ([[body]])", *keys, "body")
     names = []
     for i in range(len(raw)):
-        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",))
+        travel = "travel_deg" if str(raw[i].get("joint", "")).strip().startswith("rotary") else "travel_mm"
+        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",), renamed={**_RENAMED, "travel": travel})
         if not isinstance(item["name"], str) or item["name"] in names or item["name"] == "bed":
             raise toml.error(f"body name must be a unique string other than 'bed', got {item['name']!r}", *keys, "body", i, "name")
         names.append(item["name"])
@@ -959,7 +984,7 @@ def chain_from_toml(toml, *keys, extra=()):
     try:
         axes = top.get("axis_order")
         tool_axis = top.get("tool_axis", [0.0, 0.0, 1.0])
-        tool_tip = np.asarray(top.get("tool_tip", [0.0, 0.0, 0.0]), float)
+        tool_tip = np.asarray(top.get("tool_tip_mm", [0.0, 0.0, 0.0]), float)
         return MachineChain(
             tuple(bodies),
             tool=body_index(top["tool"], *keys, "tool"),
@@ -988,36 +1013,37 @@ def _body_from_toml(toml, base, where, item, body_index):
     if (kind == "fixed") != ("axis" not in item):
         raise fail("a moving joint needs 'axis' (the commanded axis name), a fixed one has none", "joint")
 
-    def vector(key, names, scale, size):
-        value = item.get(key, {})
-        if not isinstance(value, dict):
-            raise fail(f"{key} must be a table like {{ {names[0]} = ... }}", key)
-        unknown = set(value) - set(names)
-        if unknown:
-            raise fail(f"unknown key '{sorted(unknown)[0]}' in {key}; expected one of: {', '.join(names)}", key)
-        out = np.zeros(size)
+    def vector(key, units):
+        """A table like ``{ dx_um = 2, ex_urad = 1 }`` in mm, rad; `units` is ((name, unit, scale), ...)."""
+        if not isinstance(item.get(key, {}), dict):
+            raise fail(f"{key} must be a table like {{ {units[0][0]}_{units[0][1]} = ... }}", key)
+        names = [f"{name}_{unit}" for name, unit, _ in units]
+        value = toml.table(*where, key, allowed=names, renamed=dict(zip((n for n, _, _ in units), names))) if key in item else {}
+        out = np.zeros(len(units))
         for k, v in value.items():
-            out[names.index(k)] = _number(v, fail, key) * (scale[names.index(k)] if isinstance(scale, tuple) else scale)
+            out[names.index(k)] = _number(v, fail, key) * units[names.index(k)][2]
         return out
 
     per_min = 1 / 60.0
-    lin_ang = (_MM_PER_UM,) * 3 + (_RAD_PER_URAD,) * 3
-    static = vector("static", COMPONENTS, lin_ang, 6)
-    squareness = vector("squareness", _DIRECTIONS, _RAD_PER_URAD, 3)
-    tilt = vector("tilt", _DIRECTIONS, _RAD_PER_URAD, 3)
-    thermal = vector("thermal", COMPONENTS, tuple(s * per_min for s in lin_ang), 6)
+    static = vector("static", [(c, unit, scale) for c, (unit, scale) in zip(COMPONENTS, ERROR_UNITS)])
+    squareness = vector("squareness", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
+    tilt = vector("tilt", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
+    thermal = vector("thermal", [(c, f"{unit}_per_min", scale * per_min) for c, (unit, scale) in zip(COMPONENTS, ERROR_UNITS)])
     for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
         if values.any() and (kind != wanted or values[direction]):
             raise fail(f"{key} applies to a {wanted} joint, towards the other two directions", key)
-    offset = item.get("offset", [0.0, 0.0, 0.0])
+    offset = item.get("offset_mm", [0.0, 0.0, 0.0])
     if not isinstance(offset, list) or len(offset) != 3:
-        raise fail("offset must be [x, y, z] in mm", "offset")
-    offset = [_number(v, fail, "offset") for v in offset]
-    travel = item.get("travel")
+        raise fail("offset_mm must be [x, y, z]", "offset_mm")
+    offset = [_number(v, fail, "offset_mm") for v in offset]
+    travel_key, wrong = ("travel_deg", "travel_mm") if rotary else ("travel_mm", "travel_deg")
+    if wrong in item:
+        raise fail(f"the travel of a {kind} joint is '{travel_key}'", wrong)
+    travel = item.get(travel_key)
     if travel is not None:
         if not isinstance(travel, list) or len(travel) != 2:
-            raise fail("travel must be [min, max]", "travel")
-        travel = [_number(v, fail, "travel") for v in travel]
+            raise fail(f"{travel_key} must be [min, max]", travel_key)
+        travel = [_number(v, fail, travel_key) for v in travel]
         travel = tuple(np.deg2rad(travel)) if rotary else tuple(travel)
     motion = _motion_from_toml(toml, base, where, item, rotary, fail)
     try:
@@ -1046,7 +1072,8 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
     errors = item.get("errors", {})
     if not errors:
         return (ErrorMotion(),) * 6
-    toml.table(*where, "errors", allowed=COMPONENTS + ("table",))
+    keys = {column: comp for column, (comp, _) in ERROR_COLUMNS.items()}  # the same names as an error table's columns
+    toml.table(*where, "errors", allowed=(*keys, "table"), renamed={comp: key for key, comp in keys.items()})
     tables = {}
     if "table" in errors:
         path = base / str(errors["table"])
@@ -1057,32 +1084,34 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
                 raise fail(f"error table {str(errors['table'])!r} not found (relative to {base})", "errors", "table") from None
             raise exc
     to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
+    period_key = "period_deg" if rotary else "period_mm"
     motion = []
-    for i, comp in enumerate(COMPONENTS):
-        scale = _MM_PER_UM if i < 3 else _RAD_PER_URAD
-        spec = errors.get(comp, {})
+    for key, (unit, scale) in zip(keys, ERROR_UNITS):
+        comp = keys[key]
+        spec = errors.get(key, {})
         if not isinstance(spec, dict):
-            raise fail(f"errors.{comp} must be a table of constant / poly / cyclic", "errors", comp)
-        unknown = set(spec) - set(_TERM_KEYS)
-        if unknown:
-            raise fail(f"unknown key '{sorted(unknown)[0]}' in errors.{comp}; expected one of: {', '.join(_TERM_KEYS)}", "errors", comp)
+            raise fail(f"errors.{key} must be a table of constant / poly / cyclic", "errors", key)
+        if spec:
+            toml.table(*where, "errors", key, allowed=_TERM_KEYS)
         if "constant" in spec and "poly" in spec:
-            raise fail(f"errors.{comp}: give either constant or poly, not both", "errors", comp)
+            raise fail(f"errors.{key}: give either constant or poly, not both", "errors", key)
         poly = spec.get("poly", [spec["constant"]] if "constant" in spec else [])
         if not isinstance(poly, list):
-            raise fail(f"errors.{comp}.poly must be a list of coefficients", "errors", comp)
-        poly = [_number(c, fail, "errors", comp) * scale / to_q**k for k, c in enumerate(poly)]
+            raise fail(f"errors.{key}.poly must be a list of coefficients", "errors", key)
+        poly = [_number(c, fail, "errors", key) * scale / to_q**k for k, c in enumerate(poly)]
         cyclic = spec.get("cyclic", [])
         cyclic = [cyclic] if isinstance(cyclic, dict) else cyclic
+        amplitude_key = f"amplitude_{unit}"
         terms = []
         for term in cyclic:
-            if not isinstance(term, dict) or set(term) - {"amplitude", "period", "phase_deg"} or not {"amplitude", "period"} <= set(term):
-                raise fail(f"errors.{comp}.cyclic terms are {{ amplitude, period, phase_deg }}", "errors", comp)
-            period = _number(term["period"], fail, "errors", comp)
+            if not isinstance(term, dict) or set(term) - {amplitude_key, period_key, "phase_deg"} or not {amplitude_key, period_key} <= set(term):
+                raise fail(f"errors.{key}.cyclic terms are {{ {amplitude_key}, {period_key}, phase_deg }} "
+                           f"(see {FORMAT_DOC})", "errors", key)
+            period = _number(term[period_key], fail, "errors", key)
             if period <= 0:
-                raise fail(f"errors.{comp}.cyclic period must be positive, got {period}", "errors", comp)
-            terms.append(Cyclic.from_amplitude(_number(term["amplitude"], fail, "errors", comp) * scale,
-                                               period * to_q, np.deg2rad(_number(term.get("phase_deg", 0.0), fail, "errors", comp))))
+                raise fail(f"errors.{key}.cyclic {period_key} must be positive, got {period}", "errors", key)
+            terms.append(Cyclic.from_amplitude(_number(term[amplitude_key], fail, "errors", key) * scale,
+                                               period * to_q, np.deg2rad(_number(term.get("phase_deg", 0.0), fail, "errors", key))))
         motion.append(ErrorMotion(tuple(poly), tuple(terms), tables.get(comp)))
     return tuple(motion)
 

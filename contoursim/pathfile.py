@@ -1,7 +1,8 @@
 """Path files of the trajectories library: a TOML path description or a G-code program.
 
 The TOML format (``[feed]`` and ``[path]`` tables, units in the key names) is
-described in trajectories/README.md. Every error names the file and the line
+listed in the README section "File format"; trajectories/README.md says which
+keys each path type takes. Every error names the file and the line
 of the offending key, through :class:`contoursim.config.TomlFile`.
 """
 
@@ -94,7 +95,7 @@ def load_path_file(file):
     Parameters
     ----------
     file : str or os.PathLike
-        A ``.toml`` path file (format in trajectories/README.md), a ``.nc``
+        A ``.toml`` path file (keys in the README section "File format"), a ``.nc``
         G-code program (see :func:`contoursim.gcode.read_gcode`), or the name
         of either in the trajectories library (see :func:`library_file`).
 

@@ -108,13 +108,34 @@ def _spline_w_of_u(row, u):
 
 
 @njit(cache=True)
-def _spline_table(coef):
-    """Row of a spline piece from its (12,) coefficients: appends the cumulative arc-length table."""
-    row = np.zeros(NCOL)
-    row[:12] = coef
-    for j in range(_TABLE):
-        row[13 + j] = row[12 + j] + _spline_integral(row, j / _TABLE, (j + 1) / _TABLE)
-    return row
+def _spline_tables(coefs):
+    """Rows of spline pieces from their (K, 12) coefficients: each with its cumulative arc-length table."""
+    rows = np.zeros((coefs.shape[0], NCOL))
+    for k in range(coefs.shape[0]):
+        row = rows[k]
+        row[:12] = coefs[k]
+        for j in range(_TABLE):
+            row[13 + j] = row[12 + j] + _spline_integral(row, j / _TABLE, (j + 1) / _TABLE)
+    return rows
+
+
+@njit(cache=True)
+def _spline_max_curvature(rows):
+    """Largest curvature |P' × P''| / |P'|³ of each spline piece at w = 0, 1/64, ..., 1 [1/mm], shape (K,)."""
+    out = np.zeros(rows.shape[0])
+    d1 = np.empty(3)
+    d2 = np.empty(3)
+    for k in range(rows.shape[0]):
+        row = rows[k]
+        for m in range(65):
+            w = m / 64.0
+            for i in range(3):
+                d1[i] = row[3 + i] + 2.0 * row[6 + i] * w + 3.0 * row[9 + i] * w * w
+                d2[i] = 2.0 * row[6 + i] + 6.0 * row[9 + i] * w
+            cx, cy, cz = d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]
+            speed = math.sqrt(d1[0] ** 2 + d1[1] ** 2 + d1[2] ** 2)
+            out[k] = max(out[k], math.sqrt(cx * cx + cy * cy + cz * cz) / speed**3)
+    return out
 
 
 @njit(cache=True)
@@ -165,13 +186,20 @@ def _primitive_at(breaks, s):
 
 
 @njit(cache=True)
-def _evaluate(kinds, rows, breaks, s):
-    out = np.empty((s.size, 9))
-    for m in range(s.size):
-        k = _primitive_at(breaks, s[m])
-        u = min(max(s[m] - breaks[k], 0.0), breaks[k + 1] - breaks[k])
-        _eval_prim(kinds[k], rows[k], u, out[m])
+def _evaluate_local(kinds, rows, index, u):
+    """Position, tangent and curvature vector at arc length u[m] of primitive index[m], shape (M, 9)."""
+    out = np.empty((u.size, 9))
+    for m in range(u.size):
+        k = index[m]
+        length = rows[k, 6] if kinds[k] == LINE else rows[k, 17] if kinds[k] == ARC else rows[k, 12 + _TABLE]
+        _eval_prim(kinds[k], rows[k], min(max(u[m], 0.0), length), out[m])
     return out
+
+
+def _evaluate(kinds, rows, breaks, s):
+    """Position, tangent and curvature vector at path arc lengths `s`, shape (M, 9): primitive k holds [breaks[k], breaks[k+1])."""
+    k = np.clip(np.searchsorted(breaks, s, side="right") - 1, 0, breaks.size - 2)
+    return _evaluate_local(kinds, rows, k, np.clip(s - breaks[k], 0.0, breaks[k + 1] - breaks[k]))
 
 
 # --------------------------------------------------------------------------- primitives
@@ -372,22 +400,60 @@ class SplinePiece(_Primitive):
             coef = _validate.finite_array("coefficients", self.coefficients, shape=(4, 3))
         except ValueError as exc:
             raise PathError(str(exc)) from None
-        w = np.linspace(0.0, 1.0, 65)[:, None]
-        speed = np.linalg.norm(coef[1] + 2 * coef[2] * w + 3 * coef[3] * w**2, axis=1)
-        chord = np.linalg.norm(coef[1:].sum(axis=0))
-        if speed.min() <= 1e-9 * max(chord, 1e-300):
-            raise PathError("spline piece has a cusp or zero length (duplicate control points?)")
-        row = _spline_table(coef.ravel())
-        _frozen(self, coefficients=coef, row=row)
-        object.__setattr__(self, "length", float(row[12 + _TABLE]))
+        rows, cusps = _spline_rows(coef[None])
+        if cusps.size:
+            raise PathError(_CUSP)
+        self._set(*self._frozen_rows(coef[None], rows), 0)
+
+    @staticmethod
+    def _frozen_rows(coefs, rows):
+        """Read-only coefficients (K, 4, 3) and rows (K, NCOL), and whether each piece lies in z = 0."""
+        coefs, rows = np.array(coefs, dtype=float), np.array(rows, dtype=float)
+        coefs.flags.writeable = False
+        rows.flags.writeable = False
+        return coefs, rows, np.all(np.abs(coefs[:, :, 2]) < 1e-12, axis=1)
+
+    def _set(self, coefs, rows, in_xy, k):
+        object.__setattr__(self, "coefficients", coefs[k])
+        object.__setattr__(self, "row", rows[k])
+        object.__setattr__(self, "length", float(rows[k, 12 + _TABLE]))
+        object.__setattr__(self, "_in_xy", bool(in_xy[k]))
+
+    @classmethod
+    def _pieces(cls, coefs, rows, role):
+        """Pieces from coefficients (K, 4, 3) and their rows from :func:`_spline_rows` (checked there)."""
+        frozen = cls._frozen_rows(coefs, rows)
+        pieces = []
+        for k in range(len(coefs)):
+            piece = object.__new__(cls)
+            object.__setattr__(piece, "role", role)
+            piece._set(*frozen, k)
+            pieces.append(piece)
+        return pieces
 
     @property
     def in_xy_plane(self):
         """True if the piece lies in z = 0."""
-        return bool(np.all(np.abs(self.coefficients[:, 2]) < 1e-12))
+        return self._in_xy
 
 
 _PRIMITIVES = (Line, HelicalArc, SplinePiece)
+
+
+_CUSP = "spline piece has a cusp or zero length (duplicate control points?)"
+
+
+def _spline_rows(coefs):
+    """Rows (K, NCOL) of spline pieces with coefficients (K, 4, 3), and the indices of pieces with a cusp.
+
+    A piece has a cusp (or zero length) where its speed |dP/dw|, sampled at
+    65 points, drops to 1e-9 of its chord.
+    """
+    w = np.linspace(0.0, 1.0, 65)[:, None, None]
+    speed = np.linalg.norm(coefs[None, :, 1] + 2 * coefs[None, :, 2] * w + 3 * coefs[None, :, 3] * w**2, axis=2)
+    chord = np.linalg.norm(coefs[:, 1:].sum(axis=1), axis=1)
+    cusps = np.flatnonzero(speed.min(axis=0) <= 1e-9 * np.maximum(chord, 1e-300))
+    return _spline_tables(np.ascontiguousarray(coefs.reshape(len(coefs), 12))), cusps
 
 
 # --------------------------------------------------------------------------- path
@@ -436,30 +502,35 @@ class Path:
         for k, p in enumerate(prims):
             if not isinstance(p, _PRIMITIVES):
                 raise PathError(f"segment {k} is a {type(p).__name__}, not a Line, HelicalArc or SplinePiece")
-        for k in range(1, len(prims)):
-            gap = float(np.linalg.norm(prims[k].start - prims[k - 1].end))
-            if gap > CONTINUITY_TOL:
-                raise PathError(f"segment {k} starts {gap:.3g} mm away from the end of segment {k - 1}")
+        kinds = np.array([p.kind for p in prims], dtype=np.int64)
+        rows = np.array([p.row for p in prims])
+        lengths = np.array([p.length for p in prims])
+        index = np.arange(len(prims))
+        ends = _evaluate_local(kinds, rows, np.repeat(index, 2), np.column_stack([np.zeros(len(prims)), lengths]).ravel())
+        ends = ends.reshape(len(prims), 2, 9)  # start and end of each primitive: position, tangent, curvature vector
+        gaps = np.linalg.norm(ends[1:, 0, :3] - ends[:-1, 1, :3], axis=1)
+        if np.any(gaps > CONTINUITY_TOL):
+            k = int(np.argmax(gaps > CONTINUITY_TOL)) + 1
+            raise PathError(f"segment {k} starts {gaps[k - 1]:.3g} mm away from the end of segment {k - 1}")
         planar_xy = all(p.in_xy_plane for p in prims)
         dim = 2 if (self.dim is None and planar_xy) else 3 if self.dim is None else self.dim
         if dim not in (2, 3) or (dim == 2 and not planar_xy):
             raise PathError(f"dim must be 3, or 2 for a path in the XY plane, got {self.dim!r}")
-        kinds = np.array([p.kind for p in prims], dtype=np.int64)
-        rows = np.array([p.row for p in prims])
-        breaks = np.concatenate([[0.0], np.cumsum([p.length for p in prims])])
-        for name, value in dict(kinds=kinds, rows=rows, breaks=breaks).items():
+        breaks = np.concatenate([[0.0], np.cumsum(lengths)])
+        for name, value in dict(kinds=kinds, rows=rows, breaks=breaks, _ends=ends).items():
             value.flags.writeable = False
             object.__setattr__(self, name, value)
         object.__setattr__(self, "primitives", prims)
         object.__setattr__(self, "dim", dim)
         object.__setattr__(self, "length", float(breaks[-1]))
         object.__setattr__(self, "roles", tuple(p.role for p in prims))
-        object.__setattr__(self, "closed", bool(np.linalg.norm(prims[-1].end - prims[0].start) <= CONTINUITY_TOL))
+        object.__setattr__(self, "closed", bool(np.linalg.norm(ends[-1, 1, :3] - ends[0, 0, :3]) <= CONTINUITY_TOL))
         object.__setattr__(self, "plane_normal", np.array([0.0, 0.0, 1.0]) if planar_xy else self._plane())
 
     def _plane(self):
-        u = np.linspace(0.0, 1.0, 9)
-        pts = np.concatenate([p.evaluate(u * p.length)[0] for p in self.primitives])
+        lengths = np.diff(self.breaks)
+        index = np.repeat(np.arange(len(lengths)), 9)
+        pts = _evaluate_local(self.kinds, self.rows, index, np.tile(np.linspace(0.0, 1.0, 9), len(lengths)) * lengths[index])[:, :3]
         pts = pts - pts.mean(axis=0)
         _, sv, vt = np.linalg.svd(pts, full_matrices=False)
         extent = max(sv[0], 1e-300)
@@ -481,12 +552,12 @@ class Path:
     @property
     def start(self):
         """First point [mm], shape (3,)."""
-        return self.primitives[0].start
+        return self._ends[0, 0, :3].copy()
 
     @property
     def end(self):
         """Last point [mm], shape (3,)."""
-        return self.primitives[-1].end
+        return self._ends[-1, 1, :3].copy()
 
     def derivatives(self, s):
         """Position, unit tangent and curvature vector at arc lengths `s`.
@@ -567,24 +638,21 @@ class Path:
         -------
         ndarray, shape (K - 1,)
         """
-        ends = [p.evaluate([p.length])[1][0] for p in self.primitives[:-1]]
-        starts = [p.evaluate([0.0])[1][0] for p in self.primitives[1:]]
-        cos = np.clip(np.sum(np.reshape(ends, (-1, 3)) * np.reshape(starts, (-1, 3)), axis=1), -1.0, 1.0)
+        cos = np.clip(np.sum(self._ends[:-1, 1, 3:6] * self._ends[1:, 0, 3:6], axis=1), -1.0, 1.0)
         return np.arccos(cos)
 
     def max_curvature(self):
-        """Largest curvature of each primitive [1/mm] (sampled at 65 points on spline pieces).
+        """Largest curvature of each primitive [1/mm] (sampled at w = 0, 1/64, ..., 1 on spline pieces).
 
         Returns
         -------
         ndarray, shape (K,)
         """
         result = np.zeros(len(self.primitives))
-        for k, p in enumerate(self.primitives):
-            if isinstance(p, HelicalArc):
-                result[k] = p.radius / (p.radius**2 + p.rise**2)
-            elif isinstance(p, SplinePiece):
-                result[k] = np.linalg.norm(p.evaluate(np.linspace(0.0, p.length, 65))[2], axis=1).max()
+        arcs = self.kinds == ARC
+        result[arcs] = self.rows[arcs, 12] / self.rows[arcs, 16] ** 2  # radius / (radius² + rise²)
+        pieces = self.kinds == SPLINE
+        result[pieces] = _spline_max_curvature(self.rows[pieces])
         return result
 
 
@@ -934,26 +1002,13 @@ def spline(points, closed=False, role="path"):
             raise PathError("a closed spline needs at least 3 distinct points")
     chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
     cs = CubicSpline(chord, pts, bc_type="periodic" if closed else "not-a-knot")
-    h = np.diff(chord)
-    prims = []
-    for i in range(len(h)):
-        c3, c2, c1, c0 = cs.c[:, i, :]
-        coef = np.array([c0, c1 * h[i], c2 * h[i] ** 2, c3 * h[i] ** 3])
-        coef[0] = pts[i]
-        try:
-            prims.append(SplinePiece(coef, role))
-        except PathError as exc:
-            raise PathError(f"spline piece {i} (points[{i}] to points[{i + 1}]): {exc}") from None
+    h = np.diff(chord)[:, None]
+    c3, c2, c1, _ = cs.c
+    coefs = np.stack([pts[:-1], c1 * h, c2 * h**2, c3 * h**3], axis=1)  # (K, 4, 3): a, b, c, d of P(w)
     # snap each piece's end onto the next start (rounding of the polynomial sum)
-    return Path(tuple(_snap(prims)))
-
-
-def _snap(prims):
-    out = [prims[0]]
-    for nxt in prims[1:]:
-        prev = out[-1]
-        coef = np.array(prev.coefficients)
-        coef[3] += nxt.coefficients[0] - coef.sum(axis=0)
-        out[-1] = SplinePiece(coef, prev.role)
-        out.append(nxt)
-    return out
+    coefs[:-1, 3] += pts[1:-1] - coefs[:-1].sum(axis=1)
+    rows, cusps = _spline_rows(coefs)
+    if cusps.size:
+        i = int(cusps[0])
+        raise PathError(f"spline piece {i} (points[{i}] to points[{i + 1}]): {_CUSP}")
+    return Path(tuple(SplinePiece._pieces(coefs, rows, role)))

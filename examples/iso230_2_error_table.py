@@ -180,7 +180,7 @@ def axis_machine(folder, axis, table, travel):
             'parent = "bed"\n'
             f'joint = "linear {axis}"\n'
             f'axis = "{axis}"\n'
-            f"travel = [{travel[0]:g}, {travel[1]:g}]\n"
+            f"travel_mm = [{travel[0]:g}, {travel[1]:g}]\n"
             "[body.errors]\n"
             f'table = "{table}"                 # measured positioning error d{axis}(q)\n'
         )

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import ROOT
 from contoursim.cli import main
-from contoursim.simulate import SimResult
+from contoursim.simulation import SimResult
 from contoursim.traces import read_trace
 
 SMALL_PATH = """
@@ -28,18 +28,18 @@ servo_period_ms = 0.5
 max_feed_mm_min = 5000
 
 [axes.x]
-mass = 300.0
-force_constant = 942.0
-kv = 80.0
-ti = 0.016
-kp = {kp}
+mass_kg = 300.0
+force_constant_N_per_A = 942.0
+kv_A_s_per_m = 80.0
+ti_s = 0.016
+kp_per_s = {kp}
 
 [axes.y]
-mass = 300.0
-force_constant = 942.0
-kv = 80.0
-ti = 0.016
-kp = 40.0
+mass_kg = 300.0
+force_constant_N_per_A = 942.0
+kv_A_s_per_m = 80.0
+ti_s = 0.016
+kp_per_s = 40.0
 """
 
 
@@ -122,7 +122,20 @@ def test_bad_servo_value_names_file_line_and_axis(tmp_path, capsys):
     (tmp_path / "m.toml").write_text(MACHINE.format(kp=-1.0))
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert f"{tmp_path / 'm.toml'}, line 11: axis x: kp must be positive" in err
+    assert f"{tmp_path / 'm.toml'}, line 11: axis x: kp_per_s must be positive" in err
+
+
+def test_keys_without_their_unit_are_refused_with_the_new_name(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp=40.0).replace("mass_kg", "mass"))
+    assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'm.toml'}, line 7: key 'mass' in [axes.x] is now 'mass_kg' (units in the key name): rename it" in err
+    assert "README.md, section 'File format'" in err
+    job = tmp_path / "job.toml"
+    job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { x = 250 }\n')
+    assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
+    assert f"{job}, line 3: key 'x' in [work_offset] is now 'x_mm'" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
@@ -130,7 +143,7 @@ def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'm.toml'}, line 6: the position loop of axis 'x'" in err
-    assert "phase margin 16.6 deg" in err and "lower kp" in err
+    assert "phase margin 16.6 deg" in err and "(kp_per_s = 900): lower kp_per_s" in err
 
 
 def test_servo_period_too_long_names_the_key(tmp_path, capsys):
@@ -178,7 +191,7 @@ def test_bad_machine_leaves_no_output_directory(tmp_path, capsys):
 def test_text_for_a_number_names_file_and_line(tmp_path, capsys):
     (tmp_path / "m.toml").write_text(MACHINE.format(kp='"40"'))
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
-    assert f"{tmp_path / 'm.toml'}, line 11: axis x: kp must be a number, got '40'" in capsys.readouterr().err
+    assert f"{tmp_path / 'm.toml'}, line 11: axis x: kp_per_s must be a number, got '40'" in capsys.readouterr().err
 
 
 def test_out_must_be_a_directory(tmp_path, capsys):
@@ -204,12 +217,12 @@ def test_never_replaces_a_users_file_inside_its_own_directory(tmp_path, capsys):
 
 def test_job_work_offset_moves_the_path_on_the_machine(tmp_path, capsys):
     job = tmp_path / "job.toml"
-    job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { x = 470 }\n')
+    job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { x_mm = 470 }\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
     assert "axis x would move over 420 .. 520, outside its travel 0 .. 500" in capsys.readouterr().err
-    job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { w = 1 }\n')
+    job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { w_mm = 1 }\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2
-    assert f"{job}, line 3: unknown key 'w' in [work_offset]" in capsys.readouterr().err
+    assert f"{job}, line 3: unknown key 'w_mm' in [work_offset]" in capsys.readouterr().err
 
 
 def test_unwritable_output_gives_one_line(tmp_path, capsys, monkeypatch):
@@ -277,7 +290,7 @@ def test_each_kind_of_file_where_another_is_expected_says_what_was_expected(tmp_
 
 def test_saturation_is_a_warning_naming_run_axis_and_fraction(tmp_path, capsys):
     (tmp_path / "small.toml").write_text(SMALL_PATH)
-    (tmp_path / "m.toml").write_text(MACHINE.format(kp="40.0\ncurrent_limit = 0.01"))
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp="40.0\ncurrent_limit_A = 0.01"))
     assert main(["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"),
                  "--out", str(tmp_path / "o")]) == 0
     err = capsys.readouterr().err.splitlines()
@@ -312,11 +325,11 @@ def test_help_and_import_leave_the_heavy_libraries_unloaded():
             "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
             f"print([m for m in {heavy!r} if m in sys.modules])\n"
             "from contoursim import simulate, Machine\n"
-            "import contoursim.simulate\n"
-            "print(contoursim.simulate is simulate, callable(simulate), Machine.__name__)\n")
+            "import contoursim.simulation\n"
+            "print(contoursim.simulate is contoursim.simulation.simulate, Machine.__name__)\n")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines()[-2:] == ["[]", "True True Machine"]  # lazy names are the objects, not submodules
+    assert done.stdout.splitlines()[-2:] == ["[]", "True Machine"]  # lazy names are the objects, not submodules
 
 
 def test_compare_prints_the_table_and_writes_the_json_and_plots(tmp_path, capsys):

@@ -60,11 +60,13 @@ def test_bad_values_are_rejected():
 
 def test_read_error_table_converts_units(tmp_path):
     f = tmp_path / "x.csv"
-    f.write_text("# laser run\n# units: mm, µm, µrad\nposition,dx,ey\n0,0.0,1\n100,1.5,2\n200,2.0,-1\n")
+    rows = "0,0.0,1\n100,1.5,2\n200,2.0,-1\n"
+    f.write_text("# laser run\nposition_mm,dx_um,ey_urad\n" + rows)
     table = read_error_table(f)
     np.testing.assert_allclose(table["dx"][0], [0, 100, 200])
     np.testing.assert_allclose(table["dx"][1], [0, 1.5e-3, 2e-3])
     np.testing.assert_allclose(table["ey"][1], [1e-6, 2e-6, -1e-6])
+    f.write_text("# laser run\nposition_deg,dx_um,ey_urad\n" + rows)
     rotary = read_error_table(f, rotary=True)
     np.testing.assert_allclose(rotary["dx"][0], np.deg2rad([0, 100, 200]))
 
@@ -72,11 +74,14 @@ def test_read_error_table_converts_units(tmp_path):
 @pytest.mark.parametrize(
     "text, line, match",
     [
-        ("position,dq\n0,1\n1,2\n", 1, "header must hold"),
-        ("position,dx\n0,1\n1,x\n", 3, "column 'dx' is not a number"),
-        ("position,dx\n0,1\n2,2\n1,3\n", 4, "strictly increasing"),
-        ("# c\nposition,dx\n0,1\n1,2,3\n", 4, "expected 2 cells"),
-        ("position,dx\n0,1\n1,nan\n", 3, "not finite"),
+        ("position_mm,dq_um\n0,1\n1,2\n", 1, "header must hold"),
+        ("position_mm,dx_um\n0,1\n1,x\n", 3, "column 'dx_um' is not a number"),
+        ("position_mm,dx_um\n0,1\n2,2\n1,3\n", 4, "strictly increasing"),
+        ("# c\nposition_mm,dx_um\n0,1\n1,2,3\n", 4, "expected 2 cells"),
+        ("position_mm,dx_um\n0,1\n1,nan\n", 3, "not finite"),
+        ("# old\nposition,dx\n0,1\n1,2\n", 2, "column 'position' is now 'position_mm'"),
+        ("position_mm,ey\n0,1\n1,2\n", 1, "column 'ey' is now 'ey_urad'"),
+        ("position_deg,dx_um\n0,1\n1,2\n", 1, "header must hold 'position_mm'"),
     ],
 )
 def test_read_error_table_names_file_and_line(tmp_path, text, line, match):

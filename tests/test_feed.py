@@ -53,6 +53,23 @@ def test_scurve_reduced_profile_for_short_moves():
     assert np.abs(jerks).max() <= jerk * (1 + 1e-6)
 
 
+@pytest.mark.parametrize(
+    "first, jerk, want",
+    [
+        (1.0, None, np.sqrt(2 * 100.0 * 1.0)),  # v² = 2 a L
+        (0.5, 1000.0, (0.5**2 * 1000.0) ** (1 / 3)),  # a_max not reached: L = v sqrt(v/j)
+        (10.0, 1000.0, 40.0),  # a_max reached: v²/2a + v a/2j = L, i.e. v² + 10 v - 2000 = 0
+    ],
+)
+def test_junction_speed_is_what_the_first_block_can_reach(first, jerk, want):
+    # a short block at 3000 mm/min, then a long one at 3600 mm/min along the same line (a = 100 mm/s²):
+    # the junction is passed at the speed reached from rest over the first block
+    path = paths.polyline([[0, 0], [first, 0]]) + paths.polyline([[first, 0], [first + 100, 0]])
+    profile = plan(path, [50.0, 60.0], 100.0, jerk)
+    at_junction = profile.v0[np.flatnonzero(profile.s0 >= first)[0]]
+    assert at_junction == pytest.approx(want, rel=1e-12)
+
+
 def test_exact_stop_at_a_sharp_corner():
     # two rest-to-rest 10 mm moves: 2 (L/F + F/a) = 2 (0.5 + 0.2)
     path = paths.polyline([[0, 0], [10, 0], [10, 10]])
@@ -132,3 +149,23 @@ def test_refuses_a_motion_with_too_many_samples():
     circle = paths.circle((0, 0), 1e6)
     with pytest.raises(ValueError, match="more than the 50,000,000 allowed"):
         sample(circle, plan(circle, 1000 / 60, 1000.0), 1e-3)
+
+
+@pytest.mark.parametrize("jerk", [None, 2000.0, 50000.0])
+def test_section_peak_is_the_largest_that_fits(jerk):
+    """Between junction speeds v0, v1 the peak is the largest speed whose two ramps fit the section."""
+    from contoursim.feed import _peak, _ramp_distance
+
+    rng = np.random.default_rng(7)
+    for _ in range(500):
+        v0, v1 = rng.uniform(0, 30, 2) * (rng.random(2) > 0.2)
+        vmax = max(v0, v1) + rng.uniform(0, 30)
+        top = max(v0, v1)
+        length = _ramp_distance(v0, top, 100.0, jerk) + _ramp_distance(top, v1, 100.0, jerk) + rng.uniform(0, 3) ** 3
+
+        def total(x):
+            return _ramp_distance(v0, x, 100.0, jerk) + _ramp_distance(x, v1, 100.0, jerk)
+
+        peak = _peak(v0, v1, length, vmax, 100.0, jerk)
+        assert top <= peak <= vmax and total(peak) <= length
+        assert peak == vmax or total(peak * (1 + 1e-12)) > length

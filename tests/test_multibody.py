@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from contoursim import multibody
 from contoursim.config import TomlFile
 from contoursim.errormotion import Cyclic, ErrorMotion
 from contoursim.exceptions import ConfigError
@@ -326,9 +327,9 @@ workpiece = "bed"
 name = "X"
 joint = "linear x"
 axis = "x"
-squareness = { y = 10 }
+squareness = { y_urad = 10 }
 [body.errors]
-dx = { poly = [1, 0.01], cyclic = { amplitude = 2, period = 5 } }
+dx_um = { poly = [1, 0.01], cyclic = { amplitude_um = 2, period_mm = 5 } }
 
 [[body]]
 name = "tool"
@@ -347,14 +348,52 @@ def test_toml_units_are_converted_at_the_edge():
 @pytest.mark.parametrize(
     "old, new, line, match",
     [
-        ('squareness = { y = 10 }', 'squarenes = { y = 10 }', 9, "unknown key 'squarenes'"),
+        ('squareness = { y_urad = 10 }', 'squarenes = { y_urad = 10 }', 9, "unknown key 'squarenes'"),
         ('joint = "linear x"', 'joint = "linear w"', 7, "joint must be"),
         ('parent = "X"', 'parent = "Y"', 15, "'Y' is not a body"),
-        ("dx = { poly = [1, 0.01],", 'dx = { poly = [1, "a"],', 11, "expected a finite number"),
-        ("dx = { poly", "dq = { poly", 11, "unknown key 'dq'"),
-        ('squareness = { y = 10 }', 'squareness = { x = 10 }', 9, "squareness applies"),
+        ("dx_um = { poly = [1, 0.01],", 'dx_um = { poly = [1, "a"],', 11, "expected a finite number"),
+        ("dx_um = { poly", "dq_um = { poly", 11, "unknown key 'dq_um'"),
+        ('squareness = { y_urad = 10 }', 'squareness = { x_urad = 10 }', 9, "squareness applies"),
+        ("period_mm = 5", "period_deg = 5", 11, r"cyclic terms are \{ amplitude_um, period_mm, phase_deg \}"),
+        ('axis = "x"', 'axis = "x"\ntravel_deg = [0, 1]', 9, "the travel of a linear joint is 'travel_mm'"),
+        # keys without their unit (earlier versions) name the key that replaced them
+        ('axis = "x"', 'axis = "x"\ntravel = [0, 1]', 9, r"key 'travel' in \[body.0\] is now 'travel_mm'"),
+        ('squareness = { y_urad = 10 }', 'squareness = { y = 10 }', 9, "key 'y' .* is now 'y_urad'"),
+        ("dx_um = { poly", "dx = { poly", 11, "key 'dx' .* is now 'dx_um'"),
+        ('parent = "X"', 'parent = "X"\noffset = [0, 0, 1]', 16, "key 'offset' .* is now 'offset_mm'"),
     ],
 )
 def test_toml_errors_name_file_and_line(old, new, line, match):
     with pytest.raises(ConfigError, match=rf"^m.toml, line {line}: .*{match}"):
         chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
+
+
+def _scaled_pinv(A, floor, rcond=1e-4):
+    """Least-squares operator of A x = b, columns scaled by max(norm, floor), by numpy's SVD; and the dropped directions.
+
+    Singular values with σ² <= rcond are dropped (the eigenvalue threshold of
+    the scaled normal equations).
+    """
+    s = np.maximum(np.linalg.norm(A, axis=0), floor)
+    U, sigma, Vt = np.linalg.svd(A / s)
+    keep = sigma**2 > rcond
+    V = Vt[: len(sigma)][keep].T
+    X = V @ np.diag(1 / sigma[keep]) @ U[:, keep].T
+    null = np.eye(A.shape[1]) - V @ V.T
+    return X / s[:, None], null * s[None, :] / s[:, None]
+
+
+def test_prioritized_inverse_equals_the_svd_pseudo_inverse():
+    """Position rows by the column-scaled pseudo-inverse, tool-axis rows in the null space the position leaves."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(50, 6, 5)) * np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3])[None, :, None] * rng.uniform(0.5, 300, (50, 1, 5))
+    P = multibody._prioritized_inverse(J)
+    P3 = multibody._prioritized_inverse(np.ascontiguousarray(J[:, :3]))
+    for n in range(len(J)):
+        X1, null = _scaled_pinv(J[n, :3], 1.0)
+        Jo = J[n, 3:]
+        X2, _ = _scaled_pinv(Jo @ null, np.linalg.norm(Jo, axis=0).max())
+        want = np.hstack([X1 - null @ X2 @ Jo @ X1, null @ X2])
+        np.testing.assert_allclose(P[n], want, rtol=0, atol=1e-10 * np.abs(want).max())
+        np.testing.assert_allclose(P3[n], X1, rtol=0, atol=1e-10 * np.abs(X1).max())
+        np.testing.assert_allclose(J[n, :3] @ P[n, :, :3], np.eye(3), atol=1e-9)  # the position is met exactly

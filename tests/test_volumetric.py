@@ -31,9 +31,9 @@ def test_report_gives_the_worst_errors_and_plots(tmp_path):
     # where the tool tip sits on the Z slide's frame origin (no Abbe offset) and X's errors vanish,
     # so Δx = -z·S_xZ + dx_Z(z); the Z slide's horizontal straightness poly is zero at 200 mm
     z_slide = next(b for b in TomlFile.read(preset_file("polishing_platform_4axis")).data["body"] if b["name"] == "Z")
-    z = z_slide["travel"][1]
-    squareness = 1e-6 * z_slide["squareness"]["x"]  # [rad]
-    straightness = np.polynomial.polynomial.polyval(z, z_slide["errors"]["dx"]["poly"])  # [µm]
+    z = z_slide["travel_mm"][1]
+    squareness = 1e-6 * z_slide["squareness"]["x_urad"]  # [rad]
+    straightness = np.polynomial.polynomial.polyval(z, z_slide["errors"]["dx_um"]["poly"])  # [µm]
     want = -z * squareness * 1e3 + straightness  # [µm]
     assert z == 200 and straightness == pytest.approx(0.0, abs=1e-12)
     chain = load_machine("polishing_platform_4axis")
