@@ -816,6 +816,8 @@ def _separating_test(a, b):
         return "a step or a faster reversal: a feedback delay changes the loop's damping (overshoot), a command delay only shifts the response"
     if a.name == b.name == "backlash":
         return "a reversal test read on the motor encoder and on a linear scale: with motor feedback the table lags, with scale feedback the loop chases the lost motion"
+    if {a.name, b.name} == {"scale_error", "thermal_drift"}:
+        return "the same move at another feed, or with a dwell: a drift grows with time, a scale error with position"
     stages = {a.stage, b.stage}
     if "geometry" in stages and len(stages) > 1:
         return ("run the circle in the other direction and at a second feed: geometric errors keep their shape, "

@@ -25,6 +25,7 @@ from contoursim.identify import identify_machine
 from contoursim.machine import Machine, load_machine
 from contoursim.model import Model
 from contoursim.servo import AxisServo
+from contoursim.simulation import simulate
 from contoursim.traces import Trace, read_trace, write_trace
 
 DT = 5e-4  # servo period [s]; the traces are logged every 1 ms
@@ -121,6 +122,24 @@ def test_other_discretisation_fast_logging_and_time_stamp_jitter(machine):
     jitter = np.random.default_rng(0).uniform(-2e-4, 2e-4, trace.t.size) * trace.dt  # within read_trace's 0.1 %
     result = diagnose(Trace(trace.t + jitter, trace.reference, trace.actual, trace.axes), Model(machine))
     assert_found(result, Effect("backlash", "x", lost_motion_um=6.0), "lost_motion_um")
+
+
+def test_two_equivalent_explanations_are_reported_with_the_test_that_separates_them(machine):
+    """X moving at constant speed the whole trace: a scale error of X (∝ position) and a drift of X (∝ time)
+    explain it exactly alike; the diagnosis names one, says so, and names the test that tells them apart."""
+    t = np.arange(4000) * 1e-3
+    reference = np.column_stack([20.0 * t, 3.0 * np.sin(np.pi * t)])
+    truth = Model(machine, (Effect("scale_error", "x", ppm=80.0),))
+    tool = simulate(truth, Trace(t, reference, reference, ("x", "y")), contour=False).tool_position[::2]  # 0.5 ms servo
+    measured = tool + np.random.default_rng(1).normal(0.0, 1e-4, tool.shape)
+    result = diagnose(Trace(t, reference, measured, ("x", "y")), Model(machine))
+    first = result.effects[0]
+    assert (first.name, first.axis) in {("scale_error", "x"), ("thermal_drift", "x")}, result.report()
+    if first.name == "thermal_drift":  # 80 µm/m at 20 mm/s is 96 µm/min
+        assert first["rate_um_per_min"] == pytest.approx(80e-6 * 20.0 * 60 * 1e3, rel=0.05)
+    ambiguous = [w for w in result.warnings if "almost equally" in w]
+    assert ambiguous and "scale_error.x" in ambiguous[0] and "thermal_drift.x" in ambiguous[0], result.report()
+    assert "a drift grows with time, a scale error with position" in ambiguous[0]
 
 
 def test_noise_level_from_the_second_differences():
