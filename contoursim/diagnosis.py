@@ -512,9 +512,8 @@ class _Problem:
         """Make `model` the base: its prediction, axis positions and the nominal refit's sensitivities.
 
         With `refit` > 0, that many Gauss–Newton steps first move the base's
-        nominal parameters to their least-squares values (the linear
-        projection then only handles what is left), so that a nominal model
-        off by more than a few % is refitted rather than linearised.
+        nominal parameters to their (prior-weighted) least-squares values,
+        the linearised refit then handling only what is left.
         """
         for step in range(refit + 1):
             self._linearise(model)
@@ -716,12 +715,11 @@ def _model_of(model, cand, x):
 
 
 def _score(problem, cand, r, tau=None):
-    """Fill `cand`'s cost, autocorrelation time and ΔBIC from its whitened, projected residual `r`.
+    """Fill `cand`'s cost, autocorrelation time and ΔBIC from its residual `r` (:meth:`_Problem.residual`).
 
     `tau`: the autocorrelation time to count samples with (default `r`'s own).
     """
     cand.cost = float(r @ r)
-    d = problem.trace.actual.shape[1]
     cand.tau = autocorrelation_time(problem.samples(r)[problem.scored])
     rss0 = float(problem.base_residual @ problem.base_residual)
     cand.delta_bic = float(delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau or cand.tau))
@@ -753,7 +751,6 @@ def _rescore(problem, cands):
     if not cands:
         return
     best = min(cands, key=lambda c: float(c.residual @ c.residual))
-    d = problem.trace.actual.shape[1]
     tau = autocorrelation_time(problem.samples(best.residual)[problem.scored])
     for cand in cands:
         _score(problem, cand, cand.residual, tau)
