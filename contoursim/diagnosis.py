@@ -322,7 +322,8 @@ def locate(trace, reference, residual):
     Returns
     -------
     tuple of str
-        The time spans holding most of it; for a circle test the angles of
+        The time spans (and path stations, the distance along the commanded
+        path) holding most of it; for a circle test the angles of
         the largest radial residual; per axis the features (reversals,
         velocity, acceleration, position, time, a spatial period) it
         correlates with best.
@@ -339,7 +340,9 @@ def locate(trace, reference, residual):
     edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
     spans = sorted(((energy[a:b].sum() / energy.sum(), a, b) for a, b in zip(edges[::2], edges[1::2])), reverse=True)
     covered = sum(b - a for _, a, b in spans) / n
-    text = ", ".join(f"{t[a]:.3g}–{t[b - 1]:.3g} s ({100 * share:.0f} %)" for share, a, b in spans[:3])
+    station = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(trace.reference, axis=0), axis=1))])
+    text = ", ".join(f"{t[a]:.3g}–{t[b - 1]:.3g} s" + (f" (path station {station[a]:.4g}–{station[b - 1]:.4g} mm)"
+                     if station[-1] > 0 else "") + f" ({100 * share:.0f} %)" for share, a, b in spans[:3])
     found.append(f"the residual energy concentrates in {text} ({100 * covered:.0f} % of the time)"
                  if covered < 0.5 else f"the residual is spread over the run (the largest part: {text})")
     circle = _circle(trace.reference)
