@@ -31,11 +31,17 @@ from contoursim.effects import Effect
 from contoursim.machine import Machine
 from contoursim.model import Model
 from contoursim.servo import AxisServo
-from contoursim.simulate import _commands, _packed, _reference, simulate_batch
+from contoursim.simulation import measured_reference, simulate_batch
 from contoursim.traces import Trace
 
 DT = 1e-3
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0)
+
+
+def rows(model):
+    """The kernel rows of one variant: servo-stage and in-loop effects realised, ``kernel.pack`` per axis."""
+    loop = model.loop_effects()
+    return [kernel.pack(servo, DT, loop[axis]) for axis, servo in model.servos().items()]
 
 
 def main():
@@ -51,7 +57,7 @@ def main():
 
     print(f"model_with_values_us: {1e6 * best(lambda: model.with_values({'backlash.x.lost_motion_um': 9.0}), 200):.1f}")
     variant = model.with_values({"backlash.x.lost_motion_um": 9.0})
-    print(f"variant_rows_ms: {1e3 * best(lambda: _packed(variant, DT), 200):.3f}")
+    print(f"variant_rows_ms: {1e3 * best(lambda: rows(variant), 200):.3f}")
 
     sizes = np.linspace(2.0, 20.0, 64)
     in_loop = Model(machine, model.stage("servo") + model.stage("loop"))
@@ -59,10 +65,9 @@ def main():
         variants = [base.with_values({"backlash.x.lost_motion_um": b}) for b in sizes]
         simulate_batch(variants[:2], trace)  # compile, check the loops
         layer = best(lambda: simulate_batch(variants, trace), 3)
-        trajectory = _reference(machine, trace, None)
-        q, v, a = variants[0].commands(*_commands(variants[0], trajectory, ()))
-        rows = np.array([_packed(m, DT) for m in variants])
-        bare = best(lambda: kernel.run_batch(rows, DT, q, v, a, outputs=("tool",)), 3)
+        q, v, a = variants[0].commands(*machine.axis_commands(measured_reference(trace, DT)))
+        packed = np.array([rows(m) for m in variants])
+        bare = best(lambda: kernel.run_batch(packed, DT, q, v, a, outputs=("tool",)), 3)
         print(f"{label}: {bare / layer:.2f}")
 
     steps = {name: 0.1 * abs(p.value) for name, p in model.parameters().items() if p.vary and p.value}

@@ -15,12 +15,12 @@ The main objects, by the data flow of a simulation:
   runs them side by side;
 - :func:`simulate` -> :class:`SimResult` (tracking and exact contour error), on a path or a
   measured trace; :func:`simulate_batch` (variants of one model in one compiled call);
-- traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format).
+- traces: :func:`read_trace`, :func:`write_trace` (the measured-trace CSV format);
+- diagnosis: :func:`diagnose` -> :class:`Diagnosis` (which catalogue effects a nominal model
+  lacks to explain a measured trace; :mod:`contoursim.diagnosis`).
 """
 
 import importlib
-import sys
-import types
 
 from ._version import __version__
 from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopError
@@ -30,19 +30,21 @@ from .exceptions import ConfigError, PathError, TraceFormatError, UnstableLoopEr
 _LAZY = {
     "AxisServo": "servo",
     "CrossCoupled": "compensation",
+    "Diagnosis": "diagnosis",
     "Feedforward": "compensation",
     "ZPETC": "compensation",
     "Effect": "effects",
     "Machine": "machine",
     "Model": "model",
-    "SimResult": "simulate",
+    "SimResult": "simulation",
     "Trace": "traces",
     "Trajectory": "trajectory",
+    "diagnose": "diagnosis",
     "load_machine": "machine",
     "load_model": "model",
     "read_trace": "traces",
-    "simulate": "simulate",
-    "simulate_batch": "simulate",
+    "simulate": "simulation",
+    "simulate_batch": "simulation",
     "write_trace": "traces",
 }
 
@@ -50,6 +52,7 @@ __all__ = [
     "AxisServo",
     "ConfigError",
     "CrossCoupled",
+    "Diagnosis",
     "Effect",
     "Feedforward",
     "Machine",
@@ -61,6 +64,7 @@ __all__ = [
     "Trajectory",
     "UnstableLoopError",
     "ZPETC",
+    "diagnose",
     "load_machine",
     "load_model",
     "read_trace",
@@ -81,14 +85,3 @@ def __getattr__(name):
 def __dir__():
     return sorted(set(globals()) | set(_LAZY))
 
-
-class _Package(types.ModuleType):
-    """The package module: importing the submodule ``contoursim.simulate`` leaves the name the function."""
-
-    def __setattr__(self, name, value):
-        if name in _LAZY and isinstance(value, types.ModuleType):
-            return  # the import system binds a submodule of the same name; the public name is the object in it
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

@@ -1,4 +1,4 @@
-"""Command line: ``contoursim demo | simulate | compare | volumetric``.
+"""Command line: ``contoursim demo | simulate | compare | volumetric | diagnose``.
 
 Every job prints a summary table to stdout and writes plots and traces to
 ``--out`` (default ``./contoursim-out``) through :func:`contoursim.output.output_dir`:
@@ -62,10 +62,10 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     -------
     tuple
         ``(name, path_file, result)``: the run's name (file stem or `label`),
-        the path file and the :class:`~contoursim.simulate.SimResult`.
+        the path file and the :class:`~contoursim.simulation.SimResult`.
     """
     from .model import as_model
-    from .simulate import default_settle, simulate
+    from .simulation import default_settle, simulate
 
     # held here as simulate would hold it, so that the reference before holding is freed before the run
     trajectory = _trajectory(model, path_file, job).held(default_settle(as_model(model).machine))
@@ -108,7 +108,7 @@ def demo(args):
     from .compensation import strategies_named
     from .machine import load_machine
     from .pathfile import library_file
-    from .simulate import simulate
+    from .simulation import simulate
 
     machine = load_machine(DEMO_MACHINE)
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
@@ -229,6 +229,37 @@ def volumetric(args):
     print(volumetric_report(preset_file(args.machine), args.out))
 
 
+def diagnose_command(args):
+    """``contoursim diagnose MEASURED.csv [--model M.toml] [--report R.json]``: name what the nominal model lacks."""
+    import json
+
+    from .diagnosis import diagnose, save_figures
+    from .model import load_model
+    from .output import writing
+    from .traces import read_trace
+
+    trace = read_trace(args.file)
+    model = load_model(args.model) if args.model else None
+    report = Path(args.report) if args.report else None
+    if report is not None and report.exists():  # replace only a diagnosis report, never a file the user keeps
+        try:
+            ours = "residual_rms_before_um" in json.loads(report.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError, TypeError):
+            ours = False
+        if not ours:
+            raise FileExistsError(f"{report} exists and is not a diagnosis report; refusing to overwrite it")
+    print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
+          f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
+    result = diagnose(trace, model, progress=lambda line: print(line, file=sys.stderr, flush=True))
+    print(result.report())
+    if report is not None:
+        with writing(report, overwrite=True) as stream:
+            stream.write(result.to_json() + "\n")
+        print(f"report written to {report}")
+    save_figures(result, args.out)
+    print(f"plots written to {args.out}/")
+
+
 def _every(text):
     """``--every N``: a whole number >= 1."""
     from . import _validate
@@ -261,6 +292,11 @@ def main(argv=None):
     p = sub.add_parser("volumetric", help="volumetric error map of a machine preset or file")
     p.add_argument("machine", help="machine preset name or file")
     p.set_defaults(run=volumetric)
+    p = sub.add_parser("diagnose", help="name the effects a nominal model lacks to explain a measured trace")
+    p.add_argument("file", help="measured trace CSV (t, x_ref, x[, y_ref, y[, z_ref, z]])")
+    p.add_argument("--model", help="nominal machine file or preset (default: identified from the trace)")
+    p.add_argument("--report", help="write the diagnosis report (JSON) to this file")
+    p.set_defaults(run=diagnose_command)
     for p in sub.choices.values():
         p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
     for command in ("demo", "simulate"):

@@ -17,7 +17,7 @@ import numpy as np
 from .compensation import STRATEGY_NAMES, strategies_named
 from .exceptions import ContoursimWarning, UnstableLoopError
 from .model import as_model
-from .simulate import simulate
+from .simulation import simulate
 
 __all__ = ["Comparison", "compare", "JSON_KEYS"]
 
@@ -41,7 +41,7 @@ class Comparison:
 
     Parameters
     ----------
-    runs : dict of str -> contoursim.simulate.SimResult
+    runs : dict of str -> contoursim.simulation.SimResult
     """
 
     runs: dict

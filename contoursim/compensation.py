@@ -1,6 +1,6 @@
 """Compensation strategies: feedforward, ZPETC, cross-coupled contour control, and their compositions.
 
-A strategy is an object passed to :func:`contoursim.simulate.simulate`
+A strategy is an object passed to :func:`contoursim.simulation.simulate`
 (``strategies=[...]``). It acts at one or more stages of the data flow, each
 a method of :class:`Strategy` that leaves things unchanged by default:
 

@@ -44,13 +44,11 @@ import numpy as np
 from . import kernel
 from .config import TomlFile
 from .effects import Effect, read_effects
-from .errormotion import Cyclic
+from .errormotion import _MM_PER_UM, _RAD_PER_URAD, Cyclic
 from .machine import Machine, load_machine, preset_file
 from .multibody import cartesian_chain
 
 __all__ = ["Model", "as_model", "load_model", "with_file_effects"]
-
-_UM, _URAD = 1e-3, 1e-6
 
 
 @dataclass(frozen=True)
@@ -326,7 +324,7 @@ def _add_motion(body, component, poly=(), cyclic=()):
 def _squareness(e, body, side, chain, home):
     towards = chain.bodies[_linear_body(chain, e.axis[1]) - 1].direction
     squareness = body.squareness.copy()
-    squareness[towards] += e["angle_urad"] * _URAD
+    squareness[towards] += e["angle_urad"] * _RAD_PER_URAD
     return replace(body, squareness=squareness)
 
 
@@ -335,7 +333,7 @@ def _scale_error(e, body, side, chain, home):
 
 
 def _cyclic_error(e, body, side, chain, home):
-    term = Cyclic.from_amplitude(body.sign * e["amplitude_um"] * _UM, e["period_mm"], np.radians(e["phase_deg"]))
+    term = Cyclic.from_amplitude(body.sign * e["amplitude_um"] * _MM_PER_UM, e["period_mm"], np.radians(e["phase_deg"]))
     return _add_motion(body, body.direction, cyclic=(term,))
 
 
@@ -343,7 +341,7 @@ def _straightness(e, body, side, chain, home):
     direction = "xyz".index(e.options["error_direction"])
     if direction == body.direction:
         raise ValueError(f"error_direction {e.options['error_direction']!r} is the axis's own direction of motion")
-    c = -side * e["peak_um"] * _UM * (2.0 / e["span_mm"]) ** 2  # side·(−peak·(2(q − q0)/span)²) = c·(q − q0)²
+    c = -side * e["peak_um"] * _MM_PER_UM * (2.0 / e["span_mm"]) ** 2  # side·(−peak·(2(q − q0)/span)²) = c·(q − q0)²
     q0 = home[e.axis]
     return _add_motion(body, direction, poly=(c * q0**2, -2.0 * c * q0, c))
 
@@ -356,7 +354,7 @@ def _thermal_drift(e, body, side, chain, home):
             f"a drift with {tau:g} s cannot be added to it"
         )
     thermal = body.thermal.copy()
-    thermal[body.direction] += body.sign * e["rate_um_per_min"] * _UM / 60.0
+    thermal[body.direction] += body.sign * e["rate_um_per_min"] * _MM_PER_UM / 60.0
     return replace(body, thermal=thermal, thermal_time_constant=tau)
 
 
@@ -369,7 +367,7 @@ _GEOMETRY = {
 }
 
 _LOOP = {
-    "backlash": lambda e: dict(backlash_mm=e["lost_motion_um"] * _UM, backlash_feedback=e.options["feedback"]),
+    "backlash": lambda e: dict(backlash_mm=e["lost_motion_um"] * _MM_PER_UM, backlash_feedback=e.options["feedback"]),
     "coulomb_friction": lambda e: dict(
         coulomb_N=e["force_N"],
         viscous_N_s_per_m=e["viscous_N_s_per_m"],
@@ -382,6 +380,6 @@ _LOOP = {
     "vibration": lambda e: dict(
         mode_freq_hz=e["freq_hz"], mode_damping_ratio=e["damping_ratio"], mode_mass_ratio=e["mass_ratio"]
     ),
-    "quantisation": lambda e: dict(quantum_mm=e["resolution_um"] * _UM),
-    "noise": lambda e: dict(noise_mm=e["rms_um"] * _UM, seed=e.options["seed"]),
+    "quantisation": lambda e: dict(quantum_mm=e["resolution_um"] * _MM_PER_UM),
+    "noise": lambda e: dict(noise_mm=e["rms_um"] * _MM_PER_UM, seed=e.options["seed"]),
 }

@@ -145,7 +145,7 @@ def plot_path_error(result, ax=None, magnification=None):
 
     Parameters
     ----------
-    result : contoursim.simulate.SimResult
+    result : contoursim.simulation.SimResult
     ax : matplotlib.axes.Axes, optional
     magnification : float, optional
         Factor k [-], at least 1; chosen by :func:`magnification_for` when omitted.
@@ -221,7 +221,7 @@ def circular_deviation(result):
 
     Parameters
     ----------
-    result : contoursim.simulate.SimResult
+    result : contoursim.simulation.SimResult
         A run on a path with a test circle (:meth:`contoursim.paths.Path.test_circle`).
 
     Returns
@@ -314,7 +314,7 @@ def plot_errors_over_time(result, fig=None):
 
     Parameters
     ----------
-    result : contoursim.simulate.SimResult
+    result : contoursim.simulation.SimResult
     fig : matplotlib.figure.Figure, optional
         Where to draw three stacked axes; a new figure when omitted.
 
@@ -365,7 +365,7 @@ def save_figures(runs, out_dir, name):
 
     Parameters
     ----------
-    runs : dict of str -> contoursim.simulate.SimResult
+    runs : dict of str -> contoursim.simulation.SimResult
         The runs, by file name stem.
     out_dir : str, pathlib.Path or contoursim.output.OutputDir
         The output folder (see :func:`contoursim.output.output_dir`): created if
@@ -427,7 +427,7 @@ def plot_compared_paths(runs, ax=None, magnification=None):
 
     Parameters
     ----------
-    runs : dict of str -> contoursim.simulate.SimResult
+    runs : dict of str -> contoursim.simulation.SimResult
         Runs on the same reference, by name.
     ax : matplotlib.axes.Axes, optional
     magnification : float, optional
@@ -466,7 +466,7 @@ def plot_compared_contour_error(runs, ax=None):
 
     Parameters
     ----------
-    runs : dict of str -> contoursim.simulate.SimResult
+    runs : dict of str -> contoursim.simulation.SimResult
     ax : matplotlib.axes.Axes, optional
 
     Returns

@@ -17,7 +17,7 @@ from contoursim.feed import plan, sample
 from contoursim.machine import load_machine
 from contoursim.output import output_dir
 from contoursim.plotting import save_figures
-from contoursim.simulate import simulate
+from contoursim.simulation import simulate
 
 
 def main(out="contoursim-out"):

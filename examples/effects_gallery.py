@@ -30,7 +30,7 @@ from contoursim.feed import plan, sample
 from contoursim.machine import load_machine
 from contoursim.model import Model
 from contoursim.output import output_dir
-from contoursim.simulate import simulate_batch
+from contoursim.simulation import simulate_batch
 
 RADIUS, FEED = 25.0, 1000.0 / 60  # [mm], [mm/s]
 EFFECTS = (

@@ -19,7 +19,7 @@ import scipy.io
 
 from contoursim.machine import Machine
 from contoursim.servo import AxisServo
-from contoursim.simulate import simulate
+from contoursim.simulation import simulate
 from contoursim.traces import Trace
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "emps" / "DATA_EMPS.mat"

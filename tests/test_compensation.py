@@ -10,7 +10,7 @@ from contoursim.exceptions import UnstableLoopError
 from contoursim.feed import plan, sample
 from contoursim.machine import Machine
 from contoursim.servo import AxisServo
-from contoursim.simulate import simulate
+from contoursim.simulation import simulate
 
 DT = 2e-4
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, damping=500.0)
@@ -194,7 +194,7 @@ def test_arc_coupling_in_3d_corrects_the_out_of_plane_part_and_estimates_as_offl
 
 
 def test_batch_applies_the_drive_and_prefilter_stages_like_simulate():
-    from contoursim.simulate import simulate_batch
+    from contoursim.simulation import simulate_batch
 
     machine, trajectory = _circle_machine_and_trajectory()
     for strategies in ([cp.Feedforward()], [cp.ZPETC()]):

@@ -11,7 +11,7 @@ from contoursim.feed import plan, sample
 from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
 from contoursim.servo import AxisServo
-from contoursim.simulate import measured_reference, simulate, simulate_batch
+from contoursim.simulation import measured_reference, simulate, simulate_batch
 from contoursim.traces import Trace, read_trace
 
 DT = 1e-3

@@ -21,7 +21,7 @@ from contoursim.feed import plan, sample
 from contoursim.machine import Machine
 from contoursim.model import Model
 from contoursim.servo import AxisServo
-from contoursim.simulate import simulate
+from contoursim.simulation import simulate
 
 DT = 1e-3  # a coarse servo period: the loops cross over near 40 Hz
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0)

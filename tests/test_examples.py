@@ -18,7 +18,8 @@ from contoursim.output import output_dir
 
 EXAMPLES = ROOT / "examples"
 JOBS = sorted(EXAMPLES.glob("*.toml"))
-CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py", "effects_gallery.py"}
+CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py", "effects_gallery.py",
+           "diagnose_real_traces.py"}  # the last in test_diagnosis.py
 
 
 def _figure(text, pattern):

@@ -10,7 +10,7 @@ from contoursim.feed import FeedSettings, plan, sample
 from contoursim.machine import load_machine
 from contoursim.output import output_dir
 from contoursim.plotting import save_figures
-from contoursim.simulate import default_settle, simulate
+from contoursim.simulation import default_settle, simulate
 
 
 def _differences(profile, dt):

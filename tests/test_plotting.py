@@ -8,7 +8,7 @@ from contoursim.feed import plan, sample
 from contoursim.machine import load_machine
 from contoursim.plotting import (circular_deviation, envelope_indices, magnification_for, plot_polar_deviation,
                                  save_figures)
-from contoursim.simulate import simulate
+from contoursim.simulation import simulate
 
 
 @pytest.mark.parametrize("size, error", [(100.0, 0.01), (100.0, 0.0123), (4000.0, 0.15), (50.0, 3.0), (10.0, 40.0),

@@ -404,7 +404,8 @@ BATCH_CHUNK_BYTES = 2**27
 _BATCH_OUTPUTS = ("tool_position", "axis_position")
 
 
-def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64):
+def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64,
+                   check=True):
     """Simulate B variants of one structure on one reference, in as few kernel calls as possible.
 
     The variants may differ in any effect value, and in which effects they
@@ -448,6 +449,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     dtype : numpy dtype
         Of the returned arrays (``np.float32`` halves their memory; the
         simulation and the geometric stage run in float64).
+    check : bool
+        Check the nominal machines' loops (``False``: the machines are
+        themselves variants of a checked one, e.g. a fit's nominal
+        parameters moved by a few %, and a diverged row says what failed).
 
     Returns
     -------
@@ -486,7 +491,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
             raise ValueError(f"models[{i}] has another structure than models[0] (axes, servo period, work offset or chain): "
                              "a batch runs variants of one machine")
     dt, servo = first.servo_period, first.servo_columns
-    for machine in {id(m.machine): m.machine for m in models}.values():
+    for machine in {id(m.machine): m.machine for m in models}.values() if check else ():
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory = _reference(first, reference, settle)

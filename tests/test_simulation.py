@@ -13,7 +13,7 @@ from contoursim.traces import read_trace
 from contoursim.machine import Machine
 from contoursim.plotting import circular_deviation
 from contoursim.servo import AxisServo
-from contoursim.simulate import simulate
+from contoursim.simulation import simulate
 
 DT = 2e-4
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, damping=500.0)

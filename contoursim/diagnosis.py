@@ -1,0 +1,1186 @@
+"""Diagnosis: where a measured trace and the nominal model disagree, which catalogue effect closes the gap.
+
+The workflow (:func:`diagnose`):
+
+1. **Load** a measured trace and a nominal :class:`~contoursim.model.Model`;
+   without one, identify the nominal loops from the trace
+   (:func:`contoursim.identify.identify_machine`: one position gain shared
+   by all axes, so that a ``gain_mismatch`` stays visible).
+2. **Compare**: simulate the nominal model on the measured reference
+   (:func:`~contoursim.simulation.measured_reference`); residual = measured −
+   simulated, per axis and along the path normal; :func:`locate` says where
+   it concentrates and what it correlates with.
+3. **Refit the nominal model**: real machines differ from their nominal
+   model by a few % in masses, damping and gains, and a measuring instrument
+   has its own zero. These nuisance parameters — one position-gain scale
+   shared by all axes (a per-axis one would absorb a ``gain_mismatch``),
+   and likewise one velocity-feedforward fraction where there is one; per
+   axis the velocity-loop gain (with the mass, the velocity loop's
+   bandwidth) and the mass where acceleration feedforward uses it; and a
+   constant offset per axis
+   (the instrument's zero) — act almost linearly on the trace. Their
+   sensitivities (one :func:`~contoursim.simulation.simulate_batch` call of
+   finite differences) are refitted in every residual below by ridge
+   regression: each servo parameter is known to :data:`NOMINAL_SPREAD` (a
+   Gaussian prior centred on the nominal machine), the offsets are free.
+   An effect is named only for what a slightly wrong nominal model cannot
+   explain; once it is named, the nominal parameters are refitted by
+   Gauss–Newton with it in place and its own parameters fitted again
+   around them.
+4. **Name**: every catalogue effect on every axis it can act on is a
+   candidate. All candidates' starting grids run in one batch;
+   the best row of each starts :func:`scipy.optimize.least_squares` (bounds
+   from the catalogue) whose finite-difference Jacobian is one batch per
+   iteration. Geometric candidates reuse the loop's axis positions (no
+   re-simulation). Candidates are scored by the Bayesian information
+   criterion of the whitened residual,
+   ``ΔBIC = n_eff·ln(RSS_before/RSS_after) − k·ln(n_eff)``, where the
+   residual is weighted by each axis's noise level (:func:`noise_level`,
+   from the residual's second differences) and ``n_eff`` is the number of
+   samples over the residual's integrated autocorrelation time (correlated
+   model error counts for less than white noise). The best is accepted when
+   ``ΔBIC > SIGNIFICANT`` (very strong evidence on the Kass–Raftery scale);
+   the search repeats for a second and a third effect and stops when
+   nothing is significant or the residual is at the noise floor
+   (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
+   reported as ambiguous, with the test that would separate them.
+"""
+
+import json
+from dataclasses import dataclass, field, replace
+from itertools import combinations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .effects import Effect, effect_kind
+from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identify_machine
+from .kernel import MAX_DELAY_SAMPLES
+from .machine import Machine
+from .model import Model, as_model
+from .plotting import fit_circle_center
+from .simulation import measured_reference, simulate_batch
+
+__all__ = [
+    "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal",
+    "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
+]
+
+#: Most effects named in one diagnosis.
+MAX_EFFECTS = 3
+#: The residual is at the noise floor when its RMS is within this factor of the noise estimated from the
+#: trace (the estimate itself is good to a few % on quantised, non-Gaussian noise): nothing more is named.
+NOISE_FLOOR = 1.1
+#: How well a nominal servo parameter is known (1σ, relative): the prior of the nominal refit.
+NOMINAL_SPREAD = 0.05
+
+_NUISANCE_STEP = 0.02  # relative step of the nominal parameters' finite differences
+_FD_STEP = 1e-3  # relative step of the candidates' finite differences
+_GRID = 4  # starting values per size parameter over its typical range (each sign)
+_UM = 1e-3
+_REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
+_REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
+
+
+def noise_level(residual, measured=None):
+    """Measurement noise per axis, from the residual's high-frequency part [mm].
+
+    ``σ = 1.4826·MAD(Δ²r)/√6``: the second difference removes the smooth
+    part of the residual (model error), white noise of level σ gives
+    ``var(Δ²r) = 6σ²``, and the median absolute deviation ignores the few
+    samples at steps and spikes. Positions logged with a resolution q
+    (the smallest step between the values an axis takes) carry at least
+    the rounding noise ``q/√12``, which coarse logs hide from the second
+    differences (most are zero).
+
+    Parameters
+    ----------
+    residual : ndarray, shape (N, d)
+        Measured minus simulated positions [mm].
+    measured : ndarray, shape (N, d), optional
+        The measured positions [mm], for their resolution.
+
+    Returns
+    -------
+    ndarray, shape (d,)
+        At least 1e-6 mm (1 nm).
+    """
+    d2 = np.diff(np.asarray(residual, dtype=float), n=2, axis=0)
+    mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    sigma = 1.4826 * mad / np.sqrt(6.0)
+    if measured is not None:
+        steps = [np.diff(np.unique(x)) for x in np.asarray(measured, dtype=float).T]
+        quantum = np.array([s.min() if s.size else 0.0 for s in steps])
+        sigma = np.maximum(sigma, quantum / np.sqrt(12.0))
+    return np.maximum(sigma, 1e-6)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the diagnosis: the nominal model, its refit, or an effect named.
+
+    Parameters
+    ----------
+    label : str
+        ``"nominal model"``, ``"nominal refit"`` or the effect's ``name.axis``.
+    effect : Effect or None
+        The effect named at this step (``None`` for the nominal steps).
+    uncertainty : dict
+        One standard deviation of each fitted parameter [its unit].
+    rms_um, max_um : float
+        Residual RMS and max of the norm over axes after this step [µm].
+    delta_bic : float
+        ΔBIC of this step over the previous one (``nan`` for the nominal model).
+    """
+
+    label: str
+    effect: object
+    uncertainty: dict
+    rms_um: float
+    max_um: float
+    delta_bic: float
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What :func:`diagnose` found: the steps, the residuals before and after, where they were.
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+        The measured trace.
+    model : Model
+        The nominal model (given, or identified: `identified`).
+    identified : bool
+        The nominal machine was identified from the trace.
+    noise_um : ndarray, shape (d,)
+        Measurement noise per axis [µm] (:func:`noise_level`).
+    steps : tuple of Step
+        The nominal model, its refit, then one step per effect named.
+    simulated_before : ndarray, shape (N, d)
+        The nominal model simulated on the measured reference [mm].
+    simulated_after : ndarray, shape (N, d)
+        The final model, nominal parameters refitted, at the trace's samples [mm].
+    scored : ndarray of bool, shape (N,)
+        The samples the fit scored (all but a start transient the simulation cannot reproduce).
+    refitted : Model
+        The final model: the nominal machine with its servo parameters refitted, and the effects named.
+    where : tuple of str
+        Where the nominal residual concentrates and what it correlates with (:func:`locate`).
+    warnings : tuple of str
+        Ambiguities (two candidates explaining the data almost equally, with
+        the test that would separate them) and limits of the diagnosis.
+    """
+
+    trace: object
+    model: Model
+    identified: bool
+    noise_um: np.ndarray
+    steps: tuple
+    simulated_before: np.ndarray
+    simulated_after: np.ndarray
+    scored: np.ndarray
+    refitted: Model
+    where: tuple = ()
+    warnings: tuple = field(default=())
+
+    @property
+    def effects(self):
+        """The effects named, in the order they were found."""
+        return tuple(s.effect for s in self.steps if s.effect is not None)
+
+    @property
+    def residual_before(self):
+        """Measured minus nominally simulated positions [mm], shape (N, d)."""
+        return self.trace.actual - self.simulated_before
+
+    @property
+    def residual_after(self):
+        """Measured minus finally simulated positions [mm], shape (N, d)."""
+        return self.trace.actual - self.simulated_after
+
+    def to_dict(self):
+        """The report in the contract form (DESIGN.md), plus the story's details."""
+        keep = self.scored
+        before, after = self.residual_before[keep], self.residual_after[keep]
+        normal_before, normal_after = (path_normal(self.trace.reference[keep], r) for r in (before, after))
+        report = {
+            "effects": [
+                {"name": e.name, "axis": e.axis, "parameters": e.values(),
+                 **({"options": dict(e.options)} if e.options else {}),
+                 "uncertainty": {k: v if np.isfinite(v) else None for k, v in s.uncertainty.items()},
+                 "delta_bic": s.delta_bic}
+                for s in self.steps for e in [s.effect] if e is not None
+            ],
+            "residual_rms_before_um": _rms_um(before),
+            "residual_rms_after_um": _rms_um(after),
+            "residual_max_before_um": _max_um(before),
+            "residual_max_after_um": _max_um(after),
+            "noise_um": {a: float(n) for a, n in zip(self.trace.axes, self.noise_um)},
+            "nominal_identified": self.identified,
+            "nominal_refit": {
+                f"{axis}.{name}": {"nominal": getattr(servo, name), "refit": getattr(self.refitted.machine.axes[axis], name)}
+                for axis, servo in self.model.machine.axes.items() for name in _REFIT_FIELDS
+                if getattr(servo, name) != getattr(self.refitted.machine.axes[axis], name)
+            },
+            "steps": [{"label": s.label, "rms_um": s.rms_um, "max_um": s.max_um,
+                       "delta_bic": None if np.isnan(s.delta_bic) else s.delta_bic} for s in self.steps],
+            "where": list(self.where),
+            "warnings": list(self.warnings),
+        }
+        if normal_before is not None:
+            report["residual_normal_rms_before_um"] = 1e3 * float(np.sqrt(np.mean(normal_before**2)))
+            report["residual_normal_rms_after_um"] = 1e3 * float(np.sqrt(np.mean(normal_after**2)))
+        return report
+
+    def to_json(self):
+        """:meth:`to_dict` as JSON text."""
+        return json.dumps(self.to_dict(), indent=2, ensure_ascii=False)
+
+    def report(self):
+        """The story as a short table: per step the effect, its parameters ± 1σ, residual RMS and max [µm]."""
+        lines = [f"{'step':<28}{'parameters (± 1σ)':<52}{'RMS µm':>10}{'max µm':>10}{'ΔBIC':>10}", "-" * 110]
+        for s in self.steps:
+            if s.effect is None:
+                text = ""
+            else:
+                default = {p.name: p.value for p in s.effect.kind.parameters}
+                text = ", ".join(
+                    f"{p.name} = {p.value:.4g}" + (f" ± {s.uncertainty[p.name]:.2g}" if p.name in s.uncertainty else "")
+                    for p in s.effect.parameters if p.name in s.uncertainty or p.value != default[p.name]
+                ) + "".join(f", {k} = {v}" for k, v in s.effect.options.items())
+            bic = "" if np.isnan(s.delta_bic) else f"{s.delta_bic:.0f}"
+            lines.append(f"{s.label:<28}{text:<52}{s.rms_um:>10.3f}{s.max_um:>10.3f}{bic:>10}")
+        noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
+        lines.append(f"noise floor [µm RMS]: {noise}")
+        if not self.effects and self.steps[-1].rms_um <= NOISE_FLOOR * float(np.linalg.norm(self.noise_um)):
+            lines.append("no effect named: the measurement is explained by the nominal model within noise "
+                         "(and the nominal parameters' usual spread)")
+        elif not self.effects:
+            lines.append(f"no effect named: no catalogue effect explains the residual significantly; it stays at "
+                         f"{self.steps[-1].rms_um:.3g} µm RMS against a noise floor of "
+                         f"{float(np.linalg.norm(self.noise_um)):.3g} µm (see where it is and what it correlates with)")
+        lines += [f"where: {w}" for w in self.where]
+        lines += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+def _rms_um(r):
+    return 1e3 * float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
+
+
+def _max_um(r):
+    return 1e3 * float(np.max(np.linalg.norm(r, axis=1)))
+
+
+def path_normal(reference, residual):
+    """The residual's component along the path normal [mm], shape (N,); ``None`` for one axis.
+
+    In the plane (2 axes) the signed component along the tangent turned by
+    +90°; in space the magnitude of the part perpendicular to the tangent.
+    The tangent is the commanded positions' central difference; where the
+    reference stands still the whole residual counts.
+
+    Parameters
+    ----------
+    reference : ndarray, shape (N, d)
+        Commanded positions [mm].
+    residual : ndarray, shape (N, d)
+        Measured minus simulated positions [mm].
+
+    Returns
+    -------
+    ndarray, shape (N,) or None
+    """
+    if reference.shape[1] < 2:
+        return None
+    tangent = np.gradient(reference, axis=0)
+    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
+    moving = norm[:, 0] > 1e-9 * max(float(norm.max()), 1e-300)
+    tangent = np.where(moving[:, None], tangent / np.where(norm > 0, norm, 1.0), 0.0)
+    if reference.shape[1] == 2:
+        normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+        return np.where(moving, np.sum(residual * normal, axis=1), np.linalg.norm(residual, axis=1))
+    along = np.sum(residual * tangent, axis=1, keepdims=True)
+    return np.linalg.norm(residual - along * tangent, axis=1)
+
+
+# -- where the residual is ---------------------------------------------------------------------
+
+
+def locate(trace, reference, residual):
+    """Where a residual concentrates and what it correlates with, as sentences.
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+    reference : contoursim.trajectory.Trajectory
+        The measured reference at the servo period (for velocity and acceleration).
+    residual : ndarray, shape (N, d)
+        At the trace's samples [mm].
+
+    Returns
+    -------
+    tuple of str
+        The time spans (and path stations, the distance along the commanded
+        path) holding most of it; for a circle test the angles of
+        the largest radial residual; per axis the features (reversals,
+        velocity, acceleration, position, time, a spatial period) it
+        correlates with best.
+    """
+    t = trace.t
+    n = len(t)
+    found = []
+    energy = np.sum(residual**2, axis=1)
+    if energy.sum() <= 0:
+        return ()
+    window = max(1, n // 200)
+    smooth = np.convolve(energy, np.ones(window) / window, mode="same")
+    hot = smooth > 0.25 * smooth.max()
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], hot.astype(int), [0]])))
+    spans = sorted(((energy[a:b].sum() / energy.sum(), a, b) for a, b in zip(edges[::2], edges[1::2])), reverse=True)
+    covered = sum(b - a for _, a, b in spans) / n
+    station = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(trace.reference, axis=0), axis=1))])
+    text = ", ".join(f"{t[a]:.3g}–{t[b - 1]:.3g} s" + (f" (path station {station[a]:.4g}–{station[b - 1]:.4g} mm)"
+                     if station[-1] > 0 else "") + f" ({100 * share:.0f} %)" for share, a, b in spans[:3])
+    found.append(f"the residual energy concentrates in {text} ({100 * covered:.0f} % of the time)"
+                 if covered < 0.5 else f"the residual is spread over the run (the largest part: {text})")
+    circle = _circle(trace.reference)
+    if circle is not None:
+        center, radius = circle
+        rel = trace.reference - center
+        theta = np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) % 360
+        radial = np.sum(residual[:, :2] * rel[:, :2], axis=1) / np.linalg.norm(rel[:, :2], axis=1)
+        bins = np.clip((theta // 10).astype(int), 0, 35)
+        mean = np.array([radial[bins == k].mean() if np.any(bins == k) else 0.0 for k in range(36)])
+        top = np.argsort(-np.abs(mean))[:3]
+        found.append(f"circle R = {radius:.4g} mm: largest radial residual at "
+                     + ", ".join(f"{10 * k + 5}° ({1e3 * mean[k]:+.2f} µm)" for k in top))
+    v = _on_trace(trace, reference.t, reference.velocity)
+    a = _on_trace(trace, reference.t, reference.acceleration)
+    for i, axis in enumerate(trace.axes):
+        r = residual[:, i] - residual[:, i].mean()
+        if not np.any(r):
+            continue
+        since = _time_since_reversal(t, v[:, i])
+        features = {
+            "direction of motion (sign of v)": np.sign(v[:, i]),
+            "reversals (first 50 ms after)": np.exp(-since / 0.05),
+            "velocity": v[:, i],
+            "acceleration": a[:, i],
+            "position": trace.reference[:, i],
+            "time": t,
+        }
+        scores = []
+        for name, f in features.items():
+            f = f - f.mean()
+            if np.any(f):
+                target = np.abs(r) - np.abs(r).mean() if name.startswith("reversals") else r
+                scores.append((abs(float(np.corrcoef(target, f)[0, 1])), name))
+        period, share = _spatial_period(trace.reference[:, i], r)
+        if period is not None:
+            scores.append((np.sqrt(share), f"a spatial period of {period:.3g} mm"))
+        scores.sort(reverse=True)
+        found.append(f"axis {axis}: correlates with " + ", ".join(f"{name} ({c:.2f})" for c, name in scores[:3]))
+    return tuple(found)
+
+
+def _circle(position):
+    """``(centre, radius)`` when most of the first two axes' reference runs one full circle, else ``None``.
+
+    The circle is fitted (algebraically) to the points near it, narrowing
+    from 20 % to 0.03 % of the radius, so that run-in and run-out arcs or
+    approach moves do not pull it; half the samples must lie on it.
+    """
+    if position.shape[1] < 2:
+        return None
+    p = position[:, :2]
+    on = np.ones(len(p), bool)
+    for tol in (np.inf, 0.2, 0.05, 0.01, 1e-3, 3e-4):
+        if on.sum() < 3:
+            return None
+        center = fit_circle_center(p[on])
+        r = np.linalg.norm(p - center, axis=1)
+        radius = float(np.median(r[on]))
+        on = np.abs(r - radius) < tol * radius
+    if radius <= 0 or on.mean() < 0.5:
+        return None
+    rel = p[on] - center
+    angle = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))
+    if np.ptp(angle) < 2 * np.pi * 0.95:
+        return None
+    return np.concatenate([center, np.zeros(position.shape[1] - 2)]), radius
+
+
+def _time_since_reversal(t, v):
+    """Time since the last sign change of `v` [s] (since the start before the first)."""
+    s = np.sign(v)
+    moving = np.flatnonzero(s)
+    since = t - t[0]
+    if moving.size < 2:
+        return since
+    flips = moving[1:][s[moving[1:]] != s[moving[:-1]]]
+    last = np.full(len(t), t[0])
+    last[flips] = t[flips]
+    return t - np.maximum.accumulate(last)
+
+
+def _spatial_period(q, r):
+    """The spatial period [mm] best explaining `r` over position `q`, and the share of the variance it explains."""
+    travel = np.ptp(q)
+    if travel <= 0:
+        return None, 0.0
+    periods = np.geomspace(max(travel / 200, 0.5), travel / 2, 60) if travel > 1.0 else ()
+    best = (None, 0.0)
+    var = float(r @ r)
+    for period in periods:
+        w = 2 * np.pi * q / period
+        basis = np.column_stack([np.sin(w), np.cos(w)])
+        coef = np.linalg.lstsq(basis, r, rcond=None)[0]
+        share = float(np.sum((basis @ coef) ** 2)) / var
+        if share > best[1]:
+            best = (float(period), share)
+    return best
+
+
+# -- the fit -----------------------------------------------------------------------------------
+
+
+class _Problem:
+    """A measured trace against variants of one model: predictions, whitening, nominal refit."""
+
+    def __init__(self, trace, model, noise, scored):
+        self.trace = trace
+        self.reference = measured_reference(trace, model.machine.servo_period)
+        self.scored = scored  # samples the fit scores, shape (N,)
+        self.weight = scored[:, None] / noise  # 1/σ per axis on scored samples, 0 elsewhere [1/mm], (N, d)
+        self.n = int(scored.sum()) * len(noise)  # residual entries scored
+        self.nominal = model.machine  # the prior of the nominal refit is centred here
+        self.base = None
+        self.set_base(model)
+
+    # predictions at the trace's samples
+    def predict(self, models):
+        """Tool positions of `models` at the trace's samples, list of (N, d)."""
+        out = []
+        loop = [m for m in models if not self._geometric_only(m)]
+        if loop:
+            for start in range(0, len(loop), 64):
+                part = loop[start : start + 64]
+                tool = simulate_batch(part, self.reference, outputs=("tool_position",), settle=0.0, check=False)["tool_position"]
+                out += [_on_trace(self.trace, self.reference.t, y) for y in tool]
+        loop_results = iter(out)
+        results = []
+        for m in models:
+            if self._geometric_only(m):
+                y = m.geometry.tool_position(self.axis_position, self.reference.t, self.trace.reference.shape[1])
+                results.append(_on_trace(self.trace, self.reference.t, y))
+            else:
+                results.append(next(loop_results))
+        return results
+
+    def _geometric_only(self, model):
+        """`model` differs from the base in geometric effects only (the loop's axis positions can be reused)."""
+        if self.base is None:
+            return False
+        other = [e for e in model.effects if e.stage != "geometry"]
+        return model.machine is self.base.machine and other == [e for e in self.base.effects if e.stage != "geometry"]
+
+    def whitened(self, y):
+        """``(measured − y)/σ`` per axis, flattened, shape (N·d,)."""
+        return ((self.trace.actual - y) * self.weight).ravel()
+
+    def coefficients(self, r):
+        """The nominal refit of a whitened residual `r`: zero offsets [steps of σ], then each nominal step's factor."""
+        return self.solve @ r - self.pull
+
+    def residual(self, y):
+        """The residual of prediction `y` after the nominal refit: whitened misfit, then the prior's terms.
+
+        Shape (N·d + d + K,): what the refit leaves of the whitened residual,
+        then the refit's coefficients over their prior widths (a nominal
+        parameter is known to :data:`NOMINAL_SPREAD`; zero offsets are free).
+        """
+        with np.errstate(over="ignore", invalid="ignore"):  # a variant that went unstable: made large by _finite
+            r = self.whitened(y)
+            c = self.coefficients(r)
+            return np.concatenate([r - self.columns @ c, self.prior * (c + self.shift)])
+
+    def samples(self, r):
+        """The misfit part of a :meth:`residual`, per sample, shape (N, d)."""
+        n, d = self.trace.actual.shape
+        return r[: n * d].reshape(n, d)
+
+    def set_base(self, model, refit=0):
+        """Make `model` the base: its prediction, axis positions and the nominal refit's sensitivities.
+
+        With `refit` > 0, that many Gauss–Newton steps first move the base's
+        nominal parameters to their (prior-weighted) least-squares values,
+        the linearised refit then handling only what is left.
+        """
+        for step in range(refit + 1):
+            self._linearise(model)
+            if step == refit or not self.changes:
+                break
+            d = self.trace.actual.shape[1]
+            model = _refitted(model, self.changes, self.coefficients(self.whitened(self.base_prediction))[d:])
+
+    def _linearise(self, model):
+        self.base = None
+        run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0, check=False)
+        self.axis_position = run["axis_position"][0]
+        self.base_prediction = _on_trace(self.trace, self.reference.t, run["tool_position"][0])
+        self.changes = _nuisance_changes(model, self.trace.axes)
+        n, d = self.trace.actual.shape
+        columns = [(np.eye(d)[i] * self.weight).ravel() for i in range(d)]  # instrument zero per axis
+        if self.changes:
+            ys = self.predict([_with_servos(model, change) for change in self.changes])
+            r0 = self.whitened(self.base_prediction)
+            columns += [r0 - self.whitened(y) for y in ys]  # the prediction's change for each nominal step, whitened
+        s = self.columns = np.column_stack(columns)
+        self.prior = np.concatenate([np.zeros(d), np.full(len(self.changes), _NUISANCE_STEP / NOMINAL_SPREAD)])
+        # ridge: the prior on the nominal parameters, centred on the nominal machine (the base may have moved from it)
+        self.shift = np.concatenate([np.zeros(d), [_steps_from(self.nominal, model.machine, c) for c in self.changes]])
+        normal = s.T @ s + np.diag(self.prior**2)
+        self.solve = np.linalg.solve(normal, s.T)
+        self.pull = np.linalg.solve(normal, self.prior**2 * self.shift)
+        self.base = model
+        self.base_residual = self.residual(self.base_prediction)
+
+    def zero_offset(self):
+        """The instrument zero of each axis the nominal refit finds [mm], shape (d,)."""
+        d = self.trace.actual.shape[1]
+        return self.coefficients(self.whitened(self.base_prediction))[:d]
+
+    def fitted(self):
+        """The base's prediction with the nominal refit (and instrument zero) added [mm], shape (N, d)."""
+        r = self.whitened(self.base_prediction)
+        return self.base_prediction + self.unwhiten(self.columns @ self.coefficients(r))
+
+    def unwhiten(self, r):
+        """A whitened vector (its first N·d entries) as positions [mm], shape (N, d); 0 on samples not scored."""
+        n, d = self.trace.actual.shape
+        return np.divide(r[: n * d].reshape(n, d), self.weight, out=np.zeros((n, d)), where=self.weight > 0)
+
+
+def _nuisance_changes(model, axes):
+    """The nominal refit's steps: one dict ``{axis: {field: stepped value}}`` per nominal parameter of `axes`."""
+    servos = model.machine.axes
+    h = 1.0 + _NUISANCE_STEP
+    changes = [{a: {"kp": s.kp * h} for a, s in servos.items()}]  # one position gain for all axes
+    feedforward = {a: {"vff": s.vff * h if s.vff * h <= 1 else s.vff / h} for a, s in servos.items() if s.vff > 0}
+    if feedforward:  # one fraction for all axes too: per axis it would set each axis's steady lag, a gain in disguise
+        changes.append(feedforward)
+    for a in axes:
+        s = servos[a]
+        changes.append({a: {"kv": s.kv * h}})  # the velocity loop's gain over the mass: its bandwidth
+        if s.aff > 0:
+            changes.append({a: {"mass": s.mass * h}})
+    return changes
+
+
+def _steps_from(nominal, machine, change):
+    """How far `machine` is from `nominal` in the parameters of one nominal step, in units of that step (mean over its fields)."""
+    steps = [(getattr(machine.axes[a], f) - getattr(nominal.axes[a], f)) / (v - getattr(machine.axes[a], f))
+             for a, fields in change.items() for f, v in fields.items()]
+    return float(np.mean(steps))
+
+
+def _with_servos(model, change):
+    """`model` with some servo fields changed, ``{axis: {field: value}}`` (same chain: one structure for a batch)."""
+    machine = model.machine
+    servos = dict(machine.axes)
+    for axis, fields in change.items():
+        servos[axis] = replace(servos[axis], **fields)
+    m = Machine(servos, machine.servo_period, machine.chain, machine.name, machine.max_feed, dict(machine.work_offset))
+    return Model(m, model.effects)
+
+
+def _refitted(model, changes, coef):
+    """`model` moved by `coef` times each change (a Gauss–Newton step), each field kept within ±50 % (vff in [0, 1])."""
+    new = {}
+    for change, c in zip(changes, coef):
+        for axis, fields in change.items():
+            for field, stepped in fields.items():
+                old = getattr(model.machine.axes[axis], field)
+                value = old + c * (stepped - old)
+                scale = old if old > 0 else abs(stepped)
+                value = float(np.clip(value, max(0.0, old - 0.5 * scale), old + 0.5 * scale))
+                new.setdefault(axis, {})[field] = min(value, 1.0) if field == "vff" else value
+    return _with_servos(model, new)
+
+
+@dataclass
+class _Candidate:
+    effect: Effect
+    free: tuple
+    grid: list
+    x: np.ndarray = None
+    residual: np.ndarray = None
+    cost: float = np.inf
+    fit: object = None
+    uncertainty: dict = None
+    delta_bic: float = -np.inf
+    tau: float = 1.0
+
+
+def _candidates(problem, model):
+    """Every catalogue effect on every axis of the trace it can act on, not yet in `model`."""
+    trace = problem.trace
+    axes = trace.axes
+    servo = [a for a in axes if a in model.machine.axes]
+    have = {e.label for e in model.effects}
+    residual = problem.unwhiten(problem.base_residual)
+    out = []
+
+    def add(effect, free, grid):
+        if effect.label not in have:
+            out.append(_Candidate(effect, free, grid))
+
+    def sizes(name):
+        p = effect_kind(name).parameters[0]
+        lo, hi = p.typical
+        values = np.geomspace(lo, hi, _GRID)
+        return list(values) + (list(-values) if p.signed else [])
+
+    dt = model.machine.servo_period
+    for a in servo:
+        s = model.machine.axes[a]
+        for feedback in ("motor", "scale"):
+            add(Effect("backlash", a, lost_motion_um=1.0, feedback=feedback), ("lost_motion_um",),
+                [{"lost_motion_um": v} for v in sizes("backlash")])
+        add(Effect("coulomb_friction", a, force_N=1.0), ("force_N",), [{"force_N": v} for v in sizes("coulomb_friction")])
+        if len(servo) > 1:
+            add(Effect("gain_mismatch", a, kp_ratio=1.0), ("kp_ratio",),
+                [{"kp_ratio": r} for r in (0.7, 0.85, 0.95, 1.05, 1.15, 1.3)])
+        for kind in ("command", "feedback"):
+            top = 3e-3 if kind == "command" else min(3e-3, (MAX_DELAY_SAMPLES - 1) * dt)
+            add(Effect("time_delay", a, delay_s=1e-4, kind=kind), ("delay_s",),
+                [{"delay_s": v} for v in np.geomspace(min(1e-4, top / 4), top, _GRID)])
+        nyquist = 0.5 / dt
+        freqs = [f for f in np.geomspace(30.0, 150.0, _GRID) if f < 0.4 * nyquist]
+        peak = _spectral_peak(trace.t, residual[:, axes.index(a)], 0.4 * min(nyquist, 0.5 / trace.dt))
+        freqs += [peak] if peak is not None else []
+        if freqs:
+            add(Effect("vibration", a, freq_hz=freqs[0]), ("freq_hz", "damping_ratio"),
+                [{"freq_hz": f, "damping_ratio": z} for f in freqs for z in (0.02, 0.1)])
+    for a in axes:
+        i = axes.index(a)
+        q = trace.reference[:, i]
+        add(Effect("scale_error", a, ppm=1.0), ("ppm",), [{"ppm": v} for v in sizes("scale_error")])
+        add(Effect("thermal_drift", a, rate_um_per_min=1.0), ("rate_um_per_min",),
+            [{"rate_um_per_min": v} for v in sizes("thermal_drift")])
+        period, _ = _spatial_period(q, residual[:, i] - residual[:, i].mean())
+        if period is not None and 0.1 <= period <= 1000.0:
+            add(Effect("cyclic_error", a, amplitude_um=1.0, period_mm=period), ("amplitude_um", "phase_deg", "period_mm"),
+                [{"amplitude_um": v, "phase_deg": ph} for v in (1.0, 3.0) for ph in (0.0, 90.0, 180.0, 270.0)])
+        span = float(np.ptp(q))
+        for b in axes:
+            if b != a and span > 0:
+                add(Effect("straightness", a, peak_um=1.0, span_mm=span, error_direction=b), ("peak_um",),
+                    [{"peak_um": v} for v in sizes("straightness")])
+    for a, b in combinations(axes, 2):
+        add(Effect("squareness", a + b, angle_urad=1.0), ("angle_urad",), [{"angle_urad": v} for v in sizes("squareness")])
+    return [c for c in out if c.grid]
+
+
+def _spectral_peak(t, r, fmax):
+    """Frequency [Hz] of the largest peak of `r`'s spectrum between 20 Hz and `fmax`, or ``None``."""
+    if fmax <= 20.0 or len(r) < 64:
+        return None
+    dt = (t[-1] - t[0]) / (len(t) - 1)
+    spec = np.abs(np.fft.rfft((r - r.mean()) * np.hanning(len(r))))
+    f = np.fft.rfftfreq(len(r), dt)
+    band = (f >= 20.0) & (f <= fmax)
+    return float(f[band][np.argmax(spec[band])]) if np.any(band) else None
+
+
+def _bounds(problem, cand):
+    """Lower and upper bounds of `cand`'s free parameters: the catalogue's, the servo period's limits."""
+    effect, params = cand.effect, {p.name: p for p in cand.effect.parameters}
+    limits = {}
+    if effect.name == "vibration":
+        limits["freq_hz"] = (1.0, 0.45 / problem.reference.dt)
+    elif effect.name == "time_delay":
+        top = 0.1 if effect.options["kind"] == "command" else (MAX_DELAY_SAMPLES - 1) * problem.reference.dt
+        limits["delay_s"] = (0.0, top)
+    elif effect.name == "cyclic_error":  # at least two periods within the travel, else it is not cyclic
+        travel = float(np.ptp(problem.trace.reference[:, problem.trace.axes.index(effect.axis)]))
+        limits["period_mm"] = (params["period_mm"].bounds[0], max(travel / 2, 2 * params["period_mm"].bounds[0]))
+    lower = np.array([limits.get(n, params[n].bounds)[0] for n in cand.free])
+    upper = np.array([limits.get(n, params[n].bounds)[1] for n in cand.free])
+    return lower, upper
+
+
+def _model_of(model, cand, x):
+    """`model` with `cand`'s effect at free-parameter values `x`."""
+    return model.with_effect(cand.effect.with_values(**dict(zip(cand.free, x))))
+
+
+def _score(problem, cand, r, tau=None):
+    """Fill `cand`'s cost, autocorrelation time and ΔBIC from its residual `r` (:meth:`_Problem.residual`).
+
+    `tau`: the autocorrelation time to count samples with (default `r`'s own).
+    """
+    cand.cost = float(r @ r)
+    cand.tau = autocorrelation_time(problem.samples(r)[problem.scored])
+    rss0 = float(problem.base_residual @ problem.base_residual)
+    cand.delta_bic = float(delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau or cand.tau))
+
+
+def _start(problem, cands, model):
+    """Every candidate's grid in one batch: the best row becomes its starting point ``cand.x``, scored."""
+    rows, owner = [], []
+    for i, cand in enumerate(cands):
+        lower, upper = _bounds(problem, cand)
+        for row in cand.grid:
+            x = np.clip(np.array([row.get(n, cand.effect[n]) for n in cand.free], dtype=float), lower, upper)
+            rows.append(x)
+            owner.append(i)
+    predictions = problem.predict([_model_of(model, cands[i], x) for i, x in zip(owner, rows)])
+    best = {}
+    for i, x, y in zip(owner, rows, predictions):
+        r = _finite(problem.residual(y))
+        if i not in best or r @ r < best[i][1] @ best[i][1]:
+            best[i] = (x, r)
+    for i, cand in enumerate(cands):
+        cand.x, cand.residual = best[i]
+    _rescore(problem, cands)
+
+
+def _rescore(problem, cands):
+    """Score `cands` with one autocorrelation time, that of the best candidate's residual, so that they compare
+    by their residual and their number of parameters alone."""
+    if not cands:
+        return
+    best = min(cands, key=lambda c: float(c.residual @ c.residual))
+    tau = autocorrelation_time(problem.samples(best.residual)[problem.scored])
+    for cand in cands:
+        _score(problem, cand, cand.residual, tau)
+
+
+def _finite(r):
+    """`r` with what a variant that went unstable left (non-finite or absurd entries) held at ±1e6 noise levels."""
+    return np.clip(np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6), -1e6, 1e6)
+
+
+def _refine(problem, cand, model):
+    """Fit `cand`'s free parameters from its start through the simulator; fills the fit and its uncertainty."""
+    lower, upper = _bounds(problem, cand)
+    params = {p.name: p for p in cand.effect.parameters}
+    scale = np.array([_scale(params[n]) for n in cand.free])
+    cache = {}
+
+    def residuals(xs):
+        todo = [x for x in xs if x.tobytes() not in cache]
+        if todo:
+            for x, y in zip(todo, problem.predict([_model_of(model, cand, x) for x in todo])):
+                cache[x.tobytes()] = _finite(problem.residual(y))
+        return [cache[x.tobytes()] for x in xs]
+
+    def fun(x):
+        return residuals([x])[0]
+
+    def jac(x):
+        steps = []
+        for j in range(x.size):
+            h = _FD_STEP * max(abs(x[j]), scale[j])
+            steps.append(h if x[j] + h <= upper[j] else -h)
+        r0, *cols = residuals([x] + [x + h * np.eye(x.size)[j] for j, h in enumerate(steps)])
+        return np.column_stack([(c - r0) / h for c, h in zip(cols, steps)])
+
+    fit = least_squares(fun, cand.x, jac=jac, bounds=(lower, upper), x_scale=scale, max_nfev=25, xtol=1e-6, ftol=1e-8)
+    cand.residual = fun(fit.x)
+    _score(problem, cand, cand.residual)
+    cand.fit = _model_of(model, cand, fit.x).effects[-1]
+    j = jac(fit.x)
+    n, k = problem.n, len(cand.free)
+    try:
+        cov = np.linalg.inv(j.T @ j) * (cand.cost / max(n - k, 1) * cand.tau)
+        err = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        err = np.full(k, np.inf)
+    cand.uncertainty = {name: float(e) for name, e in zip(cand.free, err)}
+
+
+def _scale(p):
+    if p.typical is not None:
+        return p.typical[1]
+    lo, hi = p.bounds
+    return (hi - lo) if np.isfinite(hi - lo) and hi - lo < 1e3 else 1.0
+
+
+def _separating_test(a, b):
+    """The extra test that tells effect `a` from effect `b`."""
+    if a.name == b.name == "time_delay":
+        return "a step or a faster reversal: a feedback delay changes the loop's damping (overshoot), a command delay only shifts the response"
+    if a.name == b.name == "backlash":
+        return "a reversal test read on the motor encoder and on a linear scale: with motor feedback the table lags, with scale feedback the loop chases the lost motion"
+    if {a.name, b.name} == {"scale_error", "thermal_drift"}:
+        return "the same move at another feed, or with a dwell: a drift grows with time, a scale error with position"
+    stages = {a.stage, b.stage}
+    if "geometry" in stages and len(stages) > 1:
+        return ("run the circle in the other direction and at a second feed: geometric errors keep their shape, "
+                "servo effects flip with the direction and grow with the feed")
+    if stages == {"geometry"}:
+        return "a circle of another radius, or straight-line tests along each axis (ISO 230-2)"
+    return "repeat the test at a second feed and in the other direction: the two effects scale differently with speed and acceleration"
+
+
+# -- the workflow ------------------------------------------------------------------------------
+
+
+def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
+    """Name the catalogue effects a nominal model lacks to explain a measured trace (module docstring).
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+        The measured trace (1–3 axes).
+    model : Model or Machine, optional
+        The nominal model; its servo axes must include the trace's axes.
+        ``None``: identified from the trace (:func:`contoursim.identify.identify_machine`).
+    max_effects : int
+        Most effects to name.
+    progress : callable, optional
+        Called with one line of text per candidate fitted (the CLI prints it to stderr).
+
+    Returns
+    -------
+    Diagnosis
+    """
+    say = progress or (lambda text: None)
+    identified = model is None
+    if identified:
+        say("no nominal model given: identifying the servo loops from the trace")
+        model = Model(identify_machine(trace, progress=say))
+    model = as_model(model)
+    missing = [a for a in trace.axes if a not in model.machine.axes]
+    if missing:
+        raise ValueError(f"the model has no servo axis {missing[0]!r} for the trace's column {missing[0]!r}; "
+                         f"its axes are {', '.join(model.machine.axes)}")
+    reference = measured_reference(trace, model.machine.servo_period)
+    before = _on_trace(trace, reference.t, simulate_batch([model], reference, settle=0.0, check=not identified)["tool_position"][0])
+    noise = noise_level(trace.actual - before, trace.actual)
+    warnings = []
+    scored = np.ones(len(trace.t), bool)
+    speed = np.linalg.norm(reference.velocity, axis=1)
+    if speed[0] > 1e-3 * speed.max():
+        # the simulation starts at rest on the reference, the machine did not: leave its transient out
+        skip = min(5.0 * max(_settling_time(model.machine.axes[a]) for a in trace.axes), 0.1 * (trace.t[-1] - trace.t[0]))
+        scored = trace.t >= trace.t[0] + skip
+        warnings.append(f"the trace does not start at rest on its reference: the first {skip:.3g} s "
+                        "(five time constants of the slowest closed-loop pole) are left out of the fit and the figures")
+    if identified:
+        warnings.append("the nominal machine was identified from the trace with an assumed mass "
+                        "(forces such as force_N are relative to that axis, not in real newtons)")
+    if len(trace.axes) == 1:
+        warnings.append("one axis: gain_mismatch cannot be told from the nominal position gain and is not a candidate")
+    problem = _Problem(trace, model, noise, scored)
+    raw = (trace.actual - before)[scored]
+    steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
+    steps.append(_step(problem, "nominal refit", None, {}, np.nan))
+    where = locate(trace, problem.reference, np.where(scored[:, None], trace.actual - before - raw.mean(axis=0), 0.0))
+    for round_ in range(max_effects):
+        base = problem.base
+        rss0 = float(problem.base_residual @ problem.base_residual)
+        if rss0 <= problem.n * NOISE_FLOOR**2:
+            say("the residual is at the noise floor: stopping")
+            break
+        cands = _candidates(problem, base)
+        say(f"[effect {round_ + 1}] starting values of {len(cands)} candidates (one batch)")
+        _start(problem, cands, base)
+        cands = [c for c in cands if c.delta_bic > 0]  # no row of its grid explains anything: not refined
+        for i, cand in enumerate(cands):
+            _refine(problem, cand, base)
+            say(f"[effect {round_ + 1}, {i + 1}/{len(cands)}] {cand.effect.label:<22}"
+                f"{_options(cand.effect):<26} RMS {_rms_um(problem.unwhiten(cand.residual)):8.3f} µm")
+        _rescore(problem, cands)
+        cands.sort(key=lambda c: -c.delta_bic)
+        if not cands or not cands[0].delta_bic > SIGNIFICANT:
+            say("nothing significant left: stopping")
+            break
+        best = cands[0]
+        rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
+        if rival is not None:
+            warnings.append(
+                f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
+                f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
+                f"{_separating_test(best.fit, rival.fit)}")
+        # the nominal parameters refitted with the effect in place, then the effect refitted around them
+        problem.set_base(base.with_effect(best.fit), refit=_REFIT_STEPS)
+        problem.set_base(Model(problem.base.machine, base.effects))
+        best.x = np.array([best.fit[name] for name in best.free])
+        _refine(problem, best, problem.base)
+        problem.set_base(problem.base.with_effect(best.fit), refit=_REFIT_STEPS)
+        if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
+            best.fit = _constant_force(problem, best.fit)
+            problem.set_base(problem.base.with_effect(best.fit))
+            warnings.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
+                            "measurement's zero offset; without an integrator in the velocity loop the two "
+                            "cannot be told apart")
+        steps.append(_step(problem, best.fit.label, best.fit, best.uncertainty, best.delta_bic))
+        say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
+    return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, problem.fitted(), scored,
+                     problem.base, where, tuple(warnings))
+
+
+def _settling_time(servo):
+    """Time constant of the slowest pole of an axis's closed position loop [s]."""
+    from .servo import closed_loop
+
+    return 1.0 / float(np.min(-np.real(closed_loop(servo, feedforward=False).poles())))
+
+
+def _constant_force(problem, effect):
+    """`effect` (friction on an axis without velocity integrator) with ``offset_N`` = the force equal to the zero offset."""
+    base = problem.base
+    i = problem.trace.axes.index(effect.axis)
+    pushed, = problem.predict([base.with_effect(effect.with_values(offset_N=effect["offset_N"] + 1.0))])
+    gain = float(np.mean((pushed - problem.base_prediction)[problem.scored, i]))  # [mm/N]
+    return effect.with_values(offset_N=effect["offset_N"] + problem.zero_offset()[i] / gain)
+
+
+def _step(problem, label, effect, uncertainty, delta_bic):
+    """The step after `problem`'s base was set: residual RMS and max on the scored samples."""
+    r = (problem.trace.actual - problem.fitted())[problem.scored]
+    return Step(label, effect, uncertainty, _rms_um(r), _max_um(r), float(delta_bic))
+
+
+def _options(effect):
+    return "" if not effect.options else " (" + ", ".join(f"{k} = {v}" for k, v in effect.options.items()) + ")"
+
+
+def synthetic_trace(model, trajectory, mismatch=0.03, noise_um=0.1, quantum_um=0.05, every=1, seed=0):
+    """A trace as a real machine would log it: `model` with its nominal parameters a little off, noise, quantisation.
+
+    What the diagnosis is tested on: the "truth" is `model` (a nominal
+    machine plus hidden effects) with every axis's mass, damping and
+    velocity gain, and the position gain shared by all axes, scaled by
+    independent factors uniform in ``1 ± mismatch``; the recorded positions
+    carry Gaussian noise and are rounded to `quantum_um`.
+
+    Parameters
+    ----------
+    model : Model or Machine
+        The truth before the nominal parameters' spread.
+    trajectory : contoursim.trajectory.Trajectory
+        The reference, sampled at the machine's servo period.
+    mismatch : float
+        Relative spread of the nominal parameters [-].
+    noise_um : float
+        Measurement noise [µm RMS].
+    quantum_um : float
+        Resolution of the recorded positions [µm] (0: none).
+    every : int
+        Log every `every`-th servo sample.
+    seed : int
+        Seed of the spread and the noise.
+
+    Returns
+    -------
+    contoursim.traces.Trace
+        Axes x, y (, z) as the trajectory's dimension.
+    """
+    from .simulation import simulate
+    from .traces import Trace
+
+    model = as_model(model)
+    rng = np.random.default_rng(seed)
+    machine = model.machine
+    factor = lambda: 1.0 + rng.uniform(-mismatch, mismatch)  # noqa: E731
+    kp = factor()
+    servos = {a: replace(s, kp=s.kp * kp, mass=s.mass * factor(), damping=s.damping * factor(), kv=s.kv * factor())
+              for a, s in machine.axes.items()}
+    truth = Model(replace(machine, axes=servos), model.effects)
+    result = simulate(truth, trajectory, contour=False)
+    keep = slice(None, None, int(every))
+    actual = result.tool_position[keep] + rng.normal(0.0, noise_um * _UM, result.tool_position[keep].shape)
+    if quantum_um > 0:
+        actual = np.round(actual / (quantum_um * _UM)) * (quantum_um * _UM)
+    axes = ("x", "y", "z")[: trajectory.dim]
+    return Trace(result.trajectory.t[keep], result.trajectory.position[keep], actual, axes, {"synthetic": "true"})
+
+
+# -- figures -----------------------------------------------------------------------------------
+
+def _after(diagnosis):
+    """Legend label of the final model."""
+    return "after: " + (", ".join(e.label for e in diagnosis.effects) or "nominal refit only")
+
+
+def plot_residuals(diagnosis, fig=None):
+    """Residual over time per axis before (nominal model) and after the diagnosis [µm], with the noise band.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    fig : matplotlib.figure.Figure, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    trace, keep = diagnosis.trace, diagnosis.scored
+    d = len(trace.axes)
+    fig = fig or plt.figure(figsize=(8.0, 2.2 + 1.8 * d), layout="constrained")
+    axes = fig.subplots(d, 1, sharex=True, squeeze=False)[:, 0]
+    for i, (ax, axis) in enumerate(zip(axes, trace.axes)):
+        before = diagnosis.residual_before[:, i]
+        ax.plot(trace.t[keep], 1e3 * (before - before[keep].mean())[keep], color="C0", lw=0.7,
+                label="before: nominal model (zero offset removed)")
+        ax.plot(trace.t[keep], 1e3 * diagnosis.residual_after[keep, i], color="C3", lw=0.7, label=_after(diagnosis))
+        ax.axhspan(-diagnosis.noise_um[i], diagnosis.noise_um[i], color="0.85", label="noise ±1σ")
+        ax.set_ylabel(f"{axis}: measured − simulated [µm]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize="small", loc="upper right")
+    axes[0].set_title("Residual before and after the diagnosis")
+    axes[-1].set_xlabel("t [s]")
+    return fig
+
+
+def plot_magnified(diagnosis, ax=None):
+    """The trace magnified, before and after the diagnosis.
+
+    With two or more axes: the XY reference path, and the residual
+    (measured − simulated) along the path normal drawn magnified on it,
+    ``reference + k·(r·n)·n``, for the nominal model (zero offset removed)
+    and after the diagnosis. With one axis: the following error
+    (reference − position) over time, measured and simulated both ways [µm].
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    ax : matplotlib.axes.Axes, optional
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    import matplotlib.pyplot as plt
+
+    from .plotting import magnification_for
+
+    trace, keep = diagnosis.trace, diagnosis.scored
+    ax = ax or plt.figure(figsize=(7.0, 6.0), layout="constrained").add_subplot()
+    after = _after(diagnosis)
+    if len(trace.axes) == 1:
+        runs = (("measured", "k", trace.actual), ("nominal model", "C0", diagnosis.simulated_before),
+                (after, "C3", diagnosis.simulated_after))
+        for label, color, y in runs:
+            ax.plot(trace.t[keep], 1e3 * (trace.reference - y)[keep, 0], color=color, lw=0.7, label=label)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(f"{trace.axes[0]}: following error [µm]")
+        ax.set_title("Following error, measured and simulated")
+    else:
+        ref = trace.reference[keep, :2]
+        before = diagnosis.residual_before[keep, :2]
+        runs = (("before: nominal model", "C0", before - before.mean(axis=0)), (after, "C3", diagnosis.residual_after[keep, :2]))
+        normals = [(label, color, path_normal(ref, r)) for label, color, r in runs]
+        size = float(np.max(np.ptp(ref, axis=0)))
+        k = magnification_for(size, max(float(np.percentile(np.abs(n), 99)) for *_, n in normals))
+        tangent = np.gradient(ref, axis=0)
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
+        unit = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+        ax.plot(ref[:, 0], ref[:, 1], color="0.5", lw=0.8, ls="--", label="reference")
+        for label, color, normal in normals:
+            p = ref + k * normal[:, None] * unit
+            ax.plot(p[:, 0], p[:, 1], color=color, lw=0.8, label=label)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{trace.axes[0]} [mm]")
+        ax.set_ylabel(f"{trace.axes[1]} [mm]")
+        ax.set_title(f"Residual (measured − simulated) along the path normal, magnified ×{k:g}")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
+    return ax
+
+
+def plot_polar(diagnosis, ax=None):
+    """Polar plot of a circle test: the radial residual (measured − simulated) before and after the diagnosis [µm].
+
+    Drawn against the reference's angle over the samples whose reference
+    has been on the test circle for five time constants of the slowest
+    closed-loop pole (not on a run-in arc), the zero on the dashed circle: the shape a ballbar
+    technician reads, of what the nominal model misses and of what is left.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    ax : matplotlib.axes.Axes with polar projection, optional
+
+    Returns
+    -------
+    matplotlib.axes.Axes or None
+        ``None`` when the trace is not a circle test.
+    """
+    import matplotlib.pyplot as plt
+
+    trace, keep = diagnosis.trace, diagnosis.scored
+    circle = _circle(trace.reference[keep])
+    if circle is None:
+        return None
+    center, radius = circle
+    ax = ax or plt.figure(figsize=(6.4, 6.6), layout="constrained").add_subplot(projection="polar")
+    rel = trace.reference[keep, :2] - center[:2]
+    r = np.linalg.norm(rel, axis=1)
+    on = np.abs(r - radius) < 1e-3 * radius
+    lag = int(np.ceil(5.0 * max(_settling_time(diagnosis.model.machine.axes[a]) for a in trace.axes) / trace.dt))
+    on[lag:] &= np.convolve(~on, np.ones(lag + 1), mode="full")[: on.size][lag:] == 0
+    on[:lag] = False
+    if not on.any():
+        return None
+    theta = np.arctan2(rel[on, 1], rel[on, 0])
+    unit = rel[on] / r[on, None]
+    before = diagnosis.residual_before[keep][on, :2]
+    before = before - before.mean(axis=0)  # the instrument's zero, as the refit removes it
+    devs = [("before: nominal model", "C0", before), (_after(diagnosis), "C3", diagnosis.residual_after[keep][on, :2])]
+    devs = [(label, color, 1e3 * np.sum(d * unit, axis=1)) for label, color, d in devs]
+    span = max(max(float(np.abs(d).max()) for *_, d in devs), 1e-3)
+    for label, color, dev in devs:
+        ax.plot(theta, dev, color=color, lw=0.8, label=label)
+    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.6)
+    ax.set_rorigin(-2.5 * span)
+    ax.set_ylim(-1.2 * span, 1.2 * span)
+    ax.set_rlabel_position(67.5)
+    ax.set_title(f"Circle R = {radius:.4g} mm: radial residual, measured − simulated [µm]; dashed: zero",
+                 fontsize="medium")
+    ax.legend(fontsize="small", loc="lower left", bbox_to_anchor=(-0.1, -0.12))
+    return ax
+
+
+def save_figures(diagnosis, out):
+    """Write the diagnosis figures as PNG files into the output folder `out`.
+
+    ``diagnosis_residual.png`` (:func:`plot_residuals`),
+    ``diagnosis_trace.png`` (:func:`plot_magnified`) and, for a circle
+    test, ``diagnosis_polar.png`` (:func:`plot_polar`).
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+    out : str, Path or contoursim.output.OutputDir
+        Created if missing; a file there that contoursim did not write is never replaced.
+
+    Returns
+    -------
+    list of pathlib.Path
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .output import output_dir
+
+    out = output_dir(out)
+    figures = [("diagnosis_residual.png", plot_residuals(diagnosis)), ("diagnosis_trace.png", plot_magnified(diagnosis).figure)]
+    polar = plot_polar(diagnosis)
+    if polar is not None:
+        figures.append(("diagnosis_polar.png", polar.figure))
+    for name, fig in figures:
+        with out.write(name, binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=110)
+        plt.close(fig)
+    return [out.path / name for name, _ in figures]

@@ -1,0 +1,231 @@
+"""Nominal servo identification from a measured trace: what a diagnosis compares against without a model.
+
+Users often do not know their drives' parameters. From the commanded and
+measured positions alone, :func:`identify_machine` fits a cascade of a P
+position loop around a P velocity loop with velocity feedforward:
+
+- ONE position gain ``kp`` [1/s] shared by all axes (NC position gains are
+  normally set equal; a gain identified per axis would silently absorb a
+  ``gain_mismatch``, which the diagnosis must be able to name);
+- ONE velocity-feedforward fraction ``vff`` [-] shared by all axes (set in
+  the NC, like the gain);
+- per axis, the velocity-loop bandwidth ``ω_v`` [rad/s]: with the plant's
+  mass and force constant fixed at :data:`MASS` and :data:`FORCE_CONSTANT`,
+  ``kv = ω_v·MASS/FORCE_CONSTANT``. The position loop's damping follows
+  from ``kp/ω_v``.
+
+A position trace carries no force, so the mass is not identifiable: forces
+of in-loop effects fitted on an identified machine (``force_N`` of
+``coulomb_friction``) are in the units of this assumed axis and say only
+how the effect compares between axes and runs.
+
+The fit: starting values from a regression of the tracking error on the
+commanded velocity and acceleration (a P/P cascade lags by
+``e ≈ (1 − vff)·v/kp + (1/(kp·ω_v) − (1 − vff)²/kp²)·a``), then
+:func:`scipy.optimize.least_squares` on the tracking error through the
+simulator, each finite-difference Jacobian one :func:`simulate_batch` call:
+first without feedforward, then with it, kept only when it is significant
+(:func:`delta_bic`): kp and vff set the steady lag together, and only the
+transients tell them apart.
+"""
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .machine import Machine
+from .servo import AxisServo
+from .simulation import measured_reference, simulate_batch
+
+__all__ = ["FORCE_CONSTANT", "MASS", "SIGNIFICANT", "autocorrelation_time", "delta_bic", "identify_machine", "servo_period_for"]
+
+#: ΔBIC a parameter or an effect must add to be kept (2·ln Bayes factor > 10: "very strong", Kass & Raftery 1995).
+SIGNIFICANT = 10.0
+#: Moving mass assumed for an identified axis [kg] (not identifiable from positions).
+MASS = 100.0
+#: Force constant assumed for an identified axis [N/A]: with MASS, kv [A·s/m] = ω_v [rad/s].
+FORCE_CONSTANT = 100.0
+
+_FD_STEP = 1e-3
+
+
+def servo_period_for(dt):
+    """The servo period to simulate a trace sampled every `dt`: `dt` up to 1 ms, else `dt` divided to 1 ms or less.
+
+    Parameters
+    ----------
+    dt : float
+        The trace's sample period [s].
+
+    Returns
+    -------
+    float
+        The servo period [s].
+    """
+    return dt / max(1, int(np.ceil(dt / 1e-3 - 1e-9)))
+
+
+def _machine(axes, period, x):
+    """The machine of parameter vector ``x = (log kp, vff, log ω_v per axis)``."""
+    kp, vff = float(np.exp(x[0])), float(x[1])
+    servos = {a: AxisServo(mass=MASS, force_constant=FORCE_CONSTANT, kv=float(np.exp(w)) * MASS / FORCE_CONSTANT,
+                           kp=kp, vff=vff) for a, w in zip(axes, x[2:])}
+    return Machine(servos, period, name="identified from the trace")
+
+
+def _start(trace, reference, period):
+    """Starting parameters from the regression of the tracking error on commanded v and a."""
+    n = len(trace.t)
+    v, a = (_on_trace(trace, reference.t, x) for x in (reference.velocity, reference.acceleration))
+    error = -trace.tracking_error  # lag: reference − actual [mm]
+    slopes, curv = [], []
+    for i in range(trace.reference.shape[1]):
+        design = np.column_stack([v[:, i], a[:, i], np.ones(n)])
+        coef = np.linalg.lstsq(design, error[:, i], rcond=None)[0]
+        slopes.append(coef[0])
+        curv.append(coef[1])
+    slope = float(np.median(slopes))
+    nyquist = np.pi / period
+    kp = 1.0 / slope if 1.0 / nyquist < slope < 10.0 else 30.0
+    x = [np.log(kp), 0.0]
+    for b in curv:
+        inv = b + 1.0 / kp**2  # 1/(kp·ω_v)
+        w = 1.0 / (kp * inv) if inv > 0 else 10.0 * kp
+        x.append(np.log(np.clip(w, 3.0 * kp, 0.2 * nyquist)))
+    return np.array(x)
+
+
+def identify_machine(trace, servo_period=None, progress=None):
+    """Identify the nominal servo loop of each axis of a trace (see the module docstring).
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+        The measured trace.
+    servo_period : float, optional
+        Servo period of the identified machine [s]; default
+        :func:`servo_period_for` the trace's sample period.
+    progress : callable, optional
+        Called with one line of text per fit iteration.
+
+    Returns
+    -------
+    Machine
+        Axes named as the trace's, each an :class:`AxisServo` with
+        ``mass = MASS``, ``force_constant = FORCE_CONSTANT``, the shared
+        ``kp`` and ``vff`` and its own ``kv``.
+    """
+    period = servo_period_for(trace.dt) if servo_period is None else float(servo_period)
+    reference = measured_reference(trace, period)
+    axes = trace.axes
+    x0 = _start(trace, reference, period)
+    nyquist = np.pi / period
+    lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * len(axes))
+    upper = np.array([np.log(0.5 * nyquist), 0.99] + [np.log(0.5 * nyquist)] * len(axes))
+    x0 = np.clip(x0, lower + 1e-6, upper - 1e-6)
+    measured = trace.actual
+    scale = max(float(np.std(trace.tracking_error)), 1e-6)
+    cache = {}
+
+    def outputs(xs):
+        tool = simulate_batch([_machine(axes, period, x) for x in xs], reference, settle=0.0, check=False)["tool_position"]
+        return [_on_trace(trace, reference.t, y) for y in tool]
+
+    def fun(x):
+        key = x.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = ((measured - outputs([x])[0]) / scale).ravel()
+        return cache[key]
+
+    def jac(x, free):
+        steps = {j: _FD_STEP * (1 if x[j] + _FD_STEP <= upper[j] else -1) for j in np.flatnonzero(free)}
+        rows = [x + h * np.eye(x.size)[j] for j, h in steps.items()]
+        r0 = fun(x)
+        cols = [((measured - y) / scale).ravel() for y in outputs(rows)]
+        if progress is not None:
+            progress(f"identify: kp = {np.exp(x[0]):.2f} 1/s, vff = {x[1]:.3f}, "
+                     f"RMS {1e3 * scale * np.sqrt(np.mean(r0**2)):.3g} µm")
+        return np.column_stack([(c - r0) / h for c, h in zip(cols, steps.values())])
+
+    def fitted(x, free):
+        """Least squares over the coordinates `free` of `x`, the others held."""
+        def part(z):
+            full = x.copy()
+            full[free] = z
+            return full
+
+        fit = least_squares(lambda z: fun(part(z)), x[free], jac=lambda z: jac(part(z), free),
+                            bounds=(lower[free], upper[free]), x_scale=1.0, max_nfev=40)
+        return part(fit.x)
+
+    # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
+    # transients show it (ΔBIC over the fit without it), else a valley of (kp, vff) pairs fits alike
+    x0[1] = 0.0
+    x1 = fitted(x0, np.array([j != 1 for j in range(x0.size)]))
+    r1 = fun(x1).copy()
+    x2 = fitted(x1, np.ones(x0.size, bool))
+    r2 = fun(x2)
+    tau = autocorrelation_time(r2.reshape(len(trace.t), len(axes)))
+    keep = delta_bic(float(r1 @ r1), float(r2 @ r2), r2.size, 1, tau) > SIGNIFICANT
+    return _machine(axes, period, x2 if keep else x1)
+
+
+def autocorrelation_time(x):
+    """Integrated autocorrelation time of a residual, in samples: the largest of its axes' (at least 1).
+
+    ``τ = 1 + 2·Σ ρ_k``, summed until the autocorrelation ρ first turns
+    negative; N/τ is the residual's number of effectively independent samples.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, d)
+
+    Returns
+    -------
+    float
+        Between 1 and N/10.
+    """
+    taus = []
+    for y in np.asarray(x, dtype=float).T:
+        y = y - y.mean()
+        n = len(y)
+        f = np.fft.rfft(y, 2 * n)
+        acf = np.fft.irfft(f * np.conj(f))[:n]
+        if acf[0] <= 0:
+            continue
+        acf = acf / acf[0]
+        negative = np.flatnonzero(acf <= 0)
+        stop = negative[0] if negative.size else n
+        taus.append(1.0 + 2.0 * acf[1:stop].sum())
+    return float(np.clip(max(taus, default=1.0), 1.0, len(x) / 10))
+
+
+def delta_bic(rss0, rss1, n, k, tau):
+    """BIC gain of a model with `k` more parameters: ``n_eff·ln(rss0/rss1) − k·ln(n_eff)``, ``n_eff = n/tau``.
+
+    Parameters
+    ----------
+    rss0, rss1 : float
+        Residual sums of squares without and with the parameters.
+    n : int
+        Residual entries.
+    k : int
+        Parameters added.
+    tau : float
+        Autocorrelation time of the residual (:func:`autocorrelation_time`).
+
+    Returns
+    -------
+    float
+    """
+    n_eff = n / tau
+    return n_eff * np.log(rss0 / max(rss1, 1e-300)) - k * np.log(n_eff)
+
+
+def _on_trace(trace, t_sim, y):
+    """Simulated outputs `y` (M, d) on the servo grid `t_sim`, at the trace's samples, shape (N, d)."""
+    n = len(trace.t)
+    if len(t_sim) == n and abs((t_sim[-1] - t_sim[0]) - (trace.t[-1] - trace.t[0])) <= 1e-3 * trace.dt * n:
+        return y[:n]
+    t = np.clip(trace.t, t_sim[0], t_sim[-1])
+    return np.column_stack([np.interp(t, t_sim, y[:, i]) for i in range(y.shape[1])])
