@@ -271,8 +271,6 @@ def test_margins_equal_python_control_stability_margins(extra, dt):
 
 
 def test_loop_analysis_runs_once_per_servo_and_period(monkeypatch):
-    import contoursim.servo as servo_module
-
     calls = []
     loop_gains = servo_module._loop_gains
     monkeypatch.setattr(servo_module, "_loop_gains", lambda blocks: calls.append(1) or loop_gains(blocks))
