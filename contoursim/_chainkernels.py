@@ -210,6 +210,11 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v):
     dropped. The nonzero eigenvalues of AᵀA (k x k) are those of AAᵀ
     (3 x 3): with AAᵀ = U Λ Uᵀ the kept eigenvectors of AᵀA are Aᵀu/√λ, so
     ``X = Σ Aᵀu uᵀ/λ`` and ``null = I − Σ Aᵀu uᵀA/λ`` (scaled variables).
+    When all three are kept that is ``X = Aᵀ G⁻¹``, ``null = I − Aᵀ G⁻¹ A``
+    with G = AAᵀ, taken without the eigenvectors where the bound
+    λ_min ≥ 4 det G / (tr G)² (the two larger eigenvalues' product is at
+    most (tr G / 2)²) shows every eigenvalue above `rcond`, with a margin
+    of two for rounding: the common case, a well-conditioned position.
     `s`, `As`, `G`, `lam`, `U`, `v` are work arrays.
     """
     k = A.shape[1]
@@ -223,21 +228,40 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v):
             for c in range(k):
                 g += As[r, c] * As[q, c]
             G[r, q] = g
-    _eigh3(G, lam, U)
     X[:] = 0.0
     null[:] = 0.0
     for c in range(k):
         null[c, c] = 1.0
-    for i in range(3):
-        if lam[i] <= rcond:
-            continue
-        for c in range(k):  # Aᵀu = √λ · (eigenvector of AᵀA)
-            v[c] = As[0, c] * U[0, i] + As[1, c] * U[1, i] + As[2, c] * U[2, i]
+    # Cofactors of the symmetric G: its adjugate, and its determinant along the first row.
+    c00 = G[1, 1] * G[2, 2] - G[1, 2] * G[1, 2]
+    c01 = G[0, 2] * G[1, 2] - G[0, 1] * G[2, 2]
+    c02 = G[0, 1] * G[1, 2] - G[0, 2] * G[1, 1]
+    det = G[0, 0] * c00 + G[0, 1] * c01 + G[0, 2] * c02
+    trace = G[0, 0] + G[1, 1] + G[2, 2]
+    if det > 0.5 * rcond * trace * trace:  # λ_min ≥ 4 det / tr² > 2 rcond: all kept, X = Aᵀ G⁻¹
+        U[0, 0], U[0, 1], U[0, 2] = c00 / det, c01 / det, c02 / det  # U holds G⁻¹ here
+        U[1, 1] = (G[0, 0] * G[2, 2] - G[0, 2] * G[0, 2]) / det
+        U[1, 2] = (G[0, 1] * G[0, 2] - G[0, 0] * G[1, 2]) / det
+        U[2, 2] = (G[0, 0] * G[1, 1] - G[0, 1] * G[0, 1]) / det
+        U[1, 0], U[2, 0], U[2, 1] = U[0, 1], U[0, 2], U[1, 2]
         for c in range(k):
             for r in range(3):
-                X[c, r] += v[c] * U[r, i] / lam[i]
+                X[c, r] = As[0, c] * U[0, r] + As[1, c] * U[1, r] + As[2, c] * U[2, r]
+        for c in range(k):
             for d in range(k):
-                null[c, d] -= v[c] * v[d] / lam[i]
+                null[c, d] -= X[c, 0] * As[0, d] + X[c, 1] * As[1, d] + X[c, 2] * As[2, d]
+    else:
+        _eigh3(G, lam, U)
+        for i in range(3):
+            if lam[i] <= rcond:
+                continue
+            for c in range(k):  # Aᵀu = √λ · (eigenvector of AᵀA)
+                v[c] = As[0, c] * U[0, i] + As[1, c] * U[1, i] + As[2, c] * U[2, i]
+            for c in range(k):
+                for r in range(3):
+                    X[c, r] += v[c] * U[r, i] / lam[i]
+                for d in range(k):
+                    null[c, d] -= v[c] * v[d] / lam[i]
     for c in range(k):  # back to unscaled variables
         for r in range(3):
             X[c, r] /= s[c]
