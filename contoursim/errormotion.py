@@ -110,13 +110,15 @@ class ErrorMotion:
             val.flags.writeable = False
             object.__setattr__(self, "table", (pos, val))
 
-    def __call__(self, q):
+    def __call__(self, q, out=None):
         """Error motion at positions `q`.
 
         Parameters
         ----------
         q : ndarray, shape (N,)
             Axis positions [mm] or [rad].
+        out : ndarray, shape (N,), optional
+            Where to write the result.
 
         Returns
         -------
@@ -124,7 +126,8 @@ class ErrorMotion:
             The error motion [mm] or [rad].
         """
         q = np.ascontiguousarray(q, dtype=float)
-        out = np.full_like(q, self.poly[-1] if self.poly else 0.0)
+        out = np.empty_like(q) if out is None else out
+        out[...] = self.poly[-1] if self.poly else 0.0
         for c in self.poly[-2::-1]:  # Horner, in place
             out *= q
             out += c

@@ -280,7 +280,10 @@ class Body:
         q = np.ascontiguousarray(q, dtype=float)
         out = np.empty((q.size, 6)) if out is None else out
         for i, m in enumerate(self.motion):
-            out[:, i] = 0.0 if m.is_zero else m(q)
+            if m.is_zero:
+                out[:, i] = 0.0
+            else:
+                m(q, out=out[:, i])
         for i in np.flatnonzero(self.squareness):
             out[:, i] -= (self.sign * self.squareness[i]) * q
         return out
