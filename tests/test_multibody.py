@@ -100,6 +100,15 @@ def test_tilted_rotary_axis_is_a_rodrigues_rotation_about_l():
     np.testing.assert_allclose(p, expect, atol=1e-12)
 
 
+def test_rotation_is_exact_on_both_sides_of_the_series_threshold():
+    """Angles from 1e-9 to 0.1 rad (the series serves below 0.01) rotate as scipy's rotation matrices do."""
+    rng = np.random.default_rng(8)
+    w = rng.normal(size=(400, 3))
+    w *= (np.geomspace(1e-9, 0.1, 400) / np.linalg.norm(w, axis=1))[:, None]
+    v = rng.uniform(-500, 500, (400, 3))
+    np.testing.assert_allclose(multibody._rotate(v, w), Rotation.from_rotvec(w).apply(v), rtol=0, atol=1e-15 * 500 * 4)
+
+
 # -- seed 001 axis vectors ---------------------------------------------------------
 
 
