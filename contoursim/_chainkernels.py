@@ -204,7 +204,7 @@ def _eigh3(A, lam, U):
 
 
 @njit(cache=True, inline="always")
-def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v):
+def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
     """Least-squares operator X (k, 3) of A x = b for a (3, k) A (x = X b), and the projector `null` onto the dropped directions.
 
     Columns are divided by their norm, but at least by `floor`; directions
@@ -217,7 +217,8 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v):
     λ_min ≥ 4 det G / (tr G)² (the two larger eigenvalues' product is at
     most (tr G / 2)²) shows every eigenvalue above `rcond`, with a margin
     of two for rounding: the common case, a well-conditioned position.
-    `s`, `As`, `G`, `lam`, `U`, `v` are work arrays.
+    `null` is left alone unless `with_null`. `s`, `As`, `G`, `lam`, `U`, `v`
+    are work arrays.
     """
     k = A.shape[1]
     for c in range(k):
@@ -231,9 +232,10 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v):
                 g += As[r, c] * As[q, c]
             G[r, q] = g
     X[:] = 0.0
-    null[:] = 0.0
-    for c in range(k):
-        null[c, c] = 1.0
+    if with_null:
+        null[:] = 0.0
+        for c in range(k):
+            null[c, c] = 1.0
     # Cofactors of the symmetric G: its adjugate, and its determinant along the first row.
     c00 = G[1, 1] * G[2, 2] - G[1, 2] * G[1, 2]
     c01 = G[0, 2] * G[1, 2] - G[0, 1] * G[2, 2]
@@ -249,9 +251,10 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v):
         for c in range(k):
             for r in range(3):
                 X[c, r] = As[0, c] * U[0, r] + As[1, c] * U[1, r] + As[2, c] * U[2, r]
-        for c in range(k):
-            for d in range(k):
-                null[c, d] -= X[c, 0] * As[0, d] + X[c, 1] * As[1, d] + X[c, 2] * As[2, d]
+        if with_null:
+            for c in range(k):
+                for d in range(k):
+                    null[c, d] -= X[c, 0] * As[0, d] + X[c, 1] * As[1, d] + X[c, 2] * As[2, d]
     else:
         _eigh3(G, lam, U)
         for i in range(3):
@@ -262,13 +265,15 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v):
             for c in range(k):
                 for r in range(3):
                     X[c, r] += v[c] * U[r, i] / lam[i]
-                for d in range(k):
-                    null[c, d] -= v[c] * v[d] / lam[i]
+                if with_null:
+                    for d in range(k):
+                        null[c, d] -= v[c] * v[d] / lam[i]
     for c in range(k):  # back to unscaled variables
         for r in range(3):
             X[c, r] /= s[c]
-        for d in range(k):
-            null[c, d] *= s[d] / s[c]
+        if with_null:
+            for d in range(k):
+                null[c, d] *= s[d] / s[c]
 
 
 @njit(cache=True)
@@ -285,13 +290,12 @@ def prioritized_inverse(J, rcond):
     X1 = np.empty((k, 3))
     X2 = np.empty((k, 3))
     null = np.empty((k, k))
-    null2 = np.empty((k, k))
     A = np.empty((3, k))
     NX2 = np.empty((k, 3))
     JoX1 = np.empty((3, 3))
     s, As, G, lam, U, v = np.empty(k), np.empty((3, k)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(k)
     for n in range(size):
-        _pinv3(J[n, :3], rcond, 1.0, X1, null, s, As, G, lam, U, v)
+        _pinv3(J[n, :3], rcond, 1.0, X1, null, s, As, G, lam, U, v, rows == 6)
         strongest = 0.0
         if rows == 6:
             for c in range(k):
@@ -310,7 +314,7 @@ def prioritized_inverse(J, rcond):
                 for d in range(k):
                     a += J[n, 3 + i, d] * X1[d, r]
                 JoX1[i, r] = a
-        _pinv3(A, rcond, strongest + 1e-300, X2, null2, s, As, G, lam, U, v)
+        _pinv3(A, rcond, strongest + 1e-300, X2, null, s, As, G, lam, U, v, False)
         for c in range(k):
             for r in range(3):
                 a = 0.0
