@@ -204,6 +204,19 @@ def _eigh3(A, lam, U):
 
 
 @njit(cache=True, inline="always")
+def _adjugate3(M):
+    """The adjugate of a symmetric 3x3 `M` (its cofactors): entries 00, 11, 22, 01, 02, 12."""
+    return (
+        M[1, 1] * M[2, 2] - M[1, 2] * M[1, 2],
+        M[0, 0] * M[2, 2] - M[0, 2] * M[0, 2],
+        M[0, 0] * M[1, 1] - M[0, 1] * M[0, 1],
+        M[0, 2] * M[1, 2] - M[0, 1] * M[2, 2],
+        M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1],
+        M[0, 1] * M[0, 2] - M[0, 0] * M[1, 2],
+    )
+
+
+@njit(cache=True, inline="always")
 def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
     """Least-squares operator X (k, 3) of A x = b for a (3, k) A (x = X b), and the projector `null` onto the dropped directions.
 
@@ -212,11 +225,19 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
     dropped. The nonzero eigenvalues of AᵀA (k x k) are those of AAᵀ
     (3 x 3): with AAᵀ = U Λ Uᵀ the kept eigenvectors of AᵀA are Aᵀu/√λ, so
     ``X = Σ Aᵀu uᵀ/λ`` and ``null = I − Σ Aᵀu uᵀA/λ`` (scaled variables).
-    When all three are kept that is ``X = Aᵀ G⁻¹``, ``null = I − Aᵀ G⁻¹ A``
-    with G = AAᵀ, taken without the eigenvectors where the bound
-    λ_min ≥ 4 det G / (tr G)² (the two larger eigenvalues' product is at
-    most (tr G / 2)²) shows every eigenvalue above `rcond`, with a margin
-    of two for rounding: the common case, a well-conditioned position.
+    That is ``X = Aᵀ G⁺``, ``null = I − Aᵀ G⁺ A`` with G = AAᵀ and G⁺ the
+    inverse of its kept part, taken without the eigenvectors in the two
+    common cases (a margin of two for rounding in each bound):
+
+    - all three kept (a well-conditioned position): G⁺ = G⁻¹, where
+      λ_min ≥ 4 det G / (tr G)² > `rcond` (the two larger eigenvalues'
+      product is at most (tr G / 2)²);
+    - one eigenvalue zero to rounding, the other two kept (the tool axis:
+      a unit vector turns in a plane): with m the sum of G's principal
+      minors (= λ₁λ₂ there) and ``P = adj G / m`` the projector onto the
+      zero one's eigenvector, G⁺ = (G + P)⁻¹ − P, where
+      det G ≤ 1e-13 m tr G and λ_min ≥ m / tr G > `rcond`.
+
     `null` is left alone unless `with_null`. `s`, `As`, `G`, `lam`, `U`, `v`
     are work arrays.
     """
@@ -236,18 +257,27 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
         null[:] = 0.0
         for c in range(k):
             null[c, c] = 1.0
-    # Cofactors of the symmetric G: its adjugate, and its determinant along the first row.
-    c00 = G[1, 1] * G[2, 2] - G[1, 2] * G[1, 2]
-    c01 = G[0, 2] * G[1, 2] - G[0, 1] * G[2, 2]
-    c02 = G[0, 1] * G[1, 2] - G[0, 2] * G[1, 1]
-    det = G[0, 0] * c00 + G[0, 1] * c01 + G[0, 2] * c02
+    a00, a11, a22, a01, a02, a12 = _adjugate3(G)
+    det = G[0, 0] * a00 + G[0, 1] * a01 + G[0, 2] * a02
     trace = G[0, 0] + G[1, 1] + G[2, 2]
-    if det > 0.5 * rcond * trace * trace:  # λ_min ≥ 4 det / tr² > 2 rcond: all kept, X = Aᵀ G⁻¹
-        U[0, 0], U[0, 1], U[0, 2] = c00 / det, c01 / det, c02 / det  # U holds G⁻¹ here
-        U[1, 1] = (G[0, 0] * G[2, 2] - G[0, 2] * G[0, 2]) / det
-        U[1, 2] = (G[0, 1] * G[0, 2] - G[0, 0] * G[1, 2]) / det
-        U[2, 2] = (G[0, 0] * G[1, 1] - G[0, 1] * G[0, 1]) / det
-        U[1, 0], U[2, 0], U[2, 1] = U[0, 1], U[0, 2], U[1, 2]
+    minors = a00 + a11 + a22
+    full = det > 0.5 * rcond * trace * trace  # all three kept
+    plane = not full and det <= 1e-13 * minors * trace and minors > 2.0 * rcond * trace  # one zero, two kept
+    if full or plane:  # U <- G⁺
+        if full:
+            b00, b11, b22, b01, b02, b12 = a00 / det, a11 / det, a22 / det, a01 / det, a02 / det, a12 / det
+        else:
+            a00, a11, a22, a01, a02, a12 = a00 / minors, a11 / minors, a22 / minors, a01 / minors, a02 / minors, a12 / minors  # P
+            U[0, 0], U[1, 1], U[2, 2] = G[0, 0] + a00, G[1, 1] + a11, G[2, 2] + a22  # G + P
+            U[0, 1], U[0, 2], U[1, 2] = G[0, 1] + a01, G[0, 2] + a02, G[1, 2] + a12
+            U[1, 0], U[2, 0], U[2, 1] = U[0, 1], U[0, 2], U[1, 2]
+            b00, b11, b22, b01, b02, b12 = _adjugate3(U)
+            det = U[0, 0] * b00 + U[0, 1] * b01 + U[0, 2] * b02
+            b00, b11, b22 = b00 / det - a00, b11 / det - a11, b22 / det - a22
+            b01, b02, b12 = b01 / det - a01, b02 / det - a02, b12 / det - a12
+        U[0, 0], U[1, 1], U[2, 2] = b00, b11, b22
+        U[0, 1], U[0, 2], U[1, 2] = b01, b02, b12
+        U[1, 0], U[2, 0], U[2, 1] = b01, b02, b12
         for c in range(k):
             for r in range(3):
                 X[c, r] = As[0, c] * U[0, r] + As[1, c] * U[1, r] + As[2, c] * U[2, r]

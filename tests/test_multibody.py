@@ -396,7 +396,11 @@ def test_prioritized_inverse_equals_the_svd_pseudo_inverse():
     """Position rows by the column-scaled pseudo-inverse, tool-axis rows in the null space the position leaves."""
     rng = np.random.default_rng(3)
     J = rng.normal(size=(50, 6, 5)) * np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3])[None, :, None] * rng.uniform(0.5, 300, (50, 1, 5))
-    J[::5, 2] = J[::5, 1]  # every fifth position of rank 2: the eigenvector path, not the inverse of AAᵀ
+    # Positions of rank 2 (one direction dropped, by the projector), of rank 3 with one direction
+    # below rcond and of rank 1: the eigenvector path; the tool axis (rank 2 at most) by the projector.
+    J[::5, 2] = J[::5, 1]
+    J[1::5, 2] = J[1::5, 1] * (1 + 1e-3 * np.arange(5))
+    J[2::5, 1] = J[2::5, 2] = J[2::5, 0]
     P = multibody._prioritized_inverse(J)
     P3 = multibody._prioritized_inverse(np.ascontiguousarray(J[:, :3]))
     for n in range(len(J)):
@@ -406,5 +410,5 @@ def test_prioritized_inverse_equals_the_svd_pseudo_inverse():
         want = np.hstack([X1 - null @ X2 @ Jo @ X1, null @ X2])
         np.testing.assert_allclose(P[n], want, rtol=0, atol=1e-10 * np.abs(want).max())
         np.testing.assert_allclose(P3[n], X1, rtol=0, atol=1e-10 * np.abs(X1).max())
-        if n % 5:
+        if n % 5 > 2:
             np.testing.assert_allclose(J[n, :3] @ P[n, :, :3], np.eye(3), atol=1e-9)  # the position is met exactly
