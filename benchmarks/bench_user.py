@@ -17,8 +17,8 @@ Prints one ``name: value`` line per target:
 - ``geocomp_7axis_300k_s``, ``geocomp_3axis_300k_s``: CPU seconds of one
   geometric compensation of 300 k samples (7-axis and 3-axis presets), a
   warm call: the process compensated 100 samples first, so loading the
-  compiled functions from numba's cache (about 0.3 s, once per process) is
-  not in the figure;
+  compiled functions from numba's cache (0.16–0.18 s measured on this
+  machine, once per process) is not in the figure;
 - ``spline_20k_s``: CPU seconds to build and plan a 20 k-point spline;
 - ``gcode_plan_us_per_block``: CPU µs per block to plan a 5,000-block G-code
   program (G1 moves around a 100 mm polygon, the feed changing every block,

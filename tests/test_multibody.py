@@ -397,7 +397,8 @@ def test_prioritized_inverse_equals_the_svd_pseudo_inverse():
     rng = np.random.default_rng(3)
     J = rng.normal(size=(50, 6, 5)) * np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3])[None, :, None] * rng.uniform(0.5, 300, (50, 1, 5))
     # Positions of rank 2 (one direction dropped, by the projector), of rank 3 with one direction
-    # below rcond and of rank 1: the eigenvector path; the tool axis (rank 2 at most) by the projector.
+    # below rcond and of rank 1: the eigenvector path; the tool axis by the projector where the
+    # position has full rank (the null space it leaves, and so Jo·N, of rank 2), else by the inverse.
     J[::5, 2] = J[::5, 1]
     J[1::5, 2] = J[1::5, 1] * (1 + 1e-3 * np.arange(5))
     J[2::5, 1] = J[2::5, 2] = J[2::5, 0]
