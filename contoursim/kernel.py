@@ -554,8 +554,9 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 slot = k % _NBUF
                 state[a, _BUFX + slot] = enc
                 state[a, _BUFV + slot] = state[a, 1]
-                x_fb[a] = _delayed(state, a, _BUFX, k, n, f)
-                v_fb[a] = _delayed(state, a, _BUFV, k, n, f)
+                # np.int64(constant): numba compiles a callee once per literal argument, once per type otherwise
+                x_fb[a] = _delayed(state, a, np.int64(_BUFX), k, n, f)
+                v_fb[a] = _delayed(state, a, np.int64(_BUFV), k, n, f)
             if record:
                 if write_tool:
                     y = table + state[a, 2]
@@ -599,12 +600,13 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                                      par[a, _VEPS], v)  # fmt: skip
             # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the rows that are zero by construction
             # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
-            state[a, 0] = _plant_row(par, a, 0, x, v, d, w, i, u, force)
-            state[a, 1] = _plant_row(par, a, 1, x, v, d, w, i, u, force)
+            # (rows as np.int64: one compiled _plant_row, not one per literal row number)
+            state[a, 0] = _plant_row(par, a, np.int64(0), x, v, d, w, i, u, force)
+            state[a, 1] = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
             if par[a, _MODE] != 0.0:
-                state[a, 2] = _plant_row(par, a, 2, x, v, d, w, i, u, force)
-                state[a, 3] = _plant_row(par, a, 3, x, v, d, w, i, u, force)
-            state[a, 4] = _plant_row(par, a, 4, x, v, d, w, i, u, force) if electrical else u
+                state[a, 2] = _plant_row(par, a, np.int64(2), x, v, d, w, i, u, force)
+                state[a, 3] = _plant_row(par, a, np.int64(3), x, v, d, w, i, u, force)
+            state[a, 4] = _plant_row(par, a, np.int64(4), x, v, d, w, i, u, force) if electrical else u
         if k % _DIVERGENCE_CHECK == 0 or k == n_steps - 1:
             for a in range(n_axes):
                 if status[a, _DIVERGED] < 0 and not math.isfinite(state[a, 0] + state[a, 1] + state[a, 4]):
