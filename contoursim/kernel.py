@@ -613,16 +613,15 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                     status[a, _DIVERGED] = k
 
 
-@njit(cache=True)
 def _no_coupling():
     """Coupling arguments of :func:`_variant` that switch it off (kind 0)."""
     return np.zeros(_C_NPAR), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(_C_NSTATE)
 
 
 @njit(cache=True, parallel=True)
-def _batch(rows, states, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
-    """:func:`_variant` (without coupling) for each row of `rows` (B, n, NPAR), in parallel over the rows."""
-    cpar, knots, knot_of_sample, cstate = _no_coupling()
+def _batch(rows, states, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
+           tool, encoder, velocity, current, saturated, status):  # fmt: skip
+    """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows; coupling off (:func:`_no_coupling`)."""
     no_estimate = np.empty((0, 3))
     for b in prange(rows.shape[0]):
         _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
@@ -1068,7 +1067,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     arrays["saturated"] = out("saturated", bool)
     status = np.empty((n_variants, n, 3), np.int64)
     states = _initial_state((n_variants, n), ref_pos[0])
-    _batch(rows, states, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), status)
+    _batch(rows, states, ref_pos, ref_vel, ref_acc, *_no_coupling(), int(every), *arrays.values(), status)
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
     result["saturated_count"] = status[..., _CLAMPED]
