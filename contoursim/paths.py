@@ -182,8 +182,16 @@ def _eval_prim(kind, row, u, out):
 @njit(cache=True)
 def _primitive_at(breaks, s):
     """Index of the primitive holding arc length s (the later one at a junction)."""
-    k = np.searchsorted(breaks, s, side="right") - 1
-    return min(max(k, 0), breaks.size - 2)
+    # bisection for np.searchsorted(breaks, s, side="right") - 1 (a NaN after all): numba's searchsorted
+    # compiles comparisons for every dtype (~0.4 s on a first run)
+    lo, hi = 0, breaks.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if s < breaks[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return min(max(lo - 1, 0), breaks.size - 2)
 
 
 @njit(cache=True)
