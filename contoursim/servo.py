@@ -361,17 +361,20 @@ def _expm(M):
     while norm > 0.5:
         norm /= 2.0
         squarings += 1
-    X = M / 2.0**squarings
+    scale = 2.0**squarings
+    X = np.empty((n, n))
     E = np.empty((n, n))
     for i in range(n):
         for j in range(n):
+            X[i, j] = M[i, j] / scale
             E[i, j] = (1.0 if i == j else 0.0) + X[i, j]
     term = X
     for k in range(2, 30):
-        term = _matmul(term, X) / k
+        term = _matmul(term, X)
         term_max = E_max = 0.0
         for i in range(n):
             for j in range(n):
+                term[i, j] /= k
                 E[i, j] += term[i, j]
                 term_max, E_max = max(term_max, abs(term[i, j])), max(E_max, abs(E[i, j]))
         if term_max <= 1e-18 * E_max:
