@@ -387,6 +387,7 @@ def _three_point_arc(knots, n, up):
     m = knots.shape[0]
     if m == 2:
         t = _unit(_sub(_row(knots, 1), _row(knots, 0)), (1.0, 0.0, 0.0))
+        # np.bool_(True), not the literal True: numba would compile _binormal for it besides bool
         return _row(knots, n), t, _binormal(t, t, np.bool_(True), up), 0.0
     i = min(max(n, 1), m - 2)
     pn = _row(knots, i)

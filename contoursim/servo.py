@@ -350,7 +350,7 @@ def _expm(M):
     terms; the 20th is below ``0.5^20/20! ≈ 4e-25``).
     """
     n = M.shape[0]
-    # plain loops, not array expressions: numba would compile their broadcasting and its error messages (~1.5 s)
+    # plain loops, not array expressions: numba would compile their broadcasting and its error messages (~1 s)
     norm = 0.0
     for j in range(n):
         column = 0.0
