@@ -198,7 +198,8 @@ def _foot_points(kinds, rows, breaks, closed, knot_s, idx, act):
             d = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
             if d < best_d:
                 best_d, best_k, best_u = d, k, u
-                frame[i] = out
+                for c in range(9):  # not frame[i] = out: numba compiles its shape-mismatch error (~2 s)
+                    frame[i, c] = out[c]
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
             for _ in range(k_count):
@@ -214,7 +215,8 @@ def _foot_points(kinds, rows, breaks, closed, knot_s, idx, act):
                 if d >= best_d:
                     break
                 best_d, best_k, best_u, k = d, nk, u, nk
-                frame[i] = out
+                for c in range(9):
+                    frame[i, c] = out[c]
         s_out[i] = breaks[best_k] + best_u
         prim[i] = best_k
     return frame, s_out, prim

@@ -387,7 +387,8 @@ def _three_point_arc(knots, n, up):
     m = knots.shape[0]
     if m == 2:
         t = _unit(_sub(_row(knots, 1), _row(knots, 0)), (1.0, 0.0, 0.0))
-        return _row(knots, n), t, _binormal(t, t, True, up), 0.0
+        # np.bool_(True), not the literal True: numba would compile _binormal for it besides bool
+        return _row(knots, n), t, _binormal(t, t, np.bool_(True), up), 0.0
     i = min(max(n, 1), m - 2)
     pn = _row(knots, i)
     a = _sub(pn, _row(knots, i - 1))
@@ -399,7 +400,7 @@ def _three_point_arc(knots, n, up):
     if ww <= 1e-24 * aa * cc * (aa + cc):
         # a cusp: P_{n+1} = P_{n-1}, the path reverses at P_n; use the incoming line
         t = _unit(a, (1.0, 0.0, 0.0))
-        return pn, t, _binormal(t, x, True, up), 0.0
+        return pn, t, _binormal(t, x, np.bool_(True), up), 0.0
     nw = np.sqrt(ww)
     t = _scale(1.0 / nw, w)
     straight = _dot(x, x) <= _STRAIGHT**2 * aa * cc

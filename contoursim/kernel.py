@@ -554,8 +554,9 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 slot = k % _NBUF
                 state[a, _BUFX + slot] = enc
                 state[a, _BUFV + slot] = state[a, 1]
-                x_fb[a] = _delayed(state, a, _BUFX, k, n, f)
-                v_fb[a] = _delayed(state, a, _BUFV, k, n, f)
+                # np.int64(constant): numba compiles a callee once per literal argument, once per type otherwise
+                x_fb[a] = _delayed(state, a, np.int64(_BUFX), k, n, f)
+                v_fb[a] = _delayed(state, a, np.int64(_BUFV), k, n, f)
             if record:
                 if write_tool:
                     y = table + state[a, 2]
@@ -599,28 +600,28 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                                      par[a, _VEPS], v)  # fmt: skip
             # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the rows that are zero by construction
             # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
-            state[a, 0] = _plant_row(par, a, 0, x, v, d, w, i, u, force)
-            state[a, 1] = _plant_row(par, a, 1, x, v, d, w, i, u, force)
+            # (rows as np.int64: one compiled _plant_row, not one per literal row number)
+            state[a, 0] = _plant_row(par, a, np.int64(0), x, v, d, w, i, u, force)
+            state[a, 1] = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
             if par[a, _MODE] != 0.0:
-                state[a, 2] = _plant_row(par, a, 2, x, v, d, w, i, u, force)
-                state[a, 3] = _plant_row(par, a, 3, x, v, d, w, i, u, force)
-            state[a, 4] = _plant_row(par, a, 4, x, v, d, w, i, u, force) if electrical else u
+                state[a, 2] = _plant_row(par, a, np.int64(2), x, v, d, w, i, u, force)
+                state[a, 3] = _plant_row(par, a, np.int64(3), x, v, d, w, i, u, force)
+            state[a, 4] = _plant_row(par, a, np.int64(4), x, v, d, w, i, u, force) if electrical else u
         if k % _DIVERGENCE_CHECK == 0 or k == n_steps - 1:
             for a in range(n_axes):
                 if status[a, _DIVERGED] < 0 and not math.isfinite(state[a, 0] + state[a, 1] + state[a, 4]):
                     status[a, _DIVERGED] = k
 
 
-@njit(cache=True)
 def _no_coupling():
     """Coupling arguments of :func:`_variant` that switch it off (kind 0)."""
     return np.zeros(_C_NPAR), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(_C_NSTATE)
 
 
 @njit(cache=True, parallel=True)
-def _batch(rows, states, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
-    """:func:`_variant` (without coupling) for each row of `rows` (B, n, NPAR), in parallel over the rows."""
-    cpar, knots, knot_of_sample, cstate = _no_coupling()
+def _batch(rows, states, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
+           tool, encoder, velocity, current, saturated, status):  # fmt: skip
+    """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows; coupling off (:func:`_no_coupling`)."""
     no_estimate = np.empty((0, 3))
     for b in prange(rows.shape[0]):
         _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
@@ -1066,7 +1067,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     arrays["saturated"] = out("saturated", bool)
     status = np.empty((n_variants, n, 3), np.int64)
     states = _initial_state((n_variants, n), ref_pos[0])
-    _batch(rows, states, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), status)
+    _batch(rows, states, ref_pos, ref_vel, ref_acc, *_no_coupling(), int(every), *arrays.values(), status)
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
     result["saturated_count"] = status[..., _CLAMPED]

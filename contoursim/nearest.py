@@ -130,7 +130,7 @@ def nearest_knots(knots, points, window):
         Index of the nearest knot found for each position.
     """
     idx = np.empty(points.shape[0], np.int64)
-    j = 0
+    j = np.int64(0)  # not the literal 0: numba would compile nearest_knot for it besides int64
     for k in range(points.shape[0]):
         j = nearest_knot(knots, j, (points[k, 0], points[k, 1], points[k, 2]), window)
         idx[k] = j

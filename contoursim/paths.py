@@ -113,9 +113,10 @@ def _spline_tables(coefs):
     rows = np.zeros((coefs.shape[0], NCOL))
     for k in range(coefs.shape[0]):
         row = rows[k]
-        row[:12] = coefs[k]
-        for j in range(_TABLE):
-            row[13 + j] = row[12 + j] + _spline_integral(row, j / _TABLE, (j + 1) / _TABLE)
+        for c in range(12):  # not row[:12] = coefs[k]: numba would compile its shape-mismatch error (~1.5 s)
+            row[c] = coefs[k, c]
+        for j in range(_TABLE):  # integrated over the read-only coefs[k]: the signature of every other call
+            row[13 + j] = row[12 + j] + _spline_integral(coefs[k], j / _TABLE, (j + 1) / _TABLE)
     return rows
 
 
@@ -181,8 +182,16 @@ def _eval_prim(kind, row, u, out):
 @njit(cache=True)
 def _primitive_at(breaks, s):
     """Index of the primitive holding arc length s (the later one at a junction)."""
-    k = np.searchsorted(breaks, s, side="right") - 1
-    return min(max(k, 0), breaks.size - 2)
+    # bisection for np.searchsorted(breaks, s, side="right") - 1 (a NaN s sorting last, as in numpy):
+    # numba's searchsorted compiles comparisons for every dtype (~0.3 s of a first run)
+    lo, hi = 0, breaks.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if s < breaks[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return min(max(lo - 1, 0), breaks.size - 2)
 
 
 @njit(cache=True)
@@ -455,7 +464,9 @@ def _spline_rows(coefs):
     speed = np.linalg.norm(coefs[None, :, 1] + 2 * coefs[None, :, 2] * w + 3 * coefs[None, :, 3] * w**2, axis=2)
     chord = np.linalg.norm(coefs[:, 1:].sum(axis=1), axis=1)
     cusps = np.flatnonzero(speed.min(axis=0) <= 1e-9 * np.maximum(chord, 1e-300))
-    return _spline_tables(np.ascontiguousarray(coefs.reshape(len(coefs), 12))), cusps
+    flat = np.ascontiguousarray(coefs.reshape(len(coefs), 12))  # a new view: the caller's array keeps its flags
+    flat.flags.writeable = False  # read-only as a Path's rows are: one compiled signature of the spline helpers
+    return _spline_tables(flat), cusps
 
 
 # --------------------------------------------------------------------------- path

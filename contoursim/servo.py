@@ -350,20 +350,34 @@ def _expm(M):
     terms; the 20th is below ``0.5^20/20! ≈ 4e-25``).
     """
     n = M.shape[0]
+    # plain loops, not array expressions: numba would compile their broadcasting and its error messages (~1 s)
     norm = 0.0
     for j in range(n):
-        norm = max(norm, np.abs(M[:, j]).sum())
+        column = 0.0
+        for i in range(n):
+            column += abs(M[i, j])
+        norm = max(norm, column)
     squarings = 0
     while norm > 0.5:
         norm /= 2.0
         squarings += 1
-    X = M / 2.0**squarings
-    E = np.eye(n) + X
-    term = X.copy()
-    for j in range(2, 30):
-        term = _matmul(term, X) / j
-        E += term
-        if np.abs(term).max() <= 1e-18 * np.abs(E).max():
+    scale = 2.0**squarings
+    X = np.empty((n, n))
+    E = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            X[i, j] = M[i, j] / scale
+            E[i, j] = (1.0 if i == j else 0.0) + X[i, j]
+    term = X
+    for k in range(2, 30):
+        term = _matmul(term, X)
+        term_max = E_max = 0.0
+        for i in range(n):
+            for j in range(n):
+                term[i, j] /= k
+                E[i, j] += term[i, j]
+                term_max, E_max = max(term_max, abs(term[i, j])), max(E_max, abs(E[i, j]))
+        if term_max <= 1e-18 * E_max:
             break
     for _ in range(squarings):
         E = _matmul(E, E)

@@ -85,6 +85,32 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
     assert "--every: must be a whole number of samples, at least 1; got '0'" in capsys.readouterr().err
 
 
+# a fresh process with an empty numba cache (a function loaded from the cache does not compile its callees):
+# the compiled functions the demo uses, and how many machine-code versions of each it made
+DEMO_SIGNATURES = """
+import contextlib, io, sys
+from numba.core.registry import CPUDispatcher
+import contoursim.cli
+with contextlib.redirect_stdout(io.StringIO()):
+    assert contoursim.cli.main(["demo", "--out", sys.argv[1]]) == 0
+for name, module in list(sys.modules.items()):
+    if name.startswith("contoursim"):
+        for value in vars(module).values():
+            if isinstance(value, CPUDispatcher) and value.__module__ == name and value.signatures:
+                print(f"{name}.{value.__name__}", len(value.signatures))
+"""
+
+
+def test_demo_compiles_each_function_once(tmp_path):
+    """No copy per literal argument (a row number, a flag) or per writeable/read-only array: a first run compiles less."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
+    done = subprocess.run([sys.executable, "-c", DEMO_SIGNATURES, str(tmp_path / "out")], cwd=ROOT, env=env,
+                          capture_output=True, text=True, check=True)
+    counts = dict(line.rsplit(" ", 1) for line in done.stdout.splitlines())
+    assert "contoursim.kernel._variant" in counts and "contoursim.kernel._plant_row" in counts  # the kernel ran
+    assert {name: n for name, n in counts.items() if n != "1"} == {}
+
+
 def test_never_writes_into_a_users_directory(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("mine")
     assert main(["demo", "--out", str(tmp_path)]) == 2
