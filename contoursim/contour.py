@@ -225,7 +225,7 @@ def _foot_points(kinds, rows, breaks, closed, knot_s, idx, act):
 # --------------------------------------------------------------------------- public function
 
 #: Actual points whose foot frames :func:`exact_contour_error` holds at once [points].
-_BLOCK = 1 << 16
+_BLOCK = 1 << 14
 
 
 def _binormal(path, prim, tangent, kvec):

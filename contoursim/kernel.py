@@ -331,8 +331,8 @@ class ServoResponse:
 
     Parameters
     ----------
-    t : ndarray, shape (N,)
-        Sample times ``k·dt`` [s].
+    dt : float
+        Servo period [s]: the samples are at ``t = k·dt`` (:attr:`t`).
     position : ndarray, shape (N, n)
         Tool position of each axis at ``t_k`` [mm]: the table (behind any
         backlash) plus the tool-side deflection of a structural mode, plus
@@ -358,7 +358,7 @@ class ServoResponse:
     simulation whose state stopped being finite.
     """
 
-    t: np.ndarray
+    dt: float
     position: np.ndarray
     encoder: np.ndarray
     velocity: np.ndarray
@@ -367,19 +367,24 @@ class ServoResponse:
     contour_estimate: np.ndarray | None = None
 
     def __post_init__(self):
-        t = _validate.float_array("t", self.t, ndim=1)
-        shape = (t.size, _validate.float_array("position", self.position, ndim=2).shape[1])
-        arrays = dict(t=t, saturated=np.asarray(self.saturated, bool))
+        object.__setattr__(self, "dt", _validate.positive("dt", self.dt))
+        shape = _validate.float_array("position", self.position, ndim=2).shape
+        arrays = dict(saturated=np.asarray(self.saturated, bool))
         for name in ("position", "encoder", "velocity", "current"):
             arrays[name] = _validate.float_array(name, getattr(self, name), shape=shape)
         if arrays["saturated"].shape != shape:
             raise ValueError(f"saturated must have shape {shape}, got {arrays['saturated'].shape}")
         if self.contour_estimate is not None:
             arrays["contour_estimate"] = _validate.float_array("contour_estimate", self.contour_estimate,
-                                                               shape=(t.size, 3))
+                                                               shape=(shape[0], 3))
         for name, value in arrays.items():
             value.flags.writeable = False
             object.__setattr__(self, name, value)
+
+    @property
+    def t(self):
+        """Sample times ``k·dt`` [s], shape (N,): made on each call, not kept (8 bytes a step)."""
+        return np.arange(self.position.shape[0]) * self.dt
 
 
 # ---------------------------------------------------------------------------------------------
@@ -993,7 +998,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
             f"the simulation of axis {names[a]!r} diverged by t = {diverged[a] * dt:.6g} s (step {diverged[a]}): "
             "its loop with these effects (or this coupling) is unstable"
         )
-    return ServoResponse(np.arange(n_steps) * dt, *outputs[:5], contour_estimate=None if coupling is None else estimate)
+    return ServoResponse(dt, *outputs[:5], contour_estimate=None if coupling is None else estimate)
 
 
 def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, dtype=np.float64):

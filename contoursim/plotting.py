@@ -158,7 +158,9 @@ def plot_path_error(result, ax=None, magnification=None):
         _validate.positive("magnification", magnification)
     if k < 1:
         raise ValueError(f"magnification must be at least 1 (true scale), got {k:g}")
-    shown = contour.foot[:, :2] + k * (result.tool_position[:, :2] - contour.foot[:, :2])
+    shown = result.tool_position[:, :2] - contour.foot[:, :2]  # foot + k·(actual − foot), in place: one (N, 2) array
+    shown *= k
+    shown += contour.foot[:, :2]
     step = size / (2 * _COLUMNS)
     ir, ia = _thin_curve(ref, step), _thin_curve(shown, step)
     ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=1.0, label="reference")
@@ -329,23 +331,26 @@ def plot_errors_over_time(result, fig=None):
     axes = fig.subplots(3, 1, sharex=True)
     t = result.trajectory.t
     response = result.servo_response
-    following = result.axis_command[:, result.machine.servo_columns] - response.position
+    following = np.take(result.axis_command, result.machine.servo_columns, axis=1)  # a new array: scaled in place
+    following -= response.position
+    following *= 1e3  # [µm]
     names = list(result.machine.axes)
     contour, labels = result.contour.normal[:, None], ["contour error"]
     if result.trajectory.dim == 3:  # a 3-D path: the part out of the path's plane too
         contour, labels = np.column_stack([contour, result.contour.out_of_plane]), ["in plane", "out of plane"]
     series = [
         (axes[0], 1e3 * contour, labels, "contour error [µm]"),
-        (axes[1], 1e3 * following, names, "following error [µm]"),
+        (axes[1], following, names, "following error [µm]"),
         (axes[2], response.current, names, "motor current [A]"),
     ]
-    test = np.flatnonzero(result.trajectory.measuring)
+    measuring = result.trajectory.measuring
+    test = t[np.argmax(measuring)], t[len(measuring) - 1 - np.argmax(measuring[::-1])]  # its first and last sample
     for ax, values, labels, ylabel in series:
         keep = envelope_indices(values)
         for j, label in enumerate(labels):
             ax.plot(t[keep], values[keep, j], lw=0.9, label=label, color="C3" if ax is axes[0] and j == 0 else f"C{j}")
         if _has_test(result.trajectory):
-            ax.axvspan(t[test[0]], t[test[-1]], color="0.93", zorder=0, label="test proper")
+            ax.axvspan(*test, color="0.93", zorder=0, label="test proper")
         ax.axhline(0.0, color="0.5", lw=0.6)
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
