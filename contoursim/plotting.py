@@ -117,8 +117,15 @@ def envelope_indices(values, columns=_COLUMNS):
 
 def _thin_curve(points, step):
     """Indices of points along a curve, about `step` apart along it (and the last one) [same units]."""
-    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    first = np.flatnonzero(np.diff(np.floor(travelled / step), prepend=-1.0) > 0)
+    squares = np.diff(points, axis=0)
+    squares *= squares  # the segment lengths as np.linalg.norm computes them, with one (N, d) temporary
+    cell = np.empty(len(points))  # the travelled distance, then the step it is in, in place
+    cell[0] = 0.0
+    np.cumsum(np.sqrt(squares.sum(axis=1)), out=cell[1:])
+    del squares
+    cell /= step
+    np.floor(cell, out=cell)
+    first = np.concatenate([[0], 1 + np.flatnonzero(cell[1:] > cell[:-1])])
     return np.union1d(first, [len(points) - 1])
 
 
