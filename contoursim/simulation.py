@@ -173,7 +173,7 @@ class SimResult:
             "units": f"t [s]; {columns}{contour} [mm]; measuring [1 = test proper, 0 = not]",
         }
         extra = {} if self.contour is None else {"contour": self.contour.magnitude, "contour_normal": self.contour.normal}
-        extra["measuring"] = self.trajectory.measuring.view(np.uint8)  # written 1/0 as a bool is, without an int copy
+        extra["measuring"] = self.trajectory.measuring
         write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
 
 
