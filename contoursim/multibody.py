@@ -331,10 +331,11 @@ class Body:
             [mm, rad], in the body's frame after its ideal motion.
         """
         out = np.empty((np.size(t), 6)) if out is None else out
-        out[:] = self.thermal
-        if self.thermal_growth.any():
-            out[:, :3] += (q - self.thermal_reference)[:, None] * self.thermal_growth
-        out *= self.thermal_time(t)[:, None]
+        tau = self.thermal_time(t)
+        for c, rate in enumerate(self.thermal):  # column by column: contiguous in the chain's (6, N) rows
+            if c < 3 and self.thermal_growth[c]:
+                rate = rate + self.thermal_growth[c] * (q - self.thermal_reference)
+            np.multiply(tau, rate, out=out[:, c])
         return out
 
     def thermal_time(self, t):
