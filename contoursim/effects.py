@@ -410,10 +410,13 @@ _register(EffectKind(
 _register(EffectKind(
     "thermal_drift", "geometry",
     (
-        _p("rate_um_per_min", 0.0, "µm/min", (-1e4, 1e4), (1.0, 10.0), doc="drift rate along the axis at the start"),
+        _p("rate_um_per_min", 0.0, "µm/min", (-1e4, 1e4), (1.0, 10.0), doc="drift rate along the axis at the start, at reference_mm"),
         _p("time_constant_s", 0.0, "s", (0.0, 1e6), vary=False, doc="0: linear in time; else first-order, rate·τ·(1 − exp(−t/τ))"),
+        _p("growth_ppm_per_min", 0.0, "ppm/min", (-1e4, 1e4), (0.5, 5.0),
+           doc="thermal growth: the drift rate grows by this many µm/min per m of axis position from reference_mm"),
+        _p("reference_mm", 0.0, "mm", (-1e5, 1e5), vary=False, doc="axis position where the growth is zero (the screw's fixed end, or the axis zero)"),
     ),
-    doc="slow drift of an axis's position in time",
+    doc="slow drift of an axis's position in time, growing with the distance from reference_mm (seed 004's δt(q))",
 ))
 _register(EffectKind(
     "vibration", "loop",

@@ -31,8 +31,9 @@ How each stage realises its effects (:data:`contoursim.effects.STAGES`):
   cyclic_error   ``s·amplitude·sin(2π·q/period + phase)`` on the positioning error
   straightness   ``side·(−peak·(2(q − q0)/span)²)`` on the error motion along
                  error_direction; q0 the axis position at the path origin
-  thermal_drift  ``thermal[dir] += s·rate`` (with ``time_constant_s`` the body's
-                 first-order time constant)
+  thermal_drift  ``thermal[dir] += s·rate``, ``thermal_growth[dir] += s·growth`` from
+                 ``reference_mm`` (with ``time_constant_s`` the body's first-order time
+                 constant): the drift ``τ(t)·(rate + growth·(q − reference))``
   ============== ========================================================================
 """
 
@@ -348,14 +349,19 @@ def _straightness(e, body, side, chain, home):
 
 def _thermal_drift(e, body, side, chain, home):
     tau = e["time_constant_s"]
-    if body.thermal.any() and body.thermal_time_constant != tau:
+    if body.drifts and body.thermal_time_constant != tau:
         raise ValueError(
             f"body {body.name!r} already drifts with time constant {body.thermal_time_constant:g} s; "
             f"a drift with {tau:g} s cannot be added to it"
         )
+    growth = e["growth_ppm_per_min"] * 1e-6 / 60.0  # [mm/s per mm]
+    # a body that grows already keeps its reference: growth·(q − r_e) = growth·(q − r_b) + growth·(r_b − r_e)
+    reference = body.thermal_reference if body.thermal_growth.any() else e["reference_mm"]
     thermal = body.thermal.copy()
-    thermal[body.direction] += body.sign * e["rate_um_per_min"] * _MM_PER_UM / 60.0
-    return replace(body, thermal=thermal, thermal_time_constant=tau)
+    thermal[body.direction] += body.sign * (e["rate_um_per_min"] * _MM_PER_UM / 60.0 + growth * (reference - e["reference_mm"]))
+    thermal_growth = body.thermal_growth.copy()
+    thermal_growth[body.direction] += body.sign * growth
+    return replace(body, thermal=thermal, thermal_growth=thermal_growth, thermal_reference=reference, thermal_time_constant=tau)
 
 
 _GEOMETRY = {

@@ -16,8 +16,12 @@ characteristic matrices (seed 000 eq. 1.41, seed 004 eq. 6 and 15)::
   a rotary joint a rotation by q about its axis line. With a squareness
   (tilt) error the rotary axis line is the tilted unit vector ``l`` of seed
   001 (l_a, l_b, l_c) and M is the Rodrigues rotation about ``l``;
-- ``D``: thermal drift, its own matrix (seed 004): rates [mm/s, rad/s] × t,
-  or × τ·(1 − exp(−t/τ)) for a first-order drift with time constant τ;
+- ``D``: thermal drift, its own matrix (seed 004 eq. 6, δxt(q), δyt(q),
+  δzt(q)): the twist ``τ(t)·(rate + growth·(q − q_ref))`` with τ(t) = t, or
+  τ·(1 − exp(−t/τ)) for a first-order drift with time constant τ; rates
+  [mm/s, rad/s], and on a linear joint the thermal growth of the axis
+  [mm/s per mm] (the screw or scale expands: the drift grows with the
+  distance from q_ref, the axis's fixed end or zero);
 - ``E``: motion error, the six error motions ``dx, dy, dz, ex, ey, ez`` of
   the axis as functions of q, plus the linear-axis squareness, which enters
   the translation column as ``−ξ·S`` (seed 004 eq. 9 and 11; ξ the carriage
@@ -164,11 +168,19 @@ class Body:
     tilt : ndarray, shape (3,)
         Rotary joint: squareness of the axis line s_k,d [rad] (seed 001).
     thermal : ndarray, shape (6,)
-        Thermal drift rates dx, dy, dz [mm/s], ex, ey, ez [rad/s].
+        Thermal drift rates dx, dy, dz [mm/s], ex, ey, ez [rad/s] (at
+        ``q = thermal_reference``).
+    thermal_growth : ndarray, shape (3,)
+        Linear joint: thermal growth dx, dy, dz [mm/s per mm of axis
+        position, i.e. 1/s]: the drift rate grows by this much per mm from
+        `thermal_reference`, ``rate + growth·(q − thermal_reference)``.
+    thermal_reference : float
+        Axis position [mm] where the thermal growth is zero (the screw's
+        fixed bearing, or the axis zero).
     thermal_time_constant : float
         0 (default): the drift grows linearly in time, ``rate·t``; τ > 0 [s]:
         first order, ``rate·τ·(1 − exp(−t/τ))`` (rate at the start, levels
-        off at rate·τ).
+        off at rate·τ). The same for the growth.
     travel : tuple of float, optional
         Axis travel (min, max) [mm or rad].
     """
@@ -185,6 +197,8 @@ class Body:
     squareness: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tilt: np.ndarray = field(default_factory=lambda: np.zeros(3))
     thermal: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    thermal_growth: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    thermal_reference: float = 0.0
     thermal_time_constant: float = 0.0
     travel: tuple = None
 
@@ -199,7 +213,7 @@ class Body:
             raise ValueError(f"{self.name}: a moving joint needs an axis name, a fixed one has none")
         if len(self.motion) != 6 or not all(isinstance(m, ErrorMotion) for m in self.motion):
             raise ValueError(f"{self.name}: motion must be 6 ErrorMotion objects (dx, dy, dz, ex, ey, ez)")
-        for name, size in (("offset", 3), ("static", 6), ("squareness", 3), ("tilt", 3), ("thermal", 6)):
+        for name, size in (("offset", 3), ("static", 6), ("squareness", 3), ("tilt", 3), ("thermal", 6), ("thermal_growth", 3)):
             arr = _validate.finite_array(f"{self.name}.{name}", getattr(self, name), shape=(size,))
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
@@ -209,6 +223,9 @@ class Body:
             raise ValueError(f"{self.name}: tilt applies to a rotary joint, towards the other two directions")
         if self.joint == "fixed" and any(not m.is_zero for m in self.motion):
             raise ValueError(f"{self.name}: a fixed body has no error motions (use static)")
+        if self.thermal_growth.any() and self.joint != "linear":
+            raise ValueError(f"{self.name}: thermal growth applies to a linear joint (it grows with the axis position)")
+        object.__setattr__(self, "thermal_reference", _validate.finite(f"{self.name}.thermal_reference", self.thermal_reference))
         object.__setattr__(self, "thermal_time_constant",
                            _validate.nonnegative(f"{self.name}.thermal_time_constant", self.thermal_time_constant))
         if self.travel is not None:
@@ -227,6 +244,7 @@ class Body:
             ("squareness", self.squareness, _DIRECTIONS),
             ("tilt", self.tilt, _DIRECTIONS),
             ("thermal", self.thermal, COMPONENTS),
+            ("thermal_growth", self.thermal_growth, COMPONENTS[:3]),
         ):
             out.update({f"{self.name}.{group}.{c}": float(v) for c, v in zip(comps, values) if v})
         return out
@@ -240,6 +258,7 @@ class Body:
             squareness=factor * self.squareness,
             tilt=factor * self.tilt,
             thermal=factor * self.thermal,
+            thermal_growth=factor * self.thermal_growth,
         )
 
     def with_parameter(self, key, value):
@@ -250,7 +269,8 @@ class Body:
             motion = list(self.motion)
             motion[i] = motion[i].with_parameter(rest, value)
             return replace(self, motion=tuple(motion))
-        names = {"static": COMPONENTS, "thermal": COMPONENTS, "squareness": _DIRECTIONS, "tilt": _DIRECTIONS}
+        names = {"static": COMPONENTS, "thermal": COMPONENTS, "thermal_growth": COMPONENTS[:3], "squareness": _DIRECTIONS,
+                 "tilt": _DIRECTIONS}
         if group not in names or rest not in names[group]:
             raise ValueError(f"unknown parameter {self.name}.{key}")
         arr = getattr(self, group).copy()
@@ -288,11 +308,35 @@ class Body:
             out[:, i] -= (self.sign * self.squareness[i]) * q
         return out
 
-    def thermal_drift(self, t, n):
-        """Thermal drift twist, shape (n, 6), at times `t` (s, shape (n,)); zeros when t is None."""
-        if t is None or not self.thermal.any():
-            return np.zeros((n, 6))
-        return self.thermal_time(t)[:, None] * self.thermal
+    @property
+    def drifts(self):
+        """True when the thermal drift is not identically zero."""
+        return bool(self.thermal.any() or self.thermal_growth.any())
+
+    def thermal_drift(self, t, q=None, out=None):
+        """Thermal drift twist ``τ(t)·(rate + growth·(q − q_ref))`` (dx, dy, dz, ex, ey, ez).
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times [s].
+        q : ndarray, shape (N,), optional
+            Axis positions [mm]; needed when the body has a thermal growth.
+        out : ndarray, shape (N, 6), optional
+            Where to write the result.
+
+        Returns
+        -------
+        ndarray, shape (N, 6)
+            [mm, rad], in the body's frame after its ideal motion.
+        """
+        out = np.empty((np.size(t), 6)) if out is None else out
+        tau = self.thermal_time(t)
+        for c, rate in enumerate(self.thermal):  # column by column: contiguous in the chain's (6, N) rows
+            if c < 3 and self.thermal_growth[c]:
+                rate = rate + self.thermal_growth[c] * (q - self.thermal_reference)
+            np.multiply(tau, rate, out=out[:, c])
+        return out
 
     def thermal_time(self, t):
         """What the drift rates multiply: ``t``, or ``τ·(1 − exp(−t/τ))`` for a first-order drift [s]."""
@@ -436,7 +480,8 @@ class MachineChain:
         Names are ``<body>.<dx|dy|dz|ex|ey|ez>.p<k>`` (polynomial coefficient
         [mm or rad per unit of q^k]), ``<body>.<comp>.cyclic<i>.sin|cos``,
         ``<body>.static.<comp>``, ``<body>.squareness.<x|y|z>`` [rad],
-        ``<body>.tilt.<x|y|z>`` [rad], ``<body>.thermal.<comp>`` [mm/s, rad/s].
+        ``<body>.tilt.<x|y|z>`` [rad], ``<body>.thermal.<comp>`` [mm/s, rad/s],
+        ``<body>.thermal_growth.<dx|dy|dz>`` [1/s: mm/s per mm].
         Tabulated error motions are data, not parameters.
         """
         out = {}
@@ -488,27 +533,37 @@ class MachineChain:
         translation d) with w, d fixed or read from q, t or the error
         motions. The tool tip goes out from the tool frame through the tool
         branch's bodies, last step first, then in through the workpiece
-        branch's bodies, inverted.
+        branch's bodies, inverted. A thermal drift in time only is a THERMAL
+        step (a time row times the rates); one with a thermal growth depends
+        on the axis position too and is a per-sample twist, an ERROR step
+        reading its row of `err`.
 
         Returns
         -------
         steps : list of (kind, inverse, column, vector (6,))
         err : ndarray, shape (M, 6, N)
-            Error motions of the moving bodies that have any [mm, rad].
+            Error motions of the moving bodies that have any, then the thermal
+            drift of the bodies with a thermal growth [mm, rad].
         times : ndarray, shape (T, N)
             What the thermal drift rates multiply, one row per time constant
             (:meth:`Body.thermal_time`) [s].
         """
         K = _chainkernels
+        drifting = [] if ideal or t is None else [j for j, b in enumerate(self.bodies, 1) if b.drifts]
+        growing = [j for j in drifting if self.bodies[j - 1].thermal_growth.any()]
         with_errors = [j for j, b in enumerate(self.bodies, 1) if not ideal and b.joint != "fixed" and b.has_motion_error]
-        err = np.empty((len(with_errors), 6, q.shape[0]))  # each component contiguous
+        err = np.empty((len(with_errors) + len(growing), 6, q.shape[0]))  # each component contiguous
         for i, j in enumerate(with_errors):
             b = self.bodies[j - 1]
             b.motion_error(q[:, self.axes.index(b.axis)], out=err[i].T)
+        for i, j in enumerate(growing, start=len(with_errors)):
+            b = self.bodies[j - 1]
+            b.thermal_drift(t, q[:, self.axes.index(b.axis)], out=err[i].T)
 
         drift_times = {}  # time constant -> what the drift rates multiply
-        for b in self.bodies:
-            if not ideal and t is not None and b.thermal.any():
+        for j in drifting:
+            b = self.bodies[j - 1]
+            if j not in growing:
                 drift_times.setdefault(b.thermal_time_constant, b.thermal_time(t))
         constants = list(drift_times)
         times = np.array(list(drift_times.values())).reshape(len(constants), q.shape[0])
@@ -523,7 +578,9 @@ class MachineChain:
             elif b.joint == "rotary":
                 line = np.eye(3)[b.direction] if ideal else tilted_axis(b.direction, b.tilt)
                 steps.append((K.ROTARY, self.axes.index(b.axis), np.concatenate([b.sign * line, np.zeros(3)])))
-            if not ideal and t is not None and b.thermal.any():
+            if j in growing:
+                steps.append((K.ERROR, len(with_errors) + growing.index(j), np.zeros(6)))
+            elif j in drifting:
                 steps.append((K.THERMAL, constants.index(b.thermal_time_constant), np.concatenate([b.thermal[3:], b.thermal[:3]])))
             if j in with_errors:
                 steps.append((K.ERROR, with_errors.index(j), np.zeros(6)))
@@ -628,10 +685,10 @@ class MachineChain:
             b = self.bodies[j - 1]
             if b.static.any():
                 out += effect(j, "static", b.static)
-            twist = b.thermal_drift(t, q.shape[0])
+            qj = None if b.joint == "fixed" else q[:, self.axes.index(b.axis)]
+            twist = b.thermal_drift(t, qj) if t is not None and b.drifts else np.zeros((q.shape[0], 6))
             if b.joint != "fixed":
-                qj = q[:, self.axes.index(b.axis)]
-                twist = twist + b.motion_error(qj)
+                twist += b.motion_error(qj)
                 if b.tilt.any():
                     twist += b.tilt_twist(qj)
             if twist.any():
@@ -666,7 +723,7 @@ class MachineChain:
             b = self.bodies[j - 1]
             group, _, rest = key.partition(".")
             kind = "static" if group == "static" else "motion"
-            if b.joint == "fixed" and kind == "motion" and group != "thermal":
+            if b.joint == "fixed" and kind == "motion" and group not in ("thermal", "thermal_growth"):
                 raise ValueError(f"{name}: a fixed body has only static errors and thermal drift")
             qj = None if b.joint == "fixed" else q[:, self.axes.index(b.axis)]
             basis = np.zeros((n, 6))
@@ -674,10 +731,15 @@ class MachineChain:
                 basis[:, COMPONENTS.index(group)] = b.motion[COMPONENTS.index(group)].basis(rest, qj)
             elif group == "static" and rest in COMPONENTS:
                 basis[:, COMPONENTS.index(rest)] = 1.0
-            elif group == "thermal" and rest in COMPONENTS:
+            elif group in ("thermal", "thermal_growth") and rest in COMPONENTS:
                 if t is None:
                     raise ValueError(f"{name}: thermal parameters need the times t")
-                basis[:, COMPONENTS.index(rest)] = b.thermal_time(t)
+                if group == "thermal":
+                    basis[:, COMPONENTS.index(rest)] = b.thermal_time(t)
+                elif b.joint == "linear" and COMPONENTS.index(rest) < 3:
+                    basis[:, COMPONENTS.index(rest)] = b.thermal_time(t) * (qj - b.thermal_reference)
+                else:
+                    raise ValueError(f"{name}: thermal growth is dx, dy, dz of a linear joint")
             elif group == "squareness" and rest in _DIRECTIONS and b.joint == "linear":
                 if _DIRECTIONS.index(rest) == b.direction:
                     raise ValueError(f"{name}: squareness is towards the other two directions")
@@ -902,7 +964,7 @@ def cartesian_chain(axes=("x", "y", "z")):
 
 _MACHINE_KEYS = ("name", "description", "tool", "workpiece", "tool_tip_mm", "tool_axis", "axis_order", "body")
 _BODY_KEYS = ("name", "parent", "joint", "axis", "travel_mm", "travel_deg", "offset_mm", "static", "squareness", "tilt",
-              "thermal", "errors")
+              "thermal", "thermal_growth", "thermal_reference_mm", "thermal_time_constant_s", "errors")
 _TERM_KEYS = ("constant", "poly", "cyclic")
 #: Keys of earlier versions -> the keys that replaced them.
 _RENAMED = {"tool_tip": "tool_tip_mm", "offset": "offset_mm"}
@@ -934,6 +996,9 @@ def chain_from_toml(toml, *keys, extra=()):
         squareness = { y_urad = 20 }               # linear joint, positive: angle > 90°
         tilt = { x_urad = 10, y_urad = -5 }        # rotary joint axis-line squareness (seed 001)
         thermal = { dx_um_per_min = 2 }            # drift rate (ex_urad_per_min ...)
+        thermal_growth = { dx_ppm_per_min = 1.5 }  # linear joint: the drift rate grows per m of travel
+        thermal_reference_mm = 0                   # ... from this axis position (default 0)
+        thermal_time_constant_s = 1800             # optional first-order drift (default: linear in time)
         [body.errors]
         table = "x_laser.csv"         # optional ISO 230-2 table, relative to this file
         dx_um = { poly = [0, 12e-3], cyclic = [{ amplitude_um = 1.5, period_mm = 10, phase_deg = 0 }] }
@@ -1032,6 +1097,12 @@ def _body_from_toml(toml, base, where, item, body_index):
     squareness = vector("squareness", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
     tilt = vector("tilt", [(d, "urad", _RAD_PER_URAD) for d in _DIRECTIONS])
     thermal = vector("thermal", [(c, f"{unit}_per_min", scale * per_min) for c, (unit, scale) in zip(COMPONENTS, ERROR_UNITS)])
+    growth = vector("thermal_growth", [(c, "ppm_per_min", 1e-6 * per_min) for c in COMPONENTS[:3]])
+    if growth.any() and kind != "linear":
+        raise fail("thermal_growth applies to a linear joint (it grows with the axis position)", "thermal_growth")
+    time_constant = _number(item.get("thermal_time_constant_s", 0.0), fail, "thermal_time_constant_s")
+    if time_constant < 0:
+        raise fail(f"thermal_time_constant_s must be 0 (linear in time) or positive, got {time_constant:g}", "thermal_time_constant_s")
     for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
         if values.any() and (kind != wanted or values[direction]):
             raise fail(f"{key} applies to a {wanted} joint, towards the other two directions", key)
@@ -1063,6 +1134,9 @@ def _body_from_toml(toml, base, where, item, body_index):
             squareness=squareness,
             tilt=tilt,
             thermal=thermal,
+            thermal_growth=growth,
+            thermal_reference=_number(item.get("thermal_reference_mm", 0.0), fail, "thermal_reference_mm"),
+            thermal_time_constant=time_constant,
             travel=travel,
         )
     except (TypeError, ValueError) as exc:

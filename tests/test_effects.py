@@ -140,6 +140,8 @@ def test_geometric_effects_land_in_the_chain_of_a_machine_with_bodies():
     cases = [
         (Effect("scale_error", "x", ppm=100.0), lambda d: 100e-6 * q[:, 0], 0),  # from the axis's zero
         (Effect("thermal_drift", "y", rate_um_per_min=6.0), lambda d: 6e-3 / 60 * t, 1),
+        (Effect("thermal_drift", "x", rate_um_per_min=2.0, growth_ppm_per_min=3.0, reference_mm=100.0),
+         lambda d: (2e-3 + 3e-6 * (q[:, 0] - 100.0)) / 60 * t, 0),  # from the axis position reference_mm
         (Effect("straightness", "x", peak_um=5.0, span_mm=100.0, error_direction="z"),
          lambda d: -5e-3 * (2 * d[:, 0] / 100.0) ** 2, 2),
     ]
@@ -147,6 +149,66 @@ def test_geometric_effects_land_in_the_chain_of_a_machine_with_bodies():
         moved = Model(machine, (effect,)).geometry.tool_position(q, t, 3)
         d = q - machine.home()  # positions from the path origin
         np.testing.assert_allclose(moved[:, column] - base[:, column], shift(d), atol=2e-7)  # first order in the errors
+
+
+GROWING_MILL = """
+name = "growing"
+servo_period_ms = 1.0
+tool = "tool"
+workpiece = "bed"
+
+[axes.x]
+mass_kg = 300.0
+force_constant_N_per_A = 942.0
+kv_A_s_per_m = 80.0
+
+[axes.y]
+mass_kg = 300.0
+force_constant_N_per_A = 942.0
+kv_A_s_per_m = 80.0
+
+[[body]]
+name = "X"
+joint = "linear x"
+axis = "x"
+thermal_growth = { dx_ppm_per_min = 2.0 }
+thermal_reference_mm = 50
+
+[[body]]
+name = "Y"
+parent = "X"
+joint = "linear y"
+axis = "y"
+
+[[body]]
+name = "tool"
+parent = "Y"
+
+[[effect]]
+name = "thermal_drift"
+axis = "x"
+rate_um_per_min = 1.0
+growth_ppm_per_min = 3.0
+reference_mm = -100
+"""
+
+
+def test_a_files_thermal_growth_adds_to_the_machines_own_each_from_its_reference(tmp_path):
+    """The body's growth (2 ppm/min from 50 mm) and the effect's (3 ppm/min from −100 mm) add exactly (pure translations)."""
+    file = tmp_path / "growing.toml"
+    file.write_text(GROWING_MILL)
+    model = load_model(file)
+    assert model.values() == {"thermal_drift.x.rate_um_per_min": 1.0, "thermal_drift.x.time_constant_s": 0.0,
+                              "thermal_drift.x.growth_ppm_per_min": 3.0, "thermal_drift.x.reference_mm": -100.0}
+    q = np.column_stack([np.linspace(-200.0, 300.0, 11), np.linspace(0.0, 50.0, 11)])
+    t = np.linspace(0.0, 600.0, 11)
+    moved = model.geometry.tool_position(q, t, 2) - model.geometry.tool_position(q, np.zeros(11), 2)
+    x = q[:, 0]
+    expected = (1e-3 + 2e-6 * (x - 50.0) + 3e-6 * (x + 100.0)) / 60 * t  # [mm]
+    np.testing.assert_allclose(moved[:, 0], expected, rtol=0, atol=1e-13)  # rounding of 300 mm positions
+    np.testing.assert_array_equal(moved[:, 1], 0.0)
+    with pytest.raises(ValueError, match="body 'X' already drifts with time constant 0 s; a drift with 60 s cannot be added"):
+        _ = model.with_values({"thermal_drift.x.time_constant_s": 60.0}).geometry
 
 
 def test_a_machine_without_bodies_gets_a_cartesian_chain_only_for_geometric_effects():

@@ -22,6 +22,7 @@ from contoursim.machine import Machine
 from contoursim.model import Model
 from contoursim.servo import AxisServo
 from contoursim.simulation import simulate
+from contoursim.traces import Trace
 
 DT = 1e-3  # a coarse servo period: the loops cross over near 40 Hz
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0)
@@ -126,6 +127,33 @@ def test_thermal_drift_leaves_the_circle_open(tau):
     gap = d[test[-1]] - d[test[0]]  # the test circle starts and ends at the same commanded point
     assert gap[0] == pytest.approx(rate / 60 * (drift(t1) - drift(t0)), rel=1e-9)
     assert gap[1] == 0.0
+
+
+@pytest.mark.parametrize("tau", [0.0, 2.0])
+def test_thermal_growth_grows_linearly_with_position_on_a_line_run_twice(tau):
+    """The 40 mm line along X, out, back and out again: on both outward passes the drift over its time
+    factor (t, or τ·(1 − exp(−t/τ))) is a straight line in x whose slope is the growth in ppm/min."""
+    rate, growth, reference_mm = 60.0, 3000.0, -20.0  # [µm/min], [ppm/min] = 50 µm/m per s, the line's start
+    one = _reference(("line",)).position
+    hold = np.repeat(one[-1:], 200, axis=0)
+    path = np.concatenate([np.repeat(one[:1], 200, axis=0), one, hold, one[::-1], np.repeat(one[:1], 200, axis=0), one, hold])
+    t = DT * np.arange(len(path))
+    run = Trace(t, path, path, ("x", "y"))
+    effect = Effect("thermal_drift", "x", rate_um_per_min=rate, growth_ppm_per_min=growth, reference_mm=reference_mm,
+                    time_constant_s=tau)
+    x = simulate(MACHINE, run).tool_position[:, 0]
+    dx = simulate(Model(MACHINE, (effect,)), run).tool_position[:, 0] - x
+    drift_time = t if tau == 0 else tau * (1 - np.exp(-t / tau))
+    first = 200 + np.arange(len(one))  # the two outward passes
+    second = first + 2 * len(one) + 400
+    ends = []
+    for k in (first, second):
+        slope, intercept = np.polyfit(x[k], dx[k] / drift_time[k], 1)  # [mm/s per mm], [mm/s]
+        assert np.abs(np.polyval((slope, intercept), x[k]) - dx[k] / drift_time[k]).max() < 1e-9 * abs(intercept)
+        assert slope * 60 * 1e6 == pytest.approx(growth, rel=1e-6)
+        assert intercept * 60 * 1e3 == pytest.approx(rate - growth * 1e-3 * reference_mm, rel=1e-6)
+        ends.append(dx[k[-1]])
+    assert ends[1] > ends[0] > 0  # the same position, later: the drift has grown
 
 
 # -- command and servo effects: a 45° ellipse that flips with direction and grows with feed --

@@ -1,5 +1,7 @@
 """Multibody chain: topology, exact HTM products, first-order model, seed formulas."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -149,8 +151,11 @@ def test_c_axis_squareness_minus_10_deg_gives_a_circle_normal_to_l_c():
 @pytest.mark.parametrize("name", ["vertical_mill_3axis", "polishing_platform_4axis", "table_tilting_5axis", "diamond_lathe", "aircraft_drilling_7axis"])
 def test_full_product_agrees_with_first_order_to_second_order(name):
     chain = load_machine(name)
-    q = travel_grid(chain, 200)
-    t = np.linspace(0, 900, 200)
+    assert_first_order_to_second_order(chain, travel_grid(chain, 200), np.linspace(0, 900, 200))
+
+
+def assert_first_order_to_second_order(chain, q, t):
+    """Full product minus first order shrinks fourfold when every error halves."""
     diffs = []
     for factor in (1.0, 0.5):
         c = chain.scaled(factor)
@@ -229,6 +234,121 @@ def test_polishing_platform_first_order_expressions_term_by_term():
         dp, dv = chain.with_parameters({name: size for name in expected}).volumetric_error(q)
         diffs.append(np.abs(np.c_[dp, dv] - size * J.sum(axis=2)).max())
     assert diffs[0] < 1e-4 * 200 * 1e-5 and diffs[0] / diffs[1] == pytest.approx(4.0, rel=0.01)
+
+
+# -- thermal drift growing with the axis position (seed 004) ------------------------------------
+
+
+def drift_time(t, tau):
+    """What seed 004's drift rates multiply: t, or the first-order τ·(1 − exp(−t/τ)) [s]."""
+    return t if tau == 0 else tau * (1 - np.exp(-t / tau))
+
+
+def poly(c, q):
+    return sum(ck * q**k for k, ck in enumerate(c))
+
+
+@pytest.mark.parametrize("tau", [0.0, 600.0])
+def test_x_on_y_with_thermal_growth_is_seed_004_eq_9(tau):
+    """Seed 004 eqs. 6-9: ideal · thermal drift · geometric error per axis, multiplied out by hand.
+
+    Y on the bed (eq. 7): translation column (δx(y) + δxt(y), y + δy(y) + δyt(y), δz(y) + δzt(y));
+    X on Y (eq. 9): (x + δx(x) + δxt(x), δy(x) + δyt(x) − x·S_XY, δz(x) + δzt(x)); the rotation
+    block of each is its angular error motions ε (exact rotations here, first order in the seed).
+    The thermal drifts grow with the axis position: δt(q) = τ(t)·(rate + growth·(q − q_ref)).
+    """
+    per_min = 1 / 60.0
+    S_XY = 30e-6
+    geo = {  # body: polynomial coefficients of dx, dy, dz [mm], ex, ey, ez [rad] in q [mm]
+        "X": [(0, 6e-6), (0, 4e-6, -1e-9), (2e-3,), (0, 1e-8), (5e-6,), (1e-6, 2e-9)],
+        "Y": [(0, 4e-6, -2e-9), (0, 8e-6), (0, 6e-6), (0, 4e-9), (-3e-6,), (5e-6,)],
+    }
+    rate = {"X": np.array([2.0, -1.0, 0.5]) * 1e-3 * per_min, "Y": np.array([0.7, 3.0, -1.5]) * 1e-3 * per_min}  # [mm/s]
+    growth = {"X": np.array([3.0, 1.0, -2.0]) * 1e-6 * per_min, "Y": np.array([-1.0, 2.5, 0.5]) * 1e-6 * per_min}  # [1/s]
+    ref = {"X": 150.0, "Y": -40.0}
+
+    def body(name, parent, direction, squareness=(0, 0, 0)):
+        return Body(name, parent, "linear", direction, axis=name.lower(), motion=tuple(ErrorMotion(c) for c in geo[name]),
+                    squareness=squareness, thermal=np.r_[rate[name], 0, 0, 0], thermal_growth=growth[name],
+                    thermal_reference=ref[name], thermal_time_constant=tau)
+
+    tip = np.array([10.0, -20.0, 80.0])
+    chain = MachineChain((body("Y", 0, 1), body("X", 1, 0, squareness=(0, S_XY, 0))), tool=2, workpiece=0, axes=("x", "y"), tool_tip=tip)
+    rng = np.random.default_rng(9)
+    q = rng.uniform([-300, -200], [400, 250], (12, 2))
+    t = rng.uniform(0, 3600, 12)
+    p, v = chain.tool_pose(q, t)
+
+    def seed_matrix(name, qj, tj, ideal_translation):
+        e = [poly(c, qj) for c in geo[name]]
+        thermal = drift_time(tj, tau) * (rate[name] + growth[name] * (qj - ref[name]))  # δxt, δyt, δzt
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_rotvec(e[3:]).as_matrix()
+        T[:3, 3] = ideal_translation + np.array(e[:3]) + thermal
+        return T
+
+    for k, ((x, y), tk) in enumerate(zip(q, t)):
+        T_Y = seed_matrix("Y", y, tk, [0.0, y, 0.0])  # eq. (7)
+        T_X = seed_matrix("X", x, tk, [x, -x * S_XY, 0.0])  # eq. (9)
+        T = T_Y @ T_X
+        np.testing.assert_allclose(p[k], T[:3, :3] @ tip + T[:3, 3], rtol=0, atol=1e-11)
+        np.testing.assert_allclose(v[k], T[:3, 2], rtol=0, atol=1e-15)
+    # the growth is what makes the difference: without it the pose moves by micrometres
+    still = replace(chain, bodies=tuple(replace(b, thermal_growth=np.zeros(3)) for b in chain.bodies))
+    assert np.abs(still.tool_pose(q, t)[0] - p).max() > 1e-3
+
+
+def with_growth(chain, reference=0.0, tau=0.0):
+    """`chain` with a thermal growth (all three directions, 1-4 ppm/min) on every linear body, from `reference`."""
+    bodies = []
+    for i, b in enumerate(chain.bodies):
+        if b.joint == "linear":
+            b = replace(b, thermal_growth=np.array([4.0, -1.0, 2.0])[np.roll(np.arange(3), i)] * 1e-6 / 60,
+                        thermal_reference=reference, thermal_time_constant=tau)
+        bodies.append(b)
+    return replace(chain, bodies=tuple(bodies))
+
+
+@pytest.mark.parametrize("name", ["vertical_mill_3axis", "aircraft_drilling_7axis"])
+def test_thermal_growth_full_product_agrees_with_first_order_to_second_order(name):
+    chain = with_growth(load_machine(name), reference=100.0, tau=900.0)
+    q = travel_grid(chain, 200, seed=7)
+    t = np.linspace(0, 3600, 200)
+    assert_first_order_to_second_order(chain, q, t)
+    growth = {k: v for k, v in chain.parameters().items() if ".thermal_growth." in k}
+    without = chain.with_parameters(dict.fromkeys(growth, 0.0))
+    J = chain.error_jacobian(q, list(growth), t)
+    np.testing.assert_allclose(J @ np.array(list(growth.values())), chain.first_order_error(q, t) - without.first_order_error(q, t),
+                               atol=1e-12)
+
+
+def test_thermal_growth_jacobian_matches_finite_differences_of_the_exact_chain():
+    """Tool and workpiece branch (the mill's X and Y carry the table, sign −1), first-order and linear drift."""
+    chain = with_growth(load_machine("vertical_mill_3axis").ideal(), reference=120.0)
+    chain = replace(chain, bodies=tuple(replace(b, thermal_time_constant=600.0) if b.name == "Y" else b for b in chain.bodies))
+    q = travel_grid(chain, 20, seed=4)
+    t = np.linspace(10, 1800, 20)
+    names = [f"{b}.thermal_growth.{c}" for b in ("X", "Y", "Z") for c in ("dx", "dy", "dz")]
+    J = chain.error_jacobian(q, names, t)
+    h = 1e-7
+    for k, name in enumerate(names):
+        plus = chain.with_parameters({name: chain.parameters()[name] + h}).tool_pose(q, t)
+        minus = chain.with_parameters({name: chain.parameters()[name] - h}).tool_pose(q, t)
+        fd = np.c_[plus[0] - minus[0], plus[1] - minus[1]] / (2 * h)
+        assert np.abs(fd).max() > 1.0, name  # (q − 120 mm)·t of hundreds of mm·s
+        np.testing.assert_allclose(J[:, :, k], fd, atol=1e-6 * np.abs(fd).max(), err_msg=name)
+
+
+def test_thermal_growth_needs_a_linear_joint_and_names_its_components():
+    with pytest.raises(ValueError, match="C: thermal growth applies to a linear joint"):
+        Body("C", 0, "rotary", 2, axis="c", thermal_growth=[1e-8, 0, 0])
+    chain = load_machine("vertical_mill_3axis")
+    with pytest.raises(ValueError, match="thermal growth is dx, dy, dz of a linear joint"):
+        chain.error_jacobian(np.zeros((1, 3)), ["X.thermal_growth.ex"], np.zeros(1))
+    with pytest.raises(ValueError, match="thermal growth is dx, dy, dz of a linear joint"):
+        chain.error_jacobian(np.zeros((1, 3)), ["tool.thermal_growth.dx"], np.zeros(1))
+    with pytest.raises(ValueError, match="thermal parameters need the times t"):
+        chain.error_jacobian(np.zeros((1, 3)), ["X.thermal_growth.dx"])
 
 
 # -- ISO 230-4 circle signatures ---------------------------------------------------------
@@ -354,9 +474,23 @@ def test_toml_units_are_converted_at_the_edge():
     assert x.motion[0].cyclic[0].sin == pytest.approx(2e-3) and x.motion[0].cyclic[0].period == 5
 
 
+def test_toml_thermal_growth_reference_and_time_constant():
+    text = MACHINE.replace('squareness = { y_urad = 10 }', 'squareness = { y_urad = 10 }\nthermal = { dy_um_per_min = 3 }\n'
+                           'thermal_growth = { dx_ppm_per_min = 1.5, dz_ppm_per_min = -0.6 }\n'
+                           'thermal_reference_mm = 250\nthermal_time_constant_s = 1800')
+    x = chain_from_toml(TomlFile("m.toml", text)).bodies[0]
+    np.testing.assert_allclose(x.thermal_growth, np.array([1.5, 0.0, -0.6]) * 1e-6 / 60, rtol=1e-15)  # [mm/s per mm]
+    np.testing.assert_allclose(x.thermal, [0, 3e-3 / 60, 0, 0, 0, 0], rtol=1e-15)
+    assert (x.thermal_reference, x.thermal_time_constant) == (250.0, 1800.0)
+
+
 @pytest.mark.parametrize(
     "old, new, line, match",
     [
+        ('squareness = { y_urad = 10 }', 'thermal_growth = { ex_ppm_per_min = 1 }', 9, "unknown key 'ex_ppm_per_min'"),
+        ('squareness = { y_urad = 10 }', 'thermal_time_constant_s = -5', 9, "thermal_time_constant_s must be 0 .* or positive"),
+        ('squareness = { y_urad = 10 }', 'thermal_reference_mm = "a"', 9, "expected a finite number"),
+        ('parent = "X"', 'parent = "X"\nthermal_growth = { dx_ppm_per_min = 1 }', 16, "thermal_growth applies to a linear joint"),
         ('squareness = { y_urad = 10 }', 'squarenes = { y_urad = 10 }', 9, "unknown key 'squarenes'"),
         ('joint = "linear x"', 'joint = "linear w"', 7, "joint must be"),
         ('parent = "X"', 'parent = "Y"', 15, "'Y' is not a body"),
