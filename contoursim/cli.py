@@ -180,10 +180,20 @@ def simulate_command(args):
         runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
     out, rows = _write(args.out, {Path(path_file).stem: runs}, args.every)
-    effects = ", ".join(f"{e.label} ({e.parameters[0].name} = {e.parameters[0].value:g})" for e in model.effects) or "none"
+    effects = "; ".join(f"{e.label} ({_set_values(e)})" for e in model.effects) or "none"
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     print(_table(rows))
     print(f"\nplots and traces written to {out}/")
+
+
+def _set_values(effect):
+    """``name = value`` of an effect's size and of every parameter or option not at its default."""
+    kind = effect.kind
+    values = [f"{p.name} = {p.value:g}" for i, (p, default) in enumerate(zip(effect.parameters, kind.parameters))
+              if i == 0 or p.value != default.value]  # fmt: skip
+    values += [f"{key} = {effect.options[key]!r}" for key, allowed in kind.options.items()
+               if effect.options[key] != (allowed[0] if isinstance(allowed, tuple) else 0)]  # fmt: skip
+    return ", ".join(values)
 
 
 def compare_command(args):

@@ -386,6 +386,13 @@ def test_the_command_line_runs_a_jobs_effects(tmp_path, capsys):
     assert "effects: none" in plain and "effects: squareness.xy (angle_urad = 200)" in skewed
     volumetric = [float(out.splitlines()[3].split()[-1]) for out in (plain, skewed)]
     assert volumetric == [0.0, pytest.approx(200e-6 * 50.0 * 1e3, rel=1e-6)]  # |(0, −αx)| at x = ±R = 50 mm [µm]
+    grows = tmp_path / "grows.toml"
+    grows.write_text(job.read_text() + '\n[[effect]]\nname = "thermal_drift"\naxis = "x"\nrate_um_per_min = 0\n'
+                     'growth_ppm_per_min = 2\n\n[[effect]]\nname = "backlash"\naxis = "y"\nlost_motion_um = 8\n'
+                     'feedback = "scale"\n')  # fmt: skip
+    assert main(["simulate", str(grows), "--out", str(tmp_path / "grows")]) == 0
+    assert ("thermal_drift.x (rate_um_per_min = 0, growth_ppm_per_min = 2); backlash.y (lost_motion_um = 8, "
+            "feedback = 'scale')") in capsys.readouterr().out  # the values set, not the defaults
     job.write_text(job.read_text() + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 8\nfeedback = "linear"\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "bad")]) == 2
     assert f"{job}, line 13: [[effect]] backlash.x: feedback must be one of 'motor', 'scale'" in capsys.readouterr().err
