@@ -319,14 +319,15 @@ def exact_contour_error(trajectory, actual, window=8):
     if int(window) < 1:
         raise ValueError(f"window must be at least 1, got {window!r}")
     position, window = trajectory.position, int(window)
-    first = np.flatnonzero(moved(position))  # the knots: the distinct reference samples
+    # the knots, the distinct reference samples: their first samples and, while the search needs them, positions
+    first = np.flatnonzero(moved(position)).astype(np.int32)  # int32 (as idx): 2**31 samples would need ~1 TB
     knots = np.zeros((first.size, 3))
     for lo in range(0, first.size, _BLOCK):
         knots[lo : lo + _BLOCK, :d] = position[first[lo : lo + _BLOCK]]
     n = act.shape[0]
-    idx = np.empty(n, np.int64)
+    idx = np.empty(n, np.int32)  # the nearest knot to each actual point
     for lo in range(0, n, _BLOCK):  # in blocks, as below: no (N, 3) copy of the actual points
-        idx[lo : lo + _BLOCK] = nearest_knots(knots, _xyz(act[lo : lo + _BLOCK]), window, idx[lo - 1] if lo else 0)
+        idx[lo : lo + _BLOCK] = nearest_knots(knots, _xyz(act[lo : lo + _BLOCK]), window, int(idx[lo - 1]) if lo else 0)
     del knots  # before the results are filled
     magnitude, s, normal = np.empty((3, n))
     foot = np.empty((n, d))

@@ -134,6 +134,7 @@ class SimResult:
             e = error()
             summary[f"{name}_max_um"] = 1e3 * float(e.max())
             summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(np.square(e, out=e))))
+            del e  # before the next one is made
         return summary
 
     def to_trace(self, metadata=None):

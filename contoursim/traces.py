@@ -81,7 +81,7 @@ TIME_DECIMALS = 9
 """Decimals of ``t`` in a written trace [s]: to the ns."""
 POSITION_DECIMALS = 6
 """Decimals of positions (and other float columns) in a written trace [mm]: to the nm."""
-_CHUNK = 1 << 16  # rows formatted at once: bounds the formatter's memory
+_CHUNK = 1 << 14  # rows formatted at once: bounds the formatter's memory (its buffers, ~0.5 kB a row)
 
 
 def write_trace(file, trace, extra=None, overwrite=False, every=1):
