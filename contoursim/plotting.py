@@ -22,7 +22,7 @@ __all__ = [
 
 _COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
 _RUN_COLOURS = ("C3", "C0", "C2", "C4")  # runs overlaid: red first, as a single run is drawn
-_BLOCK = 1 << 16  # samples a long series is read in at once, so that no (N, d) temporary is made [samples]
+_BLOCK = 1 << 14  # samples a long series is read in at once, so that no (N, d) temporary is made [samples]
 
 
 def _axes(ax, **subplot):

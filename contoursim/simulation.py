@@ -34,7 +34,7 @@ from .trajectory import Trajectory
 
 __all__ = ["SimResult", "default_settle", "measured_reference", "simulate", "simulate_batch"]
 
-_BLOCK = 1 << 16  # samples a summary reduces at once [samples]
+_BLOCK = 1 << 14  # samples a summary reduces at once [samples]
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,8 @@ class SimResult:
     servo_response : contoursim.kernel.ServoResponse
         Servo axes' positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
-        Actual tool tip in workpiece coordinates [mm].
+        Actual tool tip in workpiece coordinates [mm]; read-only (:func:`simulate`
+        shares it with the contour error as its ``actual`` points).
     static_tool_position : ndarray, shape (N, d)
         Where the tool tip would be if every axis followed its command
         exactly: the reference plus the volumetric (geometric) error of the

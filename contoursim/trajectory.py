@@ -8,7 +8,7 @@ from . import _validate
 
 __all__ = ["Trajectory"]
 
-_BLOCK = 1 << 16  # samples a property reduces at once [samples]
+_BLOCK = 1 << 14  # samples a property reduces at once [samples]
 
 
 @dataclass(frozen=True)
