@@ -166,7 +166,7 @@ def _thin_curve(points, step):
 
 
 def _magnified(result, k):
-    """The path drawn with the contour error magnified, ``foot + k·(actual − foot)`` in XY [mm], as :class:`_Rows`."""
+    """The path with its contour error magnified, ``foot + k·(actual − foot)`` in XY [mm], as :class:`_Rows`."""
     tool, foot = result.tool_position, result.contour.foot
 
     def rows(index):

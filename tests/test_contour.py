@@ -172,7 +172,7 @@ def test_exact_result_derives_its_vector_and_shares_the_actual_points():
     actual.flags.writeable = False  # as a simulation's tool positions are: kept without a copy
     err = exact_contour_error(ref, actual)
     assert np.shares_memory(err.actual, actual)
-    np.testing.assert_array_equal(err.vector, err.foot - actual)  # the correction, from the foot points and actual points
+    np.testing.assert_array_equal(err.vector, err.foot - actual)  # the correction, from foot and actual points
     assert not err.vector.flags.writeable
     assert err.out_of_plane.shape == (phi.size,) and not err.out_of_plane.any() and err.out_of_plane.strides == (0,)
     mine = actual.copy()  # writeable: the caller's, copied and left writeable
@@ -188,6 +188,7 @@ def test_nearest_knots_searched_block_by_block_as_in_one_go():
     points = np.ascontiguousarray(np.column_stack([50.1 * np.cos(phi), 50.1 * np.sin(phi), np.zeros(phi.size)]))
     whole = nearest_knots(knots, points, 8, 0)
     first = nearest_knots(knots, points[:1234], 8, 0)
-    np.testing.assert_array_equal(np.concatenate([first, nearest_knots(knots, points[1234:], 8, int(first[-1]))]), whole)
+    rest = nearest_knots(knots, points[1234:], 8, int(first[-1]))  # hinted by the last knot found before
+    np.testing.assert_array_equal(np.concatenate([first, rest]), whole)
     np.testing.assert_allclose(np.hypot(*knots[whole, :2].T), 50.0, rtol=1e-12)  # on the circle, nearest in angle
     assert np.abs(np.angle(np.exp(1j * (np.arctan2(knots[whole, 1], knots[whole, 0]) - phi)))).max() < 0.5 / 50.0
