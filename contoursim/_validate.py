@@ -98,7 +98,7 @@ def finite_array(name, value, ndim=None, shape=None, limit=None):
     if not np.isfinite(arr).all():
         first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
         raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
-    if limit is not None and np.any(np.abs(arr) > limit):
+    if limit is not None and arr.size and max(arr.max(), -arr.min()) > limit:  # |arr| > limit, no (N, d) temporary
         first = np.unravel_index(np.argmax(np.abs(arr) > limit), arr.shape)
         raise ValueError(f"{name} holds {arr[first]:g} at index {tuple(map(int, first))}, beyond ±{limit:g}")
     return arr
@@ -163,11 +163,13 @@ def time_base(name, t, rtol=1e-3):
     if np.any(step <= 0):
         i = int(np.argmax(step <= 0))
         raise TimeStepError(f"{name} must be strictly increasing: t[{i + 1}] = {t[i + 1]} follows t[{i}] = {t[i]}", i)
-    dt = float(np.median(step))
-    worst = int(np.argmax(np.abs(step - dt)))
-    if abs(step[worst] - dt) > rtol * max(dt, 1e-300) + 1e-12:
+    dt = float(np.median(step, overwrite_input=True))  # reorders `step`: no (N,) copy
+    np.subtract(t[1:], t[:-1], out=step)  # the steps again, in order
+    step -= dt
+    worst = int(np.argmax(np.abs(step, out=step)))  # the deviations from the median step, in place
+    if step[worst] > rtol * max(dt, 1e-300) + 1e-12:
         raise TimeStepError(
-            f"{name} must be uniformly sampled: step {worst} is {step[worst]:.9g} s, "
+            f"{name} must be uniformly sampled: step {worst} is {t[worst + 1] - t[worst]:.9g} s, "
             f"the median step is {dt:.9g} s",
             worst,
         )

@@ -26,10 +26,31 @@ import numpy as np
 from ._numba import njit
 
 from . import _validate
-from .nearest import distinct, nearest_knots
+from .nearest import moved, nearest_knots
 from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
 
 __all__ = ["ContourError", "exact_contour_error"]
+
+
+class _Correction:
+    """The `vector` field of :class:`ContourError`: the array given, or ``foot - actual`` when ``None`` was given.
+
+    A data descriptor: the dataclass's ``__init__`` stores the value given
+    through it; its class access raises AttributeError, so the field has no
+    default and stays a required argument.
+    """
+
+    def __get__(self, error, owner=None):
+        if error is None:
+            raise AttributeError("vector")
+        vector = error.__dict__["_vector"]
+        if vector is None:  # the correction the refinement found, -(actual - foot), to the sign of a zero
+            vector = error.foot - error.actual
+            vector.flags.writeable = False
+        return vector
+
+    def __set__(self, error, value):
+        error.__dict__["_vector"] = value
 
 
 @dataclass(frozen=True)
@@ -44,9 +65,11 @@ class ContourError:
     ----------
     magnitude : ndarray, shape (N,)
         Distance to the path [mm], >= 0.
-    vector : ndarray, shape (N, d)
+    vector : ndarray, shape (N, d), or None
         From the actual point to its (estimated) foot point on the path: the
-        correction [mm]; d is 2 or 3.
+        correction [mm]; d is 2 or 3. ``None`` when `foot` and `actual` are
+        given: it is then ``foot - actual``, made on each access and not
+        stored (an exact result's, 8·d bytes a point less).
     normal : ndarray, shape (N,)
         Signed in-plane component (P_a - foot) . n_left [mm], n_left = b x T
         normalised: positive to the left of the direction of travel, so a CCW
@@ -55,7 +78,8 @@ class ContourError:
         Component (P_a - foot) . b [mm] along the path's plane normal b (for
         helices and 3-D curves, b made orthogonal to T, so that
         normal^2 + out_of_plane^2 = magnitude^2 wherever the foot is not a
-        path end); zero for planar estimates.
+        path end); zero for planar paths and estimates (a 2-D exact result
+        holds one zero, read-only, broadcast to shape (N,)).
     foot : ndarray, shape (N, d), optional
         Nearest path points [mm]. Exact only (``None`` for estimates).
     s : ndarray, shape (N,), optional
@@ -67,25 +91,36 @@ class ContourError:
     method : str
         What produced it: ``"exact"``, ``"linear"``, ``"circular"``,
         ``"three_point"`` or ``"newton"``.
+    actual : ndarray, shape (N, d), optional
+        The actual points [mm]. Exact only (:func:`exact_contour_error`
+        keeps them, without a copy when they are read-only, as a
+        simulation's tool positions are).
     """
 
     magnitude: np.ndarray
-    vector: np.ndarray
+    vector: np.ndarray = _Correction()  # a required field, stored through the descriptor
     normal: np.ndarray
     out_of_plane: np.ndarray
     foot: np.ndarray = None
     s: np.ndarray = None
     index: np.ndarray = None
     method: str = "exact"
+    actual: np.ndarray = None
 
     def __post_init__(self):
         magnitude = _validate.finite_array("magnitude", self.magnitude, ndim=1)
         n = magnitude.size
-        vector = _validate.finite_array("vector", self.vector, ndim=2)
-        if vector.shape[0] != n or vector.shape[1] not in (2, 3):
-            raise ValueError(f"vector must have shape ({n}, 2) or ({n}, 3), got {vector.shape}")
-        shapes = dict(normal=(n,), out_of_plane=(n,), foot=(n, vector.shape[1]), s=(n,))
-        values = dict(magnitude=magnitude, vector=vector)
+        values = dict(magnitude=magnitude)
+        given = self.__dict__["_vector"]
+        if given is None and (self.foot is None or self.actual is None):
+            raise ValueError("vector may be None only when foot and actual are given (it is foot - actual then)")
+        if given is not None:
+            values["vector"] = _validate.finite_array("vector", given, ndim=2)
+        shape = (values["vector"] if given is not None else _validate.float_array("actual", self.actual, ndim=2)).shape
+        if shape[0] != n or shape[1] not in (2, 3):
+            raise ValueError(f"{'vector' if given is not None else 'actual'} must have shape ({n}, 2) or ({n}, 3), "
+                             f"got {shape}")
+        shapes = dict(normal=(n,), out_of_plane=(n,), foot=(n, shape[1]), s=(n,), actual=(n, shape[1]))
         for name, shape in shapes.items():
             if getattr(self, name) is not None or name in ("normal", "out_of_plane"):
                 values[name] = _validate.finite_array(name, getattr(self, name), shape=shape)
@@ -175,12 +210,13 @@ def _closest(kind, row, p, u0, length, out):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, knot_s, idx, act):
+def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act):
     """Foot point (position, tangent, curvature vector), arc length and primitive of each actual point.
 
-    knot_s : arc length of the distinct reference samples; idx : the one nearest to each actual point.
+    sample_s : arc length of the reference samples; first : the first sample of each knot (distinct
+    sample); idx : the knot nearest to each actual point.
     """
-    n, k_count = knot_s.size, kinds.size
+    n, k_count = first.size, kinds.size
     frame = np.empty((act.shape[0], 9))
     s_out = np.empty(act.shape[0])
     prim = np.empty(act.shape[0], np.int64)
@@ -188,12 +224,12 @@ def _foot_points(kinds, rows, breaks, closed, knot_s, idx, act):
     for i in range(act.shape[0]):
         p = act[i]
         j = idx[i]
-        k_lo = _primitive_at(breaks, knot_s[max(j - 1, 0)])
-        k_hi = _primitive_at(breaks, knot_s[min(j + 1, n - 1)])
+        k_lo = _primitive_at(breaks, sample_s[first[max(j - 1, 0)]])
+        k_hi = _primitive_at(breaks, sample_s[first[min(j + 1, n - 1)]])
         best_d, best_k, best_u = np.inf, -1, 0.0
         for k in range(k_lo, k_hi + 1):
             length = breaks[k + 1] - breaks[k]
-            u0 = min(max(knot_s[j] - breaks[k], 0.0), length)
+            u0 = min(max(sample_s[first[j]] - breaks[k], 0.0), length)
             u = _closest(kinds[k], rows[k], p, u0, length, out)
             d = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
             if d < best_d:
@@ -282,26 +318,41 @@ def exact_contour_error(trajectory, actual, window=8):
         raise ValueError(f"actual must have shape (N, {d}) like the trajectory's positions, got {act.shape}")
     if int(window) < 1:
         raise ValueError(f"window must be at least 1, got {window!r}")
-    act3 = np.ascontiguousarray(_validate.as_xyz(act))
-    knots, first = distinct(np.ascontiguousarray(_validate.as_xyz(trajectory.position)))[:2]
-    idx = nearest_knots(knots, act3, int(window))
-    knot_s = trajectory.s[first]
-    del knots, first  # before the foot points' arrays are made
-    n = act3.shape[0]
-    magnitude, s, normal, out_of_plane = np.empty((4, n))
-    vector, foot = np.empty((2, n, d))
+    position, window = trajectory.position, int(window)
+    # the knots, the distinct reference samples: their first samples and, while the search needs them, positions
+    first = np.flatnonzero(moved(position)).astype(np.int32)  # int32 (as idx): 2**31 samples would need ~1 TB
+    knots = np.zeros((first.size, 3))
+    for lo in range(0, first.size, _BLOCK):
+        knots[lo : lo + _BLOCK, :d] = position[first[lo : lo + _BLOCK]]
+    n = act.shape[0]
+    idx = np.empty(n, np.int32)  # the nearest knot to each actual point
+    for lo in range(0, n, _BLOCK):  # in blocks, as below: no (N, 3) copy of the actual points
+        idx[lo : lo + _BLOCK] = nearest_knots(knots, _xyz(act[lo : lo + _BLOCK]), window, int(idx[lo - 1]) if lo else 0)
+    del knots  # before the results are filled
+    magnitude, s, normal = np.empty((3, n))
+    foot = np.empty((n, d))
+    out_of_plane = np.empty(n) if d == 3 else np.broadcast_to(0.0, (n,))  # a 2-D path: (P_a - foot) . z = 0
     for lo in range(0, n, _BLOCK):  # in blocks: the (block, 9) foot frames and their products stay small
         part = slice(lo, lo + _BLOCK)
-        frame, s[part], prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, knot_s, idx[part],
-                                            act3[part])
+        act3 = _xyz(act[part])
+        frame, s[part], prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, first,
+                                            idx[part], act3)
         tangent = frame[:, 3:6]
         b = _binormal(path, prim, tangent, frame[:, 6:9])
         left = np.cross(b, tangent)
         left /= np.linalg.norm(left, axis=1, keepdims=True)
-        delta = act3[part] - frame[:, :3]
+        delta = act3 - frame[:, :3]
         magnitude[part] = np.linalg.norm(delta, axis=1)
-        vector[part] = -delta[:, :d]
         foot[part] = frame[:, :d]
         normal[part] = np.sum(delta * left, axis=1)
-        out_of_plane[part] = np.sum(delta * np.cross(tangent, left), axis=1)
-    return ContourError(magnitude=magnitude, vector=vector, foot=foot, s=s, normal=normal, out_of_plane=out_of_plane)
+        if d == 3:
+            out_of_plane[part] = np.sum(delta * np.cross(tangent, left), axis=1)
+    if act.flags.writeable:  # the caller's array: a copy, so that it stays writeable
+        act = act.copy()
+    return ContourError(magnitude=magnitude, vector=None, foot=foot, s=s, normal=normal, out_of_plane=out_of_plane,
+                        actual=act)
+
+
+def _xyz(points):
+    """Points (M, 2) or (M, 3) as a C-contiguous (M, 3) array, z = 0 added to 2-D ones [mm]."""
+    return np.ascontiguousarray(_validate.as_xyz(points))

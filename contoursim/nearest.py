@@ -19,7 +19,7 @@ from the reference sample nearest to the actual tool position. The search
 import numpy as np
 from ._numba import njit
 
-__all__ = ["distinct", "nearest_knot", "nearest_knots"]
+__all__ = ["distinct", "moved", "nearest_knot", "nearest_knots"]
 
 REACH = 2048  # most knots the search scans forward before walking on [-]
 
@@ -41,10 +41,28 @@ def distinct(points):
     knot_of_sample : ndarray of int, shape (N,)
         Knot holding each sample.
     """
-    keep = np.ones(len(points), bool)
-    moved = points[1:] != points[:-1]
-    keep[1:] = moved[:, 0] | moved[:, 1] | moved[:, 2]  # np.any(axis=1) is several times slower on 3 columns
+    keep = moved(points)
     return np.ascontiguousarray(points[keep]), np.flatnonzero(keep), np.cumsum(keep) - 1
+
+
+def moved(points):
+    """Which points differ from the one before (the first always): the knots among them.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, d)
+        Reference samples in path order [mm], N >= 1, any number of columns d.
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+    """
+    keep = np.ones(len(points), bool)
+    changed = points[1:] != points[:-1]
+    keep[1:] = changed[:, 0]
+    for column in range(1, points.shape[1]):  # np.any(axis=1) is several times slower on 2 or 3 columns
+        keep[1:] |= changed[:, column]
+    return keep
 
 
 @njit(cache=True)
@@ -112,7 +130,7 @@ def nearest_knot(knots, hint, p, window):
 
 
 @njit(cache=True)
-def nearest_knots(knots, points, window):
+def nearest_knots(knots, points, window, hint):
     """Nearest knot to each of a sequence of tool positions, each search hinted by the previous one.
 
     Parameters
@@ -120,9 +138,13 @@ def nearest_knots(knots, points, window):
     knots : ndarray, shape (M, 3)
         Distinct reference samples [mm] (:func:`distinct`), M >= 1.
     points : ndarray, shape (K, 3)
-        Tool positions in time order, starting near the first knot [mm].
+        Tool positions in time order, starting near the knot `hint` [mm].
     window : int
         As in :func:`nearest_knot` [-].
+    hint : int
+        Knot to start the first search from: 0 at the path start, or the
+        last knot found for the positions before `points` (a trace searched
+        block by block).
 
     Returns
     -------
@@ -130,7 +152,7 @@ def nearest_knots(knots, points, window):
         Index of the nearest knot found for each position.
     """
     idx = np.empty(points.shape[0], np.int64)
-    j = np.int64(0)  # not the literal 0: numba would compile nearest_knot for it besides int64
+    j = np.int64(hint)  # an int64 whatever the caller passes: numba compiles nearest_knot for one hint type
     for k in range(points.shape[0]):
         j = nearest_knot(knots, j, (points[k, 0], points[k, 1], points[k, 2]), window)
         idx[k] = j

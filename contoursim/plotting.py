@@ -22,6 +22,7 @@ __all__ = [
 
 _COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
 _RUN_COLOURS = ("C3", "C0", "C2", "C4")  # runs overlaid: red first, as a single run is drawn
+_BLOCK = 1 << 14  # samples a long series is read in at once, so that no (N, d) temporary is made [samples]
 
 
 def _axes(ax, **subplot):
@@ -77,17 +78,40 @@ def magnification_for(size, error, fraction=0.08):
     return float(max(m for m in (1.0, 2.0, 5.0) if m * decade <= raw) * decade)
 
 
+class _Rows:
+    """An (N, k) series made from a run's arrays when indexed (a block, or the samples drawn), never whole.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples N.
+    rows : callable
+        ``rows(index)``: the rows `index` (a slice or an index array) of the series.
+    """
+
+    def __init__(self, n, rows):
+        self._n, self._rows = n, rows
+
+    def __len__(self):
+        return self._n
+
+    def __getitem__(self, index):
+        return self._rows(index)
+
+
 def envelope_indices(values, columns=_COLUMNS):
     """Indices of the samples that draw `values` as it looks at `columns` pixel columns.
 
     The samples are cut into `columns` equal runs; of each run the smallest
     and the largest value (of every series) are kept, with the first and
     last sample, so spikes survive and the line looks as the full data does.
+    The runs are read a block of them at a time.
 
     Parameters
     ----------
     values : ndarray, shape (N,) or (N, k)
-        One series or k series over the same samples, in drawing order.
+        One series or k series over the same samples, in drawing order (or
+        an object of that length whose slices are such arrays).
     columns : int
         Number of runs (about the plot's width in pixels or more).
 
@@ -103,30 +127,55 @@ def envelope_indices(values, columns=_COLUMNS):
     >>> len(i) <= 202 and 1234 in i
     True
     """
-    values = np.asarray(values, float).reshape(len(values), -1)
     n = len(values)
     if n <= 2 * columns:
         return np.arange(n)
     size = -(-n // columns)
     whole = n // size * size
-    runs = values[:whole].reshape(-1, size, values.shape[1])
-    start = np.arange(0, whole, size)[:, None]
-    picked = [start + runs.argmin(axis=1), start + runs.argmax(axis=1), [0, n - 1], np.arange(whole, n)]
+    block = size * max(1, _BLOCK // size)  # whole runs
+    picked = [[0, n - 1], np.arange(whole, n)]
+    for lo in range(0, whole, block):
+        part = np.asarray(values[lo : min(lo + block, whole)], float)
+        runs = part.reshape(-1, size, part.size // len(part))
+        start = np.arange(lo, lo + len(part), size)[:, None]
+        picked += [start + runs.argmin(axis=1), start + runs.argmax(axis=1)]
     return np.unique(np.concatenate([np.ravel(p) for p in picked]))
 
 
 def _thin_curve(points, step):
-    """Indices of points along a curve, about `step` apart along it (and the last one) [same units]."""
-    squares = np.diff(points, axis=0)
-    squares *= squares  # the segment lengths as np.linalg.norm computes them, with one (N, d) temporary
-    cell = np.empty(len(points))  # the travelled distance, then the step it is in, in place
-    cell[0] = 0.0
-    np.cumsum(np.sqrt(squares.sum(axis=1)), out=cell[1:])
-    del squares
-    cell /= step
-    np.floor(cell, out=cell)
-    first = np.concatenate([[0], 1 + np.flatnonzero(cell[1:] > cell[:-1])])
-    return np.union1d(first, [len(points) - 1])
+    """Indices of points along a curve, about `step` apart along it (and the last one) [same units].
+
+    `points` is an (N, d) array, or an object of that length whose slices are
+    such arrays (:class:`_Rows`); it is read a block at a time.
+    """
+    n = len(points)
+    first = [[0]]
+    travelled = 0.0  # along the curve up to the block's first point
+    for lo in range(0, n - 1, _BLOCK):
+        squares = np.diff(np.asarray(points[lo : lo + _BLOCK + 1]), axis=0)
+        squares *= squares  # the segment lengths as np.linalg.norm computes them
+        cell = np.empty(len(squares) + 1)  # the travelled distance, then the step it is in, in place
+        cell[0] = travelled
+        np.sqrt(squares.sum(axis=1), out=cell[1:])
+        np.cumsum(cell, out=cell)  # sequential: the sums of one cumsum over the whole curve
+        travelled = cell[-1]
+        cell /= step
+        np.floor(cell, out=cell)
+        first.append(lo + 1 + np.flatnonzero(cell[1:] > cell[:-1]))
+    return np.union1d(np.concatenate(first), [n - 1])
+
+
+def _magnified(result, k):
+    """The path with its contour error magnified, ``foot + k·(actual − foot)`` in XY [mm], as :class:`_Rows`."""
+    tool, foot = result.tool_position, result.contour.foot
+
+    def rows(index):
+        shown = tool[index, :2] - foot[index, :2]
+        shown *= k
+        shown += foot[index, :2]
+        return shown
+
+    return _Rows(len(tool), rows)
 
 
 def _has_test(trajectory):
@@ -165,14 +214,12 @@ def plot_path_error(result, ax=None, magnification=None):
         _validate.positive("magnification", magnification)
     if k < 1:
         raise ValueError(f"magnification must be at least 1 (true scale), got {k:g}")
-    shown = result.tool_position[:, :2] - contour.foot[:, :2]  # foot + k·(actual − foot), in place: one (N, 2) array
-    shown *= k
-    shown += contour.foot[:, :2]
     step = size / (2 * _COLUMNS)
+    shown = _magnified(result, k)
     ir, ia = _thin_curve(ref, step), _thin_curve(shown, step)
     ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=1.0, label="reference")
     label = f"actual, contour error ×{k:g} along the path normal" if k > 1 else "actual (true scale)"
-    ax.plot(shown[ia, 0], shown[ia, 1], color="C3", lw=1.0, label=label)
+    ax.plot(*shown[ia].T, color="C3", lw=1.0, label=label)
     ax.plot(*ref[0], "o", color="k", ms=5, label="start")
     ahead = int(np.searchsorted(traj.s, traj.s[0] + 0.04 * size))
     if 0 < ahead < len(ref):
@@ -337,16 +384,15 @@ def plot_errors_over_time(result, fig=None):
         fig = plt.figure(figsize=(8.0, 7.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     t = result.trajectory.t
-    response = result.servo_response
-    following = np.take(result.axis_command, result.machine.servo_columns, axis=1)  # a new array: scaled in place
-    following -= response.position
-    following *= 1e3  # [µm]
+    response, columns, error = result.servo_response, result.machine.servo_columns, result.contour
+    following = _Rows(len(t), lambda i: (np.take(result.axis_command[i], columns, axis=1) - response.position[i]) * 1e3)
     names = list(result.machine.axes)
-    contour, labels = result.contour.normal[:, None], ["contour error"]
+    contour, labels = _Rows(len(t), lambda i: 1e3 * error.normal[i][:, None]), ["contour error"]
     if result.trajectory.dim == 3:  # a 3-D path: the part out of the path's plane too
-        contour, labels = np.column_stack([contour, result.contour.out_of_plane]), ["in plane", "out of plane"]
-    series = [
-        (axes[0], 1e3 * contour, labels, "contour error [µm]"),
+        contour = _Rows(len(t), lambda i: 1e3 * np.column_stack([error.normal[i], error.out_of_plane[i]]))
+        labels = ["in plane", "out of plane"]
+    series = [  # [µm]; the errors made block by block and at the samples drawn, not whole
+        (axes[0], contour, labels, "contour error [µm]"),
         (axes[1], following, names, "following error [µm]"),
         (axes[2], response.current, names, "motor current [A]"),
     ]
@@ -354,8 +400,9 @@ def plot_errors_over_time(result, fig=None):
     test = t[np.argmax(measuring)], t[len(measuring) - 1 - np.argmax(measuring[::-1])]  # its first and last sample
     for ax, values, labels, ylabel in series:
         keep = envelope_indices(values)
+        drawn = values[keep]
         for j, label in enumerate(labels):
-            ax.plot(t[keep], values[keep, j], lw=0.9, label=label, color="C3" if ax is axes[0] and j == 0 else f"C{j}")
+            ax.plot(t[keep], drawn[:, j], lw=0.9, label=label, color="C3" if ax is axes[0] and j == 0 else f"C{j}")
         if _has_test(result.trajectory):
             ax.axvspan(*test, color="0.93", zorder=0, label="test proper")
         ax.axhline(0.0, color="0.5", lw=0.6)
@@ -459,11 +506,10 @@ def plot_compared_paths(runs, ax=None, magnification=None):
     ir = _thin_curve(ref, step)
     ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=2.0, label="reference")
     for i, (name, result) in enumerate(runs.items()):
-        foot = result.contour.foot[:, :2]
-        shown = foot + k * (result.tool_position[:, :2] - foot)
+        shown = _magnified(result, k)
         ia = _thin_curve(shown, step)
         largest = 1e3 * result.contour.magnitude[result.trajectory.measuring].max()
-        ax.plot(shown[ia, 0], shown[ia, 1], color=f"C{i}", lw=0.9, label=f"{name} (max {largest:.3g} µm)")
+        ax.plot(*shown[ia].T, color=f"C{i}", lw=0.9, label=f"{name} (max {largest:.3g} µm)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")

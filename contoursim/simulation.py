@@ -34,6 +34,8 @@ from .trajectory import Trajectory
 
 __all__ = ["SimResult", "default_settle", "measured_reference", "simulate", "simulate_batch"]
 
+_BLOCK = 1 << 14  # samples a summary reduces at once [samples]
+
 
 @dataclass(frozen=True)
 class SimResult:
@@ -53,7 +55,8 @@ class SimResult:
     servo_response : contoursim.kernel.ServoResponse
         Servo axes' positions, velocities, currents.
     tool_position : ndarray, shape (N, d)
-        Actual tool tip in workpiece coordinates [mm].
+        Actual tool tip in workpiece coordinates [mm]; read-only (:func:`simulate`
+        shares it with the contour error as its ``actual`` points).
     static_tool_position : ndarray, shape (N, d)
         Where the tool tip would be if every axis followed its command
         exactly: the reference plus the volumetric (geometric) error of the
@@ -118,18 +121,21 @@ class SimResult:
             ``contour_rms_um`` (without a contour error: not there),
             ``volumetric_max_um``, ``volumetric_rms_um``.
         """
-        keep = self.trajectory.measuring if measuring_only else slice(None)
-        errors = dict(
-            tracking=np.linalg.norm(self.tracking_error[keep], axis=1),
-            contour=None if self.contour is None else self.contour.magnitude[keep],
-            volumetric=np.linalg.norm(self.volumetric_error[keep], axis=1),
+        keep = self.trajectory.measuring if measuring_only else np.ones(len(self.trajectory), bool)
+        reference = self.trajectory.position
+        errors = dict(  # made one at a time, each an (n,) array: a finished run holds everything else already
+            tracking=lambda: _distances(self.tool_position, reference, keep),
+            contour=None if self.contour is None else lambda: self.contour.magnitude[keep],
+            volumetric=lambda: _distances(self.static_tool_position, reference, keep),
         )
         summary = {}
-        for name, e in errors.items():
-            if e is None:
+        for name, error in errors.items():
+            if error is None:
                 continue
+            e = error()
             summary[f"{name}_max_um"] = 1e3 * float(e.max())
-            summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(e**2)))
+            summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(np.square(e, out=e))))
+            del e  # before the next one is made
         return summary
 
     def to_trace(self, metadata=None):
@@ -175,6 +181,18 @@ class SimResult:
         extra = {} if self.contour is None else {"contour": self.contour.magnitude, "contour_normal": self.contour.normal}
         extra["measuring"] = self.trajectory.measuring
         write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
+
+
+def _distances(points, reference, keep):
+    """``|points - reference|`` of the rows `keep` [mm], shape (keep.sum(),): made in blocks, no (N, d) temporaries."""
+    out = np.empty(np.count_nonzero(keep))
+    done = 0
+    for lo in range(0, len(keep), _BLOCK):
+        part, rows = slice(lo, lo + _BLOCK), keep[lo : lo + _BLOCK]
+        distances = np.linalg.norm(points[part][rows] - reference[part][rows], axis=1)
+        out[done : done + distances.size] = distances
+        done += distances.size
+    return out
 
 
 def measured_reference(trace, servo_period):
@@ -383,6 +401,8 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
+    del elapsed  # before the contour error is computed
+    tool.flags.writeable = False  # the contour error keeps it as its actual points, without a copy
     error = None
     if contour and trajectory.path is not None:
         error = exact_contour_error(trajectory, tool)

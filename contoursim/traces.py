@@ -64,8 +64,9 @@ class Trace:
         reference = _validate.finite_array("reference", self.reference, shape=shape, limit=MAX_POSITION)
         actual = _validate.finite_array("actual", self.actual, shape=shape, limit=MAX_POSITION)
         for name, value in dict(t=t, reference=reference, actual=actual).items():
-            value = np.array(value)  # a copy: the caller's arrays stay writeable
-            value.flags.writeable = False
+            if value.flags.writeable:  # a copy: the caller's arrays stay writeable (read-only ones are shared)
+                value = value.copy()
+                value.flags.writeable = False
             object.__setattr__(self, name, value)
         object.__setattr__(self, "axes", axes)
         object.__setattr__(self, "dt", dt)
@@ -80,7 +81,7 @@ TIME_DECIMALS = 9
 """Decimals of ``t`` in a written trace [s]: to the ns."""
 POSITION_DECIMALS = 6
 """Decimals of positions (and other float columns) in a written trace [mm]: to the nm."""
-_CHUNK = 1 << 16  # rows formatted at once: bounds the formatter's memory
+_CHUNK = 1 << 14  # rows formatted at once: bounds the formatter's memory (its buffers, ~0.5 kB a row)
 
 
 def write_trace(file, trace, extra=None, overwrite=False, every=1):
@@ -126,12 +127,15 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
             raise ValueError(f"extra column {name!r} clashes with a trace column")
         values = np.asarray(values)
         whole = values.dtype.kind in "bui"
-        values = _validate.finite_array(name, values.astype(int) if values.dtype.kind == "b" else values, shape=(trace.t.size,))
+        if values.dtype.kind != "b":
+            values = _validate.finite_array(name, values, shape=(trace.t.size,))
+        elif values.shape != (trace.t.size,):  # booleans (written 1 and 0) are finite: no float copy to check
+            raise ValueError(f"{name} must have shape ({trace.t.size},), got {values.shape}")
         columns[name] = (values, 0 if whole else POSITION_DECIMALS)
     for name, (values, decimals) in columns.items():
-        largest = float(np.abs(values).max()) * 10.0**decimals
-        if largest >= 2.0**53:
-            raise ValueError(f"column {name!r}: {np.abs(values).max():g} is too large to write to 1e-{decimals}")
+        largest = max(float(values.max()), -float(values.min()))  # |values|.max() without an (N,) temporary
+        if largest * 10.0**decimals >= 2.0**53:
+            raise ValueError(f"column {name!r}: {largest:g} is too large to write to 1e-{decimals}")
     header = "".join(f"# {key}: {value}\n" for key, value in trace.metadata.items()) + ",".join(columns) + "\n"
     values = [v[::every] for v, _ in columns.values()]
     decimals = [d for _, d in columns.values()]

@@ -8,6 +8,8 @@ from . import _validate
 
 __all__ = ["Trajectory"]
 
+_BLOCK = 1 << 14  # samples a property reduces at once [samples]
+
 
 @dataclass(frozen=True)
 class Trajectory:
@@ -114,7 +116,9 @@ class Trajectory:
     @property
     def feed(self):
         """Highest path speed over the test proper (`measuring`) [mm/s]: the programmed feed where the plan reaches it."""
-        return float(self.speed[self.measuring].max())
+        blocks = range(0, len(self), _BLOCK)  # |v| block by block: no (N, d) temporaries beside a finished run
+        return max(float(np.linalg.norm(self.velocity[k : k + _BLOCK][self.measuring[k : k + _BLOCK]], axis=1).max(
+            initial=0.0)) for k in blocks)
 
     @property
     def tangent(self):

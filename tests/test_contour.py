@@ -6,7 +6,8 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import lfilter
 
 from contoursim import paths
-from contoursim.contour import exact_contour_error
+from contoursim.contour import ContourError, exact_contour_error
+from contoursim.nearest import nearest_knots
 from contoursim.feed import plan, sample
 from contoursim.trajectory import Trajectory
 
@@ -161,3 +162,33 @@ def test_iso_circle_trajectory_and_input_checks():
     bare = Trajectory(ref.t, ref.position, ref.velocity, ref.acceleration, ref.s)
     with pytest.raises(ValueError, match="trajectory has no path"):
         exact_contour_error(bare, actual)
+
+
+def test_exact_result_derives_its_vector_and_shares_the_actual_points():
+    ref = _coarse(paths.circle((0.0, 0.0), 50.0))
+    phi = np.linspace(0.0, 2 * np.pi, 40_001)[1:-1]  # more points than one block of the search
+    actual = (50.0 + 0.01 * np.sin(7 * phi))[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+    np.testing.assert_allclose(exact_contour_error(ref, actual).normal, -0.01 * np.sin(7 * phi), rtol=0, atol=1e-12)
+    actual.flags.writeable = False  # as a simulation's tool positions are: kept without a copy
+    err = exact_contour_error(ref, actual)
+    assert np.shares_memory(err.actual, actual)
+    np.testing.assert_array_equal(err.vector, err.foot - actual)  # the correction, from foot and actual points
+    assert not err.vector.flags.writeable
+    assert err.out_of_plane.shape == (phi.size,) and not err.out_of_plane.any() and err.out_of_plane.strides == (0,)
+    mine = actual.copy()  # writeable: the caller's, copied and left writeable
+    assert not np.shares_memory(exact_contour_error(ref, mine).actual, mine) and mine.flags.writeable
+    with pytest.raises(ValueError, match="foot and actual"):
+        ContourError(err.magnitude, None, err.normal, err.out_of_plane)
+
+
+def test_nearest_knots_searched_block_by_block_as_in_one_go():
+    ref = _coarse(paths.circle((0.0, 0.0), 50.0), spacing=0.5)
+    knots = np.ascontiguousarray(np.column_stack([ref.position, np.zeros(len(ref))]))
+    phi = np.linspace(0.0, 2 * np.pi, 5_000)[:-1]  # one turn, as the reference
+    points = np.ascontiguousarray(np.column_stack([50.1 * np.cos(phi), 50.1 * np.sin(phi), np.zeros(phi.size)]))
+    whole = nearest_knots(knots, points, 8, 0)
+    first = nearest_knots(knots, points[:1234], 8, 0)
+    rest = nearest_knots(knots, points[1234:], 8, int(first[-1]))  # hinted by the last knot found before
+    np.testing.assert_array_equal(np.concatenate([first, rest]), whole)
+    np.testing.assert_allclose(np.hypot(*knots[whole, :2].T), 50.0, rtol=1e-12)  # on the circle, nearest in angle
+    assert np.abs(np.angle(np.exp(1j * (np.arctan2(knots[whole, 1], knots[whole, 0]) - phi)))).max() < 0.5 / 50.0

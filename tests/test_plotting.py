@@ -6,8 +6,8 @@ import pytest
 from contoursim import paths
 from contoursim.feed import plan, sample
 from contoursim.machine import load_machine
-from contoursim.plotting import (circular_deviation, envelope_indices, magnification_for, plot_polar_deviation,
-                                 save_figures)
+from contoursim.plotting import (_Rows, _thin_curve, circular_deviation, envelope_indices, magnification_for,
+                                 plot_polar_deviation, save_figures)
 from contoursim.simulation import simulate
 
 
@@ -72,3 +72,16 @@ def test_polar_plot_only_for_circular_tests(tmp_path):
     assert [f.name for f in files] == ["a_path.png", "b_path.png", "a_errors.png", "b_errors.png"]  # no polar
     files = save_figures({"a": circle}, tmp_path, "a")
     assert files[-1].name == "a_polar.png" and all(f.stat().st_size > 10_000 for f in files)
+
+
+def test_curve_thinned_block_by_block_keeps_one_point_per_step_travelled():
+    u = np.linspace(0.0, 6 * np.pi, 150_001)  # longer than a block
+    points = np.column_stack([(10 + u) * np.cos(u), (10 + u) * np.sin(u)])  # a spiral [mm]
+    step = 0.37
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    cell = np.floor(travelled / step)
+    want = np.union1d(np.concatenate([[0], 1 + np.flatnonzero(cell[1:] > cell[:-1])]), [len(points) - 1])
+    np.testing.assert_array_equal(_thin_curve(points, step), want)
+    np.testing.assert_array_equal(_thin_curve(_Rows(len(points), lambda i: points[i]), step), want)  # made on demand
+    y = np.sin(u)
+    np.testing.assert_array_equal(envelope_indices(_Rows(len(y), lambda i: y[i][:, None])), envelope_indices(y))

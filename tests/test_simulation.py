@@ -248,3 +248,42 @@ def test_the_api_refuses_a_path_faster_than_the_machine_allows_like_the_cli():
         plan(path, feed=6000 / 60, accel=2000.0, max_feed=machine.max_feed)
     at_limit = sample(path, plan(path, feed=5000 / 60, accel=2000.0), DT)
     assert simulate(machine, at_limit).trajectory.speed.max() == pytest.approx(5000 / 60)
+
+
+def test_what_follows_a_run_allocates_no_arrays_of_its_length(tmp_path):
+    """The contour error, the summary, the trace CSV and the plots of a run, measured with tracemalloc at two lengths.
+
+    Per extra step, the peak of what each allocates may hold the contour error's results
+    (magnitude, s, normal, 2-D foot: 40 bytes) and its two int32 search indices, a summary's one
+    error at a time (8 bytes), a few bytes for the CSV's and the plots' checks and picks: no
+    (N, d) temporary (16 bytes a step in 2-D) beside a finished run.
+    """
+    import tracemalloc
+
+    from contoursim.contour import exact_contour_error
+    from contoursim.plotting import save_figures
+
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=36.0, **AXIS)}, DT)
+    path = paths.circle(center=(0, 0), radius=20.0)
+    peaks = {}
+    for feed in (6.0, 2.0):  # ~105 k and ~314 k steps
+        result = simulate(machine, sample(path, plan(path, feed=feed, accel=2000.0), DT), settle=0.0)
+        out = tmp_path / f"feed_{feed:g}"
+        jobs = dict(
+            contour=lambda: exact_contour_error(result.trajectory, result.tool_position),
+            summary=result.summary,
+            csv=lambda: result.save_csv(tmp_path / f"feed_{feed:g}.csv", overwrite=True),
+            plots=lambda: save_figures({"run": result}, out, "run"),
+        )
+        for name, job in jobs.items():
+            job()  # compiled, imported, cached: what a second call allocates is the job's own
+            tracemalloc.start()
+            try:
+                base = tracemalloc.get_traced_memory()[0]
+                job()
+                peaks.setdefault(name, []).append((len(result.trajectory), tracemalloc.get_traced_memory()[1] - base))
+            finally:
+                tracemalloc.stop()
+    limits = dict(contour=52, summary=16, csv=4, plots=8)  # [bytes per step]
+    for name, ((n1, p1), (n2, p2)) in peaks.items():
+        assert (p2 - p1) / (n2 - n1) <= limits[name], (name, (p2 - p1) / (n2 - n1))

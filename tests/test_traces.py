@@ -159,3 +159,16 @@ def test_trace_arrays_are_read_only_and_the_callers_are_not():
             getattr(trace, name)[0] = 1.0
     ref[0] = 1.0  # the caller's array is theirs
     assert trace.reference[0, 0] == 0.0
+
+
+def test_read_only_arrays_are_shared_not_copied(tmp_path):
+    t = np.arange(5) * 1e-3
+    ref = np.zeros((5, 1))
+    for array in (t, ref):
+        array.flags.writeable = False  # e.g. a Trajectory's: nobody can change them, so a trace shares them
+    trace = Trace(t, ref, ref, ("x",))
+    assert trace.t is t and trace.reference is ref and trace.actual is ref
+    write_trace(tmp_path / "a.csv", trace, extra={"measuring": np.array([0, 1, 1, 0, 1], bool)})
+    assert (tmp_path / "a.csv").read_text().splitlines()[1:3] == ["0,0,0,0", "0.001,0,0,1"]
+    with pytest.raises(ValueError, match=r"measuring must have shape \(5,\)"):
+        write_trace(tmp_path / "b.csv", trace, extra={"measuring": np.ones(4, bool)})
