@@ -339,7 +339,8 @@ class ServoResponse:
         measurement noise; the axis position without effects.
     encoder : ndarray, shape (N, n)
         The position the position loop closed on at ``t_k`` [mm]: motor
-        encoder or linear scale, quantised and delayed.
+        encoder or linear scale, quantised and delayed (:func:`run` returns
+        `position` itself when no axis has an effect between the two).
     velocity : ndarray, shape (N, n)
         Motor (carriage) velocities at ``t_k`` [mm/s].
     current : ndarray, shape (N, n)
@@ -976,7 +977,13 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
 
     n_steps = ref_pos.shape[0]
     state = _initial_state((n,), ref_pos[0])
-    position, encoder, velocity, current = np.empty((4, n_steps, n))  # one block, which malloc keeps for the next run
+    # Without a sensor effect between them (a mode, noise, delay, quantisation, or backlash behind a motor
+    # encoder) the encoder reads the tool position exactly: one array holds both, written twice with the same values.
+    sensed = par[:, _MODE] + par[:, _NOISE] + par[:, _DELAY_N] + par[:, _DELAY_F] + par[:, _QUANTUM]
+    separate = bool(np.any(sensed != 0.0) or np.any((par[:, _HALF_PLAY] != 0.0) & (par[:, _SCALE] == 0.0)))
+    signals = np.empty((3 + separate, n_steps, n))  # one block, which malloc keeps for the next run
+    position, velocity, current = signals[:3]
+    encoder = signals[3] if separate else position
     saturated = np.empty((n_steps, n), bool)
     status = np.empty((n, 3), np.int64)
     if coupling is None:

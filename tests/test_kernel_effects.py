@@ -384,6 +384,27 @@ def test_measurement_noise_rms_and_determinism():
     assert np.abs(noisy[2].position - noisy[0].position).max() > noise
 
 
+@pytest.mark.parametrize("effects, separate", [
+    ({}, False),
+    ({"y": LoopEffects(backlash_mm=0.004, backlash_feedback="scale", coulomb_N=50.0)}, False),  # the scale reads the table
+    ({"y": LoopEffects(backlash_mm=0.004)}, True),  # the motor encoder does not
+    ({"y": LoopEffects(quantum_mm=1e-4)}, True),
+    ({"x": LoopEffects(feedback_delay_s=0.5 * DT)}, True),
+    ({"x": LoopEffects(mode_freq_hz=80.0)}, True),
+    ({"x": LoopEffects(noise_mm=1e-4)}, True),
+])  # fmt: skip
+def test_run_shares_the_encoder_array_only_when_it_reads_the_tool_position(effects, separate):
+    pos, vel = back_and_forth(DT)[:2]
+    refs = [np.column_stack([r, 0.5 * r]) for r in (pos, vel, np.gradient(vel, DT))]
+    r = run([axis(), axis()], DT, *refs, effects=effects)
+    assert (r.encoder is not r.position) == separate
+    # the batch writes the two signals apart: equal exactly where run() shares them
+    rows = np.array([[pack(axis(), DT, effects.get(name, LoopEffects())) for name in ("x", "y")]])
+    batch = run_batch(rows, DT, *refs, outputs=("tool", "encoder"))
+    assert np.array_equal(batch["tool"][0], batch["encoder"][0]) != separate
+    np.testing.assert_array_equal(batch["encoder"][0], r.encoder)
+
+
 # --- batches ---------------------------------------------------------------------------------
 
 
