@@ -169,7 +169,7 @@ def axis_jacobian(q, n_axes, tool, workpiece, tip, axis, order, parent, kind, co
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _eigh3(A, lam, U):
     """Eigenvalues `lam` and eigenvectors (columns of `U`) of a symmetric 3x3 `A` (cyclic Jacobi; `A` is overwritten)."""
     U[:] = 0.0
@@ -203,7 +203,7 @@ def _eigh3(A, lam, U):
         lam[i] = A[i, i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _adjugate3(M):
     """The adjugate of a symmetric 3x3 `M` (its cofactors): entries 00, 11, 22, 01, 02, 12."""
     return (
@@ -216,18 +216,18 @@ def _adjugate3(M):
     )
 
 
-@njit(cache=True, inline="always")
-def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
-    """Least-squares operator X (k, 3) of A x = b for a (3, k) A (x = X b), and the projector `null` onto the dropped directions.
+@njit(cache=True)
+def _pinv3(A, rcond, floor, X, s, As, G, lam, U, v):
+    """Least-squares operator X (k, 3) of A x = b for a (3, k) A (x = X b).
 
     Columns are divided by their norm, but at least by `floor`; directions
     whose eigenvalue of the scaled normal equations is below `rcond` are
     dropped. The nonzero eigenvalues of AᵀA (k x k) are those of AAᵀ
     (3 x 3): with AAᵀ = U Λ Uᵀ the kept eigenvectors of AᵀA are Aᵀu/√λ, so
-    ``X = Σ Aᵀu uᵀ/λ`` and ``null = I − Σ Aᵀu uᵀA/λ`` (scaled variables).
-    That is ``X = Aᵀ G⁺``, ``null = I − Aᵀ G⁺ A`` with G = AAᵀ and G⁺ the
-    inverse of its kept part, taken without the eigenvectors in the two
-    common cases (a margin of two for rounding in each bound):
+    ``X = Σ Aᵀu uᵀ/λ`` (scaled variables), that is ``X = Aᵀ G⁺`` with
+    G = AAᵀ and G⁺ the inverse of its kept part, taken without the
+    eigenvectors in the two common cases (a margin of two for rounding in
+    each bound):
 
     - all three kept (a well-conditioned position): G⁺ = G⁻¹, where
       λ_min ≥ 4 det G / (tr G)² > `rcond` (the two larger eigenvalues'
@@ -238,8 +238,10 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
       zero one's eigenvector, G⁺ = (G + P)⁻¹ − P, where
       det G ≤ 1e-13 m tr G and λ_min ≥ m / tr G > `rcond`.
 
-    `null` is left alone unless `with_null`. `s`, `As`, `G`, `lam`, `U`, `v`
-    are work arrays.
+    The projector onto the directions left free is ``I − X A``: in the
+    scaled variables ``I − Σ Aᵀu uᵀA/λ``, and scaling by ``S = diag(s)``
+    turns it into ``S⁻¹ (I − Xs As) S = I − X A``. `s`, `As`, `G`, `lam`,
+    `U`, `v` are work arrays.
     """
     k = A.shape[1]
     for c in range(k):
@@ -253,10 +255,6 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
                 g += As[r, c] * As[q, c]
             G[r, q] = g
     X[:] = 0.0
-    if with_null:
-        null[:] = 0.0
-        for c in range(k):
-            null[c, c] = 1.0
     a00, a11, a22, a01, a02, a12 = _adjugate3(G)
     det = G[0, 0] * a00 + G[0, 1] * a01 + G[0, 2] * a02
     trace = G[0, 0] + G[1, 1] + G[2, 2]
@@ -281,10 +279,6 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
         for c in range(k):
             for r in range(3):
                 X[c, r] = As[0, c] * U[0, r] + As[1, c] * U[1, r] + As[2, c] * U[2, r]
-        if with_null:
-            for c in range(k):
-                for d in range(k):
-                    null[c, d] -= X[c, 0] * As[0, d] + X[c, 1] * As[1, d] + X[c, 2] * As[2, d]
     else:
         _eigh3(G, lam, U)
         for i in range(3):
@@ -295,15 +289,9 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
             for c in range(k):
                 for r in range(3):
                     X[c, r] += v[c] * U[r, i] / lam[i]
-                if with_null:
-                    for d in range(k):
-                        null[c, d] -= v[c] * v[d] / lam[i]
     for c in range(k):  # back to unscaled variables
         for r in range(3):
             X[c, r] /= s[c]
-        if with_null:
-            for d in range(k):
-                null[c, d] *= s[d] / s[c]
 
 
 @njit(cache=True)
@@ -311,52 +299,55 @@ def prioritized_inverse(J, rcond):
     """Per-sample operator P, shape (N, k, rows), of the step ``P·r`` for ``J·step = r``.
 
     Position rows first (x = X1 r_p); the tool axis (rows 3-5 of a
-    (N, 6, k) `J`) only in the null space N the position leaves:
+    (N, 6, k) `J`) only in the null space N = I − X1 Jp the position leaves:
     x += N X2 (r_o − Jo x) with X2 the operator of ``(Jo N) x2 = b``, so
-    ``P = [X1 − N X2 Jo X1 | N X2]``. See :func:`contoursim.multibody._prioritized_inverse`.
+    ``P = [X1 − N X2 Jo X1 | N X2]``. N is applied as ``y − X1 (Jp y)``,
+    never formed (k x 3 x 3 products instead of k x k x 3). See
+    :func:`contoursim.multibody._prioritized_inverse`.
     """
     size, rows, k = J.shape
     out = np.zeros((size, k, rows))
     X1 = np.empty((k, 3))
     X2 = np.empty((k, 3))
-    null = np.empty((k, k))
     A = np.empty((3, k))
     NX2 = np.empty((k, 3))
     JoX1 = np.empty((3, 3))
+    JpX2 = np.empty((3, 3))
     s, As, G, lam, U, v = np.empty(k), np.empty((3, k)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(k)
     for n in range(size):
-        _pinv3(J[n, :3], rcond, 1.0, X1, null, s, As, G, lam, U, v, rows == 6)
+        Jp = J[n, :3]
+        _pinv3(Jp, rcond, 1.0, X1, s, As, G, lam, U, v)
         strongest = 0.0
         if rows == 6:
             for c in range(k):
                 strongest = max(strongest, np.sqrt(J[n, 3, c] ** 2 + J[n, 4, c] ** 2 + J[n, 5, c] ** 2))
         if strongest == 0.0:
-            out[n, :, :3] = X1
-            continue
-        for i in range(3):  # A = Jo·N, JoX1 = Jo·X1
             for c in range(k):
-                a = 0.0
-                for d in range(k):
-                    a += J[n, 3 + i, d] * null[d, c]
-                A[i, c] = a
+                for r in range(3):
+                    out[n, c, r] = X1[c, r]
+            continue
+        Jo = J[n, 3:]
+        for i in range(3):  # JoX1 = Jo·X1, then A = Jo·N = Jo − JoX1·Jp
             for r in range(3):
                 a = 0.0
                 for d in range(k):
-                    a += J[n, 3 + i, d] * X1[d, r]
+                    a += Jo[i, d] * X1[d, r]
                 JoX1[i, r] = a
-        _pinv3(A, rcond, strongest + 1e-300, X2, null, s, As, G, lam, U, v, False)
-        for c in range(k):
+            for c in range(k):
+                A[i, c] = Jo[i, c] - (JoX1[i, 0] * Jp[0, c] + JoX1[i, 1] * Jp[1, c] + JoX1[i, 2] * Jp[2, c])
+        _pinv3(A, rcond, strongest + 1e-300, X2, s, As, G, lam, U, v)
+        for i in range(3):  # JpX2 = Jp·X2, then N·X2 = X2 − X1·JpX2
             for r in range(3):
                 a = 0.0
                 for d in range(k):
-                    a += null[c, d] * X2[d, r]
-                NX2[c, r] = a
+                    a += Jp[i, d] * X2[d, r]
+                JpX2[i, r] = a
         for c in range(k):
             for r in range(3):
-                a = X1[c, r]
-                for i in range(3):
-                    a -= NX2[c, i] * JoX1[i, r]
-                out[n, c, r] = a
+                NX2[c, r] = X2[c, r] - (X1[c, 0] * JpX2[0, r] + X1[c, 1] * JpX2[1, r] + X1[c, 2] * JpX2[2, r])
+        for c in range(k):
+            for r in range(3):
+                out[n, c, r] = X1[c, r] - (NX2[c, 0] * JoX1[0, r] + NX2[c, 1] * JoX1[1, r] + NX2[c, 2] * JoX1[2, r])
                 out[n, c, 3 + r] = NX2[c, r]
     return out
 
