@@ -11,26 +11,31 @@ import numpy as np
 
 from ._numba import njit
 
-__all__ = ["rotated", "CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse", "newton_update"]
+__all__ = ["rotation", "rotated", "CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse", "newton_update"]
 
 
 @njit(cache=True)
-def rotated(vx, vy, vz, wx, wy, wz):
-    """The vector v rotated by the rotation vector w (exact, Rodrigues).
+def rotation(wx, wy, wz):
+    """The coefficients (a, b) of :func:`rotated` for the rotation vector w: a = sin θ/θ, b = (1 − cos θ)/θ², θ = |w|.
 
-    ``v + a (w × v) + b w × (w × v)`` with a = sin θ/θ, b = (1 − cos θ)/θ²,
-    θ = |w|. Below θ = 0.01 (every error motion, most steps of a chain) by
-    their series to θ⁴: the first term left out, θ⁶/5040, is below 2e-16 there,
+    Below θ = 0.01 (every error motion, most steps of a chain) by their
+    series to θ⁴: the first term left out, θ⁶/5040, is below 2e-16 there,
     and no sine, cosine or root is taken.
     """
     th2 = wx * wx + wy * wy + wz * wz
     if th2 < 1e-4:
-        a = 1.0 - th2 / 6.0 * (1.0 - th2 / 20.0)
-        b = 0.5 - th2 / 24.0 * (1.0 - th2 / 30.0)
-    else:
-        th = np.sqrt(th2)
-        a = np.sin(th) / th
-        b = (1.0 - np.cos(th)) / th2
+        return 1.0 - th2 / 6.0 * (1.0 - th2 / 20.0), 0.5 - th2 / 24.0 * (1.0 - th2 / 30.0)
+    th = np.sqrt(th2)
+    return np.sin(th) / th, (1.0 - np.cos(th)) / th2
+
+
+@njit(cache=True)
+def rotated(vx, vy, vz, wx, wy, wz, a, b):
+    """The vector v rotated by the rotation vector w (exact, Rodrigues), with (a, b) = :func:`rotation` (w).
+
+    ``v + a (w × v) + b w × (w × v)``; one :func:`rotation` serves every
+    vector turned by the same w.
+    """
     cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
     return vx + a * cx + b * (wy * cz - wz * cy), vy + a * cy + b * (wz * cx - wx * cz), vz + a * cz + b * (wx * cy - wy * cx)
 
@@ -85,8 +90,9 @@ def tool_pose(q, times, err, tip, axis, kind, inverse, column, vector):
                 px, py, pz = px - dx, py - dy, pz - dz
                 wx, wy, wz = -wx, -wy, -wz
             if wx != 0.0 or wy != 0.0 or wz != 0.0:
-                px, py, pz = rotated(px, py, pz, wx, wy, wz)
-                vx, vy, vz = rotated(vx, vy, vz, wx, wy, wz)
+                a, b = rotation(wx, wy, wz)
+                px, py, pz = rotated(px, py, pz, wx, wy, wz, a, b)
+                vx, vy, vz = rotated(vx, vy, vz, wx, wy, wz, a, b)
             if not inverse[i]:
                 px, py, pz = px + dx, py + dy, pz + dz
         out[n, 0], out[n, 1], out[n, 2] = px, py, pz
@@ -99,8 +105,9 @@ def _rotate_columns(R, w):
     """R <- Rot(w) R (exact), for a 3x3 R."""
     if w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0:
         return
+    a, b = rotation(w[0], w[1], w[2])
     for c in range(3):
-        R[0, c], R[1, c], R[2, c] = rotated(R[0, c], R[1, c], R[2, c], w[0], w[1], w[2])
+        R[0, c], R[1, c], R[2, c] = rotated(R[0, c], R[1, c], R[2, c], w[0], w[1], w[2], a, b)
 
 
 @njit(cache=True)

@@ -930,7 +930,8 @@ def _rotate_kernel(v, w):
     """Rows of (M, 3) arrays: v rotated by w (:func:`contoursim._chainkernels.rotated`)."""
     out = np.empty_like(v)
     for n in range(v.shape[0]):
-        out[n, 0], out[n, 1], out[n, 2] = _chainkernels.rotated(v[n, 0], v[n, 1], v[n, 2], w[n, 0], w[n, 1], w[n, 2])
+        a, b = _chainkernels.rotation(w[n, 0], w[n, 1], w[n, 2])
+        out[n, 0], out[n, 1], out[n, 2] = _chainkernels.rotated(v[n, 0], v[n, 1], v[n, 2], w[n, 0], w[n, 1], w[n, 2], a, b)
     return out
 
 
