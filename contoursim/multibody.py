@@ -787,7 +787,9 @@ class MachineChain:
         residual shrinks by about the errors' relative size and slope per step. The
         Jacobian is kept while the steps shrink at least tenfold each (as
         they do on the actual chain, whose errors are small) and evaluated
-        anew where they do not.
+        anew where they do not. The samples are iterated in blocks of
+        16 384, each to its own end (its Jacobians and step operators, of
+        the block's length, stay in cache).
 
         Parameters
         ----------
@@ -840,7 +842,7 @@ class MachineChain:
         columns = np.flatnonzero(mask)
         target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
         max_iter = int(_validate.positive("max_iter", max_iter))
-        for lo in range(0, n, _BLOCK):  # the whole iteration block by block: its (block, 6, k) temporaries stay in cache
+        for lo in range(0, n, _BLOCK):
             part = slice(lo, lo + _BLOCK)
             self._newton(q[part], position[part], target_axis[part], None if t is None else t[part], columns, rows, ideal,
                          tol, max_iter, lo)

@@ -420,6 +420,31 @@ def test_actual_inverse_with_tool_axis_reaches_the_pose():
     np.testing.assert_allclose(va, v, atol=1e-12)
 
 
+def test_inverse_of_more_than_two_blocks_reaches_every_pose():
+    # 2 full blocks of the iteration and a short one; the thermal drift reads each block's own times
+    chain = load_machine("aircraft_drilling_7axis")
+    n = 2 * multibody._BLOCK + 100
+    q_true = travel_grid(chain, n, seed=7)
+    t = np.linspace(0.0, 600.0, n)
+    p, v = chain.tool_pose(q_true, t, ideal=True)
+    q = chain.inverse(p, v, q0=q_true, t=t)
+    pa, va = chain.tool_pose(q, t)
+    assert np.abs(chain.tool_pose(q_true, t)[0] - p).max() > 1e-2  # the errors to cancel, up to tens of µm
+    np.testing.assert_allclose(pa, p, atol=1e-9)
+    np.testing.assert_allclose(va, v, atol=1e-12)
+
+
+def test_inverse_names_the_sample_that_does_not_converge_in_a_later_block():
+    chain = load_machine("vertical_mill_3axis")
+    n = multibody._BLOCK + 10
+    q_true = travel_grid(chain, n, seed=8)
+    p, _ = chain.tool_pose(q_true, ideal=True)
+    q0 = q_true.copy()
+    q0[n - 3] += 1.0  # every other sample starts at its solution: the first block stops at once
+    with pytest.raises(ValueError, match=f"did not converge in 1 steps \\(sample {n - 3}, last step 1"):
+        chain.inverse(p, q0=q0, ideal=True, max_iter=1)
+
+
 # -- validation and loading -----------------------------------------------------------------
 
 
