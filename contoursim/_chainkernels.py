@@ -243,7 +243,12 @@ def _pinv3(A, rcond, floor, X, s, As, G, lam, U, v):
       a unit vector turns in a plane): with m the sum of G's principal
       minors (= λ₁λ₂ there) and ``P = adj G / m`` the projector onto the
       zero one's eigenvector, G⁺ = (G + P)⁻¹ − P, where
-      det G ≤ 1e-13 m tr G and λ_min ≥ m / tr G > `rcond`.
+      det G ≤ 1e-13 m tr G and λ_min ≥ m / tr G > `rcond`;
+    - two eigenvalues zero to rounding, one kept (the tool axis with one
+      turn left to it): G = λ u uᵀ with λ = tr G, so G⁺ = G / (tr G)²,
+      where m ≤ 1e-13 (tr G)² and tr G > `rcond`;
+    - none kept, where tr G ≤ `rcond` / 2 (no eigenvalue exceeds the
+      trace): X = 0.
 
     The projector onto the directions left free is ``I − X A``: in the
     scaled variables ``I − Σ Aᵀu uᵀA/λ``, and scaling by ``S = diag(s)``
@@ -267,11 +272,12 @@ def _pinv3(A, rcond, floor, X, s, As, G, lam, U, v):
     trace = G[0, 0] + G[1, 1] + G[2, 2]
     minors = a00 + a11 + a22
     full = det > 0.5 * rcond * trace * trace  # all three kept
-    plane = not full and det <= 1e-13 * minors * trace and minors > 2.0 * rcond * trace  # one zero, two kept
-    if full or plane:  # U <- G⁺
+    plane = det <= 1e-13 * minors * trace and minors > 2.0 * rcond * trace  # one zero, two kept
+    line = minors <= 1e-13 * trace * trace and trace > 2.0 * rcond  # two zero, one kept
+    if full or plane or line:  # U <- G⁺
         if full:
             b00, b11, b22, b01, b02, b12 = a00 / det, a11 / det, a22 / det, a01 / det, a02 / det, a12 / det
-        else:
+        elif plane:
             a00, a11, a22, a01, a02, a12 = a00 / minors, a11 / minors, a22 / minors, a01 / minors, a02 / minors, a12 / minors  # P
             U[0, 0], U[1, 1], U[2, 2] = G[0, 0] + a00, G[1, 1] + a11, G[2, 2] + a22  # G + P
             U[0, 1], U[0, 2], U[1, 2] = G[0, 1] + a01, G[0, 2] + a02, G[1, 2] + a12
@@ -280,13 +286,16 @@ def _pinv3(A, rcond, floor, X, s, As, G, lam, U, v):
             det = U[0, 0] * b00 + U[0, 1] * b01 + U[0, 2] * b02
             b00, b11, b22 = b00 / det - a00, b11 / det - a11, b22 / det - a22
             b01, b02, b12 = b01 / det - a01, b02 / det - a02, b12 / det - a12
+        else:
+            t2 = trace * trace
+            b00, b11, b22, b01, b02, b12 = G[0, 0] / t2, G[1, 1] / t2, G[2, 2] / t2, G[0, 1] / t2, G[0, 2] / t2, G[1, 2] / t2
         U[0, 0], U[1, 1], U[2, 2] = b00, b11, b22
         U[0, 1], U[0, 2], U[1, 2] = b01, b02, b12
         U[1, 0], U[2, 0], U[2, 1] = b01, b02, b12
         for c in range(k):
             for r in range(3):
                 X[c, r] = As[0, c] * U[0, r] + As[1, c] * U[1, r] + As[2, c] * U[2, r]
-    else:
+    elif trace > 0.5 * rcond:  # else none kept: X = 0 as it is
         _eigh3(G, lam, U)
         for i in range(3):
             if lam[i] <= rcond:

@@ -572,3 +572,15 @@ def test_prioritized_inverse_equals_the_svd_pseudo_inverse():
         np.testing.assert_allclose(P3[n], X1, rtol=0, atol=1e-10 * np.abs(X1).max())
         if n % 5 > 2:
             np.testing.assert_allclose(J[n, :3] @ P[n, :, :3], np.eye(3), atol=1e-9)  # the position is met exactly
+
+
+def test_prioritized_inverse_keeps_a_tool_axis_turn_just_above_the_threshold():
+    """A turn left to the tool axis is used when its scaled eigenvalue exceeds rcond = 1e-4, else dropped."""
+    eigenvalue = np.array([3e-4, 1.5e-4, 1.01e-4, 0.99e-4, 0.7e-4, 0.4e-4, 0.0])
+    J = np.zeros((eigenvalue.size, 6, 4))
+    J[:, :3, :3] = np.eye(3)  # the position takes axes 0-2 ...
+    J[:, 3, 0] = 1.0  # ... and with them the strongest turn of the tool axis (the column scale)
+    J[:, 5, 3] = np.sqrt(eigenvalue)  # axis 3, free, turns the tool axis about the rest: by √λ per unit
+    P = multibody._prioritized_inverse(J)
+    # kept: a unit residual of that component moves axis 3 by 1/√λ; dropped: not at all
+    np.testing.assert_allclose(P[:, 3, 5] * np.sqrt(eigenvalue), eigenvalue > 1e-4, rtol=1e-12, atol=0)
