@@ -831,6 +831,7 @@ class MachineChain:
             tool_axis = _validate.finite_array("tool_axis", tool_axis, shape=(n, 3))
         q = np.zeros((n, len(self.axes))) if q0 is None else _validate.finite_array("q0", q0, shape=(n, len(self.axes)))
         q = q.copy()
+        t = None if t is None else _validate.finite_array("t", t, shape=(n,))
         if free is None:
             mask = np.ones(len(self.axes), bool) if tool_axis is not None else ~self.rotary_axes
         else:

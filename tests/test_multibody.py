@@ -434,7 +434,7 @@ def test_inverse_of_more_than_two_blocks_reaches_every_pose():
     np.testing.assert_allclose(va, v, atol=1e-12)
 
 
-def test_inverse_names_the_sample_that_does_not_converge_in_a_later_block():
+def test_inverse_errors_name_the_whole_input_not_a_block():
     chain = load_machine("vertical_mill_3axis")
     n = multibody._BLOCK + 10
     q_true = travel_grid(chain, n, seed=8)
@@ -443,6 +443,8 @@ def test_inverse_names_the_sample_that_does_not_converge_in_a_later_block():
     q0[n - 3] += 1.0  # every other sample starts at its solution: the first block stops at once
     with pytest.raises(ValueError, match=f"did not converge in 1 steps \\(sample {n - 3}, last step 1"):
         chain.inverse(p, q0=q0, ideal=True, max_iter=1)
+    with pytest.raises(ValueError, match=f"t must have shape \\({n}\\)"):  # the whole input's length, not a block's
+        chain.inverse(p, q0=q_true, t=np.zeros(n - 1))
 
 
 # -- validation and loading -----------------------------------------------------------------
