@@ -233,8 +233,8 @@ def _pinv3(A, rcond, floor, X, s, As, G, lam, U, v):
     (3 x 3): with AAᵀ = U Λ Uᵀ the kept eigenvectors of AᵀA are Aᵀu/√λ, so
     ``X = Σ Aᵀu uᵀ/λ`` (scaled variables), that is ``X = Aᵀ G⁺`` with
     G = AAᵀ and G⁺ the inverse of its kept part, taken without the
-    eigenvectors in the two common cases (a margin of two for rounding in
-    each bound):
+    eigenvectors in the common cases (a margin of two for rounding in each
+    bound):
 
     - all three kept (a well-conditioned position): G⁺ = G⁻¹, where
       λ_min ≥ 4 det G / (tr G)² > `rcond` (the two larger eigenvalues'
