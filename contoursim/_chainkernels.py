@@ -11,26 +11,31 @@ import numpy as np
 
 from ._numba import njit
 
-__all__ = ["rotated", "CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse", "newton_update"]
+__all__ = ["rotation", "rotated", "CONSTANT", "LINEAR", "ROTARY", "THERMAL", "ERROR", "tool_pose", "axis_jacobian", "prioritized_inverse", "newton_update"]
 
 
 @njit(cache=True)
-def rotated(vx, vy, vz, wx, wy, wz):
-    """The vector v rotated by the rotation vector w (exact, Rodrigues).
+def rotation(wx, wy, wz):
+    """The coefficients (a, b) of :func:`rotated` for the rotation vector w: a = sin θ/θ, b = (1 − cos θ)/θ², θ = |w|.
 
-    ``v + a (w × v) + b w × (w × v)`` with a = sin θ/θ, b = (1 − cos θ)/θ²,
-    θ = |w|. Below θ = 0.01 (every error motion, most steps of a chain) by
-    their series to θ⁴: the first term left out, θ⁶/5040, is below 2e-16 there,
+    Below θ = 0.01 (every error motion, most steps of a chain) by their
+    series to θ⁴: the first term left out, θ⁶/5040, is below 2e-16 there,
     and no sine, cosine or root is taken.
     """
     th2 = wx * wx + wy * wy + wz * wz
     if th2 < 1e-4:
-        a = 1.0 - th2 / 6.0 * (1.0 - th2 / 20.0)
-        b = 0.5 - th2 / 24.0 * (1.0 - th2 / 30.0)
-    else:
-        th = np.sqrt(th2)
-        a = np.sin(th) / th
-        b = (1.0 - np.cos(th)) / th2
+        return 1.0 - th2 / 6.0 * (1.0 - th2 / 20.0), 0.5 - th2 / 24.0 * (1.0 - th2 / 30.0)
+    th = np.sqrt(th2)
+    return np.sin(th) / th, (1.0 - np.cos(th)) / th2
+
+
+@njit(cache=True)
+def rotated(vx, vy, vz, wx, wy, wz, a, b):
+    """The vector v rotated by the rotation vector w (exact, Rodrigues), with (a, b) = :func:`rotation` (w).
+
+    ``v + a (w × v) + b w × (w × v)``; one :func:`rotation` serves every
+    vector turned by the same w.
+    """
     cx, cy, cz = wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx
     return vx + a * cx + b * (wy * cz - wz * cy), vy + a * cy + b * (wz * cx - wx * cz), vz + a * cz + b * (wx * cy - wy * cx)
 
@@ -85,8 +90,9 @@ def tool_pose(q, times, err, tip, axis, kind, inverse, column, vector):
                 px, py, pz = px - dx, py - dy, pz - dz
                 wx, wy, wz = -wx, -wy, -wz
             if wx != 0.0 or wy != 0.0 or wz != 0.0:
-                px, py, pz = rotated(px, py, pz, wx, wy, wz)
-                vx, vy, vz = rotated(vx, vy, vz, wx, wy, wz)
+                a, b = rotation(wx, wy, wz)
+                px, py, pz = rotated(px, py, pz, wx, wy, wz, a, b)
+                vx, vy, vz = rotated(vx, vy, vz, wx, wy, wz, a, b)
             if not inverse[i]:
                 px, py, pz = px + dx, py + dy, pz + dz
         out[n, 0], out[n, 1], out[n, 2] = px, py, pz
@@ -99,8 +105,9 @@ def _rotate_columns(R, w):
     """R <- Rot(w) R (exact), for a 3x3 R."""
     if w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0:
         return
+    a, b = rotation(w[0], w[1], w[2])
     for c in range(3):
-        R[0, c], R[1, c], R[2, c] = rotated(R[0, c], R[1, c], R[2, c], w[0], w[1], w[2])
+        R[0, c], R[1, c], R[2, c] = rotated(R[0, c], R[1, c], R[2, c], w[0], w[1], w[2], a, b)
 
 
 @njit(cache=True)
@@ -169,7 +176,7 @@ def axis_jacobian(q, n_axes, tool, workpiece, tip, axis, order, parent, kind, co
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _eigh3(A, lam, U):
     """Eigenvalues `lam` and eigenvectors (columns of `U`) of a symmetric 3x3 `A` (cyclic Jacobi; `A` is overwritten)."""
     U[:] = 0.0
@@ -203,7 +210,7 @@ def _eigh3(A, lam, U):
         lam[i] = A[i, i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _adjugate3(M):
     """The adjugate of a symmetric 3x3 `M` (its cofactors): entries 00, 11, 22, 01, 02, 12."""
     return (
@@ -216,18 +223,18 @@ def _adjugate3(M):
     )
 
 
-@njit(cache=True, inline="always")
-def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
-    """Least-squares operator X (k, 3) of A x = b for a (3, k) A (x = X b), and the projector `null` onto the dropped directions.
+@njit(cache=True)
+def _pinv3(A, rcond, floor, X, s, As, G, lam, U, v):
+    """Least-squares operator X (k, 3) of A x = b for a (3, k) A (x = X b).
 
     Columns are divided by their norm, but at least by `floor`; directions
     whose eigenvalue of the scaled normal equations is below `rcond` are
     dropped. The nonzero eigenvalues of AᵀA (k x k) are those of AAᵀ
     (3 x 3): with AAᵀ = U Λ Uᵀ the kept eigenvectors of AᵀA are Aᵀu/√λ, so
-    ``X = Σ Aᵀu uᵀ/λ`` and ``null = I − Σ Aᵀu uᵀA/λ`` (scaled variables).
-    That is ``X = Aᵀ G⁺``, ``null = I − Aᵀ G⁺ A`` with G = AAᵀ and G⁺ the
-    inverse of its kept part, taken without the eigenvectors in the two
-    common cases (a margin of two for rounding in each bound):
+    ``X = Σ Aᵀu uᵀ/λ`` (scaled variables), that is ``X = Aᵀ G⁺`` with
+    G = AAᵀ and G⁺ the inverse of its kept part, taken without the
+    eigenvectors in the common cases (a margin of two for rounding in each
+    bound):
 
     - all three kept (a well-conditioned position): G⁺ = G⁻¹, where
       λ_min ≥ 4 det G / (tr G)² > `rcond` (the two larger eigenvalues'
@@ -236,10 +243,17 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
       a unit vector turns in a plane): with m the sum of G's principal
       minors (= λ₁λ₂ there) and ``P = adj G / m`` the projector onto the
       zero one's eigenvector, G⁺ = (G + P)⁻¹ − P, where
-      det G ≤ 1e-13 m tr G and λ_min ≥ m / tr G > `rcond`.
+      det G ≤ 1e-13 m tr G and λ_min ≥ m / tr G > `rcond`;
+    - two eigenvalues zero to rounding, one kept (the tool axis with one
+      turn left to it): G = λ u uᵀ with λ = tr G, so G⁺ = G / (tr G)²,
+      where m ≤ 1e-13 (tr G)² and tr G > `rcond`;
+    - none kept, where tr G ≤ `rcond` / 2 (no eigenvalue exceeds the
+      trace): X = 0.
 
-    `null` is left alone unless `with_null`. `s`, `As`, `G`, `lam`, `U`, `v`
-    are work arrays.
+    The projector onto the directions left free is ``I − X A``: in the
+    scaled variables ``I − Σ Aᵀu uᵀA/λ``, and scaling by ``S = diag(s)``
+    turns it into ``S⁻¹ (I − Xs As) S = I − X A``. `s`, `As`, `G`, `lam`,
+    `U`, `v` are work arrays.
     """
     k = A.shape[1]
     for c in range(k):
@@ -253,20 +267,17 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
                 g += As[r, c] * As[q, c]
             G[r, q] = g
     X[:] = 0.0
-    if with_null:
-        null[:] = 0.0
-        for c in range(k):
-            null[c, c] = 1.0
     a00, a11, a22, a01, a02, a12 = _adjugate3(G)
     det = G[0, 0] * a00 + G[0, 1] * a01 + G[0, 2] * a02
     trace = G[0, 0] + G[1, 1] + G[2, 2]
     minors = a00 + a11 + a22
     full = det > 0.5 * rcond * trace * trace  # all three kept
-    plane = not full and det <= 1e-13 * minors * trace and minors > 2.0 * rcond * trace  # one zero, two kept
-    if full or plane:  # U <- G⁺
+    plane = det <= 1e-13 * minors * trace and minors > 2.0 * rcond * trace  # one zero, two kept
+    line = minors <= 1e-13 * trace * trace and trace > 2.0 * rcond  # two zero, one kept
+    if full or plane or line:  # U <- G⁺
         if full:
             b00, b11, b22, b01, b02, b12 = a00 / det, a11 / det, a22 / det, a01 / det, a02 / det, a12 / det
-        else:
+        elif plane:
             a00, a11, a22, a01, a02, a12 = a00 / minors, a11 / minors, a22 / minors, a01 / minors, a02 / minors, a12 / minors  # P
             U[0, 0], U[1, 1], U[2, 2] = G[0, 0] + a00, G[1, 1] + a11, G[2, 2] + a22  # G + P
             U[0, 1], U[0, 2], U[1, 2] = G[0, 1] + a01, G[0, 2] + a02, G[1, 2] + a12
@@ -275,17 +286,16 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
             det = U[0, 0] * b00 + U[0, 1] * b01 + U[0, 2] * b02
             b00, b11, b22 = b00 / det - a00, b11 / det - a11, b22 / det - a22
             b01, b02, b12 = b01 / det - a01, b02 / det - a02, b12 / det - a12
+        else:
+            t2 = trace * trace
+            b00, b11, b22, b01, b02, b12 = G[0, 0] / t2, G[1, 1] / t2, G[2, 2] / t2, G[0, 1] / t2, G[0, 2] / t2, G[1, 2] / t2
         U[0, 0], U[1, 1], U[2, 2] = b00, b11, b22
         U[0, 1], U[0, 2], U[1, 2] = b01, b02, b12
         U[1, 0], U[2, 0], U[2, 1] = b01, b02, b12
         for c in range(k):
             for r in range(3):
                 X[c, r] = As[0, c] * U[0, r] + As[1, c] * U[1, r] + As[2, c] * U[2, r]
-        if with_null:
-            for c in range(k):
-                for d in range(k):
-                    null[c, d] -= X[c, 0] * As[0, d] + X[c, 1] * As[1, d] + X[c, 2] * As[2, d]
-    else:
+    elif trace > 0.5 * rcond:  # else none kept: X = 0 as it is
         _eigh3(G, lam, U)
         for i in range(3):
             if lam[i] <= rcond:
@@ -295,15 +305,9 @@ def _pinv3(A, rcond, floor, X, null, s, As, G, lam, U, v, with_null):
             for c in range(k):
                 for r in range(3):
                     X[c, r] += v[c] * U[r, i] / lam[i]
-                if with_null:
-                    for d in range(k):
-                        null[c, d] -= v[c] * v[d] / lam[i]
     for c in range(k):  # back to unscaled variables
         for r in range(3):
             X[c, r] /= s[c]
-        if with_null:
-            for d in range(k):
-                null[c, d] *= s[d] / s[c]
 
 
 @njit(cache=True)
@@ -311,52 +315,55 @@ def prioritized_inverse(J, rcond):
     """Per-sample operator P, shape (N, k, rows), of the step ``P·r`` for ``J·step = r``.
 
     Position rows first (x = X1 r_p); the tool axis (rows 3-5 of a
-    (N, 6, k) `J`) only in the null space N the position leaves:
+    (N, 6, k) `J`) only in the null space N = I − X1 Jp the position leaves:
     x += N X2 (r_o − Jo x) with X2 the operator of ``(Jo N) x2 = b``, so
-    ``P = [X1 − N X2 Jo X1 | N X2]``. See :func:`contoursim.multibody._prioritized_inverse`.
+    ``P = [X1 − N X2 Jo X1 | N X2]``. N is applied as ``y − X1 (Jp y)``,
+    never formed (k x 3 x 3 products instead of k x k x 3). See
+    :func:`contoursim.multibody._prioritized_inverse`.
     """
     size, rows, k = J.shape
     out = np.zeros((size, k, rows))
     X1 = np.empty((k, 3))
     X2 = np.empty((k, 3))
-    null = np.empty((k, k))
     A = np.empty((3, k))
     NX2 = np.empty((k, 3))
     JoX1 = np.empty((3, 3))
+    JpX2 = np.empty((3, 3))
     s, As, G, lam, U, v = np.empty(k), np.empty((3, k)), np.empty((3, 3)), np.empty(3), np.empty((3, 3)), np.empty(k)
     for n in range(size):
-        _pinv3(J[n, :3], rcond, 1.0, X1, null, s, As, G, lam, U, v, rows == 6)
+        Jp = J[n, :3]
+        _pinv3(Jp, rcond, 1.0, X1, s, As, G, lam, U, v)
         strongest = 0.0
         if rows == 6:
             for c in range(k):
                 strongest = max(strongest, np.sqrt(J[n, 3, c] ** 2 + J[n, 4, c] ** 2 + J[n, 5, c] ** 2))
         if strongest == 0.0:
-            out[n, :, :3] = X1
-            continue
-        for i in range(3):  # A = Jo·N, JoX1 = Jo·X1
             for c in range(k):
-                a = 0.0
-                for d in range(k):
-                    a += J[n, 3 + i, d] * null[d, c]
-                A[i, c] = a
+                for r in range(3):
+                    out[n, c, r] = X1[c, r]
+            continue
+        Jo = J[n, 3:]
+        for i in range(3):  # JoX1 = Jo·X1, then A = Jo·N = Jo − JoX1·Jp
             for r in range(3):
                 a = 0.0
                 for d in range(k):
-                    a += J[n, 3 + i, d] * X1[d, r]
+                    a += Jo[i, d] * X1[d, r]
                 JoX1[i, r] = a
-        _pinv3(A, rcond, strongest + 1e-300, X2, null, s, As, G, lam, U, v, False)
-        for c in range(k):
+            for c in range(k):
+                A[i, c] = Jo[i, c] - (JoX1[i, 0] * Jp[0, c] + JoX1[i, 1] * Jp[1, c] + JoX1[i, 2] * Jp[2, c])
+        _pinv3(A, rcond, strongest + 1e-300, X2, s, As, G, lam, U, v)
+        for i in range(3):  # JpX2 = Jp·X2, then N·X2 = X2 − X1·JpX2
             for r in range(3):
                 a = 0.0
                 for d in range(k):
-                    a += null[c, d] * X2[d, r]
-                NX2[c, r] = a
+                    a += Jp[i, d] * X2[d, r]
+                JpX2[i, r] = a
         for c in range(k):
             for r in range(3):
-                a = X1[c, r]
-                for i in range(3):
-                    a -= NX2[c, i] * JoX1[i, r]
-                out[n, c, r] = a
+                NX2[c, r] = X2[c, r] - (X1[c, 0] * JpX2[0, r] + X1[c, 1] * JpX2[1, r] + X1[c, 2] * JpX2[2, r])
+        for c in range(k):
+            for r in range(3):
+                out[n, c, r] = X1[c, r] - (NX2[c, 0] * JoX1[0, r] + NX2[c, 1] * JoX1[1, r] + NX2[c, 2] * JoX1[2, r])
                 out[n, c, 3 + r] = NX2[c, r]
     return out
 

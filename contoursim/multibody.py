@@ -65,6 +65,7 @@ __all__ = [
 _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+_BLOCK = 1 << 14  # samples the inverse kinematics iterates at once [samples]
 
 
 def lower_body_array(parents):
@@ -786,7 +787,9 @@ class MachineChain:
         residual shrinks by about the errors' relative size and slope per step. The
         Jacobian is kept while the steps shrink at least tenfold each (as
         they do on the actual chain, whose errors are small) and evaluated
-        anew where they do not.
+        anew where they do not. The samples are iterated in blocks of
+        16 384, each to its own end (its Jacobians and step operators, of
+        the block's length, stay in cache).
 
         Parameters
         ----------
@@ -828,6 +831,7 @@ class MachineChain:
             tool_axis = _validate.finite_array("tool_axis", tool_axis, shape=(n, 3))
         q = np.zeros((n, len(self.axes))) if q0 is None else _validate.finite_array("q0", q0, shape=(n, len(self.axes)))
         q = q.copy()
+        t = None if t is None else _validate.finite_array("t", t, shape=(n,))
         if free is None:
             mask = np.ones(len(self.axes), bool) if tool_axis is not None else ~self.rotary_axes
         else:
@@ -838,24 +842,37 @@ class MachineChain:
         rows = 6 if tool_axis is not None else 3
         columns = np.flatnonzero(mask)
         target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
+        max_iter = int(_validate.positive("max_iter", max_iter))
+        for lo in range(0, n, _BLOCK):
+            part = slice(lo, lo + _BLOCK)
+            self._newton(q[part], position[part], target_axis[part], None if t is None else t[part], columns, rows, ideal,
+                         tol, max_iter, lo)
+        return q
+
+    def _newton(self, q, position, target_axis, t, columns, rows, ideal, tol, max_iter, first):
+        """The Gauss-Newton iteration of :meth:`inverse` on one block of samples, `q` updated in place.
+
+        `first` is the block's first sample, for the message of a block that
+        does not converge.
+        """
         refresh, previous = True, None
-        for _ in range(int(_validate.positive("max_iter", max_iter))):
+        for _ in range(max_iter):
             if refresh:  # a new Jacobian only when the last one stops the steps shrinking fast
                 J = self.axis_jacobian(q if self.rotary_axes.any() else q[:1])  # linear axes only: one J for all
-                P = _prioritized_inverse(J[:, :rows] if mask.all() else J[:, :rows].take(columns, axis=2))
+                P = _prioritized_inverse(J[:, :rows] if columns.size == J.shape[2] else J[:, :rows].take(columns, axis=2))
                 del J
                 refresh = False
             p, v = self.tool_pose(q, t, ideal=ideal)
             largest, worst = _chainkernels.newton_update(q, columns, P, p, v, position, target_axis)
             if largest <= tol:
-                return q
+                return
             if previous is not None:
                 ratio = largest / previous  # the contraction of a linearly converging iteration ...
                 if ratio < 0.1 and largest * ratio / (1 - ratio) <= tol:  # ... bounds the steps still to come
-                    return q
+                    return
                 refresh = ratio >= 0.1
             previous = None if refresh else largest
-        raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {worst}, last step {largest:.3g})")
+        raise ValueError(f"inverse kinematics did not converge in {max_iter} steps (sample {first + worst}, last step {largest:.3g})")
 
     # -- helpers ----------------------------------------------------------
 
@@ -916,7 +933,8 @@ def _rotate_kernel(v, w):
     """Rows of (M, 3) arrays: v rotated by w (:func:`contoursim._chainkernels.rotated`)."""
     out = np.empty_like(v)
     for n in range(v.shape[0]):
-        out[n, 0], out[n, 1], out[n, 2] = _chainkernels.rotated(v[n, 0], v[n, 1], v[n, 2], w[n, 0], w[n, 1], w[n, 2])
+        a, b = _chainkernels.rotation(w[n, 0], w[n, 1], w[n, 2])
+        out[n, 0], out[n, 1], out[n, 2] = _chainkernels.rotated(v[n, 0], v[n, 1], v[n, 2], w[n, 0], w[n, 1], w[n, 2], a, b)
     return out
 
 

@@ -420,6 +420,33 @@ def test_actual_inverse_with_tool_axis_reaches_the_pose():
     np.testing.assert_allclose(va, v, atol=1e-12)
 
 
+def test_inverse_of_more_than_two_blocks_reaches_every_pose():
+    # 2 full blocks of the iteration and a short one; the thermal drift reads each block's own times
+    chain = load_machine("aircraft_drilling_7axis")
+    n = 2 * multibody._BLOCK + 100
+    q_true = travel_grid(chain, n, seed=7)
+    t = np.linspace(0.0, 600.0, n)
+    p, v = chain.tool_pose(q_true, t, ideal=True)
+    q = chain.inverse(p, v, q0=q_true, t=t)
+    pa, va = chain.tool_pose(q, t)
+    assert np.abs(chain.tool_pose(q_true, t)[0] - p).max() > 1e-2  # the errors to cancel, up to tens of µm
+    np.testing.assert_allclose(pa, p, atol=1e-9)
+    np.testing.assert_allclose(va, v, atol=1e-12)
+
+
+def test_inverse_errors_name_the_whole_input_not_a_block():
+    chain = load_machine("vertical_mill_3axis")
+    n = multibody._BLOCK + 10
+    q_true = travel_grid(chain, n, seed=8)
+    p, _ = chain.tool_pose(q_true, ideal=True)
+    q0 = q_true.copy()
+    q0[n - 3] += 1.0  # every other sample starts at its solution: the first block stops at once
+    with pytest.raises(ValueError, match=f"did not converge in 1 steps \\(sample {n - 3}, last step 1"):
+        chain.inverse(p, q0=q0, ideal=True, max_iter=1)
+    with pytest.raises(ValueError, match=f"t must have shape \\({n}\\)"):  # the whole input's length, not a block's
+        chain.inverse(p, q0=q_true, t=np.zeros(n - 1))
+
+
 # -- validation and loading -----------------------------------------------------------------
 
 
@@ -547,3 +574,15 @@ def test_prioritized_inverse_equals_the_svd_pseudo_inverse():
         np.testing.assert_allclose(P3[n], X1, rtol=0, atol=1e-10 * np.abs(X1).max())
         if n % 5 > 2:
             np.testing.assert_allclose(J[n, :3] @ P[n, :, :3], np.eye(3), atol=1e-9)  # the position is met exactly
+
+
+def test_prioritized_inverse_keeps_a_tool_axis_turn_just_above_the_threshold():
+    """A turn left to the tool axis is used when its scaled eigenvalue exceeds rcond = 1e-4, else dropped."""
+    eigenvalue = np.array([3e-4, 1.5e-4, 1.01e-4, 0.99e-4, 0.7e-4, 0.4e-4, 0.0])
+    J = np.zeros((eigenvalue.size, 6, 4))
+    J[:, :3, :3] = np.eye(3)  # the position takes axes 0-2 ...
+    J[:, 3, 0] = 1.0  # ... and with them the strongest turn of the tool axis (the column scale)
+    J[:, 5, 3] = np.sqrt(eigenvalue)  # axis 3, free, turns the tool axis about the rest: by √λ per unit
+    P = multibody._prioritized_inverse(J)
+    # kept: a unit residual of that component moves axis 3 by 1/√λ; dropped: not at all
+    np.testing.assert_allclose(P[:, 3, 5] * np.sqrt(eigenvalue), eigenvalue > 1e-4, rtol=1e-12, atol=0)
