@@ -26,6 +26,7 @@ import numpy as np
 from ._numba import njit
 
 from . import _validate
+from ._blocks import blocks
 from .nearest import moved, nearest_knots
 from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
 
@@ -261,7 +262,6 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act):
 # --------------------------------------------------------------------------- public function
 
 #: Actual points whose foot frames :func:`exact_contour_error` holds at once [points].
-_BLOCK = 1 << 14
 
 
 def _binormal(path, prim, tangent, kvec):
@@ -322,18 +322,17 @@ def exact_contour_error(trajectory, actual, window=8):
     # the knots, the distinct reference samples: their first samples and, while the search needs them, positions
     first = np.flatnonzero(moved(position)).astype(np.int32)  # int32 (as idx): 2**31 samples would need ~1 TB
     knots = np.zeros((first.size, 3))
-    for lo in range(0, first.size, _BLOCK):
-        knots[lo : lo + _BLOCK, :d] = position[first[lo : lo + _BLOCK]]
+    for part in blocks(first.size):
+        knots[part, :d] = position[first[part]]
     n = act.shape[0]
     idx = np.empty(n, np.int32)  # the nearest knot to each actual point
-    for lo in range(0, n, _BLOCK):  # in blocks, as below: no (N, 3) copy of the actual points
-        idx[lo : lo + _BLOCK] = nearest_knots(knots, _xyz(act[lo : lo + _BLOCK]), window, int(idx[lo - 1]) if lo else 0)
+    for part in blocks(n):  # as below: no (N, 3) copy of the actual points
+        idx[part] = nearest_knots(knots, _xyz(act[part]), window, int(idx[part.start - 1]) if part.start else 0)
     del knots  # before the results are filled
     magnitude, s, normal = np.empty((3, n))
     foot = np.empty((n, d))
     out_of_plane = np.empty(n) if d == 3 else np.broadcast_to(0.0, (n,))  # a 2-D path: (P_a - foot) . z = 0
-    for lo in range(0, n, _BLOCK):  # in blocks: the (block, 9) foot frames and their products stay small
-        part = slice(lo, lo + _BLOCK)
+    for part in blocks(n):  # the (block, 9) foot frames and their products stay small
         act3 = _xyz(act[part])
         frame, s[part], prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, first,
                                             idx[part], act3)

@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _chainkernels, _validate
+from ._blocks import blocks
 from ._numba import njit
 from .config import FORMAT_DOC
 from .errormotion import _RAD_PER_URAD, COMPONENTS, ERROR_COLUMNS, ERROR_UNITS, Cyclic, ErrorMotion, read_error_table
@@ -65,7 +66,6 @@ __all__ = [
 _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
-_BLOCK = 1 << 14  # samples the inverse kinematics iterates at once [samples]
 
 
 def lower_body_array(parents):
@@ -843,10 +843,9 @@ class MachineChain:
         columns = np.flatnonzero(mask)
         target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
         max_iter = int(_validate.positive("max_iter", max_iter))
-        for lo in range(0, n, _BLOCK):
-            part = slice(lo, lo + _BLOCK)
+        for part in blocks(n):
             self._newton(q[part], position[part], target_axis[part], None if t is None else t[part], columns, rows, ideal,
-                         tol, max_iter, lo)
+                         tol, max_iter, part.start)
         return q
 
     def _newton(self, q, position, target_axis, t, columns, rows, ideal, tol, max_iter, first):

@@ -12,6 +12,7 @@ the smallest and largest sample of every pixel column, so no spike is lost.
 import numpy as np
 
 from . import _validate
+from ._blocks import BLOCK, blocks
 from .output import output_dir
 
 __all__ = [
@@ -22,7 +23,6 @@ __all__ = [
 
 _COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
 _RUN_COLOURS = ("C3", "C0", "C2", "C4")  # runs overlaid: red first, as a single run is drawn
-_BLOCK = 1 << 14  # samples a long series is read in at once, so that no (N, d) temporary is made [samples]
 
 
 def _axes(ax, **subplot):
@@ -132,7 +132,7 @@ def envelope_indices(values, columns=_COLUMNS):
         return np.arange(n)
     size = -(-n // columns)
     whole = n // size * size
-    block = size * max(1, _BLOCK // size)  # whole runs
+    block = size * max(1, BLOCK // size)  # whole runs
     picked = [[0, n - 1], np.arange(whole, n)]
     for lo in range(0, whole, block):
         part = np.asarray(values[lo : min(lo + block, whole)], float)
@@ -151,8 +151,8 @@ def _thin_curve(points, step):
     n = len(points)
     first = [[0]]
     travelled = 0.0  # along the curve up to the block's first point
-    for lo in range(0, n - 1, _BLOCK):
-        squares = np.diff(np.asarray(points[lo : lo + _BLOCK + 1]), axis=0)
+    for part in blocks(n - 1):
+        squares = np.diff(np.asarray(points[part.start : part.stop + 1]), axis=0)
         squares *= squares  # the segment lengths as np.linalg.norm computes them
         cell = np.empty(len(squares) + 1)  # the travelled distance, then the step it is in, in place
         cell[0] = travelled
@@ -161,7 +161,7 @@ def _thin_curve(points, step):
         travelled = cell[-1]
         cell /= step
         np.floor(cell, out=cell)
-        first.append(lo + 1 + np.flatnonzero(cell[1:] > cell[:-1]))
+        first.append(part.start + 1 + np.flatnonzero(cell[1:] > cell[:-1]))
     return np.union1d(np.concatenate(first), [n - 1])
 
 

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from . import estimators, kernel
+from ._blocks import blocks
 from .compensation import Composition
 from ._version import __version__
 from .contour import exact_contour_error
@@ -34,7 +35,6 @@ from .trajectory import Trajectory
 
 __all__ = ["SimResult", "default_settle", "measured_reference", "simulate", "simulate_batch"]
 
-_BLOCK = 1 << 14  # samples a summary reduces at once [samples]
 
 
 @dataclass(frozen=True)
@@ -187,8 +187,8 @@ def _distances(points, reference, keep):
     """``|points - reference|`` of the rows `keep` [mm], shape (keep.sum(),): made in blocks, no (N, d) temporaries."""
     out = np.empty(np.count_nonzero(keep))
     done = 0
-    for lo in range(0, len(keep), _BLOCK):
-        part, rows = slice(lo, lo + _BLOCK), keep[lo : lo + _BLOCK]
+    for part in blocks(len(keep)):
+        rows = keep[part]
         distances = np.linalg.norm(points[part][rows] - reference[part][rows], axis=1)
         out[done : done + distances.size] = distances
         done += distances.size

@@ -5,10 +5,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate
+from ._blocks import blocks
 
 __all__ = ["Trajectory"]
 
-_BLOCK = 1 << 14  # samples a property reduces at once [samples]
 
 
 @dataclass(frozen=True)
@@ -116,9 +116,8 @@ class Trajectory:
     @property
     def feed(self):
         """Highest path speed over the test proper (`measuring`) [mm/s]: the programmed feed where the plan reaches it."""
-        blocks = range(0, len(self), _BLOCK)  # |v| block by block: no (N, d) temporaries beside a finished run
-        return max(float(np.linalg.norm(self.velocity[k : k + _BLOCK][self.measuring[k : k + _BLOCK]], axis=1).max(
-            initial=0.0)) for k in blocks)
+        return max(float(np.linalg.norm(self.velocity[part][self.measuring[part]], axis=1).max(initial=0.0))
+                   for part in blocks(len(self)))  # |v| block by block: no (N, d) temporaries beside a finished run
 
     @property
     def tangent(self):

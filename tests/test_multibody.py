@@ -7,6 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from contoursim import multibody
+from contoursim._blocks import BLOCK
 from contoursim.config import TomlFile
 from contoursim.errormotion import Cyclic, ErrorMotion
 from contoursim.exceptions import ConfigError
@@ -423,7 +424,7 @@ def test_actual_inverse_with_tool_axis_reaches_the_pose():
 def test_inverse_of_more_than_two_blocks_reaches_every_pose():
     # 2 full blocks of the iteration and a short one; the thermal drift reads each block's own times
     chain = load_machine("aircraft_drilling_7axis")
-    n = 2 * multibody._BLOCK + 100
+    n = 2 * BLOCK + 100
     q_true = travel_grid(chain, n, seed=7)
     t = np.linspace(0.0, 600.0, n)
     p, v = chain.tool_pose(q_true, t, ideal=True)
@@ -436,7 +437,7 @@ def test_inverse_of_more_than_two_blocks_reaches_every_pose():
 
 def test_inverse_errors_name_the_whole_input_not_a_block():
     chain = load_machine("vertical_mill_3axis")
-    n = multibody._BLOCK + 10
+    n = BLOCK + 10
     q_true = travel_grid(chain, n, seed=8)
     p, _ = chain.tool_pose(q_true, ideal=True)
     q0 = q_true.copy()
