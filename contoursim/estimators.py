@@ -96,10 +96,11 @@ _STRAIGHT = 1e-10  # |a x b| <= _STRAIGHT |a||b|: the three points are collinear
 
 
 # --------------------------------------------------------------------------
-# 3-vector helpers on tuples (no allocation inside the compiled loops)
+# 3-vector helpers on tuples (no allocation inside the compiled loops); compiled once each and inlined by LLVM:
+# inlined into numba's IR (inline="always") at every call, they would be typed and compiled again each time
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # inlined: compiled as a function, it would be compiled per literal row
 def _row(a, i):
     return (a[i, 0], a[i, 1], a[i, 2])
 
