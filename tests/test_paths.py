@@ -126,7 +126,9 @@ def test_spline_arc_length_matches_quadrature():
     np.testing.assert_allclose(path.evaluate(path.breaks)[0][:, :2], pts, atol=1e-12)
 
 
-@pytest.mark.parametrize("n, closed", [(2, False), (3, False), (4, False), (9, False), (4, True), (5, True), (13, True)])
+@pytest.mark.parametrize("n, closed", [
+    (2, False), (3, False), (4, False), (9, False), (4, True), (5, True), (13, True),
+])
 def test_spline_is_scipys_cubic_spline(n, closed):
     # the same curve as scipy's CubicSpline through the points over their cumulative chord length
     from scipy.interpolate import CubicSpline
