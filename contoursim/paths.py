@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import solve_banded  # numba imports scipy.linalg as it compiles or loads anything: no extra cost
 
 from . import _validate
 from ._numba import njit
@@ -993,9 +994,8 @@ def _spline_slopes(chord, slope, closed):
 
     The tridiagonal system of scipy's ``CubicSpline`` (``bc_type``
     ``"not-a-knot"`` or ``"periodic"``), with its special cases, solved as it
-    does (``scipy.linalg.solve_banded``; numba imports ``scipy.linalg`` anyway,
-    ``scipy.interpolate`` would cost a quarter of a second more). For the
-    interior knots
+    does (``scipy.linalg.solve_banded``; ``scipy.interpolate`` would cost a
+    quarter of a second more to import). For the interior knots
     ``dx[i]·s[i-1] + 2(dx[i-1] + dx[i])·s[i] + dx[i-1]·s[i+1] = 3(dx[i]·slope[i-1] + dx[i-1]·slope[i])``.
 
     Parameters
@@ -1007,8 +1007,6 @@ def _spline_slopes(chord, slope, closed):
     closed : bool
         Periodic (the last knot repeats the first; n >= 4) or not-a-knot ends.
     """
-    from scipy.linalg import solve_banded
-
     n, dx = chord.size, np.diff(chord)
     if n == 2:  # a straight line
         return np.vstack([slope, slope])
