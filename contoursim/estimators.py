@@ -96,45 +96,46 @@ _STRAIGHT = 1e-10  # |a x b| <= _STRAIGHT |a||b|: the three points are collinear
 
 
 # --------------------------------------------------------------------------
-# 3-vector helpers on tuples (no allocation inside the compiled loops)
+# 3-vector helpers on tuples (no allocation inside the compiled loops); compiled once each and inlined by LLVM:
+# inlined into numba's IR (inline="always") at every call, they would be typed and compiled again each time
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always")  # inlined: compiled as a function, it would be compiled per literal row
 def _row(a, i):
     return (a[i, 0], a[i, 1], a[i, 2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _sub(a, b):
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _axpy(s, x, y):
     return (s * x[0] + y[0], s * x[1] + y[1], s * x[2] + y[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _scale(s, a):
     return (s * a[0], s * a[1], s * a[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _norm(a):
     return np.sqrt(_dot(a, a))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _unit(a, fallback):
     n = _norm(a)
     if n > 0.0:
@@ -224,7 +225,7 @@ def _point_estimate(anchor, p, up):
     return StepEstimate(_norm(e), _norm(_axpy(-h, up, e)), h, -e[0], -e[1], -e[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _cubic(tau, p0, a1, a2, a3):
     """Position, first and second derivative of p0 + a1 tau + a2 tau^2 + a3 tau^3."""
     pos = _axpy(tau, _axpy(tau, _axpy(tau, a3, a2), a1), p0)
@@ -233,7 +234,7 @@ def _cubic(tau, p0, a1, a2, a3):
     return pos, d1, dd
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _up(params):
     return (params[0], params[1], params[2])
 

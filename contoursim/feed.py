@@ -178,10 +178,20 @@ def _ramp_slope(v, x, r, y, accel, jerk):
     return 2.0 * y * r / math.sqrt(jerk) + (v + x) * (y / r if r > 0 else 1.0) / math.sqrt(jerk)
 
 
-def _fitting(v, fits, lo):
-    """`v` stepped down to the largest value that still fits (rounding), not below `lo`."""
+def _ramps(x, v0, v1, accel, jerk):
+    """Distance of the ramps v0 -> x and, unless `v1` is None, x -> v1."""
+    distance = _ramp_distance(v0, x, accel, jerk)
+    return distance if v1 is None else distance + _ramp_distance(x, v1, accel, jerk)
+
+
+def _fitting(v, lo, v0, v1, length, accel, jerk):
+    """`v` stepped down to the largest value whose :func:`_ramps` fit in `length` (rounding), not below `lo`.
+
+    Plain arguments, no closure: a function object made per block is garbage
+    the collector has to walk (G-code planning once took 40 % longer so).
+    """
     for _ in range(64):
-        if v <= lo or fits(v):
+        if v <= lo or _ramps(v, v0, v1, accel, jerk) <= length:
             return max(v, lo)
         v = max(v - 4e-16 * max(v, 1.0), lo)
     return lo
@@ -208,7 +218,7 @@ def _reach(v0, length, vmax, accel, jerk):
         u = (0.5 * q + math.sqrt(0.25 * q * q + p**3 / 27.0)) ** (1.0 / 3.0)
         y = u - p / (3.0 * u)
         v = v0 + y * y
-    return _fitting(min(max(v, v0), vmax), lambda x: _ramp_distance(v0, x, accel, jerk) <= length, v0)
+    return _fitting(min(max(v, v0), vmax), v0, v0, None, length, accel, jerk)
 
 
 def _peak(v0, v1, length, vmax, accel, jerk):
@@ -221,27 +231,24 @@ def _peak(v0, v1, length, vmax, accel, jerk):
     the faster end starts (a jerk-limited ramp covers (2v + y²) y / √j),
     inside a bracket that bisection shrinks where Newton would leave it.
     """
-    def total(x):
-        return _ramp_distance(v0, x, accel, jerk) + _ramp_distance(x, v1, accel, jerk)
-
     top, other = max(v0, v1), min(v0, v1)
-    if total(vmax) <= length:
+    if _ramps(vmax, v0, v1, accel, jerk) <= length:
         return vmax
-    if total(top) >= length:
+    if _ramps(top, v0, v1, accel, jerk) >= length:
         return top
     if v0 == v1:
-        return _fitting(_reach(v0, 0.5 * length, vmax, accel, jerk), lambda x: total(x) <= length, top)
+        return _fitting(_reach(v0, 0.5 * length, vmax, accel, jerk), top, v0, v1, length, accel, jerk)
     # both ramps trapezoidal, or both reaching a_max: (2x² − v0² − v1²)/(2a) [+ (v0 + v1 + 2x) a/(2j)] = L
     b = 0.0 if jerk is None else 0.5 * accel / jerk
     c = b * (v0 + v1) - (v0 * v0 + v1 * v1) / (2.0 * accel) - length
     x = -2.0 * c / (2.0 * b + math.sqrt(4.0 * b * b - 4.0 * c / accel))  # root of x²/a + 2b x + c, no cancellation
     if jerk is None or x - top >= accel**2 / jerk:
-        return _fitting(min(max(x, top), vmax), lambda x: total(x) <= length, top)
+        return _fitting(min(max(x, top), vmax), top, v0, v1, length, accel, jerk)
     lo, hi = 0.0, math.sqrt(vmax - top)  # bracket on y: total fits at lo, not at hi
     y = 0.5 * hi
     for _ in range(100):
         x = top + y * y
-        f = total(x) - length
+        f = _ramps(x, v0, v1, accel, jerk) - length
         if f <= 0:
             lo = y
         else:
@@ -252,7 +259,7 @@ def _peak(v0, v1, length, vmax, accel, jerk):
         if abs(new - y) * (new + y) <= 2e-16 * max(top, 1.0) or new in (lo, hi):  # x = top + y² settled
             break
         y = new
-    return _fitting(top + y * y, lambda x: total(x) <= length, top + lo * lo)
+    return _fitting(top + y * y, top + lo * lo, v0, v1, length, accel, jerk)
 
 
 def _plan_sections(breaks, vmax, vjunction, accel, jerk):
@@ -278,11 +285,11 @@ def _plan_sections(breaks, vmax, vjunction, accel, jerk):
         for duration, a0, j in pieces:
             if duration <= 0:
                 continue
-            rows.append((t, s, vel, a0, j))
+            rows += (t, s, vel, a0, j)  # flat: a tuple kept per piece would be garbage for the collector to count
             s += duration * (vel + duration * (a0 / 2 + duration * j / 6))
             vel += duration * (a0 + duration * j / 2)
             t += duration
-    t0, s0, v0, a0, j = np.array(rows).T
+    t0, s0, v0, a0, j = np.array(rows).reshape(-1, 5).T
     return FeedProfile(t0, s0, np.maximum(v0, 0.0), a0, j, t, float(breaks[-1]))
 
 

@@ -25,10 +25,10 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from ._numba import njit
-from scipy.interpolate import CubicSpline
+from scipy.linalg import solve_banded  # numba imports scipy.linalg as it compiles or loads anything: no extra cost
 
 from . import _validate
+from ._numba import njit
 from .exceptions import PathError
 
 __all__ = [
@@ -989,6 +989,57 @@ def polyline(points, blend_radius=0.0, role="path"):
     return Path(tuple(prims))
 
 
+def _spline_slopes(chord, slope, closed):
+    """First derivatives dP/ds at the knots of a C2 cubic spline, shape (n, 3).
+
+    The tridiagonal system of scipy's ``CubicSpline`` (``bc_type``
+    ``"not-a-knot"`` or ``"periodic"``), with its special cases, solved as it
+    does (``scipy.linalg.solve_banded``; ``scipy.interpolate`` would cost a
+    quarter of a second more to import). For the interior knots
+    ``dx[i]·s[i-1] + 2(dx[i-1] + dx[i])·s[i] + dx[i-1]·s[i+1] = 3(dx[i]·slope[i-1] + dx[i-1]·slope[i])``.
+
+    Parameters
+    ----------
+    chord : ndarray, shape (n,)
+        Knots: cumulative chord length [mm].
+    slope : ndarray, shape (n - 1, 3)
+        Chord slopes ``ΔP / dx`` [-].
+    closed : bool
+        Periodic (the last knot repeats the first; n >= 4) or not-a-knot ends.
+    """
+    n, dx = chord.size, np.diff(chord)
+    if n == 2:  # a straight line
+        return np.vstack([slope, slope])
+    if n == 3 and not closed:  # the parabola through the three points
+        middle = (dx[1] * slope[0] + dx[0] * slope[1]) / (dx[0] + dx[1])
+        return np.vstack([2 * slope[0] - middle, middle, 2 * slope[1] - middle])
+    band = np.zeros((3, n))  # upper diagonal, diagonal, lower diagonal (solve_banded's layout)
+    band[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
+    band[0, 2:] = dx[:-1]
+    band[2, :-2] = dx[1:]
+    rhs = np.empty((n, 3))
+    rhs[1:-1] = 3 * (dx[1:, None] * slope[:-1] + dx[:-1, None] * slope[1:])
+    if not closed:
+        d = chord[2] - chord[0]
+        band[1, 0], band[0, 1] = dx[1], d
+        rhs[0] = ((dx[0] + 2 * d) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d
+        d = chord[-1] - chord[-3]
+        band[1, -1], band[2, -2] = dx[-2], d
+        rhs[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+        return solve_banded((1, 1), band, rhs, overwrite_ab=True, overwrite_b=True, check_finite=False)
+    # Periodic: unknowns s[0] .. s[n-2] (s[n-1] = s[0]), a cyclic system. With the last unknown s[n-2] taken out,
+    # the n - 2 rows left are tridiagonal: solved for the right-hand side (s1) and for the column of s[n-2] (s2),
+    # s = s1 + s[n-2]·s2, and s[n-2] from the last row.
+    band[1, 0], band[0, 1] = 2 * (dx[-1] + dx[0]), dx[-1]
+    rhs[0] = 3 * (dx[0] * slope[-1] + dx[-1] * slope[0])
+    m = n - 2
+    column = np.zeros((m, 1))
+    column[0], column[-1] = -dx[0], -dx[-3]
+    s1, s2 = (solve_banded((1, 1), band[:, :m], b, check_finite=False) for b in (rhs[:m], column))
+    last = (rhs[m] - dx[-2] * s1[0] - dx[-1] * s1[-1]) / (2 * (dx[-1] + dx[-2]) + dx[-2] * s2[0] + dx[-1] * s2[-1])
+    return np.vstack([s1 + last * s2, last, s1[0] + last * s2[0]])
+
+
 def spline(points, closed=False, role="path"):
     """C2 cubic spline through `points`, chord-length parameterised.
 
@@ -1015,9 +1066,12 @@ def spline(points, closed=False, role="path"):
         if len(pts) < 4:
             raise PathError("a closed spline needs at least 3 distinct points")
     chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
-    cs = CubicSpline(chord, pts, bc_type="periodic" if closed else "not-a-knot")
     h = np.diff(chord)[:, None]
-    c3, c2, c1, _ = cs.c
+    delta = np.diff(pts, axis=0) / h  # chord slopes
+    slopes = _spline_slopes(chord, delta, closed)
+    # the Hermite cubic of each interval in powers of (s - s_i), as scipy's CubicHermiteSpline writes it, then in w
+    t = (slopes[:-1] + slopes[1:] - 2 * delta) / h
+    c1, c2, c3 = slopes[:-1], (delta - slopes[:-1]) / h - t, t / h
     coefs = np.stack([pts[:-1], c1 * h, c2 * h**2, c3 * h**3], axis=1)  # (K, 4, 3): a, b, c, d of P(w)
     # snap each piece's end onto the next start (rounding of the polynomial sum)
     coefs[:-1, 3] += pts[1:-1] - coefs[:-1].sum(axis=1)

@@ -468,7 +468,8 @@ def _draw(drawings, out_dir):
         fig.subplots_adjust(**margins)
         draw(fig)
         with out_dir.write(file.name, binary=True) as stream:
-            fig.savefig(stream, format="png", dpi=110)
+            # zlib level 3, not PIL's 6: the same pixels, 5 ms less per figure, files 1-10 % larger
+            fig.savefig(stream, format="png", dpi=110, pil_kwargs={"compress_level": 3})
     return files
 
 

@@ -20,7 +20,6 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from . import estimators, kernel
 from ._blocks import blocks
@@ -227,6 +226,8 @@ def measured_reference(trace, servo_period):
     >>> ref.position[:3, 0].round(6).tolist(), ref.velocity[:3, 0].round(6).tolist()
     ([0.0, 0.0015, 0.003], [3.0, 3.0, 3.0])
     """
+    from scipy.interpolate import CubicSpline  # ~0.25 s to import: only measured traces need it
+
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
     if abs(trace.dt - servo_period) <= 1e-3 * servo_period:

@@ -126,6 +126,28 @@ def test_spline_arc_length_matches_quadrature():
     np.testing.assert_allclose(path.evaluate(path.breaks)[0][:, :2], pts, atol=1e-12)
 
 
+@pytest.mark.parametrize("n, closed", [
+    (2, False), (3, False), (4, False), (9, False), (4, True), (5, True), (13, True),
+])
+def test_spline_is_scipys_cubic_spline(n, closed):
+    # the same curve as scipy's CubicSpline through the points over their cumulative chord length
+    from scipy.interpolate import CubicSpline
+
+    points = np.random.default_rng(n).normal(scale=20.0, size=(n, 3))
+    if closed:
+        points[-1] = points[0]
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    reference = CubicSpline(chord, points, bc_type="periodic" if closed else "not-a-knot")
+    path = paths.spline(points[:-1] if closed else points, closed=closed)
+    w = np.linspace(0.0, 1.0, 7)[:, None]
+    for i, piece in enumerate(path.primitives):
+        a, b, c, d = piece.coefficients
+        h = chord[i + 1] - chord[i]
+        s = chord[i] + w[:, 0] * h
+        np.testing.assert_allclose(a + w * (b + w * (c + w * d)), reference(s), rtol=0, atol=1e-12 * 20.0)
+        np.testing.assert_allclose((b + w * (2 * c + 3 * w * d)) / h, reference(s, 1), rtol=0, atol=1e-12)
+
+
 def test_closed_spline_is_c2_at_the_seam():
     t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     path = paths.spline(np.column_stack([30 * np.cos(t), 20 * np.sin(2 * t)]), closed=True)
