@@ -1073,7 +1073,12 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     kept = -(-n_steps // every)
 
     def out(name, kind):
-        return np.empty((n_variants, kept if name in outputs else 0, n), kind)
+        # Touched here, before the parallel steps: worker threads first touching fresh pages at once stall each
+        # other (page-table lock, huge-page compaction): 0.6-1.5e8 axis-steps/s from one process to the next
+        # on the 2-core machine, 1.3-1.4e8 always when touched first (benchmarks/bench_kernel.py).
+        array = np.empty((n_variants, kept if name in outputs else 0, n), kind)
+        array.fill(0)
+        return array
 
     arrays = {name: out(name, dtype) for name in BATCH_OUTPUTS[:4]}
     arrays["saturated"] = out("saturated", bool)
