@@ -109,15 +109,31 @@ def _spline_w_of_u(row, u):
 
 @njit(cache=True)
 def _spline_tables(coefs):
-    """Rows of spline pieces from their (K, 12) coefficients: each with its cumulative arc-length table."""
+    """Rows of spline pieces from their (K, 12) coefficients, and which pieces have a cusp.
+
+    Each row holds its cumulative arc-length table. A piece has a cusp (or
+    zero length) where its speed |dP/dw|, sampled at w = 0, 1/64, ..., 1,
+    drops to 1e-9 of its chord.
+    """
     rows = np.zeros((coefs.shape[0], NCOL))
+    cusp = np.zeros(coefs.shape[0], np.bool_)
     for k in range(coefs.shape[0]):
         row = rows[k]
         for c in range(12):  # not row[:12] = coefs[k]: numba would compile its shape-mismatch error (~1.5 s)
             row[c] = coefs[k, c]
         for j in range(_TABLE):  # integrated over the read-only coefs[k]: the signature of every other call
             row[13 + j] = row[12 + j] + _spline_integral(coefs[k], j / _TABLE, (j + 1) / _TABLE)
-    return rows
+        chord2 = slowest2 = 0.0
+        for i in range(3):
+            chord2 += (row[3 + i] + row[6 + i] + row[9 + i]) ** 2
+        for m in range(65):
+            w = m / 64.0
+            speed2 = 0.0
+            for i in range(3):
+                speed2 += (row[3 + i] + 2.0 * row[6 + i] * w + 3.0 * row[9 + i] * w * w) ** 2
+            slowest2 = speed2 if m == 0 else min(slowest2, speed2)
+        cusp[k] = slowest2 <= 1e-18 * max(chord2, 1e-300)
+    return rows, cusp
 
 
 @njit(cache=True)
@@ -455,18 +471,12 @@ _CUSP = "spline piece has a cusp or zero length (duplicate control points?)"
 
 
 def _spline_rows(coefs):
-    """Rows (K, NCOL) of spline pieces with coefficients (K, 4, 3), and the indices of pieces with a cusp.
-
-    A piece has a cusp (or zero length) where its speed |dP/dw|, sampled at
-    65 points, drops to 1e-9 of its chord.
-    """
-    w = np.linspace(0.0, 1.0, 65)[:, None, None]
-    speed = np.linalg.norm(coefs[None, :, 1] + 2 * coefs[None, :, 2] * w + 3 * coefs[None, :, 3] * w**2, axis=2)
-    chord = np.linalg.norm(coefs[:, 1:].sum(axis=1), axis=1)
-    cusps = np.flatnonzero(speed.min(axis=0) <= 1e-9 * np.maximum(chord, 1e-300))
+    """Rows (K, NCOL) of spline pieces with coefficients (K, 4, 3), and the indices of pieces with a cusp
+    (:func:`_spline_tables`)."""
     flat = np.ascontiguousarray(coefs.reshape(len(coefs), 12))  # a new view: the caller's array keeps its flags
     flat.flags.writeable = False  # read-only as a Path's rows are: one compiled signature of the spline helpers
-    return _spline_tables(flat), cusps
+    rows, cusp = _spline_tables(flat)
+    return rows, np.flatnonzero(cusp)
 
 
 # --------------------------------------------------------------------------- path

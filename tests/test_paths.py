@@ -158,6 +158,15 @@ def test_closed_spline_is_c2_at_the_seam():
     np.testing.assert_allclose(k0, k1, atol=1e-10)
 
 
+def test_spline_piece_that_stops_is_refused():
+    """dP/dw = 3(w - 1/2)^2 (1, 2, 0): the piece stops at w = 1/2 (a cusp); a little faster there, it is a piece."""
+    stops = [[0, 0, 0], [0.75, 1.5, 0], [-1.5, -3, 0], [1, 2, 0]]
+    with pytest.raises(PathError, match="cusp"):
+        paths.SplinePiece(stops)
+    moving = np.array(stops) + [[0, 0, 0], [1e-6, 0, 0], [0, 0, 0], [0, 0, 0]]
+    assert paths.SplinePiece(moving).length == pytest.approx(np.sqrt(5) * 0.25, rel=1e-5)
+
+
 def test_degenerate_input_raises_path_error():
     with pytest.raises(PathError, match="zero length"):
         paths.line((1, 1), (1, 1))
