@@ -109,13 +109,14 @@ def _spline_w_of_u(row, u):
 
 @njit(cache=True)
 def _spline_tables(coefs):
-    """Rows of spline pieces from their (K, 12) coefficients, and which pieces have a cusp.
+    """Rows of spline pieces from their (K, 12) coefficients, their largest curvature, and which have a cusp.
 
-    Each row holds its cumulative arc-length table. A piece has a cusp (or
-    zero length) where its speed |dP/dw|, sampled at w = 0, 1/64, ..., 1,
-    drops to 1e-9 of its chord.
+    Each row holds its cumulative arc-length table. At w = 0, 1/64, ..., 1:
+    the largest curvature |P' × P''| / |P'|³ [1/mm], and a cusp (or zero
+    length) where the speed |P'| = |dP/dw| drops to 1e-9 of the chord.
     """
     rows = np.zeros((coefs.shape[0], NCOL))
+    curvature = np.zeros(coefs.shape[0])
     cusp = np.zeros(coefs.shape[0], np.bool_)
     for k in range(coefs.shape[0]):
         row = rows[k]
@@ -128,31 +129,17 @@ def _spline_tables(coefs):
             chord2 += (row[3 + i] + row[6 + i] + row[9 + i]) ** 2
         for m in range(65):
             w = m / 64.0
-            speed2 = 0.0
-            for i in range(3):
-                speed2 += (row[3 + i] + 2.0 * row[6 + i] * w + 3.0 * row[9 + i] * w * w) ** 2
+            d1x = row[3] + 2.0 * row[6] * w + 3.0 * row[9] * w * w  # dP/dw
+            d1y = row[4] + 2.0 * row[7] * w + 3.0 * row[10] * w * w
+            d1z = row[5] + 2.0 * row[8] * w + 3.0 * row[11] * w * w
+            d2x, d2y, d2z = 2.0 * row[6] + 6.0 * row[9] * w, 2.0 * row[7] + 6.0 * row[10] * w, 2.0 * row[8] + 6.0 * row[11] * w
+            speed2 = d1x * d1x + d1y * d1y + d1z * d1z
             slowest2 = speed2 if m == 0 else min(slowest2, speed2)
+            if speed2 > 0.0:
+                cx, cy, cz = d1y * d2z - d1z * d2y, d1z * d2x - d1x * d2z, d1x * d2y - d1y * d2x
+                curvature[k] = max(curvature[k], math.sqrt((cx * cx + cy * cy + cz * cz) / speed2**3))
         cusp[k] = slowest2 <= 1e-18 * max(chord2, 1e-300)
-    return rows, cusp
-
-
-@njit(cache=True)
-def _spline_max_curvature(rows):
-    """Largest curvature |P' × P''| / |P'|³ of each spline piece at w = 0, 1/64, ..., 1 [1/mm], shape (K,)."""
-    out = np.zeros(rows.shape[0])
-    d1 = np.empty(3)
-    d2 = np.empty(3)
-    for k in range(rows.shape[0]):
-        row = rows[k]
-        for m in range(65):
-            w = m / 64.0
-            for i in range(3):
-                d1[i] = row[3 + i] + 2.0 * row[6 + i] * w + 3.0 * row[9 + i] * w * w
-                d2[i] = 2.0 * row[6 + i] + 6.0 * row[9 + i] * w
-            cx, cy, cz = d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]
-            speed = math.sqrt(d1[0] ** 2 + d1[1] ** 2 + d1[2] ** 2)
-            out[k] = max(out[k], math.sqrt(cx * cx + cy * cy + cz * cz) / speed**3)
-    return out
+    return rows, curvature, cusp
 
 
 @njit(cache=True)
@@ -411,6 +398,11 @@ class SplinePiece(_Primitive):
     role : str
         Tag, see :class:`Line`.
 
+    Attributes
+    ----------
+    max_curvature : float
+        Largest curvature |P' × P''| / |P'|³ at w = 0, 1/64, ..., 1 [1/mm].
+
     Notes
     -----
     The arc length is not linear in w: a table of cumulative arc length at 17
@@ -427,10 +419,10 @@ class SplinePiece(_Primitive):
             coef = _validate.finite_array("coefficients", self.coefficients, shape=(4, 3))
         except ValueError as exc:
             raise PathError(str(exc)) from None
-        rows, cusps = _spline_rows(coef[None])
+        rows, curvature, cusps = _spline_rows(coef[None])
         if cusps.size:
             raise PathError(_CUSP)
-        self._set(*self._frozen_rows(coef[None], rows), 0)
+        self._set(*self._frozen_rows(coef[None], rows), curvature, 0)
 
     @staticmethod
     def _frozen_rows(coefs, rows):
@@ -440,16 +432,17 @@ class SplinePiece(_Primitive):
         rows.flags.writeable = False
         return coefs, rows, np.all(np.abs(coefs[:, :, 2]) < 1e-12, axis=1)
 
-    def _set(self, coefs, rows, in_xy, k):
+    def _set(self, coefs, rows, in_xy, curvature, k):
         object.__setattr__(self, "coefficients", coefs[k])
         object.__setattr__(self, "row", rows[k])
         object.__setattr__(self, "length", float(rows[k, 12 + _TABLE]))
         object.__setattr__(self, "_in_xy", bool(in_xy[k]))
+        object.__setattr__(self, "max_curvature", float(curvature[k]))
 
     @classmethod
-    def _pieces(cls, coefs, rows, role):
-        """Pieces from coefficients (K, 4, 3) and their rows from :func:`_spline_rows` (checked there)."""
-        frozen = cls._frozen_rows(coefs, rows)
+    def _pieces(cls, coefs, rows, curvature, role):
+        """Pieces from coefficients (K, 4, 3), their rows and largest curvatures from :func:`_spline_rows` (checked there)."""
+        frozen = (*cls._frozen_rows(coefs, rows), curvature)
         pieces = []
         for k in range(len(coefs)):
             piece = object.__new__(cls)
@@ -471,12 +464,12 @@ _CUSP = "spline piece has a cusp or zero length (duplicate control points?)"
 
 
 def _spline_rows(coefs):
-    """Rows (K, NCOL) of spline pieces with coefficients (K, 4, 3), and the indices of pieces with a cusp
-    (:func:`_spline_tables`)."""
+    """Rows (K, NCOL) of spline pieces with coefficients (K, 4, 3), their largest curvatures (K,) [1/mm], and the
+    indices of pieces with a cusp (:func:`_spline_tables`)."""
     flat = np.ascontiguousarray(coefs.reshape(len(coefs), 12))  # a new view: the caller's array keeps its flags
     flat.flags.writeable = False  # read-only as a Path's rows are: one compiled signature of the spline helpers
-    rows, cusp = _spline_tables(flat)
-    return rows, np.flatnonzero(cusp)
+    rows, curvature, cusp = _spline_tables(flat)
+    return rows, curvature, np.flatnonzero(cusp)
 
 
 # --------------------------------------------------------------------------- path
@@ -676,7 +669,7 @@ class Path:
         arcs = self.kinds == ARC
         result[arcs] = self.rows[arcs, 12] / self.rows[arcs, 16] ** 2  # radius / (radius² + rise²)
         pieces = self.kinds == SPLINE
-        result[pieces] = _spline_max_curvature(self.rows[pieces])
+        result[pieces] = [p.max_curvature for p in self.primitives if p.kind == SPLINE]
         return result
 
 
@@ -1085,8 +1078,8 @@ def spline(points, closed=False, role="path"):
     coefs = np.stack([pts[:-1], c1 * h, c2 * h**2, c3 * h**3], axis=1)  # (K, 4, 3): a, b, c, d of P(w)
     # snap each piece's end onto the next start (rounding of the polynomial sum)
     coefs[:-1, 3] += pts[1:-1] - coefs[:-1].sum(axis=1)
-    rows, cusps = _spline_rows(coefs)
+    rows, curvature, cusps = _spline_rows(coefs)
     if cusps.size:
         i = int(cusps[0])
         raise PathError(f"spline piece {i} (points[{i}] to points[{i + 1}]): {_CUSP}")
-    return Path(tuple(SplinePiece._pieces(coefs, rows, role)))
+    return Path(tuple(SplinePiece._pieces(coefs, rows, curvature, role)))

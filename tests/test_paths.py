@@ -158,6 +158,22 @@ def test_closed_spline_is_c2_at_the_seam():
     np.testing.assert_allclose(k0, k1, atol=1e-10)
 
 
+def test_max_curvature_of_each_primitive():
+    """Lines 0, arcs r/(r² + p²) (p = rise per radian), spline pieces |P' × P''| / |P'|³ at w = 0, 1/64, ..., 1."""
+    rng = np.random.default_rng(1)
+    curve = paths.spline(10 * rng.normal(size=(40, 3)))
+    w = np.linspace(0, 1, 65)[:, None]
+    want = []
+    for piece in curve.primitives:
+        a, b, c, d = piece.coefficients
+        d1, d2 = b + 2 * c * w + 3 * d * w**2, 2 * c + 6 * d * w
+        want.append(np.max(np.linalg.norm(np.cross(d1, d2), axis=1) / np.linalg.norm(d1, axis=1) ** 3))
+    np.testing.assert_allclose(curve.max_curvature(), want, rtol=1e-12)
+    helix = paths.helix((0, 0, 0), 5.0, pitch=2 * np.pi, turns=1.0)  # rises 1 mm per radian
+    line = paths.line((0, 0), (3, 4))
+    np.testing.assert_allclose([helix.max_curvature()[0], line.max_curvature()[0]], [5 / 26, 0.0], rtol=1e-12)
+
+
 def test_spline_piece_that_stops_is_refused():
     """dP/dw = 3(w - 1/2)^2 (1, 2, 0): the piece stops at w = 1/2 (a cusp); a little faster there, it is a piece."""
     stops = [[0, 0, 0], [0.75, 1.5, 0], [-1.5, -3, 0], [1, 2, 0]]
