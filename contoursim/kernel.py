@@ -607,17 +607,18 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 u, state[a, _ZC] = _current_controller(par[a, _CB], par[a, _CC], par[a, _CD], state[a, _ZC], i_cmd - i)
             else:
                 u = i_cmd
-            force = 0.0
-            if par[a, _FRICTION] != 0.0:  # stick-slip: the friction that stops the carriage, within its bounds
-                force = par[a, _F0] - par[a, _FV] * v
-                v_free = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
-                force += _dry_friction(par[a, _FC], par[a, _FS], par[a, _VS], par[a, _FA], v,
-                                       -v_free / par[a, _BF + 1])  # fmt: skip
             # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the rows that are zero by construction
             # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
             # (rows as np.int64: one compiled _plant_row, not one per literal row number)
+            friction = par[a, _FRICTION] != 0.0
+            force = par[a, _F0] - par[a, _FV] * v if friction else 0.0
+            v_next = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
+            if friction:  # stick-slip: the force that stops the carriage at t_k+1, within the friction bounds
+                dry = _dry_friction(par[a, _FC], par[a, _FS], par[a, _VS], par[a, _FA], v, -v_next / par[a, _BF + 1])
+                force += dry
+                v_next += par[a, _BF + 1] * dry
             state[a, 0] = _plant_row(par, a, np.int64(0), x, v, d, w, i, u, force)
-            state[a, 1] = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
+            state[a, 1] = v_next
             if par[a, _MODE] != 0.0:
                 state[a, 2] = _plant_row(par, a, np.int64(2), x, v, d, w, i, u, force)
                 state[a, 3] = _plant_row(par, a, np.int64(3), x, v, d, w, i, u, force)
