@@ -161,7 +161,8 @@ class LoopEffects:
     asymmetry_N : float, default 0
         Force [N] pushing towards negative positions while the axis moves in
         either direction: friction is ``coulomb_N + asymmetry_N`` moving
-        forward and ``coulomb_N - asymmetry_N`` moving back.
+        forward and ``coulomb_N - asymmetry_N`` moving back (and the
+        break-away levels at rest shift the same way).
     offset_N : float, default 0
         Constant force [N] on the carriage, always (e.g. an unbalanced weight).
     feedback_delay_s : float, default 0
