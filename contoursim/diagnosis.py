@@ -637,10 +637,11 @@ def _candidates(problem, model):
         if effect.label not in have:
             out.append(_Candidate(effect, free, grid))
 
-    def sizes(name):
+    def sizes(name, below=0):
+        """`_GRID` values over the typical range of `name`'s size (each sign), plus `below` more grid steps under it."""
         p = effect_kind(name).parameters[0]
         lo, hi = p.typical
-        values = np.geomspace(lo, hi, _GRID)
+        values = np.geomspace(lo * (lo / hi) ** (below / (_GRID - 1)), hi, _GRID + below)
         return list(values) + (list(-values) if p.signed else [])
 
     dt = model.machine.servo_period
@@ -649,7 +650,11 @@ def _candidates(problem, model):
         for feedback in ("motor", "scale"):
             add(Effect("backlash", a, lost_motion_um=1.0, feedback=feedback), ("lost_motion_um",),
                 [{"lost_motion_um": v} for v in sizes("backlash")])
-        add(Effect("coulomb_friction", a, force_N=1.0), ("force_N",), [{"force_N": v} for v in sizes("coulomb_friction")])
+        # one step below the typical range too: a loop without velocity integrator stands still short of its
+        # target by force/(kf·kv·kp), steep in the force, and an identified machine's forces are relative to
+        # its assumed mass (the TU/e rig: 2.4 N, which a start at 5 N misses)
+        add(Effect("coulomb_friction", a, force_N=1.0), ("force_N",),
+            [{"force_N": v} for v in sizes("coulomb_friction", below=1)])
         if len(servo) > 1:
             add(Effect("gain_mismatch", a, kp_ratio=1.0), ("kp_ratio",),
                 [{"kp_ratio": r} for r in (0.7, 0.85, 0.95, 1.05, 1.15, 1.3)])

@@ -48,8 +48,10 @@ output is held over ``[t_k, t_k+1)``):
    path and adds a correction to every axis's velocity command;
 6. position P + velocity feedforward, velocity PI + acceleration
    feedforward, current clamp with anti-windup, current PI (when modelled);
-7. the disturbance force: the constant offset minus friction (see
-   :class:`LoopEffects`), from the velocity sampled at ``t_k``, held;
+7. the disturbance force: the constant offset minus viscous and stick-slip
+   friction (see :class:`LoopEffects`): the dry friction is the force that
+   would stop the carriage at ``t_k+1``, within its static or kinetic
+   bounds at the velocity sampled at ``t_k``; held;
 8. the exact ZOH plant update with the held voltage (or current) and force.
 
 The helpers take and return scalars (state goes in and comes back out) or
@@ -102,13 +104,13 @@ _ELEC = 46  # 1.0 when the current loop is modelled
 _HALF_PLAY = 47  # half the backlash [mm]
 _SCALE = 48  # 1.0 when the loop closes on the table (linear scale)
 _FRICTION = 49  # 1.0 when any friction or offset force is set
-_FC, _FV, _FS, _VS, _FA, _F0, _VEPS = 50, 51, 52, 53, 54, 55, 56  # friction, see LoopEffects
-_DELAY_N, _DELAY_F = 57, 58  # feedback delay: whole periods, fraction of a period
-_QUANTUM = 59  # encoder resolution [mm] (0: none)
-_NOISE = 60  # measurement noise on the tool position [mm RMS]
-_SEED = 61  # noise seed
-_MODE = 62  # 1.0 when the axis has a structural mode
-NPAR = 63  #: length of one axis's parameter row from :func:`pack`
+_FC, _FV, _FS, _VS, _FA, _F0 = 50, 51, 52, 53, 54, 55  # friction, see LoopEffects
+_DELAY_N, _DELAY_F = 56, 57  # feedback delay: whole periods, fraction of a period
+_QUANTUM = 58  # encoder resolution [mm] (0: none)
+_NOISE = 59  # measurement noise on the tool position [mm RMS]
+_SEED = 60  # noise seed
+_MODE = 61  # 1.0 when the axis has a structural mode
+NPAR = 62  #: length of one axis's parameter row from :func:`pack`
 
 # Per-axis state ----------------------------------------------------------------------------
 _ZV, _ZC = 5, 6  # velocity / current controller integrators [mm], [A·s]
@@ -128,8 +130,6 @@ _DIVERGENCE_CHECK = 256
 
 #: The longest feedback delay the kernel holds, in servo periods.
 MAX_DELAY_SAMPLES = _NBUF - 1
-#: Smallest velocity scale of the smooth friction law [mm/s].
-FRICTION_VELOCITY_MM_S = 0.05
 
 #: Signals :func:`run_batch` can return, each (B, samples, n_axes).
 BATCH_OUTPUTS = ("tool", "encoder", "velocity", "current", "saturated")
@@ -161,7 +161,8 @@ class LoopEffects:
     asymmetry_N : float, default 0
         Force [N] pushing towards negative positions while the axis moves in
         either direction: friction is ``coulomb_N + asymmetry_N`` moving
-        forward and ``coulomb_N - asymmetry_N`` moving back.
+        forward and ``coulomb_N - asymmetry_N`` moving back (and the
+        break-away levels at rest shift the same way).
     offset_N : float, default 0
         Constant force [N] on the carriage, always (e.g. an unbalanced weight).
     feedback_delay_s : float, default 0
@@ -185,15 +186,23 @@ class LoopEffects:
 
     Notes
     -----
-    The friction force opposing motion, with the smooth sign
-    ``s = v/sqrt(v^2 + v_ε^2)``, is
-    ``(coulomb_N + stribeck_N·exp(-(v/stribeck_velocity)^2))·s +
-    viscous·v + asymmetry_N·|s|``; the disturbance force on the carriage is
-    ``offset_N`` minus it. The velocity scale ``v_ε`` is
-    ``max(FRICTION_VELOCITY_MM_S, 2·1000·F_max·dt/m1)`` [mm/s] (``F_max``
-    the largest friction level, ``m1`` the carriage mass [kg]): small enough
-    to look like a step, smooth enough that the sampled friction does not
-    chatter at the servo rate.
+    Friction is stick-slip in discrete time (the idea of Kikuuwe et al.,
+    "A friction model for discrete-time simulation", IROS 2005, for the
+    exact ZOH plant). The disturbance force on the carriage, held over a
+    servo period, is ``offset_N - viscous·v + f`` with ``v`` the carriage
+    velocity at the start of the period [mm/s] and the dry friction
+
+        f = clip(F_stop, -(L + asymmetry_N), L - asymmetry_N),
+        L = coulomb_N + stribeck_N·exp(-(v/stribeck_velocity)^2),
+
+    where ``F_stop = -v_free / (∂v_{k+1}/∂F)`` [N] is the force that stops
+    the carriage at the end of the period, ``v_free`` the velocity it would
+    have then under every other force (drive, viscous, offset; structural
+    mode and current dynamics included). Within the bounds the axis sticks
+    (``v_{k+1} = 0``) until the other forces exceed the static level
+    ``coulomb_N + stribeck_N`` (break-away); sliding, ``F_stop`` is large
+    and the clip gives the kinetic friction ``L ± asymmetry_N`` opposing the
+    motion.
     """
 
     backlash_mm: float = 0.0
@@ -448,14 +457,13 @@ def _plant_row(p, a, r, x, v, d, w, i, u, force):
 
 
 @njit(cache=True)
-def _disturbance(fc, fv, fs, vs, fa, f0, veps, v):
-    """Disturbance force on the carriage [N]: the offset minus friction at velocity `v` [mm/s]."""
-    s = v / math.sqrt(v * v + veps * veps)
+def _dry_friction(fc, fs, vs, fa, v, f_stop):
+    """Stick-slip friction force [N] at velocity `v` [mm/s]: `f_stop` [N] clipped to the friction bounds."""
     level = fc
     r2 = (v / vs) ** 2
     if fs != 0.0 and r2 < 36.0:  # beyond, exp(-r2) < 2.4e-16: below float64 resolution of the static level
         level += fs * math.exp(-r2)
-    return f0 - level * s - fv * v - fa * abs(s)
+    return min(max(f_stop, -(level + fa)), level - fa)
 
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -600,15 +608,18 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 u, state[a, _ZC] = _current_controller(par[a, _CB], par[a, _CC], par[a, _CD], state[a, _ZC], i_cmd - i)
             else:
                 u = i_cmd
-            force = 0.0
-            if par[a, _FRICTION] != 0.0:
-                force = _disturbance(par[a, _FC], par[a, _FV], par[a, _FS], par[a, _VS], par[a, _FA], par[a, _F0],
-                                     par[a, _VEPS], v)  # fmt: skip
             # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the rows that are zero by construction
             # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
             # (rows as np.int64: one compiled _plant_row, not one per literal row number)
+            friction = par[a, _FRICTION] != 0.0
+            force = par[a, _F0] - par[a, _FV] * v if friction else 0.0
+            v_next = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
+            if friction:  # stick-slip: the force that stops the carriage at t_k+1, within the friction bounds
+                dry = _dry_friction(par[a, _FC], par[a, _FS], par[a, _VS], par[a, _FA], v, -v_next / par[a, _BF + 1])
+                force += dry
+                v_next += par[a, _BF + 1] * dry
             state[a, 0] = _plant_row(par, a, np.int64(0), x, v, d, w, i, u, force)
-            state[a, 1] = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
+            state[a, 1] = v_next
             if par[a, _MODE] != 0.0:
                 state[a, 2] = _plant_row(par, a, np.int64(2), x, v, d, w, i, u, force)
                 state[a, 3] = _plant_row(par, a, np.int64(3), x, v, d, w, i, u, force)
@@ -750,10 +761,7 @@ def pack(servo, dt, effects=LoopEffects()):
     friction = (e.coulomb_N, e.viscous_N_s_per_m / 1000.0, e.stribeck_N, e.stribeck_velocity_mm_s, e.asymmetry_N,
                 e.offset_N)  # fmt: skip
     row[_FRICTION] = float(any(friction[i] != 0.0 for i in (0, 1, 2, 4, 5)))
-    carriage_mass = servo.mass * (1.0 - e.mode_mass_ratio) if e.mode_freq_hz is not None else servo.mass
-    level = e.coulomb_N + e.stribeck_N + abs(e.asymmetry_N)
-    veps = max(FRICTION_VELOCITY_MM_S, 2.0 * 1000.0 * level * dt / carriage_mass)
-    row[_FC : _VEPS + 1] = (*friction, veps)
+    row[_FC : _F0 + 1] = friction
     whole = math.floor(delay + 1e-9)
     row[_DELAY_N], row[_DELAY_F] = whole, max(delay - whole, 0.0)
     row[_QUANTUM], row[_NOISE], row[_SEED] = e.quantum_mm, e.noise_mm, e.seed

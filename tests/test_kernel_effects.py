@@ -120,8 +120,10 @@ def reference_loop(servo, effects, start):
     Returns the interconnection (inputs xr, vr, ar; outputs tool, x_fb, i_cmd) and its initial state.
     """
     plant = ct.sample_system(two_mass_plant(servo, effects), DT, method="zoh")
-    plant = ct.ss(plant.A, plant.B, plant.C, plant.D, DT, inputs=["drive", "F"], outputs=plant.output_labels,
-                  name="plant")  # fmt: skip
+    n_plant = plant.nstates  # the full state is an output too: the stick-slip friction needs it
+    states = [f"s{j}" for j in range(n_plant)]
+    plant = ct.ss(plant.A, plant.B, np.vstack([plant.C, np.eye(n_plant)]), np.zeros((plant.noutputs + n_plant, 2)),
+                  DT, inputs=["drive", "F"], outputs=plant.output_labels + states, name="plant")  # fmt: skip
     d = servo.discretize(DT)
     h, q = effects.backlash_mm / 2, effects.quantum_mm
     delay = effects.feedback_delay_s / DT
@@ -149,14 +151,15 @@ def reference_loop(servo, effects, start):
                        states=1 + 2 * m, dt=DT, name="sensors")  # fmt: skip
 
     def friction_output(t, z, u, params):
-        e = effects
-        v_eps = max(kernel.FRICTION_VELOCITY_MM_S, 2000 * (e.coulomb_N + e.stribeck_N + abs(e.asymmetry_N)) * DT
-                    / (servo.mass * (1 - e.mode_mass_ratio) if e.mode_freq_hz else servo.mass))  # fmt: skip
-        s = u[0] / np.hypot(u[0], v_eps)
-        level = e.coulomb_N + e.stribeck_N * np.exp(-((u[0] / e.stribeck_velocity_mm_s) ** 2))
-        return [e.offset_N - level * s - e.viscous_N_s_per_m / 1000 * u[0] - e.asymmetry_N * abs(s)]
+        """Stick-slip (Kikuuwe): the force stopping the carriage (v1) at the next sample, within the bounds."""
+        e, s, drive = effects, u[:n_plant], u[n_plant]
+        v = s[1]
+        other = e.offset_N - e.viscous_N_s_per_m / 1000 * v
+        v_free = plant.A[1] @ s + plant.B[1, 0] * drive + plant.B[1, 1] * other
+        level = e.coulomb_N + e.stribeck_N * np.exp(-((v / e.stribeck_velocity_mm_s) ** 2))
+        return [other + np.clip(-v_free / plant.B[1, 1], -(level + e.asymmetry_N), level - e.asymmetry_N)]
 
-    friction = ct.nlsys(None, friction_output, inputs=["v"], outputs=["F"], dt=DT, name="friction")
+    friction = ct.nlsys(None, friction_output, inputs=states + ["drive"], outputs=["F"], dt=DT, name="friction")
     vb = d.velocity_controller
     b, c, dd = (vb.B[0, 0], vb.C[0, 0], vb.D[0, 0]) if vb.nstates else (0.0, 0.0, vb.D[0, 0])
     limit = np.inf if servo.current_limit is None else servo.current_limit
@@ -235,6 +238,25 @@ def test_kernel_equals_python_control_reference(name, extra):
         assert np.abs(result.position - plain.position).max() > 1e-6  # the effect shows in 300 steps
 
 
+STICKY = dict(coulomb_N=100.0, stribeck_N=80.0, stribeck_velocity_mm_s=1.0, asymmetry_N=10.0, offset_N=-20.0)
+
+
+@pytest.mark.parametrize("effects", [LoopEffects(**STICKY), LoopEffects(**STICKY, **MODE)])
+@pytest.mark.parametrize("extra", [dict(), dict(**ELECTRICAL)])
+def test_kernel_equals_python_control_reference_sticking_and_breaking_away(effects, extra):
+    # A 2 mm/s ramp from rest: the axis sticks until the loop's force passes the static friction, then slides.
+    servo, n = axis(**extra), 400
+    t = np.arange(n) * DT
+    refs = 2.0 * t, np.full(n, 2.0), np.zeros(n)
+    result = run({"x": servo}, DT, *(r[:, None] for r in refs), effects={"x": effects})
+    stuck = np.abs(result.velocity[:, 0]) < 1e-9  # [mm/s]: stopped but for rounding
+    assert 50 < np.argmin(stuck) < 200 and not stuck[np.argmin(stuck) :].any()  # sticks, breaks away, slides
+    loop, x0 = reference_loop(servo, effects, 0.0)
+    ref = ct.input_output_response(loop, t, np.vstack(refs), X0=x0).outputs
+    np.testing.assert_allclose(result.position[:, 0], ref[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.current[:, 0], ref[2], rtol=0, atol=1e-9 * np.abs(ref[2]).max())
+
+
 # --- physical signatures, measured from the simulated traces --------------------------------
 
 
@@ -276,6 +298,60 @@ def test_friction_spike_after_reversal_shrinks_with_integral_gain():
 
 def test_friction_spike_grows_with_friction_level():
     np.testing.assert_array_less(friction_bulge_peaks(75.0, (0.01,)), friction_bulge_peaks(150.0, (0.01,)))
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_stuck_axis_breaks_away_at_the_static_friction(direction):
+    # P-only loops at rest: the drive force is kf·kv·kp·(r - x). A slow command ramp raises it; the axis
+    # stays exactly where it is while it is within the static bounds -(fc + fs + fa) .. fc + fs - fa and
+    # moves the sample after it passes them, in the direction of the force.
+    fc, fs, fa = 100.0, 60.0, 15.0
+    servo = axis(ti=None)
+    per_mm = servo.force_constant * servo.kv_mm * servo.kp  # drive force per mm of position error [N/mm]
+    n = 2000
+    ramp = direction * 0.05 * np.arange(n) / n  # 50 µm in 2000 steps: up to 360 N
+    r = run([servo], DT, ramp[:, None], np.zeros((n, 1)), np.zeros((n, 1)),
+            effects={"x": LoopEffects(coulomb_N=fc, stribeck_N=fs, stribeck_velocity_mm_s=1.0, asymmetry_N=fa)})
+    static = fc + fs + direction * fa
+    first = int(np.argmax(per_mm * np.abs(ramp) > static))  # the first sample whose force breaks away
+    assert 100 < first < n - 100
+    x = r.position[:, 0]
+    assert np.abs(x[: first + 1]).max() < 1e-15  # stuck, but for rounding [mm]
+    assert direction * x[first + 1] > 1e-10  # broken away
+
+
+def test_p_only_velocity_loop_stops_short_by_the_friction_over_the_loop_stiffness():
+    # A P velocity loop at rest pushes kf·kv·kp·e [N] for a position error e; the axis slides while that
+    # exceeds Coulomb friction, so it settles e = fc / (kf·kv·kp) short of a step and stays (it would
+    # creep on with a friction that does not stick).
+    fc, servo = 150.0, axis(ti=None)
+    short = fc / (servo.force_constant * servo.kv_mm * servo.kp)  # [mm]: 20.8 µm
+    n = 10000
+    step = np.full((n, 1), 1.0)
+    step[:10] = 0.0  # at rest at 0, then a 1 mm step
+    r = run([servo], DT, step, np.zeros((n, 1)), np.zeros((n, 1)), effects={"x": LoopEffects(coulomb_N=fc)})
+    error = 1.0 - r.position[:, 0]
+    assert error[-1] == pytest.approx(short, rel=1e-3)
+    assert np.ptp(error[n // 2 :]) < 1e-6 * short  # stopped
+    assert run([servo], DT, step, np.zeros((n, 1)), np.zeros((n, 1))).position[-1, 0] == pytest.approx(1.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("feedback", ["motor", "scale"])
+def test_backlash_with_scale_feedback_and_stiction_hunts(feedback):
+    # A 2 µm step at rest, PI velocity loop, static friction twice the Coulomb level, 10 µm of play.
+    # On the scale the loop sees the table stop while the motor crosses the play: the integrator winds
+    # up, the axis breaks away and overshoots, again and again (measured: 5.29 µm p2p every second).
+    # On the motor encoder the motor hunts inside the play and the table stays put.
+    dt, lost, n = 2e-4, 0.010, 15000
+    step = np.where(np.arange(n) * dt > 0.1, 0.002, 0.0)[:, None]
+    effects = LoopEffects(backlash_mm=lost, backlash_feedback=feedback, coulomb_N=100.0, stribeck_N=100.0,
+                          stribeck_velocity_mm_s=0.1)  # fmt: skip
+    table = run([axis()], dt, step, np.zeros_like(step), np.zeros_like(step), effects={"x": effects}).position[:, 0]
+    p2p = [np.ptp(table[int(a / dt) : int((a + 1) / dt)]) for a in (1.0, 2.0)]
+    if feedback == "scale":
+        assert min(p2p) > 0.3 * lost and max(p2p) < lost  # a limit cycle of the order of the play
+    else:
+        assert max(p2p) < 1e-12
 
 
 def back_and_forth(dt, stroke=1.0, move=0.3, dwell=0.6):
@@ -498,7 +574,7 @@ def test_bad_run_and_batch_arguments():
     with pytest.raises(TypeError, match="effects must be a LoopEffects"):
         run([axis()], DT, ref, ref, ref, effects={"x": dict(backlash_mm=0.01)})
     rows = pack(axis(), DT)[None, None, :]
-    with pytest.raises(ValueError, match=r"rows must have shape \(B, n_axes, 63\)"):
+    with pytest.raises(ValueError, match=rf"rows must have shape \(B, n_axes, {NPAR}\)"):
         run_batch(rows[..., :-1], DT, ref, ref, ref)
     with pytest.raises(ValueError, match="outputs must name signals from tool"):
         run_batch(rows, DT, ref, ref, ref, outputs=("position",))
