@@ -261,7 +261,6 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act):
 
 # --------------------------------------------------------------------------- public function
 
-#: Actual points whose foot frames :func:`exact_contour_error` holds at once [points].
 
 
 def _binormal(path, prim, tangent, kvec):
