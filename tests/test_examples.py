@@ -19,7 +19,7 @@ from contoursim.output import output_dir
 EXAMPLES = ROOT / "examples"
 JOBS = sorted(EXAMPLES.glob("*.toml"))
 CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py", "effects_gallery.py",
-           "diagnose_real_traces.py"}  # the last in test_diagnosis.py
+           "hunting.py", "diagnose_real_traces.py"}  # the last in test_diagnosis.py
 
 
 def _figure(text, pattern):
@@ -115,6 +115,19 @@ def test_effects_gallery_prints_the_ballbar_sizes_of_the_closed_forms(tmp_path, 
         for direction in ("radial deviation CCW", "p-p, CW"):
             assert _figure(printed, rf"{re.escape(label)}\s+.*{direction}\s+([\d.]+) µm") == pytest.approx(size, rel=0.01)
     assert (tmp_path / "out" / "effects_gallery.png").exists()
+
+
+def test_hunting_needs_static_friction_above_sliding(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["hunting.py", str(tmp_path / "out")])
+    runpy.run_path(str(EXAMPLES / "hunting.py"), run_name="__main__")
+    rows = dict(((feedback, float(static)), (float(p2p), float(error)))
+                for feedback, static, p2p, error in re.findall(r"^(motor|scale)\s+(\d+) N\s+([\d.]+)\s+(-?[\d.]+)$",
+                                                               capsys.readouterr().out, re.M))  # fmt: skip
+    assert rows[("motor", 100.0)] == (0.0, -2.0)  # a step smaller than the play: the table stays behind
+    assert rows[("scale", 100.0)] == (0.0, 0.0)  # the scale pushes it through the play, onto the target
+    assert rows[("scale", 200.0)][0] > 5.0  # stick-slip through the 10 µm play: a limit cycle of most of it
+    assert rows[("motor", 200.0)][0] > 1.0  # the motor's own stick-slip cycle, larger than the play here
+    assert (tmp_path / "out" / "hunting.png").exists()
 
 
 def test_example_never_replaces_a_users_file(tmp_path, monkeypatch):
