@@ -1,7 +1,5 @@
 """``python -m contoursim``: the command line, see :mod:`contoursim.cli`."""
 
-import sys
+from .cli import run
 
-from .cli import main
-
-sys.exit(main())
+run()

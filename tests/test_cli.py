@@ -330,6 +330,7 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
     """``python -m contoursim`` in a fresh process, from the repository root and from another folder."""
     cwd = ROOT if where == "root" else tmp_path
     env = {**os.environ, "PYTHONPATH": str(ROOT)}  # this checkout's contoursim, as if installed
+    env.pop("PYTHONUNBUFFERED", None)  # output buffered, as in a user's pipe
     run = lambda *args: subprocess.run([sys.executable, "-m", "contoursim", *args], cwd=cwd, env=env,  # noqa: E731
                                        capture_output=True, text=True, timeout=300)
     helped = run("--help")
@@ -337,7 +338,11 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     done = run("simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out"))
     assert done.returncode == 0, done.stderr
+    # the whole table and the last line through a pipe: the program flushes before its hard exit (cli.run)
     assert "small " in done.stdout and not done.stderr
+    assert done.stdout.endswith(f"plots and traces written to {tmp_path / 'out'}/\n")
+    failed = run("simulate", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "out2"))
+    assert failed.returncode == 2 and failed.stderr.startswith("contoursim simulate: error: ") and not failed.stdout
     assert read_trace(tmp_path / "out" / "small.csv").axes == ("x", "y")
     imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
                               capture_output=True, text=True, timeout=60)
