@@ -115,13 +115,15 @@ def _spline_tables(coefs):
     the largest curvature |P' × P''| / |P'|³ [1/mm], and a cusp (or zero
     length) where the speed |P'| = |dP/dw| drops to 1e-9 of the chord.
     """
-    rows = np.zeros((coefs.shape[0], NCOL))
-    curvature = np.zeros(coefs.shape[0])
-    cusp = np.zeros(coefs.shape[0], np.bool_)
+    # np.empty, every entry set below: np.zeros would compile three more functions per signature (~0.07 s each)
+    rows = np.empty((coefs.shape[0], NCOL))
+    curvature = np.empty(coefs.shape[0])
+    cusp = np.empty(coefs.shape[0], np.bool_)
     for k in range(coefs.shape[0]):
         row = rows[k]
         for c in range(12):  # not row[:12] = coefs[k]: numba would compile its shape-mismatch error (~1.5 s)
             row[c] = coefs[k, c]
+        row[12] = curvature[k] = 0.0
         for j in range(_TABLE):  # integrated over the read-only coefs[k]: the signature of every other call
             row[13 + j] = row[12 + j] + _spline_integral(coefs[k], j / _TABLE, (j + 1) / _TABLE)
         chord2 = slowest2 = 0.0
