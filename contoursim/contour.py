@@ -211,17 +211,17 @@ def _closest(kind, row, p, u0, length, out):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act):
-    """Foot point (position, tangent, curvature vector), arc length and primitive of each actual point.
+def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act, plane, magnitude, s_out, normal, out_of_plane,
+                 foot):  # fmt: skip
+    """Foot point of each actual point, its arc length and the contour error's parts, into the outputs.
 
     sample_s : arc length of the reference samples; first : the first sample of each knot (distinct
-    sample); idx : the knot nearest to each actual point.
+    sample); idx : the knot nearest to each actual point; act : the actual points (N, 3), z = 0 for a
+    2-D path; plane : the path's plane normal, zero when it has none. Fills magnitude, s_out, normal
+    (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
     """
-    n, k_count = first.size, kinds.size
-    frame = np.empty((act.shape[0], 9))
-    s_out = np.empty(act.shape[0])
-    prim = np.empty(act.shape[0], np.int64)
-    out = np.empty(9)
+    n, k_count, d = first.size, kinds.size, foot.shape[1]
+    out, frame = np.empty(9), np.empty(9)  # frame: position, tangent, curvature vector at the foot
     for i in range(act.shape[0]):
         p = act[i]
         j = idx[i]
@@ -232,11 +232,11 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act):
             length = breaks[k + 1] - breaks[k]
             u0 = min(max(sample_s[first[j]] - breaks[k], 0.0), length)
             u = _closest(kinds[k], rows[k], p, u0, length, out)
-            d = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
-            if d < best_d:
-                best_d, best_k, best_u = d, k, u
-                for c in range(9):  # not frame[i] = out: numba compiles its shape-mismatch error (~2 s)
-                    frame[i, c] = out[c]
+            dist = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
+            if dist < best_d:
+                best_d, best_k, best_u = dist, k, u
+                for c in range(9):  # not frame[:] = out: numba compiles its shape-mismatch error (~2 s)
+                    frame[c] = out[c]
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
             for _ in range(k_count):
@@ -248,35 +248,41 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act):
                     break
                 length = breaks[nk + 1] - breaks[nk]
                 u = _closest(kinds[nk], rows[nk], p, length if step == -1 else 0.0, length, out)
-                d = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
-                if d >= best_d:
+                dist = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
+                if dist >= best_d:
                     break
-                best_d, best_k, best_u, k = d, nk, u, nk
+                best_d, best_k, best_u, k = dist, nk, u, nk
                 for c in range(9):
-                    frame[i, c] = out[c]
+                    frame[c] = out[c]
         s_out[i] = breaks[best_k] + best_u
-        prim[i] = best_k
-    return frame, s_out, prim
+        # the plane normal b at the foot: the path's plane, an arc's axis, the osculating binormal, else z
+        tx, ty, tz = frame[3], frame[4], frame[5]
+        if plane[0] != 0.0 or plane[1] != 0.0 or plane[2] != 0.0:
+            bx, by, bz = plane[0], plane[1], plane[2]
+        elif kinds[best_k] == ARC:
+            bx, by, bz = rows[best_k, 9], rows[best_k, 10], rows[best_k, 11]
+        else:
+            bx, by, bz = ty * frame[8] - tz * frame[7], tz * frame[6] - tx * frame[8], tx * frame[7] - ty * frame[6]
+            nb = math.sqrt(bx * bx + by * by + bz * bz)
+            if nb < 1e-9:  # straight here: z (x for a tangent near z) made perpendicular to t
+                bx, by, bz = (0.0, 0.0, 1.0) if abs(tz) < 0.9 else (1.0, 0.0, 0.0)
+                along = bx * tx + by * ty + bz * tz
+                bx, by, bz = bx - along * tx, by - along * ty, bz - along * tz
+                nb = math.sqrt(bx * bx + by * by + bz * bz)
+            bx, by, bz = bx / nb, by / nb, bz / nb
+        lx, ly, lz = by * tz - bz * ty, bz * tx - bx * tz, bx * ty - by * tx  # left of travel: b x t
+        nl = math.sqrt(lx * lx + ly * ly + lz * lz)
+        lx, ly, lz = lx / nl, ly / nl, lz / nl
+        dx, dy, dz = p[0] - frame[0], p[1] - frame[1], p[2] - frame[2]
+        magnitude[i] = math.sqrt(dx * dx + dy * dy + dz * dz)
+        normal[i] = dx * lx + dy * ly + dz * lz
+        if d == 3:  # along t x l
+            out_of_plane[i] = dx * (ty * lz - tz * ly) + dy * (tz * lx - tx * lz) + dz * (tx * ly - ty * lx)
+        for c in range(d):
+            foot[i, c] = frame[c]
 
 
 # --------------------------------------------------------------------------- public function
-
-
-
-def _binormal(path, prim, tangent, kvec):
-    """Plane normal b at each foot: the path's plane, an arc's axis, the osculating binormal, else z."""
-    if path.plane_normal is not None:
-        return np.broadcast_to(path.plane_normal, tangent.shape)
-    b = np.cross(tangent, kvec)
-    norm = np.linalg.norm(b, axis=1)
-    arcs = path.kinds[prim] == ARC
-    b[arcs] = path.rows[prim[arcs], 9:12]
-    straight = ~arcs & (norm < 1e-9)
-    b[~arcs & ~straight] /= norm[~arcs & ~straight, None]
-    ref = np.where(np.abs(tangent[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-    fallback = ref - np.sum(ref * tangent, axis=1, keepdims=True) * tangent
-    b[straight] = fallback[straight] / np.linalg.norm(fallback[straight], axis=1, keepdims=True)
-    return b
 
 
 def exact_contour_error(trajectory, actual, window=8):
@@ -330,21 +336,13 @@ def exact_contour_error(trajectory, actual, window=8):
     del knots  # before the results are filled
     magnitude, s, normal = np.empty((3, n))
     foot = np.empty((n, d))
-    out_of_plane = np.empty(n) if d == 3 else np.broadcast_to(0.0, (n,))  # a 2-D path: (P_a - foot) . z = 0
-    for part in blocks(n):  # the (block, 9) foot frames and their products stay small
-        act3 = _xyz(act[part])
-        frame, s[part], prim = _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, first,
-                                            idx[part], act3)
-        tangent = frame[:, 3:6]
-        b = _binormal(path, prim, tangent, frame[:, 6:9])
-        left = np.cross(b, tangent)
-        left /= np.linalg.norm(left, axis=1, keepdims=True)
-        delta = act3 - frame[:, :3]
-        magnitude[part] = np.linalg.norm(delta, axis=1)
-        foot[part] = frame[:, :d]
-        normal[part] = np.sum(delta * left, axis=1)
-        if d == 3:
-            out_of_plane[part] = np.sum(delta * np.cross(tangent, left), axis=1)
+    out_of_plane = np.empty(n if d == 3 else 0)
+    plane = np.zeros(3) if path.plane_normal is None else np.asarray(path.plane_normal, dtype=float)
+    for part in blocks(n):  # the actual points as (block, 3) copies: one compiled signature, no (N, 3) copy
+        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, first, idx[part], _xyz(act[part]),
+                     plane, magnitude[part], s[part], normal[part], out_of_plane[part], foot[part])  # fmt: skip
+    if d == 2:  # a 2-D path: (P_a - foot) . z = 0
+        out_of_plane = np.broadcast_to(0.0, (n,))
     if act.flags.writeable:  # the caller's array: a copy, so that it stays writeable
         act = act.copy()
     return ContourError(magnitude=magnitude, vector=None, foot=foot, s=s, normal=normal, out_of_plane=out_of_plane,
