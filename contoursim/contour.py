@@ -197,10 +197,10 @@ def _closest(kind, row, p, u0, length, out):
                 g += c * d1
                 speed2 += d1 * d1
                 gp += d1 * d1 + c * d2
-            if gp < 0.1 * speed2:
-                gp = speed2
-            wn = min(max(w - g / gp, 0.0), 1.0)
-            if abs(wn - w) < 1e-15:
+            newton = gp >= 0.1 * speed2  # else Gauss-Newton: linear convergence
+            wn = min(max(w - g / (gp if newton else speed2), 0.0), 1.0)
+            # a Newton step leaves an error of the order of its square: below rounding once the step is 1e-10
+            if abs(wn - w) <= (1e-10 if newton else 1e-15):
                 w = wn
                 break
             w = wn

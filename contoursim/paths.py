@@ -99,10 +99,12 @@ def _spline_w_of_u(row, u):
         else:
             a = w
         wn = w - f / _spline_speed(row, w)
+        # the error after a Newton step is of the order of its square: below rounding once the step is 1e-10
+        # (a tighter test would go on in the rounding noise of f, 12 steps on average instead of 2)
+        if abs(wn - w) <= 1e-10:
+            return min(max(wn, a), b)
         if not (a < wn < b):
             wn = 0.5 * (a + b)
-        if abs(wn - w) <= 2e-15:
-            return wn
         w = wn
     return w
 

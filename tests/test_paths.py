@@ -126,6 +126,19 @@ def test_spline_arc_length_matches_quadrature():
     np.testing.assert_allclose(path.evaluate(path.breaks)[0][:, :2], pts, atol=1e-12)
 
 
+def test_spline_arc_length_inverted_to_rounding():
+    """The parameter found for an arc length gives that length back under quadrature, to 1e-13 of the piece."""
+    from contoursim.paths import _spline_w_of_u
+
+    path = paths.spline([[0, 0], [10, 5], [20, -3], [35, 8], [40, 0]])
+    for row, piece in zip(path.rows, path.primitives):
+        a, b, c, d = piece.coefficients
+        for u in np.linspace(0, piece.length, 41)[1:-1]:
+            w = _spline_w_of_u(row, u)
+            back, _ = quad(lambda v: np.linalg.norm(b + 2 * c * v + 3 * d * v * v), 0, w, epsabs=1e-14, epsrel=1e-13)
+            assert back == pytest.approx(u, abs=1e-13 * piece.length)
+
+
 @pytest.mark.parametrize("n, closed", [
     (2, False), (3, False), (4, False), (9, False), (4, True), (5, True), (13, True),
 ])
