@@ -348,17 +348,19 @@ def run():
       complete; a normal exit would still free the objects of numba,
       matplotlib and python-control one by one, 0.25 s of CPU after
       ``contoursim demo``. The program flushes its output and ends the
-      process instead (as mypy does).
+      process instead (as mypy does). When the reader of its output has
+      gone (``contoursim demo | head``), it ends there with status 1
+      and no traceback; the files completed by then are kept.
 
     :func:`main` itself leaves the process as it is, for callers in Python.
     """
     gc.set_threshold(10_000, 10, 10)
-    code = main()
     try:
+        code = main()
         sys.stdout.flush()
         sys.stderr.flush()
-    except OSError:  # the reader of a pipe is gone: what a normal exit reports
-        code = code or 120
+    except BrokenPipeError:  # the reader of the output is gone (contoursim demo | head): no traceback
+        code = 1
     os._exit(code)
 
 

@@ -343,6 +343,14 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
     assert done.stdout.endswith(f"plots and traces written to {tmp_path / 'out'}/\n")
     failed = run("simulate", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "out2"))
     assert failed.returncode == 2 and failed.stderr.startswith("contoursim simulate: error: ") and not failed.stdout
+    # the reader of the output gone before the first line (as in `contoursim simulate ... | head`), each line
+    # written at once (python -u): no traceback
+    piped = subprocess.Popen([sys.executable, "-u", "-m", "contoursim", "simulate", str(tmp_path / "small.toml"),
+                              "--out", str(tmp_path / "out3")], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE)  # fmt: skip
+    piped.stdout.close()
+    assert piped.wait(timeout=300) == 1 and piped.stderr.read() == b""
+    assert (tmp_path / "out3" / "small.csv").exists()  # written before the table is printed
     assert read_trace(tmp_path / "out" / "small.csv").axes == ("x", "y")
     imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
                               capture_output=True, text=True, timeout=60)
