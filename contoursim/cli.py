@@ -223,12 +223,13 @@ def compare_command(args):
     comparison = compare(model, _trajectory(model, path_file, job), names)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)
+    if report is not None:  # the files before the table: a reader gone half-way (| head) costs none of them
+        with atomic_write(report) as stream:
+            stream.write(comparison.to_json() + "\n")
     machine = comparison.runs[names[0]].machine
     print(f"contoursim compare — machine: {machine.name}, path: {Path(path_file).name}; errors over the test proper")
     print(comparison.table())
     if report is not None:
-        with atomic_write(report) as stream:
-            stream.write(comparison.to_json() + "\n")
         print(f"\ncomparison written to {report}")
     print(f"plots written to {out}/")
 
@@ -263,12 +264,13 @@ def diagnose_command(args):
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
     result = diagnose(trace, model, progress=lambda line: print(line, file=sys.stderr, flush=True))
-    print(result.report())
-    if report is not None:
+    if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")
-        print(f"report written to {report}")
     save_figures(result, args.out)
+    print(result.report())
+    if report is not None:
+        print(f"report written to {report}")
     print(f"plots written to {args.out}/")
 
 

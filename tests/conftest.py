@@ -28,3 +28,22 @@ def real_data():
             pytest.fail(message)
         pytest.skip(message)
     return SHARED_DATA
+
+
+class ReaderGone:
+    """A command's standard output whose reader stops after the first line, as ``contoursim ... | head -1``.
+
+    Set it as ``sys.stdout`` in the test itself (pytest sets its own capture after the fixtures).
+    """
+
+    def __init__(self):
+        self.text = ""
+
+    def write(self, text):
+        if "\n" in self.text:
+            raise BrokenPipeError(32, "Broken pipe")
+        self.text += text
+        return len(text)
+
+    def flush(self):
+        pass

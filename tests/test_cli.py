@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import ROOT, ReaderGone
 from contoursim.cli import main
 from contoursim.simulation import SimResult
 from contoursim.traces import read_trace
@@ -402,6 +402,21 @@ def test_compare_prints_the_table_and_writes_the_json_and_plots(tmp_path, capsys
     assert main(["compare", str(path), "--json", str(keep), "--out", str(tmp_path / "out")]) == 2
     assert "notes.json exists and is not a comparison JSON" in capsys.readouterr().err
     assert keep.read_text() == '{"mine": 1}'
+
+
+def test_compare_writes_its_files_before_a_reader_can_go(tmp_path, monkeypatch):
+    """``contoursim compare ... | head -1``: the JSON and the plots are written before the table is printed."""
+    import json
+
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL_PATH)
+    report = tmp_path / "r.json"
+    monkeypatch.setattr(sys, "stdout", reader_gone := ReaderGone())
+    with pytest.raises(BrokenPipeError):
+        main(["compare", str(path), "--strategies", "none,ccc_arc", "--json", str(report), "--out", str(tmp_path / "o")])
+    assert reader_gone.text.startswith("contoursim compare — machine: ")
+    assert list(json.loads(report.read_text())["runs"]) == ["none", "ccc_arc"]
+    assert {p.name for p in (tmp_path / "o").glob("*.png")} == {f"small_compare_{k}.png" for k in ("path", "contour", "table")}
 
 
 @pytest.mark.parametrize("strategies, message", [

@@ -10,11 +10,12 @@ The full sweep is benchmarks/bench_diagnose.py.
 
 import json
 import runpy
+import sys
 
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import ROOT, ReaderGone
 
 from contoursim import paths
 from contoursim.cli import main
@@ -210,6 +211,22 @@ def test_cli_prints_the_story_and_writes_the_contract_report(tmp_path, capsys):
     assert main(args) == 2
     assert "not a diagnosis report" in capsys.readouterr().err
     assert report.read_text() == "my notes"
+
+
+def test_cli_writes_report_and_plots_before_a_reader_can_go(tmp_path, monkeypatch):
+    """``contoursim diagnose ... | head -1``: the report and the plots are written before the story is printed."""
+    mill = load_machine("demo_mill")
+    path = paths.iso230_4_circle(10.0)
+    reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), mill.servo_period)
+    write_trace(tmp_path / "measured.csv", synthetic_trace(Model(mill), reference, every=5, seed=3))
+    report = tmp_path / "r.json"
+    monkeypatch.setattr(sys, "stdout", reader_gone := ReaderGone())
+    with pytest.raises(BrokenPipeError):
+        main(["diagnose", str(tmp_path / "measured.csv"), "--model", "demo_mill", "--report", str(report),
+              "--out", str(tmp_path / "out")])  # fmt: skip
+    assert reader_gone.text.startswith("contoursim diagnose — measured.csv: ")
+    assert "residual_rms_before_um" in json.loads(report.read_text())
+    assert {p.name for p in (tmp_path / "out").glob("*.png")} == {"diagnosis_residual.png", "diagnosis_trace.png", "diagnosis_polar.png"}
 
 
 def test_emps_real_axis_names_coulomb_friction_first(real_data, tmp_path):
