@@ -359,8 +359,9 @@ def run():
     gc.set_threshold(10_000, 10, 10)
     try:
         code = main()
-        sys.stdout.flush()
-        sys.stderr.flush()
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None:  # None: started with the descriptor closed (contoursim demo >&-)
+                stream.flush()
     except BrokenPipeError:  # the reader of the output is gone (contoursim demo | head): no traceback
         code = 1
     os._exit(code)

@@ -351,6 +351,10 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
     piped.stdout.close()
     assert piped.wait(timeout=300) == 1 and piped.stderr.read() == b""
     assert (tmp_path / "out3" / "small.csv").exists()  # written before the table is printed
+    closed = subprocess.run([sys.executable, "-m", "contoursim", "simulate", str(tmp_path / "small.toml"), "--out",
+                             str(tmp_path / "out4")], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=lambda: os.close(1), timeout=300)  # started without a stdout
+    assert closed.returncode == 0 and closed.stderr == b"" and (tmp_path / "out4" / "small.csv").exists()
     assert read_trace(tmp_path / "out" / "small.csv").axes == ("x", "y")
     imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
                               capture_output=True, text=True, timeout=60)
