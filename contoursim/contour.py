@@ -1,22 +1,22 @@
 """Exact contour error: distance from actual tool positions to the continuous reference path.
 
-For each actual point, in time order:
+For each actual point P, taken when the reference was at sample R:
 
-1. the package's windowed nearest-sample search
-   (:func:`contoursim.nearest.nearest_knot`) over the distinct reference
-   samples (the repeats of a standstill removed), started at the previous
-   point's sample and reaching across the local distance minimum a sharp
-   corner leaves on the incoming edge, so the search follows the branch
-   being travelled where a closed curve comes back near itself or a
-   figure-eight crosses, and the cost is linear in the number of points;
+1. the package's nearest-sample search (:func:`contoursim.nearest.nearest_knot`)
+   over the distinct reference samples (the repeats of a standstill removed)
+   on the part of the path connected to R inside the ball of radius 2|P - R|
+   about R: every path point nearer to P than R lies there, so the contour
+   error is never larger than the tracking error |P - R|, wherever the path
+   turns back on itself, and a branch that only comes near P elsewhere (a
+   closed curve's start, a figure-eight's crossing) is not taken;
 2. refinement on the primitives spanned by that sample's two neighbours:
    closed form on lines and plain arcs, Newton's method on the arc length of
-   helices and on the parameter of spline pieces; when the foot point is
-   clamped at a primitive end, the neighbouring primitive (across the seam
-   of a closed path, too) is tried.
+   helices and on the parameter of spline pieces, never farther than the
+   sample itself; when the foot point is clamped at a primitive end, the
+   neighbouring primitive (across the seam of a closed path, too) is tried.
 
-The result is independent of the sample spacing: the samples only seed the
-search.
+The result is independent of the sample spacing (the samples only seed the
+search) and of the order of the points.
 """
 
 import math
@@ -27,7 +27,7 @@ from ._numba import njit
 
 from . import _validate
 from ._blocks import blocks
-from .nearest import moved, nearest_knots
+from .nearest import fill_chord, moved, nearest_knots
 from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
 
 __all__ = ["ContourError", "exact_contour_error"]
@@ -227,7 +227,11 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act, plane, 
         j = idx[i]
         k_lo = _primitive_at(breaks, sample_s[first[max(j - 1, 0)]])
         k_hi = _primitive_at(breaks, sample_s[first[min(j + 1, n - 1)]])
-        best_d, best_k, best_u = np.inf, -1, 0.0
+        # the knot itself, on its primitive: the refinement never ends farther from p than the sample
+        best_k = _primitive_at(breaks, sample_s[first[j]])
+        best_u = min(max(sample_s[first[j]] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
+        _eval_prim(kinds[best_k], rows[best_k], best_u, frame)
+        best_d = (frame[0] - p[0]) ** 2 + (frame[1] - p[1]) ** 2 + (frame[2] - p[2]) ** 2
         for k in range(k_lo, k_hi + 1):
             length = breaks[k + 1] - breaks[k]
             u0 = min(max(sample_s[first[j]] - breaks[k], 0.0), length)
@@ -285,7 +289,7 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act, plane, 
 # --------------------------------------------------------------------------- public function
 
 
-def exact_contour_error(trajectory, actual, window=8):
+def exact_contour_error(trajectory, actual, at=None, window=8):
     """Distance from actual tool positions to the continuous reference path.
 
     Parameters
@@ -293,12 +297,18 @@ def exact_contour_error(trajectory, actual, window=8):
     trajectory : Trajectory
         Reference samples with their `path` (the search seeds on the samples).
     actual : array_like, shape (N, d)
-        Actual tool positions [mm], d = trajectory.dim, in time order, starting
-        near the path start.
+        Actual tool positions [mm], d = trajectory.dim.
+    at : array_like of int, shape (N,), optional
+        The reference sample commanded when each actual point was taken
+        (its tracking error is measured from it); default: sample i for
+        point i, `actual` then having one row per reference sample. The
+        contour error is searched on the part of the path connected to that
+        sample inside the ball of twice the tracking error about it (module
+        docstring), so it never exceeds the tracking error.
     window : int
-        Distinct reference samples searched either side of the previous
-        point's nearest one before the search walks on [samples]
-        (:func:`contoursim.nearest.nearest_knot`).
+        Distinct reference samples the search's descent from the previous
+        point's foot scans either side before walking on [samples]
+        (:func:`contoursim.nearest.nearest_knot`; speed only, not the result).
 
     Returns
     -------
@@ -310,7 +320,8 @@ def exact_contour_error(trajectory, actual, window=8):
     >>> from contoursim.feed import plan, sample
     >>> path = circle((0, 0), 50.0)
     >>> ref = sample(path, plan(path, 100.0, 1000.0), 0.01)
-    >>> err = exact_contour_error(ref, [[50.002, 0.0], [0.0, 49.999]])
+    >>> quarter = int(np.argmax(ref.position[:, 1]))   # the sample at (0, 50)
+    >>> err = exact_contour_error(ref, [[50.002, 0.0], [0.0, 49.999]], at=[0, quarter])
     >>> np.round(err.normal * 1e3, 6).tolist()   # R - |P - c| [µm]
     [-2.0, 1.0]
     """
@@ -323,16 +334,28 @@ def exact_contour_error(trajectory, actual, window=8):
         raise ValueError(f"actual must have shape (N, {d}) like the trajectory's positions, got {act.shape}")
     if int(window) < 1:
         raise ValueError(f"window must be at least 1, got {window!r}")
-    position, window = trajectory.position, int(window)
+    position, window, n = trajectory.position, int(window), act.shape[0]
+    if at is None:
+        if n != len(position):
+            raise ValueError(f"actual has {n} rows but the trajectory {len(position)} samples: "
+                             "give `at`, the sample commanded at each actual point")  # fmt: skip
+    else:
+        at = np.asarray(at)
+        if at.shape != (n,) or at.dtype.kind not in "iu" or (n and (at.min() < 0 or at.max() >= len(position))):
+            raise ValueError(f"at must hold {n} sample indices in [0, {len(position)}), got {at.dtype} {at.shape}")
     # the knots, the distinct reference samples: their first samples and, while the search needs them, positions
     first = np.flatnonzero(moved(position)).astype(np.int32)  # int32 (as idx): 2**31 samples would need ~1 TB
-    knots = np.zeros((first.size, 3))
+    knots = np.zeros((first.size, 4))  # x, y, z and the chord length
     for part in blocks(first.size):
         knots[part, :d] = position[first[part]]
-    n = act.shape[0]
+    fill_chord(knots)
     idx = np.empty(n, np.int32)  # the nearest knot to each actual point
-    for part in blocks(n):  # as below: no (N, 3) copy of the actual points
-        idx[part] = nearest_knots(knots, _xyz(act[part]), window, int(idx[part.start - 1]) if part.start else 0)
+    for part in blocks(n):  # as below: no (N, 3) copy of the actual points, no (N,) array of anchors
+        commanded = np.arange(part.start, part.stop, dtype=np.int32) if at is None else at[part].astype(np.int32)
+        anchors = np.searchsorted(first, commanded, side="right") - 1  # the knot holding each commanded sample
+        # (both int32: searchsorted would otherwise convert all of `first` for each block)
+        hint = int(idx[part.start - 1]) if part.start else int(anchors[0])
+        idx[part] = nearest_knots(knots, anchors, _xyz(act[part]), window, hint)
     del knots  # before the results are filled
     magnitude, s, normal = np.empty((3, n))
     foot = np.empty((n, d))

@@ -22,11 +22,13 @@ Two layers
 ``newton_step``) are numba ``@njit`` functions over plain arrays, all with one
 signature::
 
-    estimate, index = step(knots, hint, actual, params)
+    estimate, index = step(knots, anchor, hint, actual, params)
 
-``knots`` (M, 3) are the distinct reference samples (see
-:func:`distinct_samples`), ``hint`` an index into them, ``actual`` (3,) the
-tool position, ``params`` a small float array built by :func:`search_params`
+``knots`` (M, 4) are the distinct reference samples with their chord length
+(see :func:`distinct_samples`), ``anchor`` the knot of the commanded sample
+(the reference point of the same servo step), ``hint`` the knot the previous
+step returned (where the search starts; the result does not depend on it),
+``actual`` (3,) the tool position, ``params`` a small float array built by :func:`search_params`
 or :func:`circular_params`. ``estimate`` is a :class:`StepEstimate` named
 tuple (magnitude, normal, out_of_plane, vx, vy, vz) and ``index`` the knot the
 estimate is anchored to, to be passed back as the next step's hint. A
@@ -244,7 +246,7 @@ def _up(params):
 
 
 @njit(cache=True)
-def linear_step(knots, hint, actual, params):
+def linear_step(knots, anchor, hint, actual, params):
     """Linear (tangent) estimate: the tracking error's component normal to the path.
 
     Koren's classic estimate behind cross-coupled control: with the tracking
@@ -255,11 +257,13 @@ def linear_step(knots, hint, actual, params):
 
     Parameters
     ----------
-    knots : ndarray, shape (M, 3)
-        Distinct reference samples [mm].
-    hint : int
+    knots : ndarray, shape (M, 4)
+        Distinct reference samples [mm] (:func:`distinct_samples`).
+    anchor : int
         Knot of the commanded sample P_r (``knot_of_sample[k]`` from
         :func:`distinct_samples` at servo step k).
+    hint : int
+        Not used.
     actual : ndarray, shape (3,)
         Actual tool position [mm].
     params : ndarray, shape (4,)
@@ -269,12 +273,12 @@ def linear_step(knots, hint, actual, params):
     -------
     estimate : StepEstimate
     index : int
-        `hint`, unchanged.
+        `anchor`, clipped to the knots.
     """
     m = knots.shape[0]
     up = _up(params)
     p = (actual[0], actual[1], actual[2])
-    j = min(max(hint, 0), m - 1)
+    j = min(max(anchor, 0), m - 1)
     if m == 1:
         return _point_estimate(_row(knots, j), p, up), j
     anchor, t, b, kappa = _linear_arc(knots, j, up)
@@ -297,7 +301,7 @@ def _linear_arc(knots, j, up):
 
 
 @njit(cache=True)
-def circular_step(knots, hint, actual, params):
+def circular_step(knots, anchor, hint, actual, params):
     """Circular estimate: radial deviation from a circle of known centre.
 
     With h the offset of P_a along the circle's axis and L its distance from
@@ -306,8 +310,10 @@ def circular_step(knots, hint, actual, params):
 
     Parameters
     ----------
-    knots : ndarray, shape (M, 3)
-        Not used (the circle is given by `params`); any array, e.g. ``np.empty((0, 3))``.
+    knots : ndarray, shape (M, 4)
+        Not used (the circle is given by `params`); any array, e.g. ``np.empty((0, 4))``.
+    anchor : int
+        Not used.
     hint : int
         Not used; returned unchanged.
     actual : ndarray, shape (3,)
@@ -337,12 +343,12 @@ def circular_step(knots, hint, actual, params):
 
 
 @njit(cache=True)
-def three_point_step(knots, hint, actual, params):
+def three_point_step(knots, anchor, hint, actual, params):
     """Three-point circumscribed-arc estimate with out-of-plane projection.
 
     The method of DOMAIN.md section 3 (seed 003): find the knot P_n nearest to
-    P_a by the windowed search around `hint`
-    (:func:`contoursim.nearest.nearest_knot`); take the circle through
+    P_a on the stretch of the path around the commanded knot
+    (:func:`contoursim.nearest.nearest_knot`: never farther than it); take the circle through
     P_{n-1}, P_n, P_{n+1} (centre O, radius r, plane normal b); project P_a
     onto the circle's plane (P_a'), h = |P_a - P_a'|, L = |O - P_a'|; the estimate is
     sqrt((L - r)^2 + h^2), reported as its in-plane part (``normal``, r - L when
@@ -356,11 +362,13 @@ def three_point_step(knots, hint, actual, params):
 
     Parameters
     ----------
-    knots : ndarray, shape (M, 3)
-        Distinct reference samples [mm] (:func:`distinct_samples`).
+    knots : ndarray, shape (M, 4)
+        Distinct reference samples [mm] with their chord length (:func:`distinct_samples`).
+    anchor : int
+        Knot of the commanded sample (``knot_of_sample[k]`` at servo step k).
     hint : int
-        Knot to start the search from: the index this function returned at
-        the previous step (0 at the start of the path).
+        Where the search starts: the index this function returned at the
+        previous step (the anchor at the first); speed only.
     actual : ndarray, shape (3,)
         Actual tool position [mm].
     params : ndarray, shape (4,)
@@ -375,7 +383,7 @@ def three_point_step(knots, hint, actual, params):
     m = knots.shape[0]
     up = _up(params)
     p = (actual[0], actual[1], actual[2])
-    n = nearest_knot(knots, hint, p, int(params[3]))
+    n = nearest_knot(knots, anchor, hint, p, int(params[3]))
     if m == 1:
         return _point_estimate(_row(knots, 0), p, up), n
     anchor, t, b, kappa = _three_point_arc(knots, n, up)
@@ -410,7 +418,7 @@ def _three_point_arc(knots, n, up):
 
 
 @njit(cache=True)
-def newton_step(knots, hint, actual, params):
+def newton_step(knots, anchor, hint, actual, params):
     """Foot point by Newton's method on a local cubic through four knots.
 
     The accuracy ceiling of the online family. The reference around the
@@ -431,11 +439,13 @@ def newton_step(knots, hint, actual, params):
 
     Parameters
     ----------
-    knots : ndarray, shape (M, 3)
-        Distinct reference samples [mm] (:func:`distinct_samples`).
+    knots : ndarray, shape (M, 4)
+        Distinct reference samples [mm] with their chord length (:func:`distinct_samples`).
+    anchor : int
+        Knot of the commanded sample (``knot_of_sample[k]`` at servo step k).
     hint : int
-        Knot to start the search from: the index this function returned at
-        the previous step (0 at the start of the path).
+        Where the search starts: the index this function returned at the
+        previous step (the anchor at the first); speed only.
     actual : ndarray, shape (3,)
         Actual tool position [mm].
     params : ndarray, shape (4,)
@@ -449,10 +459,10 @@ def newton_step(knots, hint, actual, params):
     """
     m = knots.shape[0]
     if m < 4:
-        return three_point_step(knots, hint, actual, params)
+        return three_point_step(knots, anchor, hint, actual, params)
     up = _up(params)
     p = (actual[0], actual[1], actual[2])
-    n = nearest_knot(knots, hint, p, int(params[3]))
+    n = nearest_knot(knots, anchor, hint, p, int(params[3]))
     # the segment [i, i+1] holding the foot, and its neighbours i-1 and i+2
     ahead = _dot(_sub(p, _row(knots, n)), _sub(_row(knots, min(n + 1, m - 1)), _row(knots, max(n - 1, 0))))
     i = min(max(n if ahead >= 0.0 else n - 1, 1), m - 3)
@@ -497,25 +507,19 @@ def newton_step(knots, hint, actual, params):
 
 
 @njit(cache=True)
-def _trace(method, knots, hints, follow, actual, params, out, index):
-    """Run one step function over every actual point.
-
-    follow : carry the returned index to the next step as its hint (searching
-    estimators); otherwise hint k is hints[k] (linear: the commanded sample).
-    """
-    idx = hints[0]
+def _trace(method, knots, anchors, actual, params, out, index):
+    """Run one step function over every actual point, anchored at its commanded knot, hinted by the step before."""
+    idx = anchors[0]
     for k in range(actual.shape[0]):
-        if not follow:
-            idx = hints[k]
         p = actual[k]
         if method == _LINEAR:
-            est, idx = linear_step(knots, idx, p, params)
+            est, idx = linear_step(knots, anchors[k], idx, p, params)
         elif method == _CIRCULAR:
-            est, idx = circular_step(knots, idx, p, params)
+            est, idx = circular_step(knots, anchors[k], idx, p, params)
         elif method == _THREE_POINT:
-            est, idx = three_point_step(knots, idx, p, params)
+            est, idx = three_point_step(knots, anchors[k], idx, p, params)
         else:
-            est, idx = newton_step(knots, idx, p, params)
+            est, idx = newton_step(knots, anchors[k], idx, p, params)
         out[k, 0] = est.magnitude
         out[k, 1] = est.normal
         out[k, 2] = est.out_of_plane
@@ -535,8 +539,9 @@ def distinct_samples(reference):
 
     Returns
     -------
-    knots : ndarray, shape (M, 3)
-        The distinct samples in order, z = 0 added for d = 2 [mm].
+    knots : ndarray, shape (M, 4)
+        The distinct samples in order, z = 0 added for d = 2 [mm], and their
+        cumulative chord length [mm] (:func:`contoursim.nearest.distinct`).
     first_sample : ndarray of int, shape (M,)
         Index of the first reference sample of each knot.
     knot_of_sample : ndarray of int, shape (N,)
@@ -650,7 +655,7 @@ def linear(reference, actual, up=(0.0, 0.0, 1.0)):
     if len(act) != len(ref):
         raise ValueError(f"actual must have one row per reference sample ({len(ref)}), got {len(act)}")
     knots, first, knot_of = distinct_samples(ref)
-    out, idx = _run(_LINEAR, knots, knot_of, False, act, search_params(up))
+    out, idx = _run(_LINEAR, knots, knot_of, act, search_params(up))
     return _result(out, first[idx], act.shape[1], "linear")
 
 
@@ -672,68 +677,85 @@ def circular(actual, center, radius, normal=(0.0, 0.0, 1.0), direction="ccw"):
     """
     act = _points("actual", actual)
     params = circular_params(center, radius, normal, direction)
-    out, _ = _run(_CIRCULAR, np.empty((0, 3)), np.zeros(1, np.int64), True, act, params)
+    out, _ = _run(_CIRCULAR, np.empty((0, 4)), np.zeros(len(act), np.int64), act, params)
     return _result(out, None, act.shape[1], "circular")
 
 
-def three_point(reference, actual, up=(0.0, 0.0, 1.0), window=4):
+def three_point(reference, actual, up=(0.0, 0.0, 1.0), window=4, at=None):
     """Three-point circumscribed-arc estimate over a trace; see :func:`three_point_step`.
 
     Parameters
     ----------
     reference : array_like, shape (N, d)
-        Reference samples in path order [mm]; duplicates (standstill) allowed.
+        Commanded positions at the servo period [mm]; duplicates (standstill) allowed.
     actual : array_like, shape (K, d)
-        Actual tool positions in time order [mm], starting near the start of
-        the reference (the search starts at its first sample).
+        Actual tool positions in time order [mm].
     up : array_like, shape (3,)
         Orients the local plane normal (:func:`search_params`).
     window : int
-        Search window [knots] (:func:`search_params`).
+        Knots the search's descent from the previous step scans either side (:func:`search_params`; speed only).
+    at : array_like of int, shape (K,), optional
+        The reference sample commanded when each actual point was taken
+        (the search's anchor, :func:`contoursim.nearest.nearest_knot`);
+        default sample k for point k, `actual` then having one row per
+        reference sample.
 
     Returns
     -------
     contoursim.contour.ContourError
         ``index`` is the nearest reference sample found for each actual point.
     """
-    return _searching(_THREE_POINT, "three_point", reference, actual, up, window)
+    return _searching(_THREE_POINT, "three_point", reference, actual, up, window, at)
 
 
-def newton(reference, actual, up=(0.0, 0.0, 1.0), window=4):
+def newton(reference, actual, up=(0.0, 0.0, 1.0), window=4, at=None):
     """Cubic Newton foot-point estimate over a trace; see :func:`newton_step`.
 
     Parameters
     ----------
     reference : array_like, shape (N, d)
-        Reference samples in path order [mm]; duplicates (standstill) allowed.
+        Commanded positions at the servo period [mm]; duplicates (standstill) allowed.
     actual : array_like, shape (K, d)
-        Actual tool positions in time order [mm], starting near the start of
-        the reference.
+        Actual tool positions in time order [mm].
     up : array_like, shape (3,)
         Orients the local plane normal (:func:`search_params`).
     window : int
-        Search window [knots] (:func:`search_params`).
+        Knots the search's descent from the previous step scans either side (:func:`search_params`; speed only).
+    at : array_like of int, shape (K,), optional
+        The reference sample commanded when each actual point was taken
+        (the search's anchor, :func:`contoursim.nearest.nearest_knot`);
+        default sample k for point k, `actual` then having one row per
+        reference sample.
 
     Returns
     -------
     contoursim.contour.ContourError
         ``index`` is the nearest reference sample found for each actual point.
     """
-    return _searching(_NEWTON, "newton", reference, actual, up, window)
+    return _searching(_NEWTON, "newton", reference, actual, up, window, at)
 
 
-def _searching(method, name, reference, actual, up, window):
+def _searching(method, name, reference, actual, up, window, at):
     ref = _points("reference", reference)
     act = _points("actual", actual, like=ref)
-    knots, first, _ = distinct_samples(ref)
-    out, idx = _run(method, knots, np.zeros(1, np.int64), True, act, search_params(up, window))
+    params = search_params(up, window)
+    knots, first, knot_of = distinct_samples(ref)
+    if at is None:
+        if len(act) != len(ref):
+            raise ValueError(f"actual has {len(act)} rows but the reference {len(ref)}: give `at`, "
+                             "the sample commanded at each actual point")  # fmt: skip
+        at = np.arange(len(act))
+    at = np.asarray(at)
+    if at.shape != (len(act),) or at.dtype.kind not in "iu" or at.min() < 0 or at.max() >= len(ref):
+        raise ValueError(f"at must hold {len(act)} sample indices in [0, {len(ref)}), got {at.dtype} {at.shape}")
+    out, idx = _run(method, knots, knot_of[at], act, params)
     return _result(out, first[idx], act.shape[1], name)
 
 
-def _run(method, knots, hints, follow, actual, params):
+def _run(method, knots, anchors, actual, params):
     out = np.empty((len(actual), 6))
     index = np.empty(len(actual), np.int64)
-    _trace(method, knots, hints.astype(np.int64), follow, np.ascontiguousarray(_validate.as_xyz(actual)), params, out, index)
+    _trace(method, knots, anchors.astype(np.int64), np.ascontiguousarray(_validate.as_xyz(actual)), params, out, index)
     return out, index
 
 

@@ -505,7 +505,7 @@ def _coupling_step(k, cpar, knots, knot_of_sample, cstate, x_fb, dvel):
     if cpar[_C_KIND] == 1.0:
         anchor, t, b, kappa = _linear_arc(knots, knot_of_sample[k], up)
     else:
-        j = nearest_knot(knots, int(cstate[_C_HINT]), p, int(cpar[_C_WINDOW]))
+        j = nearest_knot(knots, knot_of_sample[k], int(cstate[_C_HINT]), p, int(cpar[_C_WINDOW]))
         cstate[_C_HINT] = j
         anchor, t, b, kappa = _three_point_arc(knots, j, up)
     e_n, e_h, lf = _arc_parts(anchor, t, b, kappa, p)

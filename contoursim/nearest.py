@@ -1,27 +1,45 @@
-"""Nearest reference sample to a moving tool position: the one windowed search of the package.
+"""Nearest reference sample to a tool position: the one search of the package.
 
 Both the exact contour error (:mod:`contoursim.contour`, which refines the
 sample it finds on the continuous path) and the online estimators
 (:mod:`contoursim.estimators`, which build their local curve around it) start
-from the reference sample nearest to the actual tool position. The search
+from the reference sample nearest to the actual tool position P. Which part of
+the path is searched is fixed by the *commanded* sample R, the reference
+point of the same instant, not by the history of the search:
 
-- runs over the *knots*, the reference samples with the repeats of a
-  standstill removed (:func:`distinct`): at an exact stop the interpolator
-  repeats the corner sample for many servo periods, and a window counted in
-  samples would sit inside that run and never see the outgoing edge;
-- starts at a *hint*, the knot found for the previous tool position, so it
-  follows the branch being travelled where a closed curve comes back near its
-  start or a figure-eight crosses itself, and the cost is linear in the length
-  of the trace;
-- never searches the whole path.
+    the part of the path that is connected to R inside the ball of radius
+    2|P - R| about R.
+
+Every path point nearer to P than R is lies in that ball, so the distance
+found is never larger than the tracking error |P - R| (R itself is a
+candidate), whatever the path does elsewhere: where it turns back on itself
+(a retract, a drilling cycle, back-and-forth passes, a circle cut twice) the
+search looks at the stretch around R and the reversal point is part of it;
+where a closed curve comes back near its start or a figure-eight crosses
+itself, the other branch is not connected to R inside the ball and is not
+taken.
+
+The search runs over the *knots*, the reference samples with the repeats of a
+standstill removed (:func:`distinct`): at an exact stop the interpolator
+repeats the corner sample for many servo periods. Each knot carries the
+cumulative chord length of the knots up to it, ``L``; since
+|K_i - K_j| <= |L_i - L_j| (the triangle inequality), a knot whose distance to
+R leaves a slack below the ball's radius, and whose distance to P exceeds the
+best one found by a margin, rules out every knot within that slack and margin
+of chord length, which are skipped by a galloping search on ``L`` (sphere
+tracing along the path). The knot found for the previous tool position, the
+*hint*, seeds the best distance: a short descent from it (a few knots) finds
+the foot point of a tool that follows the path, so that the scan of the ball
+mostly skips; the result does not depend on the hint (a hint outside R's part
+of the ball is discarded and the ball scanned again without it).
 """
 
 import numpy as np
 from ._numba import njit
 
-__all__ = ["distinct", "moved", "nearest_knot", "nearest_knots"]
+__all__ = ["distinct", "fill_chord", "moved", "nearest_knot", "nearest_knots", "with_chord"]
 
-REACH = 2048  # most knots the search scans forward before walking on [-]
+REACH = 2048  # most knots the descent from the hint scans forward before walking on [-]
 
 
 def distinct(points):
@@ -34,15 +52,56 @@ def distinct(points):
 
     Returns
     -------
-    knots : ndarray, shape (M, 3)
-        The distinct samples in order [mm], C-contiguous.
+    knots : ndarray, shape (M, 4)
+        The distinct samples in order [mm] and, in the last column, the
+        cumulative chord length from the first [mm] (see the module docstring); C-contiguous.
     first_sample : ndarray of int, shape (M,)
         Index of the first sample of each knot.
     knot_of_sample : ndarray of int, shape (N,)
         Knot holding each sample.
     """
     keep = moved(points)
-    return np.ascontiguousarray(points[keep]), np.flatnonzero(keep), np.cumsum(keep) - 1
+    return with_chord(points[keep]), np.flatnonzero(keep), np.cumsum(keep) - 1
+
+
+def with_chord(knots):
+    """Knots (M, 3) with their cumulative chord length as a fourth column [mm], C-contiguous (M, 4).
+
+    Parameters
+    ----------
+    knots : ndarray, shape (M, 3)
+        Distinct points in path order [mm], M >= 1.
+
+    Returns
+    -------
+    ndarray, shape (M, 4)
+
+    Examples
+    --------
+    >>> with_chord(np.array([[0.0, 0, 0], [3, 4, 0], [3, 4, 1]]))[:, 3].tolist()
+    [0.0, 5.0, 6.0]
+    """
+    out = np.empty((len(knots), 4))
+    out[:, :3] = knots
+    fill_chord(out)
+    return out
+
+
+@njit(cache=True)
+def fill_chord(knots):
+    """Write the cumulative chord length of the points in columns 0-2 of `knots` into column 3 [mm].
+
+    Parameters
+    ----------
+    knots : ndarray, shape (M, 4)
+        Distinct points in path order [mm] in columns 0-2; column 3 is overwritten.
+    """
+    total = 0.0
+    for i in range(knots.shape[0]):
+        if i:
+            total += np.sqrt((knots[i, 0] - knots[i - 1, 0]) ** 2 + (knots[i, 1] - knots[i - 1, 1]) ** 2
+                             + (knots[i, 2] - knots[i - 1, 2]) ** 2)  # fmt: skip
+        knots[i, 3] = total
 
 
 def moved(points):
@@ -66,37 +125,23 @@ def moved(points):
 
 
 @njit(cache=True)
-def nearest_knot(knots, hint, p, window):
-    """Index of the knot nearest to p, searched around `hint`.
+def _distance(knots, i, p):
+    return np.sqrt((p[0] - knots[i, 0]) ** 2 + (p[1] - knots[i, 1]) ** 2 + (p[2] - knots[i, 2]) ** 2)
+
+
+@njit(cache=True)
+def _descend(knots, hint, p, window):
+    """Knot nearest to p around `hint`: the local minimum of the distance the hint leads to.
 
     Scans `window` knots back from the hint, and forward at least `window`
     knots and on while the knots stay within d_hint + d_best of the hint (at
-    most :data:`REACH` knots; no knot nearer to p than d_best lies outside
-    that ball): at a concave corner, or wherever the tool cuts inside a sharp
-    turn, the distance along the incoming segment has a local minimum of its
-    own, and the outgoing segment is found across it. When the best knot lies
-    on the edge of the scanned range the search walks on that way while the
-    distance decreases. The cost is bounded by how far the foot point really
-    moves and by the size of the error, and a branch of the path that comes
-    back close to p far along the path (a closed curve's start, the other lobe
-    of a figure-eight) is never reached by jumping.
+    most :data:`REACH`): at a concave corner the distance along the incoming
+    segment has a local minimum of its own, and the outgoing segment is
+    found across it. When the best knot lies on the edge of the scanned
+    range the search walks on that way while the distance decreases.
 
-    Parameters
-    ----------
-    knots : ndarray, shape (M, 3)
-        Distinct reference samples [mm] (:func:`distinct`), M >= 1.
-    hint : int
-        Knot to start from: the one found for the previous tool position
-        (0 at the start of the path); clipped to [0, M - 1].
-    p : tuple of 3 float
-        Tool position [mm].
-    window : int
-        Knots scanned either side of the hint before walking on [-], >= 1.
-
-    Returns
-    -------
-    int
-        Index of the nearest knot found.
+    Returns the knot and the range [lo, hi] of knots looked at, none of
+    them nearer to p than it.
     """
     m = knots.shape[0]
     h = min(max(hint, 0), m - 1)
@@ -126,25 +171,131 @@ def nearest_knot(knots, hint, p, window):
             break
         best, dbest = i, d
         i += step
-    return best
+    if step == 1:
+        hi = min(i, m - 1)
+    elif step == -1:
+        lo = max(i, 0)
+    return best, lo, hi
 
 
 @njit(cache=True)
-def nearest_knots(knots, points, window, hint):
-    """Nearest knot to each of a sequence of tool positions, each search hinted by the previous one.
+def _beyond(knots, j, step, slack):
+    """The first knot past j (in direction step = ±1) whose chord length differs from j's by >= slack.
+
+    Returns an index outside [0, M) when there is none. Galloping: doubling
+    steps, then bisection, O(log k) probes for a jump of k knots.
+    """
+    m = knots.shape[0]
+    left = j if step == -1 else m - 1 - j  # knots that way
+    c0 = knots[j, 3]
+    good, k = 0, 1  # gap < slack up to good; k: the probe
+    while k <= left and step * (knots[j + step * k, 3] - c0) < slack:
+        good = k
+        k *= 2
+    bad = min(k, left + 1)  # gap >= slack there, or past the end
+    while bad - good > 1:
+        mid = (good + bad) // 2
+        if step * (knots[j + step * mid, 3] - c0) < slack:
+            good = mid
+        else:
+            bad = mid
+    return j + step * bad
+
+
+@njit(cache=True)
+def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
+    """Nearest knot to p among those connected to knot a inside the ball of `radius` about it.
+
+    ``best, dbest`` seed the search (a knot and its distance to p; a and
+    its distance when there is no other): knots not nearer than dbest are
+    skipped, and so is the range [seen_lo, seen_hi] of knots known to be no
+    nearer (empty when seen_lo > seen_hi). Returns the best knot and its
+    distance, and the index range [lo, hi] of a's part of the ball.
+    """
+    m = knots.shape[0]
+    r = (knots[a, 0], knots[a, 1], knots[a, 2])
+    lo, hi = 0, m - 1
+    for step in (-1, 1):
+        j = a
+        while True:
+            dr = _distance(knots, j, r)
+            if dr > radius:  # j leaves the ball: a's part of it ends before j
+                if step == -1:
+                    lo = j + 1
+                else:
+                    hi = j - 1
+                break
+            dp = _distance(knots, j, p)
+            if dp < dbest:
+                best, dbest = j, dp
+            if seen_lo <= j <= seen_hi:  # no nearer knot up to the end of the seen range: the ball decides alone
+                past = seen_hi + 1 if step == 1 else seen_lo - 1
+                ball = _beyond(knots, j, step, radius - dr)
+                j = past if step * (ball - past) >= 0 else ball
+            else:  # every knot within this much chord length of j is inside the ball and no nearer to p than dbest
+                j = _beyond(knots, j, step, min(radius - dr, dp - dbest))
+            if j < 0 or j >= m:
+                break
+    return best, dbest, lo, hi
+
+
+@njit(cache=True)
+def nearest_knot(knots, anchor, hint, p, window):
+    """Index of the knot nearest to p on the part of the path around the commanded knot.
+
+    The part of the path connected to the `anchor` knot R inside the ball
+    of radius 2|p - R| about it (see the module docstring): the knot found
+    is never farther from p than R, and a branch of the path that only
+    comes near p elsewhere is never taken.
 
     Parameters
     ----------
-    knots : ndarray, shape (M, 3)
-        Distinct reference samples [mm] (:func:`distinct`), M >= 1.
+    knots : ndarray, shape (M, 4)
+        Distinct reference samples [mm] and their cumulative chord length [mm] (:func:`distinct`), M >= 1.
+    anchor : int
+        Knot of the commanded sample: the reference point of the instant at which p was taken; clipped to [0, M - 1].
+    hint : int
+        Knot found for the previous tool position (an accelerator only:
+        the result does not depend on it); clipped to [0, M - 1].
+    p : tuple of 3 float
+        Tool position [mm].
+    window : int
+        Knots the descent from the hint scans either side before walking on [-], >= 1.
+
+    Returns
+    -------
+    int
+        Index of the nearest knot.
+    """
+    m = knots.shape[0]
+    a = min(max(anchor, 0), m - 1)
+    e = _distance(knots, a, p)
+    h, seen_lo, seen_hi = _descend(knots, hint, p, window)
+    dh = _distance(knots, h, p)
+    if dh < e:
+        best, dbest, lo, hi = _scan(knots, a, p, 2.0 * e, h, dh, seen_lo, seen_hi)
+        if lo <= h <= hi:  # the hint's descent ended on a's part of the ball: its seed was fair
+            return best
+    return _scan(knots, a, p, 2.0 * e, a, e, a + 1, a)[0]  # (a + 1, a): no range seen, typed as the other call's
+
+
+@njit(cache=True)
+def nearest_knots(knots, anchors, points, window, hint):
+    """Nearest knot to each of a sequence of tool positions (:func:`nearest_knot`), each hinted by the previous one.
+
+    Parameters
+    ----------
+    knots : ndarray, shape (M, 4)
+        Distinct reference samples [mm] with their chord length (:func:`distinct`), M >= 1.
+    anchors : ndarray of int, shape (K,)
+        Knot of the commanded sample of each position.
     points : ndarray, shape (K, 3)
-        Tool positions in time order, starting near the knot `hint` [mm].
+        Tool positions in time order [mm].
     window : int
         As in :func:`nearest_knot` [-].
     hint : int
-        Knot to start the first search from: 0 at the path start, or the
-        last knot found for the positions before `points` (a trace searched
-        block by block).
+        Hint of the first search: the last knot found for the positions
+        before `points` (a trace searched block by block), else its anchor.
 
     Returns
     -------
@@ -154,6 +305,6 @@ def nearest_knots(knots, points, window, hint):
     idx = np.empty(points.shape[0], np.int64)
     j = np.int64(hint)  # an int64 whatever the caller passes: numba compiles nearest_knot for one hint type
     for k in range(points.shape[0]):
-        j = nearest_knot(knots, j, (points[k, 0], points[k, 1], points[k, 2]), window)
+        j = nearest_knot(knots, np.int64(anchors[k]), j, (points[k, 0], points[k, 1], points[k, 2]), window)
         idx[k] = j
     return idx

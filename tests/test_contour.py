@@ -7,7 +7,7 @@ from scipy.signal import lfilter
 
 from contoursim import paths
 from contoursim.contour import ContourError, exact_contour_error
-from contoursim.nearest import nearest_knots
+from contoursim.nearest import nearest_knots, with_chord
 from contoursim.feed import plan, sample
 from contoursim.trajectory import Trajectory
 
@@ -19,13 +19,19 @@ def _coarse(path, spacing=1.0):
     return sample(path, plan(path, 100.0, 1e4), spacing / 100.0)
 
 
+def _at(ref, s):
+    """The reference sample commanded at each of the arc lengths `s` [mm]: the one nearest along the path."""
+    i = np.clip(np.searchsorted(ref.s, s), 1, len(ref.s) - 1)
+    return np.where(np.abs(ref.s[i - 1] - s) < np.abs(ref.s[i] - s), i - 1, i)
+
+
 def test_circle_in_plane_closed_form():
     center, radius = np.array([3.0, -2.0]), 50.0
     ref = _coarse(paths.circle(center, radius))
     phi = np.linspace(0.0, 2 * np.pi, 3001)[1:-1]
     r = radius + rng.uniform(-0.5, 0.5, phi.size)
     actual = center + r[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
-    err = exact_contour_error(ref, actual)
+    err = exact_contour_error(ref, actual, at=_at(ref, radius * phi))
     # DOMAIN.md §3: ε = R - |P - c| for a CCW circle; foot on the ray through P
     np.testing.assert_allclose(err.normal, radius - r, rtol=0, atol=1e-9)
     np.testing.assert_allclose(err.magnitude, np.abs(radius - r), rtol=0, atol=1e-9)
@@ -45,7 +51,7 @@ def test_tilted_circle_with_out_of_plane_offset():
     dr, h = rng.uniform(-0.2, 0.2, phi.size), rng.uniform(-0.3, 0.3, phi.size)
     radial = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
     actual = center + (radius + dr)[:, None] * radial + h[:, None] * n
-    err = exact_contour_error(ref, actual)
+    err = exact_contour_error(ref, actual, at=_at(ref, radius * phi))
     np.testing.assert_allclose(err.magnitude, np.hypot(dr, h), atol=1e-9)
     np.testing.assert_allclose(err.normal, -dr, atol=1e-9)
     np.testing.assert_allclose(err.out_of_plane, h, atol=1e-9)
@@ -60,7 +66,7 @@ def test_line_at_an_angle(theta):
     along = np.linspace(-2.0, 82.0, 400)
     offset = rng.uniform(-1, 1, (along.size, 2))
     actual = start + along[:, None] * direction + offset
-    err = exact_contour_error(ref, actual)
+    err = exact_contour_error(ref, actual, at=_at(ref, along))
     # DOMAIN.md §3: ε = -(x_a - x_r) sin θ + (y_a - y_r) cos θ for any point r of the line
     expected = -(actual[:, 0] - start[0]) * np.sin(theta) + (actual[:, 1] - start[1]) * np.cos(theta)
     inside = (offset @ direction + along > 0) & (offset @ direction + along < 80)
@@ -83,7 +89,7 @@ def test_helix_against_brute_force_minimisation():
 
     theta = np.linspace(0.05, 4 * np.pi - 0.05, 60)
     actual = np.array([point(t) for t in theta]) + rng.uniform(-0.3, 0.3, (theta.size, 3))
-    err = exact_contour_error(ref, actual)
+    err = exact_contour_error(ref, actual, at=_at(ref, np.hypot(radius, h) * theta))
     grid = np.linspace(0, 4 * np.pi, 20001)
     dense = np.array([point(g) for g in grid])
     step = grid[1]
@@ -105,7 +111,7 @@ def test_figure_eight_follows_the_travelled_branch():
     left = np.column_stack([-tangent[:, 1], tangent[:, 0]])
     d = 0.3 * np.sin(2 * np.pi * s_true / 37.0)
     actual = pos[:, :2] + d[:, None] * left
-    err = exact_contour_error(ref, actual)
+    err = exact_contour_error(ref, actual, at=_at(ref, s_true))
     np.testing.assert_allclose(err.s, s_true, atol=1e-9)
     np.testing.assert_allclose(err.normal, d, atol=1e-10)
     # near the crossing the other branch is nearer for some points: a global search would jump to it
@@ -122,7 +128,7 @@ def test_rounded_square_offset_sampled_coarser_than_its_fillets():
     s = np.linspace(0, path.length, 5000)
     pos, tangent, _ = path.derivatives(s)
     actual = pos[:, :2] + 0.5 * np.column_stack([tangent[:, 1], -tangent[:, 0]])
-    err = exact_contour_error(ref, actual)
+    err = exact_contour_error(ref, actual, at=_at(ref, s))
     np.testing.assert_allclose(err.magnitude, 0.5, atol=1e-12)
     np.testing.assert_allclose(err.normal, -0.5, atol=1e-12)
 
@@ -168,27 +174,31 @@ def test_exact_result_derives_its_vector_and_shares_the_actual_points():
     ref = _coarse(paths.circle((0.0, 0.0), 50.0))
     phi = np.linspace(0.0, 2 * np.pi, 40_001)[1:-1]  # more points than one block of the search
     actual = (50.0 + 0.01 * np.sin(7 * phi))[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
-    np.testing.assert_allclose(exact_contour_error(ref, actual).normal, -0.01 * np.sin(7 * phi), rtol=0, atol=1e-12)
+    at = _at(ref, 50.0 * phi)
+    np.testing.assert_allclose(exact_contour_error(ref, actual, at).normal, -0.01 * np.sin(7 * phi), rtol=0, atol=1e-12)
     actual.flags.writeable = False  # as a simulation's tool positions are: kept without a copy
-    err = exact_contour_error(ref, actual)
+    err = exact_contour_error(ref, actual, at)
     assert np.shares_memory(err.actual, actual)
     np.testing.assert_array_equal(err.vector, err.foot - actual)  # the correction, from foot and actual points
     assert not err.vector.flags.writeable
     assert err.out_of_plane.shape == (phi.size,) and not err.out_of_plane.any() and err.out_of_plane.strides == (0,)
     mine = actual.copy()  # writeable: the caller's, copied and left writeable
-    assert not np.shares_memory(exact_contour_error(ref, mine).actual, mine) and mine.flags.writeable
+    assert not np.shares_memory(exact_contour_error(ref, mine, at).actual, mine) and mine.flags.writeable
     with pytest.raises(ValueError, match="foot and actual"):
         ContourError(err.magnitude, None, err.normal, err.out_of_plane)
 
 
-def test_nearest_knots_searched_block_by_block_as_in_one_go():
+def test_nearest_knot_does_not_depend_on_the_hint():
+    """The search's result is fixed by the commanded knot: hinted by the previous point, by itself, or by any knot."""
     ref = _coarse(paths.circle((0.0, 0.0), 50.0), spacing=0.5)
-    knots = np.ascontiguousarray(np.column_stack([ref.position, np.zeros(len(ref))]))
+    knots = with_chord(np.column_stack([ref.position, np.zeros(len(ref))]))
     phi = np.linspace(0.0, 2 * np.pi, 5_000)[:-1]  # one turn, as the reference
     points = np.ascontiguousarray(np.column_stack([50.1 * np.cos(phi), 50.1 * np.sin(phi), np.zeros(phi.size)]))
-    whole = nearest_knots(knots, points, 8, 0)
-    first = nearest_knots(knots, points[:1234], 8, 0)
-    rest = nearest_knots(knots, points[1234:], 8, int(first[-1]))  # hinted by the last knot found before
-    np.testing.assert_array_equal(np.concatenate([first, rest]), whole)
+    anchors = np.clip(_at(ref, 50.0 * phi) + 3, 0, len(ref.s) - 1)  # the tool lags a little
+    whole = nearest_knots(knots, anchors, points, 8, 0)
+    alone = [nearest_knots(knots, anchors[i : i + 1], points[i : i + 1], 8, int(anchors[i])) for i in range(0, 4999, 7)]
+    far = [nearest_knots(knots, anchors[i : i + 1], points[i : i + 1], 8, (i + 300) % 600) for i in range(0, 4999, 7)]
+    np.testing.assert_array_equal(np.concatenate(alone), whole[::7])
+    np.testing.assert_array_equal(np.concatenate(far), whole[::7])
     np.testing.assert_allclose(np.hypot(*knots[whole, :2].T), 50.0, rtol=1e-12)  # on the circle, nearest in angle
     assert np.abs(np.angle(np.exp(1j * (np.arctan2(knots[whole, 1], knots[whole, 0]) - phi)))).max() < 0.5 / 50.0

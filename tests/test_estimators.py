@@ -91,11 +91,11 @@ def test_three_point_equals_closed_form_on_a_circle(turn):
     phi = turn * np.sort(RNG.uniform(0.0, 2.2 * np.pi, 3000))
     dist = radius + RNG.uniform(-0.2, 0.2, phi.size)
     act = center + dist[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
-    got = est.three_point(ref, act)
+    nearest = np.argmin(np.abs(phi[:, None] - theta[None, :]), axis=1)  # on the same turn
+    got = est.three_point(ref, act, at=nearest)
     np.testing.assert_allclose(got.normal, turn * (radius - dist), rtol=0, atol=1e-11)
     np.testing.assert_allclose(got.magnitude, np.abs(radius - dist), rtol=0, atol=1e-11)
     assert np.all(np.diff(got.index) >= 0)  # followed the turn, never jumped back to the start
-    nearest = np.argmin(np.abs(phi[:, None] - theta[None, :]), axis=1)  # on the same turn
     assert np.all(np.abs(got.index - nearest) <= 1)
 
 
@@ -107,13 +107,14 @@ def test_three_point_in_a_tilted_plane_with_out_of_plane_offset():
     delta, h = RNG.uniform(-0.2, 0.2, phi.size), RNG.uniform(-0.1, 0.1, phi.size)
     on, radial, _ = circle_points(center, radius, phi, normal)
     act = on + delta[:, None] * radial + h[:, None] * n
-    got = est.three_point(ref, act, up=normal)
+    at = np.searchsorted(theta, phi)
+    got = est.three_point(ref, act, up=normal, at=at)
     L = np.linalg.norm((act - center) - ((act - center) @ n)[:, None] * n, axis=1)
     np.testing.assert_allclose(got.magnitude, np.sqrt((L - radius) ** 2 + h**2), rtol=0, atol=1e-11)
     np.testing.assert_allclose(got.normal, radius - L, rtol=0, atol=1e-11)
     np.testing.assert_allclose(got.out_of_plane, h, rtol=0, atol=1e-11)
     np.testing.assert_allclose(act + got.vector, on, rtol=0, atol=1e-11)
-    flipped = est.three_point(ref, act, up=-n)  # b turned over: both signed parts flip
+    flipped = est.three_point(ref, act, up=-n, at=at)  # b turned over: both signed parts flip
     np.testing.assert_allclose(flipped.normal, L - radius, rtol=0, atol=1e-11)
     np.testing.assert_allclose(flipped.out_of_plane, -h, rtol=0, atol=1e-11)
 
@@ -129,18 +130,18 @@ def _ellipse_case():
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
     left = np.column_stack([-tangent[:, 1], tangent[:, 0]])
     act = np.column_stack([a * np.cos(phi), b * np.sin(phi)]) + eps[:, None] * left
-    return a, b, act, eps  # the exact contour error is eps: |eps| < b^2/a, the smallest radius
+    return a, b, act, eps, phi  # the exact contour error is eps: |eps| < b^2/a, the smallest radius
 
 
 @pytest.mark.parametrize("method, order", [(est.three_point, 3.0), (est.newton, 4.0)])
 def test_order_of_convergence_on_an_ellipse(method, order):
-    a, b, act, eps = _ellipse_case()
+    a, b, act, eps, phi = _ellipse_case()
     sizes = np.array([200, 400, 800, 1600])
     errors = []
     for n in sizes:  # uniform in the parameter: unequal spacing along the curve
         theta = np.linspace(0.0, 2 * np.pi, n + 1)
         ref = np.column_stack([a * np.cos(theta), b * np.sin(theta)])
-        errors.append(np.abs(method(ref, act).normal - eps).max())
+        errors.append(np.abs(method(ref, act, at=np.searchsorted(theta, phi)).normal - eps).max())
     measured = np.polyfit(np.log(2 * np.pi / sizes), np.log(errors), 1)[0]  # log-log slope
     assert measured == pytest.approx(order, abs=0.3)
     assert errors[-1] < 1e-6
@@ -173,7 +174,7 @@ def test_figure_eight_search_follows_the_travelled_branch():
     eps = 0.3
     act = np.column_stack([40 * np.sin(tf), 20 * np.sin(2 * tf)]) + eps * left
     for method in (est.three_point, est.newton):
-        got = method(ref, act)
+        got = method(ref, act, at=np.searchsorted(t, tf))
         assert np.all(np.diff(got.index) >= 0)
         np.testing.assert_allclose(got.normal, eps, rtol=0, atol=1e-6)
     # near the crossing the other branch is closer than eps: a global search would jump to it
@@ -191,8 +192,10 @@ def test_search_crosses_a_sharp_corner_cut_on_the_inside():
     y = np.linspace(10.0, inside, 300)
     down = np.column_stack([np.full_like(y, inside), y])  # 1 µm inside the incoming edge x = 0
     act = np.concatenate([down, down[::-1, ::-1]])  # then along the outgoing edge y = 0
+    # commanded where the tool is: the sample at the same height on the way in, the same x on the way out
+    at = np.concatenate([np.rint(200 * (1 - (y / 10) ** (1 / 3))), 200 + np.rint(200 * (y[::-1] / 10) ** (1 / 3))])
     for method in (est.three_point, est.newton):
-        got = method(ref, act)
+        got = method(ref, act, at=at.astype(int))
         np.testing.assert_allclose(got.magnitude, inside, rtol=1e-9)
         assert got.index[-1] == len(ref) - 1
 
@@ -205,7 +208,7 @@ def test_duplicates_give_the_same_result_as_distinct_samples():
     dup = np.repeat(ref, counts, axis=0)
     act = dup + RNG.normal(0.0, 0.01, dup.shape)
     for method in (est.three_point, est.newton):
-        plain, with_dup = method(ref, act), method(dup, act)
+        plain, with_dup = method(ref, act, at=np.repeat(np.arange(len(ref)), counts)), method(dup, act)
         np.testing.assert_allclose(with_dup.magnitude, plain.magnitude, rtol=0, atol=1e-15)
         np.testing.assert_array_equal(with_dup.index, np.cumsum(counts)[plain.index] - counts[plain.index])
     # the linear estimate with the same standstills, on a line at angle a: -e_x sin a + e_y cos a
@@ -235,12 +238,15 @@ def test_cusp_and_short_references_are_defined():
     act = np.array([[0.0, 0.1], [1.0, -0.2], [2.3, 0.1], [2.0, 0.5], [1.5, -0.1], [0.2, 0.3]])
     for method in (est.linear, est.three_point, est.newton):
         for ref in (out_and_back, out_and_back[:2], out_and_back[:1]):
-            got = method(ref, act if method is not est.linear else act[: len(ref)])
+            if method is est.linear:
+                got = method(ref, act[: len(ref)])
+            else:
+                got = method(ref, act, at=np.arange(len(act)) * len(ref) // len(act))
             assert np.all(np.isfinite(got.magnitude)) and np.all(np.isfinite(got.vector))
     # the cusp tip at (2, 0): the incoming line y = 0
-    tip = est.three_point(out_and_back, np.array([[0.0, 0.1], [1.0, 0.1], [2.0, 0.25]]))
+    tip = est.three_point(out_and_back, np.array([[0.0, 0.1], [1.0, 0.1], [2.0, 0.25]]), at=[0, 1, 2])
     np.testing.assert_allclose(tip.magnitude, [0.1, 0.1, 0.25], rtol=1e-12)
-    two = est.three_point(out_and_back[:2], np.array([[0.5, 0.3]]))
+    two = est.three_point(out_and_back[:2], np.array([[0.5, 0.3]]), at=[0])
     np.testing.assert_allclose(two.normal, [0.3], rtol=1e-12)
 
 
@@ -248,12 +254,12 @@ def test_cusp_and_short_references_are_defined():
 
 
 @njit
-def _kernel_like(knots, actual, params):
-    """What a compensator does inside the servo loop: one step per period, index carried."""
+def _kernel_like(knots, knot_of_sample, actual, params):
+    """What a compensator does inside the servo loop: one step per period, anchored at the commanded knot."""
     index = 0
     out = np.empty(actual.shape[0])
     for k in range(actual.shape[0]):
-        estimate, index = est.three_point_step(knots, index, actual[k], params)
+        estimate, index = est.three_point_step(knots, knot_of_sample[k], index, actual[k], params)
         out[k] = estimate.normal
     return out
 
@@ -262,10 +268,10 @@ def test_step_function_inside_a_compiled_loop_matches_the_offline_estimate():
     theta = np.linspace(0.0, 2 * np.pi, 1000)
     ref = np.column_stack([30 * np.cos(theta), 20 * np.sin(theta), np.zeros_like(theta)])
     act = ref * 1.001
-    knots, _, _ = est.distinct_samples(ref)
-    online = _kernel_like(knots, act, est.search_params())
+    knots, _, knot_of_sample = est.distinct_samples(ref)
+    online = _kernel_like(knots, knot_of_sample, act, est.search_params())
     np.testing.assert_array_equal(online, est.three_point(ref, act).normal)
-    estimate, index = est.circular_step(knots, 7, np.array([0.0, 49.0, 0.0]), est.circular_params((0, 0), 50.0))
+    estimate, index = est.circular_step(knots, 3, 7, np.array([0.0, 49.0, 0.0]), est.circular_params((0, 0), 50.0))
     assert index == 7 and estimate.normal == pytest.approx(1.0) and estimate.vy == pytest.approx(1.0)
 
 

@@ -10,6 +10,7 @@ import re
 import runpy
 import sys
 
+import numpy as np
 import pytest
 
 from conftest import ROOT
@@ -33,6 +34,18 @@ def test_every_example_script_is_checked_here():
     assert {p.name for p in EXAMPLES.glob("*.py")} == CHECKED
 
 
+def _contour_within_tracking(folder):
+    """Every trace CSV in `folder`: the contour column never above the distance of the tool from its reference."""
+    files = sorted(folder.glob("*.csv"))
+    for csv in files:
+        header, *rows = [line for line in csv.read_text().splitlines() if not line.startswith("#")]
+        data = dict(zip(header.split(","), np.loadtxt(rows, delimiter=",", ndmin=2).T))
+        axes = [name[: -len("_ref")] for name in data if name.endswith("_ref")]
+        tracking = np.sqrt(sum((data[axis] - data[f"{axis}_ref"]) ** 2 for axis in axes))
+        assert np.all(data["contour"] <= tracking + 2e-6), csv.name  # the CSV holds positions to the nm
+    return files
+
+
 def _readme_tour():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     return re.search(r"## API tour\n\n```python\n(.*?)```", readme, re.S).group(1)
@@ -51,6 +64,7 @@ def test_api_tour_agrees_with_the_readme_prints_v_over_kp_and_runs_twice(tmp_pat
         monkeypatch.setattr(sys, "argv", ["api_tour.py", str(tmp_path / "out")])
         runpy.run_path(str(EXAMPLES / "api_tour.py"), run_name="__main__")
     assert {"circle.csv", "circle_path.png"} <= {p.name for p in (tmp_path / "contoursim-out").iterdir()}
+    assert _contour_within_tracking(tmp_path / "out")
     printed = capsys.readouterr().out
     # the slower axis (y, Kp = 36 1/s) lags v/Kp behind at 3000 mm/min
     assert _figure(printed, r"tracking_max_um:\s+([\d.]+)") == pytest.approx(1e3 * 50 / 36, rel=0.01)
@@ -145,3 +159,4 @@ def test_example_job_runs(job, tmp_path, capsys):
 
     assert main(["simulate", str(job), "--out", str(tmp_path)]) == 0
     assert "contoursim simulate" in capsys.readouterr().out
+    assert _contour_within_tracking(tmp_path)

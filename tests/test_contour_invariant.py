@@ -1,0 +1,149 @@
+"""Contour error never exceeds tracking error, on any path: generated G-code programs, the library, a real kernel.
+
+The tool's distance to the path can never exceed its distance to the
+commanded point, which lies on the path. The programs are generated
+property-based (hypothesis): random sequences of G0/G1/G2/G3 in G17/G18/G19
+with reversals (straight back along the last move), zero-length and very
+short moves, full circles, helices and rapid retracts. The tool follows
+each axis through a first-order lag of its own gain (the exact discrete
+form, no contoursim kernel), so the actual path cuts inside corners, lags
+around arcs and overshoots nothing; then the exact contour error and the
+in-loop estimators (three-point arc, Newton, linear) are held to the
+invariant: each is a distance to some point of the path (or of the local
+curve through the commanded sample), so none may exceed the tracking error.
+"""
+
+import math
+from importlib import resources
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy.signal import lfilter
+
+from contoursim import estimators
+from contoursim.contour import exact_contour_error
+from contoursim.feed import plan, sample
+from contoursim.gcode import read_gcode
+from contoursim.machine import load_machine
+from contoursim.pathfile import load_path_file
+from contoursim.simulation import simulate
+
+ROUNDING = 1e-9  # [mm]: the foot point and the sample are the same path point evaluated two ways
+
+_PLANE_AXES = {17: ("X", "Y", "Z", "I", "J"), 18: ("Z", "X", "Y", "K", "I"), 19: ("Y", "Z", "X", "J", "K")}
+
+
+def _fmt(value):
+    return f"{value:.4f}".rstrip("0").rstrip(".") or "0"
+
+
+@st.composite
+def programs(draw):
+    """G-code text of a random program that starts with a feed move from the origin."""
+    pos = {"X": 0.0, "Y": 0.0, "Z": 0.0}
+    previous = dict(pos)
+    lines = ["G21 G90 G94", "G0 X0 Y0 Z0", f"G1 X{_fmt(draw(st.floats(0.5, 5)))} F{draw(st.integers(60, 3000))}"]
+    pos["X"] = float(lines[-1].split()[1][1:])
+    for _ in range(draw(st.integers(1, 7))):
+        kind = draw(st.sampled_from(["line", "back", "zero", "tiny", "arc", "circle", "helix", "retract"]))
+        plane = draw(st.sampled_from([17, 18, 19]))
+        a, b, n, ia, ib = _PLANE_AXES[plane]
+        if kind in ("line", "tiny"):
+            size = 5.0 if kind == "line" else 0.003
+            target = {k: pos[k] + draw(st.floats(-size, size)) for k in "XYZ"}
+            words = " ".join(f"{k}{_fmt(v)}" for k, v in target.items())
+            lines.append(f"G1 {words}")
+        elif kind == "back":  # straight back to where the last move started: the path reverses
+            target = dict(previous)
+            lines.append("G1 " + " ".join(f"{k}{_fmt(v)}" for k, v in target.items()))
+        elif kind == "zero":
+            target = dict(pos)
+            lines.append("G1 " + " ".join(f"{k}{_fmt(v)}" for k, v in target.items()))
+        elif kind == "retract":  # a drilling cycle written as moves: plunge, rapid back up
+            depth = draw(st.floats(0.2, 3.0))
+            lines.append(f"G1 Z{_fmt(pos['Z'] - depth)}")
+            lines.append(f"G0 Z{_fmt(pos['Z'])}")
+            target = dict(pos)
+        else:  # an arc in the plane: centre at radius r from the start, a sweep, full turns, a rise along n
+            radius = draw(st.floats(0.5, 6.0))
+            start = draw(st.floats(0, 2 * math.pi))
+            sweep = 2 * math.pi if kind == "circle" else draw(st.floats(0.1, 2 * math.pi - 0.1))
+            cw = draw(st.booleans())
+            center = (pos[a] - radius * math.cos(start), pos[b] - radius * math.sin(start))
+            end = start - sweep if cw else start + sweep
+            target = dict(pos)
+            target[a] = center[0] + radius * math.cos(end)
+            target[b] = center[1] + radius * math.sin(end)
+            if kind == "circle":
+                target[a], target[b] = pos[a], pos[b]
+            # rounded ends must stay on the arc: write the centre to 4 decimals and the end as computed from it
+            i_off, j_off = round(center[0] - pos[a], 4), round(center[1] - pos[b], 4)
+            r_exact = math.hypot(i_off, j_off)
+            cx, cy = pos[a] + i_off, pos[b] + j_off
+            if kind != "circle":
+                target[a] = round(cx + r_exact * math.cos(end), 4)
+                target[b] = round(cy + r_exact * math.sin(end), 4)
+            rise = draw(st.floats(-2.0, 2.0)) if kind == "helix" else 0.0
+            target[n] = pos[n] + rise
+            lines.append(f"G{plane} G{2 if cw else 3} {a}{_fmt(target[a])} {b}{_fmt(target[b])} {n}{_fmt(target[n])} "
+                         f"{ia}{_fmt(i_off)} {ib}{_fmt(j_off)}")  # fmt: skip
+        previous, pos = dict(pos), {k: float(_fmt(v)) for k, v in target.items()}
+    lines.append("M30")
+    return "\n".join(lines) + "\n"
+
+
+def _lagged(reference, gains, dt):
+    """Each axis behind its reference through a first-order lag, exact discrete form, starting on it [mm]."""
+    out = np.empty_like(reference)
+    for axis, kp in enumerate(gains):
+        a = math.exp(-kp * dt)
+        out[:, axis] = lfilter([0.0, 1.0 - a], [1.0, -a], reference[:, axis], zi=reference[:1, axis])[0]
+    return out
+
+
+def _check(trajectory, actual):
+    tracking = np.linalg.norm(actual - trajectory.position, axis=1)
+    exact = exact_contour_error(trajectory, actual)
+    worst = int(np.argmax(exact.magnitude - tracking))
+    assert exact.magnitude[worst] <= tracking[worst] + ROUNDING, (
+        f"contour {exact.magnitude[worst]:.6g} mm > tracking {tracking[worst]:.6g} mm at sample {worst}")
+    for method in (estimators.three_point, estimators.newton, estimators.linear):
+        estimate = method(trajectory.position, actual)
+        assert np.all(estimate.magnitude <= tracking + ROUNDING), method.__name__
+    return exact, tracking
+
+
+@settings(max_examples=1000, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(programs(), st.tuples(*[st.floats(15.0, 80.0)] * 3))
+def test_contour_error_never_exceeds_tracking_on_generated_programs(text, gains):
+    """1,000 programs (hypothesis, derandomized: the same 1,000 every run), servo period 1 ms."""
+    program = read_gcode(text)
+    dt = 1e-3
+    trajectory = sample(program.path, plan(program.path, program.feeds, 2000.0), dt)
+    _check(trajectory, _lagged(trajectory.position, gains[: trajectory.dim], dt))
+
+
+def test_the_retract_that_broke_it():
+    """Out and back along X, then up Y (issue 17): contour was 9.77 mm with tracking 0.28 mm."""
+    program = read_gcode("G21 G90 G17\nG0 X0 Y0\nG1 X10 F600\nG1 X0\nG1 Y10\nM30\n")
+    dt = 2e-4
+    trajectory = sample(program.path, plan(program.path, program.feeds, 1000.0), dt)
+    exact, tracking = _check(trajectory, _lagged(trajectory.position, (40.0, 36.0), dt))
+    # on the way back the tool rides the line it came along: no contour error beyond rounding there
+    back = (trajectory.s > 10.5) & (trajectory.s < 19.5)
+    assert exact.magnitude[back].max() < 1e-9 < tracking[back].min()
+
+
+LIBRARY = sorted(f.name for f in resources.files("contoursim.trajectories").iterdir() if f.name.endswith((".toml", ".nc")))
+
+
+@pytest.mark.parametrize("name", LIBRARY)
+def test_contour_error_never_exceeds_tracking_on_the_library_through_the_kernel(name):
+    """Every path of trajectories/ on the demo mill, stepped by contoursim's own kernel."""
+    machine = load_machine("demo_mill")
+    path, feed = load_path_file(name)
+    result = simulate(machine, sample(path, feed.plan(path, machine.max_feed), machine.servo_period))
+    tracking = np.linalg.norm(result.tool_position - result.trajectory.position, axis=1)
+    assert np.all(result.contour.magnitude <= tracking + ROUNDING)
