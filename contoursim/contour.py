@@ -211,14 +211,14 @@ def _closest(kind, row, p, u0, length, out):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act, plane, magnitude, s_out, normal, out_of_plane,
-                 foot):  # fmt: skip
+def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, idx, act, plane, magnitude, s_out, normal,
+                 out_of_plane, foot):  # fmt: skip
     """Foot point of each actual point, its arc length and the contour error's parts, into the outputs.
 
-    sample_s : arc length of the reference samples; first : the first sample of each knot (distinct
-    sample); idx : the knot nearest to each actual point; act : the actual points (N, 3), z = 0 for a
-    2-D path; plane : the path's plane normal, zero when it has none. Fills magnitude, s_out, normal
-    (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
+    sample_s, sample_pos : arc length and position (N, d) of the reference samples; first : the first
+    sample of each knot (distinct sample); idx : the knot nearest to each actual point; act : the
+    actual points (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has
+    none. Fills magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
     """
     n, k_count, d = first.size, kinds.size, foot.shape[1]
     out, frame = np.empty(9), np.empty(9)  # frame: position, tangent, curvature vector at the foot
@@ -227,20 +227,25 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, first, idx, act, plane, 
         j = idx[i]
         k_lo = _primitive_at(breaks, sample_s[first[max(j - 1, 0)]])
         k_hi = _primitive_at(breaks, sample_s[first[min(j + 1, n - 1)]])
-        # the knot itself, on its primitive: the refinement never ends farther from p than the sample
-        best_k = _primitive_at(breaks, sample_s[first[j]])
-        best_u = min(max(sample_s[first[j]] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
-        _eval_prim(kinds[best_k], rows[best_k], best_u, frame)
-        best_d = (frame[0] - p[0]) ** 2 + (frame[1] - p[1]) ** 2 + (frame[2] - p[2]) ** 2
+        # the sample itself is the first candidate: the refinement never ends farther from p than it
+        best_d, best_k, best_u = 0.0, -1, 0.0
+        for c in range(d):
+            best_d += (sample_pos[first[j], c] - p[c]) ** 2
+        if d == 2:
+            best_d += p[2] ** 2
         for k in range(k_lo, k_hi + 1):
             length = breaks[k + 1] - breaks[k]
             u0 = min(max(sample_s[first[j]] - breaks[k], 0.0), length)
             u = _closest(kinds[k], rows[k], p, u0, length, out)
             dist = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
-            if dist < best_d:
+            if dist < best_d or (best_k < 0 and dist <= best_d):
                 best_d, best_k, best_u = dist, k, u
                 for c in range(9):  # not frame[:] = out: numba compiles its shape-mismatch error (~2 s)
                     frame[c] = out[c]
+        if best_k < 0:  # no primitive's refinement came nearer than the sample (a Newton step astray): the sample
+            best_k = _primitive_at(breaks, sample_s[first[j]])
+            best_u = min(max(sample_s[first[j]] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
+            _eval_prim(kinds[best_k], rows[best_k], best_u, frame)
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
             for _ in range(k_count):
@@ -362,8 +367,9 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     out_of_plane = np.empty(n if d == 3 else 0)
     plane = np.zeros(3) if path.plane_normal is None else np.asarray(path.plane_normal, dtype=float)
     for part in blocks(n):  # the actual points as (block, 3) copies: one compiled signature, no (N, 3) copy
-        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, first, idx[part], _xyz(act[part]),
-                     plane, magnitude[part], s[part], normal[part], out_of_plane[part], foot[part])  # fmt: skip
+        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first, idx[part],
+                     _xyz(act[part]), plane, magnitude[part], s[part], normal[part], out_of_plane[part],
+                     foot[part])  # fmt: skip
     if d == 2:  # a 2-D path: (P_a - foot) . z = 0
         out_of_plane = np.broadcast_to(0.0, (n,))
     if act.flags.writeable:  # the caller's array: a copy, so that it stays writeable
