@@ -73,7 +73,8 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
     measuring = data[:, names.index("measuring")] == 1
     assert 0 < measuring.sum() < len(data)  # the test circle, without run-in, overruns, run-out and settling
     assert f"{1e3 * data[measuring, names.index('contour')].max():.2f}" == f"{contour_max:.2f}"
-    assert "# units: t [s]; x_ref, x, y_ref, y, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]" in lines
+    assert ("# units: t [s]; x_ref, x, y_ref, y, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]; "
+            "rapid [1 = G0, 0 = not]") in lines
     # a second run reuses its own output directory; --every thins the CSV, not the table
     assert main(["demo", "--out", str(tmp_path / "out"), "--every", "10"]) == 0
     assert capsys.readouterr().out == table
