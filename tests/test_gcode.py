@@ -5,6 +5,7 @@ import pytest
 
 from contoursim.exceptions import ConfigError, ContoursimWarning
 from contoursim.gcode import read_gcode
+from contoursim.pathfile import load_path_file, read_path_file
 
 POCKET = """%
 (a closed contour: lines, I/J arc, R arc, incremental arc)
@@ -82,7 +83,11 @@ def test_arc_centre_is_moved_onto_the_bisector():
     ("G1 X1 F100\nG95 X2 F0.1\n", 2, "feed per revolution"),
     ("G1 X1 F100\nM98 P1000\n", 2, "subprogram calls \\(M98\\)"),
     ("G1 X1 F100\nG1 X2 P3\n", 2, "P belongs to a dwell"),
-    ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 2, "G28/G30/G53\\) between feed moves is not supported \\(next feed move on line 3"),
+    ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 3, "from a machine position is not supported: line 2 \\(G28/G30/G53\\) took Z there; "
+                                         "position Z with G0 first"),
+    ("G1 X1 F100\nG28\nG0 X0 Y0\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # G28 alone: all axes
+    ("G1 X1 F100\nG28 G91 Z0\nG0 Z-5\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # still unknown
+    ("G1 X1 F100\nG53 G0 Z0\nG1 X2\n", 3, "line 2 \\(G28/G30/G53\\) took Z there"),
     ("G0 X10 Y0\nG2 X20 Y0 F100\n", 2, "the arc centre is missing: give I/J \\(relative to the arc's start\\) or R"),
     ("G18 G0 X10 Y0\nG2 X20 Y0 J5 F100\n", 2, "the arc centre is missing: give I/K"),
     ("G0 X1\n\nG1 X2\n", 3, "missing F before the first feed move"),
@@ -91,6 +96,8 @@ def test_arc_centre_is_moved_onto_the_bisector():
     ("G1 X1 F100\nG1 X2 X3\n", 2, "appears twice"),
     ("X1\n", 1, "needs a motion mode"),
     ("G1 X1 F100 (open comment\n", 1, "unbalanced parenthesis"),
+    ("G1 X1 F100\n(open ; comment\n", 2, "unbalanced parenthesis"),  # the ; is inside the open comment
+    ("G1 X1 F100 (nested (comment) here)\n", 1, "unbalanced parenthesis"),
     ("G0 X1\nG0 X2\n", None, "no feed move"),
 ])
 def test_errors_name_the_line(text, line, message):
@@ -153,3 +160,46 @@ def test_latin1_comment_and_byte_order_mark_are_read(tmp_path):
     with pytest.raises(ConfigError, match=f"{tmp_path / 'l1.nc'}, line 3: cannot read 'Gü'"):
         (tmp_path / "l1.nc").write_bytes("G0 X0 Y0\nG1 X10 F600\nGü\n".encode("latin-1"))
         read_gcode(tmp_path / "l1.nc")
+
+
+def test_a_semicolon_inside_a_parenthesis_comment_belongs_to_the_comment():
+    """Fusion 360 and OpenBuilds posts write ``(T1 D=6. CR=0. - ZMIN=-5. - flat end mill ; note)``."""
+    program = read_gcode("(T1 D=6. CR=0. - ZMIN=-5. - flat end mill ; climb)\n"
+                         "G0 X0 Y0 (rapid ; to start) G90\n"
+                         "G1 X10 F600 ; a ; comment may hold ( or ) too\n")
+    np.testing.assert_allclose(program.path.end, [10, 0, 0])
+    assert program.texts == ("G1 X10 F600 ; a ; comment may hold ( or ) too",)
+
+
+def test_a_tool_change_between_cuts_is_positioning_with_rapids():
+    # G28 G91 Z0 takes Z to a machine position; the G0 moves after it are rapids from where the tool was,
+    # and the G0 with Z (G43 Z5 H2, zero length here) brings Z back into work coordinates
+    with pytest.warns(ContoursimWarning, match="ignored"):
+        program = read_gcode("G0 X0 Y0 Z5\nG1 Z-1 F100\nG1 X10\nG0 Z5\nG28 G91 Z0\nG90\nT2 M6\nG0 X20 Y0\n"
+                             "G43 Z5 H2\nG1 Z-1 F200\nG0 Z5\nG28 G91 Z0\nM30\n")
+    assert program.path.roles == ("path", "path", "rapid", "rapid", "path")
+    assert program.lines.tolist() == [2, 3, 4, 8, 10]
+    assert program.texts[3:] == ("G0 X20 Y0", "G1 Z-1 F200")
+    np.testing.assert_allclose([p.end for p in program.path.primitives][2:],
+                               [[10, 0, 5], [20, 0, 5], [20, 0, -1]])
+
+
+def test_linuxcnc_path_tolerance_is_accepted():
+    with pytest.warns(ContoursimWarning, match="ignored"):
+        assert read_gcode("G64 P0.01\nG0 X0 Y0\nG1 X1 F100\n").ignored == ("G64",)
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".EIA"])
+def test_the_usual_gcode_file_names_are_read_as_gcode(tmp_path, suffix):
+    file = tmp_path / f"part{suffix}"
+    file.write_text("G0 X0 Y0\nG1 X10 F600\n")
+    read = read_path_file(file)
+    assert read.program.source == str(file) and read.feed.feed == (10.0,)
+    np.testing.assert_allclose(load_path_file(file)[0].end, [10, 0, 0])
+
+
+def test_another_file_type_is_refused_with_the_types_read(tmp_path):
+    (tmp_path / "part.txt").write_text("G0 X0 Y0\nG1 X10 F600\n")
+    with pytest.raises(ConfigError, match=r"part.txt: unknown path file type '.txt': use .toml, or G-code .nc .ngc "
+                                          r".gcode .tap .cnc .mpf .iso .eia"):
+        read_path_file(tmp_path / "part.txt")
