@@ -51,6 +51,7 @@ Files are read as UTF-8 (a byte-order mark is dropped) or, failing that, as
 Latin-1, so a comment written on an older controller or editor reads too.
 """
 
+import csv
 import os
 import re
 import warnings
@@ -339,7 +340,7 @@ class BlockErrors:
     tracking_max: np.ndarray
 
     def table(self, top=5):
-        """The `top` worst cutting blocks as a text table: line, largest contour and tracking error [µm], text.
+        """The `top` worst cutting blocks as a text table: line, largest contour and tracking error [µm] ("-" for none), text.
 
         Parameters
         ----------
@@ -350,10 +351,10 @@ class BlockErrors:
         -------
         str
         """
-        head = f"{'line':>6}{'contour max':>14}{'tracking max':>14}  block"
-        rows = [f"{self.line[k]:>6}{1e3 * self.contour_max[k]:>14.2f}{1e3 * self.tracking_max[k]:>14.2f}  {self.text[k]}"
+        um = lambda value: f"{'-':>14}" if np.isnan(value) else f"{1e3 * value:>14.2f}"  # noqa: E731
+        rows = [f"{self.line[k]:>6}{um(self.contour_max[k])}{um(self.tracking_max[k])}  {self.text[k]}"
                 for k in np.flatnonzero(~self.rapid)[:top]]
-        return "\n".join([head, *rows])
+        return "\n".join([f"{'line':>6}{'contour max':>14}{'tracking max':>14}  block", *rows])
 
     def save_csv(self, stream):
         """Write every block as CSV: ``line, rapid, feed_mm_min, contour_max_um, tracking_max_um, block``.
@@ -366,8 +367,6 @@ class BlockErrors:
         stream : text file object
             Open for writing, with ``newline=""``.
         """
-        import csv
-
         um = lambda value: "" if np.isnan(value) else f"{1e3 * value:.3f}"  # noqa: E731
         writer = csv.writer(stream, lineterminator="\n")
         writer.writerow(["line", "rapid", "feed_mm_min", "contour_max_um", "tracking_max_um", "block"])

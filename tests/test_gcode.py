@@ -1,10 +1,12 @@
 """G-code reader: geometry of the moves worked out by hand, errors naming file and line."""
 
+import io
+
 import numpy as np
 import pytest
 
 from contoursim.exceptions import ConfigError, ContoursimWarning
-from contoursim.gcode import read_gcode
+from contoursim.gcode import block_errors, read_gcode
 from contoursim.pathfile import load_path_file, read_path_file
 
 POCKET = """%
@@ -203,3 +205,42 @@ def test_another_file_type_is_refused_with_the_types_read(tmp_path):
     with pytest.raises(ConfigError, match=r"part.txt: unknown path file type '.txt': use .toml, or G-code .nc .ngc "
                                           r".gcode .tap .cnc .mpf .iso .eia"):
         read_path_file(tmp_path / "part.txt")
+
+
+def test_block_errors_are_each_blocks_worst_samples_worst_block_first():
+    from contoursim.feed import FeedSettings, sample
+    from contoursim.machine import load_machine
+    from contoursim.simulation import simulate
+
+    # line 3 is 0.1 µm long, passed between two samples 2 µm apart: no sample, no figure, last of the cutting blocks
+    program = read_gcode("G0 X0 Y0\nG1 X9.9991 F600\nG1 X9.9992\nG1 X20\nG0 Y10\nG1 X0 F1200 (back ; faster)\n")
+    machine = load_machine("demo_mill")
+    settings = FeedSettings(tuple(program.feeds))
+    trajectory = sample(program.path, settings.plan(program.path, in_position=0.1), machine.servo_period)
+    result = simulate(machine, trajectory)
+    assert not (result.trajectory.primitive == 1).any()
+    errors = block_errors(program, result)
+    assert errors.line.tolist()[-2:] == [3, 5] and errors.rapid.tolist() == [False] * 4 + [True]
+    assert np.isnan(errors.contour_max[3]) and np.isnan(errors.tracking_max[3])
+    assert errors.line[0] == 6 and errors.text[0] == "G1 X0 F1200 (back ; faster)"
+    np.testing.assert_array_equal(errors.feed * 60, [1200, 600, 600, 600, 10000])
+    # each block's figure is the largest over the samples whose reference lies on it (the stop at its end included)
+    on = np.searchsorted([0, 9.9991, 9.9992, 20, 30], result.trajectory.s, side="left")  # 1-based block of each sample
+    tracking = np.linalg.norm(result.tracking_error, axis=1)
+    keep = result.trajectory.measuring | result.trajectory.rapid
+    for line, block in ((2, 1), (4, 3), (5, 4), (6, 5)):
+        k = errors.line.tolist().index(line)
+        mine = keep & (on == block)
+        assert errors.tracking_max[k] == tracking[mine].max()
+        assert errors.contour_max[k] == result.contour.magnitude[mine].max()
+    assert 1e3 * np.nanmax(errors.tracking_max[~errors.rapid]) == pytest.approx(result.summary()["tracking_max_um"])
+    assert result.summary()["tracking_max_um"] == pytest.approx(1e3 * 20 / 40)  # F1200 along X: v/Kp
+    stream = io.StringIO()
+    errors.save_csv(stream)
+    rows = stream.getvalue().splitlines()
+    assert rows[0] == "line,rapid,feed_mm_min,contour_max_um,tracking_max_um,block"
+    assert rows[1].startswith("6,0,1200,") and rows[1].endswith(",G1 X0 F1200 (back ; faster)")
+    assert rows[4] == "3,0,600,,,G1 X9.9992" and rows[5].startswith("5,1,10000,")
+    table = errors.table(top=4).splitlines()
+    assert table[0].split() == ["line", "contour", "max", "tracking", "max", "block"] and len(table) == 5
+    assert table[1].split()[0] == "6" and table[4].split() == ["3", "-", "-", "G1", "X9.9992"]
