@@ -9,7 +9,8 @@ normal axis is a helix.
 
 The modes the model assumes are accepted: ``G21`` (mm), ``G94`` (feed per
 minute), ``G40`` and ``G49`` (no cutter or tool length compensation), ``G80``
-(no canned cycle). Accepted and ignored, because they move no axis of the
+(no canned cycle), ``G91.1`` (arc centres relative to the arc's start, as
+Mach3-style posts write it; ``G90.1``, absolute centres, is refused). Accepted and ignored, because they move no axis of the
 contour: ``%`` lines, comments ``( ... )`` (a ``;`` inside one is part of the
 comment) and ``; ...`` (to the end of the line), sequence numbers
 ``N``, program numbers ``O``, spindle speed ``S``, tool ``T`` with its offsets
@@ -68,11 +69,12 @@ __all__ = ["DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "rea
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
-_MODEL_G = (21, 40, 49, 80, 94)  # mm, no cutter or tool length compensation, no canned cycle, feed per minute
+_MODEL_G = (21, 40, 49, 80, 91.1, 94)  # mm, no cutter/tool length compensation, no canned cycle, I/J/K relative, F/min
 _IGNORED_G = {4: "G4 dwell", 43: "G43", 54: "G54", 55: "G55", 56: "G56", 57: "G57", 58: "G58", 59: "G59",
               61: "G61", 64: "G64"}
 _MACHINE_MOVES = (28, 30, 53)  # home returns, machine coordinates: ignored outside the contour
 _REFUSED_G = {20: "inch programs are not supported (G20): convert to mm and use G21",
+              90.1: "absolute arc centres (G90.1) are not supported: program I/J/K relative to the arc's start (G91.1)",
               41: "cutter radius compensation (G41) is not supported: program the tool-centre path with G40",
               42: "cutter radius compensation (G42) is not supported: program the tool-centre path with G40",
               93: "inverse-time feed (G93) is not supported: program F in mm/min (G94)",
@@ -84,7 +86,7 @@ SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".eia")
 DIALECT = ("Fanuc/LinuxCNC/GRBL mill dialect: mm (G21), feed per minute (G94), absolute unless G91, arc centres "
            "I/J/K relative to the arc's start, comments ( ) and ;, G28/G30/G53 positioning outside the contour")
 _COMMENT = re.compile(r"\([^)]*\)|;.*")  # the leftmost first: a ( ) comment may hold a ;, a ; comment a ( or )
-_SUPPORTED = ("G0-G3, G4, G17-G19, G21, G28, G30, G40, G43, G49, G53-G59, G61, G64, G80, G90, G91, G94, "
+_SUPPORTED = ("G0-G3, G4, G17-G19, G21, G28, G30, G40, G43, G49, G53-G59, G61, G64, G80, G90, G91, G91.1, G94, "
               "X Y Z I J K R F, O N S T D H, M codes but M98/M99")
 
 

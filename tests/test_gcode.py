@@ -83,6 +83,7 @@ def test_arc_centre_is_moved_onto_the_bisector():
     ("G1 X1 F100\nG7\n", 2, "unknown word G7"),
     ("G1 X1 F100\nG41 D1 X2\n", 2, "cutter radius compensation \\(G41\\) is not supported"),
     ("G1 X1 F100\nG95 X2 F0.1\n", 2, "feed per revolution"),
+    ("G90.1\nG1 X1 F100\n", 1, "absolute arc centres \\(G90.1\\) are not supported"),
     ("G1 X1 F100\nM98 P1000\n", 2, "subprogram calls \\(M98\\)"),
     ("G1 X1 F100\nG1 X2 P3\n", 2, "P belongs to a dwell"),
     ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 3, "from a machine position is not supported: line 2 \\(G28/G30/G53\\) took Z there; "
@@ -184,6 +185,11 @@ def test_a_tool_change_between_cuts_is_positioning_with_rapids():
     assert program.texts[3:] == ("G0 X20 Y0", "G1 Z-1 F200")
     np.testing.assert_allclose([p.end for p in program.path.primitives][2:],
                                [[10, 0, 5], [20, 0, 5], [20, 0, -1]])
+
+
+def test_mach3_arc_centre_mode_is_the_one_assumed():
+    np.testing.assert_allclose(read_gcode("G91.1 G90 G0 X10 Y0\nG3 X0 Y10 I-10 J0 F100\n").path.primitives[0].center,
+                               [0, 0, 0], atol=1e-12)
 
 
 def test_linuxcnc_path_tolerance_is_accepted():
