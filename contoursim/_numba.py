@@ -7,14 +7,19 @@ an uninstall and leave an importable, empty ``contoursim`` behind. So the
 cache of contoursim's own functions goes to the user-wide cache folder
 instead (``~/.cache/numba`` on Linux, or ``NUMBA_CACHE_DIR`` when set);
 other packages' functions are cached as numba always does.
+
+A first run (a cold cache) compiles them, ~20 s of CPU; :class:`CompileClock`
+tells when that happens, so the command line can say so.
 """
 
+import time
 from pathlib import Path
 
 from numba import njit, prange
 from numba.core.caching import CacheImpl, UserWideCacheLocator
+from numba.core.event import Listener
 
-__all__ = ["njit", "prange"]
+__all__ = ["CompileClock", "njit", "prange"]
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -27,6 +32,47 @@ class _PackageCacheLocator(UserWideCacheLocator):
         if not Path(py_file).resolve().is_relative_to(_PACKAGE):
             return None
         return super().from_function(py_func, py_file)
+
+
+class CompileClock(Listener):
+    """A numba event listener timing the compilation of contoursim's functions.
+
+    Install it with ``numba.core.event.install_listener("numba:compile", clock)``.
+    Functions loaded from the cache do not compile and are not counted.
+
+    Parameters
+    ----------
+    on_first : callable
+        Called with no argument when the first of contoursim's functions starts compiling.
+
+    Attributes
+    ----------
+    seconds : float
+        Wall time spent compiling contoursim's functions so far [s] (callees counted once, in their caller).
+    """
+
+    def __init__(self, on_first):
+        self.on_first, self.seconds, self._depth, self._since = on_first, 0.0, 0, None
+
+    @staticmethod
+    def _ours(event):
+        return event.data["dispatcher"].py_func.__module__.startswith(__package__ + ".")
+
+    def on_start(self, event):
+        if not self._ours(event):
+            return
+        if self._depth == 0:
+            if self._since is None:
+                self.on_first()
+            self._since = time.perf_counter()
+        self._depth += 1
+
+    def on_end(self, event):
+        if not self._ours(event):
+            return
+        self._depth -= 1
+        if self._depth == 0:
+            self.seconds += time.perf_counter() - self._since
 
 
 if _PackageCacheLocator not in CacheImpl._locator_classes:

@@ -16,6 +16,7 @@ import gc
 import os
 import sys
 import warnings
+from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,6 +27,9 @@ from .output import output_dir
 DEMO_MACHINE = "demo_mill"
 DEMO_STRATEGIES = ("feedforward", "ccc_arc", "feedforward+ccc_arc")  # the demo's compact comparison, on its free-form run
 DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
+TOP_BLOCKS = 5  # the G-code blocks simulate prints, worst first
+FILE_HELP = ("job .toml, path .toml or G-code (.nc .ngc .gcode .tap .cnc .mpf .iso .eia): a file, or a name in the "
+             "trajectories library")
 _JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
 
 
@@ -43,16 +47,23 @@ def _table(rows):
 
 
 def _trajectory(model, path_file, job=None):
-    """The path file's reference at the model's servo period; a job's ``[feed]`` overrides the file's key by key."""
+    """The path file's reference at the model's servo period, and its G-code program (None for a TOML path).
+
+    A job's ``[feed]`` overrides the file's key by key. The motion waits at the
+    end of each rapid (G0) for :func:`~contoursim.simulation.default_settle`
+    seconds, a controller's in-position check: a cut starts with the axes in position.
+    """
     from .feed import sample
     from .model import as_model
-    from .pathfile import load_path_file, read_feed_table
+    from .pathfile import read_feed_table, read_path_file
+    from .simulation import default_settle
 
-    path, settings = load_path_file(path_file)
-    if job is not None and "feed" in job.data:
-        settings = read_feed_table(job, base=settings)
+    read = read_path_file(path_file)
+    settings = read.feed if job is None or "feed" not in job.data else read_feed_table(job, base=read.feed)
     machine = as_model(model).machine
-    return sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+    # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
+    profile = settings.plan(read.path, max_feed=machine.max_feed, in_position=default_settle(machine))
+    return sample(read.path, profile, machine.servo_period), read.program
 
 
 def run_job(model, path_file, job=None, strategies=(), label=None):
@@ -63,45 +74,54 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     Returns
     -------
     tuple
-        ``(name, path_file, result)``: the run's name (file stem or `label`),
-        the path file and the :class:`~contoursim.simulation.SimResult`.
+        ``(name, path_file, result, program)``: the run's name (file stem or
+        `label`), the path file, the :class:`~contoursim.simulation.SimResult`
+        and the G-code :class:`~contoursim.gcode.Program` (None for a TOML path).
     """
     from .model import as_model
     from .simulation import default_settle, simulate
 
+    trajectory, program = _trajectory(model, path_file, job)
     # held here as simulate would hold it, so that the reference before holding is freed before the run
-    trajectory = _trajectory(model, path_file, job).held(default_settle(as_model(model).machine))
+    trajectory = trajectory.held(default_settle(as_model(model).machine))
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
         result = simulate(model, trajectory, strategies, settle=0.0)  # held already
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
-    return name, path_file, result
+    return name, path_file, result, program
 
 
 def _write(out, groups, every):
-    """Write each run's trace CSV (every `every`-th sample) and the plots of each group of runs shown side by side.
+    """Write each run's trace CSV (every `every`-th sample), its blocks CSV (G-code) and the plots of each group.
 
     Parameters
     ----------
     groups : dict of str -> list of tuple
-        Runs (from :func:`run_job`) that share plots, by the group's file stem.
+        Runs (from :func:`run_job`) that share plots, shown side by side, by the group's file stem.
 
     Returns
     -------
     tuple
-        The output folder and the table rows.
+        The output folder, the table rows and, per G-code run, its
+        :class:`~contoursim.gcode.BlockErrors` (written as ``NAME_blocks.csv``).
     """
+    from .gcode import block_errors
     from .plotting import save_figures
 
     out = output_dir(out)
+    blocks = {}
     for name, runs in groups.items():
-        for run, path_file, result in runs:
+        for run, path_file, result, program in runs:
             with out.write(f"{run}.csv") as stream:
                 result.save_csv(stream, metadata={"path": Path(path_file).name}, every=every)
-        save_figures({run: result for run, _, result in runs}, out, name)
-    return out, [(run, result.summary()) for runs in groups.values() for run, _, result in runs]
+            if program is not None:
+                blocks[run] = block_errors(program, result)
+                with out.write(f"{run}_blocks.csv") as stream:
+                    blocks[run].save_csv(stream)
+        save_figures({run: result for run, _, result, _ in runs}, out, name)
+    return out, [(run, result.summary()) for runs in groups.values() for run, _, result, _ in runs], blocks
 
 
 def demo(args):
@@ -114,11 +134,11 @@ def demo(args):
 
     machine = load_machine(DEMO_MACHINE)
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
-    (_, free_form, plain), = groups["butterfly"]
+    (_, free_form, plain, _), = groups["butterfly"]
     compared = {"none": plain}
     compared.update((name, simulate(machine, plain.trajectory, strategies_named(name), settle=0.0))
                     for name in DEMO_STRATEGIES)  # on the same reference, already held at its end
-    out, rows = _write(args.out, groups, args.every)
+    out, rows, _ = _write(args.out, groups, args.every)
     print(f"contoursim demo — machine: {machine.name}, servo period {1e3 * machine.servo_period:g} ms")
     print("Tracking error is the lag behind the interpolator (≈ v/Kp); contour error is the distance to the path.")
     print("Both over the test proper: the full test circle of the ISO 230-4 runs (the CSV's measuring = 1 rows).")
@@ -171,6 +191,7 @@ def _job(args):
 
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
+    from .gcode import DIALECT
     from .geocomp import GeometricCompensation
 
     model, path_file, job, geometric = _job(args)
@@ -181,10 +202,18 @@ def simulate_command(args):
     if geometric or args.geometric_compensation:
         runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
-    out, rows = _write(args.out, {Path(path_file).stem: runs}, args.every)
+    out, rows, blocks = _write(args.out, {Path(path_file).stem: runs}, args.every)
     effects = "; ".join(f"{e.label} ({_set_values(e)})" for e in model.effects) or "none"
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
+    if blocks:
+        print(f"G-code: {DIALECT}.")
+        print("Errors over the cutting moves (G1/G2/G3: the CSV's measuring = 1 rows); the rapids (G0, rapid = 1) "
+              "are not scored.")
     print(_table(rows))
+    for run, errors in blocks.items():
+        print(f"\n{run}: the worst cutting blocks, max over each [µm] ({min(TOP_BLOCKS, (~errors.rapid).sum())} of "
+              f"{(~errors.rapid).sum()}; every block in {run}_blocks.csv)")
+        print(errors.table(TOP_BLOCKS))
     print(f"\nplots and traces written to {out}/")
 
 
@@ -199,7 +228,11 @@ def _set_values(effect):
 
 
 def compare_command(args):
-    """``contoursim compare FILE [--strategies a,b] [--json R.json]``: compensation strategies side by side."""
+    """``contoursim compare FILE [--strategies a,b] [--json R.json]``: compensation strategies side by side.
+
+    FILE as for ``simulate``; a job's ``geometric_compensation = true`` adds the strategy ``geometric``
+    unless one of the strategies composes it already.
+    """
     import json
 
     from .comparison import compare
@@ -208,10 +241,9 @@ def compare_command(args):
     from .plotting import save_comparison_figures
 
     model, path_file, job, geometric = _job(args)
-    if geometric:
-        raise job.error("compare runs the strategies of --strategies: compose geometric compensation there "
-                        "(e.g. --strategies none,geometric,geometric+ccc_arc)", "geometric_compensation")
     names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
+    if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
+        names = [*names, "geometric"]
     report = Path(args.json) if args.json else None
     if report is not None and report.exists():  # replace only a comparison JSON, never a file the user keeps
         try:
@@ -220,7 +252,7 @@ def compare_command(args):
             ours = False
         if not ours:
             raise FileExistsError(f"{report} exists and is not a comparison JSON; refusing to overwrite it")
-    comparison = compare(model, _trajectory(model, path_file, job), names)
+    comparison = compare(model, _trajectory(model, path_file, job)[0], names)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)
     if report is not None:  # the files before the table: a reader gone half-way (| head) costs none of them
@@ -284,19 +316,33 @@ def _every(text):
         raise argparse.ArgumentTypeError(f"must be a whole number of samples, at least 1; got {text!r}") from None
 
 
-def main(argv=None):
-    """Entry point of the ``contoursim`` command."""
+def main(argv=None, compile_notice=False):
+    """Entry point of the ``contoursim`` command.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default: the process's).
+    compile_notice : bool
+        Say on stderr when numba compiles contoursim's functions, and how
+        long that took (:func:`_compile_notice`); the program does.
+
+    Returns
+    -------
+    int
+        The exit status: 0, 2 for an error of the user's, 130 when interrupted.
+    """
     parser = argparse.ArgumentParser(prog="contoursim", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="ISO 230-4 circle tests and a free-form path on the demo machine")
     p.set_defaults(run=demo)
     p = sub.add_parser("simulate", help="simulate a job file (machine + path) or a path file")
-    p.add_argument("file", help="job .toml, path .toml or G-code .nc (a file, or a name in the trajectories library)")
+    p.add_argument("file", help=FILE_HELP)
     p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
     p.add_argument("--geometric-compensation", action="store_true", help="also run with geometric compensation")
     p.set_defaults(run=simulate_command)
     p = sub.add_parser("compare", help="compensation strategies side by side on a job file or a path file")
-    p.add_argument("file", help="job .toml, path .toml or G-code .nc (a file, or a name in the trajectories library)")
+    p.add_argument("file", help=FILE_HELP)
     p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
     p.add_argument("--strategies", metavar="A,B,...",
                    help="strategies to run, comma-separated (default: none,feedforward,zpetc,ccc_linear,ccc_arc,"
@@ -325,7 +371,7 @@ def main(argv=None):
             default_show(message, category, *details)
 
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _compile_notice(args.command) if compile_notice else nullcontext():
             warnings.simplefilter("always", ContoursimWarning)
             default_show, warnings.showwarning = warnings.showwarning, show
             args.run(args)
@@ -339,9 +385,28 @@ def main(argv=None):
     return 0
 
 
+@contextmanager
+def _compile_notice(command):
+    """Say on stderr when contoursim's numba functions compile (a first run: a cold cache), and then how long it took."""
+    from numba.core.event import install_listener
+
+    from ._numba import CompileClock
+
+    clock = CompileClock(lambda: print(f"contoursim {command}: compiling the numba functions of the simulation, once "
+                                       "(later runs load them from the cache) ...", file=sys.stderr, flush=True))
+    try:
+        with install_listener("numba:compile", clock):
+            yield
+    finally:
+        if clock.seconds:
+            print(f"contoursim {command}: compiled in {clock.seconds:.1f} s", file=sys.stderr, flush=True)
+
+
 def run():
     """The ``contoursim`` program (and ``python -m contoursim``): :func:`main` tuned for a whole process.
 
+    - A first run (a cold numba cache) says on stderr that it compiles,
+      once, and how long that took (:func:`_compile_notice`).
     - Python's cycle collector looks at the young objects once 10,000 more
       have been made than freed, not 700: numba's compiler and matplotlib
       make many objects and few cycles, and in a first ``contoursim demo``
@@ -358,7 +423,7 @@ def run():
     """
     gc.set_threshold(10_000, 10, 10)
     try:
-        code = main()
+        code = main(compile_notice=True)
         for stream in (sys.stdout, sys.stderr):
             if stream is not None:  # None: started with the descriptor closed (contoursim demo >&-)
                 stream.flush()

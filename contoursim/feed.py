@@ -262,8 +262,8 @@ def _peak(v0, v1, length, vmax, accel, jerk):
     return _fitting(top + y * y, top + lo * lo, v0, v1, length, accel, jerk)
 
 
-def _plan_sections(breaks, vmax, vjunction, accel, jerk):
-    """Profile over sections [breaks[i], breaks[i+1]] with speed limits vmax[i] and junction caps."""
+def _plan_sections(breaks, vmax, vjunction, accel, jerk, dwell):
+    """Profile over sections [breaks[i], breaks[i+1]]: speed limits vmax[i], junction caps, a standstill dwell[i] after each."""
     lengths = np.diff(breaks).tolist()
     vmax = np.asarray(vmax, float).tolist()
     v = np.array(vjunction, dtype=float).tolist()
@@ -289,6 +289,9 @@ def _plan_sections(breaks, vmax, vjunction, accel, jerk):
             s += duration * (vel + duration * (a0 / 2 + duration * j / 6))
             vel += duration * (a0 + duration * j / 2)
             t += duration
+        if dwell[i] > 0:  # at rest (v1 = 0 there) exactly at the section's end
+            rows += (t, float(breaks[i + 1]), 0.0, 0.0, 0.0)
+            t += dwell[i]
     t0, s0, v0, a0, j = np.array(rows).reshape(-1, 5).T
     return FeedProfile(t0, s0, np.maximum(v0, 0.0), a0, j, t, float(breaks[-1]))
 
@@ -307,7 +310,8 @@ def _feed_values(feed):
     return values
 
 
-def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_tolerance=1e-3, max_feed=None):
+def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_tolerance=1e-3, max_feed=None,
+         in_position=0.0):
     """Plan the motion along a path under feed, acceleration and jerk limits.
 
     Parameters
@@ -326,6 +330,11 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         Tangent turn at a join above which the motion stops exactly [rad].
     max_feed : float, optional
         Largest feed allowed [mm/s]; a larger `feed` raises ValueError.
+    in_position : float
+        Standstill at the end of each rapid (a primitive with role
+        ``"rapid"``, a G0 move) [s]: the motion always stops there, and waits
+        for the axes to reach the position (a controller's in-position check)
+        before the next block.
 
     Returns
     -------
@@ -364,13 +373,16 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         kappa = path.max_curvature()
         curved = kappa > 0
         limits[curved] = np.minimum(limits[curved], np.sqrt(ac / kappa[curved]))
-    stop = path.corner_angles() > tolerance
+    in_position = _validate.nonnegative("in_position", in_position)
+    rapid_end = (np.array(path.roles) == "rapid")[:-1]
+    stop = (path.corner_angles() > tolerance) | rapid_end
     split = stop | (limits[1:] != limits[:-1])
     first = np.concatenate([[0], np.flatnonzero(split) + 1])
     breaks = np.append(path.breaks[first], path.length)
     inner = np.where(stop[first[1:] - 1], 0.0, np.minimum(limits[first[1:] - 1], limits[first[1:]]))
     vjunction = np.concatenate([[0.0], inner, [0.0]])
-    return _plan_sections(breaks, limits[first], vjunction, accel, jerk)
+    dwell = np.append(np.where(rapid_end[first[1:] - 1], in_position, 0.0), 0.0)
+    return _plan_sections(breaks, limits[first], vjunction, accel, jerk, dwell)
 
 
 @dataclass(frozen=True)
@@ -406,7 +418,7 @@ class FeedSettings:
                 object.__setattr__(self, name, _validate.positive(name, getattr(self, name)))
         object.__setattr__(self, "corner_tolerance", _validate.nonnegative("corner_tolerance", self.corner_tolerance))
 
-    def plan(self, path, max_feed=None):
+    def plan(self, path, max_feed=None, in_position=0.0):
         """:func:`plan` with these settings.
 
         Parameters
@@ -415,13 +427,15 @@ class FeedSettings:
             The path to travel.
         max_feed : float, optional
             Largest feed allowed [mm/s].
+        in_position : float
+            Standstill at the end of each rapid [s] (see :func:`plan`).
 
         Returns
         -------
         FeedProfile
         """
         return plan(path, self.feed, self.accel, self.jerk, centripetal_accel=self.centripetal_accel,
-                    corner_tolerance=self.corner_tolerance, max_feed=max_feed)
+                    corner_tolerance=self.corner_tolerance, max_feed=max_feed, in_position=in_position)
 
 
 def sample(path, profile, dt):
@@ -443,7 +457,9 @@ def sample(path, profile, dt):
         motion (a standstill sample at s = L). Velocity T sdot [mm/s] and
         acceleration T sddot + kappa N sdot^2 [mm/s^2] are analytic;
         position has ``path.dim`` columns; ``measuring`` marks samples on
-        primitives with role "test" (all samples if the path has none).
+        primitives with role "test", on a path without them the samples on
+        every primitive but the rapids (role "rapid"); a sample at rest at a
+        junction (a stop, an in-position dwell) is on the primitive ending there.
 
     Raises
     ------
@@ -471,6 +487,7 @@ def sample(path, profile, dt):
     vel = tangent * sdot[:, None]
     acc = tangent * sddot[:, None] + kvec * (sdot**2)[:, None]
     roles = np.array(path.roles)
-    measuring = roles[path.segment_index(s)] == "test" if "test" in path.roles else None
+    on = roles[path.segment_index(s, at_rest=sdot == 0)]  # the role of each sample's primitive (a stop: the one ending)
+    measuring = on == "test" if "test" in path.roles else on != "rapid"
     # a copy of the positions, so that the (N, 9) evaluation the three came from is freed
     return Trajectory(t, pos.copy(), vel, acc, s, path=path, measuring=measuring)

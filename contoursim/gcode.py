@@ -9,17 +9,24 @@ normal axis is a helix.
 
 The modes the model assumes are accepted: ``G21`` (mm), ``G94`` (feed per
 minute), ``G40`` and ``G49`` (no cutter or tool length compensation), ``G80``
-(no canned cycle). Accepted and ignored, because they move no axis of the
-contour: ``%`` lines, comments ``( ... )`` and ``; ...``, sequence numbers
+(no canned cycle), ``G91.1`` (arc centres relative to the arc's start, as
+Mach3-style posts write it; ``G90.1``, absolute centres, is refused). Accepted and ignored, because they move no axis of the
+contour: ``%`` lines, comments ``( ... )`` (a ``;`` inside one is part of the
+comment) and ``; ...`` (to the end of the line), sequence numbers
 ``N``, program numbers ``O``, spindle speed ``S``, tool ``T`` with its offsets
 ``D``/``H``, M codes other than the program end (spindle ``M3 M4 M5``, coolant
 ``M7 M8 M9``, tool change ``M6``, stops ``M0 M1`` ...), ``G43`` (tool length
 compensation: the path is the tool tip's), work offsets ``G54``-``G59`` (the
-path's origin is the work offset), path modes ``G61 G64`` (the planner's own
-corner rule applies), and the dwell ``G4`` (with its ``P``/``X`` time, which is
-not a move; the path does not stop there). Home returns and machine-coordinate
-moves (``G28 G30 G53``) are ignored before the first and after the last feed
-move; between feed moves they are refused. What was ignored (all but ``N``) is
+path's origin is the work offset), path modes ``G61 G64`` (with LinuxCNC's
+``G64 P`` tolerance; the planner's own corner rule applies), and the dwell
+``G4`` (with its ``P``/``X`` time, which is not a move; the path does not stop
+there). Home returns and machine-coordinate moves (``G28 G30 G53``, e.g. a
+post's ``G28 G91 Z0`` before a tool change) take the axes they name (``G28``
+and ``G30`` without axis words: all) to a machine position contoursim does
+not know in work coordinates. Before the first feed move they are ignored;
+after it the tool is taken to stay where it was, and the G0 moves that
+follow position it from there (rapids, not scored); a feed move while an
+axis is still at such a position is refused. What was ignored (all but ``N``) is
 listed in :attr:`Program.ignored` and in one
 :class:`~contoursim.exceptions.ContoursimWarning`. Refused with a message
 naming file and line: inch units (``G20``), cutter radius compensation
@@ -37,10 +44,15 @@ Arcs whose start and end radii (about the programmed centre) differ by less
 than `arc_tolerance` are accepted, the centre moved onto the perpendicular
 bisector of the chord so that the arc passes through both points exactly.
 
+The dialect is that of Fanuc, LinuxCNC, GRBL and the posts written for
+them (Fusion 360, OpenBuilds ...): :data:`DIALECT` says it in a line, and
+:data:`SUFFIXES` lists the file name endings read as G-code.
+
 Files are read as UTF-8 (a byte-order mark is dropped) or, failing that, as
 Latin-1, so a comment written on an older controller or editor reads too.
 """
 
+import csv
 import os
 import re
 import warnings
@@ -53,21 +65,28 @@ from . import _validate
 from .exceptions import ConfigError, ContoursimWarning, PathError
 from .paths import Line, Path, _arc_from_point
 
-__all__ = ["Program", "read_gcode"]
+__all__ = ["DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "read_gcode"]
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
-_MODEL_G = (21, 40, 49, 80, 94)  # mm, no cutter or tool length compensation, no canned cycle, feed per minute
+_MODEL_G = (21, 40, 49, 80, 91.1, 94)  # mm, no cutter/tool length compensation, no canned cycle, I/J/K relative, F/min
 _IGNORED_G = {4: "G4 dwell", 43: "G43", 54: "G54", 55: "G55", 56: "G56", 57: "G57", 58: "G58", 59: "G59",
               61: "G61", 64: "G64"}
 _MACHINE_MOVES = (28, 30, 53)  # home returns, machine coordinates: ignored outside the contour
 _REFUSED_G = {20: "inch programs are not supported (G20): convert to mm and use G21",
+              90.1: "absolute arc centres (G90.1) are not supported: program I/J/K relative to the arc's start (G91.1)",
               41: "cutter radius compensation (G41) is not supported: program the tool-centre path with G40",
               42: "cutter radius compensation (G42) is not supported: program the tool-centre path with G40",
               93: "inverse-time feed (G93) is not supported: program F in mm/min (G94)",
               95: "feed per revolution (G95) is not supported: program F in mm/min (G94)"}
 _IGNORED_LETTERS = "ONSTDH"  # program and sequence numbers, spindle, tool and its offsets
-_SUPPORTED = ("G0-G3, G4, G17-G19, G21, G28, G30, G40, G43, G49, G53-G59, G61, G64, G80, G90, G91, G94, "
+#: File name endings read as G-code (lower case).
+SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".eia")
+#: The assumptions :func:`read_gcode` makes, in one line (the command line prints it with a G-code file's table).
+DIALECT = ("Fanuc/LinuxCNC/GRBL mill dialect: mm (G21), feed per minute (G94), absolute unless G91, arc centres "
+           "I/J/K relative to the arc's start, comments ( ) and ;, G28/G30/G53 positioning outside the contour")
+_COMMENT = re.compile(r"\([^)]*\)|;.*")  # the leftmost first: a ( ) comment may hold a ;, a ; comment a ( or )
+_SUPPORTED = ("G0-G3, G4, G17-G19, G21, G28, G30, G40, G43, G49, G53-G59, G61, G64, G80, G90, G91, G91.1, G94, "
               "X Y Z I J K R F, O N S T D H, M codes but M98/M99")
 
 
@@ -83,6 +102,8 @@ class Program:
         Feed rate of each primitive [mm/s] (rapid feed for G0 segments).
     lines : ndarray of int, shape (K,)
         Source line of each primitive (1-based).
+    texts : tuple of str
+        The source text of each primitive's block (its line, stripped).
     source : str
         File name, or "<gcode>" for text.
     ignored : tuple of str
@@ -93,6 +114,7 @@ class Program:
     path: Path
     feeds: np.ndarray
     lines: np.ndarray
+    texts: tuple
     source: str = "<gcode>"
     ignored: tuple = ()
 
@@ -102,6 +124,9 @@ class Program:
         lines = np.asarray(self.lines, dtype=int)
         if lines.shape != (k,):
             raise ValueError(f"lines must have shape ({k},), got {lines.shape}")
+        if len(self.texts) != k or not all(isinstance(text, str) for text in self.texts):
+            raise ValueError(f"texts must be {k} strings, got {self.texts!r}")
+        object.__setattr__(self, "texts", tuple(self.texts))
         for name, value in dict(feeds=feeds, lines=lines).items():
             value.flags.writeable = False
             object.__setattr__(self, name, value)
@@ -125,7 +150,7 @@ def _text_and_source(file_or_text):
 
 def _words(raw, fail):
     """Upper-case (letter, value) pairs of one line, comments removed."""
-    text = re.sub(r"\([^)]*\)", " ", raw.split(";")[0])
+    text = _COMMENT.sub(" ", raw)
     if "(" in text or ")" in text:
         fail("unbalanced parenthesis in a comment")
     words, pos = [], 0
@@ -157,14 +182,14 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     -------
     Program
         The path (dimension 2 if it stays in the XY plane at Z = 0), the feed
-        of each primitive [mm/s], its source line and the ignored words.
+        of each primitive [mm/s], its source line and text, and the ignored words.
 
     Raises
     ------
     ConfigError
         Naming the file and line: unknown or repeated word, inch units, arc
         without its centre or with radii that disagree, missing F before the
-        first feed move, ...
+        first feed move, a feed move from a machine position (G28/G30/G53), ...
 
     Warns
     -----
@@ -176,8 +201,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     arc_tolerance = _validate.positive("arc_tolerance", arc_tolerance)
     here = _validate.finite_array("start", start, shape=(3,))
     motion, plane, absolute, feed, cutting = None, 2, True, None, False
-    prims, feeds, lines, ignored = [], [], [], {}
-    machine_move = None  # line of a G28/G30/G53 after the first feed move
+    prims, feeds, lines, texts, ignored = [], [], [], [], {}
+    away = {}  # axis -> line of the G28/G30/G53 that took it to a machine position, after the first feed move
 
     for number, raw in enumerate(text.splitlines(), 1):
         def fail(message):
@@ -228,9 +253,10 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 fail(f"unknown word G{g:g} (supported: {_SUPPORTED})")
         if nonmodal is not None:
             if cutting and nonmodal != 4:
-                machine_move = machine_move or number
+                moved = [a for a in "XYZ" if a in values] or (list("XYZ") if nonmodal in (28, 30) else [])
+                away.update(dict.fromkeys(moved, number))
             continue
-        if "P" in values:
+        if "P" in values and 64 not in gcodes:
             fail("P belongs to a dwell (G4)")
         if "F" in values:
             if values["F"] <= 0:
@@ -250,9 +276,12 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 target[i] = values[a] if absolute else here[i] + values[a]
         if motion > 0 and feed is None:
             fail("missing F before the first feed move")
-        if motion > 0 and machine_move is not None:
-            raise ConfigError(f"a home return or machine-coordinate move (G28/G30/G53) between feed moves is not "
-                              f"supported (next feed move on line {number})", source=source, line=machine_move)
+        if motion > 0 and away:
+            axis, at = next(iter(away.items()))
+            fail(f"a feed move from a machine position is not supported: line {at} (G28/G30/G53) took {axis} "
+                 f"there; position {axis} with G0 first")
+        for a in axes if absolute else ():  # an incremental move from an unknown position stays unknown
+            away.pop(a, None)
         if motion == 0 and not cutting:
             here = target
             continue
@@ -267,16 +296,121 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         if len(prims) > len(feeds):
             feeds.append(rapid_feed if motion == 0 else feed)
             lines.append(number)
+            texts.append(raw.strip())
             cutting = cutting or motion > 0
         here = target
 
     if not cutting:
         raise ConfigError("the program has no feed move (G1, G2 or G3)", source=source)
     while prims[-1].role == "rapid":
-        prims.pop(), feeds.pop(), lines.pop()
+        prims.pop(), feeds.pop(), lines.pop(), texts.pop()
     if ignored:
         warnings.warn(f"{source}: ignored (no contour motion): {' '.join(ignored)}", ContoursimWarning, stacklevel=2)
-    return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), source, tuple(ignored))
+    return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), tuple(texts), source, tuple(ignored))
+
+
+@dataclass(frozen=True)
+class BlockErrors:
+    """The largest contour and tracking error of each block of a G-code program, worst blocks first.
+
+    Cutting blocks (G1/G2/G3) come first, by largest contour error, then
+    tracking error; then the rapids (G0), in the same order. A block shorter
+    than a servo period may hold no sample: its errors are NaN and it comes
+    last among its kind.
+
+    Parameters
+    ----------
+    line : ndarray of int, shape (K,)
+        Source line of each block (1-based).
+    text : tuple of str
+        Source text of each block.
+    rapid : ndarray of bool, shape (K,)
+        True for a rapid (G0).
+    feed : ndarray, shape (K,)
+        Programmed feed [mm/s] (the rapid feed for a rapid).
+    contour_max : ndarray, shape (K,)
+        Largest contour error over the block's samples [mm].
+    tracking_max : ndarray, shape (K,)
+        Largest tracking error over the block's samples [mm].
+    """
+
+    line: np.ndarray
+    text: tuple
+    rapid: np.ndarray
+    feed: np.ndarray
+    contour_max: np.ndarray
+    tracking_max: np.ndarray
+
+    def table(self, top=5):
+        """The `top` worst cutting blocks as a text table: line, largest contour and tracking error [µm] ("-" for none), text.
+
+        Parameters
+        ----------
+        top : int
+            Number of blocks shown.
+
+        Returns
+        -------
+        str
+        """
+        um = lambda value: f"{'-':>14}" if np.isnan(value) else f"{1e3 * value:>14.2f}"  # noqa: E731
+        rows = [f"{self.line[k]:>6}{um(self.contour_max[k])}{um(self.tracking_max[k])}  {self.text[k]}"
+                for k in np.flatnonzero(~self.rapid)[:top]]
+        return "\n".join([f"{'line':>6}{'contour max':>14}{'tracking max':>14}  block", *rows])
+
+    def save_csv(self, stream):
+        """Write every block as CSV: ``line, rapid, feed_mm_min, contour_max_um, tracking_max_um, block``.
+
+        Errors to the nm (3 decimals of a µm), empty for a block without a
+        sample; ``rapid`` is 1 for a G0 block; ``block`` is the source text.
+
+        Parameters
+        ----------
+        stream : text file object
+            Open for writing, with ``newline=""``.
+        """
+        um = lambda value: "" if np.isnan(value) else f"{1e3 * value:.3f}"  # noqa: E731
+        writer = csv.writer(stream, lineterminator="\n")
+        writer.writerow(["line", "rapid", "feed_mm_min", "contour_max_um", "tracking_max_um", "block"])
+        for row in zip(self.line, self.rapid, self.feed, self.contour_max, self.tracking_max, self.text):
+            line, rapid, feed, contour, tracking, text = row
+            writer.writerow([line, int(rapid), f"{60 * feed:g}", um(contour), um(tracking), text])
+
+
+def block_errors(program, result):
+    """The largest contour and tracking error of each block of `program` in a simulation of it.
+
+    A block's samples are those whose reference lies on its move
+    (:attr:`contoursim.trajectory.Trajectory.primitive`: a stop at a
+    junction belongs to the block that ends there); the standstill appended
+    after the program's end (neither measuring nor rapid) is left out.
+
+    Parameters
+    ----------
+    program : Program
+        The program simulated.
+    result : contoursim.simulation.SimResult
+        A simulation of ``program.path``, with its contour error.
+
+    Returns
+    -------
+    BlockErrors
+        Worst blocks first.
+    """
+    trajectory = result.trajectory
+    if trajectory.path is not program.path or result.contour is None:
+        raise ValueError("result must be a simulation of the program's path, with its contour error")
+    keep = trajectory.measuring | trajectory.rapid
+    block = trajectory.primitive[keep]
+    worst = {}
+    for name, error in (("contour", result.contour.magnitude[keep]),
+                        ("tracking", np.linalg.norm(result.tool_position[keep] - trajectory.position[keep], axis=1))):
+        worst[name] = np.full(len(program.lines), np.nan)
+        np.fmax.at(worst[name], block, error)
+    rapid = np.array(program.path.roles) == "rapid"
+    order = np.lexsort((-np.nan_to_num(worst["tracking"], nan=-1.0), -np.nan_to_num(worst["contour"], nan=-1.0), rapid))
+    return BlockErrors(program.lines[order], tuple(program.texts[k] for k in order), rapid[order], program.feeds[order],
+                       worst["contour"][order], worst["tracking"][order])
 
 
 def _arc(start, end, values, normal_axis, ccw, tolerance, fail):

@@ -1,5 +1,9 @@
 """Path files of the trajectories library: a TOML path description or a G-code program.
 
+A file ending in ``.toml`` is a path description; one ending in a G-code
+suffix (:data:`contoursim.gcode.SUFFIXES`: ``.nc``, ``.ngc``, ``.gcode``,
+``.tap``, ``.cnc``, ``.mpf``, ``.iso``, ``.eia``) a G-code program.
+
 The TOML format (``[feed]`` and ``[path]`` tables, units in the key names) is
 listed in the README section "File format"; trajectories/README.md says which
 keys each path type takes. Every error names the file and the line
@@ -8,16 +12,17 @@ of the offending key, through :class:`contoursim.config.TomlFile`.
 
 import math
 import re
+from dataclasses import dataclass
 from pathlib import Path as _FilePath
 
 from . import _validate
 from .config import TomlFile
 from .exceptions import ConfigError
 from .feed import FeedSettings
-from .gcode import read_gcode
+from .gcode import SUFFIXES, read_gcode
 from .paths import circle, helix, iso230_4_circle, polyline, spline
 
-__all__ = ["library_file", "load_path_file", "read_feed_table"]
+__all__ = ["PathFile", "library_file", "load_path_file", "read_feed_table", "read_path_file"]
 
 
 def _angle(name, value):
@@ -72,7 +77,7 @@ def library_file(name):
     ----------
     name : str or os.PathLike
         A file name, or a library entry with or without its suffix
-        (``"butterfly"``, ``"pocket.nc"``).
+        (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then ``.nc`` is tried).
 
     Returns
     -------
@@ -85,44 +90,81 @@ def library_file(name):
     for candidate in (str(name), f"{name}.toml", f"{name}.nc"):
         if library.joinpath(candidate).is_file():
             return library / candidate
-    known = sorted(p.name for p in library.iterdir() if p.name.endswith((".toml", ".nc")))
+    known = sorted(p.name for p in library.iterdir() if p.suffix.lower() in (".toml", *SUFFIXES))
     raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library ({', '.join(known)})")
 
 
-def load_path_file(file):
+@dataclass(frozen=True)
+class PathFile:
+    """A path file as read.
+
+    Parameters
+    ----------
+    path : contoursim.paths.Path
+    feed : contoursim.feed.FeedSettings
+        Feed rate(s) [mm/s], acceleration and jerk limits of the file.
+    program : contoursim.gcode.Program or None
+        The G-code program (its blocks' lines and text) of a G-code file; None for a TOML file.
+    """
+
+    path: object
+    feed: FeedSettings
+    program: object = None
+
+
+def read_path_file(file):
     """Read a path file, or an entry of the trajectories library by name.
 
     Parameters
     ----------
     file : str or os.PathLike
-        A ``.toml`` path file (keys in the README section "File format"), a ``.nc``
-        G-code program (see :func:`contoursim.gcode.read_gcode`), or the name
-        of either in the trajectories library (see :func:`library_file`).
+        A ``.toml`` path file (keys in the README section "File format"), a
+        G-code program (a suffix of :data:`contoursim.gcode.SUFFIXES`; see
+        :func:`contoursim.gcode.read_gcode`), or the name of either in the
+        trajectories library (see :func:`library_file`).
 
     Returns
     -------
-    path : contoursim.paths.Path
-    feed : contoursim.feed.FeedSettings
-        Feed rate(s) [mm/s], acceleration and jerk limits of the file.
+    PathFile
 
     Raises
     ------
     ConfigError
-        Naming the file and line of an unknown or missing key or a bad value.
+        Naming the file and line of an unknown or missing key or a bad value,
+        or a file of another type.
     """
     file = library_file(file)
-    if file.suffix.lower() == ".nc":
+    if file.suffix.lower() in SUFFIXES:
         program = read_gcode(file)
-        return program.path, FeedSettings(tuple(program.feeds))
+        return PathFile(program.path, FeedSettings(tuple(program.feeds)), program)
     if file.suffix.lower() != ".toml":
-        raise ConfigError(f"unknown path file type {file.suffix!r}: use .toml or .nc", source=str(file))
+        raise ConfigError(f"unknown path file type {file.suffix!r}: use .toml, or G-code {' '.join(SUFFIXES)}",
+                          source=str(file))
     toml = TomlFile.read(file)
     toml.expect("path")
     top = toml.table(allowed=("name", "description", "path", "feed"))
     for key in ("name", "description"):
         if not isinstance(top.get(key, ""), str):
             raise toml.error(f"{key} must be a string", key)
-    return _path(toml), read_feed_table(toml)
+    return PathFile(_path(toml), read_feed_table(toml))
+
+
+def load_path_file(file):
+    """The path and feed settings of a path file (:func:`read_path_file`).
+
+    Parameters
+    ----------
+    file : str or os.PathLike
+        As for :func:`read_path_file`.
+
+    Returns
+    -------
+    path : contoursim.paths.Path
+    feed : contoursim.feed.FeedSettings
+        Feed rate(s) [mm/s], acceleration and jerk limits of the file.
+    """
+    read = read_path_file(file)
+    return read.path, read.feed
 
 
 def _path(toml):

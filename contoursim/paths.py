@@ -621,20 +621,26 @@ class Path:
         pos, tan, kvec = self.derivatives(s)
         return pos, tan, np.linalg.norm(kvec, axis=1)
 
-    def segment_index(self, s):
+    def segment_index(self, s, at_rest=None):
         """Index of the primitive holding each arc length (the later one at a junction).
 
         Parameters
         ----------
         s : array_like, shape (M,)
             Arc length [mm].
+        at_rest : array_like of bool, shape (M,), optional
+            Which samples of a motion stand still: one at rest at a junction
+            belongs to the earlier primitive, whose stop (or dwell) it is.
 
         Returns
         -------
         ndarray of int, shape (M,)
         """
         s = _validate.finite_array("s", s, ndim=1)
-        return np.clip(np.searchsorted(self.breaks, s, side="right") - 1, 0, len(self.primitives) - 1)
+        index = np.clip(np.searchsorted(self.breaks, s, side="right") - 1, 0, len(self.primitives) - 1)
+        if at_rest is not None:
+            index -= (index > 0) & (s <= self.breaks[index]) & np.asarray(at_rest, bool)
+        return index
 
     def test_circle(self):
         """The full test circle of a circular test (ISO 230-4), or ``None``.

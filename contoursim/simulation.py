@@ -149,8 +149,9 @@ class SimResult:
         the columns ``contour`` (distance to the path) and ``contour_normal``
         (its signed in-plane component, positive to the left of travel) [mm],
         (without a contour error, as for a single-axis measured reference:
-        not there) and ``measuring``: 1 on the test proper (``trajectory.measuring``),
-        the rows the summary table's max and RMS are taken over. Positions and
+        not there), ``measuring``: 1 on the test proper (``trajectory.measuring``),
+        the rows the summary table's max and RMS are taken over, and ``rapid``:
+        1 on a rapid (``trajectory.rapid``, a G0 move). Positions and
         contour error are written to the nm, ``t`` to the ns
         (:func:`contoursim.traces.write_trace`). The metadata lines give the
         contoursim version, machine, servo period, feed, sampling and units,
@@ -175,10 +176,11 @@ class SimResult:
             "servo_period_s": f"{self.machine.servo_period:g}",
             "every_nth_sample": every,
             "feed_mm_min": f"{60 * self.trajectory.feed:.6g}",
-            "units": f"t [s]; {columns}{contour} [mm]; measuring [1 = test proper, 0 = not]",
+            "units": f"t [s]; {columns}{contour} [mm]; measuring [1 = test proper, 0 = not]; rapid [1 = G0, 0 = not]",
         }
         extra = {} if self.contour is None else {"contour": self.contour.magnitude, "contour_normal": self.contour.normal}
         extra["measuring"] = self.trajectory.measuring
+        extra["rapid"] = self.trajectory.rapid
         write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
 
 

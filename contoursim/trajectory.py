@@ -33,12 +33,14 @@ class Trajectory:
         error is the distance to it. ``None`` for a reference known only by
         its samples (a measured trace).
     measuring : ndarray of bool, shape (N,), optional
-        The test proper: the samples whose reference lies on the path's
-        primitives with role ``"test"`` (:func:`contoursim.feed.sample`), e.g.
-        the data-collection circle of an ISO 230-4 test without its run-in,
-        overrun and run-out arcs. All samples when omitted. The one definition
-        the summary table, the trace CSV (column ``measuring``) and the polar
-        plot use.
+        The test proper, the samples that are scored
+        (:func:`contoursim.feed.sample`): those whose reference lies on the
+        path's primitives with role ``"test"``, e.g. the data-collection
+        circle of an ISO 230-4 test without its run-in, overrun and run-out
+        arcs; on a path without them, on every primitive but the rapids (role
+        ``"rapid"``: the G0 moves of a G-code program), i.e. on the cutting
+        moves. All samples when omitted. The one definition the summary
+        table, the trace CSV (column ``measuring``) and the polar plot use.
     """
 
     t: np.ndarray
@@ -107,6 +109,25 @@ class Trajectory:
     def dim(self):
         """Number of coordinates, 1, 2 or 3."""
         return self.position.shape[1]
+
+    @property
+    def primitive(self):
+        """Index of the path's primitive each sample's reference lies on, shape (N,) int.
+
+        At a junction the later one, but for a sample at rest there: the stop
+        (or in-position dwell) at the end of the earlier one
+        (:meth:`contoursim.paths.Path.segment_index`). Raises ValueError without a path.
+        """
+        if self.path is None:
+            raise ValueError("a trajectory without a path (a measured reference) has no primitives")
+        return self.path.segment_index(self.s, at_rest=self.speed == 0)
+
+    @property
+    def rapid(self):
+        """Samples whose reference lies on a rapid (a primitive with role ``"rapid"``), shape (N,) bool; none without a path."""
+        if self.path is None or "rapid" not in self.path.roles:
+            return np.zeros(len(self), bool)
+        return np.array(self.path.roles)[self.primitive] == "rapid"
 
     @property
     def speed(self):

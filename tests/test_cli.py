@@ -1,6 +1,7 @@
 """The command line: the demo, simulate on job and path files, and what bad input gives."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -73,7 +74,8 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
     measuring = data[:, names.index("measuring")] == 1
     assert 0 < measuring.sum() < len(data)  # the test circle, without run-in, overruns, run-out and settling
     assert f"{1e3 * data[measuring, names.index('contour')].max():.2f}" == f"{contour_max:.2f}"
-    assert "# units: t [s]; x_ref, x, y_ref, y, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]" in lines
+    assert ("# units: t [s]; x_ref, x, y_ref, y, contour, contour_normal [mm]; measuring [1 = test proper, 0 = not]; "
+            "rapid [1 = G0, 0 = not]") in lines
     # a second run reuses its own output directory; --every thins the CSV, not the table
     assert main(["demo", "--out", str(tmp_path / "out"), "--every", "10"]) == 0
     assert capsys.readouterr().out == table
@@ -88,11 +90,15 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
 # a fresh process with an empty numba cache (a function loaded from the cache does not compile its callees):
 # the compiled functions the demo uses, and how many machine-code versions of each it made
 DEMO_SIGNATURES = """
-import contextlib, io, sys
+import contextlib, io, os, sys
 from numba.core.registry import CPUDispatcher
 import contoursim.cli
+sys.argv[1:] = ["demo", "--out", sys.argv[1]]
+codes = []
+os._exit = codes.append  # the program's hard exit, held off for the list below
 with contextlib.redirect_stdout(io.StringIO()):
-    assert contoursim.cli.main(["demo", "--out", sys.argv[1]]) == 0
+    contoursim.cli.run()  # the program itself, as `contoursim demo` runs it
+print("exit", *codes)
 for name, module in list(sys.modules.items()):
     if name.startswith("contoursim"):
         for value in vars(module).values():
@@ -101,14 +107,25 @@ for name, module in list(sys.modules.items()):
 """
 
 
-def test_demo_compiles_each_function_once(tmp_path):
-    """No copy per literal argument (a row number, a flag) or per writeable/read-only array: a first run compiles less."""
+def test_demo_compiles_each_function_once_and_says_so(tmp_path):
+    """No copy per literal argument (a row number, a flag) or per writeable/read-only array: a first run compiles less.
+
+    The first run says on stderr that it compiles, once, and how long that took; a second run (a warm cache) says nothing.
+    """
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
     done = subprocess.run([sys.executable, "-c", DEMO_SIGNATURES, str(tmp_path / "out")], cwd=ROOT, env=env,
                           capture_output=True, text=True, check=True)
-    counts = dict(line.rsplit(" ", 1) for line in done.stdout.splitlines())
+    assert done.stdout.startswith("exit 0\n")
+    counts = dict(line.rsplit(" ", 1) for line in done.stdout.splitlines()[1:])
     assert "contoursim.kernel._variant" in counts and "contoursim.kernel._plant_row" in counts  # the kernel ran
     assert {name: n for name, n in counts.items() if n != "1"} == {}
+    said = done.stderr.splitlines()
+    assert said[0] == ("contoursim demo: compiling the numba functions of the simulation, once (later runs load them "
+                       "from the cache) ...")
+    assert re.fullmatch(r"contoursim demo: compiled in \d+\.\d s", said[-1]) and len(said) == 2
+    again = subprocess.run([sys.executable, "-m", "contoursim", "demo", "--out", str(tmp_path / "out")], cwd=ROOT,
+                           env=env, capture_output=True, text=True)
+    assert again.returncode == 0 and again.stderr == ""
 
 
 def test_never_writes_into_a_users_directory(tmp_path, capsys):
@@ -325,6 +342,11 @@ def test_saturation_is_a_warning_naming_run_axis_and_fraction(tmp_path, capsys):
     assert err[0].endswith("% of the samples (limit ±0.01 A): the errors include the saturation")
 
 
+def _but_compiling(stderr):
+    """The lines of `stderr` but the ones saying that numba compiles (a first run, the cache cold)."""
+    return [line for line in stderr.splitlines() if not re.match(r"contoursim \w+: compil(ing|ed) ", line)]
+
+
 @pytest.mark.parametrize("where", ["root", "elsewhere"])
 def test_the_command_as_a_user_runs_it(where, tmp_path):
     """``python -m contoursim`` in a fresh process, from the repository root and from another folder."""
@@ -339,7 +361,7 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
     done = run("simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out"))
     assert done.returncode == 0, done.stderr
     # the whole table and the last line through a pipe: the program flushes before its hard exit (cli.run)
-    assert "small " in done.stdout and not done.stderr
+    assert "small " in done.stdout and not _but_compiling(done.stderr)  # a first run (a cold cache) says it compiles
     assert done.stdout.endswith(f"plots and traces written to {tmp_path / 'out'}/\n")
     failed = run("simulate", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "out2"))
     assert failed.returncode == 2 and failed.stderr.startswith("contoursim simulate: error: ") and not failed.stdout
@@ -435,3 +457,213 @@ def test_compare_refuses_bad_strategy_names(tmp_path, capsys, strategies, messag
     assert main(["compare", str(path), "--strategies", strategies, "--out", str(tmp_path / "out")]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+# Post-processor output as shops run it (written here after the posts' style): header comments with ';' inside,
+# '%' lines, a program number, N numbers, G53/G28 G91 Z0 homing, tool changes, M codes, drilling written out as
+# G1 plunges and G0 retracts. On the demo machine (Kp: X 40, Y 36, Z 40 1/s) the tracking error of a cut at
+# feed v along one axis is v/Kp once the loop has settled (a ramp into a type-1 loop).
+FUSION_CONTOUR = """%
+O1001 (CONTOUR TEST PART)
+(Machine)
+(  vendor: Autodesk ; post: fanuc.cps)
+(T1 D=6. CR=0. - ZMIN=-5. - flat end mill)
+N10 G90 G94 G17
+N15 G21
+N20 G53 G0 Z0.
+(2D Contour1 ; outside profile, climb)
+N25 T1 M6
+N30 S8000 M3
+N35 G54
+N40 M8
+N45 G0 X-38. Y-10.
+N50 G43 Z15. H1
+N55 G0 Z5.
+N60 G1 Z1. F1000.
+N65 Z-5. F300.
+N70 G1 X-35. F600.
+N75 Y10.
+N80 G2 X-25. Y20. I10. J0.
+N85 G1 X25.
+N90 G2 X35. Y10. I0. J-10.
+N95 G1 Y-10.
+N100 G2 X25. Y-20. I-10. J0.
+N105 G1 X-25.
+N110 G2 X-35. Y-10. I0. J10.
+N115 G1 X-38.
+N120 Z5. F1000.
+N125 G0 Z15.
+N130 M9
+N135 M5
+N140 G53 G0 Z0.
+N145 M30
+%
+"""
+
+FUSION_DRILL_CONTOUR = """%
+O1002 (DRILL AND CONTOUR)
+(T2 D=5. CR=0. TAPER=118deg - ZMIN=-8. - drill)
+(T1 D=6. CR=0. - ZMIN=-3. - flat end mill)
+N10 G90 G94 G17 G49 G40 G80
+N15 G21
+N20 G28 G91 Z0.
+N25 G90
+(Drill1 ; 4 holes, expanded: G1 plunges and G0 retracts)
+N30 T2 M6
+N35 S3000 M3
+N40 G54
+N45 M8
+N50 G0 X-20. Y-10.
+N55 G43 Z15. H2
+N60 G0 Z5.
+N65 G1 Z-8. F150.
+N70 G0 Z5.
+N75 X20.
+N80 G1 Z-8. F150.
+N85 G0 Z5.
+N90 Y10.
+N95 G1 Z-8. F150.
+N100 G0 Z5.
+N105 X-20.
+N110 G1 Z-8. F150.
+N115 G0 Z5.
+N120 Z15.
+N125 M9
+N130 M5
+N135 G28 G91 Z0.
+N140 G90
+M1
+(2D Contour2 ; pocket wall)
+N145 T1 M6
+N150 S10000 M3
+N155 G54
+N160 M8
+N165 G0 X0. Y-15.
+N170 G43 Z15. H1
+N175 G0 Z5.
+N180 G1 Z1. F1000.
+N185 Z-3. F250.
+N190 G1 X25. F800.
+N195 G3 X30. Y-10. I0. J5.
+N200 G1 Y10.
+N205 G3 X25. Y15. I-5. J0.
+N210 G1 X-25.
+N215 G3 X-30. Y10. I0. J-5.
+N220 G1 Y-10.
+N225 G3 X-25. Y-15. I5. J0.
+N230 G1 X0.
+N235 Z5. F1000.
+N240 G0 Z15.
+N245 M9
+N250 M5
+N255 G28 G91 Z0.
+N260 G90
+N265 G28 G91 X0. Y0.
+N270 G90
+N275 M30
+%
+"""
+
+OPENBUILDS_SPOILBOARD = """; OpenBuilds CAM - spoilboard surfacing 80 x 40 mm
+; Tool: 25 mm surfacing bit (T1 ; flat) - Feed 1500 mm/min, two passes
+G21 ; mm
+G90 ; absolute
+(Operation 0: Pocket ; spoilboard, stepover 20 mm)
+M3 S18000
+G4 P1 ; spindle spin-up
+G0 Z10
+G0 X0 Y0
+; pass 1 of 2 (z -0.5)
+G1 Z-0.5 F300
+G1 X80 F1500
+G1 Y20
+G1 X0
+G1 Y40
+G1 X80
+G0 Z10
+G0 X0 Y0
+; pass 2 of 2 (z -1)
+G1 Z-1 F300
+G1 X80 F1500
+G1 Y20
+G1 X0
+G1 Y40
+G1 X80
+G0 Z10
+G0 X0 Y0
+M5
+M30
+"""
+
+
+def _blocks_csv(file):
+    import csv
+
+    with open(file, newline="", encoding="utf-8") as stream:
+        return list(csv.DictReader(stream))
+
+
+@pytest.mark.parametrize("name, program, tracking_um, steady, rapids", [
+    # the largest cutting feed on an axis: the retracts G1 Z5. F1000. on Z, 16.67 mm/s / 40; one operation,
+    # positioned before its first cut and left after its last: no rapid in between
+    ("contour.nc", FUSION_CONTOUR, 1000 / 60 / 40, {"N85 G1 X25.": 10 / 40, "N95 G1 Y-10.": 10 / 36}, False),
+    ("drill_contour.tap", FUSION_DRILL_CONTOUR, 1000 / 60 / 40,
+     {"N65 G1 Z-8. F150.": 2.5 / 40, "N110 G1 Z-8. F150.": 2.5 / 40, "N210 G1 X-25.": 800 / 60 / 40,
+      "N200 G1 Y10.": 800 / 60 / 36}, True),
+    # 25 mm/s along Y: 25 / 36
+    ("spoilboard.gcode", OPENBUILDS_SPOILBOARD, 25 / 36, {"G1 X0": 25 / 40, "G1 Y40": 25 / 36}, True),
+])
+def test_post_processor_programs_score_their_cutting_moves(tmp_path, capsys, name, program, tracking_um, steady, rapids):
+    """Tracking error over the cutting moves is v/Kp at the cutting feeds; the rapids (~4 mm behind) are not scored."""
+    file = tmp_path / name
+    file.write_text(program)
+    out = tmp_path / "out"
+    assert main(["simulate", str(file), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    stem = file.stem
+    row = next(line for line in printed.splitlines() if line.startswith(f"{stem} "))
+    assert float(row.split()[1]) == pytest.approx(1e3 * tracking_um, rel=1e-3)
+    assert "G-code: Fanuc/LinuxCNC/GRBL mill dialect" in printed and "the rapids (G0, rapid = 1) are not scored" in printed
+    # every block in NAME_blocks.csv (listed in the marker), cutting blocks first, worst contour error first
+    assert f"{stem}_blocks.csv" in (out / ".contoursim-out").read_text().splitlines()
+    blocks = _blocks_csv(out / f"{stem}_blocks.csv")
+    cutting = [b for b in blocks if b["rapid"] == "0"]
+    assert [b["rapid"] for b in blocks] == sorted(b["rapid"] for b in blocks)
+    contour = [float(b["contour_max_um"]) for b in cutting]
+    assert contour == sorted(contour, reverse=True)
+    texts = [line.strip() for line in program.splitlines()]
+    for b in blocks:
+        assert texts[int(b["line"]) - 1] == b["block"]
+    by_text = {b["block"]: b for b in cutting}
+    for text, expected in steady.items():  # long moves at one feed along one axis reach v/Kp
+        assert float(by_text[text]["tracking_max_um"]) == pytest.approx(1e3 * expected, rel=1e-3)
+    assert max(float(b["tracking_max_um"]) for b in cutting) == pytest.approx(1e3 * tracking_um, rel=1e-3)
+    rapid = [float(b["tracking_max_um"]) for b in blocks if b["rapid"] == "1"]
+    assert (max(rapid, default=0.0) > 2000) == rapids  # 10,000 mm/min: ~4 mm behind, where nothing cuts
+    # the table's first block row is the CSV's first
+    head = printed.split(f"every block in {stem}_blocks.csv)\n")[1].splitlines()
+    assert head[1].split()[0] == cutting[0]["line"] and head[1].endswith(cutting[0]["block"])
+    # the trace marks the rapids: the summary is over measuring = 1, never on a rapid
+    lines = [line for line in (out / f"{stem}.csv").read_text().splitlines() if not line.startswith("#")]
+    data = np.genfromtxt(lines, delimiter=",", names=True)
+    assert data["rapid"].any() == rapids and not (data["rapid"].astype(bool) & data["measuring"].astype(bool)).any()
+    tracking = np.hypot(np.hypot(data["x"] - data["x_ref"], data["y"] - data["y_ref"]), data["z"] - data["z_ref"])
+    assert tracking[data["measuring"] == 1].max() == pytest.approx(tracking_um, abs=2e-6)
+    assert tracking[data["rapid"] == 1].max(initial=0.0) > 2.0 if rapids else tracking.max() < 1.0
+
+
+def test_compare_runs_a_job_with_geometric_compensation(tmp_path, capsys):
+    """The README's own job (examples/iso_circle_on_mill.toml): its geometric compensation is one more strategy."""
+    import json
+
+    report = tmp_path / "r.json"
+    job = ROOT / "examples" / "iso_circle_on_mill.toml"
+    assert main(["compare", str(job), "--strategies", "none,feedforward", "--json", str(report),
+                 "--out", str(tmp_path / "out")]) == 0
+    runs = json.loads(report.read_text())["runs"]
+    assert list(runs) == ["none", "feedforward", "geometric"]
+    assert runs["geometric"]["contour_max_um"] < runs["none"]["contour_max_um"]
+    # a strategy that composes it already: not added twice
+    assert main(["compare", str(job), "--strategies", "none,geometric+feedforward", "--json", str(report),
+                 "--out", str(tmp_path / "out")]) == 0
+    assert list(json.loads(report.read_text())["runs"]) == ["none", "geometric+feedforward"]

@@ -95,6 +95,27 @@ def test_per_block_feeds():
     assert traj.speed[second].max() <= 10.0 + 1e-9 and traj.speed.max() == pytest.approx(20.0)
 
 
+def test_a_rapid_ends_at_rest_and_waits_in_position():
+    # a 10 mm rapid at 100 mm/s straight into a 10 mm cut at 10 mm/s (a = 1000): no corner, but the motion stops
+    # at the rapid's end: a triangle 2 sqrt(L/a) = 0.2 s; then 0.01 s ramps over 0.05 mm and 9.9 mm at 10 mm/s
+    path = paths.Path((paths.Line((0, 0, 0), (10, 0, 0), "rapid"), paths.Line((10, 0, 0), (20, 0, 0))))
+    moves = 0.2 + 0.01 + 9.9 / 10 + 0.01
+    assert plan(path, [100.0, 10.0], 1000.0).duration == pytest.approx(moves, rel=1e-12)
+    profile = plan(path, [100.0, 10.0], 1000.0, in_position=0.05)
+    assert profile.duration == pytest.approx(moves + 0.05, rel=1e-12)
+    s, v, _ = profile.evaluate(np.array([0.2, 0.22, 0.249]))
+    assert s.tolist() == [10.0, 10.0, 10.0] and v.tolist() == [0.0, 0.0, 0.0]  # waiting at the rapid's end
+    # the samples of the wait belong to the rapid (not scored); the cut's are the test proper
+    traj = sample(path, profile, 1e-3)
+    waiting = (traj.t > 0.2 + 1e-9) & (traj.t < 0.25 - 1e-9)
+    assert traj.rapid[waiting].all() and not traj.measuring[waiting].any()
+    np.testing.assert_array_equal(traj.measuring, ~traj.rapid)
+    apart = np.abs(traj.t - 0.25) > 1e-9  # the sample where the cut starts from rest may be either
+    np.testing.assert_array_equal(traj.rapid[apart], traj.t[apart] < 0.25)
+    with pytest.raises(ValueError, match="in_position"):
+        plan(path, [100.0, 10.0], 1000.0, in_position=-1.0)
+
+
 def test_centripetal_limit():
     path = paths.circle((0, 0), 50.0)
     traj = sample(path, plan(path, 100.0, 1000.0, centripetal_accel=50.0), 1e-3)

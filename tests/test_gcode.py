@@ -1,10 +1,13 @@
 """G-code reader: geometry of the moves worked out by hand, errors naming file and line."""
 
+import io
+
 import numpy as np
 import pytest
 
 from contoursim.exceptions import ConfigError, ContoursimWarning
-from contoursim.gcode import read_gcode
+from contoursim.gcode import block_errors, read_gcode
+from contoursim.pathfile import load_path_file, read_path_file
 
 POCKET = """%
 (a closed contour: lines, I/J arc, R arc, incremental arc)
@@ -80,9 +83,14 @@ def test_arc_centre_is_moved_onto_the_bisector():
     ("G1 X1 F100\nG7\n", 2, "unknown word G7"),
     ("G1 X1 F100\nG41 D1 X2\n", 2, "cutter radius compensation \\(G41\\) is not supported"),
     ("G1 X1 F100\nG95 X2 F0.1\n", 2, "feed per revolution"),
+    ("G90.1\nG1 X1 F100\n", 1, "absolute arc centres \\(G90.1\\) are not supported"),
     ("G1 X1 F100\nM98 P1000\n", 2, "subprogram calls \\(M98\\)"),
     ("G1 X1 F100\nG1 X2 P3\n", 2, "P belongs to a dwell"),
-    ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 2, "G28/G30/G53\\) between feed moves is not supported \\(next feed move on line 3"),
+    ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 3, "from a machine position is not supported: line 2 \\(G28/G30/G53\\) took Z there; "
+                                         "position Z with G0 first"),
+    ("G1 X1 F100\nG28\nG0 X0 Y0\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # G28 alone: all axes
+    ("G1 X1 F100\nG28 G91 Z0\nG0 Z-5\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # still unknown
+    ("G1 X1 F100\nG53 G0 Z0\nG1 X2\n", 3, "line 2 \\(G28/G30/G53\\) took Z there"),
     ("G0 X10 Y0\nG2 X20 Y0 F100\n", 2, "the arc centre is missing: give I/J \\(relative to the arc's start\\) or R"),
     ("G18 G0 X10 Y0\nG2 X20 Y0 J5 F100\n", 2, "the arc centre is missing: give I/K"),
     ("G0 X1\n\nG1 X2\n", 3, "missing F before the first feed move"),
@@ -91,6 +99,8 @@ def test_arc_centre_is_moved_onto_the_bisector():
     ("G1 X1 F100\nG1 X2 X3\n", 2, "appears twice"),
     ("X1\n", 1, "needs a motion mode"),
     ("G1 X1 F100 (open comment\n", 1, "unbalanced parenthesis"),
+    ("G1 X1 F100\n(open ; comment\n", 2, "unbalanced parenthesis"),  # the ; is inside the open comment
+    ("G1 X1 F100 (nested (comment) here)\n", 1, "unbalanced parenthesis"),
     ("G0 X1\nG0 X2\n", None, "no feed move"),
 ])
 def test_errors_name_the_line(text, line, message):
@@ -153,3 +163,90 @@ def test_latin1_comment_and_byte_order_mark_are_read(tmp_path):
     with pytest.raises(ConfigError, match=f"{tmp_path / 'l1.nc'}, line 3: cannot read 'Gü'"):
         (tmp_path / "l1.nc").write_bytes("G0 X0 Y0\nG1 X10 F600\nGü\n".encode("latin-1"))
         read_gcode(tmp_path / "l1.nc")
+
+
+def test_a_semicolon_inside_a_parenthesis_comment_belongs_to_the_comment():
+    """Fusion 360 and OpenBuilds posts write ``(T1 D=6. CR=0. - ZMIN=-5. - flat end mill ; note)``."""
+    program = read_gcode("(T1 D=6. CR=0. - ZMIN=-5. - flat end mill ; climb)\n"
+                         "G0 X0 Y0 (rapid ; to start) G90\n"
+                         "G1 X10 F600 ; a ; comment may hold ( or ) too\n")
+    np.testing.assert_allclose(program.path.end, [10, 0, 0])
+    assert program.texts == ("G1 X10 F600 ; a ; comment may hold ( or ) too",)
+
+
+def test_a_tool_change_between_cuts_is_positioning_with_rapids():
+    # G28 G91 Z0 takes Z to a machine position; the G0 moves after it are rapids from where the tool was,
+    # and the G0 with Z (G43 Z5 H2, zero length here) brings Z back into work coordinates
+    with pytest.warns(ContoursimWarning, match="ignored"):
+        program = read_gcode("G0 X0 Y0 Z5\nG1 Z-1 F100\nG1 X10\nG0 Z5\nG28 G91 Z0\nG90\nT2 M6\nG0 X20 Y0\n"
+                             "G43 Z5 H2\nG1 Z-1 F200\nG0 Z5\nG28 G91 Z0\nM30\n")
+    assert program.path.roles == ("path", "path", "rapid", "rapid", "path")
+    assert program.lines.tolist() == [2, 3, 4, 8, 10]
+    assert program.texts[3:] == ("G0 X20 Y0", "G1 Z-1 F200")
+    np.testing.assert_allclose([p.end for p in program.path.primitives][2:],
+                               [[10, 0, 5], [20, 0, 5], [20, 0, -1]])
+
+
+def test_mach3_arc_centre_mode_is_the_one_assumed():
+    np.testing.assert_allclose(read_gcode("G91.1 G90 G0 X10 Y0\nG3 X0 Y10 I-10 J0 F100\n").path.primitives[0].center,
+                               [0, 0, 0], atol=1e-12)
+
+
+def test_linuxcnc_path_tolerance_is_accepted():
+    with pytest.warns(ContoursimWarning, match="ignored"):
+        assert read_gcode("G64 P0.01\nG0 X0 Y0\nG1 X1 F100\n").ignored == ("G64",)
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".EIA"])
+def test_the_usual_gcode_file_names_are_read_as_gcode(tmp_path, suffix):
+    file = tmp_path / f"part{suffix}"
+    file.write_text("G0 X0 Y0\nG1 X10 F600\n")
+    read = read_path_file(file)
+    assert read.program.source == str(file) and read.feed.feed == (10.0,)
+    np.testing.assert_allclose(load_path_file(file)[0].end, [10, 0, 0])
+
+
+def test_another_file_type_is_refused_with_the_types_read(tmp_path):
+    (tmp_path / "part.txt").write_text("G0 X0 Y0\nG1 X10 F600\n")
+    with pytest.raises(ConfigError, match=r"part.txt: unknown path file type '.txt': use .toml, or G-code .nc .ngc "
+                                          r".gcode .tap .cnc .mpf .iso .eia"):
+        read_path_file(tmp_path / "part.txt")
+
+
+def test_block_errors_are_each_blocks_worst_samples_worst_block_first():
+    from contoursim.feed import FeedSettings, sample
+    from contoursim.machine import load_machine
+    from contoursim.simulation import simulate
+
+    # line 3 is 0.1 µm long, passed between two samples 2 µm apart: no sample, no figure, last of the cutting blocks
+    program = read_gcode("G0 X0 Y0\nG1 X9.9991 F600\nG1 X9.9992\nG1 X20\nG0 Y10\nG1 X0 F1200 (back ; faster)\n")
+    machine = load_machine("demo_mill")
+    settings = FeedSettings(tuple(program.feeds))
+    trajectory = sample(program.path, settings.plan(program.path, in_position=0.1), machine.servo_period)
+    result = simulate(machine, trajectory)
+    assert not (result.trajectory.primitive == 1).any()
+    errors = block_errors(program, result)
+    assert errors.line.tolist()[-2:] == [3, 5] and errors.rapid.tolist() == [False] * 4 + [True]
+    assert np.isnan(errors.contour_max[3]) and np.isnan(errors.tracking_max[3])
+    assert errors.line[0] == 6 and errors.text[0] == "G1 X0 F1200 (back ; faster)"
+    np.testing.assert_array_equal(errors.feed * 60, [1200, 600, 600, 600, 10000])
+    # each block's figure is the largest over the samples whose reference lies on it (the stop at its end included)
+    on = np.searchsorted([0, 9.9991, 9.9992, 20, 30], result.trajectory.s, side="left")  # 1-based block of each sample
+    tracking = np.linalg.norm(result.tracking_error, axis=1)
+    keep = result.trajectory.measuring | result.trajectory.rapid
+    for line, block in ((2, 1), (4, 3), (5, 4), (6, 5)):
+        k = errors.line.tolist().index(line)
+        mine = keep & (on == block)
+        assert errors.tracking_max[k] == tracking[mine].max()
+        assert errors.contour_max[k] == result.contour.magnitude[mine].max()
+    assert 1e3 * np.nanmax(errors.tracking_max[~errors.rapid]) == pytest.approx(result.summary()["tracking_max_um"])
+    assert result.summary()["tracking_max_um"] == pytest.approx(1e3 * 20 / 40)  # F1200 along X: v/Kp
+    stream = io.StringIO()
+    errors.save_csv(stream)
+    rows = stream.getvalue().splitlines()
+    assert rows[0] == "line,rapid,feed_mm_min,contour_max_um,tracking_max_um,block"
+    assert rows[1].startswith("6,0,1200,") and rows[1].endswith(",G1 X0 F1200 (back ; faster)")
+    assert rows[4] == "3,0,600,,,G1 X9.9992" and rows[5].startswith("5,1,10000,")
+    table = errors.table(top=4).splitlines()
+    assert table[0].split() == ["line", "contour", "max", "tracking", "max", "block"] and len(table) == 5
+    assert table[1].split()[0] == "6" and table[4].split() == ["3", "-", "-", "G1", "X9.9992"]

@@ -276,6 +276,14 @@ def test_corner_angles_at_every_junction():
     np.testing.assert_allclose(joined.corner_angles(), [0.0, np.pi], atol=1e-9)
 
 
+def test_a_sample_at_rest_at_a_junction_belongs_to_the_primitive_ending_there():
+    path = paths.polyline([[0, 0], [10, 0], [10, 10]])
+    s = np.array([0.0, 5.0, 10.0, 10.0, 15.0, 20.0])
+    assert path.segment_index(s).tolist() == [0, 0, 1, 1, 1, 1]  # the later one at the junction
+    at_rest = np.array([True, False, True, False, False, True])
+    assert path.segment_index(s, at_rest=at_rest).tolist() == [0, 0, 0, 1, 1, 1]
+
+
 def test_building_and_evaluating_paths_compiles_one_signature():
     """Primitives are evaluated read-only, as a path holds them: building, a primitive and the path share one signature."""
     spline = paths.spline(np.array([[0.0, 0.0], [5.0, 2.0], [10.0, 0.0], [15.0, 3.0]]))
