@@ -26,7 +26,8 @@ from .output import output_dir
 DEMO_MACHINE = "demo_mill"
 DEMO_STRATEGIES = ("feedforward", "ccc_arc", "feedforward+ccc_arc")  # the demo's compact comparison, on its free-form run
 DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw.toml"), "butterfly": ("butterfly.toml",)}
-_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
+_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect", "ballbar")
+_DIRECTIONS = ("ccw", "cw")
 
 
 _COLUMNS = {"tracking max": "tracking_max_um", "tracking RMS": "tracking_rms_um", "contour max": "contour_max_um",
@@ -42,23 +43,27 @@ def _table(rows):
     return "\n".join(lines)
 
 
-def _trajectory(model, path_file, job=None):
-    """The path file's reference at the model's servo period; a job's ``[feed]`` overrides the file's key by key."""
+def _trajectory(model, path_file, job=None, direction=None):
+    """The path file's reference at the model's servo period; a job's ``[feed]`` overrides the file's key by key.
+
+    `direction` ("ccw" or "cw") replaces the path file's, for a circle, ISO 230-4 circle or helix.
+    """
     from .feed import sample
     from .model import as_model
     from .pathfile import load_path_file, read_feed_table
 
-    path, settings = load_path_file(path_file)
+    path, settings = load_path_file(path_file, direction)
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
     machine = as_model(model).machine
     return sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
 
 
-def run_job(model, path_file, job=None, strategies=(), label=None):
+def run_job(model, path_file, job=None, strategies=(), label=None, direction=None):
     """Simulate `model` (a Model, or a Machine without effects) on a path file.
 
-    A job file's ``[feed]`` table, when given, overrides the path file's key by key.
+    A job file's ``[feed]`` table, when given, overrides the path file's key
+    by key; `direction` ("ccw" or "cw") replaces the path file's.
 
     Returns
     -------
@@ -70,7 +75,7 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     from .simulation import default_settle, simulate
 
     # held here as simulate would hold it, so that the reference before holding is freed before the run
-    trajectory = _trajectory(model, path_file, job).held(default_settle(as_model(model).machine))
+    trajectory = _trajectory(model, path_file, job, direction).held(default_settle(as_model(model).machine))
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
@@ -80,13 +85,15 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     return name, path_file, result
 
 
-def _write(out, groups, every):
+def _write(out, groups, every, nominal=None):
     """Write each run's trace CSV (every `every`-th sample) and the plots of each group of runs shown side by side.
 
     Parameters
     ----------
     groups : dict of str -> list of tuple
         Runs (from :func:`run_job`) that share plots, by the group's file stem.
+    nominal : dict of str -> SimResult, optional
+        The nominal run of each circular test, by run name: a difference-from-nominal polar plot too.
 
     Returns
     -------
@@ -100,7 +107,7 @@ def _write(out, groups, every):
         for run, path_file, result in runs:
             with out.write(f"{run}.csv") as stream:
                 result.save_csv(stream, metadata={"path": Path(path_file).name}, every=every)
-        save_figures({run: result for run, _, result in runs}, out, name)
+        save_figures({run: result for run, _, result in runs}, out, name, nominal)
     return out, [(run, result.summary()) for runs in groups.values() for run, _, result in runs]
 
 
@@ -133,8 +140,9 @@ def _job(args):
 
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
     presets/library entries or files relative to the job, and optionally a
-    ``[feed]`` table, ``work_offset``, ``geometric_compensation`` and
-    ``[[effect]]`` tables, added to the machine file's) or a bare path file, run
+    ``[feed]`` table, ``work_offset``, ``geometric_compensation``,
+    ``[[effect]]`` tables, added to the machine file's, and for ``simulate`` a
+    ``[ballbar]`` table, see :func:`_ballbar`) or a bare path file, run
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
@@ -157,6 +165,9 @@ def _job(args):
                 raise job.error(f"--machine {args.machine} is not used with a job file, which names its machine "
                                 f"({data['machine']!r}); drop one of them", "machine")
             near = lambda name: file.parent / name if (file.parent / name).exists() else name  # noqa: E731
+            if "ballbar" in data and args.command != "simulate":
+                raise job.error(f"[ballbar] is for contoursim simulate; {args.command} runs the path as the file gives it",
+                                "ballbar")
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
@@ -169,23 +180,78 @@ def _job(args):
     return load_model(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
+def _ballbar(job):
+    """The ``[ballbar]`` table of a job file: ``(directions, subtract_nominal)``, or None without one.
+
+    ``directions`` (default ``["ccw", "cw"]``) runs the path file's circle in
+    each sense, the runs overlaid in one polar plot; ``subtract_nominal =
+    true`` adds a difference-from-nominal polar plot: each run minus the same
+    run of the machine without any ``[[effect]]`` (the machine file's and the
+    job's), which takes the servo's own signature out and leaves the effects'.
+    """
+    if job is None or "ballbar" not in job.data:
+        return None
+    spec = job.table("ballbar", allowed=("directions", "subtract_nominal"))
+    directions = spec.get("directions", list(_DIRECTIONS))
+    if (not isinstance(directions, list) or not directions or any(d not in _DIRECTIONS for d in directions)
+            or len(set(directions)) != len(directions)):
+        raise job.error(f'directions must be a list of "ccw" and "cw", each at most once, got {directions!r}',
+                        "ballbar", "directions")
+    subtract = spec.get("subtract_nominal", False)
+    if not isinstance(subtract, bool):
+        raise job.error(f"subtract_nominal must be true or false, got {subtract!r}", "ballbar", "subtract_nominal")
+    return tuple(directions), subtract
+
+
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
+    import re
+
     from .geocomp import GeometricCompensation
+    from .model import Model
+    from .pathfile import load_path_file
 
     model, path_file, job, geometric = _job(args)
     machine = model.machine
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
-    runs = [run_job(model, path_file, job)]
-    if geometric or args.geometric_compensation:
-        runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
-                            label=f"{Path(path_file).stem}_geometric_comp"))
-    out, rows = _write(args.out, {Path(path_file).stem: runs}, args.every)
+    ballbar = _ballbar(job)
+    if ballbar is not None and load_path_file(path_file)[0].test_circle() is None:
+        raise job.error(f"[ballbar] needs a circular test: {Path(path_file).name} has no test circle (use a path of "
+                        'type = "iso230_4_circle")', "ballbar")
+    stem = Path(path_file).stem if ballbar is None else re.sub(r"_c?cw$", "", Path(path_file).stem)
+    directions, subtract = ballbar or ((None,), False)
+    runs, nominal = [], {}
+    for direction in directions:
+        name = stem if direction is None else f"{stem}_{direction}"
+        runs.append(run_job(model, path_file, job, label=name, direction=direction))
+        if geometric or args.geometric_compensation:
+            runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
+                                label=f"{name}_geometric_comp", direction=direction))
+        if subtract:
+            *_, base = run_job(Model(machine), path_file, job, label=f"{name}_nominal", direction=direction)
+            nominal.update((run, base) for run, *_ in runs if run.startswith(name))
+    out, rows = _write(args.out, {stem: runs}, args.every, nominal or None)
     effects = "; ".join(f"{e.label} ({_set_values(e)})" for e in model.effects) or "none"
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     print(_table(rows))
+    if ballbar is not None:
+        _print_ballbar(runs, nominal)
     print(f"\nplots and traces written to {out}/")
+
+
+def _print_ballbar(runs, nominal):
+    """Circularity of each run of a ballbar job [µm], and of its difference from the nominal run."""
+    from .plotting import circular_deviation, deviation_from_nominal
+
+    print()
+    for run, _, result in runs:
+        test = circular_deviation(result)
+        line = f"{run} ({test['direction']}): circularity {test['circularity']:.2f} µm, mean deviation " \
+               f"{test['deviation'].mean():.2f} µm"
+        if run in nominal:
+            line += f"; minus the nominal run: range {deviation_from_nominal(result, nominal[run])['circularity']:.2f} µm"
+        print(line)
 
 
 def _set_values(effect):

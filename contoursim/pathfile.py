@@ -89,7 +89,7 @@ def library_file(name):
     raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library ({', '.join(known)})")
 
 
-def load_path_file(file):
+def load_path_file(file, direction=None):
     """Read a path file, or an entry of the trajectories library by name.
 
     Parameters
@@ -98,6 +98,9 @@ def load_path_file(file):
         A ``.toml`` path file (keys in the README section "File format"), a ``.nc``
         G-code program (see :func:`contoursim.gcode.read_gcode`), or the name
         of either in the trajectories library (see :func:`library_file`).
+    direction : {"ccw", "cw"}, optional
+        Instead of the ``[path]`` table's ``direction``: the same circle,
+        ISO 230-4 circle or helix the other way round.
 
     Returns
     -------
@@ -108,9 +111,12 @@ def load_path_file(file):
     Raises
     ------
     ConfigError
-        Naming the file and line of an unknown or missing key or a bad value.
+        Naming the file and line of an unknown or missing key or a bad value,
+        or a `direction` for a path that has none.
     """
     file = library_file(file)
+    if direction is not None and file.suffix.lower() != ".toml":
+        raise ConfigError("only a circle, iso230_4_circle or helix path file can be run in another direction", source=str(file))
     if file.suffix.lower() == ".nc":
         program = read_gcode(file)
         return program.path, FeedSettings(tuple(program.feeds))
@@ -122,16 +128,21 @@ def load_path_file(file):
     for key in ("name", "description"):
         if not isinstance(top.get(key, ""), str):
             raise toml.error(f"{key} must be a string", key)
-    return _path(toml), read_feed_table(toml)
+    return _path(toml, direction), read_feed_table(toml)
 
 
-def _path(toml):
-    """The :class:`~contoursim.paths.Path` described by the ``[path]`` table."""
+def _path(toml, direction=None):
+    """The :class:`~contoursim.paths.Path` described by the ``[path]`` table (in `direction` when given)."""
     kind = toml.table("path", required=("type",))["type"]
     if not isinstance(kind, str) or kind not in _PATHS:
         raise toml.error(f"[path] type must be one of {', '.join(sorted(_PATHS))}, got {kind!r}", "path", "type")
     build, arguments, required = _PATHS[kind]
     spec = toml.table("path", allowed=("type", *arguments), required=required)
+    if direction is not None:
+        if "direction" not in arguments:
+            raise toml.error(f"a {kind} path has no direction: only a circle, iso230_4_circle or helix can be run "
+                             "the other way round", "path", "type")
+        spec = {**spec, "direction": direction}
     kwargs = {}
     for key, value in spec.items():
         if key == "type":
