@@ -449,8 +449,9 @@ def _polar_frame(ax, curves):
     The rings span the data's range in 2 to 6 round divisions (zero need not
     be among them: a radius loss of 50 µm does not hide a 2 µm ellipse); the
     blank centre keeps the shape of a circle. The ring labels sit on a white
-    ground on the ray where the data keeps farthest from them; the dashed
-    zero circle is drawn over the data when it is in range.
+    ground on the ray where the data keeps farthest from them, a ring the
+    data passes there unlabelled; the dashed zero circle is drawn over the
+    data when it is in range.
 
     Returns
     -------
@@ -470,15 +471,17 @@ def _polar_frame(ax, curves):
     ax.set_rorigin(lo - 0.75 * (hi - lo))
     ax.set_ylim(lo, hi)
     ax.set_yticks(rings)
-    # the ray (every 5°) where the data within ±6° keeps farthest from the labels
+    # the labels go on the ray (every 5°) where the data within ±6° keeps clear of most of them, then farthest;
+    # a ring the data passes there within 0.45 division goes unlabelled (the title gives the spacing)
     rays = np.radians(np.arange(0.0, 360.0, 5.0))
     near = np.abs((theta[None, :] - rays[:, None] + np.pi) % (2 * np.pi) - np.pi) < np.radians(6.0)
-    gap = np.abs(values[:, None] - rings[None, :]).min(axis=1)
-    clearance = np.where(near, gap[None, :], np.inf).min(axis=1)
-    ray = np.degrees(rays[np.argmax(clearance)])
-    ax.set_yticklabels([f"{v:g}" for v in rings], fontsize="small", color="0.3",
-                       bbox=dict(facecolor="white", edgecolor="none", alpha=0.85, pad=0.6))
-    ax.set_rlabel_position(ray)
+    gap = np.abs(values[:, None] - rings[None, :])  # (samples, rings)
+    clearance = np.array([gap[ray].min(axis=0) if ray.any() else np.full(len(rings), np.inf) for ray in near])
+    clear = clearance > 0.45 * division
+    best = int(np.argmax(clear.sum(axis=1) + np.minimum(clearance.min(axis=1), division) / (2 * division)))
+    ax.set_yticklabels([f"{v:g}" if shown else "" for v, shown in zip(rings, clear[best])],
+                       fontsize="small", color="0.3", bbox=dict(facecolor="white", edgecolor="none", alpha=0.85, pad=0.6))
+    ax.set_rlabel_position(np.degrees(rays[best]))
     ax.grid(True, color="0.85", lw=0.6)
     for spine in ax.spines.values():  # no solid circle that could be read as a reference
         spine.set_edgecolor("none")  # (the inner one is made visible again at each draw)

@@ -143,3 +143,45 @@ def test_a_200000_block_program_is_plotted_in_bounded_memory_with_its_worst_erro
     drawn = actual.get_xydata()
     assert np.nanmin(np.hypot(*(drawn - point).T)) < 2 * 100 / 1200  # within two cells of the 100 mm drawing
     assert f"max {1e3 * result.contour.magnitude[i]:.2f} µm" in ax.get_title()
+
+
+def test_diagnosis_plots_keep_zero_labels_legend_and_both_runs_visible():
+    """The polar residual: zero dashed over the data, no ring label where the data runs, the legend
+    below the rings, "before" a wide band under the thin "after" line; the other two figures too."""
+    from matplotlib.figure import Figure
+
+    from contoursim.diagnosis import Diagnosis, plot_magnified, plot_polar, plot_residuals
+    from contoursim.model import Model
+    from contoursim.traces import Trace
+
+    machine = load_machine("demo_mill")
+    t = np.arange(0.0, 10.0, 1e-3)
+    theta = 2 * np.pi * t / 5.0  # two turns
+    radial = np.column_stack([np.cos(theta), np.sin(theta)])
+    reference = 50.0 * radial
+    before = 1e-3 * (3.0 * np.cos(2 * theta) + 0.5)[:, None] * radial  # [mm] what the nominal model misses
+    after = 1e-3 * (0.2 * np.sin(3 * theta))[:, None] * radial  # [mm] what is left
+    trace = Trace(t, reference, reference + before, ("x", "y"))
+    diagnosis = Diagnosis(trace, Model(machine), False, np.array([0.05, 0.05]), (), reference, reference + before - after,
+                          np.ones(len(t), bool), Model(machine))
+    ax = plot_polar(diagnosis, Figure(figsize=(6.4, 7.4)).add_subplot(projection="polar"))
+    zero, band, line = ax.lines
+    assert zero.get_zorder() > line.get_zorder() and not np.any(zero.get_ydata())
+    assert band.get_linewidth() > 2 * line.get_linewidth() and band.get_alpha() < 1
+    ax.figure.canvas.draw()
+    legend, rings = ax.get_legend().get_window_extent(), ax.get_window_extent()
+    assert legend.y1 <= rings.y0 + 0.05 * rings.height  # below the rings, not over the data
+    ray = np.radians(ax.get_rlabel_position())
+    division = float(np.diff(ax.get_yticks())[0])
+    drawn = np.concatenate([np.column_stack([a.get_xdata(), a.get_ydata()]) for a in (band, line)])
+    near = drawn[np.abs((drawn[:, 0] - ray + np.pi) % (2 * np.pi) - np.pi) < np.radians(6.0), 1]
+    labelled = [tick for tick, label in zip(ax.get_yticks(), ax.get_yticklabels()) if label.get_text()]
+    assert len(labelled) >= 3
+    assert all(np.abs(near - tick).min() > 0.45 * division for tick in labelled)
+    fig = plot_residuals(diagnosis, Figure(figsize=(9.0, 6.0), layout="constrained"))
+    fig.canvas.draw()
+    legend = fig.axes[0].get_legend().get_window_extent()
+    assert legend.x0 >= fig.axes[0].get_window_extent().x1  # beside the axes
+    ax = plot_magnified(diagnosis, Figure(figsize=(7.0, 7.0), layout="constrained").add_subplot())
+    ax.figure.canvas.draw()
+    assert ax.get_legend().get_window_extent().y1 <= ax.get_window_extent().y0
