@@ -221,16 +221,15 @@ def simulate_command(args):
                         'type = "iso230_4_circle")', "ballbar")
     stem = Path(path_file).stem if ballbar is None else re.sub(r"_c?cw$", "", Path(path_file).stem)
     directions, subtract = ballbar or ((None,), False)
+    variants = [("", [])] + ([("_geometric_comp", [GeometricCompensation(machine.chain)])]
+                             if geometric or args.geometric_compensation else [])
     runs, nominal = [], {}
     for direction in directions:
-        name = stem if direction is None else f"{stem}_{direction}"
-        runs.append(run_job(model, path_file, job, label=name, direction=direction))
-        if geometric or args.geometric_compensation:
-            runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
-                                label=f"{name}_geometric_comp", direction=direction))
-        if subtract:
-            *_, base = run_job(Model(machine), path_file, job, label=f"{name}_nominal", direction=direction)
-            nominal.update((run, base) for run, *_ in runs if run.startswith(name))
+        for suffix, strategies in variants:
+            name = (stem if direction is None else f"{stem}_{direction}") + suffix
+            runs.append(run_job(model, path_file, job, strategies, label=name, direction=direction))
+            if subtract:  # the same run on the machine without effects
+                nominal[name] = run_job(Model(machine), path_file, job, strategies, direction=direction)[2]
     out, rows = _write(args.out, {stem: runs}, args.every, nominal or None)
     effects = "; ".join(f"{e.label} ({_set_values(e)})" for e in model.effects) or "none"
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")

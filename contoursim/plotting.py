@@ -559,6 +559,8 @@ def plot_polar_deviation(runs, ax=None, nominal=None):
     feeds = sorted({f"{60 * r.trajectory.feed:.4g}" for r in results})
     radii = sorted({f"{test['radius']:g}" for test in tests})
     names = ", ".join(n for n in runs if n) or "circular test"
+    if len(names) > 60:  # long: named in the legend
+        names = f"{len(runs)} runs"
     lines = [f"{names} on {first.machine.name or 'the machine'}"]
     if shared:
         lines.append(effects[0])
@@ -674,11 +676,13 @@ def save_figures(runs, out_dir, name, nominal=None):
     drawings += [(f"{run}_errors.png", (8.0, 7.8), errors_margins, lambda fig, r=r, run=run: plot_errors_over_time(r, fig, run))
                  for run, r in runs.items()]
     if all(r.trajectory.path is not None and r.trajectory.path.test_circle() is not None for r in results):
-        polar_margins = dict(left=0.08, right=0.92, top=0.84, bottom=0.17)
-        drawings.append((f"{name}_polar.png", (7.0, 8.2), polar_margins,
+        legend = 0.5 + 0.55 * len(runs)  # [in] below the rings: two or three lines a run
+        size = (7.0, 6.9 + legend)
+        polar_margins = dict(left=0.08, right=0.92, top=1 - 1.2 / size[1], bottom=legend / size[1])
+        drawings.append((f"{name}_polar.png", size, polar_margins,
                          lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"))))
         if nominal is not None:
-            drawings.append((f"{name}_polar_difference.png", (7.0, 8.4), polar_margins,
+            drawings.append((f"{name}_polar_difference.png", size, polar_margins,
                              lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"), nominal)))
     return _draw(drawings, out_dir)
 
