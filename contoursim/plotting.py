@@ -174,8 +174,8 @@ def _drawn_curve(points, step):
     of cells is drawn once, however often the curve passes between them (a
     program that retraces its path, back-and-forth passes), so the drawn data
     is bounded by the cells the curve covers, not by its length. Pairs are
-    told apart by a 64-bit hash of their cells (two pairs sharing one, about
-    one chance in 10^10 for a million pairs, would leave a step undrawn).
+    told apart by a 64-bit hash of their cells (two pairs sharing one, a
+    chance of 3e-8 among a million pairs, would leave a step undrawn).
 
     Parameters
     ----------
