@@ -1092,8 +1092,9 @@ def plot_magnified(diagnosis, ax=None):
     after = _after(diagnosis)
     if len(trace.axes) == 1:
         t = trace.t[keep]
-        runs = [(label, 1e3 * (trace.reference - y)[keep, 0]) for label, y in
-                (("measured", trace.actual), ("nominal model", diagnosis.simulated_before), (after, diagnosis.simulated_after))]
+        simulated = (("measured", trace.actual), ("nominal model", diagnosis.simulated_before),
+                     (after, diagnosis.simulated_after))
+        runs = [(label, 1e3 * (trace.reference - y)[keep, 0]) for label, y in simulated]
         drawn = envelope_indices(np.column_stack([y for _, y in runs]))
         styles = (dict(color="k", lw=0.7), _BEFORE, _AFTER)
         for (label, y), style in zip(runs, styles):
@@ -1104,7 +1105,8 @@ def plot_magnified(diagnosis, ax=None):
     else:
         ref = trace.reference[keep, :2]
         before = diagnosis.residual_before[keep, :2]
-        runs = (("before: nominal model", _BEFORE, before - before.mean(axis=0)), (after, _AFTER, diagnosis.residual_after[keep, :2]))
+        runs = (("before: nominal model", _BEFORE, before - before.mean(axis=0)),
+                (after, _AFTER, diagnosis.residual_after[keep, :2]))
         normals = [(label, style, path_normal(ref, r)) for label, style, r in runs]
         size = float(np.max(np.ptp(ref, axis=0)))
         k = magnification_for(size, max(float(np.percentile(np.abs(n), 99)) for *_, n in normals))

@@ -116,7 +116,8 @@ def load_path_file(file, direction=None):
     """
     file = library_file(file)
     if direction is not None and file.suffix.lower() != ".toml":
-        raise ConfigError("only a circle, iso230_4_circle or helix path file can be run in another direction", source=str(file))
+        raise ConfigError("only a circle, iso230_4_circle or helix path file can be run in another direction",
+                          source=str(file))
     if file.suffix.lower() == ".nc":
         program = read_gcode(file)
         return program.path, FeedSettings(tuple(program.feeds))

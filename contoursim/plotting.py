@@ -16,7 +16,8 @@ from ._blocks import BLOCK, blocks
 from .output import output_dir
 
 __all__ = [
-    "circular_deviation", "deviation_from_nominal", "envelope_indices", "fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation",
+    "circular_deviation", "deviation_from_nominal", "envelope_indices", "fit_circle_center", "magnification_for",
+    "plot_path_error", "plot_polar_deviation",
     "plot_errors_over_time", "save_figures", "plot_compared_paths", "plot_compared_contour_error",
     "plot_compared_figures", "save_comparison_figures",
 ]
@@ -244,7 +245,8 @@ def _effects_text(result):
     effects = []
     for e in getattr(result.model, "effects", ()):
         size = e.parameters[0]
-        effects.append(f"{e.label} {size.name} = {size.value:g}" if size.unit == "-" else f"{e.label} {size.value:g} {size.unit}")
+        value = f"{size.name} = {size.value:g}" if size.unit == "-" else f"{size.value:g} {size.unit}"
+        effects.append(f"{e.label} {value}")
     text = f"effects: {', '.join(effects)}" if effects else "no effects"
     strategies = [s.name for s in result.strategies]
     return text + (f"; compensation: {', '.join(strategies)}" if strategies else "")
@@ -322,7 +324,7 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    title = f"contour error ×{k:g}: max {largest:.2f} µm" if k > 1 else f"contour error at true scale: max {largest:.2f} µm"
+    title = f"contour error {f'×{k:g}' if k > 1 else 'at true scale'}: max {largest:.2f} µm"
     if _has_test(traj):
         title += " on the test proper"
     notes = []
@@ -340,7 +342,10 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
 
 
 def _loops_and_fans(result, k):
-    """Whether the ×k drawing loops (k·ε beyond the bend radius) and fans (an error near a sharp corner), block by block."""
+    """Whether the ×k drawing loops (k·ε beyond the bend radius) and fans (an error near a sharp corner).
+
+    Read a block of samples at a time.
+    """
     path, contour = result.trajectory.path, result.contour
     dim = result.trajectory.dim
     corners = path.breaks[1:-1][path.corner_angles() > 1e-6]  # arc length of sharp corners, increasing
@@ -352,7 +357,8 @@ def _loops_and_fans(result, k):
         loops = loops or bool(np.any(k * np.einsum("ij,ij->i", offset, bend[:, :dim]) > 1))
         if len(corners) and not fans:
             i = np.searchsorted(corners, s)  # the corners either side of each sample
-            nearest = np.minimum(np.abs(s - corners[np.maximum(i - 1, 0)]), np.abs(s - corners[np.minimum(i, len(corners) - 1)]))
+            before, after = corners[np.maximum(i - 1, 0)], corners[np.minimum(i, len(corners) - 1)]
+            nearest = np.minimum(np.abs(s - before), np.abs(s - after))
             fans = bool(np.any(nearest < 5 * error))
         if loops and fans:
             break
@@ -674,8 +680,8 @@ def save_figures(runs, out_dir, name, nominal=None):
     drawings = [(f"{run}_path.png", (6.4, 7.2), path_margins,
                  lambda fig, r=r, run=run: plot_path_error(r, fig.add_subplot(), k, name=run)) for run, r in runs.items()]
     errors_margins = dict(left=0.1, right=0.84, top=0.91, bottom=0.07, hspace=0.12)
-    drawings += [(f"{run}_errors.png", (8.0, 7.8), errors_margins, lambda fig, r=r, run=run: plot_errors_over_time(r, fig, run))
-                 for run, r in runs.items()]
+    drawings += [(f"{run}_errors.png", (8.0, 7.8), errors_margins,
+                  lambda fig, r=r, run=run: plot_errors_over_time(r, fig, run)) for run, r in runs.items()]
     if all(r.trajectory.path is not None and r.trajectory.path.test_circle() is not None for r in results):
         legend = 0.5 + 0.55 * len(runs)  # [in] below the rings: two or three lines a run
         size = (7.0, 6.9 + legend)
