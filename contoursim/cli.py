@@ -30,7 +30,8 @@ DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw
 TOP_BLOCKS = 5  # the G-code blocks simulate prints, worst first
 FILE_HELP = ("job .toml, path .toml or G-code (.nc .ngc .gcode .tap .cnc .mpf .iso .eia): a file, or a name in the "
              "trajectories library")
-_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect")
+_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect", "ballbar")
+_DIRECTIONS = ("ccw", "cw")
 
 
 _COLUMNS = {"tracking max": "tracking_max_um", "tracking RMS": "tracking_rms_um", "contour max": "contour_max_um",
@@ -46,19 +47,21 @@ def _table(rows):
     return "\n".join(lines)
 
 
-def _trajectory(model, path_file, job=None):
+def _trajectory(model, path_file, job=None, direction=None):
     """The path file's reference at the model's servo period, and its G-code program (None for a TOML path).
 
-    A job's ``[feed]`` overrides the file's key by key. The motion waits at the
-    end of each rapid (G0) for :func:`~contoursim.simulation.default_settle`
-    seconds, a controller's in-position check: a cut starts with the axes in position.
+    A job's ``[feed]`` overrides the file's key by key; `direction` ("ccw" or
+    "cw") replaces the path file's, for a circle, ISO 230-4 circle or helix.
+    The motion waits at the end of each rapid (G0) for
+    :func:`~contoursim.simulation.default_settle` seconds, a controller's
+    in-position check: a cut starts with the axes in position.
     """
     from .feed import sample
     from .model import as_model
     from .pathfile import read_feed_table, read_path_file
     from .simulation import default_settle
 
-    read = read_path_file(path_file)
+    read = read_path_file(path_file, direction)
     settings = read.feed if job is None or "feed" not in job.data else read_feed_table(job, base=read.feed)
     machine = as_model(model).machine
     # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
@@ -66,10 +69,11 @@ def _trajectory(model, path_file, job=None):
     return sample(read.path, profile, machine.servo_period), read.program
 
 
-def run_job(model, path_file, job=None, strategies=(), label=None):
+def run_job(model, path_file, job=None, strategies=(), label=None, direction=None):
     """Simulate `model` (a Model, or a Machine without effects) on a path file.
 
-    A job file's ``[feed]`` table, when given, overrides the path file's key by key.
+    A job file's ``[feed]`` table, when given, overrides the path file's key
+    by key; `direction` ("ccw" or "cw") replaces the path file's.
 
     Returns
     -------
@@ -81,7 +85,7 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     from .model import as_model
     from .simulation import default_settle, simulate
 
-    trajectory, program = _trajectory(model, path_file, job)
+    trajectory, program = _trajectory(model, path_file, job, direction)
     # held here as simulate would hold it, so that the reference before holding is freed before the run
     trajectory = trajectory.held(default_settle(as_model(model).machine))
     name = label or Path(path_file).stem
@@ -93,13 +97,15 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
     return name, path_file, result, program
 
 
-def _write(out, groups, every):
+def _write(out, groups, every, nominal=None):
     """Write each run's trace CSV (every `every`-th sample), its blocks CSV (G-code) and the plots of each group.
 
     Parameters
     ----------
     groups : dict of str -> list of tuple
         Runs (from :func:`run_job`) that share plots, shown side by side, by the group's file stem.
+    nominal : dict of str -> SimResult, optional
+        The nominal run of each circular test, by run name: a difference-from-nominal polar plot too.
 
     Returns
     -------
@@ -120,7 +126,7 @@ def _write(out, groups, every):
                 blocks[run] = block_errors(program, result)
                 with out.write(f"{run}_blocks.csv") as stream:
                     blocks[run].save_csv(stream)
-        save_figures({run: result for run, _, result, _ in runs}, out, name)
+        save_figures({run: result for run, _, result, _ in runs}, out, name, nominal)
     return out, [(run, result.summary()) for runs in groups.values() for run, _, result, _ in runs], blocks
 
 
@@ -153,8 +159,9 @@ def _job(args):
 
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
     presets/library entries or files relative to the job, and optionally a
-    ``[feed]`` table, ``work_offset``, ``geometric_compensation`` and
-    ``[[effect]]`` tables, added to the machine file's) or a bare path file, run
+    ``[feed]`` table, ``work_offset``, ``geometric_compensation``,
+    ``[[effect]]`` tables, added to the machine file's, and for ``simulate`` a
+    ``[ballbar]`` table, see :func:`_ballbar`) or a bare path file, run
     on ``--machine`` (default: the demo machine). A job file names its
     machine, so ``--machine`` with a job file is an error.
     """
@@ -177,6 +184,9 @@ def _job(args):
                 raise job.error(f"--machine {args.machine} is not used with a job file, which names its machine "
                                 f"({data['machine']!r}); drop one of them", "machine")
             near = lambda name: file.parent / name if (file.parent / name).exists() else name  # noqa: E731
+            if "ballbar" in data and args.command != "simulate":
+                raise job.error(f"[ballbar] is for contoursim simulate; {args.command} runs the path as the file gives it",
+                                "ballbar")
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
@@ -189,20 +199,58 @@ def _job(args):
     return load_model(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
+def _ballbar(job):
+    """The ``[ballbar]`` table of a job file: ``(directions, subtract_nominal)``, or None without one.
+
+    ``directions`` (default ``["ccw", "cw"]``) runs the path file's circle in
+    each sense, the runs overlaid in one polar plot; ``subtract_nominal =
+    true`` adds a difference-from-nominal polar plot: each run minus the same
+    run of the machine without any ``[[effect]]`` (the machine file's and the
+    job's), which takes the servo's own signature out and leaves the effects'.
+    """
+    if job is None or "ballbar" not in job.data:
+        return None
+    spec = job.table("ballbar", allowed=("directions", "subtract_nominal"))
+    directions = spec.get("directions", list(_DIRECTIONS))
+    if (not isinstance(directions, list) or not directions or any(d not in _DIRECTIONS for d in directions)
+            or len(set(directions)) != len(directions)):
+        raise job.error(f'directions must be a list of "ccw" and "cw", each at most once, got {directions!r}',
+                        "ballbar", "directions")
+    subtract = spec.get("subtract_nominal", False)
+    if not isinstance(subtract, bool):
+        raise job.error(f"subtract_nominal must be true or false, got {subtract!r}", "ballbar", "subtract_nominal")
+    return tuple(directions), subtract
+
+
 def simulate_command(args):
     """``contoursim simulate FILE``: see :func:`_job`. Nothing is written unless every run succeeds."""
+    import re
+
     from .gcode import DIALECT
     from .geocomp import GeometricCompensation
+    from .model import Model
+    from .pathfile import load_path_file
 
     model, path_file, job, geometric = _job(args)
     machine = model.machine
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
-    runs = [run_job(model, path_file, job)]
-    if geometric or args.geometric_compensation:
-        runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
-                            label=f"{Path(path_file).stem}_geometric_comp"))
-    out, rows, blocks = _write(args.out, {Path(path_file).stem: runs}, args.every)
+    ballbar = _ballbar(job)
+    if ballbar is not None and load_path_file(path_file)[0].test_circle() is None:
+        raise job.error(f"[ballbar] needs a circular test: {Path(path_file).name} has no test circle (use a path of "
+                        'type = "iso230_4_circle")', "ballbar")
+    stem = Path(path_file).stem if ballbar is None else re.sub(r"_c?cw$", "", Path(path_file).stem)
+    directions, subtract = ballbar or ((None,), False)
+    variants = [("", [])] + ([("_geometric_comp", [GeometricCompensation(machine.chain)])]
+                             if geometric or args.geometric_compensation else [])
+    runs, nominal = [], {}
+    for direction in directions:
+        for suffix, strategies in variants:
+            name = (stem if direction is None else f"{stem}_{direction}") + suffix
+            runs.append(run_job(model, path_file, job, strategies, label=name, direction=direction))
+            if subtract:  # the same run on the machine without effects
+                nominal[name] = run_job(Model(machine), path_file, job, strategies, direction=direction)[2]
+    out, rows, blocks = _write(args.out, {stem: runs}, args.every, nominal or None)
     effects = "; ".join(f"{e.label} ({_set_values(e)})" for e in model.effects) or "none"
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     if blocks:
@@ -214,7 +262,23 @@ def simulate_command(args):
         print(f"\n{run}: the worst cutting blocks, max over each [µm] ({min(TOP_BLOCKS, (~errors.rapid).sum())} of "
               f"{(~errors.rapid).sum()}; every block in {run}_blocks.csv)")
         print(errors.table(TOP_BLOCKS))
+    if ballbar is not None:
+        _print_ballbar(runs, nominal)
     print(f"\nplots and traces written to {out}/")
+
+
+def _print_ballbar(runs, nominal):
+    """Circularity of each run of a ballbar job [µm], and of its difference from the nominal run."""
+    from .plotting import circular_deviation, deviation_from_nominal
+
+    print()
+    for run, _, result, _ in runs:
+        test = circular_deviation(result)
+        line = f"{run} ({test['direction']}): circularity {test['circularity']:.2f} µm, mean deviation " \
+               f"{test['deviation'].mean():.2f} µm"
+        if run in nominal:
+            line += f"; minus the nominal run: range {deviation_from_nominal(result, nominal[run])['circularity']:.2f} µm"
+        print(line)
 
 
 def _set_values(effect):

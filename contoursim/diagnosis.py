@@ -1014,8 +1014,18 @@ def _after(diagnosis):
     return "after: " + (", ".join(e.label for e in diagnosis.effects) or "nominal refit only")
 
 
+# "before" a wide light band under the thin "after" line: where they agree, both stay visible
+_BEFORE = dict(color="C0", lw=2.6, alpha=0.45, solid_capstyle="butt")
+_AFTER = dict(color="C3", lw=0.8)
+
+
 def plot_residuals(diagnosis, fig=None):
     """Residual over time per axis before (nominal model) and after the diagnosis [µm], with the noise band.
+
+    "Before" is a wide light band under the thin "after" line, the noise
+    band's edges (±1σ) dashed over both; the legend sits beside the axes.
+    Lines are thinned to what the pixels show, each pixel column's extremes kept
+    (:func:`contoursim.plotting.envelope_indices`).
 
     Parameters
     ----------
@@ -1028,19 +1038,26 @@ def plot_residuals(diagnosis, fig=None):
     """
     import matplotlib.pyplot as plt
 
+    from .plotting import envelope_indices
+
     trace, keep = diagnosis.trace, diagnosis.scored
     d = len(trace.axes)
-    fig = fig or plt.figure(figsize=(8.0, 2.2 + 1.8 * d), layout="constrained")
+    fig = fig or plt.figure(figsize=(9.0, 2.2 + 1.8 * d), layout="constrained")
     axes = fig.subplots(d, 1, sharex=True, squeeze=False)[:, 0]
+    t = trace.t[keep]
     for i, (ax, axis) in enumerate(zip(axes, trace.axes)):
         before = diagnosis.residual_before[:, i]
-        ax.plot(trace.t[keep], 1e3 * (before - before[keep].mean())[keep], color="C0", lw=0.7,
-                label="before: nominal model (zero offset removed)")
-        ax.plot(trace.t[keep], 1e3 * diagnosis.residual_after[keep, i], color="C3", lw=0.7, label=_after(diagnosis))
-        ax.axhspan(-diagnosis.noise_um[i], diagnosis.noise_um[i], color="0.85", label="noise ±1σ")
+        before = 1e3 * (before - before[keep].mean())[keep]
+        after = 1e3 * diagnosis.residual_after[keep, i]
+        drawn = envelope_indices(np.column_stack([before, after]))
+        ax.plot(t[drawn], before[drawn], label="before: nominal model (zero offset removed)", **_BEFORE)
+        ax.plot(t[drawn], after[drawn], label=_after(diagnosis), **_AFTER)
+        for sign in (-1, 1):
+            ax.axhline(sign * diagnosis.noise_um[i], color="k", lw=0.7, ls="--", zorder=3,
+                       label="noise ±1σ" if sign > 0 else None)
         ax.set_ylabel(f"{axis}: measured − simulated [µm]")
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize="small", loc="upper right")
+    axes[0].legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     axes[0].set_title("Residual before and after the diagnosis")
     axes[-1].set_xlabel("t [s]")
     return fig
@@ -1054,6 +1071,8 @@ def plot_magnified(diagnosis, ax=None):
     ``reference + k·(r·n)·n``, for the nominal model (zero offset removed)
     and after the diagnosis. With one axis: the following error
     (reference − position) over time, measured and simulated both ways [µm].
+    "Before" is a wide light band under the thin "after" line; the legend
+    sits below the axes.
 
     Parameters
     ----------
@@ -1066,39 +1085,44 @@ def plot_magnified(diagnosis, ax=None):
     """
     import matplotlib.pyplot as plt
 
-    from .plotting import magnification_for
+    from .plotting import _drawn_curve, envelope_indices, magnification_for
 
     trace, keep = diagnosis.trace, diagnosis.scored
-    ax = ax or plt.figure(figsize=(7.0, 6.0), layout="constrained").add_subplot()
+    ax = ax or plt.figure(figsize=(7.0, 7.0), layout="constrained").add_subplot()
     after = _after(diagnosis)
     if len(trace.axes) == 1:
-        runs = (("measured", "k", trace.actual), ("nominal model", "C0", diagnosis.simulated_before),
-                (after, "C3", diagnosis.simulated_after))
-        for label, color, y in runs:
-            ax.plot(trace.t[keep], 1e3 * (trace.reference - y)[keep, 0], color=color, lw=0.7, label=label)
+        t = trace.t[keep]
+        simulated = (("measured", trace.actual), ("nominal model", diagnosis.simulated_before),
+                     (after, diagnosis.simulated_after))
+        runs = [(label, 1e3 * (trace.reference - y)[keep, 0]) for label, y in simulated]
+        drawn = envelope_indices(np.column_stack([y for _, y in runs]))
+        styles = (dict(color="k", lw=0.7), _BEFORE, _AFTER)
+        for (label, y), style in zip(runs, styles):
+            ax.plot(t[drawn], y[drawn], label=label, **style)
         ax.set_xlabel("t [s]")
         ax.set_ylabel(f"{trace.axes[0]}: following error [µm]")
         ax.set_title("Following error, measured and simulated")
     else:
         ref = trace.reference[keep, :2]
         before = diagnosis.residual_before[keep, :2]
-        runs = (("before: nominal model", "C0", before - before.mean(axis=0)), (after, "C3", diagnosis.residual_after[keep, :2]))
-        normals = [(label, color, path_normal(ref, r)) for label, color, r in runs]
+        runs = (("before: nominal model", _BEFORE, before - before.mean(axis=0)),
+                (after, _AFTER, diagnosis.residual_after[keep, :2]))
+        normals = [(label, style, path_normal(ref, r)) for label, style, r in runs]
         size = float(np.max(np.ptp(ref, axis=0)))
         k = magnification_for(size, max(float(np.percentile(np.abs(n), 99)) for *_, n in normals))
         tangent = np.gradient(ref, axis=0)
         tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
         unit = np.column_stack([-tangent[:, 1], tangent[:, 0]])
-        ax.plot(ref[:, 0], ref[:, 1], color="0.5", lw=0.8, ls="--", label="reference")
-        for label, color, normal in normals:
-            p = ref + k * normal[:, None] * unit
-            ax.plot(p[:, 0], p[:, 1], color=color, lw=0.8, label=label)
+        step = size / 1200  # cells of the drawing: about its pixels
+        ax.plot(*_drawn_curve(ref, step).T, color="0.6", lw=0.8, label="reference")
+        for label, style, normal in normals:
+            ax.plot(*_drawn_curve(ref + k * normal[:, None] * unit, step).T, label=label, **style)
         ax.set_aspect("equal")
         ax.set_xlabel(f"{trace.axes[0]} [mm]")
         ax.set_ylabel(f"{trace.axes[1]} [mm]")
         ax.set_title(f"Residual (measured − simulated) along the path normal, magnified ×{k:g}")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize="small")
+    ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, frameon=False)
     return ax
 
 
@@ -1107,8 +1131,12 @@ def plot_polar(diagnosis, ax=None):
 
     Drawn against the reference's angle over the samples whose reference
     has been on the test circle for five time constants of the slowest
-    closed-loop pole (not on a run-in arc), the zero on the dashed circle: the shape a ballbar
+    closed-loop pole (not on a run-in arc): the shape a ballbar
     technician reads, of what the nominal model misses and of what is left.
+    The rings follow the data (:func:`contoursim.plotting.plot_polar_deviation`
+    does the same), their labels on a white ground where the data keeps off
+    them; zero is the dashed circle, drawn over the data. "Before" is a
+    wide light band under the thin "after" line; the legend sits below.
 
     Parameters
     ----------
@@ -1122,12 +1150,13 @@ def plot_polar(diagnosis, ax=None):
     """
     import matplotlib.pyplot as plt
 
+    from .plotting import _polar_frame, envelope_indices
+
     trace, keep = diagnosis.trace, diagnosis.scored
     circle = _circle(trace.reference[keep])
     if circle is None:
         return None
     center, radius = circle
-    ax = ax or plt.figure(figsize=(6.4, 6.6), layout="constrained").add_subplot(projection="polar")
     rel = trace.reference[keep, :2] - center[:2]
     r = np.linalg.norm(rel, axis=1)
     on = np.abs(r - radius) < 1e-3 * radius
@@ -1136,22 +1165,18 @@ def plot_polar(diagnosis, ax=None):
     on[:lag] = False
     if not on.any():
         return None
+    ax = ax or plt.figure(figsize=(6.4, 7.4), layout="constrained").add_subplot(projection="polar")
     theta = np.arctan2(rel[on, 1], rel[on, 0])
     unit = rel[on] / r[on, None]
     before = diagnosis.residual_before[keep][on, :2]
     before = before - before.mean(axis=0)  # the instrument's zero, as the refit removes it
-    devs = [("before: nominal model", "C0", before), (_after(diagnosis), "C3", diagnosis.residual_after[keep][on, :2])]
-    devs = [(label, color, 1e3 * np.sum(d * unit, axis=1)) for label, color, d in devs]
-    span = max(max(float(np.abs(d).max()) for *_, d in devs), 1e-3)
-    for label, color, dev in devs:
-        ax.plot(theta, dev, color=color, lw=0.8, label=label)
-    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.6)
-    ax.set_rorigin(-2.5 * span)
-    ax.set_ylim(-1.2 * span, 1.2 * span)
-    ax.set_rlabel_position(67.5)
-    ax.set_title(f"Circle R = {radius:.4g} mm: radial residual, measured − simulated [µm]; dashed: zero",
-                 fontsize="medium")
-    ax.legend(fontsize="small", loc="lower left", bbox_to_anchor=(-0.1, -0.12))
+    devs = [1e3 * np.sum(d * unit, axis=1) for d in (before, diagnosis.residual_after[keep][on, :2])]
+    drawn = envelope_indices(np.column_stack(devs))
+    _polar_frame(ax, [(theta[drawn], dev[drawn]) for dev in devs])
+    for label, style, dev in zip(("before: nominal model", _after(diagnosis)), (_BEFORE, _AFTER), devs):
+        ax.plot(theta[drawn], dev[drawn], label=label, **style)
+    ax.set_title(f"Circle R = {radius:.4g} mm: radial residual, measured − simulated [µm]", fontsize="medium")
+    ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.06), frameon=False)
     return ax
 
 

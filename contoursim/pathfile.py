@@ -112,7 +112,7 @@ class PathFile:
     program: object = None
 
 
-def read_path_file(file):
+def read_path_file(file, direction=None):
     """Read a path file, or an entry of the trajectories library by name.
 
     Parameters
@@ -122,6 +122,9 @@ def read_path_file(file):
         G-code program (a suffix of :data:`contoursim.gcode.SUFFIXES`; see
         :func:`contoursim.gcode.read_gcode`), or the name of either in the
         trajectories library (see :func:`library_file`).
+    direction : {"ccw", "cw"}, optional
+        Instead of the ``[path]`` table's ``direction``: the same circle,
+        ISO 230-4 circle or helix the other way round.
 
     Returns
     -------
@@ -131,9 +134,12 @@ def read_path_file(file):
     ------
     ConfigError
         Naming the file and line of an unknown or missing key or a bad value,
-        or a file of another type.
+        a file of another type, or a `direction` for a path that has none.
     """
     file = library_file(file)
+    if direction is not None and file.suffix.lower() != ".toml":
+        raise ConfigError("only a circle, iso230_4_circle or helix path file can be run in another direction",
+                          source=str(file))
     if file.suffix.lower() in SUFFIXES:
         program = read_gcode(file)
         return PathFile(program.path, FeedSettings(tuple(program.feeds)), program)
@@ -146,15 +152,17 @@ def read_path_file(file):
     for key in ("name", "description"):
         if not isinstance(top.get(key, ""), str):
             raise toml.error(f"{key} must be a string", key)
-    return PathFile(_path(toml), read_feed_table(toml))
+    return PathFile(_path(toml, direction), read_feed_table(toml))
 
 
-def load_path_file(file):
+def load_path_file(file, direction=None):
     """The path and feed settings of a path file (:func:`read_path_file`).
 
     Parameters
     ----------
     file : str or os.PathLike
+        As for :func:`read_path_file`.
+    direction : {"ccw", "cw"}, optional
         As for :func:`read_path_file`.
 
     Returns
@@ -163,17 +171,22 @@ def load_path_file(file):
     feed : contoursim.feed.FeedSettings
         Feed rate(s) [mm/s], acceleration and jerk limits of the file.
     """
-    read = read_path_file(file)
+    read = read_path_file(file, direction)
     return read.path, read.feed
 
 
-def _path(toml):
-    """The :class:`~contoursim.paths.Path` described by the ``[path]`` table."""
+def _path(toml, direction=None):
+    """The :class:`~contoursim.paths.Path` described by the ``[path]`` table (in `direction` when given)."""
     kind = toml.table("path", required=("type",))["type"]
     if not isinstance(kind, str) or kind not in _PATHS:
         raise toml.error(f"[path] type must be one of {', '.join(sorted(_PATHS))}, got {kind!r}", "path", "type")
     build, arguments, required = _PATHS[kind]
     spec = toml.table("path", allowed=("type", *arguments), required=required)
+    if direction is not None:
+        if "direction" not in arguments:
+            raise toml.error(f"a {kind} path has no direction: only a circle, iso230_4_circle or helix can be run "
+                             "the other way round", "path", "type")
+        spec = {**spec, "direction": direction}
     kwargs = {}
     for key, value in spec.items():
         if key == "type":

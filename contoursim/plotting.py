@@ -16,7 +16,8 @@ from ._blocks import BLOCK, blocks
 from .output import output_dir
 
 __all__ = [
-    "circular_deviation", "envelope_indices", "fit_circle_center", "magnification_for", "plot_path_error", "plot_polar_deviation",
+    "circular_deviation", "deviation_from_nominal", "envelope_indices", "fit_circle_center", "magnification_for",
+    "plot_path_error", "plot_polar_deviation",
     "plot_errors_over_time", "save_figures", "plot_compared_paths", "plot_compared_contour_error",
     "plot_compared_figures", "save_comparison_figures",
 ]
@@ -162,7 +163,57 @@ def _thin_curve(points, step):
         cell /= step
         np.floor(cell, out=cell)
         first.append(part.start + 1 + np.flatnonzero(cell[1:] > cell[:-1]))
-    return np.union1d(np.concatenate(first), [n - 1])
+    first = np.concatenate(first)  # increasing
+    return first if first[-1] == n - 1 else np.append(first, n - 1)
+
+
+def _drawn_curve(points, step):
+    """The polyline that draws `points` on a grid of cells `step` wide: what a plot of them holds [same units].
+
+    The curve is thinned to about two points per `step` travelled
+    (:func:`_thin_curve`); of its steps from one cell to another, each pair
+    of cells is drawn once, however often the curve passes between them (a
+    program that retraces its path, back-and-forth passes), so the drawn data
+    is bounded by the cells the curve covers, not by its length. Pairs are
+    told apart by a 64-bit hash of their cells (two pairs sharing one, a
+    chance of 3e-8 among a million pairs, would leave a step undrawn).
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 2)
+        Points in drawing order (or an object of that length whose slices are
+        such arrays, :class:`_Rows`); read a block at a time.
+    step : float
+        Cell size: about a pixel or less.
+
+    Returns
+    -------
+    ndarray, shape (M, 2)
+        The pieces of the curve, in order, separated by rows of NaN.
+    """
+    keep = _thin_curve(points, step / 2)
+    seen = np.empty(0, np.uint64)  # the pairs of cells drawn so far, sorted
+    pieces, last = [], None  # last: the index of the previous block's last kept point
+    for part in blocks(len(keep)):
+        index = keep[part] if last is None else np.concatenate([[last], keep[part]])
+        xy = np.asarray(points[index], float)
+        cell = np.floor(xy / step).astype(np.int64)
+        cell = (cell[:, 0] << 32) ^ (cell[:, 1] & 0xFFFFFFFF)  # one id per cell
+        moved = np.flatnonzero(cell[1:] != cell[:-1])  # step m: from point moved[m] to the next one
+        a, b = np.minimum(cell[moved], cell[moved + 1]), np.maximum(cell[moved], cell[moved + 1])
+        with np.errstate(over="ignore"):
+            key = (a.view(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) ^ b.view(np.uint64)
+        _, first = np.unique(key, return_index=True)
+        new = np.zeros(len(key), bool)
+        new[first[~np.isin(key[first], seen, assume_unique=True)]] = True  # the first of its pair, never drawn before
+        seen = np.sort(np.concatenate([seen, key[new]]))
+        edges = np.diff(np.concatenate([[False], new, [False]]).astype(np.int8))
+        for lo, hi in zip(np.flatnonzero(edges > 0), np.flatnonzero(edges < 0)):  # runs of steps drawn: one piece each
+            pieces += [xy[moved[lo] : moved[hi - 1] + 2], np.full((1, 2), np.nan)]
+        last = index[-1]
+    if not pieces:  # the whole curve in one cell
+        return np.asarray(points[np.array([0, len(points) - 1])], float)
+    return np.concatenate(pieces[:-1])
 
 
 def _magnified(result, k):
@@ -189,15 +240,57 @@ def _shared_magnification(results):
     return magnification_for(size, max(float(r.contour.magnitude.max()) for r in results))
 
 
-def plot_path_error(result, ax=None, magnification=None):
+def _effects_text(result):
+    """The effects and compensation a run has switched on, e.g. ``effects: backlash.x 10 µm, squareness.xy 100 µrad``."""
+    effects = []
+    for e in getattr(result.model, "effects", ()):
+        size = e.parameters[0]
+        value = f"{size.name} = {size.value:g}" if size.unit == "-" else f"{size.value:g} {size.unit}"
+        effects.append(f"{e.label} {value}")
+    text = f"effects: {', '.join(effects)}" if effects else "no effects"
+    strategies = [s.name for s in result.strategies]
+    return text + (f"; compensation: {', '.join(strategies)}" if strategies else "")
+
+
+def _direction(result):
+    """``"CCW"`` or ``"CW"`` for a run on a path with a test circle, else ``None``."""
+    path = result.trajectory.path
+    circle = path.test_circle() if path is not None else None
+    return None if circle is None else "CCW" if circle.sweep > 0 else "CW"
+
+
+def _run_title(result, name=None):
+    """Two lines naming a run: ``name (CW) on machine``, then the effects and compensation switched on."""
+    direction = _direction(result)
+    head = (name or "run") + (f" ({direction})" if direction else "")
+    return f"{head} on {result.machine.name or 'the machine'}\n{_effects_text(result)}"
+
+
+def _worst(result):
+    """Index of the sample with the largest contour error on the test proper (read a block at a time)."""
+    magnitude, measuring = result.contour.magnitude, result.trajectory.measuring
+    best, at = -1.0, 0
+    for part in blocks(len(magnitude)):
+        shown = np.where(measuring[part], magnitude[part], -1.0)
+        i = int(np.argmax(shown))
+        if shown[i] > best:
+            best, at = float(shown[i]), part.start + i
+    return at
+
+
+def plot_path_error(result, ax=None, magnification=None, name=None):
     """Reference path and the actual path with its contour error magnified.
 
     The magnified path is ``foot + k·(actual − foot)``: each actual point is
     moved away from its nearest path point, along the path's normal, by `k`
     times its contour error. Where ``k·ε`` exceeds the path's local radius of
     curvature on the inside of a bend (tight lobes), the drawn curve loops:
-    the title says so, as such loops are not overshoot. The start is marked
-    and an arrow gives the direction of travel; a 3-D path is drawn in XY.
+    the title says so, as such loops are not overshoot. The start is marked,
+    an arrow gives the direction of travel and a triangle the largest contour
+    error of the test proper; a 3-D path is drawn in XY. The title names the
+    run, its direction on a circular test (CW or CCW), the machine and the
+    effects and compensation switched on. The lines hold what the pixels can
+    show (:func:`_drawn_curve`): a path retraced many times is drawn once.
 
     Parameters
     ----------
@@ -205,6 +298,8 @@ def plot_path_error(result, ax=None, magnification=None):
     ax : matplotlib.axes.Axes, optional
     magnification : float, optional
         Factor k [-], at least 1; chosen by :func:`magnification_for` when omitted.
+    name : str, optional
+        The run's name, for the title.
     """
     ax = _axes(ax)
     traj, contour = result.trajectory, result.contour
@@ -214,37 +309,60 @@ def plot_path_error(result, ax=None, magnification=None):
         _validate.positive("magnification", magnification)
     if k < 1:
         raise ValueError(f"magnification must be at least 1 (true scale), got {k:g}")
-    step = size / (2 * _COLUMNS)
+    step = size / _COLUMNS
     shown = _magnified(result, k)
-    ir, ia = _thin_curve(ref, step), _thin_curve(shown, step)
-    ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=1.0, label="reference")
+    ax.plot(*_drawn_curve(ref, step).T, color="0.6", lw=1.0, label="reference")
     label = f"actual, contour error ×{k:g} along the path normal" if k > 1 else "actual (true scale)"
-    ax.plot(*shown[ia].T, color="C3", lw=1.0, label=label)
+    ax.plot(*_drawn_curve(shown, step).T, color="C3", lw=1.0, label=label)
     ax.plot(*ref[0], "o", color="k", ms=5, label="start")
+    worst = _worst(result)
+    largest = 1e3 * contour.magnitude[worst]
+    ax.plot(*shown[[worst]].T, "v", color="k", ms=6, mfc="none", label=f"max {largest:.2f} µm")
     ahead = int(np.searchsorted(traj.s, traj.s[0] + 0.04 * size))
     if 0 < ahead < len(ref):
         ax.annotate("", xy=ref[ahead], xytext=ref[0], arrowprops=dict(arrowstyle="-|>", color="k", lw=1.0))
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    largest = 1e3 * contour.magnitude[traj.measuring].max()
-    title = f"Contour error ×{k:g}: max {largest:.2f} µm" if k > 1 else f"Contour error at true scale: max {largest:.2f} µm"
+    title = f"contour error {f'×{k:g}' if k > 1 else 'at true scale'}: max {largest:.2f} µm"
     if _has_test(traj):
         title += " on the test proper"
     notes = []
     if traj.dim == 3 and np.ptp(traj.position[:, 2]) > 0:
         notes.append("3-D path shown in XY (z not drawn)")
     if k > 1 and traj.path is not None:
-        _, _, bend = traj.path.derivatives(contour.s[ia])  # curvature vector, towards the centre of the bend
-        if np.any(k * np.einsum("ij,ij->i", result.tool_position[ia] - contour.foot[ia], bend[:, : traj.dim]) > 1):
+        loops, fans = _loops_and_fans(result, k)
+        if loops:
             notes.append(f"loops: ×{k:g} error exceeds the bend radius, not overshoot")
-        corners = traj.path.breaks[1:-1][traj.path.corner_angles() > 1e-6]  # arc length of sharp corners
-        near = np.abs(contour.s[ia, None] - corners[None, :]) < 5 * contour.magnitude[ia, None]
-        if near.any():  # the foot switches between the two sides' normals there
+        if fans:  # the foot switches between the two sides' normals there
             notes.append(f"near sharp corners the ×{k:g} offset turns between two normals: fans, not overshoot")
-    ax.set_title(title + "".join(f"\n{n}" for n in notes), fontsize="medium")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize="small", frameon=False)
+    ax.set_title("\n".join([_run_title(result, name), title, *notes]), fontsize="medium")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize="small", frameon=False)
     return ax
+
+
+def _loops_and_fans(result, k):
+    """Whether the ×k drawing loops (k·ε beyond the bend radius) and fans (an error near a sharp corner).
+
+    Read a block of samples at a time.
+    """
+    path, contour = result.trajectory.path, result.contour
+    dim = result.trajectory.dim
+    corners = path.breaks[1:-1][path.corner_angles() > 1e-6]  # arc length of sharp corners, increasing
+    loops = fans = False
+    for part in blocks(len(contour.s)):
+        s, error = contour.s[part], contour.magnitude[part]
+        _, _, bend = path.derivatives(s)  # curvature vector, towards the centre of the bend
+        offset = result.tool_position[part] - contour.foot[part]
+        loops = loops or bool(np.any(k * np.einsum("ij,ij->i", offset, bend[:, :dim]) > 1))
+        if len(corners) and not fans:
+            i = np.searchsorted(corners, s)  # the corners either side of each sample
+            before, after = corners[np.maximum(i - 1, 0)], corners[np.minimum(i, len(corners) - 1)]
+            nearest = np.minimum(np.abs(s - before), np.abs(s - after))
+            fans = bool(np.any(nearest < 5 * error))
+        if loops and fans:
+            break
+    return loops, fans
 
 
 def fit_circle_center(points):
@@ -297,16 +415,109 @@ def circular_deviation(result):
                 circularity=float(np.ptp(deviation)), radius=circle.radius, direction="CCW" if circle.sweep > 0 else "CW")
 
 
-def plot_polar_deviation(runs, ax=None):
-    """Ballbar polar plot of circular tests, runs overlaid (e.g. CW and CCW).
+def deviation_from_nominal(result, nominal):
+    """Ballbar evaluation of `result` minus that of the `nominal` run at the same angles.
+
+    Both runs are evaluated as by :func:`circular_deviation` (each about its
+    own least-squares centre); the nominal deviation is interpolated at the
+    run's angles. What the run has and the nominal run has not (an effect
+    switched on) is left; what both share (the servo's radius loss, a gain
+    mismatch between the axes) cancels.
+
+    Parameters
+    ----------
+    result, nominal : contoursim.simulation.SimResult
+        Runs on the same test circle in the same direction.
+
+    Returns
+    -------
+    dict
+        As :func:`circular_deviation`: ``theta`` [rad], ``deviation`` [µm]
+        (the difference), ``offset`` (the difference of the centres) [µm],
+        ``circularity`` (range of the difference) [µm], ``radius`` [mm],
+        ``direction``.
+
+    Raises
+    ------
+    ValueError
+        The runs are circular tests in different directions.
+    """
+    run, base = circular_deviation(result), circular_deviation(nominal)
+    if run["direction"] != base["direction"]:
+        raise ValueError(f"a {run['direction']} run cannot be compared with a {base['direction']} nominal run")
+    order = np.argsort(base["theta"])
+    deviation = run["deviation"] - np.interp(run["theta"], base["theta"][order], base["deviation"][order], period=2 * np.pi)
+    return dict(run, deviation=deviation, offset=run["offset"] - base["offset"], circularity=float(np.ptp(deviation)))
+
+
+def _polar_frame(ax, curves):
+    """Rings that follow the data of `curves` (``(theta [rad], values [µm])``) on a polar `ax`.
+
+    The rings span the data's range in 2 to 6 round divisions (zero need not
+    be among them: a radius loss of 50 µm does not hide a 2 µm ellipse); the
+    blank centre keeps the shape of a circle. The ring labels sit on a white
+    ground on the ray where the data keeps farthest from them, a ring the
+    data passes there unlabelled; the dashed zero circle is drawn over the
+    data when it is in range.
+
+    Returns
+    -------
+    division : float
+        Ring spacing [µm].
+    zero : bool
+        Whether the zero circle is in range (and drawn).
+    """
+    values = np.concatenate([v for _, v in curves])
+    theta = np.concatenate([t for t, _ in curves])
+    lo, hi = float(values.min()), float(values.max())
+    division = _round_125(max(hi - lo, 1e-3) / 5)
+    lo, hi = np.floor(lo / division) * division, np.ceil(hi / division) * division
+    if hi - lo < 2 * division:
+        lo, hi = lo - division, hi + division
+    rings = division * np.arange(round(lo / division), round(hi / division) + 1)
+    ax.set_rorigin(lo - 0.75 * (hi - lo))
+    ax.set_ylim(lo, hi)
+    ax.set_yticks(rings)
+    # the labels go on the ray (every 5°) where the data within ±6° keeps clear of most of them, then farthest;
+    # a ring the data passes there within 0.45 division goes unlabelled (the title gives the spacing)
+    rays = np.radians(np.arange(0.0, 360.0, 5.0))
+    near = np.abs((theta[None, :] - rays[:, None] + np.pi) % (2 * np.pi) - np.pi) < np.radians(6.0)
+    gap = np.abs(values[:, None] - rings[None, :])  # (samples, rings)
+    clearance = np.array([gap[ray].min(axis=0) if ray.any() else np.full(len(rings), np.inf) for ray in near])
+    clear = clearance > 0.45 * division
+    best = int(np.argmax(clear.sum(axis=1) + np.minimum(clearance.min(axis=1), division) / (2 * division)))
+    ax.set_yticklabels([f"{v:g}" if shown else "" for v, shown in zip(rings, clear[best])],
+                       fontsize="small", color="0.3", bbox=dict(facecolor="white", edgecolor="none", alpha=0.85, pad=0.6))
+    ax.set_rlabel_position(np.degrees(rays[best]))
+    ax.grid(True, color="0.85", lw=0.6)
+    for spine in ax.spines.values():  # no solid circle that could be read as a reference
+        spine.set_edgecolor("none")  # (the inner one is made visible again at each draw)
+    zero = bool(lo <= 0.0 <= hi)
+    if zero:
+        ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.8, zorder=4, label="zero")
+    return division, zero
+
+
+def plot_polar_deviation(runs, ax=None, nominal=None):
+    """Ballbar polar plot of circular tests, runs overlaid (e.g. CW and CCW), or their difference from nominal runs.
 
     Each run is evaluated over its test proper (``trajectory.measuring``: the
     data-collection circle of an ISO 230-4 test, without run-in, overruns and
     run-out) as a ballbar's software does: the least-squares centre of the
     measured points is removed (offset in the legend) and the radial axis is
-    the deviation |p − c| − R [µm], zero on the dashed nominal circle. The
-    circularity is the range of that deviation (max − min). The rings are a
-    round number of µm apart, given in the title.
+    the deviation |p − c| − R [µm]. The circularity is the range of that
+    deviation (max − min). The rings follow the data: a round number of µm
+    apart (in the title) from its smallest to its largest value, so that a
+    radius loss of the servo does not squeeze a 10 µm backlash step or a
+    5 µm squareness ellipse into a fraction of a ring; the mean deviation is
+    in the legend, and zero (the nominal radius) is the dashed circle when
+    in range. The title names the runs, the machine and the effects and
+    compensation switched on.
+
+    With `nominal`, each run is drawn minus the nominal run of the same name
+    (:func:`deviation_from_nominal`): a "difference from nominal" view, in
+    which the servo's own signature (radius loss, gain mismatch) cancels and
+    what the run adds (squareness, backlash) is left.
 
     Parameters
     ----------
@@ -315,64 +526,80 @@ def plot_polar_deviation(runs, ax=None):
         (:meth:`contoursim.paths.Path.test_circle`). Runs of different
         directions are labelled by direction, others by name too.
     ax : matplotlib.axes.Axes with polar projection, optional
+    nominal : SimResult or dict of str -> SimResult, optional
+        The nominal run of each run (by the same name): the same path on the
+        machine without the effects.
 
     Raises
     ------
     ValueError
-        A run's path has no test circle.
+        A run's path has no test circle, a run has no nominal run, or a
+        nominal run goes the other way round.
     """
     runs = dict(runs) if isinstance(runs, dict) else {"": runs}
+    if nominal is not None:
+        nominal = dict(nominal) if isinstance(nominal, dict) else {"": nominal}
+        missing = [name for name in runs if name not in nominal]
+        if missing:
+            raise ValueError(f"no nominal run for {missing[0]!r}")
     results = list(runs.values())
-    for r in results:
+    for r in results + list((nominal or {}).values()):
         if r.trajectory.path is None or r.trajectory.path.test_circle() is None:
             raise ValueError("a polar plot needs runs on a path with a full test circle (role 'test')")
     ax = _axes(ax, projection="polar")
-    tests = [circular_deviation(r) for r in results]
-    span = max(max(float(np.abs(test["deviation"]).max()) for test in tests), 1e-3)
-    division = _round_125(span / 2)  # two rings each side of zero hold every deviation
-    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "k--", lw=0.8, label="nominal radius")
+    tests = [circular_deviation(r) if nominal is None else deviation_from_nominal(r, nominal[name])
+             for name, r in runs.items()]
+    keeps = [envelope_indices(test["deviation"]) for test in tests]
+    division, zero = _polar_frame(ax, [(test["theta"][keep], test["deviation"][keep]) for test, keep in zip(tests, keeps)])
     directions = [test["direction"] for test in tests]
     by_direction = len(set(directions)) == len(tests)
-    for i, (name, test) in enumerate(zip(runs, tests)):
-        keep = envelope_indices(test["deviation"])
+    effects = [_effects_text(r) for r in results]
+    shared = len(set(effects)) == 1
+    for i, (name, test, keep) in enumerate(zip(runs, tests, keeps)):
         label = test["direction"] if by_direction else f"{name} ({test['direction']})"
+        what = "circularity" if nominal is None else "range"
         ax.plot(test["theta"][keep], test["deviation"][keep], color=_RUN_COLOURS[i % len(_RUN_COLOURS)], lw=1.0,
-                label=f"{label}: circularity {test['circularity']:.2f} µm\n"
-                      f"centre offset ({_num(test['offset'][0])}, {_num(test['offset'][1])}) µm removed")
-    ax.set_rorigin(-5 * division)
-    ax.set_ylim(-2 * division, 2 * division)
-    ax.set_yticks(division * np.arange(-2, 3))
-    ax.set_yticklabels([f"{v:g}" for v in division * np.arange(-2, 3)], fontsize="small", color="0.4")
-    ax.set_rlabel_position(67.5)
-    ax.grid(True, color="0.85", lw=0.6)
-    for spine in ax.spines.values():  # no solid circle that could be read as a reference
-        spine.set_edgecolor("none")  # (the inner one is made visible again at each draw)
+                label=f"{label}: {what} {test['circularity']:.2f} µm, mean {_num(test['deviation'].mean())} µm"
+                      + ("" if shared else f"\n{effects[i]}")
+                      + f"\ncentre offset ({_num(test['offset'][0])}, {_num(test['offset'][1])}) µm removed")
     first = results[0]
     feeds = sorted({f"{60 * r.trajectory.feed:.4g}" for r in results})
     radii = sorted({f"{test['radius']:g}" for test in tests})
-    ax.set_title(
-        f"{first.machine.name or 'machine'}: circular test R = {', '.join(radii)} mm, F = {', '.join(feeds)} mm/min\n"
-        f"{' and '.join(dict.fromkeys(directions))}; radial deviation, {division:g} µm/div",
-        fontsize="medium",
-    )
+    names = ", ".join(n for n in runs if n) or "circular test"
+    if len(names) > 60:  # long: named in the legend
+        names = f"{len(runs)} runs"
+    lines = [f"{names} on {first.machine.name or 'the machine'}"]
+    if shared:
+        lines.append(effects[0])
+    if nominal is not None:
+        base = list(nominal.values())[0]
+        lines.append(f"minus the nominal run: {base.machine.name or 'the machine'}, {_effects_text(base)}")
+    lines.append(f"R = {', '.join(radii)} mm, F = {', '.join(feeds)} mm/min, {' and '.join(dict.fromkeys(directions))}: "
+                 f"{'radial deviation' if nominal is None else 'difference'} [µm], {division:g} µm/div"
+                 + ("" if zero else ", zero off the scale"))
+    ax.set_title("\n".join(lines), fontsize="medium")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.04), fontsize="small", frameon=False)
     return ax
 
 
-def plot_errors_over_time(result, fig=None):
+def plot_errors_over_time(result, fig=None, name=None):
     """Signed contour error, per-axis following error and motor current over time.
 
     What a servo-tuning tool shows, on linear axes: the signed in-plane
     contour error [µm] (positive to the left of travel; for a 3-D path also
     the part out of the path's plane), each servo axis's
     following error (command − actual position) [µm] and motor current
-    command [A]. The test proper is shaded.
+    command [A]. The test proper is shaded. The title names the run (its
+    direction on a circular test), the machine and the effects and
+    compensation switched on.
 
     Parameters
     ----------
     result : contoursim.simulation.SimResult
     fig : matplotlib.figure.Figure, optional
         Where to draw three stacked axes; a new figure when omitted.
+    name : str, optional
+        The run's name, for the title.
 
     Returns
     -------
@@ -409,18 +636,20 @@ def plot_errors_over_time(result, fig=None):
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
-    axes[0].set_title("Contour error (signed, + left of travel), following error and current", fontsize="medium")
+    axes[0].set_title(f"{_run_title(result, name)}\ncontour error (signed, + left of travel), following error and current",
+                      fontsize="medium")
     axes[-1].set_xlabel("t [s]")
     return axes
 
 
-def save_figures(runs, out_dir, name):
+def save_figures(runs, out_dir, name, nominal=None):
     """Write the standard plots of runs shown side by side as PNG files into `out_dir`.
 
     Per run ``<run>_path.png`` (:func:`plot_path_error`, one magnification
     for all `runs`) and ``<run>_errors.png`` (:func:`plot_errors_over_time`);
     when the runs are circular tests, one ``<name>_polar.png`` with all of
-    them overlaid (:func:`plot_polar_deviation`).
+    them overlaid (:func:`plot_polar_deviation`) and, with `nominal` runs,
+    ``<name>_polar_difference.png``: each run minus its nominal run.
 
     Parameters
     ----------
@@ -431,6 +660,8 @@ def save_figures(runs, out_dir, name):
         missing; a file there that contoursim did not write is never replaced.
     name : str
         File name stem of the polar plot.
+    nominal : dict of str -> contoursim.simulation.SimResult, optional
+        The nominal run of each circular test, by the run's name.
 
     Returns
     -------
@@ -445,15 +676,21 @@ def save_figures(runs, out_dir, name):
     results = list(runs.values())
     k = _shared_magnification(results)
     # (file, size [in], margins, drawing): fixed margins that leave room for the legends, no layout search
-    path_margins = dict(left=0.12, right=0.96, top=0.90, bottom=0.16)
-    drawings = [(f"{run}_path.png", (6.4, 6.8), path_margins, lambda fig, r=r: plot_path_error(r, fig.add_subplot(), k))
-                for run, r in runs.items()]
-    errors_margins = dict(left=0.1, right=0.84, top=0.95, bottom=0.07, hspace=0.12)
-    drawings += [(f"{run}_errors.png", (8.0, 7.5), errors_margins, lambda fig, r=r: plot_errors_over_time(r, fig))
-                 for run, r in runs.items()]
+    path_margins = dict(left=0.12, right=0.96, top=0.84, bottom=0.15)
+    drawings = [(f"{run}_path.png", (6.4, 7.2), path_margins,
+                 lambda fig, r=r, run=run: plot_path_error(r, fig.add_subplot(), k, name=run)) for run, r in runs.items()]
+    errors_margins = dict(left=0.1, right=0.84, top=0.91, bottom=0.07, hspace=0.12)
+    drawings += [(f"{run}_errors.png", (8.0, 7.8), errors_margins,
+                  lambda fig, r=r, run=run: plot_errors_over_time(r, fig, run)) for run, r in runs.items()]
     if all(r.trajectory.path is not None and r.trajectory.path.test_circle() is not None for r in results):
-        drawings.append((f"{name}_polar.png", (7.0, 7.6), dict(left=0.08, right=0.92, top=0.88, bottom=0.2),
+        legend = 0.5 + 0.55 * len(runs)  # [in] below the rings: two or three lines a run
+        size = (7.0, 6.9 + legend)
+        polar_margins = dict(left=0.08, right=0.92, top=1 - 1.2 / size[1], bottom=legend / size[1])
+        drawings.append((f"{name}_polar.png", size, polar_margins,
                          lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"))))
+        if nominal is not None:
+            drawings.append((f"{name}_polar_difference.png", size, polar_margins,
+                             lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"), nominal)))
     return _draw(drawings, out_dir)
 
 

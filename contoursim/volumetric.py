@@ -2,11 +2,12 @@
 
 Evaluates the machine's volumetric error (actual minus ideal tool tip and
 tool axis, in workpiece coordinates) on a grid of axis positions spanning the
-travels, prints the worst errors per component and plots the error field:
-magnified arrows and colour maps, one figure per plane of linear axes.
+travels, the rotary axes turned over theirs, prints the worst errors per
+component and plots the error field: magnified arrows and colour maps, one
+figure per plane of linear axes, the rotary axes where the error is worst.
 """
 
-from itertools import combinations
+from itertools import combinations, product
 
 import numpy as np
 
@@ -74,8 +75,14 @@ def _swept(chain, sweep):
     return [a for a, rot in zip(chain.axes, chain.rotary_axes) if not rot] if sweep is None else list(sweep)
 
 
-def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, fixed=None, time=0.0):
+def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, fixed=None, time=0.0, rotary_grid=5):
     """Worst volumetric errors over the workspace, and error-field plots.
+
+    The grid of the `sweep` axes is evaluated at every combination of
+    `rotary_grid` positions spanning the travel of each other rotary axis
+    (one not in `fixed`), so the worst errors are those of the whole
+    workspace; the plots show the plane of each pair of swept axes with the
+    rotary axes where the position error |Δ| is worst, and say where.
 
     Parameters
     ----------
@@ -96,6 +103,9 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
         ``{axis: position}`` of the other axes [mm or rad]; default 0.
     time : float
         Time [s] at which the thermal drift is evaluated.
+    rotary_grid : int
+        Positions per rotary axis outside `sweep` and `fixed` (>= 2; 0 holds
+        them at 0, as the output then says).
 
     Returns
     -------
@@ -118,14 +128,33 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     q, values = volumetric_grid(chain, sweep, grid, ranges, fixed)
     sweep = _swept(chain, sweep)
     rotary = dict(zip(chain.axes, chain.rotary_axes))
+    travel = {b.axis: b.travel for b in chain.bodies if b.axis is not None}
+    turned = [a for a in chain.axes if rotary[a] and a not in sweep and a not in (fixed or {})]
+    rotary_grid = int(rotary_grid)
+    if rotary_grid == 1 or rotary_grid < 0:
+        raise ValueError(f"rotary_grid must be 0 (hold the rotary axes at 0) or at least 2, got {rotary_grid}")
+    turned = [a for a in turned if travel.get(a) is not None] if rotary_grid else []
+    angles = [np.linspace(*travel[a], rotary_grid) for a in turned]
     t = np.full(q.shape[0], float(time))
-    dp, dv = chain.volumetric_error(q, t)
-    text = _summary(chain, q, dp, dv, sweep, values, float(time), rotary)
+    columns = [chain.axes.index(a) for a in turned]
+    rows, largest = None, -1.0
+    for setting in product(*angles):  # one grid of the swept axes at a time: memory as without rotary axes
+        q[:, columns] = setting
+        dp, dv = chain.volumetric_error(q, t)
+        rows = _worst(rows, dp, dv, q)
+        if rows[3][1] > largest:  # the largest |Δ| so far: the setting the plots show
+            largest, shown = rows[3][1], (setting, dp)
+    rotaries = _rotaries(chain, sweep, fixed, turned, angles)
+    text = _summary(chain, rows, sweep, values, float(time), rotary, rotaries, len(q) * max(1, len(list(product(*angles)))))
     if out_dir is not None:
         out = output_dir(out_dir)
+        setting, dp = shown
+        q[:, columns] = setting
         ideal = chain.tool_pose(q, t, ideal=True)[0]
-        files = _plot(chain, ideal, dp, sweep, values, rotary, out)
-        text += "\nplots: " + ", ".join(str(f) for f in files) + "\n"
+        at = [_at(a, v, True) for a, v in zip(turned, setting)]
+        note = f"{', '.join(at)}, where |Δ| is worst" if at else ""
+        files = _plot(chain, ideal, dp, sweep, values, rotary, out, note)
+        text += f"\nplots{' at ' + note if note else ''}: " + ", ".join(str(f) for f in files) + "\n"
     return text
 
 
@@ -133,20 +162,41 @@ def _fmt_q(chain, q, rotary):
     return ", ".join(f"{a}={np.rad2deg(v):.1f}°" if rotary[a] else f"{a}={v:.1f} mm" for a, v in zip(chain.axes, q))
 
 
-def _summary(chain, q, dp, dv, sweep, values, time, rotary):
+def _worst(rows, dp, dv, q):
+    """The summary rows ``[label, worst, min, max, axis positions of the worst]`` updated with errors `dp`, `dv` at `q`."""
+    components = [(f"position {c} [µm]", 1e3 * dp[:, i]) for i, c in enumerate("xyz")]
+    components.append(("position |Δ| [µm]", 1e3 * np.linalg.norm(dp, axis=1)))
+    components += [(f"tool axis {c} [µrad]", 1e6 * dv[:, i]) for i, c in enumerate("xyz")]
+    new = []
+    for (label, v), row in zip(components, rows or [None] * len(components)):
+        k = int(np.argmax(np.abs(v)))
+        low, high = float(v.min()), float(v.max())
+        worst, at = (float(v[k]), q[k].copy()) if row is None or abs(v[k]) > abs(row[1]) else (row[1], row[4])
+        if row is not None:
+            low, high = min(low, row[2]), max(high, row[3])
+        new.append([label, worst, low, high, at])
+    return new
+
+
+def _rotaries(chain, sweep, fixed, turned, angles):
+    """What the summary says of the rotary axes outside `sweep`: turned over their travels, or held where."""
+    parts = [f"{a} {_span(v, True)} at {len(v)} positions" for a, v in zip(turned, angles)]
+    held = [a for a, rot in zip(chain.axes, chain.rotary_axes) if rot and a not in sweep and a not in turned]
+    if held:
+        parts.append("held: " + ", ".join(_at(a, (fixed or {}).get(a, 0.0), True) for a in held))
+    return "; rotary axes " + "; ".join(parts) if parts else ""
+
+
+def _summary(chain, rows, sweep, values, time, rotary, rotaries, count):
     lines = [
         f"volumetric error of {chain.name or 'machine'}",
-        f"grid: {len(q)} points over " + ", ".join(f"{a} {_span(v, rotary[a])}" for a, v in zip(sweep, values))
-        + (f", t = {time:g} s" if time else ""),
+        f"grid: {count} points over " + ", ".join(f"{a} {_span(v, rotary[a])}" for a, v in zip(sweep, values))
+        + rotaries + (f", t = {time:g} s" if time else ""),
         "",
         f"{'component':20s} {'worst':>10s} {'min':>10s} {'max':>10s}  at (axis positions)",
     ]
-    rows = [(f"position {c} [µm]", 1e3 * dp[:, i]) for i, c in enumerate("xyz")]
-    rows.append(("position |Δ| [µm]", 1e3 * np.linalg.norm(dp, axis=1)))
-    rows += [(f"tool axis {c} [µrad]", 1e6 * dv[:, i]) for i, c in enumerate("xyz")]
-    for label, v in rows:
-        k = int(np.argmax(np.abs(v)))
-        lines.append(f"{label:20s} {v[k]:+10.3f} {v.min():+10.3f} {v.max():+10.3f}  {_fmt_q(chain, q[k], rotary)}")
+    for label, worst, low, high, at in rows:
+        lines.append(f"{label:20s} {worst:+10.3f} {low:+10.3f} {high:+10.3f}  {_fmt_q(chain, at, rotary)}")
     return "\n".join(lines) + "\n"
 
 
@@ -163,8 +213,10 @@ def _at(axis, value, rotary):
     return f"{axis} = {np.rad2deg(value):g}°" if rotary else f"{axis} = {value:g} mm"
 
 
-def _plot(chain, ideal, dp, sweep, values, rotary, out):
+def _plot(chain, ideal, dp, sweep, values, rotary, out, note=""):
     """One figure per pair of swept axes (middle of the others): arrows and colour maps.
+
+    `note` says where the rotary axes outside the sweep are, in each title.
 
     A plane is drawn to scale (equal aspect) unless its sides differ by more
     than :data:`_EXTREME_ASPECT` (e.g. 4000 x 150 mm), where the panels are
@@ -190,6 +242,7 @@ def _plot(chain, ideal, dp, sweep, values, rotary, out):
             for c in range(3):
                 ax.plot(np.rad2deg(values[0]) if rot else values[0], Dp[:, c], label=f"Δ{'xyz'[c]}")
             ax.set_xlabel(f"axis {sweep[0]} [{'°' if rot else 'mm'}]")
+            ax.set_title(f"{chain.name}: volumetric error, axis {sweep[0]} swept" + (f"\n{note}" if note else ""))
             ax.set_ylabel("volumetric error [µm]")
             ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
         else:
@@ -227,7 +280,7 @@ def _plot(chain, ideal, dp, sweep, values, rotary, out):
             others = [k for k in range(len(sweep)) if k not in (i, j)]
             at = ", ".join(_at(sweep[k], values[k][shape[k] // 2], rotary[sweep[k]]) for k in others)
             fig.suptitle(f"{chain.name}: volumetric error, axes {sweep[i]}/{sweep[j]} swept" + (f" at {at}" if at else "")
-                         + (f"\n{scale_note}" if scale_note else ""))
+                         + "".join(f"\n{n}" for n in (note, scale_note) if n))
         with out.write(name.name, binary=True) as stream:
             fig.savefig(stream, format="png", dpi=90)
     return files

@@ -667,3 +667,41 @@ def test_compare_runs_a_job_with_geometric_compensation(tmp_path, capsys):
     assert main(["compare", str(job), "--strategies", "none,geometric+feedforward", "--json", str(report),
                  "--out", str(tmp_path / "out")]) == 0
     assert list(json.loads(report.read_text())["runs"]) == ["none", "geometric+feedforward"]
+
+
+def test_a_ballbar_job_runs_the_circle_both_ways_and_subtracts_the_nominal_run(tmp_path, capsys):
+    """The job's circle CCW and CW: one polar plot of both, one of each minus the run without the job's effects.
+
+    On the machine without effects the difference is zero (the nominal run is that run); a 100 µrad
+    squareness on the 2 mm circle adds R·α = 0.2 µm peak to peak, both ways (closed form, as in
+    examples/effects_gallery.py).
+    """
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "two.toml").write_text(MACHINE.format(kp=36.0))  # a gain mismatch: an ellipse both runs share
+    job = 'machine = "two.toml"\npath = "small.toml"\n[ballbar]\nsubtract_nominal = true\n'
+    square = '[[effect]]\nname = "squareness"\naxis = "xy"\nangle_urad = 100.0\n'
+    for name, text in (("plain", job), ("square", job + square)):
+        (tmp_path / f"{name}.toml").write_text(text)
+        assert main(["simulate", str(tmp_path / f"{name}.toml"), "--out", str(tmp_path / name)]) == 0
+        out = capsys.readouterr().out
+        assert {"small_ccw.csv", "small_cw.csv", "small_polar.png", "small_polar_difference.png", "small_cw_path.png"} \
+            <= {p.name for p in (tmp_path / name).iterdir()}
+        for direction in ("ccw", "cw"):
+            circularity = float(re.search(rf"small_{direction} \({direction.upper()}\): circularity ([\d.]+) µm", out)[1])
+            difference = float(re.search(rf"small_{direction} .*minus the nominal run: range ([\d.]+) µm", out)[1])
+            assert circularity > 1.0  # the gain mismatch's ellipse
+            assert difference == pytest.approx(0.0 if name == "plain" else 0.2, abs=0.01)
+
+
+@pytest.mark.parametrize("text, message", [
+    ('path = "small.toml"\n[ballbar]\ndirections = ["up"]\n', r"job.toml, line 4: directions must be a list of \"ccw\""),
+    ('path = "small.toml"\n[ballbar]\nsubtract_nominal = 1\n', r"job.toml, line 4: subtract_nominal must be true or false"),
+    ('path = "small.toml"\n[ballbar]\nturns = 2\n', r"job.toml, line 4: unknown key 'turns'"),
+    ('path = "rounded_square"\n[ballbar]\n', r"job.toml, line 3: \[ballbar\] needs a circular test: rounded_square.toml"),
+])  # fmt: skip
+def test_a_bad_ballbar_table_names_file_and_line(tmp_path, capsys, text, message):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\n' + text)
+    assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert re.search(message, capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()

@@ -160,3 +160,46 @@ def test_example_job_runs(job, tmp_path, capsys):
     assert main(["simulate", str(job), "--out", str(tmp_path)]) == 0
     assert "contoursim simulate" in capsys.readouterr().out
     assert _contour_within_tracking(tmp_path)
+
+
+def test_router_ballbar_shows_its_backlash_step_and_squareness(tmp_path, capsys):
+    """examples/router: the rings follow the data, so the 10 µm backlash (its lost motion) and the
+    squareness's R·α = 5 µm (closed forms) take 40 % and 20 % of the ring band at least; the servo's
+    ~49 µm radius loss put them at 50 µm/div, ±2 rings, before (5 % and 2.5 %). CW and CCW are named
+    on their path plots; the titles list the effects.
+    """
+    import argparse
+
+    from matplotlib.figure import Figure
+
+    from contoursim.cli import _job, main, run_job
+    from contoursim.model import Model
+    from contoursim.plotting import circular_deviation, plot_path_error, plot_polar_deviation
+
+    job_file = EXAMPLES / "router" / "ballbar.toml"
+    assert main(["simulate", str(job_file), "--out", str(tmp_path)]) == 0
+    assert "circularity" in capsys.readouterr().out
+    assert {"iso230_4_circle_polar.png", "iso230_4_circle_polar_difference.png", "iso230_4_circle_cw_path.png"} \
+        <= {p.name for p in tmp_path.iterdir()}
+
+    model, path_file, job, _ = _job(argparse.Namespace(file=str(job_file), machine=None, command="simulate"))
+    runs = {d: run_job(model, path_file, job, direction=d)[2] for d in ("ccw", "cw")}
+    ax = plot_polar_deviation(runs, Figure().add_subplot(projection="polar"))
+    band = np.ptp(ax.get_ylim())  # [µm] from the inner to the outer ring
+
+    def signature(effect):  # [µm] p-p of what `effect` adds to the CCW run's ballbar deviation
+        without = Model(model.machine, tuple(e for e in model.effects if e.name != effect))
+        rest = circular_deviation(run_job(without, path_file, job, direction="ccw")[2])["deviation"]
+        return np.ptp(circular_deviation(runs["ccw"])["deviation"] - rest)
+
+    backlash, squareness = signature("backlash"), signature("squareness")
+    assert backlash == pytest.approx(10.0, rel=0.1)  # the lost motion (closed form, see effects_gallery)
+    assert squareness == pytest.approx(1e3 * 100e-6 * 50.0, rel=0.1)  # R·α [µm]
+    assert backlash >= 0.4 * band and squareness >= 0.2 * band  # at ±2 rings of 50 µm: 5 % and 2.5 %
+    assert "backlash.x 10 µm, squareness.xy 100 µrad" in ax.get_title() and "CCW and CW" in ax.get_title()
+    difference = plot_polar_deviation(runs, Figure().add_subplot(projection="polar"),
+                                      {d: run_job(Model(model.machine), path_file, job, direction=d)[2] for d in runs})
+    assert np.ptp(difference.get_ylim()) <= band and "minus the nominal run" in difference.get_title()
+    for d, result in runs.items():
+        title = plot_path_error(result, Figure().add_subplot(), name=f"router_{d}").get_title()
+        assert title.startswith(f"router_{d} ({d.upper()}) on gantry router\neffects: backlash.x 10 µm")

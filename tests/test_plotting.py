@@ -6,8 +6,8 @@ import pytest
 from contoursim import paths
 from contoursim.feed import plan, sample
 from contoursim.machine import load_machine
-from contoursim.plotting import (_Rows, _thin_curve, circular_deviation, envelope_indices, magnification_for,
-                                 plot_polar_deviation, save_figures)
+from contoursim.plotting import (_Rows, _drawn_curve, _thin_curve, circular_deviation, envelope_indices,
+                                 magnification_for, plot_path_error, plot_polar_deviation, save_figures)
 from contoursim.simulation import simulate
 
 
@@ -85,3 +85,103 @@ def test_curve_thinned_block_by_block_keeps_one_point_per_step_travelled():
     np.testing.assert_array_equal(_thin_curve(_Rows(len(points), lambda i: points[i]), step), want)  # made on demand
     y = np.sin(u)
     np.testing.assert_array_equal(envelope_indices(_Rows(len(y), lambda i: y[i][:, None])), envelope_indices(y))
+
+
+def test_a_retraced_curve_is_drawn_from_the_cells_it_covers_and_keeps_its_peaks():
+    """A circle passed 20 and 200 times, one sample 0.5 mm off it in the last pass: the same drawing.
+
+    The drawn data does not grow with the passes, the spike is in it, and every sample lies within
+    two cells of the drawn points (nothing of the curve is left out).
+    """
+    step = 100 / 1200  # [mm], a 100 mm drawing at 1200 cells
+    drawn = {}
+    for turns in (20, 200):
+        u = np.linspace(0.0, 2 * np.pi * turns, 5_000 * turns + 1)
+        points = np.column_stack([50 * np.cos(u), 50 * np.sin(u)])
+        points[-1234] *= 50.5 / 50  # [mm] a spike of one sample
+        drawn[turns] = _drawn_curve(_Rows(len(points), lambda i: points[i]), step)
+        assert np.any(np.all(drawn[turns] == points[-1234], axis=1))
+    assert len(drawn[200]) <= len(drawn[20]) + 10 and len(drawn[20]) < 20_000
+    pts = drawn[200][~np.isnan(drawn[200][:, 0])]
+    angle = np.sort(np.arctan2(pts[:, 1], pts[:, 0]))
+    assert np.diff(angle).max() < 2 * step / 50 and angle[0] + 2 * np.pi - angle[-1] < 2 * step / 50
+
+
+def test_a_200000_block_program_is_plotted_in_bounded_memory_with_its_worst_error():
+    """20 turns of a circle written as 200,000 straight blocks (as a post writes a contour), on the router example.
+
+    Every block end is a corner: the plot used to compare each of its 38,009 drawn samples with each of
+    the 199,999 corners (a 57 GiB float64 temporary, more with its masks). Measured with tracemalloc: the plot's peak stays below 64 MB, the lines hold
+    what the pixels can show (fewer than 5 points per cell the circle passes, whatever the number of
+    turns: see the test above), and the largest contour error is both marked and on the drawn line.
+    """
+    import tracemalloc
+
+    from matplotlib.figure import Figure
+
+    from conftest import ROOT
+
+    turns, per_turn = 20, 10_000
+    u = np.linspace(0.0, 2 * np.pi * turns, turns * per_turn + 1)
+    path = paths.polyline(np.column_stack([50 * np.cos(u), 50 * np.sin(u)]))
+    machine = load_machine(ROOT / "examples" / "router" / "router.toml")
+    result = simulate(machine, sample(path, plan(path, 20_000 / 60, 2000.0, 50_000.0), machine.servo_period))
+    tracemalloc.start()
+    try:
+        ax = plot_path_error(result, Figure().add_subplot(), name="program")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64e6
+    reference, actual, _, worst = ax.lines
+    cells = 2 * np.pi * 50 / (100 / 1200)  # the cells of the 1200-cell drawing the circle passes
+    assert max(len(reference.get_xdata()), len(actual.get_xdata())) < 5 * cells < len(result.trajectory) / 2
+    k = float(ax.get_title().split("contour error ×")[1].split(":")[0])
+    i = int(np.argmax(result.contour.magnitude))
+    point = result.contour.foot[i, :2] + k * (result.tool_position[i, :2] - result.contour.foot[i, :2])
+    np.testing.assert_allclose(worst.get_xydata()[0], point)
+    drawn = actual.get_xydata()
+    assert np.nanmin(np.hypot(*(drawn - point).T)) < 2 * 100 / 1200  # within two cells of the 100 mm drawing
+    assert f"max {1e3 * result.contour.magnitude[i]:.2f} µm" in ax.get_title()
+
+
+def test_diagnosis_plots_keep_zero_labels_legend_and_both_runs_visible():
+    """The polar residual: zero dashed over the data, no ring label where the data runs, the legend
+    below the rings, "before" a wide band under the thin "after" line; the other two figures too."""
+    from matplotlib.figure import Figure
+
+    from contoursim.diagnosis import Diagnosis, plot_magnified, plot_polar, plot_residuals
+    from contoursim.model import Model
+    from contoursim.traces import Trace
+
+    machine = load_machine("demo_mill")
+    t = np.arange(0.0, 10.0, 1e-3)
+    theta = 2 * np.pi * t / 5.0  # two turns
+    radial = np.column_stack([np.cos(theta), np.sin(theta)])
+    reference = 50.0 * radial
+    before = 1e-3 * (3.0 * np.cos(2 * theta) + 0.5)[:, None] * radial  # [mm] what the nominal model misses
+    after = 1e-3 * (0.2 * np.sin(3 * theta))[:, None] * radial  # [mm] what is left
+    trace = Trace(t, reference, reference + before, ("x", "y"))
+    diagnosis = Diagnosis(trace, Model(machine), False, np.array([0.05, 0.05]), (), reference, reference + before - after,
+                          np.ones(len(t), bool), Model(machine))
+    ax = plot_polar(diagnosis, Figure(figsize=(6.4, 7.4)).add_subplot(projection="polar"))
+    zero, band, line = ax.lines
+    assert zero.get_zorder() > line.get_zorder() and not np.any(zero.get_ydata())
+    assert band.get_linewidth() > 2 * line.get_linewidth() and band.get_alpha() < 1
+    ax.figure.canvas.draw()
+    legend, rings = ax.get_legend().get_window_extent(), ax.get_window_extent()
+    assert legend.y1 <= rings.y0 + 0.05 * rings.height  # below the rings, not over the data
+    ray = np.radians(ax.get_rlabel_position())
+    division = float(np.diff(ax.get_yticks())[0])
+    drawn = np.concatenate([np.column_stack([a.get_xdata(), a.get_ydata()]) for a in (band, line)])
+    near = drawn[np.abs((drawn[:, 0] - ray + np.pi) % (2 * np.pi) - np.pi) < np.radians(6.0), 1]
+    labelled = [tick for tick, label in zip(ax.get_yticks(), ax.get_yticklabels()) if label.get_text()]
+    assert len(labelled) >= 3
+    assert all(np.abs(near - tick).min() > 0.45 * division for tick in labelled)
+    fig = plot_residuals(diagnosis, Figure(figsize=(9.0, 6.0), layout="constrained"))
+    fig.canvas.draw()
+    legend = fig.axes[0].get_legend().get_window_extent()
+    assert legend.x0 >= fig.axes[0].get_window_extent().x1  # beside the axes
+    ax = plot_magnified(diagnosis, Figure(figsize=(7.0, 7.0), layout="constrained").add_subplot())
+    ax.figure.canvas.draw()
+    assert ax.get_legend().get_window_extent().y1 <= ax.get_window_extent().y0

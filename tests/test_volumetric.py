@@ -26,7 +26,8 @@ def test_grid_spans_the_travels_and_holds_fixed_axes():
 
 
 def test_report_gives_the_worst_errors_and_plots(tmp_path):
-    text = volumetric_report("polishing_platform_4axis", tmp_path / "out", grid=5)
+    text = volumetric_report("polishing_platform_4axis", tmp_path / "out", grid=5, fixed={"b": 0.0, "c": 0.0})
+    assert "rotary axes held: b = 0°, c = 0°" in text
     # independent check, from the preset's numbers: the worst Δx is at x = 0, z = 200 mm (b = c = 0),
     # where the tool tip sits on the Z slide's frame origin (no Abbe offset) and X's errors vanish,
     # so Δx = -z·S_xZ + dx_Z(z); the Z slide's horizontal straightness poly is zero at 200 mm
@@ -68,3 +69,24 @@ def test_report_sweeps_rotary_axes_over_given_ranges():
 def test_machine_without_geometry_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="no geometric half"):
         volumetric_report("demo_mill")
+
+
+def test_report_turns_the_rotary_axes_over_their_travels_and_says_so(tmp_path):
+    """The worst errors of the whole workspace: the same as over one grid of all five axes, built here
+    on its own; larger than with A and C held at 0°, as the output then says; the plots show where."""
+    chain = load_machine("table_tilting_5axis")
+    text = volumetric_report("table_tilting_5axis", tmp_path, grid=3, rotary_grid=3)
+    q, _ = volumetric_grid(chain, sweep=list(chain.axes), points=3)
+    dp, _ = chain.volumetric_error(q)
+    norm = 1e3 * np.linalg.norm(dp, axis=1)
+    row = next(line for line in text.splitlines() if line.startswith("position |Δ| [µm]"))
+    assert float(row.split()[3]) == pytest.approx(norm.max(), abs=1e-3)
+    assert "243 points" in text and "rotary axes a -110..110° at 3 positions; c 0..360° at 3 positions" in text
+    held = volumetric_report("table_tilting_5axis", grid=3, rotary_grid=0)
+    assert "rotary axes held: a = 0°, c = 0°" in held
+    held_row = next(line for line in held.splitlines() if line.startswith("position |Δ| [µm]"))
+    assert float(held_row.split()[3]) < float(row.split()[3])
+    a, c = np.degrees(q[np.argmax(norm), 3:])
+    assert f"plots at a = {a:g}°, c = {c:g}°, where |Δ| is worst: {tmp_path / 'volumetric_xy.png'}" in text
+    with pytest.raises(ValueError, match="rotary_grid must be 0"):
+        volumetric_report("table_tilting_5axis", grid=3, rotary_grid=1)
