@@ -40,6 +40,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from functools import lru_cache
+from types import MappingProxyType
 
 import numpy as np
 
@@ -61,6 +62,8 @@ __all__ = [
     "path_frames",
     "designed_gains",
     "DESIGN_DAMPING_RATIO",
+    "STRATEGY_KEYS",
+    "strategy_setting",
 ]
 
 #: The comparison's strategy names (DESIGN.md contract), in the order ``contoursim compare`` runs them.
@@ -103,6 +106,10 @@ class Strategy(abc.ABC):
     def preview(self, servos, dt):
         """Samples the pre-filter reads ahead of the one it sends: the machine dwells this long at the start [-]."""
         return 0
+
+    def settings(self, servos, dt):
+        """The settings it runs with on `servos` at period `dt` [s], by their ``[[strategy]]`` file keys (:data:`STRATEGY_KEYS`), plus what follows from them."""
+        return {}
 
 
 def _model(model, servos):
@@ -166,6 +173,9 @@ class Feedforward(Strategy):
             object.__setattr__(self, gain, value)
         object.__setattr__(self, "model", _check_model(self.model))
 
+    def settings(self, servos, dt):
+        return {"velocity_fraction": self.velocity, "acceleration_fraction": self.acceleration}
+
     def drive(self, servos):
         model = _model(self.model, servos)
         driven = {}
@@ -192,7 +202,7 @@ ZPETC_NEGATIVE_RADIUS = 0.5
 
 
 @lru_cache(maxsize=64)
-def _zpetc_filter(servo, dt):
+def _zpetc_filter(servo, dt, negative_radius=ZPETC_NEGATIVE_RADIUS):
     """``(den, num, fir, delay)`` of Tomizuka's ZPETC for the sampled loop x_ref -> x of `servo`.
 
     The sampled closed loop (:func:`contoursim.servo.discretize`, feedforward
@@ -220,7 +230,7 @@ def _zpetc_filter(servo, dt):
         zeros = scipy.linalg.eigvals(pencil, singular)
     zeros = zeros[np.isfinite(zeros) & (np.abs(zeros) < 1e8)]
     delay = n - zeros.size
-    unacceptable = (np.abs(zeros) >= ZPETC_RADIUS) | ((zeros.real < 0) & (np.abs(zeros) > ZPETC_NEGATIVE_RADIUS))
+    unacceptable = (np.abs(zeros) >= ZPETC_RADIUS) | ((zeros.real < 0) & (np.abs(zeros) > negative_radius))
     dc = (C @ np.linalg.solve(np.eye(n) - A, B) + D).item()
     a_poly = np.poly(poles).real
     ba_poly = np.poly(zeros[~unacceptable]).real
@@ -230,7 +240,7 @@ def _zpetc_filter(servo, dt):
     return ba_poly * k, a_poly, bu_poly / bu_poly.sum() ** 2, delay
 
 
-def zpetc_commands(servo, dt, q):
+def zpetc_commands(servo, dt, q, negative_radius=ZPETC_NEGATIVE_RADIUS):
     """ZPETC pre-filtered position commands for one axis (see :class:`ZPETC`).
 
     Parameters
@@ -241,6 +251,8 @@ def zpetc_commands(servo, dt, q):
         Servo period [s].
     q : ndarray, shape (N,)
         Target positions [mm], at rest before the first sample and after the last.
+    negative_radius : float
+        Zeros on the left half-plane beyond this radius are compensated in phase only (see :class:`ZPETC`).
 
     Returns
     -------
@@ -249,7 +261,7 @@ def zpetc_commands(servo, dt, q):
     """
     from scipy.signal import lfilter
 
-    den, num, fir, delay = _zpetc_filter(servo, float(dt))
+    den, num, fir, delay = _zpetc_filter(servo, float(dt), float(negative_radius))
     start, end = q[0], q[-1]
     ahead = fir.size - 1 + delay
     held = np.concatenate([q - start, np.full(ahead, end - start)])
@@ -280,6 +292,11 @@ class ZPETC(Strategy):
     ----------
     model : mapping str -> AxisServo, optional
         Servos the inverse is built from (default: the simulated machine's).
+    negative_radius : float, default 0.5
+        Zeros of the sampled loop on the left half of the z-plane beyond
+        this radius (the ZOH's sampling zeros) are compensated in phase
+        only, not inverted [-], 0..1: lower inverts fewer of them and
+        previews further ahead.
 
     References
     ----------
@@ -288,23 +305,33 @@ class ZPETC(Strategy):
     """
 
     model: Mapping | None = None
+    negative_radius: float = ZPETC_NEGATIVE_RADIUS
 
     name = "zpetc"
     kind = "feedforward"
 
     def __post_init__(self):
         object.__setattr__(self, "model", _check_model(self.model))
+        radius = _validate.nonnegative("negative_radius", self.negative_radius)
+        if radius > 1:
+            raise ValueError(f"negative_radius must be between 0 and 1 (a radius in the z-plane), got {radius!r}")
+        object.__setattr__(self, "negative_radius", radius)
+
+    def settings(self, servos, dt):
+        return {"negative_zero_radius": self.negative_radius, "preview_samples": self.preview(servos, dt)}
 
     def drive(self, servos):
         return {axis: dataclasses.replace(servo, vff=0.0, aff=0.0) for axis, servo in servos.items()}
 
     def preview(self, servos, dt):
         model = _model(self.model, servos)
-        return max(fir.size - 1 + delay for _, _, fir, delay in (_zpetc_filter(model[axis], float(dt)) for axis in servos))
+        filters = (_zpetc_filter(model[axis], float(dt), self.negative_radius) for axis in servos)
+        return max(fir.size - 1 + delay for _, _, fir, delay in filters)
 
     def prefilter(self, q, v, a, servos, dt):
         model = _model(self.model, servos)
-        q = np.column_stack([zpetc_commands(model[axis], dt, q[:, i]) for i, axis in enumerate(servos)])
+        q = np.column_stack([zpetc_commands(model[axis], dt, q[:, i], self.negative_radius)
+                             for i, axis in enumerate(servos)])
         v = np.gradient(q, dt, axis=0)
         return q, v, np.gradient(v, dt, axis=0)
 
@@ -378,10 +405,26 @@ class CrossCoupled(Strategy):
                 object.__setattr__(self, gain, _validate.nonnegative(gain, getattr(self, gain)))
         object.__setattr__(self, "kd", _validate.nonnegative("kd", self.kd))
         object.__setattr__(self, "model", _check_model(self.model))
+        if isinstance(self.window, bool) or not isinstance(self.window, (int, np.integer)) or self.window < 1:
+            raise ValueError(f"window must be a whole number of samples, at least 1; got {self.window!r}")
 
     @property
     def name(self):
         return f"ccc_{self.estimator}"
+
+    @property
+    def gains_origin(self):
+        """How its gains were chosen: ``"set"``, ``"designed"`` (:func:`designed_gains`) or ``"kp set, ki designed"``."""
+        if self.kp is not None and self.ki is not None:
+            return "set"
+        return "designed" if self.kp is None else "kp set, ki designed"
+
+    def settings(self, servos, dt):
+        kp, ki, kd = self.gains(dict(list(servos.items())[:3]), dt)
+        settings = {"kp_per_s": kp, "ki_per_s2": ki, "kd": kd}
+        if self.estimator == "arc":
+            settings["window_samples"] = self.window
+        return settings
 
     def gains(self, servos, dt):
         """``(kp, ki, kd)`` of the coupling for the coupled `servos` (mapping axis -> AxisServo) at period `dt` [s].
@@ -791,7 +834,52 @@ class Composition:
         return None
 
 
-def strategies_named(name, model=None, chain=None):
+#: ``[[strategy]]`` file keys (and ``--set NAME.KEY=VALUE``) of each strategy -> its parameter, in the key's unit.
+STRATEGY_KEYS = MappingProxyType({
+    "feedforward": MappingProxyType({"velocity_fraction": "velocity", "acceleration_fraction": "acceleration"}),
+    "zpetc": MappingProxyType({"negative_zero_radius": "negative_radius"}),
+    "ccc_linear": MappingProxyType({"kp_per_s": "kp", "ki_per_s2": "ki", "kd": "kd"}),
+    "ccc_arc": MappingProxyType({"kp_per_s": "kp", "ki_per_s2": "ki", "kd": "kd", "window_samples": "window"}),
+})
+
+
+def strategy_setting(name, key, value):
+    """A strategy's parameter and value from a file key (:data:`STRATEGY_KEYS`), checked as the strategy checks it.
+
+    Parameters
+    ----------
+    name : str
+        Strategy name (``feedforward``, ``zpetc``, ``ccc_linear``, ``ccc_arc``).
+    key : str
+        File key, e.g. ``kp_per_s``.
+    value : float or int
+
+    Returns
+    -------
+    tuple
+        ``(parameter, value)``.
+
+    Raises
+    ------
+    ValueError
+        An unknown name or key (listing the known ones), or a value the strategy refuses.
+    """
+    if name not in STRATEGY_KEYS:
+        raise ValueError(f"no settings for strategy {name!r}: strategies with settings are {', '.join(STRATEGY_KEYS)}")
+    keys = STRATEGY_KEYS[name]
+    if key not in keys:
+        raise ValueError(f"unknown setting {key!r} of {name}; expected one of {', '.join(keys)}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{key} must be a number, got {value!r}")
+    try:
+        strategies_named(name, settings={name: {keys[key]: value}})  # the strategy checks it
+    except ValueError as exc:
+        message = str(exc)
+        raise ValueError(key + message[len(keys[key]) :] if message.startswith(keys[key]) else message) from None
+    return keys[key], value
+
+
+def strategies_named(name, model=None, chain=None, settings=None):
     """The strategies behind a comparison name such as ``"feedforward+ccc_arc"``.
 
     Parameters
@@ -803,6 +891,9 @@ def strategies_named(name, model=None, chain=None):
         The servo model the strategies design from (default: the simulated machine's).
     chain : MachineChain, optional
         The geometric error model, needed by ``geometric``.
+    settings : mapping str -> mapping, optional
+        Keyword arguments of each part by its name (e.g. ``{"ccc_arc": {"kp": 120.0}}``;
+        :func:`strategy_setting` gives them from the file keys); parts not named keep their defaults.
 
     Returns
     -------
@@ -810,12 +901,13 @@ def strategies_named(name, model=None, chain=None):
     """
     from .geocomp import GeometricCompensation
 
+    settings = {} if settings is None else settings
     makers = {
         "none": lambda: None,
-        "feedforward": lambda: Feedforward(model=model),
-        "zpetc": lambda: ZPETC(model=model),
-        "ccc_linear": lambda: CrossCoupled("linear", model=model),
-        "ccc_arc": lambda: CrossCoupled("arc", model=model),
+        "feedforward": lambda: Feedforward(model=model, **settings.get("feedforward", {})),
+        "zpetc": lambda: ZPETC(model=model, **settings.get("zpetc", {})),
+        "ccc_linear": lambda: CrossCoupled("linear", model=model, **settings.get("ccc_linear", {})),
+        "ccc_arc": lambda: CrossCoupled("arc", model=model, **settings.get("ccc_arc", {})),
         "geometric": lambda: None if chain is None else GeometricCompensation(chain),
     }
     strategies = []
