@@ -151,10 +151,10 @@ class Comparison:
             lines.append("coupled loop: phase margin and ζ the worst over the directions the path's normal takes "
                          "(checked like an axis loop: >= 30°, >= 0.2)")
         for name, parts in self.settings.items():
-            values = ["; ".join(", ".join(f"{key} = {value:.4g}" for key, value in settings.items())
-                                if part == name else f"{part} " + ", ".join(f"{key} = {value:.4g}"
-                                                                             for key, value in settings.items()))
-                      for part, settings in parts.items()]
+            values = []
+            for part, settings in parts.items():
+                text = ", ".join(f"{key} = {value:.4g}" for key, value in settings.items())
+                values.append(text if part == name else f"{part} {text}")
             if values:
                 lines.append(f"  {name}: " + "; ".join(values))
         return "\n".join(lines)

@@ -494,7 +494,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     ------
     ValueError
         The variants do not share one structure; an unknown output; a
-        cross-coupled controller among the strategies.
+        cross-coupled controller among the strategies; noise on an
+        encoder (``noise`` with ``at = "encoder"``).
     UnstableLoopError
         A nominal machine's loop is unstable or badly damped.
     """
@@ -505,6 +506,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     coupled = [s.name for s in composition.strategies if s.kind == "coupling"]
     if coupled:
         raise ValueError(f"simulate_batch runs no cross-coupled controller ({coupled[0]}): use simulate")
+    noisy = [f"models[{i}] axis {axis}" for i, m in enumerate(models) for axis, e in m.loop_effects().items()
+             if e.noise_at == "encoder" and e.noise_mm > 0.0]
+    if noisy:
+        raise ValueError(f"simulate_batch runs no noise on the encoder ({noisy[0]}): use simulate")
     unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
     if unknown or not outputs:
         raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
