@@ -24,11 +24,12 @@ loop's along the path, checked like an axis loop):
    has +10 % mass on x and -10 % force constant on y; Coulomb friction (40,
    60, 50 N); 0.1 µm RMS noise on every encoder, inside the loop (the
    position loops and the coupling close on it); and a current limit per
-   axis of 90 % of the current the planned motion needs at its peak (the
-   largest mass × acceleration + damping × velocity + friction of the
-   reference, over the force constant), which binds where the reference
-   accelerates hardest: the ``clamped`` column says on what share of the
-   samples.
+   axis that leaves the drive the force to move (the largest damping ×
+   velocity + friction of the reference) and 90 % of the force of the
+   reference's peak acceleration (mass × acceleration), over the force
+   constant: it binds where the reference accelerates hardest, as a drive
+   sized to the planned acceleration does; the ``clamped`` column says on
+   what share of the samples.
 
 The last lines are the ideal butterfly's reductions of the max contour error
 of ``ccc_arc`` and ``feedforward+ccc_arc`` at the designed gains [%].
@@ -54,7 +55,7 @@ DT = 2e-4  # servo period [s]
 FORCE_CONSTANT = 942.0  # [N/A]
 FRICTION_N = {"x": 40.0, "y": 60.0, "z": 50.0}  # realistic Coulomb friction [N]
 NOISE_UM = 0.1  # realistic encoder noise, in the loop [µm RMS]
-LIMIT_FRACTION = 0.9  # realistic current limit / the current the planned motion needs at its peak [-]
+LIMIT_FRACTION = 0.9  # realistic current limit: this share of the planned peak acceleration's force, over the moving force [-]
 COUPLED = ("ccc_linear", "ccc_arc", "feedforward+ccc_arc")
 
 
@@ -74,8 +75,8 @@ def realistic(nominal, trajectory):
     for i, (name, servo) in enumerate(nominal.items()):
         servo = dataclasses.replace(servo, **off.get(name, {}))
         v, a = 1e-3 * trajectory.velocity[:, i], 1e-3 * trajectory.acceleration[:, i]  # [m/s], [m/s^2]
-        need = np.abs(servo.mass * a + servo.damping * v + FRICTION_N[name] * np.sign(v)).max() / servo.force_constant
-        limits[name] = LIMIT_FRACTION * need
+        moving = np.abs(servo.damping * v + FRICTION_N[name] * np.sign(v)).max()  # [N]
+        limits[name] = (moving + LIMIT_FRACTION * servo.mass * np.abs(a).max()) / servo.force_constant
         servos[name] = dataclasses.replace(servo, current_limit=limits[name])
     effects = [Effect("coulomb_friction", name, force_N=FRICTION_N[name]) for name in servos]
     effects += [Effect("noise", name, rms_um=NOISE_UM, seed=i + 1, at="encoder") for i, name in enumerate(servos)]
@@ -103,7 +104,7 @@ def bench(file):
     conditions = (f"model 10 % off, Coulomb friction {', '.join(f'{FRICTION_N[a]:g}' for a in nominal)} N, "
                   f"{NOISE_UM:g} µm RMS encoder noise in the loop, current limit "
                   + ", ".join(f"{a} ±{limit:.3g} A" for a, limit in limits.items())
-                  + f" ({100 * LIMIT_FRACTION:g} % of the planned peak)")
+                  + f" (moving force + {100 * LIMIT_FRACTION:g} % of the peak acceleration's)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ContoursimWarning)  # the current limit binds: the clamped column says where
         show(f"3 — realistic ({conditions}), coupling gains designed", compare(model, trajectory, design=nominal))

@@ -9,7 +9,9 @@ from contoursim import compensation as cp
 from contoursim import kernel, paths
 from contoursim.exceptions import UnstableLoopError
 from contoursim.feed import plan, sample
+from contoursim.effects import Effect
 from contoursim.machine import Machine
+from contoursim.model import Model
 from contoursim.servo import AxisServo
 from contoursim.simulation import simulate
 
@@ -288,3 +290,21 @@ def test_batch_applies_the_drive_and_prefilter_stages_like_simulate():
         np.testing.assert_array_equal(batch, single)
     with pytest.raises(ValueError, match=r"simulate_batch runs no cross-coupled controller \(ccc_arc\)"):
         simulate_batch([machine], trajectory, strategies=[cp.CrossCoupled()])
+    noisy = Model(machine, (Effect("noise", "y", rms_um=0.1, at="encoder"),))
+    with pytest.raises(ValueError, match=r"simulate_batch runs no noise on the encoder \(models\[0\] axis y\)"):
+        simulate_batch([noisy], trajectory)
+
+
+def test_the_coupling_closes_on_the_noisy_encoder():
+    """With the noise on the encoder, the coupling's estimate is that of the noisy reading, not of the axis."""
+    from contoursim import estimators as est
+
+    machine, trajectory = _circle_machine_and_trajectory()
+    noisy = Model(machine, (Effect("noise", "x", rms_um=0.1, seed=1, at="encoder"),
+                            Effect("noise", "y", rms_um=0.1, seed=2, at="encoder")))
+    result = simulate(noisy, trajectory, [cp.CrossCoupled("arc")])
+    response = result.servo_response
+    read = response.encoder - response.position
+    assert np.sqrt(np.mean(read**2)) == pytest.approx(1e-4, rel=0.05)  # 0.1 µm RMS on what the loop reads
+    offline = est.three_point(result.axis_command, response.encoder)
+    np.testing.assert_allclose(response.contour_estimate[:, :2], offline.vector, rtol=0, atol=1e-15)
