@@ -42,6 +42,11 @@ TUNE_KP_END = 64.0
 TUNE_KI_FACTORS = (0.0, 1.0 / 16.0, 1.0)
 
 
+def _nm(error):
+    """An error [µm] to the nm the trace CSV holds; ``<0.001`` below it."""
+    return "<0.001" if error < 0.0005 else f"{error:.3f}"
+
+
 def _figures(result):
     """One run's comparison figures (the JSON keys, then the share of samples whose current command was clamped)."""
     summary = result.summary()
@@ -177,9 +182,9 @@ class Comparison:
             change = "" if base is None or name == "none" else f"{100 * (f['contour_max_um'] / base - 1):+.1f}"
             loop = loops[name]
             margins = f"{'':>7}{'':>6}" if loop is None else f"{loop['phase_margin']:>7.1f}{loop['damping_ratio']:>6.2f}"
-            lines.append(f"{name:<22}{f['contour_max_um']:>12.3f}{f['contour_rms_um']:>12.3f}{f['tracking_max_um']:>13.3f}"
-                         f"{f['tracking_rms_um']:>13.3f}{f['peak_current_A']:>13.3g}{f['clamped_pct']:>9.2f}{margins}"
-                         f"{change:>9}")
+            errors = "".join(f"{_nm(f[key]):>{width}}" for key, width in
+                             (("contour_max_um", 12), ("contour_rms_um", 12), ("tracking_max_um", 13), ("tracking_rms_um", 13)))
+            lines.append(f"{name:<22}{errors}{f['peak_current_A']:>13.3g}{f['clamped_pct']:>9.2f}{margins}{change:>9}")
         return "\n".join(lines)
 
 
