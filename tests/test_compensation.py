@@ -146,6 +146,9 @@ def test_zpetc_error_on_a_circle_is_the_filters_steady_state():
     np.testing.assert_allclose(result.contour.normal[keep], -radial, rtol=1e-3)  # normal: positive to the left, inwards
     assert result.summary()["contour_max_um"] == pytest.approx(1e3 * np.abs(radial).max(), rel=1e-3)
     assert np.array_equal(result.servo_response.position[0], result.trajectory.position[0])  # the first command: the start
+    preview = cp.ZPETC().preview(servos, DT)
+    assert preview == 2 and not result.trajectory.measuring[:preview].any()  # the dwell while the filter fills
+    assert result.trajectory.t[preview] == 0.0 and not result.trajectory.velocity[:preview].any()
 
 
 def test_zpetc_times_the_python_control_loop_has_zero_phase_and_unit_dc_gain():
