@@ -55,7 +55,7 @@ DT = 2e-4  # servo period [s]
 FORCE_CONSTANT = 942.0  # [N/A]
 FRICTION_N = {"x": 40.0, "y": 60.0, "z": 50.0}  # realistic Coulomb friction [N]
 NOISE_UM = 0.1  # realistic encoder noise, in the loop [µm RMS]
-LIMIT_FRACTION = 0.9  # realistic current limit: this share of the planned peak acceleration's force, over the moving force [-]
+LIMIT_FRACTION = 0.9  # realistic current limit: the moving force + this share of the peak acceleration's [-]
 COUPLED = ("ccc_linear", "ccc_arc", "feedforward+ccc_arc")
 
 
@@ -65,7 +65,8 @@ def axis(mass, velocity_hz, kp, ti, **kw):
     return AxisServo(mass=mass, force_constant=FORCE_CONSTANT, kv=kv, ti=ti, kp=kp, damping=500.0, **kw)
 
 
-NOMINAL = {"x": axis(300.0, 100.0, 45.0, 0.010), "y": axis(450.0, 70.0, 38.0, 0.012), "z": axis(250.0, 80.0, 40.0, 0.010)}
+NOMINAL = {"x": axis(300.0, 100.0, 45.0, 0.010), "y": axis(450.0, 70.0, 38.0, 0.012),
+           "z": axis(250.0, 80.0, 40.0, 0.010)}
 
 
 def realistic(nominal, trajectory):
@@ -99,7 +100,8 @@ def bench(file):
     ideal = compare(Machine(nominal, DT), trajectory)
     show("1 — ideal (exact model, no friction, noise or current limit), coupling gains designed", ideal)
     tuned = {name: tune(Machine(nominal, DT), trajectory, name)["settings"] for name in COUPLED}
-    show("2 — ideal, coupling gains tuned on this path", compare(Machine(nominal, DT), trajectory, ("none", *COUPLED), tuned=tuned))
+    show("2 — ideal, coupling gains tuned on this path",
+         compare(Machine(nominal, DT), trajectory, ("none", *COUPLED), tuned=tuned))
     model, limits = realistic(nominal, trajectory)
     conditions = (f"model 10 % off, Coulomb friction {', '.join(f'{FRICTION_N[a]:g}' for a in nominal)} N, "
                   f"{NOISE_UM:g} µm RMS encoder noise in the loop, current limit "
@@ -127,7 +129,8 @@ def main():
     base = butterfly["none"]["contour_max_um"]
     print()
     print(f"compensation_reduction_ccc_arc_pct: {100 * (1 - butterfly['ccc_arc']['contour_max_um'] / base):.4f}")
-    print(f"compensation_reduction_ff_ccc_arc_pct: {100 * (1 - butterfly['feedforward+ccc_arc']['contour_max_um'] / base):.4f}")
+    both = butterfly["feedforward+ccc_arc"]["contour_max_um"]
+    print(f"compensation_reduction_ff_ccc_arc_pct: {100 * (1 - both / base):.4f}")
 
 
 if __name__ == "__main__":

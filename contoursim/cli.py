@@ -214,7 +214,8 @@ def _strategy_settings(job):
             raise job.error(f"[[strategy]] needs name = one of {', '.join(map(repr, STRATEGY_KEYS))}, got {name!r}",
                             "strategy", i, *(("name",) if "name" in item else ()))
         if name in settings:
-            raise job.error(f"strategy {name!r} has a [[strategy]] table already: one per strategy", "strategy", i, "name")
+            raise job.error(f"strategy {name!r} has a [[strategy]] table already: one per strategy",
+                            "strategy", i, "name")
         job.table("strategy", i, allowed=("name", *STRATEGY_KEYS[name]))
         settings[name] = {}
         for key, value in item.items():
@@ -247,7 +248,7 @@ def _set_option(settings, text):
 
 
 def compare_command(args):
-    """``contoursim compare FILE [--strategies a,b] [--set S.K=V] [--tune] [--json R.json]``: compensation strategies side by side."""
+    """``contoursim compare FILE [--strategies a,b] [--set S.K=V] [--tune] [--json R.json]``: strategies side by side."""
     import json
 
     from .comparison import compare

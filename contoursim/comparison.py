@@ -110,7 +110,7 @@ class Comparison:
 
     @cached_property
     def axis_loops(self):
-        """Axis name -> its sampled position loop's ``phase_margin`` [deg] and ``damping_ratio`` [-] (the simulated servos)."""
+        """Axis name -> its sampled position loop's ``phase_margin_deg`` and ``damping_ratio`` [-] (as simulated)."""
         result = next(iter(self.runs.values()))
         dt = result.machine.servo_period
         loops = {axis: servo.margins(dt)["position"] for axis, servo in result.model.servos().items()}
@@ -200,7 +200,7 @@ def _run(model, trajectory, name, strategies):
 
 
 def tune(model, trajectory, name, design=None, settings=None):
-    """Coupling gains of strategy `name` that minimise the max contour error on `trajectory`, under the coupled-loop check.
+    """Coupling gains of strategy `name` with the least max contour error on `trajectory` that the coupled-loop check passes.
 
     A search on the path itself, each candidate simulated: ``kp`` from
     :data:`TUNE_KP_START` times the smallest position gain ``Kp`` of the
@@ -255,7 +255,7 @@ def tune(model, trajectory, name, design=None, settings=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ContoursimWarning)
             try:
-                result = simulate(model, trajectory, strategies_named(name, design, chain, chosen), contour=True)
+                result = simulate(model, trajectory, strategies_named(name, design, chain, chosen))
             except UnstableLoopError:
                 tried.append((kp, ki, None))
                 return False

@@ -108,7 +108,7 @@ class Strategy(abc.ABC):
         return 0
 
     def settings(self, servos, dt):
-        """The settings it runs with on `servos` at period `dt` [s], by their ``[[strategy]]`` file keys (:data:`STRATEGY_KEYS`), plus what follows from them."""
+        """Its settings on `servos` at period `dt` [s] by their ``[[strategy]]`` keys (:data:`STRATEGY_KEYS`), and what follows."""
         return {}
 
 
@@ -284,8 +284,9 @@ class ZPETC(Strategy):
     delay and the non-invertible zeros, :meth:`preview`), as the
     interpolator's look-ahead allows: :func:`contoursim.simulation.simulate`
     has the machine dwell that long at the start point while the filter
-    fills, so that the first command sent is the start point. The drives' own velocity and acceleration feedforward is switched
-    off: the pre-filter takes its place. The velocity and acceleration
+    fills, so that the first command sent is the start point. The drives'
+    own velocity and acceleration feedforward is switched off: the
+    pre-filter takes its place. The velocity and acceleration
     commands become the central differences of the filtered position.
 
     Parameters
@@ -665,7 +666,7 @@ def _stored_margins(rows, shape, kp, ki, kd, dt, normals, k):
 
 
 def coupled_margins(rows, kp, ki, kd, dt, normals):
-    """Margins of the coupled sampled loop linearised across one frame of the path, as :func:`contoursim.servo.margins` gives an axis's.
+    """Margins of the coupled sampled loop linearised across one frame of the path, as an axis loop's (:func:`~.servo.margins`).
 
     The coupling's error channels are the rows of `normals` (the in-plane
     normal, and for three axes the plane normal): the estimator's
