@@ -579,8 +579,9 @@ def plot_compared_zoom(runs, fig=None):
         half = max(4.0 * largest, 1.0)  # [µm]
         foot, actual = error.foot, result.tool_position
         centre = foot[worst]
-        around = slice(max(worst - 1, 0), worst + 2)
-        tangent = np.diff(foot[around], axis=0).sum(axis=0)
+        other = np.flatnonzero(np.any(foot != centre, axis=1))  # the path's direction: to the nearest other foot point
+        nearest = other[np.argmin(np.abs(other - worst))]
+        tangent = (centre - foot[nearest]) * np.sign(worst - nearest)
         tangent /= np.linalg.norm(tangent)
         up = actual[worst] - centre
         if not np.any(up):  # no error at all: any direction across the path
