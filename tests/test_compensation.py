@@ -311,3 +311,20 @@ def test_the_coupling_closes_on_the_noisy_encoder():
     assert np.sqrt(np.mean(read**2)) == pytest.approx(1e-4, rel=0.05)  # 0.1 µm RMS on what the loop reads
     offline = est.three_point(result.axis_command, response.encoder)
     np.testing.assert_allclose(response.contour_estimate[:, :2], offline.vector, rtol=0, atol=1e-15)
+
+
+def test_tune_keeps_the_best_candidate_the_check_lets_run():
+    from contoursim.comparison import TUNE_KP_STEP, tune
+
+    machine, trajectory = _circle_machine_and_trajectory()
+    tuned = tune(machine, trajectory, "ccc_arc")
+    errors = [error for _, _, error in tuned["tried"] if error is not None]
+    assert tuned["max_contour_um"] == min(errors)
+    assert tuned["tried"][-6][2] is None  # the kp search ran up to the first gain the check refuses ...
+    refused_kp = tuned["tried"][-6][0]
+    assert tuned["tried"][-7][0] == pytest.approx(refused_kp / TUNE_KP_STEP)  # ... one step above the last it let run
+    gains = tuned["settings"]["ccc_arc"]
+    again = simulate(machine, trajectory, [cp.CrossCoupled("arc", **gains)]).summary()["contour_max_um"]
+    assert again == tuned["max_contour_um"]  # the tuned gains run, and give what the search saw
+    designed = simulate(machine, trajectory, [cp.CrossCoupled("arc")]).summary()["contour_max_um"]
+    assert tuned["max_contour_um"] <= designed
