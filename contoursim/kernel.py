@@ -740,7 +740,9 @@ def pack(servo, dt, effects=LoopEffects()):
     variant with new gains, masses or effects may be unstable, and its
     stability is the caller's business. :func:`run` checks each AxisServo's
     nominal linear loop (:func:`contoursim.servo.check`, once per servo);
-    :func:`spectral_radius` is a cheap check of a packed row.
+    :func:`spectral_radius` is a cheap check of a packed row. Noise on the
+    encoder (``noise_at="encoder"``) is not in the row: :func:`run` draws
+    it, and a batch of rows has none.
     """
     if not isinstance(servo, AxisServo):
         raise TypeError(f"servo must be an AxisServo, got {type(servo).__name__}")

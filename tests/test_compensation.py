@@ -3,6 +3,8 @@
 import control as ct
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import brentq
 
 from contoursim import compensation as cp
@@ -328,3 +330,23 @@ def test_tune_keeps_the_best_candidate_the_check_lets_run():
     assert again == tuned["max_contour_um"]  # the tuned gains run, and give what the search saw
     designed = simulate(machine, trajectory, [cp.CrossCoupled("arc")]).summary()["contour_max_um"]
     assert tuned["max_contour_um"] <= designed
+
+
+@settings(max_examples=10, deadline=None, derandomize=True)
+@given(kp_x=st.floats(25.0, 45.0), kp_y=st.floats(25.0, 45.0), kv_x=st.floats(80.0, 160.0), kv_y=st.floats(80.0, 160.0),
+       angle=st.floats(0.0, 180.0))
+def test_designed_gains_and_margins_hold_for_any_axes_against_python_control(kp_x, kp_y, kv_x, kv_y, angle):
+    """For two axes drawn at random (loops damped at 0.78 or more on their own): the design's worst line is damped at 0.7 (python-control's poles), and on any
+    line the coupled loop's damping and spectral radius are those of python-control's interconnection."""
+    servos = {"x": AxisServo(kp=kp_x, vff=1.0, **{**AXIS, "kv": kv_x}),
+              "y": AxisServo(kp=kp_y, vff=1.0, **{**AXIS, "kv": kv_y})}
+    kp, ki, kd = cp.CrossCoupled().gains(servos, DT)
+    lines = np.radians(np.arange(0.0, 180.0, 15.0))
+    worst = min(_damping(_python_control_coupled_loop(servos, (np.cos(a), np.sin(a)), kp, ki, kd).poles())
+                for a in lines)
+    assert worst == pytest.approx(cp.DESIGN_DAMPING_RATIO, abs=1e-5)
+    normal = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+    poles = _python_control_coupled_loop(servos, normal, kp, ki, kd).poles()
+    m = cp.coupled_margins([kernel.pack(s, DT) for s in servos.values()], kp, ki, kd, DT, [normal])
+    assert m["damping_ratio"] == pytest.approx(_damping(poles), abs=1e-7)
+    assert m["spectral_radius"] == pytest.approx(np.abs(poles).max(), rel=1e-9)
