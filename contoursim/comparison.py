@@ -7,7 +7,7 @@ current command, on how many samples the amplifier's current limit bound,
 the coupled loop's margins (a cross-coupled strategy) and the change of the
 max contour error relative to ``none``. Its header gives the axes' loop
 margins, every strategy's settings and how its gains were chosen: designed
-(:func:`contoursim.compensation.designed_gains`, common to the strategies),
+(:func:`contoursim.coupled_loop.designed_gains`, common to the strategies),
 set (a job file's ``[[strategy]]`` tables, ``--set``) or tuned on the path
 (:func:`tune`). ``to_json`` gives the comparison JSON of DESIGN.md (a
 contract: names and keys exact; the settings, margins and clamped share are
