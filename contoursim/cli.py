@@ -30,7 +30,7 @@ DEMO_RUNS = {"iso230_4_circle": ("iso230_4_circle_ccw.toml", "iso230_4_circle_cw
 TOP_BLOCKS = 5  # the G-code blocks simulate prints, worst first
 FILE_HELP = ("job .toml, path .toml or G-code (.nc .ngc .gcode .tap .cnc .mpf .iso .eia): a file, or a name in the "
              "trajectories library")
-_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect", "ballbar")
+_JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect", "ballbar", "strategy")
 _DIRECTIONS = ("ccw", "cw")
 
 
@@ -233,6 +233,8 @@ def simulate_command(args):
 
     model, path_file, job, geometric = _job(args)
     machine = model.machine
+    if job is not None and "strategy" in job.data:
+        raise job.error("[[strategy]] tables set the strategies of contoursim compare; simulate runs none", "strategy")
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
     ballbar = _ballbar(job)
@@ -291,8 +293,55 @@ def _set_values(effect):
     return ", ".join(values)
 
 
+def _strategy_settings(job):
+    """A job file's ``[[strategy]]`` tables: strategy name -> keyword arguments (see ``STRATEGY_KEYS``)."""
+    from .compensation import STRATEGY_KEYS, strategy_setting
+
+    raw = job.data.get("strategy", [])
+    if not isinstance(raw, list) or not all(isinstance(item, dict) for item in raw):
+        raise job.error("strategy must be an array of tables ([[strategy]])", "strategy")
+    settings = {}
+    for i, item in enumerate(raw):
+        name = item.get("name")
+        if name not in STRATEGY_KEYS:
+            raise job.error(f"[[strategy]] needs name = one of {', '.join(map(repr, STRATEGY_KEYS))}, got {name!r}",
+                            "strategy", i, *(("name",) if "name" in item else ()))
+        if name in settings:
+            raise job.error(f"strategy {name!r} has a [[strategy]] table already: one per strategy",
+                            "strategy", i, "name")
+        job.table("strategy", i, allowed=("name", *STRATEGY_KEYS[name]))
+        settings[name] = {}
+        for key, value in item.items():
+            if key != "name":
+                try:
+                    parameter, value = strategy_setting(name, key, value)
+                except ValueError as exc:
+                    raise job.error(f"[[strategy]] {name}: {exc}", "strategy", i, key) from None
+                settings[name][parameter] = value
+    return settings
+
+
+def _set_option(settings, text):
+    """``--set NAME.KEY=VALUE`` into `settings` (strategy name -> keyword arguments), as a ``[[strategy]]`` key."""
+    from .compensation import strategy_setting
+
+    where, equals, value = text.partition("=")
+    name, dot, key = where.strip().partition(".")
+    if not equals or not dot:
+        raise ValueError(f"--set {text}: write STRATEGY.KEY=VALUE, e.g. ccc_arc.kp_per_s=120")
+    try:
+        number = int(value) if value.strip().lstrip("+-").isdigit() else float(value)
+    except ValueError:
+        raise ValueError(f"--set {text}: {value.strip()!r} is not a number") from None
+    try:
+        parameter, number = strategy_setting(name, key.strip(), number)
+    except ValueError as exc:
+        raise ValueError(f"--set {text}: {exc}") from None
+    settings.setdefault(name, {})[parameter] = number
+
+
 def compare_command(args):
-    """``contoursim compare FILE [--strategies a,b] [--json R.json]``: compensation strategies side by side.
+    """``contoursim compare FILE [--strategies a,b] [--set S.K=V] [--tune] [--json R.json]``: strategies side by side.
 
     FILE as for ``simulate``; a job's ``geometric_compensation = true`` adds the strategy ``geometric``
     unless one of the strategies composes it already.
@@ -305,6 +354,9 @@ def compare_command(args):
     from .plotting import save_comparison_figures
 
     model, path_file, job, geometric = _job(args)
+    settings = {} if job is None else _strategy_settings(job)
+    for text in args.set or ():
+        _set_option(settings, text)
     names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
     if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
         names = [*names, "geometric"]
@@ -316,7 +368,7 @@ def compare_command(args):
             ours = False
         if not ours:
             raise FileExistsError(f"{report} exists and is not a comparison JSON; refusing to overwrite it")
-    comparison = compare(model, _trajectory(model, path_file, job)[0], names)
+    comparison = compare(model, _trajectory(model, path_file, job)[0], names, settings=settings, tuned=args.tune)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)
     if report is not None:  # the files before the table: a reader gone half-way (| head) costs none of them
@@ -411,6 +463,11 @@ def main(argv=None, compile_notice=False):
     p.add_argument("--strategies", metavar="A,B,...",
                    help="strategies to run, comma-separated (default: none,feedforward,zpetc,ccc_linear,ccc_arc,"
                         "feedforward+ccc_arc); parts joined by '+' compose, 'geometric' too")
+    p.add_argument("--set", action="append", metavar="S.KEY=VALUE",
+                   help="a strategy's setting, as in a job file's [[strategy]] table (e.g. ccc_arc.kp_per_s=120); "
+                        "repeat for more")
+    p.add_argument("--tune", action="store_true",
+                   help="tune each cross-coupled strategy's kp, ki on this path under the coupled-loop check")
     p.add_argument("--json", metavar="R.json", help="write the comparison (JSON) to this file")
     p.set_defaults(run=compare_command)
     p = sub.add_parser("volumetric", help="volumetric error map of a machine preset or file")

@@ -37,15 +37,23 @@ the model mismatch a real controller lives with.
 
 import abc
 import dataclasses
-import math
 from collections.abc import Mapping
 from functools import lru_cache
+from types import MappingProxyType
 
 import numpy as np
 
 from . import _validate, kernel
 from .exceptions import UnstableLoopError
-from .servo import AxisServo
+from .coupled_loop import (
+    DESIGN_DAMPING_RATIO,
+    coupled_margins,
+    coupled_spectral_radius,
+    designed_gains,
+    margins_along,
+    path_frames,
+)
+from .servo import MIN_DAMPING_RATIO, MIN_PHASE_MARGIN_DEG, AxisServo
 
 __all__ = [
     "Strategy",
@@ -57,6 +65,12 @@ __all__ = [
     "STRATEGY_NAMES",
     "strategies_named",
     "coupled_spectral_radius",
+    "coupled_margins",
+    "path_frames",
+    "designed_gains",
+    "DESIGN_DAMPING_RATIO",
+    "STRATEGY_KEYS",
+    "strategy_setting",
 ]
 
 #: The comparison's strategy names (DESIGN.md contract), in the order ``contoursim compare`` runs them.
@@ -95,6 +109,14 @@ class Strategy(abc.ABC):
     def coupling(self, path, servos, dt):
         """A :class:`contoursim.kernel.Coupling` acting in the loop, or ``None``."""
         return None
+
+    def preview(self, servos, dt):
+        """Samples the pre-filter reads ahead of the one it sends: the machine dwells this long at the start [-]."""
+        return 0
+
+    def settings(self, servos, dt):
+        """Its settings on `servos` at period `dt` [s] by their ``[[strategy]]`` keys (:data:`STRATEGY_KEYS`), and what follows."""
+        return {}
 
 
 def _model(model, servos):
@@ -158,6 +180,9 @@ class Feedforward(Strategy):
             object.__setattr__(self, gain, value)
         object.__setattr__(self, "model", _check_model(self.model))
 
+    def settings(self, servos, dt):
+        return {"velocity_fraction": self.velocity, "acceleration_fraction": self.acceleration}
+
     def drive(self, servos):
         model = _model(self.model, servos)
         driven = {}
@@ -184,7 +209,7 @@ ZPETC_NEGATIVE_RADIUS = 0.5
 
 
 @lru_cache(maxsize=64)
-def _zpetc_filter(servo, dt):
+def _zpetc_filter(servo, dt, negative_radius=ZPETC_NEGATIVE_RADIUS):
     """``(den, num, fir, delay)`` of Tomizuka's ZPETC for the sampled loop x_ref -> x of `servo`.
 
     The sampled closed loop (:func:`contoursim.servo.discretize`, feedforward
@@ -212,7 +237,7 @@ def _zpetc_filter(servo, dt):
         zeros = scipy.linalg.eigvals(pencil, singular)
     zeros = zeros[np.isfinite(zeros) & (np.abs(zeros) < 1e8)]
     delay = n - zeros.size
-    unacceptable = (np.abs(zeros) >= ZPETC_RADIUS) | ((zeros.real < 0) & (np.abs(zeros) > ZPETC_NEGATIVE_RADIUS))
+    unacceptable = (np.abs(zeros) >= ZPETC_RADIUS) | ((zeros.real < 0) & (np.abs(zeros) > negative_radius))
     dc = (C @ np.linalg.solve(np.eye(n) - A, B) + D).item()
     a_poly = np.poly(poles).real
     ba_poly = np.poly(zeros[~unacceptable]).real
@@ -222,7 +247,7 @@ def _zpetc_filter(servo, dt):
     return ba_poly * k, a_poly, bu_poly / bu_poly.sum() ** 2, delay
 
 
-def zpetc_commands(servo, dt, q):
+def zpetc_commands(servo, dt, q, negative_radius=ZPETC_NEGATIVE_RADIUS):
     """ZPETC pre-filtered position commands for one axis (see :class:`ZPETC`).
 
     Parameters
@@ -233,6 +258,8 @@ def zpetc_commands(servo, dt, q):
         Servo period [s].
     q : ndarray, shape (N,)
         Target positions [mm], at rest before the first sample and after the last.
+    negative_radius : float
+        Zeros on the left half-plane beyond this radius are compensated in phase only (see :class:`ZPETC`).
 
     Returns
     -------
@@ -241,7 +268,7 @@ def zpetc_commands(servo, dt, q):
     """
     from scipy.signal import lfilter
 
-    den, num, fir, delay = _zpetc_filter(servo, float(dt))
+    den, num, fir, delay = _zpetc_filter(servo, float(dt), float(negative_radius))
     start, end = q[0], q[-1]
     ahead = fir.size - 1 + delay
     held = np.concatenate([q - start, np.full(ahead, end - start)])
@@ -261,15 +288,23 @@ class ZPETC(Strategy):
     be inverted (outside or on the unit circle, or near -1 where the ZOH puts
     its sampling zeros: they would ring at the Nyquist frequency) compensated
     in phase only; the filter looks ahead a few servo periods (the loop's
-    delay and the non-invertible zeros), as the interpolator's look-ahead
-    allows. The drives' own velocity and acceleration feedforward is switched
-    off: the pre-filter takes its place. The velocity and acceleration
+    delay and the non-invertible zeros, :meth:`preview`), as the
+    interpolator's look-ahead allows: :func:`contoursim.simulation.simulate`
+    has the machine dwell that long at the start point while the filter
+    fills, so that the first command sent is the start point. The drives'
+    own velocity and acceleration feedforward is switched off: the
+    pre-filter takes its place. The velocity and acceleration
     commands become the central differences of the filtered position.
 
     Parameters
     ----------
     model : mapping str -> AxisServo, optional
         Servos the inverse is built from (default: the simulated machine's).
+    negative_radius : float, default 0.5
+        Zeros of the sampled loop on the left half of the z-plane beyond
+        this radius (the ZOH's sampling zeros) are compensated in phase
+        only, not inverted [-], 0..1: lower inverts fewer of them and
+        previews further ahead.
 
     References
     ----------
@@ -278,19 +313,33 @@ class ZPETC(Strategy):
     """
 
     model: Mapping | None = None
+    negative_radius: float = ZPETC_NEGATIVE_RADIUS
 
     name = "zpetc"
     kind = "feedforward"
 
     def __post_init__(self):
         object.__setattr__(self, "model", _check_model(self.model))
+        radius = _validate.nonnegative("negative_radius", self.negative_radius)
+        if radius > 1:
+            raise ValueError(f"negative_radius must be between 0 and 1 (a radius in the z-plane), got {radius!r}")
+        object.__setattr__(self, "negative_radius", radius)
+
+    def settings(self, servos, dt):
+        return {"negative_zero_radius": self.negative_radius, "preview_samples": self.preview(servos, dt)}
 
     def drive(self, servos):
         return {axis: dataclasses.replace(servo, vff=0.0, aff=0.0) for axis, servo in servos.items()}
 
+    def preview(self, servos, dt):
+        model = _model(self.model, servos)
+        filters = (_zpetc_filter(model[axis], float(dt), self.negative_radius) for axis in servos)
+        return max(fir.size - 1 + delay for _, _, fir, delay in filters)
+
     def prefilter(self, q, v, a, servos, dt):
         model = _model(self.model, servos)
-        q = np.column_stack([zpetc_commands(model[axis], dt, q[:, i]) for i, axis in enumerate(servos)])
+        q = np.column_stack([zpetc_commands(model[axis], dt, q[:, i], self.negative_radius)
+                             for i, axis in enumerate(servos)])
         v = np.gradient(q, dt, axis=0)
         return q, v, np.gradient(v, dt, axis=0)
 
@@ -314,18 +363,14 @@ class CrossCoupled(Strategy):
     ----------
     estimator : {"arc", "linear"}, default "arc"
     kp : float, optional
-        Coupling gain [1/s]. Default from the axis loops: across the path
-        the position gain becomes ``K = Kp + kp``; with the velocity loop
-        taken as a first-order lag of bandwidth ``ωv = kv·kf/m`` [rad/s]
-        the contour loop is ``s^2 + ωv·s + ωv·K``, damped at ``ζ = 0.7``
-        for ``K = ωv/2``. So ``kp = ωv/2 - Kp`` with the slowest velocity
-        loop and the smallest position gain of the coupled axes (at least
-        ``Kp``: never less than doubling the gain across the path).
+        Coupling gain [1/s]. Default: designed on the model's sampled loops
+        so that the coupled loop's least damped pole has ζ = 0.7 on every
+        straight line (:func:`designed_gains`).
     ki : float, optional
-        Integral gain [1/s^2]. Default ``K^2 / 4``: the PI corner ``ki/K``
-        a quarter of the contour loop's gain ``K``, which removes the
-        steady contour error on a line or an arc at a cost of about 14° of
-        phase.
+        Integral gain [1/s^2]. Default ``K^2 / 4`` with ``K = Kp + kp``
+        (``Kp`` the smallest position gain of the coupled axes): the PI
+        corner a quarter of the contour loop's gain, which removes the
+        steady contour error on a line or an arc.
     kd : float, default 0
         Derivative gain [-].
     model : mapping str -> AxisServo, optional
@@ -334,17 +379,22 @@ class CrossCoupled(Strategy):
     up : array_like, shape (3,), default (0, 0, 1)
         Orients the local plane normal.
     window : int, default 4
-        Search window of the arc estimate [samples].
+        Samples the arc estimator's search descends over either side of the
+        previous foot before it scans (:func:`contoursim.nearest.nearest_knot`):
+        speed only, the estimate does not depend on it.
 
     Notes
     -----
-    Before a run, :meth:`coupling` checks the linear coupled loop: the
-    simulated axes' sampled loops (without their in-loop effects) with the
-    coupling closed along a set
-    of straight-line directions (:func:`coupled_spectral_radius`); a
-    spectral radius >= 1 raises :class:`~contoursim.exceptions.UnstableLoopError`
-    naming the gains and the direction. What the linear check cannot see
-    (saturation, friction) the kernel's divergence detection reports.
+    Before a run, :meth:`coupling` checks the coupled loop as
+    :func:`contoursim.servo.check` checks an axis loop: the simulated axes'
+    sampled loops (without their in-loop effects) with the coupling closed,
+    linearised across every direction the path's normal takes
+    (:func:`path_frames`, :meth:`margins`), must be stable with a phase
+    margin of at least 30° and a closed-loop damping ratio of at least 0.2;
+    otherwise :class:`~contoursim.exceptions.UnstableLoopError` names the
+    gains and the margins. The linearisation is frozen in time (the
+    normal's turning rate is not in it); what it cannot see (saturation,
+    friction) the kernel's divergence detection reports.
     """
 
     estimator: str = "arc"
@@ -365,98 +415,77 @@ class CrossCoupled(Strategy):
                 object.__setattr__(self, gain, _validate.nonnegative(gain, getattr(self, gain)))
         object.__setattr__(self, "kd", _validate.nonnegative("kd", self.kd))
         object.__setattr__(self, "model", _check_model(self.model))
+        if isinstance(self.window, bool) or not isinstance(self.window, (int, np.integer)) or self.window < 1:
+            raise ValueError(f"window must be a whole number of samples, at least 1; got {self.window!r}")
 
     @property
     def name(self):
         return f"ccc_{self.estimator}"
 
-    def gains(self, servos):
-        """``(kp, ki, kd)`` of the coupling for the coupled `servos` (mapping axis -> AxisServo)."""
-        model = _model(self.model, servos).values()
-        position_gain = min(servo.kp for servo in model)
-        velocity_bandwidth = min(servo.kv_mm * servo.force_gain for servo in model)
-        kp = max(velocity_bandwidth / 2.0 - position_gain, position_gain) if self.kp is None else self.kp
-        ki = (position_gain + kp) ** 2 / 4.0 if self.ki is None else self.ki
-        return kp, ki, self.kd
+    @property
+    def gains_origin(self):
+        """How its gains were chosen: ``"set"``, ``"designed"`` (:func:`designed_gains`) or ``"kp set, ki designed"``."""
+        if self.kp is not None and self.ki is not None:
+            return "set"
+        return "designed" if self.kp is None else "kp set, ki designed"
+
+    def settings(self, servos, dt):
+        kp, ki, kd = self.gains(dict(list(servos.items())[:3]), dt)
+        return {"kp_per_s": kp, "ki_per_s2": ki, "kd": kd}
+
+    def gains(self, servos, dt):
+        """``(kp, ki, kd)`` of the coupling for the coupled `servos` (mapping axis -> AxisServo) at period `dt` [s].
+
+        Gains not set are designed in discrete time on the model's sampled
+        loops (:func:`designed_gains`).
+        """
+        if self.kp is not None and self.ki is not None:
+            return self.kp, self.ki, self.kd
+        kp, ki = designed_gains(_model(self.model, servos), dt, self.kd, self.kp)
+        return kp, ki if self.ki is None else self.ki, self.kd
+
+    def margins(self, path, servos, dt):
+        """The coupled loop's margins along `path`, the worst of each over the path's frames (see :func:`path_frames`).
+
+        Parameters
+        ----------
+        path : ndarray, shape (N, n)
+            The coupled axes' target path [mm].
+        servos : mapping str -> AxisServo
+            The coupled axes as simulated (their loops, not the model's).
+        dt : float
+            Servo period [s].
+
+        Returns
+        -------
+        dict
+            ``kp``, ``ki``, ``kd``, then :func:`~contoursim.coupled_loop.margins_along`'s.
+        """
+        kp, ki, kd = self.gains(servos, dt)
+        # the loop without feedforward, which does not enter it: one analysis for a strategy with and without
+        rows = [kernel.pack(dataclasses.replace(servo, vff=0.0, aff=0.0), dt) for servo in servos.values()]
+        return dict(kp=kp, ki=ki, kd=kd, **margins_along(rows, kp, ki, kd, dt, path, self.up))
 
     def coupling(self, path, servos, dt):
         coupled = dict(list(servos.items())[:3])
         if len(coupled) < 2:
             raise ValueError(f"cross-coupled control needs 2 or 3 servo axes, the machine has {len(servos)}")
-        kp, ki, kd = self.gains(coupled)
-        rows = [kernel.pack(servo, dt) for servo in coupled.values()]  # the loops as simulated, not as modelled
-        radius, direction = max(
-            ((coupled_spectral_radius(rows, kp, ki, kd, dt, d), d) for d in _directions(len(coupled))),
-            key=lambda pair: pair[0],
+        path = path[:, : len(coupled)]
+        m = self.margins(path, coupled, dt)  # the loops as simulated, not as modelled
+        if m["spectral_radius"] >= 1.0:
+            problem = f"is unstable (spectral radius {m['spectral_radius']:.6g} >= 1)"
+        elif m["phase_margin"] < MIN_PHASE_MARGIN_DEG or m["damping_ratio"] < MIN_DAMPING_RATIO:
+            problem = (f"is badly damped (needs phase margin >= {MIN_PHASE_MARGIN_DEG:g} deg and "
+                       f"closed-loop damping ratio >= {MIN_DAMPING_RATIO:g}, as an axis loop)")
+        else:
+            return kernel.Coupling(self.estimator, path, m["kp"], m["ki"], m["kd"], self.up, self.window)
+        raise UnstableLoopError(
+            f"cross-coupled control with kp = {m['kp']:g} 1/s, ki = {m['ki']:g} 1/s^2, kd = {m['kd']:g}: the coupled "
+            f"loop of axes {', '.join(coupled)} {problem} on this path: phase margin {m['phase_margin']:.3g} deg "
+            f"(at reference sample {m['sample']}), damping ratio {m['damping_ratio']:.3g}, gain margin "
+            f"{m['gain_margin']:.3g}, over the {m['frames']} directions of its normal; lower the coupling gains",
+            margins=m,
         )
-        if radius >= 1.0:
-            along = ", ".join(f"{c:.3g}" for c in direction)
-            raise UnstableLoopError(
-                f"cross-coupled control with kp = {kp:g} 1/s, ki = {ki:g} 1/s^2, kd = {kd:g} destabilises the loop "
-                f"of axes {', '.join(coupled)}: with the coupling closed across a line of normal ({along}) the "
-                f"sampled loop's spectral radius is {radius:.6g} >= 1; lower the coupling gains"
-            )
-        return kernel.Coupling(self.estimator, path[:, : len(coupled)], kp, ki, kd, self.up, self.window)
-
-
-def _directions(n):
-    """Unit normals of the straight lines the stability check closes the coupling across."""
-    angles = np.radians(np.arange(0.0, 180.0, 15.0))
-    if n == 2:
-        return [np.array([math.cos(a), math.sin(a)]) for a in angles]
-    return [np.array([math.cos(a) * math.cos(e), math.sin(a) * math.cos(e), math.sin(e)])
-            for a in angles for e in np.radians((0.0, 30.0, 60.0))] + [np.array([0.0, 0.0, 1.0])]  # fmt: skip
-
-
-def coupled_spectral_radius(rows, kp, ki, kd, dt, normal):
-    """Spectral radius of the sampled axis loops with the cross-coupled controller closed across a line.
-
-    On a straight line of unit normal `normal` the coupling is linear and
-    time-invariant: ``ε = normal · (x_fb - x_ref)``, ``u = kp·ε + ki·∫ε dt +
-    kd·dε/dt`` (trapezoidal integral, backward difference, as in the
-    kernel) and every axis's velocity command gets ``-normal_a · u``.
-
-    Parameters
-    ----------
-    rows : sequence of ndarray, shape (NPAR,)
-        The coupled axes' packed rows (:func:`contoursim.kernel.pack`).
-    kp, ki, kd : float
-        Coupling gains [1/s], [1/s^2], [-].
-    dt : float
-        Servo period [s].
-    normal : array_like, shape (len(rows),)
-        Unit normal of the line in the coupled axes [-].
-
-    Returns
-    -------
-    float
-        ``max |λ|`` of the coupled loop's transition matrix; < 1 is stable.
-    """
-    loops = [kernel.loop_matrices(row) for row in rows]
-    sizes = [phi.shape[0] for phi, _, _ in loops]
-    total = sum(sizes) + 2  # the axes, then the coupling's integrator and previous error
-    z, prev = total - 2, total - 1
-    phi = np.zeros((total, total))
-    eps = np.zeros(total)  # ε as a row over the state
-    start = 0
-    for (phi_a, _, c_a), n_a, size in zip(loops, normal, sizes):
-        phi[start : start + size, start : start + size] = phi_a
-        eps[start : start + size] = n_a * c_a
-        start += size
-    u = (kp + 0.5 * ki * dt + kd / dt) * eps
-    u[z] += ki
-    u[prev] -= kd / dt
-    start = 0
-    for (_, b_a, _), n_a, size in zip(loops, normal, sizes):
-        phi[start : start + size] -= n_a * np.outer(b_a, u)
-        start += size
-    phi[z] = dt * eps
-    phi[z, z] += 1.0
-    phi[prev] = eps
-    if ki == 0.0:  # no integrator: its state (an eigenvalue 1 that nothing reads) is not part of the loop
-        keep = np.arange(total) != z
-        phi = phi[keep][:, keep]
-    return float(np.abs(np.linalg.eigvals(phi)).max())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -514,6 +543,10 @@ class Composition:
             servos = strategy.drive(servos)
         return servos
 
+    def preview(self, servos, dt):
+        """Samples the pre-filters read ahead, together (see :meth:`Strategy.preview`)."""
+        return sum(strategy.preview(servos, dt) for strategy in self.strategies)
+
     def prefilter(self, q, v, a, servos, dt):
         """Every pre-filter stage in turn (see :meth:`Strategy.prefilter`)."""
         for strategy in self.strategies:
@@ -529,7 +562,52 @@ class Composition:
         return None
 
 
-def strategies_named(name, model=None, chain=None):
+#: ``[[strategy]]`` file keys (and ``--set NAME.KEY=VALUE``) of each strategy -> its parameter, in the key's unit.
+STRATEGY_KEYS = MappingProxyType({
+    "feedforward": MappingProxyType({"velocity_fraction": "velocity", "acceleration_fraction": "acceleration"}),
+    "zpetc": MappingProxyType({"negative_zero_radius": "negative_radius"}),
+    "ccc_linear": MappingProxyType({"kp_per_s": "kp", "ki_per_s2": "ki", "kd": "kd"}),
+    "ccc_arc": MappingProxyType({"kp_per_s": "kp", "ki_per_s2": "ki", "kd": "kd"}),
+})
+
+
+def strategy_setting(name, key, value):
+    """A strategy's parameter and value from a file key (:data:`STRATEGY_KEYS`), checked as the strategy checks it.
+
+    Parameters
+    ----------
+    name : str
+        Strategy name (``feedforward``, ``zpetc``, ``ccc_linear``, ``ccc_arc``).
+    key : str
+        File key, e.g. ``kp_per_s``.
+    value : float or int
+
+    Returns
+    -------
+    tuple
+        ``(parameter, value)``.
+
+    Raises
+    ------
+    ValueError
+        An unknown name or key (listing the known ones), or a value the strategy refuses.
+    """
+    if name not in STRATEGY_KEYS:
+        raise ValueError(f"no settings for strategy {name!r}: strategies with settings are {', '.join(STRATEGY_KEYS)}")
+    keys = STRATEGY_KEYS[name]
+    if key not in keys:
+        raise ValueError(f"unknown setting {key!r} of {name}; expected one of {', '.join(keys)}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{key} must be a number, got {value!r}")
+    try:
+        strategies_named(name, settings={name: {keys[key]: value}})  # the strategy checks it
+    except ValueError as exc:
+        message = str(exc)
+        raise ValueError(key + message[len(keys[key]) :] if message.startswith(keys[key]) else message) from None
+    return keys[key], value
+
+
+def strategies_named(name, model=None, chain=None, settings=None):
     """The strategies behind a comparison name such as ``"feedforward+ccc_arc"``.
 
     Parameters
@@ -541,6 +619,9 @@ def strategies_named(name, model=None, chain=None):
         The servo model the strategies design from (default: the simulated machine's).
     chain : MachineChain, optional
         The geometric error model, needed by ``geometric``.
+    settings : mapping str -> mapping, optional
+        Keyword arguments of each part by its name (e.g. ``{"ccc_arc": {"kp": 120.0}}``;
+        :func:`strategy_setting` gives them from the file keys); parts not named keep their defaults.
 
     Returns
     -------
@@ -548,12 +629,13 @@ def strategies_named(name, model=None, chain=None):
     """
     from .geocomp import GeometricCompensation
 
+    settings = {} if settings is None else settings
     makers = {
         "none": lambda: None,
-        "feedforward": lambda: Feedforward(model=model),
-        "zpetc": lambda: ZPETC(model=model),
-        "ccc_linear": lambda: CrossCoupled("linear", model=model),
-        "ccc_arc": lambda: CrossCoupled("arc", model=model),
+        "feedforward": lambda: Feedforward(model=model, **settings.get("feedforward", {})),
+        "zpetc": lambda: ZPETC(model=model, **settings.get("zpetc", {})),
+        "ccc_linear": lambda: CrossCoupled("linear", model=model, **settings.get("ccc_linear", {})),
+        "ccc_arc": lambda: CrossCoupled("arc", model=model, **settings.get("ccc_arc", {})),
         "geometric": lambda: None if chain is None else GeometricCompensation(chain),
     }
     strategies = []

@@ -434,8 +434,9 @@ _register(EffectKind(
 ))
 _register(EffectKind(
     "noise", "loop",
-    (_p("rms_um", 0.0, "µm", (0.0, 1000.0), (0.05, 0.5), doc="measurement noise on the recorded tool position"),),
-    options={"seed": int},
+    (_p("rms_um", 0.0, "µm", (0.0, 1000.0), (0.05, 0.5),
+        doc="measurement noise on the recorded tool position, or on the encoder the loop closes on"),),
+    options={"seed": int, "at": ("recorded", "encoder")},
     doc="measurement noise, deterministic per seed (outside the catalogue)",
 ))
 

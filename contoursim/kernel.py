@@ -37,12 +37,14 @@ output is held over ``[t_k, t_k+1)``):
 1. backlash: the table follows the motor/screw position ``x`` with a play of
    width `backlash_mm` (play operator, state: the table position);
 2. the encoder: ``x`` (``backlash_feedback="motor"``, semi-closed loop) or the
-   table (``"scale"``, closed loop), rounded to `quantum_mm`;
+   table (``"scale"``, closed loop), rounded to `quantum_mm`, plus the
+   measurement noise when it is on the encoder (``noise_at="encoder"``);
 3. feedback delay: the position loop reads the encoder and the velocity loop
    the motor velocity `feedback_delay_s` late, linearly interpolated between
    samples (ring buffers in the state, at most :data:`MAX_DELAY_SAMPLES`);
 4. recorded: the tool position (table + deflection, plus measurement noise
-   of `noise_mm` RMS), the fed-back encoder position, ``v``;
+   of `noise_mm` RMS when it is on the recording), the fed-back encoder
+   position, ``v``;
 5. a cross-coupled contour controller (:class:`Coupling`), if any, estimates
    the contour error of the fed-back axis positions against its reference
    path and adds a correction to every axis's velocity command;
@@ -179,8 +181,12 @@ class LoopEffects:
     quantum_mm : float, default 0
         Encoder resolution [mm]: the loop sees the encoder rounded to it.
     noise_mm : float, default 0
-        Gaussian measurement noise on the recorded tool position [mm RMS]
-        (outside the loop).
+        Gaussian measurement noise [mm RMS], where `noise_at` says.
+    noise_at : {"recorded", "encoder"}, default "recorded"
+        ``"recorded"``: on the recorded tool position, outside the loop;
+        ``"encoder"``: on the encoder reading the loop (and a cross-coupled
+        controller) closes on, before any feedback delay; the recorded tool
+        position is then the true one.
     seed : int, default 0
         Seed of the noise; the same seed gives the same noise.
 
@@ -219,6 +225,7 @@ class LoopEffects:
     mode_mass_ratio: float = 0.2
     quantum_mm: float = 0.0
     noise_mm: float = 0.0
+    noise_at: str = "recorded"
     seed: int = 0
 
     def __post_init__(self):
@@ -230,6 +237,8 @@ class LoopEffects:
             checked[name] = _validate.finite(name, getattr(self, name))
         if self.backlash_feedback not in ("motor", "scale"):
             raise ValueError(f'backlash_feedback must be "motor" or "scale", got {self.backlash_feedback!r}')
+        if self.noise_at not in ("recorded", "encoder"):
+            raise ValueError(f'noise_at must be "recorded" or "encoder", got {self.noise_at!r}')
         if self.mode_freq_hz is not None:
             checked["mode_freq_hz"] = _validate.positive("mode_freq_hz", self.mode_freq_hz)
         for name in ("mode_damping_ratio", "mode_mass_ratio"):
@@ -522,13 +531,15 @@ def _coupling_step(k, cpar, knots, knot_of_sample, cstate, x_fb, dvel):
 
 
 @njit(cache=True)
-def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
+def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, encoder_noise, every,
              tool, encoder, velocity, current, saturated, estimate, status):  # fmt: skip
     """Step all axes of one variant over the reference, advancing `state` and `cstate` in place.
 
     ``par`` (n, NPAR) and ``state`` (n, _NSTATE) follow the layouts above;
     ``cpar`` (_C_NPAR,), ``knots`` (M, 3), ``knot_of_sample`` (N,) and
-    ``cstate`` (_C_NSTATE,) are the coupling's (kind 0: none). Samples
+    ``cstate`` (_C_NSTATE,) are the coupling's (kind 0: none);
+    ``encoder_noise`` (N, n) is added to the encoder readings (no rows:
+    none). Samples
     ``k = 0, every, 2·every, …`` go to the outputs of shape
     (ceil(N / every), n) (`estimate`: (ceil(N / every), 3)) that have rows
     (an output with no rows is not asked for). `status` (n, 3) gets per
@@ -541,6 +552,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
     write_tool, write_encoder = tool.shape[0] > 0, encoder.shape[0] > 0
     write_velocity, write_current, write_saturated = velocity.shape[0] > 0, current.shape[0] > 0, saturated.shape[0] > 0
     write_estimate, coupled = estimate.shape[0] > 0, cpar[_C_KIND] != 0.0
+    noisy_encoder = encoder_noise.shape[0] > 0
     x_fb = np.empty(n_axes)
     v_fb = np.empty(n_axes)
     dvel = np.empty(n_axes)  # zeroed below: np.zeros would compile three more functions (~0.07 s)
@@ -562,6 +574,8 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
             table, enc = _sensors(state[a, 0], state[a, _TABLE], par[a, _HALF_PLAY], par[a, _SCALE] != 0.0,
                                   par[a, _QUANTUM])  # fmt: skip
             state[a, _TABLE] = table
+            if noisy_encoder:
+                enc += encoder_noise[k, a]
             n, f = int(par[a, _DELAY_N]), par[a, _DELAY_F]
             if n == 0 and f == 0.0:
                 x_fb[a], v_fb[a] = enc, state[a, 1]
@@ -641,8 +655,9 @@ def _batch(rows, states, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
            tool, encoder, velocity, current, saturated, status):  # fmt: skip
     """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows; coupling off (:func:`_no_coupling`)."""
     no_estimate = np.empty((0, 3))
+    no_noise = np.empty((0, rows.shape[1]))
     for b in prange(rows.shape[0]):
-        _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
+        _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, no_noise, every,
                  tool[b], encoder[b], velocity[b], current[b], saturated[b], no_estimate, status[b])  # fmt: skip
 
 
@@ -725,7 +740,9 @@ def pack(servo, dt, effects=LoopEffects()):
     variant with new gains, masses or effects may be unstable, and its
     stability is the caller's business. :func:`run` checks each AxisServo's
     nominal linear loop (:func:`contoursim.servo.check`, once per servo);
-    :func:`spectral_radius` is a cheap check of a packed row.
+    :func:`spectral_radius` is a cheap check of a packed row. Noise on the
+    encoder (``noise_at="encoder"``) is not in the row: :func:`run` draws
+    it, and a batch of rows has none.
     """
     if not isinstance(servo, AxisServo):
         raise TypeError(f"servo must be an AxisServo, got {type(servo).__name__}")
@@ -765,7 +782,7 @@ def pack(servo, dt, effects=LoopEffects()):
     row[_FC : _F0 + 1] = friction
     whole = math.floor(delay + 1e-9)
     row[_DELAY_N], row[_DELAY_F] = whole, max(delay - whole, 0.0)
-    row[_QUANTUM], row[_NOISE], row[_SEED] = e.quantum_mm, e.noise_mm, e.seed
+    row[_QUANTUM], row[_NOISE], row[_SEED] = e.quantum_mm, e.noise_mm if e.noise_at == "recorded" else 0.0, e.seed
     return row
 
 
@@ -911,6 +928,21 @@ def _initial_state(shape, start):
     return state
 
 
+def _encoder_noise(effects, n_steps):
+    """The noise on the encoder readings, shape (n_steps, n) [mm] (no rows when no axis has any).
+
+    Axis a's samples are numpy's standard normal stream seeded ``(seed, a)``
+    times its `noise_mm`; an axis without encoder noise gets zeros.
+    """
+    if not any(e.noise_at == "encoder" and e.noise_mm > 0.0 for e in effects):
+        return np.empty((0, len(effects)))
+    noise = np.zeros((n_steps, len(effects)))
+    for a, e in enumerate(effects):
+        if e.noise_at == "encoder" and e.noise_mm > 0.0:
+            noise[:, a] = e.noise_mm * np.random.default_rng((e.seed, a)).standard_normal(n_steps)
+    return noise
+
+
 def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
     """Simulate all axes' servo loops, with their in-loop effects, on a sampled reference.
 
@@ -988,8 +1020,10 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
     state = _initial_state((n,), ref_pos[0])
     # Without a sensor effect between them (a mode, noise, delay, quantisation, or backlash behind a motor
     # encoder) the encoder reads the tool position exactly: one array holds both, written twice with the same values.
+    noise = _encoder_noise([effects.get(name) or LoopEffects() for name in names], n_steps)
     sensed = par[:, _MODE] + par[:, _NOISE] + par[:, _DELAY_N] + par[:, _DELAY_F] + par[:, _QUANTUM]
-    separate = bool(np.any(sensed != 0.0) or np.any((par[:, _HALF_PLAY] != 0.0) & (par[:, _SCALE] == 0.0)))
+    separate = bool(np.any(sensed != 0.0) or np.any((par[:, _HALF_PLAY] != 0.0) & (par[:, _SCALE] == 0.0))
+                    or noise.shape[0] > 0)
     signals = np.empty((3 + separate, n_steps, n))  # one block, which malloc keeps for the next run
     position, velocity, current = signals[:3]
     encoder = signals[3] if separate else position
@@ -1004,7 +1038,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
         cpar[_C_DT], cstate = dt, np.zeros(_C_NSTATE)
         estimate = np.empty((n_steps, 3))
     outputs = (position, encoder, velocity, current, saturated, estimate, status)
-    _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, 1, *outputs)
+    _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, noise, 1, *outputs)
     if status[:, _BAD_REFERENCE].max() >= 0:
         _reference(n, ref_pos, ref_vel, ref_acc, finite=True)  # names the first non-finite value
     diverged = status[:, _DIVERGED]

@@ -387,5 +387,5 @@ _LOOP = {
         mode_freq_hz=e["freq_hz"], mode_damping_ratio=e["damping_ratio"], mode_mass_ratio=e["mass_ratio"]
     ),
     "quantisation": lambda e: dict(quantum_mm=e["resolution_um"] * _MM_PER_UM),
-    "noise": lambda e: dict(noise_mm=e["rms_um"] * _MM_PER_UM, seed=e.options["seed"]),
+    "noise": lambda e: dict(noise_mm=e["rms_um"] * _MM_PER_UM, noise_at=e.options["at"], seed=e.options["seed"]),
 }

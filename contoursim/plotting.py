@@ -19,7 +19,7 @@ __all__ = [
     "circular_deviation", "deviation_from_nominal", "envelope_indices", "fit_circle_center", "magnification_for",
     "plot_path_error", "plot_polar_deviation",
     "plot_errors_over_time", "save_figures", "plot_compared_paths", "plot_compared_contour_error",
-    "plot_compared_figures", "save_comparison_figures",
+    "plot_compared_figures", "plot_compared_zoom", "save_comparison_figures", "RESOLUTION_UM",
 ]
 
 _COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
@@ -714,27 +714,46 @@ def _draw(drawings, out_dir):
 # Strategies compared (contoursim compare)
 
 
-def plot_compared_paths(runs, ax=None, magnification=None):
-    """The actual paths of several runs (strategies) on one reference, contour errors magnified alike.
+#: The compare plots' floor [µm]: the nm the trace CSV holds (errors below it are drawn at it).
+RESOLUTION_UM = 1e-3
+
+
+def _grid(fig, n):
+    """`n` axes of small multiples on `fig`, three to a row, and the unused cells hidden."""
+    columns = min(3, n)
+    rows = -(-n // columns)
+    axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False).ravel())
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return axes[:n]
+
+
+def plot_compared_paths(runs, fig=None, magnification=None):
+    """Each run's path (strategy) in a panel of its own, contour errors magnified by one factor for all.
 
     Each run is drawn as in :func:`plot_path_error` (``foot + k·(actual − foot)``)
     with one factor k for all, chosen from the largest contour error of all
     runs: a run whose error is orders of magnitude smaller lies on the
-    reference at that scale, which is the comparison.
+    reference at that scale, which is the comparison. Small multiples, so
+    that no run hides under another.
 
     Parameters
     ----------
     runs : dict of str -> contoursim.simulation.SimResult
         Runs on the same reference, by name.
-    ax : matplotlib.axes.Axes, optional
+    fig : matplotlib.figure.Figure, optional
     magnification : float, optional
         Factor k [-], at least 1.
 
     Returns
     -------
-    matplotlib.axes.Axes
+    ndarray of matplotlib.axes.Axes
+        One per run.
     """
-    ax = _axes(ax)
+    if fig is None:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=(10.0, 7.0), layout="constrained")
     results = list(runs.values())
     first = results[0]
     ref = first.trajectory.position[:, :2]
@@ -742,23 +761,97 @@ def plot_compared_paths(runs, ax=None, magnification=None):
     k = _shared_magnification(results) if magnification is None else _validate.positive("magnification", magnification)
     step = size / (2 * _COLUMNS)
     ir = _thin_curve(ref, step)
-    ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=2.0, label="reference")
-    for i, (name, result) in enumerate(runs.items()):
+    axes = _grid(fig, len(runs))
+    for i, (ax, (name, result)) in enumerate(zip(axes, runs.items())):
+        ax.plot(ref[ir, 0], ref[ir, 1], color="0.6", lw=2.0)
         shown = _magnified(result, k)
         ia = _thin_curve(shown, step)
         largest = 1e3 * result.contour.magnitude[result.trajectory.measuring].max()
-        ax.plot(*shown[ia].T, color=f"C{i}", lw=0.9, label=f"{name} (max {largest:.3g} µm)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
+        ax.plot(*shown[ia].T, color=f"C{i}", lw=0.9)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"{name}: max {_um(largest)}", fontsize="small")
+        ax.tick_params(labelsize="x-small")
     scale = f"×{k:g} along the path normal" if k > 1 else "at true scale"
-    ax.set_title(f"Contour error of each strategy, {scale} (one factor for all)", fontsize="medium")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize="small", frameon=False)
-    return ax
+    fig.suptitle(f"Contour error of each strategy, {scale} (one factor for all; grey: the reference; x, y [mm])",
+                 fontsize="medium")
+    return axes
+
+
+def _um(value):
+    """An error [µm] as the table and the CSV hold it: to the nm, "< 0.001 µm" below."""
+    return f"< {RESOLUTION_UM:g} µm" if value < 0.5 * RESOLUTION_UM else f"{value:.3f} µm"
+
+
+def plot_compared_zoom(runs, fig=None):
+    """Each run's worst spot at true scale: the path and the actual positions around it [µm].
+
+    The window is centred on the foot point of the run's largest contour
+    error over the test proper, with the path's tangent there across and
+    the direction of that error up (in-plane and out-of-plane parts alike),
+    both in µm and at one scale (equal axes, nothing magnified). Its half
+    width is four times that error, at least 1 µm (a few samples of the
+    path at a usual feed; below it the straight lines between samples are
+    no longer the motion). Dots: the actual positions sampled at the servo
+    period; grey: their foot points on the path.
+
+    Parameters
+    ----------
+    runs : dict of str -> contoursim.simulation.SimResult
+    fig : matplotlib.figure.Figure, optional
+
+    Returns
+    -------
+    ndarray of matplotlib.axes.Axes
+        One per run.
+    """
+    if fig is None:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=(10.0, 7.0), layout="constrained")
+    axes = _grid(fig, len(runs))
+    for i, (ax, (name, result)) in enumerate(zip(axes, runs.items())):
+        error, measuring = result.contour, result.trajectory.measuring
+        worst = int(np.flatnonzero(measuring)[np.argmax(error.magnitude[measuring])])
+        largest = 1e3 * float(error.magnitude[worst])
+        half = max(4.0 * largest, 1.0)  # [µm]
+        foot, actual = error.foot, result.tool_position
+        centre = foot[worst]
+        other = np.flatnonzero(np.any(foot != centre, axis=1))  # the path's direction: to the nearest other foot point
+        nearest = other[np.argmin(np.abs(other - worst))]
+        tangent = (centre - foot[nearest]) * np.sign(worst - nearest)
+        tangent /= np.linalg.norm(tangent)
+        up = actual[worst] - centre
+        if not np.any(up):  # no error at all: any direction across the path
+            up = np.eye(tangent.size)[np.argmin(np.abs(tangent))]
+        up = up - (up @ tangent) * tangent
+        up /= np.linalg.norm(up)
+        reach = 1e-3 * 3 * half
+        near = np.flatnonzero(np.linalg.norm(foot - centre, axis=1) < reach + 1e-3 * 10)  # samples around the spot
+        frame = np.array([tangent, up])
+        path_um = 1e3 * (foot[near] - centre) @ frame.T
+        actual_um = 1e3 * (actual[near] - centre) @ frame.T
+        ax.plot(*path_um.T, color="0.6", lw=2.0, marker=".", ms=3)
+        ax.plot(*actual_um.T, color=f"C{i}", lw=0.8, marker="o", ms=3)
+        ax.annotate("", xy=1e3 * (actual[worst] - centre) @ frame.T, xytext=(0.0, 0.0),
+                    arrowprops=dict(arrowstyle="->", color="k", lw=0.8))
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-half, half)
+        ax.set_aspect("equal")
+        t = result.trajectory.t[worst]
+        ax.set_title(f"{name}: {_um(largest)} at t = {t:.3f} s", fontsize="small")
+        ax.set_xlabel("along the path [µm]", fontsize="x-small")
+        ax.set_ylabel("toward the error [µm]", fontsize="x-small")
+        ax.tick_params(labelsize="x-small")
+        ax.grid(True, alpha=0.3)
+    fig.suptitle("Worst spot of each strategy at true scale (grey: the path; dots: the actual positions, "
+                 "every servo period; arrow: the largest contour error)", fontsize="medium")
+    return axes
 
 
 def plot_compared_contour_error(runs, ax=None):
-    """Contour error magnitude over time of several runs, on a log scale [µm].
+    """Contour error magnitude over time of several runs, on a log scale from the CSV's resolution [µm].
+
+    Errors below :data:`RESOLUTION_UM` are drawn at it.
 
     Parameters
     ----------
@@ -773,10 +866,11 @@ def plot_compared_contour_error(runs, ax=None):
     for i, (name, result) in enumerate(runs.items()):
         t, error = result.trajectory.t, 1e3 * result.contour.magnitude
         keep = envelope_indices(error)
-        ax.plot(t[keep], np.maximum(error[keep], 1e-6), lw=0.8, color=f"C{i}", label=name)
+        ax.plot(t[keep], np.maximum(error[keep], RESOLUTION_UM), lw=0.8, color=f"C{i}", label=name)
     ax.set_yscale("log")
+    ax.set_ylim(bottom=RESOLUTION_UM)
     ax.set_xlabel("t [s]")
-    ax.set_ylabel("contour error [µm] (log)")
+    ax.set_ylabel("contour error [µm] (log, from the CSV's nm)")
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title("Contour error over time", fontsize="medium")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
@@ -784,7 +878,10 @@ def plot_compared_contour_error(runs, ax=None):
 
 
 def plot_compared_figures(figures, fig=None):
-    """Bar chart of a comparison's table: errors [µm] on a log scale, and the peak current [A].
+    """Bar chart of a comparison's table: errors [µm] on a log scale from the CSV's nm, and the peak current [A].
+
+    Every bar is labelled with its value (as in the table: to the nm);
+    errors below :data:`RESOLUTION_UM` are drawn at it.
 
     Parameters
     ----------
@@ -806,27 +903,34 @@ def plot_compared_figures(figures, fig=None):
     keys = (("contour_max_um", "contour max"), ("contour_rms_um", "contour RMS"),
             ("tracking_max_um", "tracking max"), ("tracking_rms_um", "tracking RMS"))  # fmt: skip
     width = 0.8 / len(keys)
+    top = max(max(figures[n][key] for n in names) for key, _ in keys)
     for j, (key, label) in enumerate(keys):
-        values = [max(figures[n][key], 1e-6) for n in names]
-        errors_ax.bar(x + (j - (len(keys) - 1) / 2) * width, values, width, label=label, color=f"C{j}")
+        values = np.array([figures[n][key] for n in names])
+        bars = errors_ax.bar(x + (j - (len(keys) - 1) / 2) * width, np.maximum(values, RESOLUTION_UM), width,
+                             label=label, color=f"C{j}")
+        errors_ax.bar_label(bars, [_um(v).replace(" µm", "") for v in values], rotation=90, padding=2,
+                            fontsize="xx-small")
     errors_ax.set_yscale("log")
-    errors_ax.set_ylabel("error [µm] (log)")
-    errors_ax.set_xticks(x, names, rotation=12)
+    errors_ax.set_ylim(RESOLUTION_UM, max(top, RESOLUTION_UM) * 300)  # room for the labels above the bars
+    errors_ax.set_ylabel("error [µm] (log, from the CSV's nm)")
+    errors_ax.set_xticks(x, names, rotation=12, fontsize="small")
     errors_ax.grid(True, axis="y", which="both", alpha=0.3)
     errors_ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", frameon=False)
     errors_ax.set_title("Errors over the test proper and peak current, by strategy", fontsize="medium")
     currents = [figures[n]["peak_current_A"] for n in names]
     hatches = ["//" if figures[n]["saturated"] else "" for n in names]
-    current_ax.bar(x, currents, 0.5, color="0.55", hatch=hatches)
+    bars = current_ax.bar(x, currents, 0.5, color="0.55", hatch=hatches)
+    current_ax.bar_label(bars, [f"{c:.3g}" for c in currents], padding=2, fontsize="x-small")
+    current_ax.set_ylim(0.0, 1.25 * max(currents))
     current_ax.set_ylabel("peak current [A]")
-    current_ax.set_xticks(x, names, rotation=12)
+    current_ax.set_xticks(x, names, rotation=12, fontsize="small")
     current_ax.grid(True, axis="y", alpha=0.3)
-    current_ax.set_title("Peak current command (hatched: the amplifier saturated)", fontsize="medium")
+    current_ax.set_title("Peak current command (hatched: the current limit bound)", fontsize="medium")
     return np.array([errors_ax, current_ax])
 
 
 def save_comparison_figures(comparison, out_dir, name):
-    """Write ``<name>_compare_path.png``, ``<name>_compare_contour.png`` and ``<name>_compare_table.png``.
+    """Write ``<name>_compare_path.png``, ``_compare_zoom.png``, ``_compare_contour.png`` and ``_compare_table.png``.
 
     Parameters
     ----------
@@ -842,12 +946,13 @@ def save_comparison_figures(comparison, out_dir, name):
         The files written.
     """
     runs = comparison.runs
+    grid = dict(left=0.07, right=0.98, top=0.9, bottom=0.08, hspace=0.35, wspace=0.3)
     drawings = [
-        (f"{name}_compare_path.png", (7.0, 8.0), dict(left=0.12, right=0.96, top=0.93, bottom=0.2),
-         lambda fig: plot_compared_paths(runs, fig.add_subplot())),
+        (f"{name}_compare_path.png", (10.0, 7.0), grid, lambda fig: plot_compared_paths(runs, fig)),
+        (f"{name}_compare_zoom.png", (10.0, 7.4), grid, lambda fig: plot_compared_zoom(runs, fig)),
         (f"{name}_compare_contour.png", (9.0, 4.8), dict(left=0.09, right=0.78, top=0.92, bottom=0.11),
          lambda fig: plot_compared_contour_error(runs, fig.add_subplot())),
-        (f"{name}_compare_table.png", (9.5, 6.5), dict(left=0.08, right=0.8, top=0.94, bottom=0.07, hspace=0.3),
+        (f"{name}_compare_table.png", (9.5, 7.0), dict(left=0.08, right=0.8, top=0.94, bottom=0.07, hspace=0.35),
          lambda fig: plot_compared_figures(comparison.figures, fig)),
     ]  # fmt: skip
     return _draw(drawings, out_dir)

@@ -245,8 +245,8 @@ def measured_reference(trace, servo_period):
     return Trajectory(t, position, spline(t, 1), spline(t, 2), s)
 
 
-def _reference(machine, reference, settle):
-    """The reference as a Trajectory at the servo period, held `settle` seconds."""
+def _reference(machine, reference, settle, preview=0):
+    """The reference as a Trajectory at the servo period, after a dwell of `preview` samples and held `settle` seconds."""
     if isinstance(reference, Trace):
         reference = measured_reference(reference, machine.servo_period)
         settle = 0.0 if settle is None else settle
@@ -266,7 +266,7 @@ def _reference(machine, reference, settle):
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
             f"{machine.servo_period:g} s: sample the path at the servo period"
         )
-    return reference.held(default_settle(machine) if settle is None else settle)
+    return reference.preceded(preview).held(default_settle(machine) if settle is None else settle)
 
 
 def default_settle(machine):
@@ -395,11 +395,18 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     Thermal drift, the machine's and the ``thermal_drift`` effects', runs
     from the reference's first sample (a measured trace's clock may start
     anywhere); strategies see that time too.
+
+    A pre-filter reads some samples ahead (ZPETC,
+    :meth:`contoursim.compensation.Strategy.preview`): the machine dwells
+    that long at the start point while the filter fills, as a controller
+    does; the result's trajectory begins with the dwell (not `measuring`,
+    its times before the reference's first).
     """
     model = as_model(model)
     machine = model.machine
-    trajectory = _reference(machine, reference, settle)
     composition = Composition(strategies)
+    preview = composition.preview(composition.drive(model.servos()), machine.servo_period)
+    trajectory = _reference(machine, reference, settle, preview)
     q, response, servos = _servo_run(model, composition, trajectory)
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
@@ -489,7 +496,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     ------
     ValueError
         The variants do not share one structure; an unknown output; a
-        cross-coupled controller among the strategies.
+        cross-coupled controller among the strategies; noise on an
+        encoder (``noise`` with ``at = "encoder"``).
     UnstableLoopError
         A nominal machine's loop is unstable or badly damped.
     """
@@ -500,6 +508,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     coupled = [s.name for s in composition.strategies if s.kind == "coupling"]
     if coupled:
         raise ValueError(f"simulate_batch runs no cross-coupled controller ({coupled[0]}): use simulate")
+    noisy = [f"models[{i}] axis {axis}" for i, m in enumerate(models) for axis, e in m.loop_effects().items()
+             if e.noise_at == "encoder" and e.noise_mm > 0.0]
+    if noisy:
+        raise ValueError(f"simulate_batch runs no noise on the encoder ({noisy[0]}): use simulate")
     unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
     if unknown or not outputs:
         raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
@@ -514,10 +526,11 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
             raise ValueError(f"models[{i}] has another structure than models[0] (axes, servo period, work offset or chain): "
                              "a batch runs variants of one machine")
     dt, servo = first.servo_period, first.servo_columns
+    preview = composition.preview(composition.drive(models[0].servos()), dt)  # the first variant's, as the pre-filter
     for machine in {id(m.machine): m.machine for m in models}.values() if check else ():
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
-    trajectory = _reference(first, reference, settle)
+    trajectory = _reference(first, reference, settle, preview)
     q, v, a = _target(models[0], trajectory, composition)
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))

@@ -105,6 +105,38 @@ class Trajectory:
             np.concatenate([self.measuring, np.zeros(n, bool)]),
         )
 
+    def preceded(self, samples):
+        """This trajectory after a standstill of `samples` servo periods at its first point.
+
+        Parameters
+        ----------
+        samples : int
+            How many samples to put before the first one (their times run
+            back from ``t[0]``).
+
+        Returns
+        -------
+        Trajectory
+            The extra samples have zero velocity and acceleration and are
+            not `measuring`.
+        """
+        n = _validate.nonnegative("samples", samples)
+        if n != int(n):
+            raise ValueError(f"samples must be a whole number, got {samples!r}")
+        n = int(n)
+        if n == 0:
+            return self
+        head = np.zeros((n, self.dim))
+        return Trajectory(
+            np.concatenate([self.t[0] - self.dt * np.arange(n, 0, -1), self.t]),
+            np.concatenate([np.broadcast_to(self.position[0], (n, self.dim)), self.position]),
+            np.concatenate([head, self.velocity]),
+            np.concatenate([head, self.acceleration]),
+            np.concatenate([np.full(n, self.s[0]), self.s]),
+            self.path,
+            np.concatenate([np.zeros(n, bool), self.measuring]),
+        )
+
     @property
     def dim(self):
         """Number of coordinates, 1, 2 or 3."""

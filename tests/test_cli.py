@@ -409,14 +409,23 @@ def test_compare_prints_the_table_and_writes_the_json_and_plots(tmp_path, capsys
     table = capsys.readouterr().out
     runs = json.loads(report.read_text())["runs"]
     assert list(runs) == list(STRATEGY_NAMES)  # the contract's names, in order
+    contract = {"contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um", "peak_current_A", "saturated"}
     for name, figures in runs.items():
-        assert set(figures) == {"contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um",
-                                "peak_current_A", "saturated"}
+        assert contract <= set(figures)  # the contract's keys stay; fields are only added
         assert isinstance(figures["saturated"], bool) and figures["peak_current_A"] > 0
         row = next(line for line in table.splitlines() if line.split()[:1] == [name])
-        assert float(row.split()[1]) == pytest.approx(figures["contour_max_um"], rel=1e-3)
+        assert float(row.split()[1]) == pytest.approx(figures["contour_max_um"], abs=5e-4)  # to the nm
+        assert figures["clamped_pct"] == 0.0  # the demo mill has no current limit
     assert runs["feedforward+ccc_arc"]["contour_max_um"] < 0.1 * runs["none"]["contour_max_um"]
-    for kind in ("path", "contour", "table"):
+    # the settings each strategy ran with, and the coupled loop's margins beside the axes'
+    assert runs["zpetc"]["settings"] == {"zpetc": {"negative_zero_radius": 0.5, "preview_samples": 2}}
+    arc = runs["ccc_arc"]
+    assert arc["gains"] == "designed" and arc["coupled_loop"]["damping_ratio"] >= 0.2
+    assert set(arc["settings"]["ccc_arc"]) == {"kp_per_s", "ki_per_s2", "kd"}
+    assert f"kp_per_s = {arc['settings']['ccc_arc']['kp_per_s']:.4g}" in table
+    assert "axis position loops (sampled): x: phase margin" in table
+    assert set(json.loads(report.read_text())["axes"]) == {"x", "y", "z"}
+    for kind in ("path", "zoom", "contour", "table"):
         assert (tmp_path / "out" / f"small_compare_{kind}.png").stat().st_size > 10_000
     # a second run replaces its own JSON; a file that is not a comparison is never overwritten
     assert main(["compare", str(path), "--strategies", "none, ccc_arc", "--json", str(report),
@@ -442,7 +451,64 @@ def test_compare_writes_its_files_before_a_reader_can_go(tmp_path, monkeypatch):
         main(["compare", str(path), "--strategies", "none,ccc_arc", "--json", str(report), "--out", str(tmp_path / "o")])
     assert reader_gone.text.startswith("contoursim compare — machine: ")
     assert list(json.loads(report.read_text())["runs"]) == ["none", "ccc_arc"]
-    assert {p.name for p in (tmp_path / "o").glob("*.png")} == {f"small_compare_{k}.png" for k in ("path", "contour", "table")}
+    assert {p.name for p in (tmp_path / "o").glob("*.png")} == {f"small_compare_{k}.png"
+                                                                 for k in ("path", "zoom", "contour", "table")}
+
+
+def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(tmp_path, capsys):
+    import json
+
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    job = tmp_path / "job.toml"
+    job.write_text('machine = "demo_mill"\npath = "small.toml"\n\n[[strategy]]\nname = "ccc_arc"\n'
+                   'kp_per_s = 30.0\n')
+    report = tmp_path / "r.json"
+    assert main(["compare", str(job), "--strategies", "ccc_arc,ccc_linear", "--set", "ccc_arc.ki_per_s2=500",
+                 "--set", "ccc_linear.kp_per_s=40", "--set", "ccc_linear.ki_per_s2=0", "--json", str(report),
+                 "--out", str(tmp_path / "out")]) == 0
+    table = capsys.readouterr().out
+    runs = json.loads(report.read_text())["runs"]
+    assert runs["ccc_arc"]["settings"]["ccc_arc"] == {"kp_per_s": 30.0, "ki_per_s2": 500, "kd": 0.0}
+    assert runs["ccc_linear"]["settings"]["ccc_linear"] == {"kp_per_s": 40, "ki_per_s2": 0, "kd": 0.0}
+    assert runs["ccc_arc"]["gains"] == runs["ccc_linear"]["gains"] == "set"
+    assert "ccc_arc, ccc_linear set by the job file or --set" in table
+    assert "ccc_arc: kp_per_s = 30, ki_per_s2 = 500, kd = 0" in table
+
+
+@pytest.mark.parametrize("tables, options, message", [
+    ('[[strategy]]\nname = "ccc_arc"\nkp = 30.0\n', [], "job.toml, line 6: unknown key 'kp' in [strategy.0]"),
+    ('[[strategy]]\nname = "ccc_arc"\nkp_per_s = -3.0\n', [], "job.toml, line 6: [[strategy]] ccc_arc: kp_per_s must be"),
+    ('[[strategy]]\nname = "pid"\n', [], "job.toml, line 5: [[strategy]] needs name = one of 'feedforward', 'zpetc'"),
+    ("", ["--set", "ccc_arc.kp=3"], "--set ccc_arc.kp=3: unknown setting 'kp' of ccc_arc; expected one of kp_per_s"),
+    ("", ["--set", "ccc_arc.kp_per_s=fast"], "--set ccc_arc.kp_per_s=fast: 'fast' is not a number"),
+    ("", ["--set", "zpetc.negative_zero_radius=2"], "negative_zero_radius must be between 0 and 1"),
+    ("", ["--set", "ccc_arc.kp_per_s=3", "--tune"], "tuning sets the coupling's kp and ki: ccc_arc.kp is set"),
+    ("", ["--set", "ccc_arc.kp_per_s=3000"], "the coupled loop of axes x, y, z is unstable"),
+])
+def test_compare_refuses_bad_strategy_settings_naming_the_place(tmp_path, capsys, tables, options, message):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    job = tmp_path / "job.toml"
+    job.write_text(f'machine = "demo_mill"\npath = "small.toml"\n\n{tables}')
+    assert main(["compare", str(job), "--strategies", "none,ccc_arc", *options, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_compare_tune_tunes_each_coupled_strategy_under_the_check(tmp_path, capsys):
+    import json
+
+    from contoursim.comparison import TUNE_KP_START
+
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    report = tmp_path / "r.json"
+    assert main(["compare", str(tmp_path / "small.toml"), "--strategies", "none,ccc_linear", "--tune",
+                 "--json", str(report), "--out", str(tmp_path / "out")]) == 0
+    table = capsys.readouterr().out
+    run = json.loads(report.read_text())["runs"]["ccc_linear"]
+    assert run["gains"] == "tuned" and "ccc_linear tuned on this path" in table
+    assert run["coupled_loop"]["phase_margin_deg"] >= 30 and run["coupled_loop"]["damping_ratio"] >= 0.2
+    assert run["settings"]["ccc_linear"]["kp_per_s"] >= TUNE_KP_START * 36.0 / 2**0.5  # from the search's grid
 
 
 @pytest.mark.parametrize("strategies, message", [

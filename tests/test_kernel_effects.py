@@ -460,6 +460,26 @@ def test_measurement_noise_rms_and_determinism():
     assert np.abs(noisy[2].position - noisy[0].position).max() > noise
 
 
+def test_encoder_noise_is_inside_the_loop_as_python_control_says():
+    """Noise n on the encoder the loop closes on: x_fb = x + n, so the axis follows x_ref − n through its
+    closed loop (python-control's response of the sampled cascade to −n), and the recorded position is x itself."""
+    noise, n_steps = 0.002, 4000
+    servo = axis()
+    ref = np.zeros((n_steps, 1))
+    r = run([servo], DT, ref, ref, ref, effects={"x": LoopEffects(noise_mm=noise, noise_at="encoder", seed=5)})
+    n = r.encoder[:, 0] - r.position[:, 0]  # what the loop read beyond the axis position
+    assert np.sqrt(np.mean(n**2)) == pytest.approx(noise, rel=0.05) and abs(np.corrcoef(n[1:], n[:-1])[0, 1]) < 0.05
+    loop = servo.discretize(DT).closed_loop
+    position_loop = ct.ss(loop.A, loop.B[:, [0]], loop.C[[0]], loop.D[[0]][:, [0]], DT)
+    expected = ct.forced_response(position_loop, np.arange(n_steps) * DT, -n).outputs
+    assert np.abs(r.position[:, 0]).max() > 0.02 * noise  # the axis moves with the noise it is fed back
+    np.testing.assert_allclose(r.position[:, 0], expected, rtol=0, atol=1e-12)
+    again = run([servo], DT, ref, ref, ref, effects={"x": LoopEffects(noise_mm=noise, noise_at="encoder", seed=5)})
+    np.testing.assert_array_equal(again.encoder, r.encoder)  # the same seed, the same noise
+    with pytest.raises(ValueError, match='noise_at must be "recorded" or "encoder"'):
+        LoopEffects(noise_mm=noise, noise_at="loop")
+
+
 @pytest.mark.parametrize("effects, separate", [
     ({}, False),
     ({"y": LoopEffects(backlash_mm=0.004, backlash_feedback="scale", coulomb_N=50.0)}, False),  # the scale reads the table

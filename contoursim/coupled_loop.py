@@ -1,0 +1,333 @@
+"""The cross-coupled loop, linearised: its matrices, margins along a path, and the design of its gains.
+
+A cross-coupled controller (:class:`contoursim.compensation.CrossCoupled`,
+:class:`contoursim.kernel.Coupling`) closes a PID of the estimated contour
+error around the axes' sampled loops. Frozen at a point of the path, the
+estimate is linear in the fed-back positions, with the path's frame there
+as its gradient (:func:`path_frames`), and the coupled loop is the axes'
+loops (:func:`contoursim.kernel.loop_matrices`) with the PID closed across
+that frame (:func:`coupled_margins`, :func:`coupled_spectral_radius`).
+:func:`designed_gains` chooses the coupling gains on it; the strategy
+checks a run's gains on it as :func:`contoursim.servo.check` checks an
+axis loop.
+"""
+
+import dataclasses
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from . import kernel
+
+__all__ = [
+    "DESIGN_DAMPING_RATIO",
+    "FRAME_KNOTS",
+    "coupled_margins",
+    "coupled_spectral_radius",
+    "designed_gains",
+    "margins_along",
+    "path_frames",
+]
+
+
+#: The closed-loop damping ratio the coupling's default gains are designed for [-].
+DESIGN_DAMPING_RATIO = 0.7
+
+
+def designed_gains(servos, dt, kd=0.0, kp=None):
+    """Coupling gains ``(kp, ki)`` designed on the sampled loops for :data:`DESIGN_DAMPING_RATIO`.
+
+    ``ki = K^2/4`` with ``K = Kp + kp`` (``Kp`` the smallest position gain
+    of the coupled axes): the PI corner ``ki/K`` a quarter of the contour
+    loop's gain. ``kp`` is the largest gain for which the least damped
+    pole of the sampled coupled loop (:func:`coupled_margins`), closed
+    across every straight line of :func:`_directions`, has a damping ratio
+    of at least :data:`DESIGN_DAMPING_RATIO` (bisection to 1e-6 relative);
+    a given `kp` is kept and only ``ki`` follows from it.
+
+    Parameters
+    ----------
+    servos : mapping str -> AxisServo
+        The coupled axes' model.
+    dt : float
+        Servo period [s].
+    kd : float
+        Derivative gain [-].
+    kp : float, optional
+        A coupling gain to keep [1/s].
+
+    Returns
+    -------
+    tuple of float
+        ``(kp, ki)`` [1/s], [1/s^2].
+
+    Raises
+    ------
+    ValueError
+        Even a coupling gain of 1 % of ``Kp`` leaves the loop damped below
+        the design ratio (the axes' own loops are).
+    """
+    from .servo import _damping_ratio
+
+    servos = list(servos.values())
+    position_gain = min(servo.kp for servo in servos)
+    if kp is not None:
+        return kp, (position_gain + kp) ** 2 / 4.0
+    rows = [kernel.pack(servo, dt) for servo in servos]
+    directions = _directions(len(servos))
+
+    def damping(kp):
+        ki = (position_gain + kp) ** 2 / 4.0
+        return min(_damping_ratio(np.linalg.eigvals(a + b @ c), dt)
+                   for a, b, c in (_coupled_system(rows, kp, ki, kd, dt, d) for d in directions))
+
+    low, high = 0.01 * position_gain, position_gain
+    if damping(low) < DESIGN_DAMPING_RATIO:
+        raise ValueError(f"the coupled loop is damped at {damping(low):.3g} < {DESIGN_DAMPING_RATIO:g} even with "
+                         f"kp = {low:g} 1/s (the axes' own loops are that little damped): set the coupling gains kp, ki")
+    while damping(high) >= DESIGN_DAMPING_RATIO:
+        low, high = high, 2.0 * high
+    while high - low > 1e-6 * high:
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if damping(middle) >= DESIGN_DAMPING_RATIO else (low, middle)
+    return low, (position_gain + low) ** 2 / 4.0
+
+
+def _directions(n):
+    """Unit normals of the straight lines the stability check closes the coupling across."""
+    angles = np.radians(np.arange(0.0, 180.0, 15.0))
+    if n == 2:
+        return [np.array([math.cos(a), math.sin(a)]) for a in angles]
+    return [np.array([math.cos(a) * math.cos(e), math.sin(a) * math.cos(e), math.sin(e)])
+            for a in angles for e in np.radians((0.0, 30.0, 60.0))] + [np.array([0.0, 0.0, 1.0])]  # fmt: skip
+
+
+def coupled_spectral_radius(rows, kp, ki, kd, dt, normal):
+    """Spectral radius of the sampled axis loops with the cross-coupled controller closed across a line.
+
+    On a straight line of unit normal `normal` the coupling is linear and
+    time-invariant: ``ε = normal · (x_fb - x_ref)``, ``u = kp·ε + ki·∫ε dt +
+    kd·dε/dt`` (trapezoidal integral, backward difference, as in the
+    kernel) and every axis's velocity command gets ``-normal_a · u``.
+
+    Parameters
+    ----------
+    rows : sequence of ndarray, shape (NPAR,)
+        The coupled axes' packed rows (:func:`contoursim.kernel.pack`).
+    kp, ki, kd : float
+        Coupling gains [1/s], [1/s^2], [-].
+    dt : float
+        Servo period [s].
+    normal : array_like, shape (len(rows),)
+        Unit normal of the line in the coupled axes [-].
+
+    Returns
+    -------
+    float
+        ``max |λ|`` of the coupled loop's transition matrix; < 1 is stable.
+    """
+    A, B, C = _coupled_system(rows, kp, ki, kd, dt, normal)
+    return float(np.abs(np.linalg.eigvals(A + B @ C)).max())
+
+
+def _coupled_system(rows, kp, ki, kd, dt, normals):
+    """The sampled axis loops with the coupling's PID on each error channel, the channels open.
+
+    State: the axes' loop states (:func:`contoursim.kernel.loop_matrices`),
+    then per channel the integral of its error (when ``ki > 0``) and its
+    previous error. Input ``e`` (k,): what each channel's PID reads; output
+    ``ε = N·x_fb`` (k,) [mm], the linearised contour error of the channels
+    (rows of `normals`). ``e = ε`` closes the coupling.
+
+    Returns
+    -------
+    A : ndarray, shape (S, S)
+    B : ndarray, shape (S, k)
+    C : ndarray, shape (k, S)
+    """
+    normals = np.atleast_2d(np.asarray(normals, float))
+    k = normals.shape[0]
+    loops = [kernel.loop_matrices(row) for row in rows]
+    sizes = [phi.shape[0] for phi, _, _ in loops]
+    n_axes = sum(sizes)
+    B_w = np.zeros((n_axes, len(rows)))  # the extra velocity command of each axis
+    C_x = np.zeros((len(rows), n_axes))  # each axis's fed-back position
+    A = np.zeros((n_axes, n_axes))
+    start = 0
+    for a, ((phi_a, b_a, c_a), size) in enumerate(zip(loops, sizes)):
+        A[start : start + size, start : start + size] = phi_a
+        B_w[start : start + size, a], C_x[a, start : start + size] = b_a, c_a
+        start += size
+    # u = g0·e + ki·z - kd/dt·e_prev (trapezoidal integral, backward difference, as in the kernel); w = -Nᵀ·u
+    push = -B_w @ normals.T  # (n_axes, k): the axes' response to the channels' outputs
+    integral = ki != 0.0  # without an integrator its state (an eigenvalue 1 nothing reads) is not part of the loop
+    size = n_axes + (1 + integral) * k
+    z, prev = n_axes, n_axes + integral * k
+    A_full, B_full, C_full = np.zeros((size, size)), np.zeros((size, k)), np.zeros((k, size))
+    A_full[:n_axes, :n_axes] = A
+    if integral:
+        A_full[:n_axes, z : z + k] = ki * push
+        A_full[z : z + k, z : z + k] = np.eye(k)
+        B_full[z : z + k] = dt * np.eye(k)
+    A_full[:n_axes, prev : prev + k] = -(kd / dt) * push
+    B_full[:n_axes] = (kp + 0.5 * ki * dt + kd / dt) * push
+    B_full[prev : prev + k] = np.eye(k)
+    C_full[:, :n_axes] = normals @ C_x
+    return A_full, B_full, C_full
+
+
+@dataclasses.dataclass(frozen=True)
+class _Loop:
+    """A sampled SISO loop gain as :func:`contoursim.servo.margins` analyses one (without importing python-control)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float
+
+    @property
+    def nstates(self):
+        return self.A.shape[0]
+
+
+@lru_cache(maxsize=4096)
+def _stored_margins(rows, shape, kp, ki, kd, dt, normals, k):
+    """:func:`coupled_margins` of rows and normals given as bytes: one analysis per loop and frame in a process."""
+    rows = np.frombuffer(rows).reshape(shape)
+    return coupled_margins(rows, kp, ki, kd, dt, np.frombuffer(normals).reshape(k, -1))
+
+
+def coupled_margins(rows, kp, ki, kd, dt, normals):
+    """Margins of the coupled sampled loop linearised across one frame of the path, as an axis loop's (:func:`~.servo.margins`).
+
+    The coupling's error channels are the rows of `normals` (the in-plane
+    normal, and for three axes the plane normal): the estimator's
+    linearisation at a point of the path. Each channel's loop gain is
+    broken at its PID's input with the other channels closed (loop at a
+    time); the damping ratio and the spectral radius are those of the
+    whole closed loop.
+
+    Parameters
+    ----------
+    rows : sequence of ndarray, shape (NPAR,)
+        The coupled axes' packed rows (:func:`contoursim.kernel.pack`).
+    kp, ki, kd : float
+        Coupling gains [1/s], [1/s^2], [-].
+    dt : float
+        Servo period [s].
+    normals : array_like, shape (k, len(rows))
+        Unit error directions of the channels in the coupled axes [-].
+
+    Returns
+    -------
+    dict
+        ``spectral_radius`` [-], ``damping_ratio`` [-] (the least damped
+        closed-loop pole), ``stable``, and over the channels the smallest
+        ``phase_margin`` [deg] and ``gain_margin`` [-] with the
+        ``gain_crossover`` [rad/s] of the phase margin.
+    """
+    from .servo import _damping_ratio, _loop_margins
+
+    A, B, C = _coupled_system(rows, kp, ki, kd, dt, normals)
+    poles = np.linalg.eigvals(A + B @ C)
+    radius = float(np.abs(poles).max())
+    result = dict(spectral_radius=radius, damping_ratio=_damping_ratio(poles, dt), stable=radius < 1.0,
+                  phase_margin=np.inf, gain_margin=np.inf, gain_crossover=np.nan)
+    for j in range(C.shape[0]):
+        others = [i for i in range(C.shape[0]) if i != j]
+        m = _loop_margins(_Loop(A + B[:, others] @ C[others], B[:, [j]], -C[[j]], np.zeros((1, 1)), dt))  # 1 + L = 0
+        if m["phase_margin"] < result["phase_margin"]:
+            result["phase_margin"], result["gain_crossover"] = m["phase_margin"], m["gain_crossover"]
+        result["gain_margin"] = min(result["gain_margin"], m["gain_margin"])
+    return result
+
+
+#: The most knots of a path whose frames :func:`path_frames` computes (evenly spread).
+FRAME_KNOTS = 20_000
+
+
+def path_frames(path, up=(0.0, 0.0, 1.0), resolution_deg=5.0):
+    """The arc estimator's linearisation along a path: its error directions, one representative per direction bin.
+
+    At a knot of the path the estimate's gradient with respect to the
+    position is the frame of the three-point arc there (the in-plane
+    normal ``l = b × t`` and, for three axes, the plane normal ``b``),
+    whatever the curvature; the linear estimator's is the same frame. The
+    frames at up to :data:`FRAME_KNOTS` knots evenly spread along the path
+    are binned at `resolution_deg`.
+
+    Parameters
+    ----------
+    path : array_like, shape (N, n)
+        The coupled axes' target path [mm], n = 2 or 3.
+    up : array_like, shape (3,)
+        Orients the plane normal (as :class:`~contoursim.compensation.CrossCoupled`'s `up`).
+    resolution_deg : float
+        Bin width of the directions [deg].
+
+    Returns
+    -------
+    list of tuple
+        ``(sample, normals)``: the first reference sample of each bin and
+        its error directions, shape (1, 2) for two axes, (2, 3) for three.
+    """
+    from .estimators import _three_point_arc, distinct_samples, search_params
+
+    path = np.asarray(path, float)
+    n = path.shape[1]
+    knots, first, _ = distinct_samples(path)
+    up = tuple(float(c) for c in search_params(up)[:3])
+    taken = np.arange(0, len(knots), max(1, len(knots) // FRAME_KNOTS))
+    arcs = [_three_point_arc(knots, j, up) for j in taken]
+    t, b = np.array([arc[1] for arc in arcs]), np.array([arc[2] for arc in arcs])
+    normals = np.cross(b, t)[:, None, :2] if n == 2 else np.stack([np.cross(b, t), b], axis=1)  # (M, k, n)
+    if n == 2:  # the normal's direction modulo 180° (±normal: the same loop)
+        bins = round(180.0 / resolution_deg)
+        angle = np.degrees(np.arctan2(normals[:, 0, 1], normals[:, 0, 0])) % 180.0
+        keys = (np.round(angle / resolution_deg).astype(np.int64) % bins)[:, None]
+    else:  # each direction with its largest component positive (±: the same loop), binned by its components
+        flip = np.take_along_axis(normals, np.abs(normals).argmax(axis=2)[..., None], axis=2) < 0
+        angles = np.degrees(np.arcsin(np.clip(np.where(flip, -normals, normals), -1.0, 1.0)))
+        keys = np.round(angles.reshape(len(taken), -1) / resolution_deg).astype(np.int64)
+    _, representative = np.unique(keys, axis=0, return_index=True)
+    return [(int(first[taken[j]]), normals[j]) for j in np.sort(representative)]
+
+
+def margins_along(rows, kp, ki, kd, dt, path, up=(0.0, 0.0, 1.0)):
+    """The worst of the coupled loop's margins over the frames of a path (:func:`path_frames`, :func:`coupled_margins`).
+
+    Parameters
+    ----------
+    rows : sequence of ndarray, shape (NPAR,)
+        The coupled axes' packed rows (:func:`contoursim.kernel.pack`).
+    kp, ki, kd : float
+        Coupling gains [1/s], [1/s^2], [-].
+    dt : float
+        Servo period [s].
+    path : array_like, shape (N, len(rows))
+        The coupled axes' target path [mm].
+    up : array_like, shape (3,)
+        Orients the plane normal.
+
+    Returns
+    -------
+    dict
+        ``spectral_radius``, ``damping_ratio``, ``phase_margin`` [deg],
+        ``gain_margin`` [-] as :func:`coupled_margins` gives them, each the
+        worst over the frames; ``frames`` (how many) and ``sample`` (the
+        reference sample of the frame with the least phase margin).
+    """
+    rows = np.ascontiguousarray(rows, float)
+    worst = dict(spectral_radius=0.0, damping_ratio=np.inf, phase_margin=np.inf, gain_margin=np.inf, sample=0)
+    frames = path_frames(path, up)
+    for sample, normals in frames:
+        m = _stored_margins(rows.tobytes(), rows.shape, kp, ki, kd, dt, normals.tobytes(), normals.shape[0])
+        if m["phase_margin"] < worst["phase_margin"]:
+            worst["phase_margin"], worst["sample"] = m["phase_margin"], sample
+        worst["spectral_radius"] = max(worst["spectral_radius"], m["spectral_radius"])
+        worst["damping_ratio"] = min(worst["damping_ratio"], m["damping_ratio"])
+        worst["gain_margin"] = min(worst["gain_margin"], m["gain_margin"])
+    worst["frames"] = len(frames)
+    return worst
