@@ -1,4 +1,4 @@
-"""Command line: ``contoursim demo | simulate | compare | volumetric | diagnose``.
+"""Command line: ``contoursim demo | simulate | compare | volumetric | diagnose | sweep``.
 
 Every job prints a summary table to stdout and writes plots and traces to
 ``--out`` (default ``./contoursim-out``) through :func:`contoursim.output.output_dir`:
@@ -128,7 +128,7 @@ def demo(args):
     print(f"\nplots and traces written to {out}/")
 
 
-def _job(args):
+def _job(args, extra_keys=()):
     """Model, path file, job file (or None) and geometric switch of ``simulate FILE``.
 
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
@@ -136,7 +136,8 @@ def _job(args):
     ``[feed]`` table, ``work_offset``, ``geometric_compensation`` and
     ``[[effect]]`` tables, added to the machine file's) or a bare path file, run
     on ``--machine`` (default: the demo machine). A job file names its
-    machine, so ``--machine`` with a job file is an error.
+    machine, so ``--machine`` with a job file is an error. `extra_keys`: the
+    further top-level keys a file built on a job file has (a sweep spec's).
     """
     from .machine import read_work_offset
     from .model import load_model, with_file_effects
@@ -149,7 +150,7 @@ def _job(args):
             if "machine" not in job.data:
                 raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
                                 '(e.g. "demo_mill"), or give a path file')
-            data = job.table(allowed=_JOB_KEYS, required=("machine", "path"))
+            data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"))
             for key in ("machine", "path"):
                 if not isinstance(data[key], str):
                     raise job.error(f"{key} must be a name or a file name in quotes, got {data[key]!r}", key)
@@ -274,6 +275,27 @@ def diagnose_command(args):
     print(f"plots written to {args.out}/")
 
 
+def sweep_command(args):
+    """``contoursim sweep SPEC.toml [--scheduler ADDRESS|local:N]``: every variant of a spec, one table row each."""
+    from .sweep import FIGURES, Progress, read_sweep, run_sweep, write_results
+
+    sweep = read_sweep(args.spec)
+    where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
+    print(f"contoursim sweep — {Path(args.spec).name}: {len(sweep.values)} variants of {', '.join(sweep.names)}; "
+          f"strategies {sweep.strategies}; on {where}", flush=True)
+    table = run_sweep(sweep, args.scheduler, progress=Progress())
+    out, chosen = write_results(sweep, table, args.out)
+    diverged = int(table[:, FIGURES.index("diverged")].sum())
+    print(f"{diverged} of {len(table)} variants diverged or were refused by the coupled-loop check")
+    if chosen is not None:
+        for label, i in zip(("best", "worst"), chosen):
+            values = ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
+            figures = dict(zip(FIGURES, table[i]))
+            print(f"{label:<6} variant {i}: {values}: contour max {figures['contour_max_um']:.4g} µm, "
+                  f"RMS {figures['contour_rms_um']:.4g} µm, peak current {figures['peak_current_A']:.4g} A")
+    print(f"table, plots and the best and worst runs written to {out}/")
+
+
 def _every(text):
     """``--every N``: a whole number >= 1."""
     from . import _validate
@@ -311,6 +333,12 @@ def main(argv=None):
     p.add_argument("--model", help="nominal machine file or preset (default: identified from the trace)")
     p.add_argument("--report", help="write the diagnosis report (JSON) to this file")
     p.set_defaults(run=diagnose_command)
+    p = sub.add_parser("sweep", help="many variants of a job (axis settings, effects, strategy gains): a table of figures")
+    p.add_argument("spec", help="sweep spec .toml: a job file with [sweep] and [[vary]] tables")
+    p.add_argument("--scheduler", metavar="ADDRESS|local:N",
+                   help="run on a dask cluster: a scheduler address, or local:N worker processes on this machine "
+                        '(needs pip install "contoursim[distributed]")')
+    p.set_defaults(run=sweep_command)
     for p in sub.choices.values():
         p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
     for command in ("demo", "simulate"):

@@ -1,0 +1,610 @@
+"""Sweeps: many variants of one job, one row of figures each; on this machine or on a dask cluster.
+
+A sweep spec is a job file (``machine``, ``path``, optionally ``[feed]``,
+``work_offset``, ``[[effect]]``) with the strategies to run, how to draw
+the variants and one ``[[vary]]`` table per parameter varied::
+
+    machine = "demo_mill"
+    path = "iso230_4_circle_ccw"
+    strategies = "ccc_arc"          # a comparison name: parts joined by '+'
+
+    [sweep]
+    method = "lhs"                  # "grid", "random" or "lhs" (Latin hypercube)
+    count = 200                     # random and lhs: the number of variants
+    seed = 1                        # random and lhs: same seed, same variants
+
+    [[vary]]
+    name = "strategy.ccc_arc.kp_per_s"
+    min = 20.0
+    max = 400.0
+    log = true                      # optional: uniform in log(value)
+
+    [[vary]]
+    name = "effect.backlash.x.lost_motion_um"
+    min = 0.0
+    max = 20.0
+    count = 5                       # grid: count points from min to max, or values = [...]
+
+Parameters are named as the files name them (:data:`PARAMETER_KINDS`):
+``axes.<axis>.<key>`` (a machine file's ``[axes.<axis>]`` key,
+:data:`contoursim.machine.SERVO_KEYS`), ``effect.<effect>.<axis>.<parameter>``
+(an ``[[effect]]`` table's parameter; the effect is added when the job lacks
+it) and ``strategy.<strategy>.<gain>`` (:data:`STRATEGY_GAINS`).
+
+Every variant runs in :func:`contoursim.simulation.simulate_batch` (they all
+share the job's structure: varying a parameter never changes the axes, the
+servo period or the chain), in tasks of many variants; a task carries only
+the job's file texts and the variants' values, and whoever runs it rebuilds
+the model (once per process). A variant's row depends on its values alone
+(each batch row equals its single run bit for bit), so the table is the
+same, bit for bit, however the variants are split into tasks and whichever
+worker runs them. With a pre-filter (``zpetc``), designed from each
+variant's own servos, the variants run one by one.
+"""
+
+import dataclasses
+import hashlib
+import itertools
+import math
+import os
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from .config import TomlFile
+from .exceptions import ConfigError
+from .simulation import SUMMARY_KEYS
+
+__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "STRATEGY_GAINS", "Sweep", "read_sweep", "run_sweep",
+           "run_variants", "write_results"]
+
+#: How the variants are drawn.
+METHODS = ("grid", "random", "lhs")
+#: The first part of a varied parameter's name.
+PARAMETER_KINDS = ("axes", "effect", "strategy")
+#: ``strategy.<name>.<gain>``: the gains of each strategy a sweep can vary, file name -> strategy field [unit].
+STRATEGY_GAINS = {
+    "feedforward": {"velocity": "velocity", "acceleration": "acceleration"},  # [-], 0..1
+    "ccc_linear": {"kp_per_s": "kp", "ki_per_s2": "ki", "kd": "kd"},  # [1/s], [1/s^2], [-]
+    "ccc_arc": {"kp_per_s": "kp", "ki_per_s2": "ki", "kd": "kd"},
+}
+#: The figures of each variant, the table's last columns (:data:`contoursim.simulation.SUMMARY_KEYS`).
+FIGURES = SUMMARY_KEYS
+#: Keys of a spec on top of a job file's.
+SPEC_KEYS = ("strategies", "sweep", "vary")
+_SWEEP_KEYS = ("method", "count", "seed", "task_size")
+_VARY_KEYS = ("name", "min", "max", "count", "values", "log")
+_DISTRIBUTED = 'dask.distributed is not installed: pip install "contoursim[distributed]"'
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A sweep read from its spec: the job's files and the variants' values.
+
+    Parameters
+    ----------
+    source : str
+        The spec file.
+    files : dict of str -> str
+        The spec's text (under its file name, the first entry) and the texts
+        of the machine and path files it names next to it: all a worker
+        needs to rebuild the job.
+    strategies : str
+        The strategies' comparison name (``"none"``, ``"ccc_arc"``, ...).
+    names : tuple of str
+        The varied parameters.
+    values : ndarray, shape (n_variants, len(names))
+        One row per variant [each parameter's unit].
+    task_size : int or None
+        Variants per task (None: chosen by :func:`run_sweep`).
+    """
+
+    source: str
+    files: dict
+    strategies: str
+    names: tuple
+    values: np.ndarray
+    task_size: int | None = None
+
+
+def read_sweep(file):
+    """Read a sweep spec (module docstring) and draw its variants.
+
+    Parameters
+    ----------
+    file : str or Path
+
+    Returns
+    -------
+    Sweep
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and line of a bad key or value, or of a parameter
+        the job has no place for (saying which names it has).
+    """
+    file = Path(file)
+    toml = TomlFile.read(file)
+    if toml.kind() != "job":
+        raise toml.error('a sweep spec is a job file: machine = "...", path = "...", then [sweep] and [[vary]] tables')
+    files = {file.name: toml.text}
+    for key in ("machine", "path"):
+        near = file.parent / str(toml.data.get(key, ""))
+        if isinstance(toml.data.get(key), str) and near.is_file() and Path(toml.data[key]).name == toml.data[key]:
+            files[toml.data[key]] = near.read_text(encoding="utf-8")
+    sweep = toml.table("sweep", allowed=_SWEEP_KEYS, required=("method",))
+    method = sweep["method"]
+    if method not in METHODS:
+        raise toml.error(f"method must be one of {', '.join(METHODS)}, got {method!r}", "sweep", "method")
+    varies = toml.data.get("vary")
+    if not isinstance(varies, list) or not varies:
+        raise toml.error("a sweep needs at least one [[vary]] table: name = \"axes.x.kp_per_s\", min = ..., max = ...")
+    tables = [toml.table("vary", i, allowed=_VARY_KEYS, required=("name",)) for i in range(len(varies))]
+    names = tuple(t["name"] for t in tables)
+    for i, name in enumerate(names):
+        if not isinstance(name, str) or names.index(name) != i:
+            raise toml.error(f"vary name must be a parameter name, each varied once; got {name!r}", "vary", i, "name")
+    count, seed = None, None
+    if method != "grid":
+        count = _integer(toml, ("sweep", "count"), sweep.get("count"), 1)
+        seed = _integer(toml, ("sweep", "seed"), sweep.get("seed", 0), 0)
+    task_size = None if "task_size" not in sweep else _integer(toml, ("sweep", "task_size"), sweep["task_size"], 1)
+    values = _draw(toml, tables, method, count, seed)
+    strategies = toml.data.get("strategies", "none")
+    if not isinstance(strategies, str):
+        raise toml.error(f"strategies must be a name in quotes (e.g. \"ccc_arc\"), got {strategies!r}", "strategies")
+    made = Sweep(str(file), files, strategies, names, values, task_size)
+    job = _job(made)  # the spec's job, every name and the extreme values checked here, not on a worker
+    for i, name in enumerate(names):
+        try:
+            job.variant({name: values[:, i].min()})
+            job.variant({name: values[:, i].max()})
+        except (TypeError, ValueError) as exc:
+            raise toml.error(f"vary {name!r}: {exc}", "vary", i, "name") from None
+    return made
+
+
+def _integer(toml, keys, value, least):
+    if isinstance(value, bool) or not isinstance(value, int) or value < least:
+        raise toml.error(f"{'.'.join(keys)} must be a whole number, at least {least}; got {value!r}", *keys)
+    return value
+
+
+def _draw(toml, tables, method, count, seed):
+    """The variants' values, shape (n_variants, len(tables)): a full grid, or `count` seeded draws."""
+    columns = []
+    for i, t in enumerate(tables):
+        if "values" in t:
+            values = t["values"]
+            if method != "grid" or any(k in t for k in ("min", "max", "count")):
+                raise toml.error("values = [...] lists a grid's points: use it with method = \"grid\", without min/max/count",
+                                 "vary", i, "values")
+            if not isinstance(values, list) or not values or not all(_number(v) for v in values):
+                raise toml.error(f"values must be a list of numbers, got {values!r}", "vary", i, "values")
+            columns.append(np.array(values, float))
+            continue
+        for key in ("min", "max"):
+            if not _number(t.get(key)):
+                raise toml.error(f"vary {t['name']!r} needs {key} = <number> (or values = [...] in a grid)", "vary", i)
+        low, high = float(t["min"]), float(t["max"])
+        log = t.get("log", False)
+        if not isinstance(log, bool):
+            raise toml.error(f"log must be true or false, got {log!r}", "vary", i, "log")
+        if high < low or (log and low <= 0):
+            raise toml.error(f"vary {t['name']!r}: min must not exceed max" + (" and both be positive (log)" if log else ""),
+                             "vary", i, "min")
+        if method == "grid":
+            n = _integer(toml, ("vary", i, "count"), t.get("count"), 1)
+            columns.append(np.geomspace(low, high, n) if log else np.linspace(low, high, n))
+        elif "count" in t:
+            raise toml.error("a vary table's count gives a grid's points: with random or lhs set [sweep] count",
+                             "vary", i, "count")
+        else:
+            columns.append((low, high, log))
+    if method == "grid":
+        return np.array(list(itertools.product(*columns)), float)
+    rng = np.random.default_rng(seed)
+    if method == "random":
+        u = rng.random((count, len(columns)))
+    else:  # Latin hypercube: each parameter's range cut in `count` strata, one draw in each, strata paired at random
+        u = np.column_stack([(rng.permutation(count) + rng.random(count)) / count for _ in columns])
+    out = np.empty_like(u)
+    for j, (low, high, log) in enumerate(columns):
+        out[:, j] = np.exp(np.log(low) + u[:, j] * np.log(high / low)) if log else low + u[:, j] * (high - low)
+    return out
+
+
+def _number(value):
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
+# ---------------------------------------------------------------------------------------------
+# The job, rebuilt from the files in each process
+
+
+@dataclass(frozen=True)
+class _Job:
+    """The nominal model, the held reference and the strategies of a sweep, and how to make a variant."""
+
+    model: object
+    trajectory: object
+    strategies: tuple
+    prefilters: bool
+
+    def variant(self, values):
+        """``(model, strategies)`` with the named parameters (module docstring) set to `values`."""
+        machine = self.model.machine
+        axes, effects, gains = dict(machine.axes), {}, {}
+        for name, value in values.items():
+            kind, _, rest = name.partition(".")
+            parts = rest.split(".")
+            value = float(value)
+            if kind == "axes" and len(parts) == 2:
+                axes[parts[0]] = dataclasses.replace(axes[parts[0]], **{_servo_field(machine, *parts): value})
+            elif kind == "effect" and len(parts) == 3:
+                effects[name[len("effect.") :]] = value
+            elif kind == "strategy" and len(parts) == 2:
+                gains.setdefault(parts[0], {})[_gain_field(self.strategies, *parts)] = value
+            else:
+                raise ValueError(f"a parameter name is axes.<axis>.<key>, effect.<effect>.<axis>.<parameter> or "
+                                 f"strategy.<strategy>.<gain>, got {name!r}")
+        model = self.model
+        if axes != dict(machine.axes):
+            model = dataclasses.replace(model, machine=dataclasses.replace(machine, axes=axes))
+        present = {e.label for e in model.effects}
+        for label in {n.rpartition(".")[0] for n in effects} - present:  # effects the job lacks: added
+            from .effects import Effect
+
+            name, axis = label.split(".")
+            model = model.with_effect(Effect(name, axis, **{n.rpartition(".")[2]: v for n, v in effects.items()
+                                                            if n.rpartition(".")[0] == label}))
+        model = model.with_values({n: v for n, v in effects.items() if n.rpartition(".")[0] in present})
+        strategies = tuple(dataclasses.replace(s, **gains[s.name]) if s.name in gains else s for s in self.strategies)
+        return model, strategies
+
+
+def _servo_field(machine, axis, key):
+    from .machine import SERVO_KEYS
+
+    if axis not in machine.axes:
+        raise ValueError(f"the machine has no servo axis {axis!r}; its axes: {', '.join(machine.axes)}")
+    if key not in SERVO_KEYS:
+        raise ValueError(f"no axis key {key!r}; the keys: {', '.join(SERVO_KEYS)}")
+    return SERVO_KEYS[key]
+
+
+def _gain_field(strategies, name, gain):
+    if name not in [s.name for s in strategies]:
+        raise ValueError(f"the sweep runs no strategy {name!r} (strategies = "
+                         f"\"{'+'.join(s.name for s in strategies) or 'none'}\")")
+    if gain not in STRATEGY_GAINS.get(name, {}):
+        known = ", ".join(STRATEGY_GAINS.get(name, {})) or "none"
+        raise ValueError(f"strategy {name} has no gain {gain!r}; its gains: {known}")
+    return STRATEGY_GAINS[name][gain]
+
+
+_JOBS = {}  # per process: the job of each set of files, by their digest
+
+
+def _job(sweep_or_files):
+    """The job of a sweep (or of its files), built once per process from the files' texts."""
+    files = sweep_or_files.files if isinstance(sweep_or_files, Sweep) else sweep_or_files
+    digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()
+    if digest not in _JOBS:
+        _JOBS[digest] = _build(files, digest)
+    return _JOBS[digest]
+
+
+def _build(files, digest):
+    from . import cli
+    from .compensation import Composition, strategies_named
+    from .simulation import default_settle
+
+    folder = Path(tempfile.gettempdir()) / f"contoursim-sweep-{digest[:16]}"
+    folder.mkdir(exist_ok=True)
+    for name, text in files.items():  # written where the job's names find them (same texts: same files)
+        (folder / name).write_text(text, encoding="utf-8")
+    spec = folder / next(iter(files))
+    model, path_file, job, _ = cli._job(SimpleNamespace(file=str(spec), machine=None), extra_keys=SPEC_KEYS)
+    try:
+        strategies = strategies_named(job.data.get("strategies", "none"), chain=model.machine.chain)
+    except ValueError as exc:
+        raise job.error(str(exc), "strategies") from None
+    trajectory = cli._trajectory(model, path_file, job).held(default_settle(model.machine))  # every variant: one length
+    return _Job(model, trajectory, strategies, Composition(strategies).prefilters)
+
+
+def run_variants(files, names, rows):
+    """Run variants of a sweep's job: the task every worker runs (plain data in, plain data out).
+
+    Parameters
+    ----------
+    files : dict of str -> str
+        :attr:`Sweep.files`.
+    names : sequence of str
+        The varied parameters.
+    rows : sequence of sequence of float
+        Each variant's values, in the order of `names`.
+
+    Returns
+    -------
+    list of list of float
+        Per variant the :data:`FIGURES` (``diverged`` as 1.0 or 0.0; a
+        diverged variant's other figures NaN).
+    """
+    from .simulation import simulate_batch
+
+    job = _job(files)
+    if _THREADS[0]:  # numba's thread count is per calling thread: set where the task runs
+        import numba
+
+        numba.set_num_threads(_THREADS[0])
+    variants = [job.variant(dict(zip(names, row))) for row in rows]
+    groups = [variants] if not job.prefilters else [[v] for v in variants]  # a pre-filter: one by one
+    out = []
+    for group in groups:
+        summary = simulate_batch([m for m, _ in group], job.trajectory, outputs=("summary",),
+                                 strategies=[s for _, s in group], settle=0.0, check=False)["summary"]
+        out += np.column_stack([summary[key].astype(float) for key in FIGURES]).tolist()
+    return out
+
+
+_THREADS = [0]  # numba threads of each task in this process (set by the warm-up on a worker; 0: numba's default)
+
+
+def _warm_up(files, names, row, threads_per_host, dask_worker=None):
+    """On a worker (``client.run``): set its numba threads, build the job, compile the kernels with one variant."""
+    import numba
+    from distributed.comm import get_address_host
+
+    dask_threads = threads_per_host.get(get_address_host(dask_worker.address), 1)
+    _THREADS[0] = min(max(1, (os.cpu_count() or 1) // dask_threads), numba.config.NUMBA_NUM_THREADS)
+    run_variants(files, names, [row])
+    return _THREADS[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+def run_sweep(sweep, scheduler=None, progress=None):
+    """Run every variant of a sweep; the table of their figures.
+
+    Parameters
+    ----------
+    sweep : Sweep
+    scheduler : None, str or distributed.Client
+        ``None``: in this process. ``"local:N"``: a dask ``LocalCluster`` of
+        N worker processes on this machine, on the loopback interface only.
+        Another string: the address of a dask scheduler
+        (``tcp://host:8786``). A ``distributed.Client``: its cluster.
+    progress : callable, optional
+        Called as ``progress(done, total)`` each time variants finish.
+
+    Returns
+    -------
+    ndarray, shape (n_variants, len(FIGURES))
+        Row i: the figures of variant i (``diverged`` 1.0 or 0.0).
+
+    Raises
+    ------
+    ValueError
+        A bad scheduler; dask.distributed missing (saying how to install it).
+    """
+    n = len(sweep.values)
+    table = np.full((n, len(FIGURES)), np.nan)
+    report = progress or (lambda done, total: None)
+    if scheduler is None:
+        report(0, n)
+        size = sweep.task_size or 32
+        for start in range(0, n, size):
+            rows = slice(start, min(start + size, n))
+            table[rows] = run_variants(sweep.files, sweep.names, sweep.values[rows].tolist())
+            report(rows.stop, n)
+        return table
+    client, cluster = _client(scheduler)
+    try:
+        info = client.scheduler_info()["workers"]
+        threads = sum(w["nthreads"] for w in info.values())
+        per_host = {}  # dask threads per host: each task's numba threads share the host's cores with the others
+        for w in info.values():
+            per_host[w["host"]] = per_host.get(w["host"], 0) + w["nthreads"]
+        client.run(_warm_up, sweep.files, sweep.names, sweep.values[0].tolist(), per_host)
+        report(0, n)
+        size = sweep.task_size or max(1, min(32, math.ceil(n / (4 * max(threads, 1)))))
+        tag = hashlib.sha256(repr((sorted(sweep.files.items()), sweep.names)).encode()).hexdigest()[:12]
+        futures, rows_of = [], {}
+        for start in range(0, n, size):
+            rows = slice(start, min(start + size, n))
+            futures.append(client.submit(run_variants, sweep.files, sweep.names, sweep.values[rows].tolist(),
+                                         key=f"contoursim-sweep-{tag}-{start}", retries=2, pure=False))
+            rows_of[futures[-1].key] = rows
+        from distributed import as_completed
+
+        done = 0
+        for future in as_completed(futures):  # streamed as they finish; a lost worker's tasks run again elsewhere
+            rows = rows_of[future.key]
+            table[rows] = future.result()
+            done += rows.stop - rows.start
+            report(done, n)
+    finally:
+        if cluster is not None:
+            client.close()
+            cluster.close()
+    return table
+
+
+def _client(scheduler):
+    """``(client, cluster)``: a client of the scheduler; `cluster` is the LocalCluster made here (closed after)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ValueError(_DISTRIBUTED) from None
+    if isinstance(scheduler, Client):
+        return scheduler, None
+    text = str(scheduler)
+    if text.startswith("local:"):
+        try:
+            n = int(text[len("local:") :])
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise ValueError(f"--scheduler local:N needs a whole number of workers, at least 1; got {text!r}")
+        threads = max(1, (os.cpu_count() or 1) // n)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, env={"NUMBA_NUM_THREADS": str(threads)})
+        return Client(cluster), cluster
+    return Client(text), None
+
+
+# ---------------------------------------------------------------------------------------------
+# Results
+
+_PLOTTED = {"contour_max_um": "contour max [µm]", "contour_rms_um": "contour RMS [µm]",
+            "tracking_max_um": "tracking max [µm]", "tracking_rms_um": "tracking RMS [µm]",
+            "peak_current_A": "peak current [A]", "saturated": "saturated [fraction]"}
+
+
+def table_text(sweep, table):
+    """The table as CSV text: ``variant``, the varied values, then :data:`FIGURES` (floats exact, as ``repr``)."""
+    lines = [",".join(("variant",) + sweep.names + FIGURES)]
+    for i, (values, figures) in enumerate(zip(sweep.values, table)):
+        cells = [str(i)] + [repr(float(v)) for v in values] + [repr(float(f)) for f in figures[:-1]]
+        lines.append(",".join(cells + [str(bool(figures[-1]))]))
+    return "\n".join(lines) + "\n"
+
+
+def best_and_worst(table):
+    """Indices of the variants with the smallest and the largest max contour error, diverged ones left out (or None)."""
+    contour = np.where(table[:, FIGURES.index("diverged")] == 0, table[:, FIGURES.index("contour_max_um")], np.nan)
+    if np.isnan(contour).all():
+        return None
+    return int(np.nanargmin(contour)), int(np.nanargmax(contour))
+
+
+def plot_sweep(sweep, table):
+    """Figures of a sweep: each figure against each varied parameter and, for two parameters, a map of each.
+
+    Returns
+    -------
+    dict of str -> matplotlib.figure.Figure
+        ``sweep_<parameter>`` for each parameter, ``sweep_map`` for two.
+        Diverged variants are red crosses on the parameter axis.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = table[:, FIGURES.index("diverged")] == 0
+    figures = {}
+    for j, name in enumerate(sweep.names):
+        fig, axes = plt.subplots(2, 3, figsize=(13, 7), layout="constrained")
+        x = sweep.values[:, j]
+        for ax, (key, label) in zip(axes.flat, _PLOTTED.items()):
+            ax.plot(x[ok], table[ok, FIGURES.index(key)], ".", ms=4)
+            ax.plot(x[~ok], np.zeros((~ok).sum()), "rx", label="diverged" if (~ok).any() else None)
+            ax.set(xlabel=name, ylabel=label)
+            ax.grid(alpha=0.3)
+        if (~ok).any():
+            axes.flat[0].legend()
+        fig.suptitle(f"{Path(sweep.source).name}: {len(x)} variants, strategies {sweep.strategies}")
+        figures[f"sweep_{name}"] = fig
+    if len(sweep.names) == 2:
+        fig, axes = plt.subplots(2, 3, figsize=(14, 8), layout="constrained")
+        x, y = sweep.values[:, 0], sweep.values[:, 1]
+        for ax, (key, label) in zip(axes.flat, _PLOTTED.items()):
+            points = ax.scatter(x[ok], y[ok], c=table[ok, FIGURES.index(key)], s=18, cmap="viridis")
+            ax.plot(x[~ok], y[~ok], "rx")
+            fig.colorbar(points, ax=ax, label=label)
+            ax.set(xlabel=sweep.names[0], ylabel=sweep.names[1])
+        fig.suptitle(f"{Path(sweep.source).name}: each figure over the two parameters (red crosses: diverged)")
+        figures["sweep_map"] = fig
+    return figures
+
+
+def write_results(sweep, table, out):
+    """Write a sweep's table, plots and the best and worst variants re-run with full traces into `out`.
+
+    ``sweep.csv`` (:func:`table_text`), ``sweep.parquet`` when pyarrow is
+    installed, the plots of :func:`plot_sweep`, and ``best.csv``,
+    ``worst.csv`` with the usual plots of both
+    (:func:`contoursim.plotting.save_figures`, polar plot ``best_worst_polar.png``).
+
+    Parameters
+    ----------
+    sweep : Sweep
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
+    out : str, Path or contoursim.output.OutputDir
+
+    Returns
+    -------
+    tuple
+        The output folder and the indices ``(best, worst)`` (None when every variant diverged).
+    """
+    import matplotlib.pyplot as plt
+
+    from .output import output_dir
+    from .plotting import save_figures
+    from .simulation import simulate
+
+    out = output_dir(out)
+    with out.write("sweep.csv") as stream:
+        stream.write(table_text(sweep, table))
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        pass
+    else:
+        columns = {"variant": np.arange(len(table))}
+        columns.update((name, sweep.values[:, j]) for j, name in enumerate(sweep.names))
+        columns.update((key, table[:, j].astype(bool) if key == "diverged" else table[:, j]) for j, key in enumerate(FIGURES))
+        with out.write("sweep.parquet", binary=True) as stream:
+            pq.write_table(pa.table(columns), stream)
+    for name, fig in plot_sweep(sweep, table).items():
+        with out.write(f"{name}.png", binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=100)
+        plt.close(fig)
+    chosen = best_and_worst(table)
+    if chosen is not None:
+        job = _job(sweep)
+        runs = {}
+        for label, i in zip(("best", "worst"), chosen):
+            model, strategies = job.variant(dict(zip(sweep.names, sweep.values[i])))
+            runs[label] = simulate(model, job.trajectory, strategies, settle=0.0)
+            values = "; ".join(f"{n} = {v!r}" for n, v in zip(sweep.names, sweep.values[i].tolist()))
+            with out.write(f"{label}.csv") as stream:
+                runs[label].save_csv(stream, metadata={"sweep": Path(sweep.source).name, "variant": i, "values": values})
+        save_figures(runs, out, "best_worst")
+    return out, chosen
+
+
+class Progress:
+    """A one-line progress bar on stderr: ``sweep: [#####.....] 412/1000 variants, 8.1/s, 1.2 min left``."""
+
+    def __init__(self, label="sweep", what="variants", stream=None):
+        self.label, self.what, self.stream = label, what, stream or sys.stderr
+        self.start, self.last = time.monotonic(), -1.0
+
+    def __call__(self, done, total):
+        now = time.monotonic()
+        if done == 0:  # the work starts (a cluster is up and warm): the rate counts from here
+            self.start = now
+        if done < total and now - self.last < 0.5:
+            return
+        self.last = now
+        rate = done / max(now - self.start, 1e-9)
+        left = (total - done) / rate if rate > 0 else float("inf")
+        bar = "#" * round(20 * done / total) + "." * (20 - round(20 * done / total))
+        eta = f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left"
+        end = "\n" if done >= total else ""
+        print(f"\r{self.label}: [{bar}] {done}/{total} {self.what}, {rate:.3g}/s, {eta}   ", end=end, file=self.stream,
+              flush=True)
