@@ -246,7 +246,8 @@ class _Job:
             parts = rest.split(".")
             value = float(value)
             if kind == "axes" and len(parts) == 2:
-                axes[parts[0]] = dataclasses.replace(axes[parts[0]], **{_servo_field(machine, *parts): value})
+                field = _servo_field(machine, *parts)
+                axes[parts[0]] = dataclasses.replace(axes[parts[0]], **{field: value})
             elif kind == "effect" and len(parts) == 3:
                 effects[name[len("effect.") :]] = value
             elif kind == "strategy" and len(parts) == 2:

@@ -17,7 +17,8 @@ from conftest import ROOT
 from contoursim.output import output_dir
 
 EXAMPLES = ROOT / "examples"
-JOBS = sorted(EXAMPLES.glob("*.toml"))
+SWEEPS = [EXAMPLES / "tune_ccc.toml"]  # sweep specs: run by contoursim sweep (below)
+JOBS = sorted(set(EXAMPLES.glob("*.toml")) - set(SWEEPS))
 CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py", "effects_gallery.py",
            "hunting.py", "diagnose_real_traces.py"}  # the last in test_diagnosis.py
 
@@ -145,3 +146,26 @@ def test_example_job_runs(job, tmp_path, capsys):
 
     assert main(["simulate", str(job), "--out", str(tmp_path)]) == 0
     assert "contoursim simulate" in capsys.readouterr().out
+
+
+def test_tune_ccc_sweep_picks_gains_better_than_the_default_and_refuses_unstable_ones(tmp_path, capsys):
+    import csv
+
+    from contoursim.cli import main
+    from contoursim.comparison import compare
+    from contoursim.sweep import _job, read_sweep
+
+    assert main(["sweep", str(SWEEPS[0]), "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    rows = list(csv.DictReader((tmp_path / "sweep.csv").open()))
+    assert len(rows) == 24
+    refused = [r for r in rows if r["diverged"] == "True"]
+    stable = [r for r in rows if r["diverged"] == "False"]
+    assert refused and len(stable) >= 12  # the coupled-loop check refuses the high integral gains
+    assert all(float(r["strategy.ccc_arc.ki_per_s2"]) > 3e4 for r in refused)
+    best = min(stable, key=lambda r: float(r["contour_max_um"]))
+    assert f"best   variant {best['variant']}:" in printed
+    job = _job(read_sweep(SWEEPS[0]))  # the default gains (CrossCoupled's own design) on the same job
+    default = compare(job.model, job.trajectory, ["ccc_arc"]).figures["ccc_arc"]["contour_max_um"]
+    assert float(best["contour_max_um"]) < default
+    assert {"best.csv", "worst.csv", "best_worst_polar.png", "sweep_map.png"} <= {p.name for p in tmp_path.iterdir()}
