@@ -46,7 +46,6 @@ import dataclasses
 import hashlib
 import itertools
 import math
-import os
 import sys
 import tempfile
 import time
@@ -79,7 +78,6 @@ FIGURES = SUMMARY_KEYS
 SPEC_KEYS = ("strategies", "sweep", "vary")
 _SWEEP_KEYS = ("method", "count", "seed", "task_size")
 _VARY_KEYS = ("name", "min", "max", "count", "values", "log")
-_DISTRIBUTED = 'dask.distributed is not installed: pip install "contoursim[distributed]"'
 
 
 @dataclass(frozen=True)
@@ -341,11 +339,10 @@ def run_variants(files, names, rows):
     """
     from .simulation import simulate_batch
 
-    job = _job(files)
-    if _THREADS[0]:  # numba's thread count is per calling thread: set where the task runs
-        import numba
+    from .cluster import task_threads
 
-        numba.set_num_threads(_THREADS[0])
+    job = _job(files)
+    task_threads()
     variants = [job.variant(dict(zip(names, row))) for row in rows]
     groups = [variants] if not job.prefilters else [[v] for v in variants]  # a pre-filter: one by one
     out = []
@@ -354,20 +351,6 @@ def run_variants(files, names, rows):
                                  strategies=[s for _, s in group], settle=0.0, check=False)["summary"]
         out += np.column_stack([summary[key].astype(float) for key in FIGURES]).tolist()
     return out
-
-
-_THREADS = [0]  # numba threads of each task in this process (set by the warm-up on a worker; 0: numba's default)
-
-
-def _warm_up(files, names, row, threads_per_host, dask_worker=None):
-    """On a worker (``client.run``): set its numba threads, build the job, compile the kernels with one variant."""
-    import numba
-    from distributed.comm import get_address_host
-
-    dask_threads = threads_per_host.get(get_address_host(dask_worker.address), 1)
-    _THREADS[0] = min(max(1, (os.cpu_count() or 1) // dask_threads), numba.config.NUMBA_NUM_THREADS)
-    run_variants(files, names, [row])
-    return _THREADS[0]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -409,59 +392,22 @@ def run_sweep(sweep, scheduler=None, progress=None):
             table[rows] = run_variants(sweep.files, sweep.names, sweep.values[rows].tolist())
             report(rows.stop, n)
         return table
-    client, cluster = _client(scheduler)
-    try:
-        info = client.scheduler_info()["workers"]
-        threads = sum(w["nthreads"] for w in info.values())
-        per_host = {}  # dask threads per host: each task's numba threads share the host's cores with the others
-        for w in info.values():
-            per_host[w["host"]] = per_host.get(w["host"], 0) + w["nthreads"]
-        client.run(_warm_up, sweep.files, sweep.names, sweep.values[0].tolist(), per_host)
+    from .cluster import connected, numba_threads, run_tasks
+
+    with connected(scheduler) as client:
+        numba_threads(client)
+        threads = sum(w["nthreads"] for w in client.scheduler_info()["workers"].values())
+        client.run(run_variants, sweep.files, sweep.names, sweep.values[:1].tolist())  # build the job, compile: warm
         report(0, n)
-        size = sweep.task_size or max(1, min(32, math.ceil(n / (4 * max(threads, 1)))))
-        tag = hashlib.sha256(repr((sorted(sweep.files.items()), sweep.names)).encode()).hexdigest()[:12]
-        futures, rows_of = [], {}
-        for start in range(0, n, size):
-            rows = slice(start, min(start + size, n))
-            futures.append(client.submit(run_variants, sweep.files, sweep.names, sweep.values[rows].tolist(),
-                                         key=f"contoursim-sweep-{tag}-{start}", retries=2, pure=False))
-            rows_of[futures[-1].key] = rows
-        from distributed import as_completed
-
+        size = sweep.task_size or max(1, min(32, math.ceil(n / (4 * threads))))
+        parts = [slice(start, min(start + size, n)) for start in range(0, n, size)]
+        tasks = [(sweep.files, sweep.names, sweep.values[rows].tolist()) for rows in parts]
         done = 0
-        for future in as_completed(futures):  # streamed as they finish; a lost worker's tasks run again elsewhere
-            rows = rows_of[future.key]
-            table[rows] = future.result()
-            done += rows.stop - rows.start
+        for i, figures in run_tasks(client, run_variants, tasks, "contoursim-sweep"):  # streamed as they finish
+            table[parts[i]] = figures
+            done += parts[i].stop - parts[i].start
             report(done, n)
-    finally:
-        if cluster is not None:
-            client.close()
-            cluster.close()
     return table
-
-
-def _client(scheduler):
-    """``(client, cluster)``: a client of the scheduler; `cluster` is the LocalCluster made here (closed after)."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise ValueError(_DISTRIBUTED) from None
-    if isinstance(scheduler, Client):
-        return scheduler, None
-    text = str(scheduler)
-    if text.startswith("local:"):
-        try:
-            n = int(text[len("local:") :])
-        except ValueError:
-            n = 0
-        if n < 1:
-            raise ValueError(f"--scheduler local:N needs a whole number of workers, at least 1; got {text!r}")
-        threads = max(1, (os.cpu_count() or 1) // n)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, env={"NUMBA_NUM_THREADS": str(threads)})
-        return Client(cluster), cluster
-    return Client(text), None
 
 
 # ---------------------------------------------------------------------------------------------
