@@ -244,7 +244,10 @@ def volumetric(args):
 
 
 def diagnose_command(args):
-    """``contoursim diagnose MEASURED.csv [--model M.toml] [--report R.json]``: name what the nominal model lacks."""
+    """``contoursim diagnose MEASURED.csv [--model M.toml] [--report R.json]``: name what the nominal model lacks.
+
+    Several traces, or a folder of them: :func:`fleet_command`.
+    """
     import json
 
     from .diagnosis import diagnose, save_figures
@@ -252,6 +255,11 @@ def diagnose_command(args):
     from .output import writing
     from .traces import read_trace
 
+    if len(args.file) > 1 or Path(args.file[0]).is_dir():
+        return fleet_command(args)
+    if args.summary or args.scheduler:
+        raise ValueError("--summary and --scheduler are for several traces (or a folder of them); one trace runs here")
+    args.file = args.file[0]
     trace = read_trace(args.file)
     model = load_model(args.model) if args.model else None
     report = Path(args.report) if args.report else None
@@ -296,6 +304,60 @@ def sweep_command(args):
     print(f"table, plots and the best and worst runs written to {out}/")
 
 
+def fleet_command(args):
+    """``contoursim diagnose A.csv B.csv … | DIR [--summary FLEET.json] [--scheduler …]``: a report per trace, a fleet summary."""
+    import json
+
+    import matplotlib.pyplot as plt
+
+    from .fleet import diagnose_fleet, fleet_summary, plot_fleet, trace_files
+    from .output import writing
+    from .sweep import Progress
+
+    if args.report:
+        raise ValueError("--report names one trace's report: with several traces each report goes to --out, "
+                         "and --summary FLEET.json gets the fleet's")
+    files = trace_files(args.file)
+    summary_file = Path(args.summary) if args.summary else None
+    if summary_file is not None and summary_file.exists():  # replace only a fleet summary, never a file the user keeps
+        try:
+            ours = "effects" in json.loads(summary_file.read_text(encoding="utf-8")) and "failed" in json.loads(
+                summary_file.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError, TypeError):
+            ours = False
+        if not ours:
+            raise FileExistsError(f"{summary_file} exists and is not a fleet summary; refusing to overwrite it")
+    where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
+    print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "
+          f"on {where}", flush=True)
+    outcomes = diagnose_fleet(files, args.model, args.scheduler, progress=Progress("diagnose", "traces"))
+    summary = fleet_summary(outcomes)
+    out = output_dir(args.out)
+    for outcome in outcomes:
+        if "report" in outcome:
+            with out.write(f"{Path(outcome['trace']).stem}.json") as stream:
+                stream.write(json.dumps(outcome["report"], indent=2, ensure_ascii=False) + "\n")
+    text = json.dumps(summary, indent=2, ensure_ascii=False) + "\n"
+    with out.write("fleet.json") as stream:
+        stream.write(text)
+    if summary_file is not None:
+        with writing(summary_file, overwrite=True) as stream:
+            stream.write(text)
+    fig = plot_fleet(summary)
+    with out.write("fleet.png", binary=True) as stream:
+        fig.savefig(stream, format="png", dpi=100)
+    plt.close(fig)
+    print(f"{summary['diagnosed']} of {summary['traces']} traces diagnosed; explained by the nominal model: "
+          f"{len(summary['nominal'])}")
+    for label, e in summary["effects"].items():
+        spread = "; ".join(f"{key} {d['min']:.4g} … {d['max']:.4g} (median {d['median']:.4g})"
+                           for key, d in e["parameters"].items())
+        print(f"  {label:<24} on {e['count']:>3} of {summary['traces']} traces: {spread}")
+    for failed in summary["failed"]:
+        print(f"  failed: {failed['trace']}: {failed['error']}")
+    print(f"reports, fleet.json and fleet.png written to {out}/" + (f"; summary to {summary_file}" if summary_file else ""))
+
+
 def _every(text):
     """``--every N``: a whole number >= 1."""
     from . import _validate
@@ -329,9 +391,13 @@ def main(argv=None):
     p.add_argument("machine", help="machine preset name or file")
     p.set_defaults(run=volumetric)
     p = sub.add_parser("diagnose", help="name the effects a nominal model lacks to explain a measured trace")
-    p.add_argument("file", help="measured trace CSV (t, x_ref, x[, y_ref, y[, z_ref, z]])")
+    p.add_argument("file", nargs="+",
+                   help="measured trace CSV (t, x_ref, x[, y_ref, y[, z_ref, z]]); several, or a folder: a fleet")
     p.add_argument("--model", help="nominal machine file or preset (default: identified from the trace)")
     p.add_argument("--report", help="write the diagnosis report (JSON) to this file")
+    p.add_argument("--summary", metavar="FLEET.json", help="several traces: write the fleet summary (JSON) to this file")
+    p.add_argument("--scheduler", metavar="ADDRESS|local:N",
+                   help='several traces: diagnose them on a dask cluster (needs pip install "contoursim[distributed]")')
     p.set_defaults(run=diagnose_command)
     p = sub.add_parser("sweep", help="many variants of a job (axis settings, effects, strategy gains): a table of figures")
     p.add_argument("spec", help="sweep spec .toml: a job file with [sweep] and [[vary]] tables")

@@ -551,7 +551,7 @@ class Progress:
         rate = done / max(now - self.start, 1e-9)
         left = (total - done) / rate if rate > 0 else float("inf")
         bar = "#" * round(20 * done / total) + "." * (20 - round(20 * done / total))
-        eta = f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left"
+        eta = "" if done == 0 else f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left"
         end = "\n" if done >= total else ""
         print(f"\r{self.label}: [{bar}] {done}/{total} {self.what}, {rate:.3g}/s, {eta}   ", end=end, file=self.stream,
               flush=True)
