@@ -121,8 +121,8 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
             outcomes[i] = {"trace": str(f), "error": f"cannot read the file: {exc}"}
     report = progress or (lambda done, total: None)
     done = len(files) - len(todo)
-    report(done, len(files))
     if scheduler is None:
+        report(done, len(files))
         results = ((k, diagnose_text(*args)) for k, args in enumerate(tasks))
         for k, outcome in results:
             outcomes[todo[k]] = outcome
@@ -132,6 +132,7 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
 
     with connected(scheduler) as client:
         numba_threads(client)
+        report(done, len(files))
         for k, outcome in run_tasks(client, diagnose_text, tasks, "contoursim-diagnose"):  # as they finish
             outcomes[todo[k]] = outcome
             done += 1

@@ -26,21 +26,27 @@ HERE = Path(__file__).resolve().parent
 NIGHTS = {"2026-10-05": 4.0, "2026-10-12": 6.0, "2026-10-19": 8.0, "2026-10-26": 10.0}  # date -> X backlash [µm]
 
 
-def main(folder=HERE):
+def write_nights(folder, nights=NIGHTS):
+    """Write one trace ``night_<date>.csv`` per night into `folder`, the X backlash [µm] of `nights` (date -> µm) hidden in it."""
     folder = Path(folder)
     machine = load_machine(HERE / "nightly_mill.toml")
     path, settings = load_path_file(library_file("iso230_4_circle_ccw"))
     settings = replace(settings, feed=3000.0 / 60.0)  # [mm/s]
     trajectory = sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period).held(0.1)
-    for night, (date, backlash) in enumerate(NIGHTS.items()):
+    for night, (date, backlash) in enumerate(nights.items()):
         truth = Model(machine, (Effect("backlash", "x", lost_motion_um=backlash),))
         trace = synthetic_trace(truth, trajectory, every=4, seed=night)
         trace = replace(trace, metadata={"date": date, "test": "ISO 230-4 circle, 3000 mm/min"})
         write_trace(folder / f"night_{date}.csv", trace, overwrite=True)
-    good = (folder / f"night_{date}.csv").read_text(encoding="utf-8").splitlines()
-    (folder / "night_2026-11-02.csv").write_text("\n".join(good[:200]) + "\n" + good[200][: len(good[200]) // 2] + "\n",
-                                               encoding="utf-8")  # the logger stopped mid-row
-    print(f"{len(NIGHTS) + 1} nightly traces written to {folder}")
+    return [folder / f"night_{date}.csv" for date in nights]
+
+
+def main(folder=HERE):
+    written = write_nights(folder)
+    good = written[-1].read_text(encoding="utf-8").splitlines()
+    (Path(folder) / "night_2026-11-02.csv").write_text("\n".join(good[:200]) + "\n" + good[200][: len(good[200]) // 2]
+                                                     + "\n", encoding="utf-8")  # the logger stopped mid-row
+    print(f"{len(written) + 1} nightly traces written to {folder}")
 
 
 if __name__ == "__main__":
