@@ -61,7 +61,17 @@ def connected(scheduler):
 
 
 def numba_threads(client):
-    """Set each worker's numba threads so that its tasks share the host's cores (``client.run``); worker -> threads."""
+    """Set each worker's numba threads so that its tasks share the host's cores (``client.run``).
+
+    Parameters
+    ----------
+    client : distributed.Client
+
+    Returns
+    -------
+    dict
+        Worker address -> numba threads of each of its tasks.
+    """
     per_host = {}  # dask threads per host: each task's numba threads share the host's cores with the others
     for w in client.scheduler_info()["workers"].values():
         per_host[w["host"]] = per_host.get(w["host"], 0) + w["nthreads"]

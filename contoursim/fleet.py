@@ -24,6 +24,11 @@ __all__ = ["diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "tr
 def trace_files(paths):
     """The trace files of the command line: the files given, and each folder's ``*.csv`` sorted by name.
 
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Trace files and folders.
+
     Raises
     ------
     ValueError
@@ -187,6 +192,11 @@ def fleet_summary(outcomes):
 
 def plot_fleet(summary):
     """The fleet at a glance: on how many traces each effect was named, and its first parameter over the traces.
+
+    Parameters
+    ----------
+    summary : dict
+        From :func:`fleet_summary`.
 
     Returns
     -------

@@ -59,8 +59,8 @@ from .config import TomlFile
 from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
 
-__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "STRATEGY_GAINS", "Sweep", "read_sweep", "run_sweep",
-           "run_variants", "write_results"]
+__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "STRATEGY_GAINS", "Progress", "Sweep", "best_and_worst",
+           "plot_sweep", "read_sweep", "run_sweep", "run_variants", "table_text", "write_results"]
 
 #: How the variants are drawn.
 METHODS = ("grid", "random", "lhs")
@@ -100,6 +100,9 @@ class Sweep:
         One row per variant [each parameter's unit].
     task_size : int or None
         Variants per task (None: chosen by :func:`run_sweep`).
+    elsewhere : tuple of str
+        Files the job reads that are not in the spec's folder (or below it):
+        the sweep runs here, not on a cluster.
     """
 
     source: str
@@ -108,6 +111,41 @@ class Sweep:
     names: tuple
     values: np.ndarray
     task_size: int | None = None
+    elsewhere: tuple = ()
+
+
+def _bundle(spec, toml):
+    """``(files, elsewhere)``: the spec's text and those of the files it names in its folder (the machine file's
+    tables too), by path relative to the folder; and the files it names outside it."""
+    files, elsewhere = {spec.name: toml.text}, []
+    folder = spec.parent.resolve()
+
+    def add(value, base):
+        file = (base / value).resolve()
+        if not file.is_file():
+            if Path(value).is_file():  # relative to the working directory
+                elsewhere.append(str(value))
+            return None
+        if not file.is_relative_to(folder):
+            elsewhere.append(str(file))
+            return None
+        files[file.relative_to(folder).as_posix()] = file.read_text(encoding="utf-8")
+        return file
+
+    machine = add(str(toml.data.get("machine", "")), spec.parent) if isinstance(toml.data.get("machine"), str) else None
+    if isinstance(toml.data.get("path"), str):
+        add(toml.data["path"], spec.parent)
+    if machine is not None:  # tables a machine file names (an ISO 230-2 table = "x_laser.csv"), relative to it
+        stack = [TomlFile.read(machine).data]
+        while stack:
+            item = stack.pop()
+            values = item.values() if isinstance(item, dict) else item if isinstance(item, list) else ()
+            for value in values:
+                if isinstance(value, str) and value.endswith(".csv"):
+                    add(value, machine.parent)
+                elif isinstance(value, (dict, list)):
+                    stack.append(value)
+    return files, tuple(elsewhere)
 
 
 def read_sweep(file):
@@ -131,11 +169,7 @@ def read_sweep(file):
     toml = TomlFile.read(file)
     if toml.kind() != "job":
         raise toml.error('a sweep spec is a job file: machine = "...", path = "...", then [sweep] and [[vary]] tables')
-    files = {file.name: toml.text}
-    for key in ("machine", "path"):
-        near = file.parent / str(toml.data.get(key, ""))
-        if isinstance(toml.data.get(key), str) and near.is_file() and Path(toml.data[key]).name == toml.data[key]:
-            files[toml.data[key]] = near.read_text(encoding="utf-8")
+    files, elsewhere = _bundle(file, toml)
     sweep = toml.table("sweep", allowed=_SWEEP_KEYS, required=("method",))
     method = sweep["method"]
     if method not in METHODS:
@@ -157,7 +191,7 @@ def read_sweep(file):
     strategies = toml.data.get("strategies", "none")
     if not isinstance(strategies, str):
         raise toml.error(f"strategies must be a name in quotes (e.g. \"ccc_arc\"), got {strategies!r}", "strategies")
-    made = Sweep(str(file), files, strategies, names, values, task_size)
+    made = Sweep(str(file), files, strategies, names, values, task_size, elsewhere)
     job = _job(made)  # the spec's job, every name and the extreme values checked here, not on a worker
     for i, name in enumerate(names):
         try:
@@ -292,24 +326,28 @@ _JOBS = {}  # per process: the job of each set of files, by their digest
 
 
 def _job(sweep_or_files):
-    """The job of a sweep (or of its files), built once per process from the files' texts."""
+    """The job of a sweep (from its spec file, so that messages name the user's files) or of its files' texts
+    (on a worker: written to a temporary folder, read, removed), built once per process."""
     files = sweep_or_files.files if isinstance(sweep_or_files, Sweep) else sweep_or_files
     digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()
     if digest not in _JOBS:
-        _JOBS[digest] = _build(files, digest)
+        if isinstance(sweep_or_files, Sweep):
+            _JOBS[digest] = _build(Path(sweep_or_files.source))
+        else:
+            with tempfile.TemporaryDirectory(prefix="contoursim-sweep-") as folder:
+                for name, text in files.items():  # where the job's names find them
+                    (Path(folder) / name).parent.mkdir(parents=True, exist_ok=True)
+                    (Path(folder) / name).write_text(text, encoding="utf-8")
+                _JOBS[digest] = _build(Path(folder) / next(iter(files)))
     return _JOBS[digest]
 
 
-def _build(files, digest):
+def _build(spec):
+    """Read the job of the spec file `spec`: everything a variant needs is in memory afterwards."""
     from . import cli
     from .compensation import Composition, strategies_named
     from .simulation import default_settle
 
-    folder = Path(tempfile.gettempdir()) / f"contoursim-sweep-{digest[:16]}"
-    folder.mkdir(exist_ok=True)
-    for name, text in files.items():  # written where the job's names find them (same texts: same files)
-        (folder / name).write_text(text, encoding="utf-8")
-    spec = folder / next(iter(files))
     model, path_file, job, _ = cli._job(SimpleNamespace(file=str(spec), machine=None), extra_keys=SPEC_KEYS)
     try:
         strategies = strategies_named(job.data.get("strategies", "none"), chain=model.machine.chain)
@@ -392,6 +430,9 @@ def run_sweep(sweep, scheduler=None, progress=None):
             table[rows] = run_variants(sweep.files, sweep.names, sweep.values[rows].tolist())
             report(rows.stop, n)
         return table
+    if sweep.elsewhere:
+        raise ValueError(f"{sweep.source} names {sweep.elsewhere[0]}, outside its folder: a cluster's workers get the "
+                         "spec's folder only; copy the file next to the spec (or below it)")
     from .cluster import connected, numba_threads, run_tasks
 
     with connected(scheduler) as client:
@@ -419,7 +460,14 @@ _PLOTTED = {"contour_max_um": "contour max [µm]", "contour_rms_um": "contour RM
 
 
 def table_text(sweep, table):
-    """The table as CSV text: ``variant``, the varied values, then :data:`FIGURES` (floats exact, as ``repr``)."""
+    """The table as CSV text: ``variant``, the varied values, then :data:`FIGURES` (floats exact, as ``repr``).
+
+    Parameters
+    ----------
+    sweep : Sweep
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
+    """
     lines = [",".join(("variant",) + sweep.names + FIGURES)]
     for i, (values, figures) in enumerate(zip(sweep.values, table)):
         cells = [str(i)] + [repr(float(v)) for v in values] + [repr(float(f)) for f in figures[:-1]]
@@ -428,7 +476,13 @@ def table_text(sweep, table):
 
 
 def best_and_worst(table):
-    """Indices of the variants with the smallest and the largest max contour error, diverged ones left out (or None)."""
+    """Indices of the variants with the smallest and the largest max contour error, diverged ones left out (or None).
+
+    Parameters
+    ----------
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
+    """
     contour = np.where(table[:, FIGURES.index("diverged")] == 0, table[:, FIGURES.index("contour_max_um")], np.nan)
     if np.isnan(contour).all():
         return None
@@ -437,6 +491,12 @@ def best_and_worst(table):
 
 def plot_sweep(sweep, table):
     """Figures of a sweep: each figure against each varied parameter and, for two parameters, a map of each.
+
+    Parameters
+    ----------
+    sweep : Sweep
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
 
     Returns
     -------
@@ -535,7 +595,19 @@ def write_results(sweep, table, out):
 
 
 class Progress:
-    """A one-line progress bar on stderr: ``sweep: [#####.....] 412/1000 variants, 8.1/s, 1.2 min left``."""
+    """A one-line progress bar on stderr: ``sweep: [#####.....] 412/1000 variants, 8.1/s, 1.2 min left``.
+
+    Called as ``progress(done, total)``; the rate counts from the call with ``done = 0``.
+
+    Parameters
+    ----------
+    label : str
+        What leads the line.
+    what : str
+        What is counted.
+    stream : file object, optional
+        Default ``sys.stderr``.
+    """
 
     def __init__(self, label="sweep", what="variants", stream=None):
         self.label, self.what, self.stream = label, what, stream or sys.stderr

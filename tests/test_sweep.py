@@ -159,3 +159,35 @@ def test_local_local1_local2_and_a_killed_worker_give_the_same_table_bit_for_bit
 
         table = run_sweep(sweep, client, progress=kill_one)
         assert killed and table_text(sweep, table) == local
+
+        # a machine file in a folder below the spec's: the workers get its text and rebuild it
+        own = _own_machine_spec(tmp_path / "own")
+        assert table_text(own, run_sweep(own, client)) == table_text(own, run_sweep(own))
+
+
+def _own_machine_spec(folder):
+    from contoursim.machine import preset_file
+
+    (folder / "machines").mkdir(parents=True)
+    text = preset_file("demo_mill").read_text().replace("kp_per_s = 36.0", "kp_per_s = 30.0")
+    (folder / "machines" / "mill.toml").write_text(text)
+    spec = _spec(folder, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}])
+    spec.write_text(spec.read_text().replace('machine = "demo_mill"', 'machine = "machines/mill.toml"'))
+    sweep = read_sweep(spec)
+    assert sorted(sweep.files) == ["machines/mill.toml", "spec.toml"] and not sweep.elsewhere
+    assert _job(sweep).model.machine.axes["y"].kp == 30.0
+    return sweep
+
+
+def test_a_file_outside_the_specs_folder_runs_here_but_not_on_a_cluster(tmp_path):
+    from contoursim.machine import preset_file
+
+    (tmp_path / "mill.toml").write_text(preset_file("demo_mill").read_text())
+    (tmp_path / "specs").mkdir()
+    spec = _spec(tmp_path / "specs", [{"name": '"axes.x.kp_per_s"', "values": "[35.0]"}])
+    spec.write_text(spec.read_text().replace('machine = "demo_mill"', 'machine = "../mill.toml"'))
+    sweep = read_sweep(spec)
+    assert sweep.elsewhere == (str(tmp_path / "mill.toml"),)
+    assert run_sweep(sweep)[0, FIGURES.index("diverged")] == 0.0
+    with pytest.raises(ValueError, match=r"names .*mill.toml, outside its folder: .* copy the file next to the spec"):
+        run_sweep(sweep, "local:1")
