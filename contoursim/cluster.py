@@ -45,7 +45,12 @@ def connected(scheduler):
         return
     text = str(scheduler)
     if not text.startswith("local:"):
-        with Client(text) as client:
+        try:
+            client = Client(text, timeout="20s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ValueError(f"cannot reach a dask scheduler at {text!r} ({exc}); give its address as "
+                             "tcp://host:8786, or local:N for N worker processes on this machine") from None
+        with client:
             yield client
         return
     try:

@@ -191,3 +191,21 @@ def test_a_file_outside_the_specs_folder_runs_here_but_not_on_a_cluster(tmp_path
     assert run_sweep(sweep)[0, FIGURES.index("diverged")] == 0.0
     with pytest.raises(ValueError, match=r"names .*mill.toml, outside its folder: .* copy the file next to the spec"):
         run_sweep(sweep, "local:1")
+
+
+def test_a_local_cluster_listens_on_the_loopback_only_and_a_bad_address_is_one_line(tmp_path):
+    pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
+    from contoursim.cluster import connected
+
+    import psutil  # a dependency of distributed
+
+    with connected("local:2") as client:
+        addresses = [client.scheduler.address] + list(client.scheduler_info()["workers"])
+        assert len(addresses) == 3 and all(a.startswith("tcp://127.0.0.1:") for a in addresses)
+        processes = [os.getpid()] + list(client.run(os.getpid).values())  # scheduler and nannies here, workers there
+        listening = [c.laddr for pid in processes for c in psutil.Process(pid).net_connections(kind="inet")
+                     if c.status == psutil.CONN_LISTEN]
+        assert len(listening) >= 5 and {address.ip for address in listening} == {"127.0.0.1"}
+    with pytest.raises(ValueError, match=r"cannot reach a dask scheduler at 'tcp://127.0.0.1:1'"):
+        with connected("tcp://127.0.0.1:1"):
+            pass
