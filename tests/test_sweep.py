@@ -209,3 +209,25 @@ def test_a_local_cluster_listens_on_the_loopback_only_and_a_bad_address_is_one_l
     with pytest.raises(ValueError, match=r"cannot reach a dask scheduler at 'tcp://127.0.0.1:1'"):
         with connected("tcp://127.0.0.1:1"):
             pass
+
+
+def test_results_csv_parquet_plots_and_the_best_and_worst_runs(tmp_path, capsys):
+    spec = _spec(tmp_path, [{"name": '"strategy.ccc_linear.kp_per_s"', "values": "[20.0, 80.0]"},
+                            {"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}])
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 0
+    out = tmp_path / "out"
+    sweep = read_sweep(spec)
+    text = (out / "sweep.csv").read_text()
+    table = np.array([[float(c) if c not in ("True", "False") else float(c == "True") for c in line.split(",")[3:]]
+                      for line in text.splitlines()[1:]])
+    assert text == table_text(sweep, table)  # the figures read back exactly
+    best, worst = np.argmin(table[:, 0]), np.argmax(table[:, 0])
+    assert f"best   variant {best}:" in capsys.readouterr().out
+    for label, i in (("best", best), ("worst", worst)):
+        head = (out / f"{label}.csv").read_text().splitlines()[:12]
+        assert f"# variant: {i}" in head
+    assert {"sweep_map.png", "sweep_axes.x.kp_per_s.png", "best_path.png", "worst_errors.png"} <= {p.name for p in out.iterdir()}
+    pq = pytest.importorskip("pyarrow.parquet", reason="pyarrow not installed: no Parquet table")
+    parquet = pq.read_table(out / "sweep.parquet").to_pydict()
+    assert list(parquet) == ["variant", *sweep.names, *FIGURES]
+    assert parquet["contour_max_um"] == table[:, 0].tolist() and parquet["diverged"] == [False] * 4
