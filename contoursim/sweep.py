@@ -103,6 +103,8 @@ class Sweep:
     elsewhere : tuple of str
         Files the job reads that are not in the spec's folder (or below it):
         the sweep runs here, not on a cluster.
+    log : tuple of bool
+        Per parameter: drawn uniform in log(value) (plotted on a log axis).
     """
 
     source: str
@@ -112,6 +114,7 @@ class Sweep:
     values: np.ndarray
     task_size: int | None = None
     elsewhere: tuple = ()
+    log: tuple = ()
 
 
 def _bundle(spec, toml):
@@ -191,7 +194,8 @@ def read_sweep(file):
     strategies = toml.data.get("strategies", "none")
     if not isinstance(strategies, str):
         raise toml.error(f"strategies must be a name in quotes (e.g. \"ccc_arc\"), got {strategies!r}", "strategies")
-    made = Sweep(str(file), files, strategies, names, values, task_size, elsewhere)
+    log = tuple(t.get("log", False) is True for t in tables)
+    made = Sweep(str(file), files, strategies, names, values, task_size, elsewhere, log)
     job = _job(made)  # the spec's job, every name and the extreme values checked here, not on a worker
     for i, name in enumerate(names):
         try:
@@ -502,7 +506,7 @@ def plot_sweep(sweep, table):
     -------
     dict of str -> matplotlib.figure.Figure
         ``sweep_<parameter>`` for each parameter, ``sweep_map`` for two.
-        Diverged variants are red crosses on the parameter axis.
+        Diverged variants are red crosses at the foot of each plot.
     """
     import matplotlib
 
@@ -516,8 +520,9 @@ def plot_sweep(sweep, table):
         x = sweep.values[:, j]
         for ax, (key, label) in zip(axes.flat, _PLOTTED.items()):
             ax.plot(x[ok], table[ok, FIGURES.index(key)], ".", ms=4)
-            ax.plot(x[~ok], np.zeros((~ok).sum()), "rx", label="diverged" if (~ok).any() else None)
-            ax.set(xlabel=name, ylabel=label)
+            ax.plot(x[~ok], np.full((~ok).sum(), 0.03), "rx", transform=ax.get_xaxis_transform(),  # at the foot
+                    label="diverged" if (~ok).any() else None)
+            ax.set(xlabel=name, ylabel=label, xscale="log" if sweep.log[j] else "linear")
             ax.grid(alpha=0.3)
         if (~ok).any():
             axes.flat[0].legend()
@@ -530,7 +535,8 @@ def plot_sweep(sweep, table):
             points = ax.scatter(x[ok], y[ok], c=table[ok, FIGURES.index(key)], s=18, cmap="viridis")
             ax.plot(x[~ok], y[~ok], "rx")
             fig.colorbar(points, ax=ax, label=label)
-            ax.set(xlabel=sweep.names[0], ylabel=sweep.names[1])
+            ax.set(xlabel=sweep.names[0], ylabel=sweep.names[1], xscale="log" if sweep.log[0] else "linear",
+                   yscale="log" if sweep.log[1] else "linear")
         fig.suptitle(f"{Path(sweep.source).name}: each figure over the two parameters (red crosses: diverged)")
         figures["sweep_map"] = fig
     return figures
