@@ -635,8 +635,8 @@ def _compositions(strategies, n):
 
 
 def _coupling(cache, composition, path, servos, dt, i, check):
-    """The variant's :class:`~contoursim.kernel.Coupling` (or None, or _REFUSED), made once per composition and servos."""
-    key = (id(composition), tuple(servos.items()))
+    """The variant's :class:`~contoursim.kernel.Coupling` (or None, or _REFUSED), made once per controller and servos."""
+    key = (tuple(repr(s) for s in composition.strategies if s.kind == "coupling"), tuple(servos.items()))  # by value
     if key not in cache:
         try:
             cache[key] = composition.coupling(path, servos, dt)
