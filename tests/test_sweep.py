@@ -5,6 +5,8 @@ import signal
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from contoursim.cli import main
 from contoursim.comparison import Comparison, compare
@@ -55,6 +57,19 @@ def test_draws_are_seeded_within_their_ranges_and_a_latin_hypercube_fills_every_
         strata = [np.floor(50 * np.log(one[:, 0] / 10) / np.log(100)), np.floor(50 * (one[:, 1] - 30) / 10)]
         for s in strata:
             assert sorted(s) == list(range(50))
+
+
+@settings(max_examples=40, deadline=None)
+@given(count=st.integers(1, 200), seed=st.integers(0, 2**32), low=st.floats(-1e3, 1e3), span=st.floats(1e-3, 1e3))
+def test_a_latin_hypercube_puts_one_draw_in_each_stratum_of_each_parameter(count, seed, low, span):
+    from contoursim.sweep import _draw
+
+    tables = [{"name": "a", "min": low, "max": low + span}, {"name": "b", "min": 1.0, "max": 1e4, "log": True}]
+    values = _draw(None, tables, "lhs", count, seed)
+    strata = [np.floor(count * (values[:, 0] - low) / span), np.floor(count * np.log10(values[:, 1]) / 4)]
+    for s in strata:
+        assert sorted(np.clip(s, 0, count - 1)) == list(range(count))  # clip: a draw on the upper edge by rounding
+    np.testing.assert_array_equal(values, _draw(None, tables, "lhs", count, seed))
 
 
 @pytest.mark.parametrize(("vary", "message"), [
