@@ -335,6 +335,8 @@ def _job(sweep_or_files):
     files = sweep_or_files.files if isinstance(sweep_or_files, Sweep) else sweep_or_files
     digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()
     if digest not in _JOBS:
+        if len(_JOBS) >= 4:  # a long-lived worker keeps the last few jobs (a reference may take 100 MB)
+            del _JOBS[next(iter(_JOBS))]
         if isinstance(sweep_or_files, Sweep):
             _JOBS[digest] = _build(Path(sweep_or_files.source))
         else:
