@@ -436,7 +436,7 @@ _BATCH_OUTPUTS = ("tool_position", "axis_position", "summary")
 
 #: Figures of a batch's ``"summary"`` output, one value per variant.
 SUMMARY_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um", "peak_current_A", "saturated",
-                "diverged")
+                "diverged", "volumetric_max_um", "volumetric_rms_um")
 
 
 def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64,
@@ -480,8 +480,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         :meth:`SimResult.summary` (NaN without a contour error), the peak
         |current command| over the whole run [A], ``saturated`` the largest
         fraction of the samples in which an axis's current command was
-        clipped [0..1], ``diverged`` (bool); a diverged variant's figures are
-        NaN. Only the summary: no trace is kept beyond a chunk of rows.
+        clipped [0..1], ``diverged`` (bool), the volumetric (geometric)
+        error's max and RMS over the test proper [µm]; a diverged variant's
+        figures are NaN. Only the summary: no trace is kept beyond a chunk of rows.
     strategies : sequence of Strategy, or sequence of B such sequences
         As for :func:`simulate`, shared by the variants; or one sequence per
         variant, differing only in their drive settings and cross-coupled
@@ -611,7 +612,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                     if "tool_position" in result:
                         result["tool_position"][i] = tool[::every] if summary else tool
                     if summary:
-                        figures = _error_figures(trajectory, tool, _contour_error(trajectory, tool))
+                        static = models[i].geometry.tool_position(q, elapsed, trajectory.dim)
+                        figures = _error_figures(trajectory, tool, _contour_error(trajectory, tool), static)
                         figures["peak_current_A"] = float(np.abs(run["current"][b]).max())
                         figures["saturated"] = float(run["saturated_count"][b].max()) / len(trajectory)
                         for key, value in figures.items():

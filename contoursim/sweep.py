@@ -462,7 +462,8 @@ def run_sweep(sweep, scheduler=None, progress=None):
 
 _PLOTTED = {"contour_max_um": "contour max [µm]", "contour_rms_um": "contour RMS [µm]",
             "tracking_max_um": "tracking max [µm]", "tracking_rms_um": "tracking RMS [µm]",
-            "peak_current_A": "peak current [A]", "saturated": "saturated [fraction]"}
+            "peak_current_A": "peak current [A]", "saturated": "saturated [fraction]",
+            "volumetric_max_um": "volumetric max [µm]", "volumetric_rms_um": "volumetric RMS [µm]"}
 
 
 def table_text(sweep, table):
@@ -476,8 +477,9 @@ def table_text(sweep, table):
     """
     lines = [",".join(("variant",) + sweep.names + FIGURES)]
     for i, (values, figures) in enumerate(zip(sweep.values, table)):
-        cells = [str(i)] + [repr(float(v)) for v in values] + [repr(float(f)) for f in figures[:-1]]
-        lines.append(",".join(cells + [str(bool(figures[-1]))]))
+        cells = [str(i)] + [repr(float(v)) for v in values]
+        cells += [str(bool(f)) if key == "diverged" else repr(float(f)) for key, f in zip(FIGURES, figures)]
+        lines.append(",".join(cells))
     return "\n".join(lines) + "\n"
 
 
@@ -518,7 +520,7 @@ def plot_sweep(sweep, table):
     ok = table[:, FIGURES.index("diverged")] == 0
     figures = {}
     for j, name in enumerate(sweep.names):
-        fig, axes = plt.subplots(2, 3, figsize=(13, 7), layout="constrained")
+        fig, axes = plt.subplots(2, 4, figsize=(17, 7), layout="constrained")
         x = sweep.values[:, j]
         for ax, (key, label) in zip(axes.flat, _PLOTTED.items()):
             ax.plot(x[ok], table[ok, FIGURES.index(key)], ".", ms=4)
@@ -531,7 +533,7 @@ def plot_sweep(sweep, table):
         fig.suptitle(f"{Path(sweep.source).name}: {len(x)} variants, strategies {sweep.strategies}")
         figures[f"sweep_{name}"] = fig
     if len(sweep.names) == 2:
-        fig, axes = plt.subplots(2, 3, figsize=(14, 8), layout="constrained")
+        fig, axes = plt.subplots(2, 4, figsize=(19, 8), layout="constrained")
         x, y = sweep.values[:, 0], sweep.values[:, 1]
         for ax, (key, label) in zip(axes.flat, _PLOTTED.items()):
             points = ax.scatter(x[ok], y[ok], c=table[ok, FIGURES.index(key)], s=18, cmap="viridis")

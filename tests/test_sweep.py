@@ -246,3 +246,18 @@ def test_results_csv_parquet_plots_and_the_best_and_worst_runs(tmp_path, capsys)
     parquet = pq.read_table(out / "sweep.parquet").to_pydict()
     assert list(parquet) == ["variant", *sweep.names, *FIGURES]
     assert parquet["contour_max_um"] == table[:, 0].tolist() and parquet["diverged"] == [False] * 4
+
+
+def test_a_tolerance_sweep_gives_the_volumetric_error_linear_in_the_squareness(tmp_path):
+    spec = _spec(tmp_path, [{"name": '"effect.squareness.xy.angle_urad"', "values": "[50.0, 100.0, -100.0]"}],
+                 strategies="none")
+    sweep = read_sweep(spec)
+    table = run_sweep(sweep)
+    job = _job(sweep)
+    volumetric = table[:, FIGURES.index("volumetric_max_um")]
+    assert volumetric[0] > 1.0 and volumetric[1] == pytest.approx(2 * volumetric[0], rel=1e-9)
+    assert volumetric[2] == pytest.approx(volumetric[1], rel=1e-9)  # the same magnitude, the other way
+    model, strategies = job.variant({"effect.squareness.xy.angle_urad": 100.0})
+    single = simulate(model, job.trajectory, strategies, settle=0.0).summary()
+    assert table[1, FIGURES.index("volumetric_rms_um")] == single["volumetric_rms_um"]
+    assert table[1, FIGURES.index("contour_max_um")] == single["contour_max_um"]
