@@ -318,11 +318,15 @@ def fleet_command(args):
         raise ValueError("--report names one trace's report: with several traces each report goes to --out, "
                          "and --summary FLEET.json gets the fleet's")
     files = trace_files(args.file)
+    stems = [f.stem for f in files]
+    twice = sorted({stem for stem in stems if stems.count(stem) > 1 or stem == "fleet"})
+    if twice:  # each trace's report is <stem>.json beside fleet.json
+        raise ValueError(f"two traces named {twice[0]}.csv (or one named fleet.csv): their reports would share a "
+                         "file name; rename one")
     summary_file = Path(args.summary) if args.summary else None
     if summary_file is not None and summary_file.exists():  # replace only a fleet summary, never a file the user keeps
         try:
-            ours = "effects" in json.loads(summary_file.read_text(encoding="utf-8")) and "failed" in json.loads(
-                summary_file.read_text(encoding="utf-8"))
+            ours = {"effects", "failed"} <= set(json.loads(summary_file.read_text(encoding="utf-8")))
         except (ValueError, UnicodeDecodeError, TypeError):
             ours = False
         if not ours:
