@@ -1,4 +1,4 @@
-"""Command line: ``contoursim demo | simulate | compare | volumetric | diagnose``.
+"""Command line: ``contoursim demo | simulate | compare | volumetric | diagnose | sweep``.
 
 Every job prints a summary table to stdout and writes plots and traces to
 ``--out`` (default ``./contoursim-out``) through :func:`contoursim.output.output_dir`:
@@ -154,7 +154,7 @@ def demo(args):
     print(f"\nplots and traces written to {out}/")
 
 
-def _job(args):
+def _job(args, extra_keys=()):
     """Model, path file, job file (or None) and geometric switch of ``simulate FILE``.
 
     FILE is a job file (a TOML with ``machine`` and ``path`` keys, both naming
@@ -163,7 +163,8 @@ def _job(args):
     ``[[effect]]`` tables, added to the machine file's, and for ``simulate`` a
     ``[ballbar]`` table, see :func:`_ballbar`) or a bare path file, run
     on ``--machine`` (default: the demo machine). A job file names its
-    machine, so ``--machine`` with a job file is an error.
+    machine, so ``--machine`` with a job file is an error. `extra_keys`: the
+    further top-level keys a file built on a job file has (a sweep spec's).
     """
     from .machine import read_work_offset
     from .model import load_model, with_file_effects
@@ -176,7 +177,7 @@ def _job(args):
             if "machine" not in job.data:
                 raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
                                 '(e.g. "demo_mill"), or give a path file')
-            data = job.table(allowed=_JOB_KEYS, required=("machine", "path"))
+            data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"))
             for key in ("machine", "path"):
                 if not isinstance(data[key], str):
                     raise job.error(f"{key} must be a name or a file name in quotes, got {data[key]!r}", key)
@@ -391,7 +392,10 @@ def volumetric(args):
 
 
 def diagnose_command(args):
-    """``contoursim diagnose MEASURED.csv [--model M.toml] [--report R.json]``: name what the nominal model lacks."""
+    """``contoursim diagnose MEASURED.csv [--model M.toml] [--report R.json]``: name what the nominal model lacks.
+
+    Several traces, or a folder of them: :func:`fleet_command`.
+    """
     import json
 
     from .diagnosis import diagnose, save_figures
@@ -399,6 +403,11 @@ def diagnose_command(args):
     from .output import writing
     from .traces import read_trace
 
+    if len(args.file) > 1 or Path(args.file[0]).is_dir():
+        return fleet_command(args)
+    if args.summary or args.scheduler:
+        raise ValueError("--summary and --scheduler are for several traces (or a folder of them); one trace runs here")
+    args.file = args.file[0]
     trace = read_trace(args.file)
     model = load_model(args.model) if args.model else None
     report = Path(args.report) if args.report else None
@@ -420,6 +429,85 @@ def diagnose_command(args):
     if report is not None:
         print(f"report written to {report}")
     print(f"plots written to {args.out}/")
+
+
+def sweep_command(args):
+    """``contoursim sweep SPEC.toml [--scheduler ADDRESS|local:N]``: every variant of a spec, one table row each."""
+    from .sweep import FIGURES, Progress, read_sweep, run_sweep, write_results
+
+    sweep = read_sweep(args.spec)
+    where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
+    print(f"contoursim sweep — {Path(args.spec).name}: {len(sweep.values)} variants of {', '.join(sweep.names)}; "
+          f"strategies {sweep.strategies}; on {where}", flush=True)
+    table = run_sweep(sweep, args.scheduler, progress=Progress())
+    out, chosen = write_results(sweep, table, args.out)
+    diverged = int(table[:, FIGURES.index("diverged")].sum())
+    print(f"{diverged} of {len(table)} variants diverged or were refused by the coupled-loop check")
+    if chosen is not None:
+        for label, i in zip(("best", "worst"), chosen):
+            values = ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
+            figures = dict(zip(FIGURES, table[i]))
+            print(f"{label:<6} variant {i}: {values}: contour max {figures['contour_max_um']:.4g} µm, "
+                  f"RMS {figures['contour_rms_um']:.4g} µm, peak current {figures['peak_current_A']:.4g} A")
+    print(f"table, plots and the best and worst runs written to {out}/")
+
+
+def fleet_command(args):
+    """``contoursim diagnose A.csv B.csv … | DIR [--summary FLEET.json] [--scheduler …]``: a report per trace, a fleet summary."""
+    import json
+
+    import matplotlib.pyplot as plt
+
+    from .fleet import diagnose_fleet, fleet_summary, plot_fleet, trace_files
+    from .output import writing
+    from .sweep import Progress
+
+    if args.report:
+        raise ValueError("--report names one trace's report: with several traces each report goes to --out, "
+                         "and --summary FLEET.json gets the fleet's")
+    files = trace_files(args.file)
+    stems = [f.stem for f in files]
+    twice = sorted({stem for stem in stems if stems.count(stem) > 1 or stem == "fleet"})
+    if twice:  # each trace's report is <stem>.json beside fleet.json
+        raise ValueError(f"two traces named {twice[0]}.csv (or one named fleet.csv): their reports would share a "
+                         "file name; rename one")
+    summary_file = Path(args.summary) if args.summary else None
+    if summary_file is not None and summary_file.exists():  # replace only a fleet summary, never a file the user keeps
+        try:
+            ours = {"effects", "failed"} <= set(json.loads(summary_file.read_text(encoding="utf-8")))
+        except (ValueError, UnicodeDecodeError, TypeError):
+            ours = False
+        if not ours:
+            raise FileExistsError(f"{summary_file} exists and is not a fleet summary; refusing to overwrite it")
+    where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
+    print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "
+          f"on {where}", flush=True)
+    outcomes = diagnose_fleet(files, args.model, args.scheduler, progress=Progress("diagnose", "traces"))
+    summary = fleet_summary(outcomes)
+    out = output_dir(args.out)
+    for outcome in outcomes:
+        if "report" in outcome:
+            with out.write(f"{Path(outcome['trace']).stem}.json") as stream:
+                stream.write(json.dumps(outcome["report"], indent=2, ensure_ascii=False) + "\n")
+    text = json.dumps(summary, indent=2, ensure_ascii=False) + "\n"
+    with out.write("fleet.json") as stream:
+        stream.write(text)
+    if summary_file is not None:
+        with writing(summary_file, overwrite=True) as stream:
+            stream.write(text)
+    fig = plot_fleet(summary)
+    with out.write("fleet.png", binary=True) as stream:
+        fig.savefig(stream, format="png", dpi=100)
+    plt.close(fig)
+    print(f"{summary['diagnosed']} of {summary['traces']} traces diagnosed; explained by the nominal model: "
+          f"{len(summary['nominal'])}")
+    for label, e in summary["effects"].items():
+        spread = "; ".join(f"{key} {d['min']:.4g} … {d['max']:.4g} (median {d['median']:.4g})"
+                           for key, d in e["parameters"].items())
+        print(f"  {label:<24} on {e['count']:>3} of {summary['traces']} traces: {spread}")
+    for failed in summary["failed"]:
+        print(f"  failed: {failed['trace']}: {failed['error']}")
+    print(f"reports, fleet.json and fleet.png written to {out}/" + (f"; summary to {summary_file}" if summary_file else ""))
 
 
 def _every(text):
@@ -474,10 +562,20 @@ def main(argv=None, compile_notice=False):
     p.add_argument("machine", help="machine preset name or file")
     p.set_defaults(run=volumetric)
     p = sub.add_parser("diagnose", help="name the effects a nominal model lacks to explain a measured trace")
-    p.add_argument("file", help="measured trace CSV (t, x_ref, x[, y_ref, y[, z_ref, z]])")
+    p.add_argument("file", nargs="+",
+                   help="measured trace CSV (t, x_ref, x[, y_ref, y[, z_ref, z]]); several, or a folder: a fleet")
     p.add_argument("--model", help="nominal machine file or preset (default: identified from the trace)")
     p.add_argument("--report", help="write the diagnosis report (JSON) to this file")
+    p.add_argument("--summary", metavar="FLEET.json", help="several traces: write the fleet summary (JSON) to this file")
+    p.add_argument("--scheduler", metavar="ADDRESS|local:N",
+                   help='several traces: diagnose them on a dask cluster (needs pip install "contoursim[distributed]")')
     p.set_defaults(run=diagnose_command)
+    p = sub.add_parser("sweep", help="many variants of a job (axis settings, effects, strategy gains): a table of figures")
+    p.add_argument("spec", help="sweep spec .toml: a job file with [sweep] and [[vary]] tables")
+    p.add_argument("--scheduler", metavar="ADDRESS|local:N",
+                   help="run on a dask cluster: a scheduler address, or local:N worker processes on this machine "
+                        '(needs pip install "contoursim[distributed]")')
+    p.set_defaults(run=sweep_command)
     for p in sub.choices.values():
         p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
     for command in ("demo", "simulate"):

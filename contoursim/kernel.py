@@ -651,13 +651,18 @@ def _no_coupling():
 
 
 @njit(cache=True, parallel=True)
-def _batch(rows, states, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
+def _batch(rows, states, ref_pos, ref_vel, ref_acc, cpars, knots, knot_of_sample, cstates, every,
            tool, encoder, velocity, current, saturated, status):  # fmt: skip
-    """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows; coupling off (:func:`_no_coupling`)."""
+    """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows.
+
+    Each row has its coupling's parameters and state (`cpars` (B, _C_NPAR), `cstates` (B, _C_NSTATE);
+    kind 0: none, :func:`_no_coupling`); the path (`knots`, `knot_of_sample`) is shared.
+    """
     no_estimate = np.empty((0, 3))
     no_noise = np.empty((0, rows.shape[1]))
     for b in prange(rows.shape[0]):
-        _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, no_noise, every,
+        _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpars[b], knots, knot_of_sample, cstates[b], no_noise,
+                 every,
                  tool[b], encoder[b], velocity[b], current[b], saturated[b], no_estimate, status[b])  # fmt: skip
 
 
@@ -1051,7 +1056,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
     return ServoResponse(dt, *outputs[:5], contour_estimate=None if coupling is None else estimate)
 
 
-def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, dtype=np.float64):
+def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, dtype=np.float64, couplings=None):
     """Run B variants of one machine on one reference, in parallel over the variants.
 
     Each variant is a stack of :func:`pack` rows (one per axis); row ``b``
@@ -1083,6 +1088,9 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
         Keep the samples ``k = 0, every, 2·every, …`` only.
     dtype : {numpy.float64, numpy.float32}, default float64
         Storage type of the float outputs (the simulation runs in float64).
+    couplings : sequence of Coupling, optional
+        One cross-coupled controller per variant (gains may differ), all on
+        one path (equal ``path`` arrays); none by default.
 
     Returns
     -------
@@ -1127,7 +1135,22 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     arrays["saturated"] = out("saturated", bool)
     status = np.empty((n_variants, n, 3), np.int64)
     states = _initial_state((n_variants, n), ref_pos[0])
-    _batch(rows, states, ref_pos, ref_vel, ref_acc, *_no_coupling(), int(every), *arrays.values(), status)
+    cpar, knots, knot_of_sample, cstate = _no_coupling()
+    cpars = np.tile(cpar, (n_variants, 1))
+    if couplings is not None:
+        couplings = list(couplings)
+        if len(couplings) != n_variants or not all(isinstance(c, Coupling) for c in couplings):
+            raise ValueError(f"couplings must be {n_variants} Coupling objects, one per variant")
+        first = couplings[0]
+        if first.path.shape != (n_steps, min(n, 3)) or any(
+                c.path is not first.path and not np.array_equal(c.path, first.path) for c in couplings):
+            raise ValueError(f"the couplings must share one path of shape ({n_steps}, {min(n, 3)})")
+        cpars = np.array([c.params for c in couplings])
+        cpars[:, _C_DT] = dt
+        knots, knot_of_sample = first.knots.copy(), first.knot_of_sample.copy()  # writeable: one compiled type
+    cstates = np.tile(cstate, (n_variants, 1))
+    _batch(rows, states, ref_pos, ref_vel, ref_acc, cpars, knots, knot_of_sample, cstates, int(every),
+           *arrays.values(), status)  # fmt: skip
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
     result["saturated_count"] = status[..., _CLAMPED]

@@ -23,16 +23,16 @@ import numpy as np
 
 from . import estimators, kernel
 from ._blocks import blocks
-from .compensation import Composition
+from .compensation import Composition, Strategy
 from ._version import __version__
 from .contour import exact_contour_error
-from .exceptions import ContoursimWarning
+from .exceptions import ContoursimWarning, UnstableLoopError
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
 from .model import as_model
 from .trajectory import Trajectory
 
-__all__ = ["SimResult", "default_settle", "measured_reference", "simulate", "simulate_batch"]
+__all__ = ["SimResult", "SUMMARY_KEYS", "default_settle", "measured_reference", "simulate", "simulate_batch"]
 
 
 
@@ -120,22 +120,7 @@ class SimResult:
             ``contour_rms_um`` (without a contour error: not there),
             ``volumetric_max_um``, ``volumetric_rms_um``.
         """
-        keep = self.trajectory.measuring if measuring_only else np.ones(len(self.trajectory), bool)
-        reference = self.trajectory.position
-        errors = dict(  # made one at a time, each an (n,) array: a finished run holds everything else already
-            tracking=lambda: _distances(self.tool_position, reference, keep),
-            contour=None if self.contour is None else lambda: self.contour.magnitude[keep],
-            volumetric=lambda: _distances(self.static_tool_position, reference, keep),
-        )
-        summary = {}
-        for name, error in errors.items():
-            if error is None:
-                continue
-            e = error()
-            summary[f"{name}_max_um"] = 1e3 * float(e.max())
-            summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(np.square(e, out=e))))
-            del e  # before the next one is made
-        return summary
+        return _error_figures(self.trajectory, self.tool_position, self.contour, self.static_tool_position, measuring_only)
 
     def to_trace(self, metadata=None):
         """The result in the measured-trace format: reference vs actual tool position."""
@@ -182,6 +167,35 @@ class SimResult:
         extra["measuring"] = self.trajectory.measuring
         extra["rapid"] = self.trajectory.rapid
         write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
+
+
+def _error_figures(trajectory, tool, contour, static=None, measuring_only=True):
+    """Max and RMS [µm] of the tracking error, the contour error (if any) and the volumetric error (given `static`)."""
+    keep = trajectory.measuring if measuring_only else np.ones(len(trajectory), bool)
+    reference = trajectory.position
+    errors = dict(  # made one at a time, each an (n,) array: a finished run holds everything else already
+        tracking=lambda: _distances(tool, reference, keep),
+        contour=None if contour is None else lambda: contour.magnitude[keep],
+        volumetric=None if static is None else lambda: _distances(static, reference, keep),
+    )
+    summary = {}
+    for name, error in errors.items():
+        if error is None:
+            continue
+        e = error()
+        summary[f"{name}_max_um"] = 1e3 * float(e.max())
+        summary[f"{name}_rms_um"] = 1e3 * float(np.sqrt(np.mean(np.square(e, out=e))))
+        del e  # before the next one is made
+    return summary
+
+
+def _contour_error(trajectory, tool):
+    """The contour error of `tool` (N, d): exact on a path, the three-point estimate on a measured reference, or None."""
+    if trajectory.path is not None:
+        return exact_contour_error(trajectory, tool)
+    if trajectory.dim > 1:
+        return estimators.three_point(trajectory.position, tool)
+    return None
 
 
 def _distances(points, reference, keep):
@@ -413,11 +427,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
     del elapsed  # before the contour error is computed
     tool.flags.writeable = False  # the contour error keeps it as its actual points, without a copy
-    error = None
-    if contour and trajectory.path is not None:
-        error = exact_contour_error(trajectory, tool)
-    elif contour and trajectory.dim > 1:
-        error = estimators.three_point(trajectory.position, tool)
+    error = _contour_error(trajectory, tool) if contour else None
     result = SimResult(trajectory, machine, q, response, tool, static, error, composition.strategies, model)
     clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
     if clipped:
@@ -431,7 +441,11 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
 #: Largest kernel output one chunk of a batch may hold [bytes].
 BATCH_CHUNK_BYTES = 2**27
 
-_BATCH_OUTPUTS = ("tool_position", "axis_position")
+_BATCH_OUTPUTS = ("tool_position", "axis_position", "summary")
+
+#: Figures of a batch's ``"summary"`` output, one value per variant.
+SUMMARY_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um", "peak_current_A", "saturated",
+                "diverged", "volumetric_max_um", "volumetric_rms_um")
 
 
 def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64,
@@ -439,9 +453,11 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     """Simulate B variants of one structure on one reference, in as few kernel calls as possible.
 
     The variants may differ in any effect value, and in which effects they
-    have, but share the machine's axes, servo period, work offset and chain
-    (``model.with_values`` and ``model.with_effect`` make such variants). A
-    finite-difference Jacobian of P parameters is one batch of P + 1 models.
+    have, in their servo settings and in their strategies' gains, but share
+    the machine's axes, servo period, work offset and chain
+    (``model.with_values``, ``model.with_effect`` and ``dataclasses.replace``
+    of the machine's axes make such variants). A finite-difference Jacobian
+    of P parameters is one batch of P + 1 models.
     Variants with the same command-stage effects share one
     :func:`contoursim.kernel.run_batch` call, made in chunks of rows so that
     the kernel's output stays below :data:`BATCH_CHUNK_BYTES`, and variants
@@ -456,6 +472,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     for stability (:func:`contoursim.servo.check`, analysed once per servo
     in a process), not the variants' (a ``gain_mismatch`` makes a new
     servo): a variant far from the nominal one is the caller's business.
+    A cross-coupled controller's coupled-loop check runs for every variant.
 
     Parameters
     ----------
@@ -464,50 +481,63 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     reference : Trajectory or Trace
         As for :func:`simulate`.
     outputs : tuple of str
-        Any of ``"tool_position"`` (shape (B, M, d)) [mm] and
+        Any of ``"tool_position"`` (shape (B, M, d)) [mm],
         ``"axis_position"`` (the actual positions of all the machine's axes,
-        shape (B, M, n_axes)) [mm, rad].
-    strategies : sequence
-        As for :func:`simulate`, without a cross-coupled controller (the
-        batch kernel runs none).
+        shape (B, M, n_axes)) [mm, rad] and ``"summary"``: per variant the
+        figures of :data:`SUMMARY_KEYS`, each an array (B,): contour and
+        tracking error max and RMS over the test proper [µm] as in
+        :meth:`SimResult.summary` (NaN without a contour error), the peak
+        |current command| over the whole run [A], ``saturated`` the largest
+        fraction of the samples in which an axis's current command was
+        clipped [0..1], ``diverged`` (bool), the volumetric (geometric)
+        error's max and RMS over the test proper [µm]; a diverged variant's
+        figures are NaN. Only the summary: no trace is kept beyond a chunk of rows.
+    strategies : sequence of Strategy, or sequence of B such sequences
+        As for :func:`simulate`, shared by the variants; or one sequence per
+        variant, differing only in their drive settings and cross-coupled
+        controllers (gains): the target stage is the first variant's, and the
+        pre-filter is designed from the first variant of each group.
     settle : float, optional
         As for :func:`simulate`.
     every : int
         Keep the samples ``k = 0, every, 2·every, …`` only (M = ceil(N / every)),
-        to bound memory. For a trace logged every k-th servo period,
-        ``every = k`` gives the trace's own instants.
+        to bound memory; the summary is taken over every sample all the same.
+        For a trace logged every k-th servo period, ``every = k`` gives the
+        trace's own instants.
     dtype : numpy dtype
         Of the returned arrays (``np.float32`` halves their memory; the
         simulation and the geometric stage run in float64).
     check : bool
-        Check the nominal machines' loops (``False``: the machines are
-        themselves variants of a checked one, e.g. a fit's nominal
-        parameters moved by a few %, and a diverged row says what failed).
+        Check the nominal machines' loops and raise when a variant's
+        cross-coupled controller fails its coupled-loop check (``False``:
+        the machines are themselves variants of a checked one, e.g. a fit's
+        nominal parameters moved by a few %, or a sweep; a diverged row says
+        what failed, and a variant whose coupled-loop check fails is not run
+        and counts as diverged).
 
     Returns
     -------
     dict
         ``"t"`` (M,) [s], each output asked for, and ``"diverged_step"``
         (B, n_servo): per variant and servo axis the first step whose state
-        was not finite (an unstable variant), -1 for none; a diverged
+        was not finite (an unstable variant; 0 on every axis for a variant
+        refused by the coupled-loop check), -1 for none; a diverged
         variant's ``tool_position`` is NaN throughout.
 
     Raises
     ------
     ValueError
-        The variants do not share one structure; an unknown output; a
-        cross-coupled controller among the strategies; noise on an
-        encoder (``noise`` with ``at = "encoder"``).
+        The variants do not share one structure; an unknown output; per-variant
+        strategies that are not B sequences; noise on an encoder (``noise``
+        with ``at = "encoder"``).
     UnstableLoopError
-        A nominal machine's loop is unstable or badly damped.
+        A nominal machine's loop is unstable or badly damped, or (with
+        `check`) a variant's cross-coupled controller fails its check.
     """
     models = [as_model(m) for m in models]
     if not models:
         raise ValueError("simulate_batch needs at least one model")
-    composition = Composition(strategies)
-    coupled = [s.name for s in composition.strategies if s.kind == "coupling"]
-    if coupled:
-        raise ValueError(f"simulate_batch runs no cross-coupled controller ({coupled[0]}): use simulate")
+    compositions = _compositions(strategies, len(models))
     noisy = [f"models[{i}] axis {axis}" for i, m in enumerate(models) for axis, e in m.loop_effects().items()
              if e.noise_at == "encoder" and e.noise_mm > 0.0]
     if noisy:
@@ -526,51 +556,109 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
             raise ValueError(f"models[{i}] has another structure than models[0] (axes, servo period, work offset or chain): "
                              "a batch runs variants of one machine")
     dt, servo = first.servo_period, first.servo_columns
-    preview = composition.preview(composition.drive(models[0].servos()), dt)  # the first variant's, as the pre-filter
+    preview = compositions[0].preview(compositions[0].drive(models[0].servos()), dt)  # the first variant's, as the pre-filter
     for machine in {id(m.machine): m.machine for m in models}.values() if check else ():
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory = _reference(first, reference, settle, preview)
-    q, v, a = _target(models[0], trajectory, composition)
+    q, v, a = _target(models[0], trajectory, compositions[0])
+    summary = "summary" in outputs
+    traces = [name for name in outputs if name != "summary"]
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))
     width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
     result = {"t": trajectory.t[keep].copy()}
-    result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in outputs})
+    result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in traces})
     result["diverged_step"] = np.empty((len(models), servo.size), np.int64)
+    if summary:
+        result["summary"] = {key: np.full(len(models), np.nan) for key in SUMMARY_KEYS}
+        result["summary"]["diverged"] = np.zeros(len(models), bool)
     groups = {}
     for i, m in enumerate(models):
         groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
-    chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * n_keep * servo.size))
-    elapsed, q_kept = _elapsed(trajectory)[keep], q[keep]
+    kernel_every = 1 if summary else every  # the summary is over every sample
+    kernel_outputs = ("tool", "current") if summary else ("tool",)
+    n_kernel = len(range(0, len(trajectory), kernel_every))
+    chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * len(kernel_outputs) * n_kernel * servo.size))
+    elapsed = _elapsed(trajectory)
+    path = _servo_part(models[0], q)
+    couplings = {}
     for rows in groups.values():
         # the pre-filter designs from the first variant of the group (pass a `model` to the strategy to fix it)
+        composition = compositions[rows[0]]
         qd, vd, ad = _sent(models[rows[0]], composition, composition.drive(models[rows[0]].servos()), (q, v, a))
         # variants that differ only in their geometry share one kernel run
         runs = {}
         for i in rows:
-            packed = np.array(_packed(models[i], dt, composition))
-            runs.setdefault(packed.tobytes(), (packed, []))[1].append(i)
+            servos, loop = compositions[i].drive(models[i].servos()), models[i].loop_effects()
+            packed = np.array([kernel.pack(servo, dt, loop[axis]) for axis, servo in servos.items()])
+            coupling = _coupling(couplings, compositions[i], path, servos, dt, i, check)
+            key = packed.tobytes() + (coupling.params.tobytes() if isinstance(coupling, kernel.Coupling) else b"")
+            runs.setdefault(key, (packed, coupling, []))[2].append(i)
         distinct = list(runs.values())
+        refused = [part for part in distinct if part[1] is _REFUSED]
+        for _, _, same in refused:
+            result["diverged_step"][same] = 0
+            for name in traces:
+                result[name][same] = np.nan
+            if summary:
+                result["summary"]["diverged"][same] = True
+        distinct = [part for part in distinct if part[1] is not _REFUSED]
+        coupled = any(c is not None for _, c, _ in distinct)
         for start in range(0, len(distinct), chunk):
             part = distinct[start : start + chunk]
-            packed = np.array([p for p, _ in part])
-            run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=("tool",), every=every)
-            for b, (_, same) in enumerate(part):
+            packed = np.array([p for p, _, _ in part])
+            run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=kernel_outputs,
+                                   every=kernel_every, couplings=[c for _, c, _ in part] if coupled else None)
+            for b, (_, _, same) in enumerate(part):
                 diverged = run["diverged_step"][b]
                 for i in same:
                     result["diverged_step"][i] = diverged
-                    actual = _actual(models[i], q_kept, run["tool"][b])
+                    if (diverged >= 0).any():  # an unstable variant: no positions, no figures
+                        for name in traces:
+                            result[name][i] = np.nan
+                        if summary:
+                            result["summary"]["diverged"][i] = True
+                        continue
+                    actual = _actual(models[i], q, run["tool"][b]) if summary else _actual(models[i], q[keep], run["tool"][b])
+                    tool = models[i].geometry.tool_position(actual, elapsed if summary else elapsed[keep], trajectory.dim)
                     if "axis_position" in result:
-                        result["axis_position"][i] = actual
-                    if "tool_position" in result and (diverged >= 0).any():
-                        result["tool_position"][i] = np.nan  # an unstable variant: no tool position
-                    elif "tool_position" in result:
-                        result["tool_position"][i] = models[i].geometry.tool_position(actual, elapsed, trajectory.dim)
+                        result["axis_position"][i] = actual[::every] if summary else actual
+                    if "tool_position" in result:
+                        result["tool_position"][i] = tool[::every] if summary else tool
+                    if summary:
+                        static = models[i].geometry.tool_position(q, elapsed, trajectory.dim)
+                        figures = _error_figures(trajectory, tool, _contour_error(trajectory, tool), static)
+                        figures["peak_current_A"] = float(np.abs(run["current"][b]).max())
+                        figures["saturated"] = float(run["saturated_count"][b].max()) / len(trajectory)
+                        for key, value in figures.items():
+                            if key in result["summary"]:
+                                result["summary"][key][i] = value
+            del run
     return result
 
 
-def _packed(model, dt, composition):
-    """The kernel's parameter rows of one variant with the strategies' drive settings, shape (n_servo, NPAR)."""
-    loop = model.loop_effects()
-    return [kernel.pack(servo, dt, loop[axis]) for axis, servo in composition.drive(model.servos()).items()]
+_REFUSED = object()  # a variant whose cross-coupled controller fails the coupled-loop check (check=False)
+
+
+def _compositions(strategies, n):
+    """One :class:`Composition` per variant: `strategies` shared, or one sequence per variant."""
+    strategies = list(strategies)
+    if not strategies or isinstance(strategies[0], Strategy):
+        return [Composition(strategies)] * n
+    if len(strategies) != n:
+        raise ValueError(f"per-variant strategies must be one sequence per model: {n} models, {len(strategies)} sequences")
+    return [Composition(s) for s in strategies]
+
+
+def _coupling(cache, composition, path, servos, dt, i, check):
+    """The variant's :class:`~contoursim.kernel.Coupling` (or None, or _REFUSED), made once per controller and servos."""
+    key = (tuple(repr(s) for s in composition.strategies if s.kind == "coupling"), tuple(servos.items()))  # by value
+    if key not in cache:
+        try:
+            cache[key] = composition.coupling(path, servos, dt)
+        except UnstableLoopError as exc:
+            if check:
+                raise UnstableLoopError(f"models[{i}]: {exc}", margins=exc.margins) from None
+            cache[key] = _REFUSED
+    return cache[key]

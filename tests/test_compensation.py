@@ -293,8 +293,6 @@ def test_batch_applies_the_drive_and_prefilter_stages_like_simulate():
         single = simulate(machine, trajectory, strategies).tool_position
         batch = simulate_batch([machine], trajectory, strategies=strategies)["tool_position"][0]
         np.testing.assert_array_equal(batch, single)
-    with pytest.raises(ValueError, match=r"simulate_batch runs no cross-coupled controller \(ccc_arc\)"):
-        simulate_batch([machine], trajectory, strategies=[cp.CrossCoupled()])
     noisy = Model(machine, (Effect("noise", "y", rms_um=0.1, at="encoder"),))
     with pytest.raises(ValueError, match=r"simulate_batch runs no noise on the encoder \(models\[0\] axis y\)"):
         simulate_batch([noisy], trajectory)
@@ -350,3 +348,29 @@ def test_designed_gains_and_margins_hold_for_any_axes_against_python_control(kp_
     m = cp.coupled_margins([kernel.pack(s, DT) for s in servos.values()], kp, ki, kd, DT, [normal])
     assert m["damping_ratio"] == pytest.approx(_damping(poles), abs=1e-7)
     assert m["spectral_radius"] == pytest.approx(np.abs(poles).max(), rel=1e-9)
+
+
+def test_batch_runs_cross_coupled_variants_each_equal_to_its_single_run():
+    from contoursim.comparison import compare
+    from contoursim.simulation import SUMMARY_KEYS, simulate_batch
+
+    machine, trajectory = _circle_machine_and_trajectory()
+    per_variant = [[cp.CrossCoupled("arc", kp=20.0)], [cp.CrossCoupled("linear", kp=60.0, ki=0.0)],
+                   [cp.Feedforward(), cp.CrossCoupled("arc")], [cp.CrossCoupled("arc", kp=1e5)]]  # the last: unstable
+    batch = simulate_batch([machine] * 4, trajectory, outputs=("tool_position", "summary"), strategies=per_variant,
+                           check=False)
+    for b, strategies in enumerate(per_variant[:3]):
+        single = simulate(machine, trajectory, strategies)
+        np.testing.assert_array_equal(batch["tool_position"][b], single.tool_position)
+        assert not batch["summary"]["diverged"][b]
+    figures = compare(machine, trajectory, ["feedforward+ccc_arc"]).figures["feedforward+ccc_arc"]
+    for key in SUMMARY_KEYS[:5]:
+        assert batch["summary"][key][2] == figures[key]
+    assert batch["summary"]["saturated"][2] == 0.0 and not figures["saturated"]
+    # refused by the coupled-loop check: not run, diverged, no figures; with check=True it is an error
+    assert batch["summary"]["diverged"][3] and np.isnan(batch["summary"]["contour_max_um"][3])
+    assert np.isnan(batch["tool_position"][3]).all()
+    with pytest.raises(UnstableLoopError, match=r"models\[0\]: cross-coupled control with kp = 100000"):
+        simulate_batch([machine], trajectory, strategies=[cp.CrossCoupled("arc", kp=1e5)])
+    with pytest.raises(ValueError, match="one sequence per model: 2 models, 4 sequences"):
+        simulate_batch([machine] * 2, trajectory, strategies=per_variant)

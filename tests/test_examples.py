@@ -18,7 +18,8 @@ from conftest import ROOT
 from contoursim.output import output_dir
 
 EXAMPLES = ROOT / "examples"
-JOBS = sorted(EXAMPLES.glob("*.toml"))
+SWEEPS = [EXAMPLES / "tune_ccc.toml"]  # sweep specs: run by contoursim sweep (below)
+JOBS = sorted(set(EXAMPLES.glob("*.toml")) - set(SWEEPS))
 CHECKED = {"api_tour.py", "estimators_tour.py", "iso230_2_error_table.py", "emps_servo_check.py", "effects_gallery.py",
            "hunting.py", "diagnose_real_traces.py"}  # the last in test_diagnosis.py
 
@@ -203,3 +204,33 @@ def test_router_ballbar_shows_its_backlash_step_and_squareness(tmp_path, capsys)
     for d, result in runs.items():
         title = plot_path_error(result, Figure().add_subplot(), name=f"router_{d}").get_title()
         assert title.startswith(f"router_{d} ({d.upper()}) on gantry router\neffects: backlash.x 10 µm")
+
+
+def test_tune_ccc_sweep_picks_gains_better_than_the_default_and_refuses_unstable_ones(tmp_path, capsys):
+    import csv
+
+    from contoursim.cli import main
+    from contoursim.comparison import compare
+    from contoursim.compensation import CrossCoupled
+    from contoursim.exceptions import UnstableLoopError
+    from contoursim.simulation import simulate
+    from contoursim.sweep import _job, read_sweep
+
+    assert main(["sweep", str(SWEEPS[0]), "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    rows = list(csv.DictReader((tmp_path / "sweep.csv").open()))
+    assert len(rows) == 24
+    refused = [r for r in rows if r["diverged"] == "True"]
+    stable = [r for r in rows if r["diverged"] == "False"]
+    assert refused and len(stable) >= 12  # the coupled-loop check refuses the high gains
+    job = _job(read_sweep(SWEEPS[0]))
+    for row in refused:  # refused by the check a single run makes, before it runs
+        gains = dict(kp=float(row["strategy.ccc_arc.kp_per_s"]), ki=float(row["strategy.ccc_arc.ki_per_s2"]))
+        with pytest.raises(UnstableLoopError, match="coupled loop"):
+            simulate(job.model, job.trajectory, [CrossCoupled("arc", **gains)])
+    best = min(stable, key=lambda r: float(r["contour_max_um"]))
+    assert f"best   variant {best['variant']}:" in printed
+    # the default gains (CrossCoupled's own design) on the same job
+    default = compare(job.model, job.trajectory, ["ccc_arc"]).figures["ccc_arc"]["contour_max_um"]
+    assert float(best["contour_max_um"]) < default
+    assert {"best.csv", "worst.csv", "best_worst_polar.png", "sweep_map.png"} <= {p.name for p in tmp_path.iterdir()}

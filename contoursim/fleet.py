@@ -1,0 +1,233 @@
+"""Fleets: many measured traces diagnosed, one report each, and what the fleet has in common.
+
+``contoursim diagnose A.csv B.csv …`` (or a folder of traces) runs
+:func:`contoursim.diagnosis.diagnose` on each trace, in this process or as
+tasks on a dask cluster (:mod:`contoursim.cluster`): a task carries the
+trace's text and the nominal machine file's text, and the worker reads them
+as the CLI would. :func:`fleet_summary` says, per effect named (name and
+axis), on how many traces it was named and how its parameters are
+distributed, in the order of the traces (file names sorted: nightly tests
+named by date read as a drift), and which traces failed and why.
+"""
+
+import json
+import math
+import tempfile
+import textwrap
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "trace_files"]
+
+
+def trace_files(paths):
+    """The trace files of the command line: the files given, and each folder's ``*.csv`` sorted by name.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Trace files and folders.
+
+    Raises
+    ------
+    ValueError
+        A path that does not exist, or a folder without ``.csv`` files.
+    """
+    files = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            found = sorted(path.glob("*.csv"))
+            if not found:
+                raise ValueError(f"{path} holds no .csv trace")
+            files += found
+        elif path.exists():
+            files.append(path)
+        else:
+            raise ValueError(f"no trace file {path}")
+    return files
+
+
+def diagnose_text(name, text, model=None):
+    """Diagnose one trace given as text: the task of a fleet (plain data in, plain data out).
+
+    Parameters
+    ----------
+    name : str
+        The trace's file name (messages name it).
+    text : str
+        The trace CSV's text.
+    model : tuple of (str, str), optional
+        The nominal machine: ``(name, None)`` for a preset, or ``(file name,
+        text)`` of a machine file; ``None``: identified from each trace.
+
+    Returns
+    -------
+    dict
+        ``trace`` (the name), and either ``report`` (the diagnosis report,
+        :meth:`contoursim.diagnosis.Diagnosis.to_dict`) and ``text`` (its
+        table), or ``error`` (why the trace could not be diagnosed).
+    """
+    from .cluster import task_threads
+    from .diagnosis import diagnose
+    from .exceptions import ConfigError, UnstableLoopError
+    from .model import load_model
+    from .traces import read_trace
+
+    task_threads()
+    with tempfile.TemporaryDirectory(prefix="contoursim-fleet-") as folder:
+        file = Path(folder) / Path(name).name
+        try:
+            file.write_text(text, encoding="utf-8")
+            nominal = None
+            if model is not None:
+                machine = model[0]
+                if model[1] is not None:
+                    machine = Path(folder) / Path(model[0]).name
+                    machine.write_text(model[1], encoding="utf-8")
+                nominal = load_model(machine)
+            result = diagnose(read_trace(file), nominal)
+            return {"trace": name, "report": json.loads(result.to_json()), "text": result.report()}
+        except (ConfigError, UnstableLoopError, ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            return {"trace": name, "error": str(exc).replace(str(Path(folder)) + "/", "")}
+
+
+def diagnose_fleet(files, model=None, scheduler=None, progress=None):
+    """Diagnose each trace file; the outcomes in the order of `files`.
+
+    Parameters
+    ----------
+    files : sequence of str or Path
+        Trace CSV files.
+    model : str or Path, optional
+        Nominal machine preset or file (default: identified from each trace).
+    scheduler : None, str or distributed.Client
+        As for :func:`contoursim.sweep.run_sweep`: ``None`` runs here.
+    progress : callable, optional
+        Called as ``progress(done, total)``.
+
+    Returns
+    -------
+    list of dict
+        :func:`diagnose_text` of each trace.
+    """
+    from .machine import preset_file
+
+    machine = None
+    if model is not None:
+        file = preset_file(model)  # a preset or a file: refused here, before any trace, when neither
+        machine = (str(model), None) if not Path(model).exists() else (file.name, file.read_text(encoding="utf-8"))
+    outcomes, tasks, todo = [None] * len(files), [], []
+    for i, f in enumerate(map(Path, files)):
+        try:
+            tasks.append((str(f), f.read_text(encoding="utf-8"), machine))
+            todo.append(i)
+        except (OSError, UnicodeDecodeError) as exc:
+            outcomes[i] = {"trace": str(f), "error": f"cannot read the file: {exc}"}
+    report = progress or (lambda done, total: None)
+    done = len(files) - len(todo)
+    if scheduler is None:
+        report(done, len(files))
+        results = ((k, diagnose_text(*args)) for k, args in enumerate(tasks))
+        for k, outcome in results:
+            outcomes[todo[k]] = outcome
+            report(done + k + 1, len(files))
+        return outcomes
+    from .cluster import connected, numba_threads, run_tasks
+
+    with connected(scheduler) as client:
+        numba_threads(client)
+        report(done, len(files))
+        for k, outcome in run_tasks(client, diagnose_text, tasks, "contoursim-diagnose"):  # as they finish
+            outcomes[todo[k]] = outcome
+            done += 1
+            report(done, len(files))
+    return outcomes
+
+
+def _distribution(values):
+    v = np.array(values, float)
+    return {"values": v.tolist(), "min": float(v.min()), "median": float(np.median(v)), "max": float(v.max()),
+            "mean": float(v.mean()), "std": float(v.std(ddof=1)) if v.size > 1 else 0.0}
+
+
+def fleet_summary(outcomes):
+    """What a fleet's diagnoses have in common.
+
+    Parameters
+    ----------
+    outcomes : list of dict
+        From :func:`diagnose_fleet`.
+
+    Returns
+    -------
+    dict
+        ``traces`` (how many), ``diagnosed`` (how many reports), ``failed``
+        (``[{"trace", "error"}]``), ``nominal`` (traces explained by the
+        nominal model: no effect named), and ``effects``: per effect label
+        ``<name>.<axis>`` its ``name``, ``axis``, ``count`` (traces it was
+        named on), ``traces`` (which, in order) and per parameter its
+        distribution over those traces (``values`` in trace order, ``min``,
+        ``median``, ``max``, ``mean``, ``std``).
+    """
+    effects, nominal = {}, []
+    reports = [o for o in outcomes if "report" in o]
+    for o in reports:
+        named = o["report"]["effects"]
+        if not named:
+            nominal.append(o["trace"])
+        for e in named:
+            entry = effects.setdefault(f"{e['name']}.{e['axis']}", {"name": e["name"], "axis": e["axis"], "traces": [],
+                                                                    "parameters": {}})
+            entry["traces"].append(o["trace"])
+            for key, value in e["parameters"].items():
+                entry["parameters"].setdefault(key, []).append(value)
+    for entry in effects.values():
+        entry["count"] = len(entry["traces"])
+        entry["parameters"] = {k: _distribution(v) for k, v in entry["parameters"].items()}
+    return {"traces": len(outcomes), "diagnosed": len(reports),
+            "failed": [{"trace": o["trace"], "error": o["error"]} for o in outcomes if "error" in o],
+            "nominal": nominal, "effects": dict(sorted(effects.items(), key=lambda item: -item[1]["count"]))}
+
+
+def plot_fleet(summary):
+    """The fleet at a glance: on how many traces each effect was named, and its first parameter over the traces.
+
+    Parameters
+    ----------
+    summary : dict
+        From :func:`fleet_summary`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    effects = summary["effects"]
+    n = max(1, len(effects))
+    fig, axes = plt.subplots(1 + math.ceil(n / 2), 2, figsize=(12, 3.2 * (1 + math.ceil(n / 2))), layout="constrained",
+                             squeeze=False)
+    ax = axes[0, 0]
+    labels = list(effects) + ["failed"]
+    ax.barh(labels, [e["count"] for e in effects.values()] + [len(summary["failed"])],
+            color=["C0"] * len(effects) + ["C3"])
+    ax.set(xlabel=f"traces (of {summary['traces']})", title="effects named")
+    ax.invert_yaxis()
+    axes[0, 1].axis("off")
+    failed = "\n".join(textwrap.fill(f"{Path(f['trace']).name}: {f['error']}", 70, subsequent_indent="    ")
+                       for f in summary["failed"][:12])
+    axes[0, 1].text(0, 1, f"failed:\n{failed}" if failed else "no trace failed", va="top", fontsize=8,
+                    transform=axes[0, 1].transAxes)
+    for ax, (label, e) in zip(axes[1:].flat, effects.items()):
+        key, dist = next(iter(e["parameters"].items()))
+        ax.plot(range(len(dist["values"])), dist["values"], "o-")
+        ax.set_xticks(range(len(e["traces"])), [Path(t).stem for t in e["traces"]], rotation=30, fontsize=7)
+        ax.set(ylabel=key, title=f"{label}: named on {e['count']} of {summary['traces']} traces")
+        ax.grid(alpha=0.3)
+    for ax in axes[1:].flat[len(effects) :]:
+        ax.axis("off")
+    return fig

@@ -1,0 +1,637 @@
+"""Sweeps: many variants of one job, one row of figures each; on this machine or on a dask cluster.
+
+A sweep spec is a job file (``machine``, ``path``, optionally ``[feed]``,
+``work_offset``, ``[[effect]]``) with the strategies to run, how to draw
+the variants and one ``[[vary]]`` table per parameter varied::
+
+    machine = "demo_mill"
+    path = "iso230_4_circle_ccw"
+    strategies = "ccc_arc"          # a comparison name: parts joined by '+'
+
+    [sweep]
+    method = "lhs"                  # "grid", "random" or "lhs" (Latin hypercube)
+    count = 200                     # random and lhs: the number of variants
+    seed = 1                        # random and lhs: same seed, same variants
+
+    [[vary]]
+    name = "strategy.ccc_arc.kp_per_s"
+    min = 20.0
+    max = 400.0
+    log = true                      # optional: uniform in log(value)
+
+    [[vary]]
+    name = "effect.backlash.x.lost_motion_um"
+    min = 0.0
+    max = 20.0
+    count = 5                       # grid: count points from min to max, or values = [...]
+
+Parameters are named as the files name them (:data:`PARAMETER_KINDS`):
+``axes.<axis>.<key>`` (a machine file's ``[axes.<axis>]`` key,
+:data:`contoursim.machine.SERVO_KEYS`), ``effect.<effect>.<axis>.<parameter>``
+(an ``[[effect]]`` table's parameter; the effect is added when the job lacks
+it) and ``strategy.<strategy>.<key>`` (the ``[[strategy]]`` keys of a job file,
+:data:`contoursim.compensation.STRATEGY_KEYS`).
+
+Every variant runs in :func:`contoursim.simulation.simulate_batch` (they all
+share the job's structure: varying a parameter never changes the axes, the
+servo period or the chain), in tasks of many variants; a task carries only
+the job's file texts and the variants' values, and whoever runs it rebuilds
+the model (once per process). A variant's row depends on its values alone
+(each batch row equals its single run bit for bit), so the table is the
+same, bit for bit, however the variants are split into tasks and whichever
+worker runs them. With a pre-filter (``zpetc``), designed from each
+variant's own servos, the variants run one by one.
+"""
+
+import dataclasses
+import hashlib
+import itertools
+import math
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from .config import TomlFile
+from .exceptions import ConfigError
+from .simulation import SUMMARY_KEYS
+
+__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst",
+           "plot_sweep", "read_sweep", "run_sweep", "run_variants", "table_text", "write_results"]
+
+#: How the variants are drawn.
+METHODS = ("grid", "random", "lhs")
+#: The first part of a varied parameter's name.
+PARAMETER_KINDS = ("axes", "effect", "strategy")
+#: The figures of each variant, the table's last columns (:data:`contoursim.simulation.SUMMARY_KEYS`).
+FIGURES = SUMMARY_KEYS
+#: Keys of a spec on top of a job file's.
+SPEC_KEYS = ("strategies", "sweep", "vary")
+_SWEEP_KEYS = ("method", "count", "seed", "task_size")
+_VARY_KEYS = ("name", "min", "max", "count", "values", "log")
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A sweep read from its spec: the job's files and the variants' values.
+
+    Parameters
+    ----------
+    source : str
+        The spec file.
+    files : dict of str -> str
+        The spec's text (under its file name, the first entry) and the texts
+        of the machine and path files it names next to it: all a worker
+        needs to rebuild the job.
+    strategies : str
+        The strategies' comparison name (``"none"``, ``"ccc_arc"``, ...).
+    names : tuple of str
+        The varied parameters.
+    values : ndarray, shape (n_variants, len(names))
+        One row per variant [each parameter's unit].
+    task_size : int or None
+        Variants per task (None: chosen by :func:`run_sweep`).
+    elsewhere : tuple of str
+        Files the job reads that are not in the spec's folder (or below it):
+        the sweep runs here, not on a cluster.
+    log : tuple of bool
+        Per parameter: drawn uniform in log(value) (plotted on a log axis).
+    """
+
+    source: str
+    files: dict
+    strategies: str
+    names: tuple
+    values: np.ndarray
+    task_size: int | None = None
+    elsewhere: tuple = ()
+    log: tuple = ()
+
+
+def _bundle(spec, toml):
+    """``(files, elsewhere)``: the spec's text and those of the files it names in its folder (the machine file's
+    tables too), by path relative to the folder; and the files it names outside it."""
+    files, elsewhere = {spec.name: toml.text}, []
+    folder = spec.parent.resolve()
+
+    def add(value, base):
+        file = (base / value).resolve()
+        if not file.is_file():
+            if Path(value).is_file():  # relative to the working directory
+                elsewhere.append(str(value))
+            return None
+        if not file.is_relative_to(folder):
+            elsewhere.append(str(file))
+            return None
+        files[file.relative_to(folder).as_posix()] = file.read_text(encoding="utf-8")
+        return file
+
+    machine = add(str(toml.data.get("machine", "")), spec.parent) if isinstance(toml.data.get("machine"), str) else None
+    if isinstance(toml.data.get("path"), str):
+        add(toml.data["path"], spec.parent)
+    if machine is not None:  # tables a machine file names (an ISO 230-2 table = "x_laser.csv"), relative to it
+        stack = [TomlFile.read(machine).data]
+        while stack:
+            item = stack.pop()
+            values = item.values() if isinstance(item, dict) else item if isinstance(item, list) else ()
+            for value in values:
+                if isinstance(value, str) and value.endswith(".csv"):
+                    add(value, machine.parent)
+                elif isinstance(value, (dict, list)):
+                    stack.append(value)
+    return files, tuple(elsewhere)
+
+
+def read_sweep(file):
+    """Read a sweep spec (module docstring) and draw its variants.
+
+    Parameters
+    ----------
+    file : str or Path
+
+    Returns
+    -------
+    Sweep
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and line of a bad key or value, or of a parameter
+        the job has no place for (saying which names it has).
+    """
+    file = Path(file)
+    toml = TomlFile.read(file)
+    if toml.kind() != "job":
+        raise toml.error('a sweep spec is a job file: machine = "...", path = "...", then [sweep] and [[vary]] tables')
+    files, elsewhere = _bundle(file, toml)
+    sweep = toml.table("sweep", allowed=_SWEEP_KEYS, required=("method",))
+    method = sweep["method"]
+    if method not in METHODS:
+        raise toml.error(f"method must be one of {', '.join(METHODS)}, got {method!r}", "sweep", "method")
+    varies = toml.data.get("vary")
+    if not isinstance(varies, list) or not varies:
+        raise toml.error("a sweep needs at least one [[vary]] table: name = \"axes.x.kp_per_s\", min = ..., max = ...")
+    tables = [toml.table("vary", i, allowed=_VARY_KEYS, required=("name",)) for i in range(len(varies))]
+    names = tuple(t["name"] for t in tables)
+    for i, name in enumerate(names):
+        if not isinstance(name, str) or names.index(name) != i:
+            raise toml.error(f"vary name must be a parameter name, each varied once; got {name!r}", "vary", i, "name")
+    count, seed = None, None
+    if method != "grid":
+        count = _integer(toml, ("sweep", "count"), sweep.get("count"), 1)
+        seed = _integer(toml, ("sweep", "seed"), sweep.get("seed", 0), 0)
+    task_size = None if "task_size" not in sweep else _integer(toml, ("sweep", "task_size"), sweep["task_size"], 1)
+    values = _draw(toml, tables, method, count, seed)
+    strategies = toml.data.get("strategies", "none")
+    if not isinstance(strategies, str):
+        raise toml.error(f"strategies must be a name in quotes (e.g. \"ccc_arc\"), got {strategies!r}", "strategies")
+    log = tuple(t.get("log", False) is True for t in tables)
+    made = Sweep(str(file), files, strategies, names, values, task_size, elsewhere, log)
+    job = _job(made)  # the spec's job, every name and the extreme values checked here, not on a worker
+    for i, name in enumerate(names):
+        try:
+            job.variant({name: values[:, i].min()})
+            job.variant({name: values[:, i].max()})
+        except (TypeError, ValueError) as exc:
+            raise toml.error(f"vary {name!r}: {exc}", "vary", i, "name") from None
+    return made
+
+
+def _integer(toml, keys, value, least):
+    if isinstance(value, bool) or not isinstance(value, int) or value < least:
+        raise toml.error(f"{'.'.join(keys)} must be a whole number, at least {least}; got {value!r}", *keys)
+    return value
+
+
+def _draw(toml, tables, method, count, seed):
+    """The variants' values, shape (n_variants, len(tables)): a full grid, or `count` seeded draws."""
+    columns = []
+    for i, t in enumerate(tables):
+        if "values" in t:
+            values = t["values"]
+            if method != "grid" or any(k in t for k in ("min", "max", "count")):
+                raise toml.error("values = [...] lists a grid's points: use it with method = \"grid\", without min/max/count",
+                                 "vary", i, "values")
+            if not isinstance(values, list) or not values or not all(_number(v) for v in values):
+                raise toml.error(f"values must be a list of numbers, got {values!r}", "vary", i, "values")
+            columns.append(np.array(values, float))
+            continue
+        for key in ("min", "max"):
+            if not _number(t.get(key)):
+                raise toml.error(f"vary {t['name']!r} needs {key} = <number> (or values = [...] in a grid)", "vary", i)
+        low, high = float(t["min"]), float(t["max"])
+        log = t.get("log", False)
+        if not isinstance(log, bool):
+            raise toml.error(f"log must be true or false, got {log!r}", "vary", i, "log")
+        if high < low or (log and low <= 0):
+            raise toml.error(f"vary {t['name']!r}: min must not exceed max" + (" and both be positive (log)" if log else ""),
+                             "vary", i, "min")
+        if method == "grid":
+            n = _integer(toml, ("vary", i, "count"), t.get("count"), 1)
+            columns.append(np.geomspace(low, high, n) if log else np.linspace(low, high, n))
+        elif "count" in t:
+            raise toml.error("a vary table's count gives a grid's points: with random or lhs set [sweep] count",
+                             "vary", i, "count")
+        else:
+            columns.append((low, high, log))
+    if method == "grid":
+        return np.array(list(itertools.product(*columns)), float)
+    rng = np.random.default_rng(seed)
+    if method == "random":
+        u = rng.random((count, len(columns)))
+    else:  # Latin hypercube: each parameter's range cut in `count` strata, one draw in each, strata paired at random
+        u = np.column_stack([(rng.permutation(count) + rng.random(count)) / count for _ in columns])
+    out = np.empty_like(u)
+    for j, (low, high, log) in enumerate(columns):
+        out[:, j] = np.exp(np.log(low) + u[:, j] * np.log(high / low)) if log else low + u[:, j] * (high - low)
+    return out
+
+
+def _number(value):
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
+# ---------------------------------------------------------------------------------------------
+# The job, rebuilt from the files in each process
+
+
+@dataclass(frozen=True)
+class _Job:
+    """The nominal model, the held reference and the strategies of a sweep, and how to make a variant."""
+
+    model: object
+    trajectory: object
+    strategies: tuple
+    prefilters: bool
+
+    def variant(self, values):
+        """``(model, strategies)`` with the named parameters (module docstring) set to `values`."""
+        machine = self.model.machine
+        axes, effects, gains = dict(machine.axes), {}, {}
+        for name, value in values.items():
+            kind, _, rest = name.partition(".")
+            parts = rest.split(".")
+            value = float(value)
+            if kind == "axes" and len(parts) == 2:
+                field = _servo_field(machine, *parts)
+                axes[parts[0]] = dataclasses.replace(axes[parts[0]], **{field: value})
+            elif kind == "effect" and len(parts) == 3:
+                effects[name[len("effect.") :]] = value
+            elif kind == "strategy" and len(parts) == 2:
+                gains.setdefault(parts[0], {})[_gain_field(self.strategies, *parts)] = value
+            else:
+                raise ValueError(f"a parameter name is axes.<axis>.<key>, effect.<effect>.<axis>.<parameter> or "
+                                 f"strategy.<strategy>.<gain>, got {name!r}")
+        model = self.model
+        if axes != dict(machine.axes):
+            model = dataclasses.replace(model, machine=dataclasses.replace(machine, axes=axes))
+        present = {e.label for e in model.effects}
+        for label in {n.rpartition(".")[0] for n in effects} - present:  # effects the job lacks: added
+            from .effects import Effect
+
+            name, axis = label.split(".")
+            model = model.with_effect(Effect(name, axis, **{n.rpartition(".")[2]: v for n, v in effects.items()
+                                                            if n.rpartition(".")[0] == label}))
+        model = model.with_values({n: v for n, v in effects.items() if n.rpartition(".")[0] in present})
+        strategies = tuple(dataclasses.replace(s, **gains[s.name]) if s.name in gains else s for s in self.strategies)
+        return model, strategies
+
+
+def _servo_field(machine, axis, key):
+    from .machine import SERVO_KEYS
+
+    if axis not in machine.axes:
+        raise ValueError(f"the machine has no servo axis {axis!r}; its axes: {', '.join(machine.axes)}")
+    if key not in SERVO_KEYS:
+        raise ValueError(f"no axis key {key!r}; the keys: {', '.join(SERVO_KEYS)}")
+    return SERVO_KEYS[key]
+
+
+def _gain_field(strategies, name, gain):
+    from .compensation import STRATEGY_KEYS
+
+    if name not in [s.name for s in strategies]:
+        raise ValueError(f"the sweep runs no strategy {name!r} (strategies = "
+                         f"\"{'+'.join(s.name for s in strategies) or 'none'}\")")
+    if gain not in STRATEGY_KEYS.get(name, {}):
+        known = ", ".join(STRATEGY_KEYS.get(name, {})) or "none"
+        raise ValueError(f"strategy {name} has no setting {gain!r}; its settings: {known}")
+    return STRATEGY_KEYS[name][gain]
+
+
+_JOBS = {}  # per process: the job of each set of files, by their digest
+
+
+def _job(sweep_or_files):
+    """The job of a sweep (from its spec file, so that messages name the user's files) or of its files' texts
+    (on a worker: written to a temporary folder, read, removed), built once per process."""
+    files = sweep_or_files.files if isinstance(sweep_or_files, Sweep) else sweep_or_files
+    digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()
+    if digest not in _JOBS:
+        if len(_JOBS) >= 4:  # a long-lived worker keeps the last few jobs (a reference may take 100 MB)
+            del _JOBS[next(iter(_JOBS))]
+        if isinstance(sweep_or_files, Sweep):
+            _JOBS[digest] = _build(Path(sweep_or_files.source))
+        else:
+            with tempfile.TemporaryDirectory(prefix="contoursim-sweep-") as folder:
+                for name, text in files.items():  # where the job's names find them
+                    (Path(folder) / name).parent.mkdir(parents=True, exist_ok=True)
+                    (Path(folder) / name).write_text(text, encoding="utf-8")
+                _JOBS[digest] = _build(Path(folder) / next(iter(files)))
+    return _JOBS[digest]
+
+
+def _build(spec):
+    """Read the job of the spec file `spec`: everything a variant needs is in memory afterwards."""
+    from . import cli
+    from .compensation import Composition, strategies_named
+    from .simulation import default_settle
+
+    model, path_file, job, _ = cli._job(SimpleNamespace(file=str(spec), machine=None), extra_keys=SPEC_KEYS)
+    settings = cli._strategy_settings(job)  # the job's [[strategy]] tables, as compare reads them
+    try:
+        strategies = strategies_named(job.data.get("strategies", "none"), chain=model.machine.chain, settings=settings)
+    except ValueError as exc:
+        raise job.error(str(exc), "strategies") from None
+    trajectory = cli._trajectory(model, path_file, job)[0].held(default_settle(model.machine))  # every variant: one length
+    return _Job(model, trajectory, strategies, Composition(strategies).prefilters)
+
+
+def run_variants(files, names, rows):
+    """Run variants of a sweep's job: the task every worker runs (plain data in, plain data out).
+
+    Parameters
+    ----------
+    files : dict of str -> str
+        :attr:`Sweep.files`.
+    names : sequence of str
+        The varied parameters.
+    rows : sequence of sequence of float
+        Each variant's values, in the order of `names`.
+
+    Returns
+    -------
+    list of list of float
+        Per variant the :data:`FIGURES` (``diverged`` as 1.0 or 0.0; a
+        diverged variant's other figures NaN).
+    """
+    from .simulation import simulate_batch
+
+    from .cluster import task_threads
+
+    job = _job(files)
+    task_threads()
+    variants = [job.variant(dict(zip(names, row))) for row in rows]
+    groups = [variants] if not job.prefilters else [[v] for v in variants]  # a pre-filter: one by one
+    out = []
+    for group in groups:
+        summary = simulate_batch([m for m, _ in group], job.trajectory, outputs=("summary",),
+                                 strategies=[s for _, s in group], settle=0.0, check=False)["summary"]
+        out += np.column_stack([summary[key].astype(float) for key in FIGURES]).tolist()
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+def run_sweep(sweep, scheduler=None, progress=None):
+    """Run every variant of a sweep; the table of their figures.
+
+    Parameters
+    ----------
+    sweep : Sweep
+    scheduler : None, str or distributed.Client
+        ``None``: in this process. ``"local:N"``: a dask ``LocalCluster`` of
+        N worker processes on this machine, on the loopback interface only.
+        Another string: the address of a dask scheduler
+        (``tcp://host:8786``). A ``distributed.Client``: its cluster.
+    progress : callable, optional
+        Called as ``progress(done, total)`` each time variants finish.
+
+    Returns
+    -------
+    ndarray, shape (n_variants, len(FIGURES))
+        Row i: the figures of variant i (``diverged`` 1.0 or 0.0).
+
+    Raises
+    ------
+    ValueError
+        A bad scheduler; dask.distributed missing (saying how to install it).
+    """
+    n = len(sweep.values)
+    table = np.full((n, len(FIGURES)), np.nan)
+    report = progress or (lambda done, total: None)
+    if scheduler is None:
+        report(0, n)
+        size = sweep.task_size or 32
+        for start in range(0, n, size):
+            rows = slice(start, min(start + size, n))
+            table[rows] = run_variants(sweep.files, sweep.names, sweep.values[rows].tolist())
+            report(rows.stop, n)
+        return table
+    if sweep.elsewhere:
+        raise ValueError(f"{sweep.source} names {sweep.elsewhere[0]}, outside its folder: a cluster's workers get the "
+                         "spec's folder only; copy the file next to the spec (or below it)")
+    from .cluster import connected, numba_threads, run_tasks
+
+    with connected(scheduler) as client:
+        numba_threads(client)
+        threads = sum(w["nthreads"] for w in client.scheduler_info()["workers"].values())
+        client.run(run_variants, sweep.files, sweep.names, sweep.values[:1].tolist())  # build the job, compile: warm
+        report(0, n)
+        size = sweep.task_size or max(1, min(32, math.ceil(n / (4 * threads))))
+        parts = [slice(start, min(start + size, n)) for start in range(0, n, size)]
+        tasks = [(sweep.files, sweep.names, sweep.values[rows].tolist()) for rows in parts]
+        done = 0
+        for i, figures in run_tasks(client, run_variants, tasks, "contoursim-sweep"):  # streamed as they finish
+            table[parts[i]] = figures
+            done += parts[i].stop - parts[i].start
+            report(done, n)
+    return table
+
+
+# ---------------------------------------------------------------------------------------------
+# Results
+
+_PLOTTED = {"contour_max_um": "contour max [µm]", "contour_rms_um": "contour RMS [µm]",
+            "tracking_max_um": "tracking max [µm]", "tracking_rms_um": "tracking RMS [µm]",
+            "peak_current_A": "peak current [A]", "saturated": "saturated [fraction]",
+            "volumetric_max_um": "volumetric max [µm]", "volumetric_rms_um": "volumetric RMS [µm]"}
+
+
+def table_text(sweep, table):
+    """The table as CSV text: ``variant``, the varied values, then :data:`FIGURES` (floats exact, as ``repr``).
+
+    Parameters
+    ----------
+    sweep : Sweep
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
+    """
+    lines = [",".join(("variant",) + sweep.names + FIGURES)]
+    for i, (values, figures) in enumerate(zip(sweep.values, table)):
+        cells = [str(i)] + [repr(float(v)) for v in values]
+        cells += [str(bool(f)) if key == "diverged" else repr(float(f)) for key, f in zip(FIGURES, figures)]
+        lines.append(",".join(cells))
+    return "\n".join(lines) + "\n"
+
+
+def best_and_worst(table):
+    """Indices of the variants with the smallest and the largest max contour error, diverged ones left out (or None).
+
+    Parameters
+    ----------
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
+    """
+    contour = np.where(table[:, FIGURES.index("diverged")] == 0, table[:, FIGURES.index("contour_max_um")], np.nan)
+    if np.isnan(contour).all():
+        return None
+    return int(np.nanargmin(contour)), int(np.nanargmax(contour))
+
+
+def plot_sweep(sweep, table):
+    """Figures of a sweep: each figure against each varied parameter and, for two parameters, a map of each.
+
+    Parameters
+    ----------
+    sweep : Sweep
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
+
+    Returns
+    -------
+    dict of str -> matplotlib.figure.Figure
+        ``sweep_<parameter>`` for each parameter, ``sweep_map`` for two.
+        Diverged variants are red crosses at the foot of each plot.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = table[:, FIGURES.index("diverged")] == 0
+    figures = {}
+    for j, name in enumerate(sweep.names):
+        fig, axes = plt.subplots(2, 4, figsize=(17, 7), layout="constrained")
+        x = sweep.values[:, j]
+        for ax, (key, label) in zip(axes.flat, _PLOTTED.items()):
+            ax.plot(x[ok], table[ok, FIGURES.index(key)], ".", ms=4)
+            ax.plot(x[~ok], np.full((~ok).sum(), 0.03), "rx", transform=ax.get_xaxis_transform(),  # at the foot
+                    label="diverged" if (~ok).any() else None)
+            ax.set(xlabel=name, ylabel=label, xscale="log" if sweep.log[j] else "linear")
+            ax.grid(alpha=0.3)
+        if (~ok).any():
+            axes.flat[0].legend()
+        fig.suptitle(f"{Path(sweep.source).name}: {len(x)} variants, strategies {sweep.strategies}")
+        figures[f"sweep_{name}"] = fig
+    if len(sweep.names) == 2:
+        fig, axes = plt.subplots(2, 4, figsize=(19, 8), layout="constrained")
+        x, y = sweep.values[:, 0], sweep.values[:, 1]
+        for ax, (key, label) in zip(axes.flat, _PLOTTED.items()):
+            points = ax.scatter(x[ok], y[ok], c=table[ok, FIGURES.index(key)], s=18, cmap="viridis")
+            ax.plot(x[~ok], y[~ok], "rx")
+            fig.colorbar(points, ax=ax, label=label)
+            ax.set(xlabel=sweep.names[0], ylabel=sweep.names[1], xscale="log" if sweep.log[0] else "linear",
+                   yscale="log" if sweep.log[1] else "linear")
+        fig.suptitle(f"{Path(sweep.source).name}: each figure over the two parameters (red crosses: diverged)")
+        figures["sweep_map"] = fig
+    return figures
+
+
+def write_results(sweep, table, out):
+    """Write a sweep's table, plots and the best and worst variants re-run with full traces into `out`.
+
+    ``sweep.csv`` (:func:`table_text`), ``sweep.parquet`` when pyarrow is
+    installed, the plots of :func:`plot_sweep`, and ``best.csv``,
+    ``worst.csv`` with the usual plots of both
+    (:func:`contoursim.plotting.save_figures`, polar plot ``best_worst_polar.png``).
+
+    Parameters
+    ----------
+    sweep : Sweep
+    table : ndarray, shape (n_variants, len(FIGURES))
+        From :func:`run_sweep`.
+    out : str, Path or contoursim.output.OutputDir
+
+    Returns
+    -------
+    tuple
+        The output folder and the indices ``(best, worst)`` (None when every variant diverged).
+    """
+    import matplotlib.pyplot as plt
+
+    from .output import output_dir
+    from .plotting import save_figures
+    from .simulation import simulate
+
+    out = output_dir(out)
+    with out.write("sweep.csv") as stream:
+        stream.write(table_text(sweep, table))
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        pass
+    else:
+        columns = {"variant": np.arange(len(table))}
+        columns.update((name, sweep.values[:, j]) for j, name in enumerate(sweep.names))
+        columns.update((key, table[:, j].astype(bool) if key == "diverged" else table[:, j]) for j, key in enumerate(FIGURES))
+        with out.write("sweep.parquet", binary=True) as stream:
+            pq.write_table(pa.table(columns), stream)
+    for name, fig in plot_sweep(sweep, table).items():
+        with out.write(f"{name}.png", binary=True) as stream:
+            fig.savefig(stream, format="png", dpi=100)
+        plt.close(fig)
+    chosen = best_and_worst(table)
+    if chosen is not None:
+        job = _job(sweep)
+        runs = {}
+        for label, i in zip(("best", "worst"), chosen):
+            model, strategies = job.variant(dict(zip(sweep.names, sweep.values[i])))
+            runs[label] = simulate(model, job.trajectory, strategies, settle=0.0)
+            values = "; ".join(f"{n} = {v!r}" for n, v in zip(sweep.names, sweep.values[i].tolist()))
+            with out.write(f"{label}.csv") as stream:
+                runs[label].save_csv(stream, metadata={"sweep": Path(sweep.source).name, "variant": i, "values": values})
+        save_figures(runs, out, "best_worst")
+    return out, chosen
+
+
+class Progress:
+    """A one-line progress bar on stderr: ``sweep: [#####.....] 412/1000 variants, 8.1/s, 1.2 min left``.
+
+    Called as ``progress(done, total)``; the rate counts from the call with ``done = 0``.
+
+    Parameters
+    ----------
+    label : str
+        What leads the line.
+    what : str
+        What is counted.
+    stream : file object, optional
+        Default ``sys.stderr``.
+    """
+
+    def __init__(self, label="sweep", what="variants", stream=None):
+        self.label, self.what, self.stream = label, what, stream or sys.stderr
+        self.start, self.last = time.monotonic(), -1.0
+
+    def __call__(self, done, total):
+        now = time.monotonic()
+        if done == 0:  # the work starts (a cluster is up and warm): the rate counts from here
+            self.start = now
+        if done < total and now - self.last < 0.5:
+            return
+        self.last = now
+        rate = done / max(now - self.start, 1e-9)
+        left = (total - done) / rate if rate > 0 else float("inf")
+        bar = "#" * round(20 * done / total) + "." * (20 - round(20 * done / total))
+        eta = "" if done == 0 else f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left"
+        end = "\n" if done >= total else ""
+        print(f"\r{self.label}: [{bar}] {done}/{total} {self.what}, {rate:.3g}/s, {eta}   ", end=end, file=self.stream,
+              flush=True)

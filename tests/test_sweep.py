@@ -1,0 +1,263 @@
+"""Sweeps: the spec, the draws, each row against its own single run, and the same table on any number of workers."""
+
+import os
+import signal
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from contoursim.cli import main
+from contoursim.comparison import Comparison, compare
+from contoursim.exceptions import ConfigError
+from contoursim.simulation import simulate
+from contoursim.sweep import FIGURES, _job, read_sweep, run_sweep, table_text
+
+JOB = """machine = "demo_mill"
+path = "rounded_square"
+strategies = "{strategies}"
+
+[feed]
+feed_mm_min = 3000
+
+[sweep]
+{sweep}
+"""
+
+
+def _spec(tmp_path, varies, sweep='method = "grid"', strategies="ccc_linear", name="spec.toml"):
+    text = JOB.format(strategies=strategies, sweep=sweep)
+    for v in varies:
+        text += "\n[[vary]]\n" + "\n".join(f"{k} = {value}" for k, value in v.items()) + "\n"
+    (tmp_path / name).write_text(text)
+    return tmp_path / name
+
+
+def test_a_grid_is_the_full_product_in_order(tmp_path):
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 3},
+                            {"name": '"effect.backlash.x.lost_motion_um"', "values": "[0.0, 8.0]"}])
+    sweep = read_sweep(spec)
+    assert sweep.names == ("axes.x.kp_per_s", "effect.backlash.x.lost_motion_um")
+    np.testing.assert_array_equal(sweep.values, [[30, 0], [30, 8], [40, 0], [40, 8], [50, 0], [50, 8]])
+
+
+@pytest.mark.parametrize("method", ["random", "lhs"])
+def test_draws_are_seeded_within_their_ranges_and_a_latin_hypercube_fills_every_stratum(tmp_path, method):
+    varies = [{"name": '"strategy.ccc_linear.kp_per_s"', "min": 10.0, "max": 1000.0, "log": "true"},
+              {"name": '"axes.y.kp_per_s"', "min": 30.0, "max": 40.0}]
+    one = read_sweep(_spec(tmp_path, varies, f'method = "{method}"\ncount = 50\nseed = 3', name="a.toml")).values
+    same = read_sweep(_spec(tmp_path, varies, f'method = "{method}"\ncount = 50\nseed = 3', name="b.toml")).values
+    other = read_sweep(_spec(tmp_path, varies, f'method = "{method}"\ncount = 50\nseed = 4', name="c.toml")).values
+    np.testing.assert_array_equal(one, same)
+    assert not np.array_equal(one, other)
+    assert one.shape == (50, 2) and (one[:, 0] >= 10).all() and (one[:, 0] <= 1000).all()
+    assert (one[:, 1] >= 30).all() and (one[:, 1] <= 40).all()
+    if method == "lhs":  # each of the 50 strata of each parameter (in log for the first) holds one draw
+        strata = [np.floor(50 * np.log(one[:, 0] / 10) / np.log(100)), np.floor(50 * (one[:, 1] - 30) / 10)]
+        for s in strata:
+            assert sorted(s) == list(range(50))
+
+
+@settings(max_examples=40, deadline=None)
+@given(count=st.integers(1, 200), seed=st.integers(0, 2**32), low=st.floats(-1e3, 1e3), span=st.floats(1e-3, 1e3))
+def test_a_latin_hypercube_puts_one_draw_in_each_stratum_of_each_parameter(count, seed, low, span):
+    from contoursim.sweep import _draw
+
+    tables = [{"name": "a", "min": low, "max": low + span}, {"name": "b", "min": 1.0, "max": 1e4, "log": True}]
+    values = _draw(None, tables, "lhs", count, seed)
+    strata = [np.floor(count * (values[:, 0] - low) / span), np.floor(count * np.log10(values[:, 1]) / 4)]
+    for s in strata:
+        assert sorted(np.clip(s, 0, count - 1)) == list(range(count))  # clip: a draw on the upper edge by rounding
+    np.testing.assert_array_equal(values, _draw(None, tables, "lhs", count, seed))
+
+
+@pytest.mark.parametrize(("vary", "message"), [
+    ({"name": '"axes.w.kp_per_s"', "min": 1.0, "max": 2.0}, r"spec.toml, line 12: vary 'axes.w.kp_per_s': the machine "
+                                                           r"has no servo axis 'w'; its axes: x, y, z"),
+    ({"name": '"axes.x.kp"', "min": 1.0, "max": 2.0}, r"line 12: vary 'axes.x.kp': no axis key 'kp'; the keys: mass_kg"),
+    ({"name": '"strategy.ccc_arc.kp_per_s"', "min": 1.0, "max": 2.0}, r"runs no strategy 'ccc_arc' \(strategies = \"ccc_linear\"\)"),
+    ({"name": '"strategy.ccc_linear.gain"', "min": 1.0, "max": 2.0}, r"no setting 'gain'; its settings: kp_per_s, ki_per_s2, kd"),
+    ({"name": '"effect.backlash.x.lost_motion_um"', "min": -5.0, "max": 2.0}, r"line 12: vary 'effect.backlash.x.lost_motion_um': "),
+    ({"name": '"axes.x.kp_per_s"', "min": 50.0, "max": 2.0, "count": 2}, r"line 13: vary 'axes.x.kp_per_s': min must not exceed max"),
+    ({"name": '"axes.x.kp_per_s"', "min": 5.0}, r"line 11: vary 'axes.x.kp_per_s' needs max = <number>"),
+])
+def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message):
+    vary.setdefault("count", 2)
+    with pytest.raises(ConfigError, match=message):
+        read_sweep(_spec(tmp_path, [vary]))
+
+
+def test_each_row_is_the_single_run_of_its_variant(tmp_path):
+    spec = _spec(tmp_path, [{"name": '"strategy.ccc_linear.kp_per_s"', "values": "[30.0, 90.0]"},
+                            {"name": '"axes.y.kp_per_s"', "values": "[30.0]"},
+                            {"name": '"effect.gain_mismatch.x.kp_ratio"', "values": "[0.9]"}])
+    sweep = read_sweep(spec)
+    table = run_sweep(sweep)
+    job = _job(sweep)
+    for i, (kp_ccc, kp_y, ratio) in enumerate(sweep.values):
+        model, strategies = job.variant(dict(zip(sweep.names, sweep.values[i])))
+        assert model.machine.axes["y"].kp == kp_y and model.values() == {"gain_mismatch.x.kp_ratio": ratio}
+        assert strategies[0].kp == kp_ccc and strategies[0].estimator == "linear"
+        figures = Comparison({"run": simulate(model, job.trajectory, strategies)}).figures["run"]
+        for j, key in enumerate(FIGURES[:5]):
+            assert table[i, j] == figures[key]
+        assert table[i, FIGURES.index("diverged")] == 0.0
+    assert table[1, 0] < table[0, 0]  # a stiffer coupling: a smaller contour error
+
+
+def test_a_pre_filter_sweep_runs_variants_one_by_one_each_designed_from_its_own_servos(tmp_path):
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[30.0, 50.0]"}], strategies="zpetc")
+    sweep = read_sweep(spec)
+    table = run_sweep(sweep)
+    job = _job(sweep)
+    for i in range(2):
+        model, strategies = job.variant({"axes.x.kp_per_s": sweep.values[i, 0]})
+        assert table[i, 0] == compare(model, job.trajectory, ["zpetc"]).figures["zpetc"]["contour_max_um"]
+
+
+def test_the_table_does_not_depend_on_how_the_variants_are_split(tmp_path):
+    spec = _spec(tmp_path, [{"name": '"strategy.ccc_linear.kp_per_s"', "min": 10.0, "max": 300.0}],
+                 'method = "random"\ncount = 5\nseed = 1')
+    sweep = read_sweep(spec)
+    whole = table_text(sweep, run_sweep(sweep))
+    for size in (1, 2):
+        split = read_sweep(spec)
+        object.__setattr__(split, "task_size", size)
+        assert table_text(split, run_sweep(split)) == whole
+
+
+def test_scheduler_without_dask_says_how_to_get_it(tmp_path, monkeypatch, capsys):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_dask(name, *args, **kwargs):
+        if name.startswith("distributed"):
+            raise ImportError(name)
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_dask)
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}])
+    assert main(["sweep", str(spec), "--scheduler", "local:2", "--out", str(tmp_path / "o")]) == 2
+    assert 'pip install "contoursim[distributed]"' in capsys.readouterr().err
+
+
+def test_bad_local_scheduler_is_refused(tmp_path, capsys):
+    pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}])
+    assert main(["sweep", str(spec), "--scheduler", "local:zero", "--out", str(tmp_path / "o")]) == 2
+    assert "local:N needs a whole number of workers, at least 1; got 'local:zero'" in capsys.readouterr().err
+
+
+def test_local_local1_local2_and_a_killed_worker_give_the_same_table_bit_for_bit(tmp_path):
+    distributed = pytest.importorskip("distributed", reason="dask.distributed not installed "
+                                                            "(pip install \"contoursim[distributed]\")")
+    spec = _spec(tmp_path, [{"name": '"strategy.ccc_linear.kp_per_s"', "min": 10.0, "max": 300.0},
+                            {"name": '"effect.backlash.x.lost_motion_um"', "min": 0.0, "max": 10.0}],
+                 'method = "lhs"\ncount = 12\nseed = 5\ntask_size = 2')
+    sweep = read_sweep(spec)
+    local = table_text(sweep, run_sweep(sweep))
+    assert table_text(sweep, run_sweep(sweep, "local:1")) == local
+    assert table_text(sweep, run_sweep(sweep, "local:2")) == local
+
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+                                  env={"NUMBA_NUM_THREADS": "1"}) as cluster, distributed.Client(cluster) as client:
+        pids = client.run(os.getpid)
+        killed = []
+
+        def kill_one(done, total):  # the first results are in: end a worker's process by its pid
+            if done > 0 and not killed:
+                pid = next(iter(pids.values()))
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+
+        table = run_sweep(sweep, client, progress=kill_one)
+        assert killed and table_text(sweep, table) == local
+
+        # a machine file in a folder below the spec's: the workers get its text and rebuild it
+        own = _own_machine_spec(tmp_path / "own")
+        assert table_text(own, run_sweep(own, client)) == table_text(own, run_sweep(own))
+
+
+def _own_machine_spec(folder):
+    from contoursim.machine import preset_file
+
+    (folder / "machines").mkdir(parents=True)
+    text = preset_file("demo_mill").read_text().replace("kp_per_s = 36.0", "kp_per_s = 30.0")
+    (folder / "machines" / "mill.toml").write_text(text)
+    spec = _spec(folder, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}])
+    spec.write_text(spec.read_text().replace('machine = "demo_mill"', 'machine = "machines/mill.toml"'))
+    sweep = read_sweep(spec)
+    assert sorted(sweep.files) == ["machines/mill.toml", "spec.toml"] and not sweep.elsewhere
+    assert _job(sweep).model.machine.axes["y"].kp == 30.0
+    return sweep
+
+
+def test_a_file_outside_the_specs_folder_runs_here_but_not_on_a_cluster(tmp_path):
+    from contoursim.machine import preset_file
+
+    (tmp_path / "mill.toml").write_text(preset_file("demo_mill").read_text())
+    (tmp_path / "specs").mkdir()
+    spec = _spec(tmp_path / "specs", [{"name": '"axes.x.kp_per_s"', "values": "[35.0]"}])
+    spec.write_text(spec.read_text().replace('machine = "demo_mill"', 'machine = "../mill.toml"'))
+    sweep = read_sweep(spec)
+    assert sweep.elsewhere == (str(tmp_path / "mill.toml"),)
+    assert run_sweep(sweep)[0, FIGURES.index("diverged")] == 0.0
+    with pytest.raises(ValueError, match=r"names .*mill.toml, outside its folder: .* copy the file next to the spec"):
+        run_sweep(sweep, "local:1")
+
+
+def test_a_local_cluster_listens_on_the_loopback_only_and_a_bad_address_is_one_line(tmp_path):
+    pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
+    from contoursim.cluster import connected
+
+    import psutil  # a dependency of distributed
+
+    with connected("local:2") as client:
+        addresses = [client.scheduler.address] + list(client.scheduler_info()["workers"])
+        assert len(addresses) == 3 and all(a.startswith("tcp://127.0.0.1:") for a in addresses)
+        processes = [os.getpid()] + list(client.run(os.getpid).values())  # scheduler and nannies here, workers there
+        listening = [c.laddr for pid in processes for c in psutil.Process(pid).net_connections(kind="inet")
+                     if c.status == psutil.CONN_LISTEN]
+        assert len(listening) >= 5 and {address.ip for address in listening} == {"127.0.0.1"}
+    with pytest.raises(ValueError, match=r"cannot reach a dask scheduler at 'tcp://127.0.0.1:1'"):
+        with connected("tcp://127.0.0.1:1"):
+            pass
+
+
+def test_results_csv_parquet_plots_and_the_best_and_worst_runs(tmp_path, capsys):
+    spec = _spec(tmp_path, [{"name": '"strategy.ccc_linear.kp_per_s"', "values": "[20.0, 80.0]"},
+                            {"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}])
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 0
+    out = tmp_path / "out"
+    sweep = read_sweep(spec)
+    text = (out / "sweep.csv").read_text()
+    table = np.array([[float(c) if c not in ("True", "False") else float(c == "True") for c in line.split(",")[3:]]
+                      for line in text.splitlines()[1:]])
+    assert text == table_text(sweep, table)  # the figures read back exactly
+    best, worst = np.argmin(table[:, 0]), np.argmax(table[:, 0])
+    assert f"best   variant {best}:" in capsys.readouterr().out
+    for label, i in (("best", best), ("worst", worst)):
+        head = (out / f"{label}.csv").read_text().splitlines()[:12]
+        assert f"# variant: {i}" in head
+    assert {"sweep_map.png", "sweep_axes.x.kp_per_s.png", "best_path.png", "worst_errors.png"} <= {p.name for p in out.iterdir()}
+    pq = pytest.importorskip("pyarrow.parquet", reason="pyarrow not installed: no Parquet table")
+    parquet = pq.read_table(out / "sweep.parquet").to_pydict()
+    assert list(parquet) == ["variant", *sweep.names, *FIGURES]
+    assert parquet["contour_max_um"] == table[:, 0].tolist() and parquet["diverged"] == [False] * 4
+
+
+def test_a_tolerance_sweep_gives_the_volumetric_error_linear_in_the_squareness(tmp_path):
+    spec = _spec(tmp_path, [{"name": '"effect.squareness.xy.angle_urad"', "values": "[50.0, 100.0, -100.0]"}],
+                 strategies="none")
+    sweep = read_sweep(spec)
+    table = run_sweep(sweep)
+    job = _job(sweep)
+    volumetric = table[:, FIGURES.index("volumetric_max_um")]
+    assert volumetric[0] > 1.0 and volumetric[1] == pytest.approx(2 * volumetric[0], rel=1e-9)
+    assert volumetric[2] == pytest.approx(volumetric[1], rel=1e-9)  # the same magnitude, the other way
+    model, strategies = job.variant({"effect.squareness.xy.angle_urad": 100.0})
+    single = simulate(model, job.trajectory, strategies, settle=0.0).summary()
+    assert table[1, FIGURES.index("volumetric_rms_um")] == single["volumetric_rms_um"]
+    assert table[1, FIGURES.index("contour_max_um")] == single["contour_max_um"]
