@@ -37,14 +37,15 @@ per turn) sampled at 5 kHz:
   physics and not from the kernel (:func:`cascade_reference`: the same P-PI
   cascades with Coulomb stick-slip friction, the ZOH plant from
   ``scipy.linalg.expm``, variants innermost, ``prange`` over blocks of
-  variants, positions written in blocks to a (B, N, 3) array it allocates
-  and touches like ``run_batch``), axis-steps/s over axis-steps/s, both on
+  variants, positions written in blocks to a new (B, N, 3) array),
+  axis-steps/s over axis-steps/s, both on
   all cores, taking turns, best of 7 (target >= 0.5; their largest position
   difference is printed);
 * ``kernel_batch_parallel_efficiency``: the same batch on all cores over
   cores x its rate on one thread (``numba.set_num_threads``), taking turns,
   best of 7 (target >= 0.8; on a machine shared with other processes it
-  measures what the cores had to spare too);
+  measures what the cores had to spare too: the reference's own figure,
+  measured the same way, is printed beside it);
 * ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
   throughput over the compiled inner loop's alone (same packed rows,
   outputs preallocated, no argument checks), best of 15 each; the same
@@ -292,9 +293,7 @@ def main():
     short = (pos[:N_REF], vel[:N_REF], acc[:N_REF])
 
     def reference():
-        out = np.empty((B_REF, N_REF, len(AXES)))
-        out.fill(0)  # touched before the parallel steps, as run_batch does
-        return cascade_reference(coef, short[0], out)
+        return cascade_reference(coef, short[0], np.empty((B_REF, N_REF, len(AXES))))
 
     def batch():
         return run_batch(ref_rows, DT, *short)["tool"]
@@ -310,7 +309,14 @@ def main():
 
         return fn
 
-    (t_one, t_all), _ = side_by_side([on(1), on(cores)], 7)
+    def reference_on(threads):
+        def fn():
+            numba.set_num_threads(threads)
+            reference()
+
+        return fn
+
+    (t_one, t_all, t_ref_one, t_ref_all), _ = side_by_side([on(1), on(cores), reference_on(1), reference_on(cores)], 7)
     numba.set_num_threads(cores)
 
     model = python_control_model(loaded)
@@ -359,6 +365,7 @@ def main():
     print(f"kernel_run_vs_inner_loop: {t_inner / t_plain:.2f}")
     print(f"kernel_batch_vs_reference: {t_reference / t_kernel_ref:.2f}")
     print(f"kernel_batch_parallel_efficiency: {t_one / (cores * t_all):.2f}")
+    print(f"reference_parallel_efficiency: {t_ref_one / (cores * t_ref_all):.2f}")
     print(f"kernel_speedup_vs_python_control: {rate_loaded / rate_pc:.0f}")
 
 

@@ -1344,17 +1344,17 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     kept = -(-n_steps // every)
 
     def out(name, kind):
-        # Touched here, before the parallel steps: worker threads first touching fresh pages at once stall each
-        # other (page-table lock, huge-page compaction): 0.6-1.5e8 axis-steps/s from one process to the next
-        # on the 2-core machine, 1.3-1.4e8 always when touched first (benchmarks/bench_kernel.py).
-        array = np.empty((n_variants, kept if name in outputs else 0, n), kind)
-        array.fill(0)
-        return array
+        # Not touched here: the blocks write their rows whole, _CHUNK samples at a time, so the page faults of a
+        # fresh array are taken by the threads in parallel (a serial fill first cost more than the steps in
+        # simulate_batch's sweeps on the loaded 2-core machine: 0.1-0.3 s per 130 MB).
+        return np.empty((n_variants, kept if name in outputs else 0, n), kind)
 
     arrays = {name: out(name, dtype) for name in BATCH_OUTPUTS[:4]}
     arrays["saturated"] = out("saturated", bool)
     status = np.empty((n_variants, n, 3), np.int64)
-    lanes = min(LANES, -(-n_variants // get_num_threads()))  # a block for every thread when B is small
+    threads = get_num_threads()
+    blocks = threads * -(-n_variants // (threads * LANES))  # as few as fill the lanes, as many for every thread
+    lanes = -(-n_variants // blocks)
     _batch(rows, lanes, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), status)
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
