@@ -137,7 +137,8 @@ def reference_coefficients(servos, coulomb):
             augmented[1, 1] = -s.damping / s.mass
             augmented[1, 2], augmented[1, 3] = 1000.0 * s.force_constant / s.mass, 1000.0 / s.mass
             step = scipy.linalg.expm(augmented * DT)
-            # kp [1/s], PI gain [A per mm/s], 1/ti [1/s], then x+ = x + Pxv·v + Pxi·i + PxF·F, v+ = Pvv·v + Pvi·i + PvF·F
+            # kp [1/s], PI gain [A per mm/s], 1/ti [1/s], then the plant's
+            # x+ = x + Pxv·v + Pxi·i + PxF·F, v+ = Pvv·v + Pvi·i + PvF·F
             coef[a, :9, b] = (s.kp, s.kv / 1000.0, 1.0 / s.ti, step[0, 1], step[0, 2], step[0, 3], step[1, 1],
                               step[1, 2], step[1, 3])  # fmt: skip
             coef[a, 9, b] = coulomb[b, a]
@@ -146,7 +147,7 @@ def reference_coefficients(servos, coulomb):
 
 @numba.njit(parallel=True, error_model="numpy")
 def cascade_reference(coef, ref_pos, out):
-    """Positions [mm] of B variants of P-PI cascades with Coulomb friction on `ref_pos` (N, n_axes), into `out` (B, N, n_axes).
+    """Positions [mm] of B P-PI cascades with Coulomb friction on `ref_pos` (N, n_axes), into `out` (B, N, n_axes).
 
     Each step, per axis and variant: velocity error ``e = kp·(x_ref - x) - v``;
     PI current ``i = g·(e + s/ti)`` with the trapezoidal integral

@@ -690,7 +690,7 @@ _ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP =
 
 @njit(cache=True, parallel=True)
 def _batch(rows, lanes, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
-    """:func:`_lanes` on blocks of `lanes` (at most :data:`LANES`) rows of `rows` (B, n, NPAR), in parallel over the blocks."""
+    """:func:`_lanes` on blocks of `lanes` (<= :data:`LANES`) rows of `rows` (B, n, NPAR), the blocks in parallel."""
     n_variants = rows.shape[0]
     for block in prange((n_variants + lanes - 1) // lanes):
         lo = block * lanes
@@ -1285,7 +1285,8 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     index innermost (numba vectorises the loops over them; an effect that
     no variant of a block has costs that block nothing), one block per
     thread at a time, the reference read once per step for all of them.
-    Nothing is checked about the variants' stability (see :func:`pack`). Memory stays bounded by asking only for the outputs
+    Nothing is checked about the variants' stability (see :func:`pack`).
+    Memory stays bounded by asking only for the outputs
     needed, keeping every `every`-th sample and/or storing float32: 500
     variants x 50,000 samples x 3 axes of tool position is 600 MB in
     float64, 300 MB in float32, 30 MB in float32 with ``every=10``.
@@ -1353,8 +1354,8 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     arrays["saturated"] = out("saturated", bool)
     status = np.empty((n_variants, n, 3), np.int64)
     threads = get_num_threads()
-    blocks = threads * -(-n_variants // (threads * LANES))  # as few as fill the lanes, as many for every thread
-    lanes = -(-n_variants // blocks)
+    blocks = threads * max(1, -(-n_variants // (threads * LANES)))  # as few as fill the lanes, as many for every thread
+    lanes = max(1, -(-n_variants // blocks))
     _batch(rows, lanes, ref_pos, ref_vel, ref_acc, int(every), *arrays.values(), status)
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)

@@ -524,7 +524,8 @@ def random_effects(rng):
         kw.update(backlash_mm=rng.uniform(0.001, 0.01), backlash_feedback=str(rng.choice(["motor", "scale"])))
     if rng.random() < 0.6:
         kw.update(coulomb_N=rng.uniform(10.0, 150.0), viscous_N_s_per_m=rng.choice([0.0, rng.uniform(0.0, 500.0)]),
-                  asymmetry_N=rng.choice([0.0, rng.uniform(-10.0, 10.0)]), offset_N=rng.choice([0.0, rng.uniform(-30.0, 30.0)]))
+                  asymmetry_N=rng.choice([0.0, rng.uniform(-10.0, 10.0)]),
+                  offset_N=rng.choice([0.0, rng.uniform(-30.0, 30.0)]))  # fmt: skip
         if rng.random() < 0.5:
             kw.update(stribeck_N=rng.uniform(5.0, 60.0), stribeck_velocity_mm_s=rng.uniform(0.5, 5.0))
     elif rng.random() < 0.2:
@@ -569,7 +570,9 @@ def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants):
         np.testing.assert_array_equal(decimated["tool"][b], single.position[::3].astype(np.float32))
         np.testing.assert_array_equal(decimated["encoder"][b], single.encoder[::3].astype(np.float32))
     assert (batch["diverged_step"] == -1).all()
-    for effect in ("backlash_mm", "coulomb_N", "stribeck_N", "feedback_delay_s", "mode_freq_hz", "quantum_mm", "noise_mm"):
+    every_effect = ("backlash_mm", "coulomb_N", "stribeck_N", "feedback_delay_s", "mode_freq_hz", "quantum_mm",
+                    "noise_mm")  # fmt: skip
+    for effect in every_effect:
         assert any(getattr(e, effect) for v in variants[1:] for e in v.values()), effect  # every effect is there
 
 
