@@ -1298,7 +1298,8 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     axes. Blocks of up to :data:`LANES` variants step together, the variant
     index innermost (numba vectorises the loops over them; an effect that
     no variant of a block has costs that block nothing), one block per
-    thread at a time, the reference read once per step for all of them.
+    thread at a time, the reference read once per step for all of them
+    (blocks of fewer than 4 variants step them one at a time, as :func:`run`).
     Nothing is checked about the variants' stability (see :func:`pack`).
     Memory stays bounded by asking only for the outputs
     needed, keeping every `every`-th sample and/or storing float32: 500
