@@ -64,10 +64,11 @@ that branches keeps numba's reference counting in the loop, ten times slower.
 
 import math
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import get_num_threads, prange
+from numba import get_num_threads
 
 from . import _validate
 from ._numba import njit
@@ -552,7 +553,7 @@ def _coupling_step(k, cpar, knots, knot_of_sample, cstate, x_fb, dvel):
     return -(e_n * lf[0] + e_h * b[0]), -(e_n * lf[1] + e_h * b[1]), -(e_n * lf[2] + e_h * b[2])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
              tool, encoder, velocity, current, saturated, estimate, status):  # fmt: skip
     """Step all axes of one variant over the reference, advancing `state` and `cstate` in place.
@@ -689,31 +690,7 @@ _LROWS = NPAR + 14
 _ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP = range(5)
 
 
-@njit(cache=True, parallel=True)
-def _batch(rows, lanes, states, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
-           tool, encoder, velocity, current, saturated, status):  # fmt: skip
-    """:func:`_lanes` on blocks of `lanes` (<= :data:`LANES`) rows of `rows` (B, n, NPAR), the blocks in parallel.
-
-    Blocks narrower than :data:`_MIN_LANES` run :func:`_variant` on each
-    row instead (the same numbers), from its initial state in `states`
-    (B, n, _NSTATE; no rows when the blocks are wide), coupling off
-    (:func:`_no_coupling`).
-    """
-    n_variants = rows.shape[0]
-    no_estimate = np.empty((0, 3))
-    for block in prange((n_variants + lanes - 1) // lanes):
-        lo = block * lanes
-        hi = min(lo + lanes, n_variants)
-        if lanes >= _MIN_LANES:
-            _lanes(rows[lo:hi], ref_pos, ref_vel, ref_acc, every, tool[lo:hi], encoder[lo:hi], velocity[lo:hi],
-                   current[lo:hi], saturated[lo:hi], status[lo:hi])  # fmt: skip
-        else:
-            for b in range(lo, hi):
-                _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, every,
-                         tool[b], encoder[b], velocity[b], current[b], saturated[b], no_estimate, status[b])  # fmt: skip
-
-
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
     """Step up to :data:`LANES` variants `rows` (L, n, NPAR) together, the variant index innermost.
 
@@ -1297,9 +1274,12 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     gives exactly (bit for bit) what :func:`run` gives for the same packed
     axes. Blocks of up to :data:`LANES` variants step together, the variant
     index innermost (numba vectorises the loops over them; an effect that
-    no variant of a block has costs that block nothing), one block per
-    thread at a time, the reference read once per step for all of them
-    (blocks of fewer than 4 variants step them one at a time, as :func:`run`).
+    no variant of a block has costs that block nothing), the reference
+    read once per step for all of them (blocks of fewer than 4 variants
+    step them one at a time, as :func:`run`). The compiled steps release
+    the GIL: ``numba.get_num_threads()`` threads step a block each at a
+    time (a pool of threads, not a ``prange``: no parallel-loop compile
+    on the first run).
     Nothing is checked about the variants' stability (see :func:`pack`).
     Memory stays bounded by asking only for the outputs
     needed, keeping every `every`-th sample and/or storing float32: 500
@@ -1371,8 +1351,28 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     threads = get_num_threads()
     blocks = threads * max(1, -(-n_variants // (threads * LANES)))  # as few as fill the lanes, as many for every thread
     lanes = max(1, -(-n_variants // blocks))
-    states = _initial_state((n_variants if lanes < _MIN_LANES else 0, n), ref_pos[0])
-    _batch(rows, lanes, states, ref_pos, ref_vel, ref_acc, *_no_coupling(), int(every), *arrays.values(), status)
+    signals = list(arrays.values())
+    every = int(every)
+
+    def block(lo):
+        # Blocks narrower than _MIN_LANES step one variant at a time (_variant, as run() does: the same numbers).
+        hi = min(lo + lanes, n_variants)
+        if lanes >= _MIN_LANES:
+            _lanes(rows[lo:hi], ref_pos, ref_vel, ref_acc, every, *(a[lo:hi] for a in signals), status[lo:hi])
+            return
+        coupling_off, no_estimate = _no_coupling(), np.empty((0, 3))
+        for b in range(lo, hi):
+            state = _initial_state((n,), ref_pos[0])
+            _variant(rows[b], state, ref_pos, ref_vel, ref_acc, *coupling_off, every, *(a[b] for a in signals),
+                     no_estimate, status[b])  # fmt: skip
+
+    starts = range(0, n_variants, lanes)
+    if len(starts) == 1 or threads == 1:
+        for lo in starts:
+            block(lo)
+    else:  # the compiled steps release the GIL: a thread per core steps its blocks
+        with ThreadPoolExecutor(min(threads, len(starts))) as pool:
+            list(pool.map(block, starts))
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
     result["saturated_count"] = status[..., _CLAMPED]
