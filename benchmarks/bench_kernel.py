@@ -39,11 +39,11 @@ per turn) sampled at 5 kHz:
   ``scipy.linalg.expm``, variants innermost, ``prange`` over blocks of
   variants, positions written in blocks to a new (B, N, 3) array),
   axis-steps/s over axis-steps/s, both on
-  all cores, taking turns, best of 7 (target >= 0.5; their largest position
-  difference is printed);
+  all cores, taking turns, best of 15 (target >= 0.5; their largest
+  position difference is printed);
 * ``kernel_batch_parallel_efficiency``: the same batch on all cores over
   cores x its rate on one thread (``numba.set_num_threads``), taking turns,
-  best of 7 (target >= 0.8; on a machine shared with other processes it
+  best of 15 (target >= 0.8; on a machine shared with other processes it
   measures what the cores had to spare too: the reference's own figure,
   measured the same way, is printed beside it);
 * ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
@@ -300,7 +300,7 @@ def main():
         return run_batch(ref_rows, DT, *short)["tool"]
 
     deviation_ref = np.abs(reference() - batch()).max()  # (and compiles the reference)
-    (t_kernel_ref, t_reference), _ = side_by_side([batch, reference], 7)
+    (t_kernel_ref, t_reference), _ = side_by_side([batch, reference], 15)
     cores = numba.get_num_threads()
 
     def on(threads):
@@ -317,7 +317,7 @@ def main():
 
         return fn
 
-    (t_one, t_all, t_ref_one, t_ref_all), _ = side_by_side([on(1), on(cores), reference_on(1), reference_on(cores)], 7)
+    (t_one, t_all, t_ref_one, t_ref_all), _ = side_by_side([on(1), on(cores), reference_on(1), reference_on(cores)], 15)
     numba.set_num_threads(cores)
 
     model = python_control_model(loaded)
