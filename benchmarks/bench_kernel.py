@@ -31,6 +31,21 @@ per turn) sampled at 5 kHz:
   and backlash on every axis, values varying per variant) on the first
   50,000 steps of the helix, tool position only (float64), all cores, best of 3
   (also printed: axis-steps per CPU-second of all threads, for a loaded machine);
+* ``kernel_batch_vs_reference``: ``run_batch`` of 128 variants (kv and
+  Coulomb friction varying per variant, tool position only, float64) on the
+  first 20,000 steps of the helix, over a reference written here from the
+  physics and not from the kernel (:func:`cascade_reference`: the same P-PI
+  cascades with Coulomb stick-slip friction, the ZOH plant from
+  ``scipy.linalg.expm``, variants innermost, ``prange`` over blocks of
+  variants, positions written in blocks to a new (B, N, 3) array),
+  axis-steps/s over axis-steps/s, both on
+  all cores, taking turns, best of 15 (target >= 0.5; their largest
+  position difference is printed);
+* ``kernel_batch_parallel_efficiency``: the same batch on all cores over
+  cores x its rate on one thread (``numba.set_num_threads``), taking turns,
+  best of 15 (target >= 0.8; on a machine shared with other processes it
+  measures what the cores had to spare too: the reference's own figure,
+  measured the same way, is printed beside it);
 * ``kernel_run_vs_inner_loop``: the plain run's ``run()`` end to end
   throughput over the compiled inner loop's alone (same packed rows,
   outputs preallocated, no argument checks), best of 15 each; the same
@@ -47,6 +62,7 @@ from dataclasses import replace
 import control as ct
 import numba
 import numpy as np
+import scipy.linalg
 
 from contoursim import kernel
 from contoursim.kernel import LoopEffects, pack, run, run_batch
@@ -56,6 +72,8 @@ DT = 2e-4  # 5 kHz
 N = 300_000  # 60 s
 N_PYTHON_CONTROL = 1_000
 N_BATCH, B = 50_000, 64
+N_REF, B_REF = 20_000, 128
+REF_LANES, REF_CHUNK = 32, 128  # the reference's variants per block, samples per write
 ALL_EFFECTS = LoopEffects(backlash_mm=0.005, backlash_feedback="scale", coulomb_N=120.0, viscous_N_s_per_m=300.0,
                           stribeck_N=40.0, stribeck_velocity_mm_s=2.0, asymmetry_N=15.0, offset_N=-30.0,
                           feedback_delay_s=1.3 * DT, mode_freq_hz=90.0, mode_damping_ratio=0.05, mode_mass_ratio=0.1,
@@ -97,6 +115,81 @@ def side_by_side(fns, repeat):
                 wall[i] = min(wall[i], time.perf_counter() - start)
                 cpu[i] = min(cpu[i], time.thread_time() - start_cpu)
     return wall, cpu
+
+
+def reference_coefficients(servos, coulomb):
+    """The reference's numbers per axis and variant, shape (n_axes, 10, B), from the physics.
+
+    Each servo (P position loop, PI velocity loop, ideal current loop, rigid
+    mass m [kg] with viscous damping c [N·s/m] and force constant kf [N/A])
+    is a row of `servos` (B, n_axes); `coulomb` (B, n_axes) the Coulomb
+    friction [N]. Plant in mm and mm/s, inputs the current i [A] and the
+    friction force F [N]: ``dx/dt = v``, ``dv/dt = 1000·(kf·i + F)/m - c·v/m``,
+    held over a period: its exact sampled form from the matrix exponential
+    of the augmented system.
+    """
+    n_variants, n_axes = len(servos), len(servos[0])
+    coef = np.empty((n_axes, 10, n_variants))
+    for b, row in enumerate(servos):
+        for a, s in enumerate(row):
+            augmented = np.zeros((4, 4))
+            augmented[0, 1] = 1.0
+            augmented[1, 1] = -s.damping / s.mass
+            augmented[1, 2], augmented[1, 3] = 1000.0 * s.force_constant / s.mass, 1000.0 / s.mass
+            step = scipy.linalg.expm(augmented * DT)
+            # kp [1/s], PI gain [A per mm/s], 1/ti [1/s], then the plant's
+            # x+ = x + Pxv·v + Pxi·i + PxF·F, v+ = Pvv·v + Pvi·i + PvF·F
+            coef[a, :9, b] = (s.kp, s.kv / 1000.0, 1.0 / s.ti, step[0, 1], step[0, 2], step[0, 3], step[1, 1],
+                              step[1, 2], step[1, 3])  # fmt: skip
+            coef[a, 9, b] = coulomb[b, a]
+    return coef
+
+
+@numba.njit(parallel=True, error_model="numpy")
+def cascade_reference(coef, ref_pos, out):
+    """Positions [mm] of B P-PI cascades with Coulomb friction on `ref_pos` (N, n_axes), into `out` (B, N, n_axes).
+
+    Each step, per axis and variant: velocity error ``e = kp·(x_ref - x) - v``;
+    PI current ``i = g·(e + s/ti)`` with the trapezoidal integral
+    ``s += dt/2·(e + e_previous)``; the friction force that would stop the
+    carriage at the end of the period, ``-v_free / PvF`` (``v_free``: the
+    velocity it reaches without friction), clipped to ±Coulomb (sticking
+    inside, kinetic friction outside); the sampled plant. The variants are
+    the inner loop (state laid out (axis, variant) per block of
+    REF_LANES), ``prange`` over the blocks.
+    """
+    n_steps, n_axes = ref_pos.shape
+    n_variants = coef.shape[2]
+    for block in numba.prange((n_variants + REF_LANES - 1) // REF_LANES):
+        lo = block * REF_LANES
+        n = min(REF_LANES, n_variants - lo)
+        c = np.empty((n_axes, 10, REF_LANES))  # the block's coefficients
+        x, v = np.empty((n_axes, REF_LANES)), np.empty((n_axes, REF_LANES))
+        s, e_last = np.empty((n_axes, REF_LANES)), np.empty((n_axes, REF_LANES))
+        kept = np.empty((REF_CHUNK, n_axes, REF_LANES))
+        for a in range(n_axes):
+            for j in range(n):
+                c[a, :, j] = coef[a, :, lo + j]
+                x[a, j], v[a, j], s[a, j], e_last[a, j] = ref_pos[0, a], 0.0, 0.0, 0.0
+        for k0 in range(0, n_steps, REF_CHUNK):
+            for k in range(k0, min(k0 + REF_CHUNK, n_steps)):
+                for a in range(n_axes):
+                    x_ref = ref_pos[k, a]
+                    for j in range(n):
+                        kept[k - k0, a, j] = x[a, j]
+                        e = c[a, 0, j] * (x_ref - x[a, j]) - v[a, j]
+                        s[a, j] += 0.5 * DT * (e + e_last[a, j])
+                        e_last[a, j] = e
+                        i = c[a, 1, j] * (e + c[a, 2, j] * s[a, j])
+                        v_free = c[a, 6, j] * v[a, j] + c[a, 7, j] * i
+                        f = min(max(-v_free / c[a, 8, j], -c[a, 9, j]), c[a, 9, j])
+                        x[a, j] += c[a, 3, j] * v[a, j] + c[a, 4, j] * i + c[a, 5, j] * f
+                        v[a, j] = v_free + c[a, 8, j] * f
+            for j in range(n):
+                for k in range(k0, min(k0 + REF_CHUNK, n_steps)):
+                    for a in range(n_axes):
+                        out[lo + j, k, a] = kept[k - k0, a, j]
+    return out
 
 
 def gain(k, inp, out):
@@ -191,6 +284,42 @@ def main():
     cpu_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3, clock=time.process_time)
     t_loaded, kernel_result = best_of(lambda: run(loaded, DT, pos, vel, acc), 5)
 
+    # the batch against the reference written here, then on one thread against all
+    rng = np.random.default_rng(0)
+    variants = [[AxisServo(**{**BASE, "kv": kv})] * len(AXES) for kv in rng.uniform(150.0, 250.0, B_REF)]
+    coulomb = rng.uniform(20.0, 200.0, (B_REF, len(AXES)))
+    ref_rows = np.array([[pack(servo, DT, LoopEffects(coulomb_N=f)) for servo, f in zip(row, fc)]
+                         for row, fc in zip(variants, coulomb)])  # fmt: skip
+    coef = reference_coefficients(variants, coulomb)
+    short = (pos[:N_REF], vel[:N_REF], acc[:N_REF])
+
+    def reference():
+        return cascade_reference(coef, short[0], np.empty((B_REF, N_REF, len(AXES))))
+
+    def batch():
+        return run_batch(ref_rows, DT, *short)["tool"]
+
+    deviation_ref = np.abs(reference() - batch()).max()  # (and compiles the reference)
+    (t_kernel_ref, t_reference), _ = side_by_side([batch, reference], 15)
+    cores = numba.get_num_threads()
+
+    def on(threads):
+        def fn():
+            numba.set_num_threads(threads)
+            batch()
+
+        return fn
+
+    def reference_on(threads):
+        def fn():
+            numba.set_num_threads(threads)
+            reference()
+
+        return fn
+
+    (t_one, t_all, t_ref_one, t_ref_all), _ = side_by_side([on(1), on(cores), reference_on(1), reference_on(cores)], 15)
+    numba.set_num_threads(cores)
+
     model = python_control_model(loaded)
     n = N_PYTHON_CONTROL
     t = np.arange(n) * DT
@@ -221,12 +350,23 @@ def main():
           f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip
     print(f"  the same batch per CPU-second of all its threads: {B * N_BATCH * 3 / cpu_batch:.4g} axis-steps "
           f"({numba.get_num_threads()} threads; the wall figure is lower when other processes share the cores)")
+    ref_steps = B_REF * N_REF * len(AXES)
+    print(f"{'kernel, batch of 128 variants, kv + Coulomb friction':58s} {N_REF:8d} {t_kernel_ref:10.4f} "
+          f"{ref_steps / t_kernel_ref:14.4g}")  # fmt: skip
+    print(f"{'reference written here (P-PI + Coulomb), same variants':58s} {N_REF:8d} {t_reference:10.4f} "
+          f"{ref_steps / t_reference:14.4g}")  # fmt: skip
+    print(f"  same positions: max |kernel - reference| = {deviation_ref:.3g} mm")
+    print(f"{'kernel, the same batch on 1 thread':58s} {N_REF:8d} {t_one:10.4f} {ref_steps / t_one:14.4g}")
+    print(f"{f'kernel, the same batch on {cores} threads':58s} {N_REF:8d} {t_all:10.4f} {ref_steps / t_all:14.4g}")
     print(f"  the same four by CPU time of the thread: {cpu[0]:.4f} {cpu[1]:.4f} {cpu[2]:.4f} {cpu[3]:.4f} s: "
           f"effects slowdown {cpu[1] / cpu[0]:.2f}, run() / inner loop {cpu[3] / cpu[0]:.2f}")
     print(f"kernel_all_effects_slowdown: {t_effects / t_plain:.2f}")
     print(f"variant_pack_ms: {1e3 * t_pack:.3f}")
     print(f"kernel_batch_axis_steps_per_s: {B * N_BATCH * 3 / t_batch:.3g}")
     print(f"kernel_run_vs_inner_loop: {t_inner / t_plain:.2f}")
+    print(f"kernel_batch_vs_reference: {t_reference / t_kernel_ref:.2f}")
+    print(f"kernel_batch_parallel_efficiency: {t_one / (cores * t_all):.2f}")
+    print(f"reference_parallel_efficiency: {t_ref_one / (cores * t_ref_all):.2f}")
     print(f"kernel_speedup_vs_python_control: {rate_loaded / rate_pc:.0f}")
 
 

@@ -17,6 +17,9 @@ One compiled kernel steps every combination of effects and of cross-coupled
 control (fixed parameter layouts where zero means off; the coupling's
 reference path is data of its own), so switching effects or coupling on or
 off never compiles anything; it is cached on disk (:mod:`contoursim._numba`).
+:func:`run` steps one variant (:func:`_variant`); :func:`run_batch` steps
+blocks of variants together, the variant index innermost (:func:`_lanes`:
+the same operations in the same order, lane by lane, so the same numbers).
 
 The plant of one axis (states ``x, v, d, ḋ, i``)::
 
@@ -63,10 +66,11 @@ that branches keeps numba's reference counting in the loop, ten times slower.
 
 import math
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import prange
+from numba import get_num_threads
 
 from . import _validate
 from ._numba import njit
@@ -86,6 +90,7 @@ __all__ = [
     "spectral_radius",
     "loop_matrices",
     "MAX_DELAY_SAMPLES",
+    "LANES",
     "NPAR",
     "BATCH_OUTPUTS",
 ]
@@ -413,25 +418,40 @@ class ServoResponse:
 @njit(cache=True)
 def _sensors(x, table, half_play, scale, quantum):
     """Table behind the play and the encoder reading: ``(table, encoder)`` [mm]."""
-    table = min(max(table, x - half_play), x + half_play)
-    encoder = table if scale else x
+    table = _play(x, table, half_play)
+    return table, _quantised(table if scale else x, quantum)
+
+
+@njit(cache=True)
+def _play(x, table, half_play):
+    """The table behind a play of ``±half_play`` around the motor position `x` [mm]."""
+    return min(max(table, x - half_play), x + half_play)
+
+
+@njit(cache=True, error_model="numpy")
+def _quantised(encoder, quantum):
+    """The encoder reading rounded to `quantum` [mm] (none when 0; no division check, so that lanes vectorise)."""
     if quantum > 0.0:
-        encoder = quantum * math.floor(encoder / quantum + 0.5)
-    return table, encoder
+        return quantum * math.floor(encoder / quantum + 0.5)
+    return encoder
 
 
 @njit(cache=True)
 def _delayed(buf, a, base, k, n, f):
     """The ring buffer `buf[a, base:base + _NBUF]` read ``n + f`` samples before step `k`."""
-    i0 = (k - n) % _NBUF
-    i1 = (k - n - 1) % _NBUF
-    return (1.0 - f) * buf[a, base + i0] + f * buf[a, base + i1]
+    return _between(buf[a, base + (k - n) % _NBUF], buf[a, base + (k - n - 1) % _NBUF], f)
 
 
 @njit(cache=True)
-def _velocity_command(p, a, x_ref, v_ref, x_fb):
-    """Position P controller plus velocity feedforward [mm/s] (reads `p` without branching)."""
-    return p[a, _KP] * (x_ref - x_fb) + p[a, _VFF] * v_ref
+def _between(now, before, f):
+    """Linear interpolation a fraction `f` of a period back from the sample `now` towards `before`."""
+    return (1.0 - f) * now + f * before
+
+
+@njit(cache=True)
+def _velocity_command(kp, vff, x_ref, v_ref, x_fb):
+    """Position P controller plus velocity feedforward [mm/s]."""
+    return kp * (x_ref - x_fb) + vff * v_ref
 
 
 @njit(cache=True)
@@ -461,17 +481,29 @@ def _current_controller(b, c, d, z, e_i):
 def _plant_row(p, a, r, x, v, d, w, i, u, force):
     """Row `r` of the plant update ``Ad [x, v, d, ḋ, i] + Bu u + BF F`` (reads `p` without branching)."""
     base = _AD + _NS * r
-    return (p[a, base] * x + p[a, base + 1] * v + p[a, base + 2] * d + p[a, base + 3] * w + p[a, base + 4] * i
-            + p[a, _BU + r] * u + p[a, _BF + r] * force)  # fmt: skip
+    return _affine(p[a, base], p[a, base + 1], p[a, base + 2], p[a, base + 3], p[a, base + 4], p[a, _BU + r],
+                   p[a, _BF + r], x, v, d, w, i, u, force)  # fmt: skip
 
 
 @njit(cache=True)
-def _dry_friction(fc, fs, vs, fa, v, f_stop):
-    """Stick-slip friction force [N] at velocity `v` [mm/s]: `f_stop` [N] clipped to the friction bounds."""
+def _affine(c0, c1, c2, c3, c4, bu, bf, x, v, d, w, i, u, force):
+    """One plant row's sum, always in this order (:func:`run` and :func:`run_batch` agree bit for bit)."""
+    return c0 * x + c1 * v + c2 * d + c3 * w + c4 * i + bu * u + bf * force
+
+
+@njit(cache=True, error_model="numpy")
+def _friction_level(fc, fs, vs, v):
+    """Kinetic plus Stribeck friction level [N] at velocity `v` [mm/s]."""
     level = fc
     r2 = (v / vs) ** 2
     if fs != 0.0 and r2 < 36.0:  # beyond, exp(-r2) < 2.4e-16: below float64 resolution of the static level
         level += fs * math.exp(-r2)
+    return level
+
+
+@njit(cache=True)
+def _dry_friction(level, fa, f_stop):
+    """Stick-slip friction force [N]: `f_stop` [N] clipped to the friction bounds of `level` and asymmetry `fa`."""
     return min(max(f_stop, -(level + fa)), level - fa)
 
 
@@ -530,7 +562,7 @@ def _coupling_step(k, cpar, knots, knot_of_sample, cstate, x_fb, dvel):
     return -(e_n * lf[0] + e_h * b[0]), -(e_n * lf[1] + e_h * b[1]), -(e_n * lf[2] + e_h * b[2])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, encoder_noise, every,
              tool, encoder, velocity, current, saturated, estimate, status):  # fmt: skip
     """Step all axes of one variant over the reference, advancing `state` and `cstate` in place.
@@ -605,7 +637,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 estimate[j, 0], estimate[j, 1], estimate[j, 2] = ex, ey, ez
         for a in range(n_axes):
             x, v, d, w, i = state[a, 0], state[a, 1], state[a, 2], state[a, 3], state[a, 4]
-            v_cmd = _velocity_command(par, a, ref_pos[k, a], ref_vel[k, a], x_fb[a]) + dvel[a]
+            v_cmd = _velocity_command(par[a, _KP], par[a, _VFF], ref_pos[k, a], ref_vel[k, a], x_fb[a]) + dvel[a]
             i_ff = par[a, _AFF] * ref_acc[k, a]
             i_cmd, clamped, state[a, _ZV] = _velocity_controller(
                 par[a, _VB], par[a, _VC], par[a, _VD], par[a, _ILIM], state[a, _ZV], v_cmd - v_fb[a], i_ff
@@ -630,7 +662,8 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
             force = par[a, _F0] - par[a, _FV] * v if friction else 0.0
             v_next = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
             if friction:  # stick-slip: the force that stops the carriage at t_k+1, within the friction bounds
-                dry = _dry_friction(par[a, _FC], par[a, _FS], par[a, _VS], par[a, _FA], v, -v_next / par[a, _BF + 1])
+                level = _friction_level(par[a, _FC], par[a, _FS], par[a, _VS], v)
+                dry = _dry_friction(level, par[a, _FA], -v_next / par[a, _BF + 1])
                 force += dry
                 v_next += par[a, _BF + 1] * dry
             state[a, 0] = _plant_row(par, a, np.int64(0), x, v, d, w, i, u, force)
@@ -650,20 +683,231 @@ def _no_coupling():
     return np.zeros(_C_NPAR), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(_C_NSTATE)
 
 
-@njit(cache=True, parallel=True)
-def _batch(rows, states, ref_pos, ref_vel, ref_acc, cpars, knots, knot_of_sample, cstates, every,
-           tool, encoder, velocity, current, saturated, status):  # fmt: skip
-    """:func:`_variant` for each row of `rows` (B, n, NPAR), in parallel over the rows.
+# ---------------------------------------------------------------------------------------------
+# Many variants, all axes, all steps: variants in the lanes
 
-    Each row has its coupling's parameters and state (`cpars` (B, _C_NPAR), `cstates` (B, _C_NSTATE);
-    kind 0: none, :func:`_no_coupling`); the path (`knots`, `knot_of_sample`) is shared.
+
+#: Most variants one thread steps together (the lanes of a block).
+LANES = 32
+_CHUNK = 128  # kept samples a block holds before writing them to the outputs
+_MIN_LANES = 4  # narrower blocks step one variant at a time (faster below 4 lanes: 1 lane 0.6x, 2 lanes 0.9x, 4 lanes 2x)
+# A block's numbers per axis and lane, in one array (axis, row, lane) of LANES lanes: a compile-time distance
+# between any two rows, which lets LLVM see that the lanes' loads and stores do not overlap (and vectorise).
+# Rows 0 .. NPAR - 1: the parameter row of pack(); then the state and the values passed between loops:
+_LX, _LV, _LD, _LW, _LI = range(NPAR, NPAR + _NS)  # plant state (as _variant's state 0 .. 4)
+_LZV, _LZC, _LTABLE = NPAR + _ZV, NPAR + _ZC, NPAR + _TABLE  # integrators, table behind the play
+_LXFB, _LVFB = NPAR + 8, NPAR + 9  # fed-back position [mm] and velocity [mm/s] of the step
+_LDRIVE, _LCLAMPED, _LCLAMPS, _LLEVEL = NPAR + 10, NPAR + 11, NPAR + 12, NPAR + 13  # current command, clamped (0/1),
+# clamped steps so far (exact as a float up to 2**53), friction level of the step
+_LROWS = NPAR + 14
+# Effects a block's axis has in any lane (the steps of the others are skipped for the whole block)
+_ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP = range(5)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
+    """Step up to :data:`LANES` variants `rows` (L, n, NPAR) together, the variant index innermost.
+
+    What :func:`_variant` does (coupling off), with the same operations in
+    the same order for each lane: bit for bit equal. The loops over the
+    lanes vectorise: every lane computes every branch of the controllers
+    and the plant and a select keeps its own; an effect that no lane of an
+    axis has is skipped for the block, and the steps that do not vectorise
+    (noise, the Stribeck exponential, the delay's reads) run only for the
+    axes that have them. Outputs (L, ceil(N / every), n) with no rows are
+    not asked for; the kept samples go to them :data:`_CHUNK` at a time.
+    `status` (L, n, 3) as for :func:`_variant` (the reference is checked
+    before).
     """
-    no_estimate = np.empty((0, 3))
-    no_noise = np.empty((0, rows.shape[1]))
-    for b in prange(rows.shape[0]):
-        _variant(rows[b], states[b], ref_pos, ref_vel, ref_acc, cpars[b], knots, knot_of_sample, cstates[b], no_noise,
-                 every,
-                 tool[b], encoder[b], velocity[b], current[b], saturated[b], no_estimate, status[b])  # fmt: skip
+    n_lanes, n_axes = rows.shape[0], rows.shape[1]
+    n_steps = ref_pos.shape[0]
+    s = np.empty((n_axes, _LROWS, LANES))  # see _LROWS; `p` where parameters are read
+    p = s
+    has = np.empty((n_axes, 5), np.bool_)
+    for a in range(n_axes):
+        for j in range(NPAR):
+            for l in range(n_lanes):
+                p[a, j, l] = rows[l, a, j]
+        for e in range(5):
+            has[a, e] = False
+        for l in range(n_lanes):
+            has[a, _ANY_QUANTUM] |= p[a, _QUANTUM, l] != 0.0
+            has[a, _ANY_DELAY] |= p[a, _DELAY_N, l] != 0.0 or p[a, _DELAY_F, l] != 0.0
+            has[a, _ANY_NOISE] |= p[a, _NOISE, l] > 0.0
+            has[a, _ANY_STRIBECK] |= p[a, _FRICTION, l] != 0.0 and p[a, _FS, l] != 0.0
+            has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, _MODE, l] != 0.0 or p[a, _ELEC, l] != 0.0
+    buf_x = np.empty((n_axes, _NBUF, LANES))
+    buf_v = np.empty((n_axes, _NBUF, LANES))
+    gauss = np.empty((n_axes, 2, LANES))
+    keys = np.empty((n_axes, LANES), np.uint64)
+    diverged = np.empty((n_axes, LANES), np.int64)
+    write_tool, write_encoder, write_velocity = tool.shape[1] > 0, encoder.shape[1] > 0, velocity.shape[1] > 0
+    write_current, write_saturated = current.shape[1] > 0, saturated.shape[1] > 0
+    kept_tool = np.empty((_CHUNK if write_tool else 0, n_axes, LANES))
+    kept_encoder = np.empty((_CHUNK if write_encoder else 0, n_axes, LANES))
+    kept_velocity = np.empty((_CHUNK if write_velocity else 0, n_axes, LANES))
+    kept_current = np.empty((_CHUNK if write_current else 0, n_axes, LANES))
+    kept_saturated = np.empty((_CHUNK if write_saturated else 0, n_axes, LANES))
+    for a in range(n_axes):  # at rest at the first reference position; the delay buffers hold the first reading
+        for l in range(n_lanes):
+            start = ref_pos[0, a]
+            for q in range(NPAR, _LROWS):
+                s[a, q, l] = 0.0
+            s[a, _LX, l] = start
+            s[a, _LLEVEL, l] = p[a, _FC, l]
+            table, enc = _sensors(start, start, p[a, _HALF_PLAY, l], p[a, _SCALE, l] != 0.0, p[a, _QUANTUM, l])
+            s[a, _LTABLE, l] = table
+            s[a, _LXFB, l] = table if p[a, _SCALE, l] != 0.0 else start  # quantised in the first step
+            for q in range(_NBUF):
+                buf_x[a, q, l] = enc
+                buf_v[a, q, l] = 0.0
+            keys[a, l] = _mix(np.uint64(p[a, _SEED, l]) * np.uint64(n_axes + 1) + np.uint64(a))
+            diverged[a, l] = -1
+    pair = -1  # the pair of noise samples held (the same for every lane)
+    first = 0  # the first kept sample held in kept_*
+    for k in range(n_steps):
+        j = k // every
+        record = k - j * every == 0
+        row = j - first
+        if record and row == _CHUNK:
+            _flush(kept_tool, tool, first, row)
+            _flush(kept_encoder, encoder, first, row)
+            _flush(kept_velocity, velocity, first, row)
+            _flush(kept_current, current, first, row)
+            _flush(kept_saturated, saturated, first, row)
+            first, row = j, 0
+        draw = record and write_tool and pair != k >> 1
+        if draw:
+            pair = k >> 1
+        for a in range(n_axes):
+            # the play and the encoder of this step were found at the end of the last one
+            if has[a, _ANY_QUANTUM]:
+                for l in range(n_lanes):
+                    s[a, _LXFB, l] = _quantised(s[a, _LXFB, l], p[a, _QUANTUM, l])
+            if has[a, _ANY_DELAY]:
+                slot = k % _NBUF
+                for l in range(n_lanes):
+                    buf_x[a, slot, l] = s[a, _LXFB, l]
+                    buf_v[a, slot, l] = s[a, _LVFB, l]
+                    n, f = int(p[a, _DELAY_N, l]), p[a, _DELAY_F, l]
+                    if n != 0 or f != 0.0:
+                        i0, i1 = (k - n) % _NBUF, (k - n - 1) % _NBUF
+                        s[a, _LXFB, l] = _between(buf_x[a, i0, l], buf_x[a, i1, l], f)
+                        s[a, _LVFB, l] = _between(buf_v[a, i0, l], buf_v[a, i1, l], f)
+            if record and write_tool:
+                for l in range(n_lanes):
+                    kept_tool[row, a, l] = s[a, _LTABLE, l] + s[a, _LD, l]
+                if has[a, _ANY_NOISE]:  # sample k of each lane's stream; a pair is drawn at a time
+                    for l in range(n_lanes):
+                        if p[a, _NOISE, l] > 0.0:
+                            if draw:
+                                gauss[a, 0, l], gauss[a, 1, l] = _gauss_pair(keys[a, l], k >> 1)
+                            kept_tool[row, a, l] += p[a, _NOISE, l] * gauss[a, k & 1, l]
+            if record and write_encoder:
+                for l in range(n_lanes):
+                    kept_encoder[row, a, l] = s[a, _LXFB, l]
+            if record and write_velocity:
+                for l in range(n_lanes):
+                    kept_velocity[row, a, l] = s[a, _LV, l]
+            if has[a, _ANY_STRIBECK]:  # math.exp does not vectorise: apart, for the axes that need it (else: fc)
+                for l in range(n_lanes):
+                    s[a, _LLEVEL, l] = _friction_level(p[a, _FC, l], p[a, _FS, l], p[a, _VS, l], s[a, _LV, l])
+            x_ref, v_ref, a_ref = ref_pos[k, a], ref_vel[k, a], ref_acc[k, a]
+            if has[a, _ANY_MODE_OR_CURRENT_LOOP]:  # two versions of the step, compiled apart
+                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, False)
+            else:
+                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, True)
+            if record and write_current:
+                for l in range(n_lanes):
+                    kept_current[row, a, l] = s[a, _LDRIVE, l]
+            if record and write_saturated:
+                for l in range(n_lanes):
+                    kept_saturated[row, a, l] = s[a, _LCLAMPED, l]
+        if k % _DIVERGENCE_CHECK == 0 or k == n_steps - 1:
+            for a in range(n_axes):
+                for l in range(n_lanes):
+                    if diverged[a, l] < 0 and not math.isfinite(s[a, _LX, l] + s[a, _LV, l] + s[a, _LI, l]):
+                        diverged[a, l] = k
+    row = (n_steps - 1) // every + 1 - first
+    _flush(kept_tool, tool, first, row)
+    _flush(kept_encoder, encoder, first, row)
+    _flush(kept_velocity, velocity, first, row)
+    _flush(kept_current, current, first, row)
+    _flush(kept_saturated, saturated, first, row)
+    for l in range(n_lanes):
+        for a in range(n_axes):
+            status[l, a, _CLAMPED] = int(s[a, _LCLAMPS, l])
+            status[l, a, _DIVERGED] = diverged[a, l]
+            status[l, a, _BAD_REFERENCE] = -1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, rigid):
+    """Controllers and plant of axis `a` of the lanes of :func:`_lanes` for one step, and the next step's encoder.
+
+    Every lane computes every branch and a select keeps its own, so that the
+    loop vectorises. ``rigid`` (a constant where this is inlined): no lane
+    has a structural mode or a current loop, whose rows are then skipped.
+    """
+    p = s
+    for l in range(n_lanes):
+        v_cmd = _velocity_command(p[a, _KP, l], p[a, _VFF, l], x_ref, v_ref, s[a, _LXFB, l]) + 0.0  # no coupling
+        i_cmd, sat, s[a, _LZV, l] = _velocity_controller(p[a, _VB, l], p[a, _VC, l], p[a, _VD, l],
+                                                         p[a, _ILIM, l], s[a, _LZV, l], v_cmd - s[a, _LVFB, l],
+                                                         p[a, _AFF, l] * a_ref)  # fmt: skip
+        s[a, _LDRIVE, l] = i_cmd
+        s[a, _LCLAMPED, l] = 1.0 if sat else 0.0
+        s[a, _LCLAMPS, l] += 1.0 if sat else 0.0
+        x, v, d, w, i = s[a, _LX, l], s[a, _LV, l], s[a, _LD, l], s[a, _LW, l], s[a, _LI, l]
+        electrical = p[a, _ELEC, l] != 0.0
+        u = i_cmd
+        if not rigid:
+            u, zc = _current_controller(p[a, _CB, l], p[a, _CC, l], p[a, _CD, l], s[a, _LZC, l], i_cmd - i)
+            u = u if electrical else i_cmd
+            s[a, _LZC, l] = zc if electrical else s[a, _LZC, l]
+        rubbing = p[a, _FRICTION, l] != 0.0
+        force = p[a, _F0, l] - p[a, _FV, l] * v if rubbing else 0.0
+        v_next = _lane_row(p, a, l, 1, x, v, d, w, i, u, force)
+        bf = p[a, _BF + 1, l]
+        dry = _dry_friction(s[a, _LLEVEL, l], p[a, _FA, l], -v_next / bf)
+        force = force + dry if rubbing else force
+        v_next = v_next + bf * dry if rubbing else v_next
+        x_next = _lane_row(p, a, l, 0, x, v, d, w, i, u, force)
+        s[a, _LX, l] = x_next
+        s[a, _LV, l] = v_next
+        if rigid:
+            s[a, _LI, l] = u
+        else:
+            mode = p[a, _MODE, l] != 0.0
+            s[a, _LD, l] = _lane_row(p, a, l, 2, x, v, d, w, i, u, force) if mode else d
+            s[a, _LW, l] = _lane_row(p, a, l, 3, x, v, d, w, i, u, force) if mode else w
+            s[a, _LI, l] = _lane_row(p, a, l, 4, x, v, d, w, i, u, force) if electrical else u
+        table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])  # the next step's play and encoder
+        s[a, _LTABLE, l] = table
+        s[a, _LXFB, l] = table if p[a, _SCALE, l] != 0.0 else x_next
+        s[a, _LVFB, l] = v_next
+
+
+@njit(cache=True)
+def _lane_row(p, a, l, r, x, v, d, w, i, u, force):
+    """Row `r` of lane `l`'s plant update, as :func:`_plant_row` (`p`: axis, quantity, lane)."""
+    base = _AD + _NS * r
+    return _affine(p[a, base, l], p[a, base + 1, l], p[a, base + 2, l], p[a, base + 3, l], p[a, base + 4, l],
+                   p[a, _BU + r, l], p[a, _BF + r, l], x, v, d, w, i, u, force)  # fmt: skip
+
+
+@njit(cache=True)
+def _flush(kept, out, first, count):
+    """Write the first `count` kept samples (sample, axis, lane) to `out` (lane, sample, axis) from sample `first`.
+
+    ``out[...] = kept`` converts a float to bool as numpy does (nonzero: True).
+    """
+    if kept.shape[0] == 0:
+        return
+    for l in range(out.shape[0]):
+        for j in range(count):
+            for a in range(out.shape[2]):
+                out[l, first + j, a] = kept[j, a, l]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1057,12 +1301,20 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
 
 
 def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, dtype=np.float64, couplings=None):
-    """Run B variants of one machine on one reference, in parallel over the variants.
+    """Run B variants of one machine on one reference, the variants side by side in SIMD lanes.
 
     Each variant is a stack of :func:`pack` rows (one per axis); row ``b``
     gives exactly (bit for bit) what :func:`run` gives for the same packed
-    axes. Nothing is checked about the variants' stability (see
-    :func:`pack`). Memory stays bounded by asking only for the outputs
+    axes. Blocks of up to :data:`LANES` variants step together, the variant
+    index innermost (numba vectorises the loops over them; an effect that
+    no variant of a block has costs that block nothing), the reference
+    read once per step for all of them (blocks of fewer than 4 variants
+    step them one at a time, as :func:`run`). The compiled steps release
+    the GIL: ``numba.get_num_threads()`` threads step a block each at a
+    time (a pool of threads, not a ``prange``: no parallel-loop compile
+    on the first run).
+    Nothing is checked about the variants' stability (see :func:`pack`).
+    Memory stays bounded by asking only for the outputs
     needed, keeping every `every`-th sample and/or storing float32: 500
     variants x 50,000 samples x 3 axes of tool position is 600 MB in
     float64, 300 MB in float32, 30 MB in float32 with ``every=10``.
@@ -1124,17 +1376,14 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     kept = -(-n_steps // every)
 
     def out(name, kind):
-        # Touched here, before the parallel steps: worker threads first touching fresh pages at once stall each
-        # other (page-table lock, huge-page compaction): 0.6-1.5e8 axis-steps/s from one process to the next
-        # on the 2-core machine, 1.3-1.4e8 always when touched first (benchmarks/bench_kernel.py).
-        array = np.empty((n_variants, kept if name in outputs else 0, n), kind)
-        array.fill(0)
-        return array
+        # Not touched here: the blocks write their rows whole, _CHUNK samples at a time, so the page faults of a
+        # fresh array are taken by the threads in parallel (a serial fill first cost more than the steps in
+        # simulate_batch's sweeps on the loaded 2-core machine: 0.1-0.3 s per 130 MB).
+        return np.empty((n_variants, kept if name in outputs else 0, n), kind)
 
     arrays = {name: out(name, dtype) for name in BATCH_OUTPUTS[:4]}
     arrays["saturated"] = out("saturated", bool)
     status = np.empty((n_variants, n, 3), np.int64)
-    states = _initial_state((n_variants, n), ref_pos[0])
     cpar, knots, knot_of_sample, cstate = _no_coupling()
     cpars = np.tile(cpar, (n_variants, 1))
     if couplings is not None:
@@ -1148,9 +1397,32 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
         cpars = np.array([c.params for c in couplings])
         cpars[:, _C_DT] = dt
         knots, knot_of_sample = first.knots.copy(), first.knot_of_sample.copy()  # writeable: one compiled type
-    cstates = np.tile(cstate, (n_variants, 1))
-    _batch(rows, states, ref_pos, ref_vel, ref_acc, cpars, knots, knot_of_sample, cstates, int(every),
-           *arrays.values(), status)  # fmt: skip
+    threads = get_num_threads()
+    blocks = threads * max(1, -(-n_variants // (threads * LANES)))  # as few as fill the lanes, as many for every thread
+    lanes = max(1, -(-n_variants // blocks))
+    signals = list(arrays.values())
+    every = int(every)
+
+    def block(lo):
+        # Blocks narrower than _MIN_LANES, and cross-coupled variants (the lanes run no coupling), step one variant at
+        # a time (_variant, as run() does: the same numbers).
+        hi = min(lo + lanes, n_variants)
+        if lanes >= _MIN_LANES and couplings is None:
+            _lanes(rows[lo:hi], ref_pos, ref_vel, ref_acc, every, *(a[lo:hi] for a in signals), status[lo:hi])
+            return
+        no_noise, no_estimate = np.empty((0, n)), np.empty((0, 3))
+        for b in range(lo, hi):
+            state = _initial_state((n,), ref_pos[0])
+            _variant(rows[b], state, ref_pos, ref_vel, ref_acc, cpars[b], knots, knot_of_sample, cstate.copy(),
+                     no_noise, every, *(a[b] for a in signals), no_estimate, status[b])  # fmt: skip
+
+    starts = range(0, n_variants, lanes)
+    if len(starts) == 1 or threads == 1:
+        for lo in starts:
+            block(lo)
+    else:  # the compiled steps release the GIL: a thread per core steps its blocks
+        with ThreadPoolExecutor(min(threads, len(starts))) as pool:
+            list(pool.map(block, starts))
     result = {"t": np.arange(kept) * every * dt}
     result.update((name, arrays[name]) for name in outputs)
     result["saturated_count"] = status[..., _CLAMPED]

@@ -4,6 +4,7 @@ import subprocess
 import sys
 
 import control as ct
+import numba
 import numpy as np
 import pytest
 
@@ -534,6 +535,65 @@ def test_batch_row_equals_single_run_bit_for_bit():
     assert set(decimated) == {"t", "tool", "current", "saturated_count", "diverged_step"}
     assert (batch["diverged_step"] == -1).all()
     assert batch["saturated_count"][:, 1].min() > 0  # the limit is reached: anti-windup is exercised
+
+
+def random_effects(rng):
+    """In-loop and sensor effects of one axis, each on or off and of random size (a lane of its own)."""
+    kw = {}
+    if rng.random() < 0.5:
+        kw.update(backlash_mm=rng.uniform(0.001, 0.01), backlash_feedback=str(rng.choice(["motor", "scale"])))
+    if rng.random() < 0.6:
+        kw.update(coulomb_N=rng.uniform(10.0, 150.0), viscous_N_s_per_m=rng.choice([0.0, rng.uniform(0.0, 500.0)]),
+                  asymmetry_N=rng.choice([0.0, rng.uniform(-10.0, 10.0)]),
+                  offset_N=rng.choice([0.0, rng.uniform(-30.0, 30.0)]))  # fmt: skip
+        if rng.random() < 0.5:
+            kw.update(stribeck_N=rng.uniform(5.0, 60.0), stribeck_velocity_mm_s=rng.uniform(0.5, 5.0))
+    elif rng.random() < 0.2:
+        kw.update(offset_N=rng.uniform(-30.0, 30.0))
+    if rng.random() < 0.4:
+        kw.update(feedback_delay_s=rng.choice([rng.integers(1, 6), rng.uniform(0.1, 5.0)]) * DT)
+    if rng.random() < 0.4:
+        kw.update(mode_freq_hz=rng.uniform(40.0, 200.0), mode_damping_ratio=rng.uniform(0.02, 0.2),
+                  mode_mass_ratio=rng.uniform(0.05, 0.4))
+    if rng.random() < 0.4:
+        kw.update(quantum_mm=rng.choice([1e-4, 5e-4, 1e-3]))
+    if rng.random() < 0.4:
+        kw.update(noise_mm=rng.uniform(1e-4, 2e-3), seed=int(rng.integers(2**53)))
+    return LoopEffects(**kw)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("n_variants", [5, 64, 70])
+def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants):
+    # Variants in the lanes of blocks (64: blocks of kernel.LANES = 32; 70: narrower ones; 5: a small one per thread):
+    # each lane mixes effects and values with its neighbours', and a block skips only what none of its lanes has;
+    # every row must still be run() of that row exactly.
+    servos, _, refs = batch_case()
+    refs = tuple(r[:1500] for r in refs)
+    rng = np.random.default_rng(n_variants)
+    variants = [{name: random_effects(rng) for name in servos} for _ in range(n_variants)]
+    variants[0] = dict.fromkeys(servos, LoopEffects())  # one variant without any effect
+    rows = np.array([[pack(s, DT, v[name]) for name, s in servos.items()] for v in variants])
+    previous = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        batch = run_batch(rows, DT, *refs, outputs=kernel.BATCH_OUTPUTS)
+        decimated = run_batch(rows, DT, *refs, outputs=("tool", "encoder"), every=3, dtype=np.float32)
+    finally:
+        numba.set_num_threads(previous)
+    for b, effects in enumerate(variants):
+        single = run(servos, DT, *refs, effects=effects)
+        for name, field in [("tool", "position"), ("encoder", "encoder"), ("velocity", "velocity"),
+                            ("current", "current"), ("saturated", "saturated")]:  # fmt: skip
+            np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=f"{name}, variant {b}")
+        np.testing.assert_array_equal(batch["saturated_count"][b], single.saturated.sum(axis=0))
+        np.testing.assert_array_equal(decimated["tool"][b], single.position[::3].astype(np.float32))
+        np.testing.assert_array_equal(decimated["encoder"][b], single.encoder[::3].astype(np.float32))
+    assert (batch["diverged_step"] == -1).all()
+    every_effect = ("backlash_mm", "coulomb_N", "stribeck_N", "feedback_delay_s", "mode_freq_hz", "quantum_mm",
+                    "noise_mm")  # fmt: skip
+    for effect in every_effect:
+        assert any(getattr(e, effect) for v in variants[1:] for e in v.values()), effect  # every effect is there
 
 
 def test_switching_effects_and_coupling_does_not_compile():
