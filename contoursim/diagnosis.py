@@ -260,6 +260,38 @@ class Diagnosis:
         """:meth:`to_dict` as strict JSON text (no NaN or Infinity: a value that is not finite is ``null``)."""
         return json.dumps(self.to_dict(), indent=2, ensure_ascii=False, allow_nan=False)
 
+    def corrected_model(self):
+        """The corrected model as machine-file text: the refitted servo axes and the effects named as ``[[effect]]`` tables.
+
+        Readable by :func:`contoursim.model.load_model` (``simulate``,
+        ``compare``, ``diagnose --model``): identify on one experiment,
+        validate on another. The geometry of the nominal machine
+        (``[[body]]`` tables) is not carried over.
+
+        Returns
+        -------
+        str
+        """
+        from .machine import SERVO_KEYS
+
+        machine = self.refitted.machine
+        source = self.trace.metadata.get("source", "")
+        lines = ["# corrected model written by contoursim diagnose" + (f" from {source}" if source else "")
+                 + ": the nominal machine with its", "# plant refitted (see the report's nominal_refit) and the "
+                 "effects named as [[effect]] tables", "",
+                 f"name = {json.dumps('corrected: ' + machine.name)}", f"servo_period_ms = {1e3 * machine.servo_period!r}"]
+        if machine.max_feed is not None:
+            lines.append(f"max_feed_mm_min = {60.0 * machine.max_feed!r}")
+        for axis, servo in machine.axes.items():
+            lines += ["", f"[axes.{axis}]"]
+            lines += [f"{key} = {float(getattr(servo, name))!r}" for key, name in SERVO_KEYS.items()
+                      if getattr(servo, name) is not None]
+        for effect in self.effects:
+            lines += ["", "[[effect]]", f"name = {json.dumps(effect.name)}", f"axis = {json.dumps(effect.axis)}"]
+            lines += [f"{k} = {float(v)!r}" for k, v in effect.values().items()]
+            lines += [f"{k} = {json.dumps(v)}" for k, v in effect.options.items()]
+        return "\n".join(lines) + "\n"
+
     def report(self):
         """The story as a short table: per step the effect, its parameters ± 1σ, residual RMS and max [µm]."""
         lines = [f"{'step':<28}{'parameters (± 1σ)':<52}{'RMS µm':>10}{'max µm':>10}{'ΔBIC':>10}", "-" * 110]
