@@ -58,7 +58,6 @@ from scipy.optimize import least_squares
 from .effects import Effect, effect_kind
 from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identify_machine
 from .kernel import MAX_DELAY_SAMPLES
-from .machine import Machine
 from .model import Model, as_model
 from .plotting import fit_circle_center
 from .simulation import measured_reference, simulate_batch
@@ -286,6 +285,9 @@ class Diagnosis:
             lines += ["", f"[axes.{axis}]"]
             lines += [f"{key} = {float(getattr(servo, name))!r}" for key, name in SERVO_KEYS.items()
                       if getattr(servo, name) is not None]
+            if machine.uncertain.get(axis):
+                keys = {name: key for key, name in SERVO_KEYS.items()}
+                lines.append(f"uncertain = {json.dumps([keys[name] for name in machine.uncertain[axis]])}")
         for effect in self.effects:
             lines += ["", "[[effect]]", f"name = {json.dumps(effect.name)}", f"axis = {json.dumps(effect.axis)}"]
             lines += [f"{k} = {float(v)!r}" for k, v in effect.values().items()]
@@ -662,7 +664,7 @@ class _Problem:
         self.n = int(scored.sum()) * len(noise)  # residual entries scored
         self.nominal = model.machine  # the prior of the nominal refit is centred here
         self.base = None
-        self.set_base(model)
+        self.set_base(model, refit=_REFIT_STEPS)
 
     # predictions at the trace's samples
     def predict(self, models):
@@ -779,7 +781,8 @@ def _nuisance_changes(model, axes, identified):
     A given model's controller (gains, integral time, feedforward, period) is
     software, set exactly: only the plant carries a prior, the moving mass
     (with the force constant fixed, it sets the velocity loop's gain and
-    the acceleration feedforward's match) and the viscous damping. An
+    the acceleration feedforward's match) and the viscous damping, and the
+    controller settings the machine file lists as ``uncertain``. An
     identified controller is itself uncertain: one position gain and one
     feedforward fraction for all axes, the velocity gain per axis.
     """
@@ -792,6 +795,10 @@ def _nuisance_changes(model, axes, identified):
             changes.append(({a: {"mass": s.mass * h}}, NOMINAL_SPREAD))
             if s.damping > 0:
                 changes.append(({a: {"damping": s.damping * h}}, DAMPING_SPREAD))
+            for name in model.machine.uncertain.get(a, ()):  # settings the machine file marks as not known exactly
+                value = getattr(s, name)
+                stepped = value * h if name not in ("vff", "aff") or value * h <= 1 else value / h
+                changes.append(({a: {name: stepped}}, NOMINAL_SPREAD))
         return changes
     changes.append(({a: {"kp": s.kp * h} for a, s in servos.items()}, NOMINAL_SPREAD))  # one position gain for all axes
     feedforward = {a: {"vff": s.vff * h if s.vff * h <= 1 else s.vff / h} for a, s in servos.items() if s.vff > 0}
@@ -818,8 +825,7 @@ def _with_servos(model, change):
     servos = dict(machine.axes)
     for axis, fields in change.items():
         servos[axis] = replace(servos[axis], **fields)
-    m = Machine(servos, machine.servo_period, machine.chain, machine.name, machine.max_feed, dict(machine.work_offset))
-    return Model(m, model.effects)
+    return Model(replace(machine, axes=servos), model.effects)
 
 
 def _refitted(model, changes, coef):
@@ -1205,6 +1211,11 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             say("nothing significant left: stopping")
             break
         best = cands[0]
+        rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
+        ambiguity = None if rival is None else (
+            f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
+            f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
+            f"{_separating_test(best.fit, rival.fit)}")
         try:
             _settle(problem, base, best, warnings)
         except _FIT_FAILURES as exc:
@@ -1217,12 +1228,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                             f"({steps[-1].rms_um:.4g} -> {step.rms_um:.4g} µm RMS)")
             problem.set_base(base)
             break
-        rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
-        if rival is not None:
-            warnings.append(
-                f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
-                f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
-                f"{_separating_test(best.fit, rival.fit)}")
+        if ambiguity is not None:
+            warnings.append(ambiguity)
         steps.append(step)
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
     after = problem.fitted()

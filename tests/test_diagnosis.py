@@ -243,6 +243,31 @@ def test_a_candidate_whose_fit_fails_is_left_out_with_a_warning(machine, monkeyp
     assert any("left out, its fit failed (simulated failure)" in w for w in result.warnings)
 
 
+def test_the_refit_trusts_the_controller_unless_the_machine_file_marks_a_setting_uncertain(machine, tmp_path):
+    """X's velocity gain is 8 % above the file's: trusted, it stays as given; marked ``uncertain`` in the machine
+    file, the refit moves it, and the velocity loop's gain over the mass comes back right."""
+    from dataclasses import replace
+
+    truth = replace(machine, axes={**machine.axes, "x": replace(machine.axes["x"], kv=1.08 * machine.axes["x"].kv)})
+    trace = synthetic_trace(truth, circle("ccw"), mismatch=0.0, noise_um=0.1, every=2, seed=9)
+    lines = ["servo_period_ms = 0.5"] + [
+        line for a, s in machine.axes.items() for line in (
+            f"[axes.{a}]", f"mass_kg = {s.mass}", f"force_constant_N_per_A = {s.force_constant}", f"kv_A_s_per_m = {s.kv}",
+            f"ti_s = {s.ti}", f"kp_per_s = {s.kp}", f"damping_N_s_per_m = {s.damping}")]  # fmt: skip
+    (tmp_path / "trusted.toml").write_text("\n".join(lines) + "\n")
+    (tmp_path / "doubted.toml").write_text("\n".join(lines).replace("[axes.y]", 'uncertain = ["kv_A_s_per_m"]\n[axes.y]') + "\n")
+    trusted = diagnose(trace, load_model(tmp_path / "trusted.toml"), max_effects=0)
+    doubted = diagnose(trace, load_model(tmp_path / "doubted.toml"), max_effects=0)
+    assert trusted.refitted.machine.axes["x"].kv == machine.axes["x"].kv
+    x, nominal = doubted.refitted.machine.axes["x"], machine.axes["x"]
+    assert x.kv > 1.02 * nominal.kv  # the prior shares the 8 % between kv and the mass: only kv/mass shows in a trace
+    assert x.kv / x.mass == pytest.approx(1.08 * nominal.kv / nominal.mass, rel=0.02)
+    assert doubted.steps[-1].rms_um < trusted.steps[-1].rms_um
+    (tmp_path / "bad.toml").write_text("\n".join(lines).replace("[axes.y]", 'uncertain = ["mass_kg"]\n[axes.y]') + "\n")
+    with pytest.raises(ValueError, match=r"bad.toml, line \d+: axis x: uncertain must list controller keys"):
+        load_model(tmp_path / "bad.toml")
+
+
 def test_model_without_the_traces_axis_is_refused(machine):
     trace = Trace(np.arange(10) * 1e-3, np.zeros((10, 3)), np.zeros((10, 3)), ("x", "y", "z"))
     with pytest.raises(ValueError, match="no servo axis 'z'"):
