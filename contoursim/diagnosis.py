@@ -12,11 +12,13 @@ The workflow (:func:`diagnose`):
    it concentrates and what it correlates with.
 3. **Refit the nominal model**: real machines differ from their nominal
    model by a few % in masses and damping, and a measuring instrument has
-   its own zero. The controller's settings are software and trusted
-   exactly; the plant is not. These nuisance parameters — per axis the
-   moving mass (known to :data:`NOMINAL_SPREAD`) and the viscous damping
-   (to :data:`DAMPING_SPREAD`), and a constant offset per axis (the
-   instrument's zero, free) — act almost linearly on the trace. For an
+   its own zero and is set up a little turned. The controller's settings
+   are software and trusted exactly; the plant is not. These nuisance
+   parameters — per axis the moving mass (known to :data:`NOMINAL_SPREAD`)
+   and the viscous damping (to :data:`DAMPING_SPREAD`), a constant offset
+   per axis and a small turn of the instrument's frame per pair of axes
+   (free: a turn is not an out-of-squareness, which shears the frame) — act
+   almost linearly on the trace. For an
    identified machine the controller is itself uncertain: one position-gain
    scale shared by all axes (a per-axis one would absorb a
    ``gain_mismatch``), likewise one velocity-feedforward fraction, and per
@@ -90,6 +92,7 @@ _FD_STEP = 1e-3  # relative step of the candidates' finite differences
 _GRID = 4  # starting values per size parameter over its typical range (each sign)
 _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
+_MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (the catalogue's modes: 0.01–0.2)
 _JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's jackknife leaves out in turn
 _REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
@@ -698,15 +701,17 @@ class _Problem:
         return ((self.trace.actual - y) * self.weight).ravel()
 
     def coefficients(self, r):
-        """The nominal refit of a whitened residual `r`: zero offsets [steps of σ], then each nominal step's factor."""
+        """The nominal refit of a whitened residual `r`: zero offsets [steps of σ], the instrument frame's turn per
+        pair of axes [rad], then each nominal step's factor."""
         return self.solve @ r - self.pull
 
     def residual(self, y):
         """The residual of prediction `y` after the nominal refit: whitened misfit, then the prior's terms.
 
-        Shape (N·d + d + K,): what the refit leaves of the whitened residual,
+        Shape (N·d + I + K,): what the refit leaves of the whitened residual,
         then the refit's coefficients over their prior widths (a nominal
-        parameter is known to :data:`NOMINAL_SPREAD`; zero offsets are free).
+        parameter is known to its spread; the instrument's I columns, its
+        zero per axis and the turn of its frame per pair of axes, are free).
         """
         with np.errstate(over="ignore", invalid="ignore"):  # a variant that went unstable: made large by _finite
             r = self.whitened(y)
@@ -730,7 +735,7 @@ class _Problem:
             if step == refit or not self.changes:
                 break
             d = self.trace.actual.shape[1]
-            coef = self.coefficients(self.whitened(self.base_prediction))[d:]
+            coef = self.coefficients(self.whitened(self.base_prediction))[self.instrument:]
             if not np.all(np.isfinite(coef)):
                 break
             model = _refitted(model, [change for change, _ in self.changes], coef)
@@ -743,6 +748,12 @@ class _Problem:
         self.changes = _nuisance_changes(model, self.trace.axes, self.identified)
         n, d = self.trace.actual.shape
         columns = [(np.eye(d)[i] * self.weight).ravel() for i in range(d)]  # instrument zero per axis
+        q = self.trace.reference - self.trace.reference[self.scored].mean(axis=0)
+        for i, j in combinations(range(d), 2):  # the instrument's frame turned a little in the plane of axes i, j
+            turn = np.zeros((n, d))
+            turn[:, i], turn[:, j] = -q[:, j], q[:, i]
+            columns.append((turn * self.weight).ravel())
+        self.instrument = len(columns)  # the instrument's columns (zero and alignment), free
         if self.changes:
             ys = self.predict([_with_servos(model, change) for change, _ in self.changes])
             r0 = self.whitened(self.base_prediction)
@@ -750,9 +761,10 @@ class _Problem:
             self.changes = [c for c, ok in zip(self.changes, finite) if ok]
             columns += [r0 - self.whitened(y) for y, ok in zip(ys, finite) if ok]  # each nominal step's effect, whitened
         s = self.columns = np.column_stack(columns)
-        self.prior = np.concatenate([np.zeros(d), [_NUISANCE_STEP / spread for _, spread in self.changes]])
+        self.prior = np.concatenate([np.zeros(self.instrument), [_NUISANCE_STEP / spread for _, spread in self.changes]])
         # ridge: the prior on the nominal parameters, centred on the nominal machine (the base may have moved from it)
-        self.shift = np.concatenate([np.zeros(d), [_steps_from(self.nominal, model.machine, c) for c, _ in self.changes]])
+        self.shift = np.concatenate([np.zeros(self.instrument),
+                                     [_steps_from(self.nominal, model.machine, c) for c, _ in self.changes]])
         normal = s.T @ s + np.diag(self.prior**2)
         self.solve = np.linalg.solve(normal, s.T)
         self.pull = np.linalg.solve(normal, self.prior**2 * self.shift)
@@ -938,8 +950,9 @@ def _bounds(problem, cand):
     """Lower and upper bounds of `cand`'s free parameters: the catalogue's, the servo period's limits."""
     effect, params = cand.effect, {p.name: p for p in cand.effect.parameters}
     limits = {}
-    if effect.name == "vibration":
+    if effect.name == "vibration":  # a lightly damped mode: a fit that wants more damping is a filter in disguise
         limits["freq_hz"] = (1.0, 0.45 / problem.reference.dt)
+        limits["damping_ratio"] = (params["damping_ratio"].bounds[0], _MODE_DAMPING_MAX)
     elif effect.name == "time_delay":
         top = 0.1 if effect.options["kind"] == "command" else (MAX_DELAY_SAMPLES - 1) * problem.reference.dt
         limits["delay_s"] = (0.0, top)
