@@ -268,6 +268,15 @@ def test_the_refit_trusts_the_controller_unless_the_machine_file_marks_a_setting
         load_model(tmp_path / "bad.toml")
 
 
+def test_identification_recognises_a_pi_velocity_loop():
+    """PI velocity loops (as most drives run): identified with an integrator, the shared kp within 3 %."""
+    servo = dict(mass=100.0, force_constant=100.0, damping=0.0, vff=0.0, kp=35.0)
+    truth = Machine({"x": AxisServo(kv=250.0, ti=0.016, **servo), "y": AxisServo(kv=200.0, ti=0.02, **servo)}, DT)
+    identified = identify_machine(synthetic_trace(truth, circle("ccw"), mismatch=0.0, noise_um=0.1, every=2, seed=3))
+    assert all(s.ti is not None for s in identified.axes.values())
+    assert identified.axes["x"].kp == pytest.approx(35.0, rel=0.03)
+
+
 def test_model_without_the_traces_axis_is_refused(machine):
     trace = Trace(np.arange(10) * 1e-3, np.zeros((10, 3)), np.zeros((10, 3)), ("x", "y", "z"))
     with pytest.raises(ValueError, match="no servo axis 'z'"):
