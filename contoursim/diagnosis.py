@@ -1214,6 +1214,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             except _FIT_FAILURES as exc:
                 warnings.append(f"{cand.effect.label}{_options(cand.effect)}: left out, its fit failed ({exc})")
                 continue
+            if cand.fit.name == "vibration" and cand.fit["damping_ratio"] >= 0.99 * _MODE_DAMPING_MAX:
+                continue  # the fit runs to the damping bound: a filter in disguise, not a lightly damped mode
             refined.append(cand)
             say(f"[effect {round_ + 1}, {i + 1}/{len(cands)}] {cand.effect.label:<22}"
                 f"{_options(cand.effect):<26} RMS {_rms_um(problem.unwhiten(cand.residual)):8.3f} µm")
