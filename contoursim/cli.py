@@ -14,6 +14,7 @@ matplotlib) when they run, so that ``contoursim --help`` answers at once.
 import argparse
 import gc
 import os
+import shutil
 import sys
 import warnings
 from contextlib import contextmanager, nullcontext
@@ -420,15 +421,31 @@ def diagnose_command(args):
             raise FileExistsError(f"{report} exists and is not a diagnosis report; refusing to overwrite it")
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
-    result = diagnose(trace, model, progress=lambda line: print(line, file=sys.stderr, flush=True))
+    result = diagnose(trace, model, progress=_progress_line(sys.stderr))
+    if sys.stderr.isatty():
+        sys.stderr.write("\n")
     if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")
     save_figures(result, args.out)
+    with output_dir(args.out).write("corrected_model.toml") as stream:
+        stream.write(result.corrected_model())
     print(result.report())
     if report is not None:
         print(f"report written to {report}")
-    print(f"plots written to {args.out}/")
+    print(f"plots and the corrected model (corrected_model.toml, for diagnose --model on another experiment) "
+          f"written to {args.out}/")
+
+
+def _progress_line(stream):
+    """A progress callback writing to `stream`: on a terminal each line replaces the last (one line), else one per line."""
+    if not stream.isatty():
+        return lambda line: print(line, file=stream, flush=True)
+
+    def say(line):
+        stream.write("\r" + line[: shutil.get_terminal_size().columns - 1] + "\x1b[K")
+        stream.flush()
+    return say
 
 
 def sweep_command(args):

@@ -11,18 +11,22 @@ The workflow (:func:`diagnose`):
    simulated, per axis and along the path normal; :func:`locate` says where
    it concentrates and what it correlates with.
 3. **Refit the nominal model**: real machines differ from their nominal
-   model by a few % in masses, damping and gains, and a measuring instrument
-   has its own zero. These nuisance parameters — one position-gain scale
-   shared by all axes (a per-axis one would absorb a ``gain_mismatch``),
-   and likewise one velocity-feedforward fraction where there is one; per
-   axis the velocity-loop gain (with the mass, the velocity loop's
-   bandwidth) and the mass where acceleration feedforward uses it; and a
-   constant offset per axis
-   (the instrument's zero) — act almost linearly on the trace. Their
+   model by a few % in masses and damping, and a measuring instrument has
+   its own zero and is set up a little turned. The controller's settings
+   are software and trusted exactly; the plant is not. These nuisance
+   parameters — per axis the moving mass (known to :data:`NOMINAL_SPREAD`)
+   and the viscous damping (to :data:`DAMPING_SPREAD`), a constant offset
+   per axis and a small turn of the instrument's frame per pair of axes
+   (free: a turn is not an out-of-squareness, which shears the frame) — act
+   almost linearly on the trace. For an
+   identified machine the controller is itself uncertain: one position-gain
+   scale shared by all axes (a per-axis one would absorb a
+   ``gain_mismatch``), likewise one velocity-feedforward fraction, and per
+   axis the velocity-loop gain, each to :data:`NOMINAL_SPREAD`. Their
    sensitivities (one :func:`~contoursim.simulation.simulate_batch` call of
-   finite differences) are refitted in every residual below by ridge
-   regression: each servo parameter is known to :data:`NOMINAL_SPREAD` (a
-   Gaussian prior centred on the nominal machine), the offsets are free.
+   finite differences; a step that makes a loop diverge is left out) are
+   refitted in every residual below by ridge regression, a Gaussian prior
+   centred on the nominal machine.
    An effect is named only for what a slightly wrong nominal model cannot
    explain; once it is named, the nominal parameters are refitted by
    Gauss–Newton with it in place and its own parameters fitted again
@@ -56,30 +60,43 @@ from scipy.optimize import least_squares
 from .effects import Effect, effect_kind
 from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identify_machine
 from .kernel import MAX_DELAY_SAMPLES
-from .machine import Machine
 from .model import Model, as_model
 from .plotting import fit_circle_center
 from .simulation import measured_reference, simulate_batch
 
 __all__ = [
-    "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal",
+    "DAMPING_SPREAD", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
+    "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
 
 #: Most effects named in one diagnosis.
 MAX_EFFECTS = 3
+#: How the reported uncertainties are obtained (the report's ``uncertainty_method``).
+UNCERTAINTY_METHOD = ("the larger of the Gauss-Newton standard deviation (noise, scaled by the residual's "
+                      "autocorrelation time) and a linearised block jackknife over 10 consecutive segments of the "
+                      "trace (model error that pulls the parameter differently along the trace)")
+#: A residual share of at least this fraction of the noise level [-] is listed as unexplained structure.
+STRUCTURE_SHARE = 0.5
 #: The residual is at the noise floor when its RMS is within this factor of the noise estimated from the
 #: trace (the estimate itself is good to a few % on quantised, non-Gaussian noise): nothing more is named.
 NOISE_FLOOR = 1.1
-#: How well a nominal servo parameter is known (1σ, relative): the prior of the nominal refit.
+#: How well a nominal servo parameter is known (1σ, relative): the prior of the nominal refit (for the moving
+#: mass of a given model, and for every servo parameter of an identified one).
 NOMINAL_SPREAD = 0.05
+#: How well a given model's viscous damping is known (1σ, relative): guides and seals vary more than masses.
+DAMPING_SPREAD = 0.2
 
 _NUISANCE_STEP = 0.02  # relative step of the nominal parameters' finite differences
 _FD_STEP = 1e-3  # relative step of the candidates' finite differences
 _GRID = 4  # starting values per size parameter over its typical range (each sign)
 _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
+_MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (the catalogue's modes: 0.01–0.2)
+_JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's jackknife leaves out in turn
 _REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
+# what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
+_FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 
 
 def noise_level(residual, measured=None):
@@ -170,6 +187,11 @@ class Diagnosis:
     warnings : tuple of str
         Ambiguities (two candidates explaining the data almost equally, with
         the test that would separate them) and limits of the diagnosis.
+    unexplained : tuple of dict
+        Structure left in the final residual (:func:`unexplained`): per
+        item ``axis``, ``signature`` (what it is: a limit cycle at
+        standstill, a period, a correlation) and ``rms_um`` (its share of
+        the residual [µm RMS]); never counted as noise.
     """
 
     trace: object
@@ -183,6 +205,7 @@ class Diagnosis:
     refitted: Model
     where: tuple = ()
     warnings: tuple = field(default=())
+    unexplained: tuple = field(default=())
 
     @property
     def effects(self):
@@ -208,7 +231,7 @@ class Diagnosis:
             "effects": [
                 {"name": e.name, "axis": e.axis, "parameters": e.values(),
                  **({"options": dict(e.options)} if e.options else {}),
-                 "uncertainty": {k: v if np.isfinite(v) else None for k, v in s.uncertainty.items()},
+                 "uncertainty": dict(s.uncertainty),
                  "delta_bic": s.delta_bic}
                 for s in self.steps for e in [s.effect] if e is not None
             ],
@@ -223,19 +246,56 @@ class Diagnosis:
                 for axis, servo in self.model.machine.axes.items() for name in _REFIT_FIELDS
                 if getattr(servo, name) != getattr(self.refitted.machine.axes[axis], name)
             },
-            "steps": [{"label": s.label, "rms_um": s.rms_um, "max_um": s.max_um,
-                       "delta_bic": None if np.isnan(s.delta_bic) else s.delta_bic} for s in self.steps],
+            "steps": [{"label": s.label, "rms_um": s.rms_um, "max_um": s.max_um, "delta_bic": s.delta_bic}
+                      for s in self.steps],
             "where": list(self.where),
             "warnings": list(self.warnings),
+            "unexplained": [dict(u) for u in self.unexplained],
+            "uncertainty_method": UNCERTAINTY_METHOD,
         }
         if normal_before is not None:
             report["residual_normal_rms_before_um"] = 1e3 * float(np.sqrt(np.mean(normal_before**2)))
             report["residual_normal_rms_after_um"] = 1e3 * float(np.sqrt(np.mean(normal_after**2)))
-        return report
+        return _strict(report)
 
     def to_json(self):
-        """:meth:`to_dict` as JSON text."""
-        return json.dumps(self.to_dict(), indent=2, ensure_ascii=False)
+        """:meth:`to_dict` as strict JSON text (no NaN or Infinity: a value that is not finite is ``null``)."""
+        return json.dumps(self.to_dict(), indent=2, ensure_ascii=False, allow_nan=False)
+
+    def corrected_model(self):
+        """The corrected model as machine-file text: the refitted servo axes and the effects named as ``[[effect]]`` tables.
+
+        Readable by :func:`contoursim.model.load_model` (``simulate``,
+        ``compare``, ``diagnose --model``): identify on one experiment,
+        validate on another. The geometry of the nominal machine
+        (``[[body]]`` tables) is not carried over.
+
+        Returns
+        -------
+        str
+        """
+        from .machine import SERVO_KEYS
+
+        machine = self.refitted.machine
+        source = self.trace.metadata.get("source", "")
+        lines = ["# corrected model written by contoursim diagnose" + (f" from {source}" if source else "")
+                 + ": the nominal machine with its", "# plant refitted (see the report's nominal_refit) and the "
+                 "effects named as [[effect]] tables", "",
+                 f"name = {json.dumps('corrected: ' + machine.name)}", f"servo_period_ms = {1e3 * machine.servo_period!r}"]
+        if machine.max_feed is not None:
+            lines.append(f"max_feed_mm_min = {60.0 * machine.max_feed!r}")
+        for axis, servo in machine.axes.items():
+            lines += ["", f"[axes.{axis}]"]
+            lines += [f"{key} = {float(getattr(servo, name))!r}" for key, name in SERVO_KEYS.items()
+                      if getattr(servo, name) is not None]
+            if machine.uncertain.get(axis):
+                keys = {name: key for key, name in SERVO_KEYS.items()}
+                lines.append(f"uncertain = {json.dumps([keys[name] for name in machine.uncertain[axis]])}")
+        for effect in self.effects:
+            lines += ["", "[[effect]]", f"name = {json.dumps(effect.name)}", f"axis = {json.dumps(effect.axis)}"]
+            lines += [f"{k} = {float(v)!r}" for k, v in effect.values().items()]
+            lines += [f"{k} = {json.dumps(v)}" for k, v in effect.options.items()]
+        return "\n".join(lines) + "\n"
 
     def report(self):
         """The story as a short table: per step the effect, its parameters ± 1σ, residual RMS and max [µm]."""
@@ -253,7 +313,8 @@ class Diagnosis:
             lines.append(f"{s.label:<28}{text:<52}{s.rms_um:>10.3f}{s.max_um:>10.3f}{bic:>10}")
         noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
         lines.append(f"noise floor [µm RMS]: {noise}")
-        if not self.effects and self.steps[-1].rms_um <= NOISE_FLOOR * float(np.linalg.norm(self.noise_um)):
+        lines += [f"unexplained on {u['axis']}: {u['signature']} ({u['rms_um']:.3g} µm RMS)" for u in self.unexplained]
+        if not self.effects and not self.unexplained and self.steps[-1].rms_um <= NOISE_FLOOR * float(np.linalg.norm(self.noise_um)):
             lines.append("no effect named: the measurement is explained by the nominal model within noise "
                          "(and the nominal parameters' usual spread)")
         elif not self.effects:
@@ -263,6 +324,21 @@ class Diagnosis:
         lines += [f"where: {w}" for w in self.where]
         lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
+
+
+def _strict(value):
+    """`value` (nested dicts, lists, numbers) with every number a plain float or int and each non-finite one ``None``."""
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 def _rms_um(r):
@@ -385,6 +461,139 @@ def locate(trace, reference, residual):
     return tuple(found)
 
 
+def _not_following(trace, simulated, scored):
+    """Sentences for the axes whose measured positions do not follow their reference at all (empty when all do).
+
+    An axis whose residual (measured − simulated, its mean removed) is as
+    large as half its commanded motion is not a servo axis tracking its
+    command with some error: its columns are swapped or in other units.
+    """
+    found = []
+    for i, axis in enumerate(trace.axes):
+        ref = trace.reference[scored, i]
+        motion = float(np.std(ref))
+        miss = float(np.std(trace.actual[scored, i] - simulated[scored, i]))
+        if motion > 0 and miss > 0.5 * motion:
+            found.append(f"the measured {axis} does not follow {axis}_ref (the residual, {1e3 * miss:.4g} µm RMS, is "
+                         f"as large as the commanded motion, {1e3 * motion:.4g} µm RMS): columns swapped or units "
+                         "wrong? No effect is named")
+    return found
+
+
+def standstill_cycles(trace, reference, residual, min_samples=64):
+    """Limit cycles at standstill ("hunting"): per axis, oscillation in one narrow band while the reference stands still.
+
+    Over the second half of every run of at least `min_samples` samples in
+    which no axis's reference moves (the first half may still be settling),
+    the residual (linear trend removed, Hann window) is a limit cycle when
+    one spectral line, at three or more periods per run, holds at least
+    half of its variance: white noise spreads over all frequencies.
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+    reference : contoursim.trajectory.Trajectory
+        The measured reference at the servo period.
+    residual : ndarray, shape (N, d)
+        At the trace's samples [mm].
+    min_samples : int
+        Shortest standstill run looked at.
+
+    Returns
+    -------
+    dict
+        Axis index -> ``{"samples": bool mask (N,) of the cycling samples,
+        "frequency": [Hz], "amplitude": half the peak-to-peak of the cycle [mm]}``.
+    """
+    v = _on_trace(trace, reference.t, reference.velocity)
+    speed = np.linalg.norm(v, axis=1)
+    still = speed <= 1e-9 * max(float(speed.max()), 1e-300) if speed.max() > 0 else np.ones(len(speed), bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
+    runs = [(a + (b - a) // 2, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_samples]
+    found = {}
+    for i in range(residual.shape[1]):
+        mask = np.zeros(len(speed), bool)
+        freqs, amps = [], []
+        for a, b in runs:
+            x = residual[a:b, i]
+            n = len(x)
+            x = x - np.polyval(np.polyfit(np.arange(n), x, 1), np.arange(n))
+            spec = np.abs(np.fft.rfft(x * np.hanning(n))) ** 2
+            spec[0] = 0.0
+            if spec.sum() <= 0:
+                continue
+            k = int(np.argmax(spec))
+            if k >= 3 and spec[max(k - 2, 1):k + 3].sum() >= 0.5 * spec.sum():
+                mask[a:b] = True
+                freqs.append(k / (n * trace.dt))
+                amps.append(0.5 * float(np.ptp(x)))
+        if mask.sum() >= min_samples // 2:
+            found[i] = {"samples": mask, "frequency": float(np.median(freqs)), "amplitude": float(np.median(amps))}
+    return found
+
+
+def unexplained(trace, reference, residual, noise, scored):
+    """Structure left in a residual: what is not white noise, as ``{"axis", "signature", "rms_um"}`` items.
+
+    Per axis, each of these is listed when its share of the residual (the
+    RMS of the residual's projection on it) reaches :data:`STRUCTURE_SHARE`
+    times the axis's noise level: a limit cycle at standstill
+    (:func:`standstill_cycles`), the largest spectral line, and a
+    correlation with the commanded velocity, acceleration, direction of
+    motion, position or time (the sign of the correlation coefficient given).
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+    reference : contoursim.trajectory.Trajectory
+        The measured reference at the servo period.
+    residual : ndarray, shape (N, d)
+        The final residual at the trace's samples [mm] (0 where not scored).
+    noise : ndarray, shape (d,)
+        The white noise level per axis [mm] (:func:`noise_level`).
+    scored : ndarray of bool, shape (N,)
+
+    Returns
+    -------
+    list of dict
+        ``rms_um`` [µm], largest first per axis.
+    """
+    found = []
+    v = _on_trace(trace, reference.t, reference.velocity)[scored]
+    acc = _on_trace(trace, reference.t, reference.acceleration)[scored]
+    cycles = standstill_cycles(trace, reference, residual)
+    for i, axis in enumerate(trace.axes):
+        r = residual[scored, i] - residual[scored, i].mean()
+        n = r.size
+        if n < 16 or not np.any(r):
+            continue
+        share = STRUCTURE_SHARE * noise[i]
+        items = []
+        if i in cycles:
+            c = cycles[i]
+            items.append((float(np.sqrt(np.mean(residual[c["samples"], i] ** 2))),
+                          f"limit cycle at standstill (hunting): ±{1e3 * c['amplitude']:.3g} µm at {c['frequency']:.3g} Hz"))
+        spec = np.abs(np.fft.rfft(r)) ** 2
+        spec[0] = 0.0
+        k = int(np.argmax(spec))
+        line = float(np.sqrt(2.0 * spec[max(k - 1, 1):k + 2].sum()) / n)  # RMS of the line (±1 bin)
+        if k >= 2 and spec[max(k - 1, 1):k + 2].sum() >= 0.2 * spec.sum():
+            items.append((line, f"periodic, {k / (n * trace.dt):.3g} Hz"))
+        features = {"velocity": v[:, i], "acceleration": acc[:, i], "direction of motion (sign of v)": np.sign(v[:, i]),
+                    "position": trace.reference[scored, i], "time (a drift)": trace.t[scored]}
+        for name, f in features.items():
+            f = f - f.mean()
+            if not np.any(f):
+                continue
+            rho = float(np.dot(r, f) / (np.linalg.norm(r) * np.linalg.norm(f)))
+            if abs(rho) >= 0.3:
+                items.append((abs(rho) * float(np.sqrt(np.mean(r**2))), f"correlated with {name} (r = {rho:+.2f})"))
+        for rms, signature in sorted(items, reverse=True):
+            if rms >= share:
+                found.append({"axis": axis, "signature": signature, "rms_um": 1e3 * rms})
+    return found
+
+
 def _circle(position):
     """``(centre, radius)`` when most of the first two axes' reference runs one full circle, else ``None``.
 
@@ -449,15 +658,16 @@ def _spatial_period(q, r):
 class _Problem:
     """A measured trace against variants of one model: predictions, whitening, nominal refit."""
 
-    def __init__(self, trace, model, noise, scored):
+    def __init__(self, trace, model, noise, scored, identified=False):
         self.trace = trace
+        self.identified = identified  # the controller too was identified: its parameters carry the prior
         self.reference = measured_reference(trace, model.machine.servo_period)
         self.scored = scored  # samples the fit scores, shape (N,)
         self.weight = scored[:, None] / noise  # 1/σ per axis on scored samples, 0 elsewhere [1/mm], (N, d)
         self.n = int(scored.sum()) * len(noise)  # residual entries scored
         self.nominal = model.machine  # the prior of the nominal refit is centred here
         self.base = None
-        self.set_base(model)
+        self.set_base(model, refit=_REFIT_STEPS)
 
     # predictions at the trace's samples
     def predict(self, models):
@@ -491,15 +701,17 @@ class _Problem:
         return ((self.trace.actual - y) * self.weight).ravel()
 
     def coefficients(self, r):
-        """The nominal refit of a whitened residual `r`: zero offsets [steps of σ], then each nominal step's factor."""
+        """The nominal refit of a whitened residual `r`: zero offsets [steps of σ], the instrument frame's turn per
+        pair of axes [rad], then each nominal step's factor."""
         return self.solve @ r - self.pull
 
     def residual(self, y):
         """The residual of prediction `y` after the nominal refit: whitened misfit, then the prior's terms.
 
-        Shape (N·d + d + K,): what the refit leaves of the whitened residual,
+        Shape (N·d + I + K,): what the refit leaves of the whitened residual,
         then the refit's coefficients over their prior widths (a nominal
-        parameter is known to :data:`NOMINAL_SPREAD`; zero offsets are free).
+        parameter is known to its spread; the instrument's I columns, its
+        zero per axis and the turn of its frame per pair of axes, are free).
         """
         with np.errstate(over="ignore", invalid="ignore"):  # a variant that went unstable: made large by _finite
             r = self.whitened(y)
@@ -523,24 +735,36 @@ class _Problem:
             if step == refit or not self.changes:
                 break
             d = self.trace.actual.shape[1]
-            model = _refitted(model, self.changes, self.coefficients(self.whitened(self.base_prediction))[d:])
+            coef = self.coefficients(self.whitened(self.base_prediction))[self.instrument:]
+            if not np.all(np.isfinite(coef)):
+                break
+            model = _refitted(model, [change for change, _ in self.changes], coef)
 
     def _linearise(self, model):
         self.base = None
         run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0, check=False)
         self.axis_position = run["axis_position"][0]
         self.base_prediction = _on_trace(self.trace, self.reference.t, run["tool_position"][0])
-        self.changes = _nuisance_changes(model, self.trace.axes)
+        self.changes = _nuisance_changes(model, self.trace.axes, self.identified)
         n, d = self.trace.actual.shape
         columns = [(np.eye(d)[i] * self.weight).ravel() for i in range(d)]  # instrument zero per axis
+        q = self.trace.reference - self.trace.reference[self.scored].mean(axis=0)
+        for i, j in combinations(range(d), 2):  # the instrument's frame turned a little in the plane of axes i, j
+            turn = np.zeros((n, d))
+            turn[:, i], turn[:, j] = -q[:, j], q[:, i]
+            columns.append((turn * self.weight).ravel())
+        self.instrument = len(columns)  # the instrument's columns (zero and alignment), free
         if self.changes:
-            ys = self.predict([_with_servos(model, change) for change in self.changes])
+            ys = self.predict([_with_servos(model, change) for change, _ in self.changes])
             r0 = self.whitened(self.base_prediction)
-            columns += [r0 - self.whitened(y) for y in ys]  # the prediction's change for each nominal step, whitened
+            finite = [bool(np.all(np.isfinite(y))) for y in ys]  # a step that makes the loop diverge is left out
+            self.changes = [c for c, ok in zip(self.changes, finite) if ok]
+            columns += [r0 - self.whitened(y) for y, ok in zip(ys, finite) if ok]  # each nominal step's effect, whitened
         s = self.columns = np.column_stack(columns)
-        self.prior = np.concatenate([np.zeros(d), np.full(len(self.changes), _NUISANCE_STEP / NOMINAL_SPREAD)])
+        self.prior = np.concatenate([np.zeros(self.instrument), [_NUISANCE_STEP / spread for _, spread in self.changes]])
         # ridge: the prior on the nominal parameters, centred on the nominal machine (the base may have moved from it)
-        self.shift = np.concatenate([np.zeros(d), [_steps_from(self.nominal, model.machine, c) for c in self.changes]])
+        self.shift = np.concatenate([np.zeros(self.instrument),
+                                     [_steps_from(self.nominal, model.machine, c) for c, _ in self.changes]])
         normal = s.T @ s + np.diag(self.prior**2)
         self.solve = np.linalg.solve(normal, s.T)
         self.pull = np.linalg.solve(normal, self.prior**2 * self.shift)
@@ -563,19 +787,40 @@ class _Problem:
         return np.divide(r[: n * d].reshape(n, d), self.weight, out=np.zeros((n, d)), where=self.weight > 0)
 
 
-def _nuisance_changes(model, axes):
-    """The nominal refit's steps: one dict ``{axis: {field: stepped value}}`` per nominal parameter of `axes`."""
+def _nuisance_changes(model, axes, identified):
+    """The nominal refit's steps: ``({axis: {field: stepped value}}, prior spread)`` per nominal parameter of `axes`.
+
+    A given model's controller (gains, integral time, feedforward, period) is
+    software, set exactly: only the plant carries a prior, the moving mass
+    (with the force constant fixed, it sets the velocity loop's gain and
+    the acceleration feedforward's match) and the viscous damping, and the
+    controller settings the machine file lists as ``uncertain``. An
+    identified controller is itself uncertain: one position gain and one
+    feedforward fraction for all axes, the velocity gain per axis.
+    """
     servos = model.machine.axes
     h = 1.0 + _NUISANCE_STEP
-    changes = [{a: {"kp": s.kp * h} for a, s in servos.items()}]  # one position gain for all axes
+    changes = []
+    if not identified:
+        for a in axes:
+            s = servos[a]
+            changes.append(({a: {"mass": s.mass * h}}, NOMINAL_SPREAD))
+            if s.damping > 0:
+                changes.append(({a: {"damping": s.damping * h}}, DAMPING_SPREAD))
+            for name in model.machine.uncertain.get(a, ()):  # settings the machine file marks as not known exactly
+                value = getattr(s, name)
+                stepped = value * h if name not in ("vff", "aff") or value * h <= 1 else value / h
+                changes.append(({a: {name: stepped}}, NOMINAL_SPREAD))
+        return changes
+    changes.append(({a: {"kp": s.kp * h} for a, s in servos.items()}, NOMINAL_SPREAD))  # one position gain for all axes
     feedforward = {a: {"vff": s.vff * h if s.vff * h <= 1 else s.vff / h} for a, s in servos.items() if s.vff > 0}
     if feedforward:  # one fraction for all axes too: per axis it would set each axis's steady lag, a gain in disguise
-        changes.append(feedforward)
+        changes.append((feedforward, NOMINAL_SPREAD))
     for a in axes:
         s = servos[a]
-        changes.append({a: {"kv": s.kv * h}})  # the velocity loop's gain over the mass: its bandwidth
+        changes.append(({a: {"kv": s.kv * h}}, NOMINAL_SPREAD))  # the velocity loop's gain over the mass: its bandwidth
         if s.aff > 0:
-            changes.append({a: {"mass": s.mass * h}})
+            changes.append(({a: {"mass": s.mass * h}}, NOMINAL_SPREAD))
     return changes
 
 
@@ -592,14 +837,15 @@ def _with_servos(model, change):
     servos = dict(machine.axes)
     for axis, fields in change.items():
         servos[axis] = replace(servos[axis], **fields)
-    m = Machine(servos, machine.servo_period, machine.chain, machine.name, machine.max_feed, dict(machine.work_offset))
-    return Model(m, model.effects)
+    return Model(replace(machine, axes=servos), model.effects)
 
 
 def _refitted(model, changes, coef):
     """`model` moved by `coef` times each change (a Gauss–Newton step), each field kept within ±50 % (vff in [0, 1])."""
     new = {}
     for change, c in zip(changes, coef):
+        if not np.isfinite(c):
+            continue
         for axis, fields in change.items():
             for field, stepped in fields.items():
                 old = getattr(model.machine.axes[axis], field)
@@ -704,8 +950,9 @@ def _bounds(problem, cand):
     """Lower and upper bounds of `cand`'s free parameters: the catalogue's, the servo period's limits."""
     effect, params = cand.effect, {p.name: p for p in cand.effect.parameters}
     limits = {}
-    if effect.name == "vibration":
+    if effect.name == "vibration":  # a lightly damped mode: a fit that wants more damping is a filter in disguise
         limits["freq_hz"] = (1.0, 0.45 / problem.reference.dt)
+        limits["damping_ratio"] = (params["damping_ratio"].bounds[0], _MODE_DAMPING_MAX)
     elif effect.name == "time_delay":
         top = 0.1 if effect.options["kind"] == "command" else (MAX_DELAY_SAMPLES - 1) * problem.reference.dt
         limits["delay_s"] = (0.0, top)
@@ -733,8 +980,13 @@ def _score(problem, cand, r, tau=None):
     cand.delta_bic = float(delta_bic(rss0, cand.cost, problem.n, len(cand.free), tau or cand.tau))
 
 
-def _start(problem, cands, model):
-    """Every candidate's grid in one batch: the best row becomes its starting point ``cand.x``, scored."""
+def _start(problem, cands, model, warnings):
+    """Every candidate's grid in one batch: the best row becomes its starting point ``cand.x``, scored.
+
+    Returns the candidates whose grid could be simulated; a candidate whose
+    simulation fails is left out with a warning (the batch is then run one
+    candidate at a time to find it).
+    """
     rows, owner = [], []
     for i, cand in enumerate(cands):
         lower, upper = _bounds(problem, cand)
@@ -742,15 +994,31 @@ def _start(problem, cands, model):
             x = np.clip(np.array([row.get(n, cand.effect[n]) for n in cand.free], dtype=float), lower, upper)
             rows.append(x)
             owner.append(i)
-    predictions = problem.predict([_model_of(model, cands[i], x) for i, x in zip(owner, rows)])
+    try:
+        predictions = problem.predict([_model_of(model, cands[i], x) for i, x in zip(owner, rows)])
+    except _FIT_FAILURES:
+        predictions = [None] * len(rows)
+        for i, cand in enumerate(cands):
+            mine = [k for k, o in enumerate(owner) if o == i]
+            try:
+                for k, y in zip(mine, problem.predict([_model_of(model, cand, rows[k]) for k in mine])):
+                    predictions[k] = y
+            except _FIT_FAILURES as exc:
+                warnings.append(f"{cand.effect.label}{_options(cand.effect)}: left out, its simulation failed ({exc})")
     best = {}
     for i, x, y in zip(owner, rows, predictions):
+        if y is None:
+            continue
         r = _finite(problem.residual(y))
         if i not in best or r @ r < best[i][1] @ best[i][1]:
             best[i] = (x, r)
+    kept = []
     for i, cand in enumerate(cands):
-        cand.x, cand.residual = best[i]
-    _rescore(problem, cands)
+        if i in best:
+            cand.x, cand.residual = best[i]
+            kept.append(cand)
+    _rescore(problem, kept)
+    return kept
 
 
 def _rescore(problem, cands):
@@ -802,10 +1070,46 @@ def _refine(problem, cand, model):
     n, k = problem.n, len(cand.free)
     try:
         cov = np.linalg.inv(j.T @ j) * (cand.cost / max(n - k, 1) * cand.tau)
-        err = np.sqrt(np.clip(np.diag(cov), 0, None))
+        err = np.maximum(np.sqrt(np.clip(np.diag(cov), 0, None)), _jackknife(problem, j, cand.residual))
     except np.linalg.LinAlgError:
         err = np.full(k, np.inf)
     cand.uncertainty = {name: float(e) for name, e in zip(cand.free, err)}
+
+
+def _jackknife(problem, j, r, blocks=_JACKKNIFE_BLOCKS):
+    """Block-jackknife standard deviation of a fit's parameters, linearised around the optimum.
+
+    The scored samples are cut into `blocks` consecutive segments; leaving
+    segment b out moves the parameters by one Gauss–Newton step,
+    ``(JᵀJ − J_bᵀJ_b)⁻¹·J_bᵀ·r_b`` (at the optimum ``Jᵀr = 0``), and the
+    spread of these moves, ``√((B−1)/B·Σ(δ_b − δ̄)²)``, is the jackknife's
+    standard deviation: a model error that pulls the parameter differently
+    along the trace shows in it, white noise alone gives the usual one.
+
+    Parameters
+    ----------
+    problem : _Problem
+    j : ndarray, shape (M, k)
+        Jacobian of the residual `r` (:meth:`_Problem.residual`) in the free parameters.
+    r : ndarray, shape (M,)
+
+    Returns
+    -------
+    ndarray, shape (k,)
+    """
+    n, d = problem.trace.actual.shape
+    rows = np.flatnonzero(problem.scored)
+    if rows.size < 4 * blocks:
+        return np.zeros(j.shape[1])
+    edges = np.linspace(0, rows.size, blocks + 1).astype(int)
+    normal = j.T @ j
+    moves = []
+    for b in range(blocks):
+        index = (rows[edges[b]:edges[b + 1], None] * d + np.arange(d)).ravel()
+        jb = j[index]
+        moves.append(np.linalg.solve(normal - jb.T @ jb, jb.T @ r[index]))
+    moves = np.array(moves)
+    return np.sqrt((blocks - 1) / blocks * np.sum((moves - moves.mean(axis=0)) ** 2, axis=0))
 
 
 def _scale(p):
@@ -866,7 +1170,12 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                          f"its axes are {', '.join(model.machine.axes)}")
     reference = measured_reference(trace, model.machine.servo_period)
     before = _on_trace(trace, reference.t, simulate_batch([model], reference, settle=0.0, check=not identified)["tool_position"][0])
+    cycles = standstill_cycles(trace, reference, trace.actual - before)
     noise = noise_level(trace.actual - before, trace.actual)
+    for i, cycle in cycles.items():  # the noise is what is white: a limit cycle is left out of its estimate
+        quiet = ~cycle["samples"]
+        if quiet.sum() >= 16:
+            noise[i] = noise_level((trace.actual - before)[quiet, i:i + 1], trace.actual[quiet, i:i + 1])[0]
     warnings = []
     scored = np.ones(len(trace.t), bool)
     speed = np.linalg.norm(reference.velocity, axis=1)
@@ -881,12 +1190,14 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                         "(forces such as force_N are relative to that axis, not in real newtons)")
     if len(trace.axes) == 1:
         warnings.append("one axis: gain_mismatch cannot be told from the nominal position gain and is not a candidate")
-    problem = _Problem(trace, model, noise, scored)
+    problem = _Problem(trace, model, noise, scored, identified)
     raw = (trace.actual - before)[scored]
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
     where = locate(trace, problem.reference, np.where(scored[:, None], trace.actual - before - raw.mean(axis=0), 0.0))
-    for round_ in range(max_effects):
+    lost = _not_following(trace, before, scored)
+    warnings += lost
+    for round_ in range(0 if lost else max_effects):
         base = problem.base
         rss0 = float(problem.base_residual @ problem.base_residual)
         if rss0 <= problem.n * NOISE_FLOOR**2:
@@ -894,12 +1205,21 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             break
         cands = _candidates(problem, base)
         say(f"[effect {round_ + 1}] starting values of {len(cands)} candidates (one batch)")
-        _start(problem, cands, base)
+        cands = _start(problem, cands, base, warnings)
         cands = [c for c in cands if c.delta_bic > 0]  # no row of its grid explains anything: not refined
+        refined = []
         for i, cand in enumerate(cands):
-            _refine(problem, cand, base)
+            try:
+                _refine(problem, cand, base)
+            except _FIT_FAILURES as exc:
+                warnings.append(f"{cand.effect.label}{_options(cand.effect)}: left out, its fit failed ({exc})")
+                continue
+            if cand.fit.name == "vibration" and cand.fit["damping_ratio"] >= 0.99 * _MODE_DAMPING_MAX:
+                continue  # the fit runs to the damping bound: a filter in disguise, not a lightly damped mode
+            refined.append(cand)
             say(f"[effect {round_ + 1}, {i + 1}/{len(cands)}] {cand.effect.label:<22}"
                 f"{_options(cand.effect):<26} RMS {_rms_um(problem.unwhiten(cand.residual)):8.3f} µm")
+        cands = refined
         _rescore(problem, cands)
         cands.sort(key=lambda c: -c.delta_bic)
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
@@ -907,27 +1227,48 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             break
         best = cands[0]
         rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
-        if rival is not None:
-            warnings.append(
-                f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
-                f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
-                f"{_separating_test(best.fit, rival.fit)}")
-        # the nominal parameters refitted with the effect in place, then the effect refitted around them
-        problem.set_base(base.with_effect(best.fit), refit=_REFIT_STEPS)
-        problem.set_base(Model(problem.base.machine, base.effects))
-        best.x = np.array([best.fit[name] for name in best.free])
-        _refine(problem, best, problem.base)
-        problem.set_base(problem.base.with_effect(best.fit), refit=_REFIT_STEPS)
-        if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
-            best.fit = _constant_force(problem, best.fit)
-            problem.set_base(problem.base.with_effect(best.fit))
-            warnings.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
-                            "measurement's zero offset; without an integrator in the velocity loop the two "
-                            "cannot be told apart")
-        steps.append(_step(problem, best.fit.label, best.fit, best.uncertainty, best.delta_bic))
+        ambiguity = None if rival is None else (
+            f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
+            f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
+            f"{_separating_test(best.fit, rival.fit)}")
+        try:
+            _settle(problem, base, best, warnings)
+        except _FIT_FAILURES as exc:
+            warnings.append(f"{best.fit.label}: not named, the refit with it in place failed ({exc})")
+            problem.set_base(base)
+            break
+        step = _step(problem, best.fit.label, best.fit, best.uncertainty, best.delta_bic)
+        if not step.rms_um < steps[-1].rms_um:  # an effect that does not close any of the gap is no explanation
+            warnings.append(f"{best.fit.label}: not named, its fit does not lower the residual "
+                            f"({steps[-1].rms_um:.4g} -> {step.rms_um:.4g} µm RMS)")
+            problem.set_base(base)
+            break
+        if ambiguity is not None:
+            warnings.append(ambiguity)
+        steps.append(step)
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
-    return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, problem.fitted(), scored,
-                     problem.base, where, tuple(warnings))
+    after = problem.fitted()
+    left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
+    warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "
+                 f"{c['frequency']:.3g} Hz while the reference stands still (not noise)" for i, c in cycles.items()]
+    return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, after, scored,
+                     problem.base, where, tuple(warnings), tuple(left))
+
+
+def _settle(problem, base, best, warnings):
+    """Make `base` with `best`'s effect the problem's base: nominal parameters refitted with it in place, then the
+    effect refitted around them, then the nominal parameters again."""
+    problem.set_base(base.with_effect(best.fit), refit=_REFIT_STEPS)
+    problem.set_base(Model(problem.base.machine, base.effects))
+    best.x = np.array([best.fit[name] for name in best.free])
+    _refine(problem, best, problem.base)
+    problem.set_base(problem.base.with_effect(best.fit), refit=_REFIT_STEPS)
+    if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
+        best.fit = _constant_force(problem, best.fit)
+        problem.set_base(problem.base.with_effect(best.fit))
+        warnings.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
+                        "measurement's zero offset; without an integrator in the velocity loop the two "
+                        "cannot be told apart")
 
 
 def _settling_time(servo):
@@ -960,10 +1301,10 @@ def synthetic_trace(model, trajectory, mismatch=0.03, noise_um=0.1, quantum_um=0
     """A trace as a real machine would log it: `model` with its nominal parameters a little off, noise, quantisation.
 
     What the diagnosis is tested on: the "truth" is `model` (a nominal
-    machine plus hidden effects) with every axis's mass, damping and
-    velocity gain, and the position gain shared by all axes, scaled by
-    independent factors uniform in ``1 ± mismatch``; the recorded positions
-    carry Gaussian noise and are rounded to `quantum_um`.
+    machine plus hidden effects) with every axis's plant — mass, force
+    constant and damping — scaled by independent factors uniform in
+    ``1 ± mismatch`` (the controller's settings are software: exact); the
+    recorded positions carry Gaussian noise and are rounded to `quantum_um`.
 
     Parameters
     ----------
@@ -994,8 +1335,7 @@ def synthetic_trace(model, trajectory, mismatch=0.03, noise_um=0.1, quantum_um=0
     rng = np.random.default_rng(seed)
     machine = model.machine
     factor = lambda: 1.0 + rng.uniform(-mismatch, mismatch)  # noqa: E731
-    kp = factor()
-    servos = {a: replace(s, kp=s.kp * kp, mass=s.mass * factor(), damping=s.damping * factor(), kv=s.kv * factor())
+    servos = {a: replace(s, mass=s.mass * factor(), force_constant=s.force_constant * factor(), damping=s.damping * factor())
               for a, s in machine.axes.items()}
     truth = Model(replace(machine, axes=servos), model.effects)
     result = simulate(truth, trajectory, contour=False)

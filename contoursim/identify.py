@@ -2,7 +2,7 @@
 
 Users often do not know their drives' parameters. From the commanded and
 measured positions alone, :func:`identify_machine` fits a cascade of a P
-position loop around a P velocity loop with velocity feedforward:
+position loop around a P or PI velocity loop with velocity feedforward:
 
 - ONE position gain ``kp`` [1/s] shared by all axes (NC position gains are
   normally set equal; a gain identified per axis would silently absorb a
@@ -11,8 +11,12 @@ position loop around a P velocity loop with velocity feedforward:
   the NC, like the gain);
 - per axis, the velocity-loop bandwidth ``ω_v`` [rad/s]: with the plant's
   mass and force constant fixed at :data:`MASS` and :data:`FORCE_CONSTANT`,
-  ``kv = ω_v·MASS/FORCE_CONSTANT``. The position loop's damping follows
-  from ``kp/ω_v``.
+  ``kv = ω_v·MASS/FORCE_CONSTANT``, at most a fifth of the Nyquist
+  frequency (a faster loop is beyond what the sampled controller can do);
+  the position loop's damping follows from ``kp/ω_v``;
+- per axis, where the trace shows it, the velocity loop's integral time
+  ``ti`` (as ``ti·ω_v``, between 1.5 and 50): most drives run PI velocity
+  loops, which a P loop can only imitate with an unbounded ``ω_v``.
 
 A position trace carries no force, so the mass is not identifiable: forces
 of in-loop effects fitted on an identified machine (``force_N`` of
@@ -26,7 +30,12 @@ commanded velocity and acceleration (a P/P cascade lags by
 simulator, each finite-difference Jacobian one :func:`simulate_batch` call:
 first without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
-transients tell them apart.
+transients tell them apart; then with a PI velocity loop, kept likewise
+(or when the P loop's bandwidth ran to its bound: it was imitating an
+integrator).
+With a feedforward near 1 the steady lag is gone and kp shows only in the
+transients: :func:`identify_machine` is then weakly determined in kp
+(:data:`WEAK_KP_VFF`; the diagnosis says so).
 """
 
 import numpy as np
@@ -36,7 +45,8 @@ from .machine import Machine
 from .servo import AxisServo
 from .simulation import measured_reference, simulate_batch
 
-__all__ = ["FORCE_CONSTANT", "MASS", "SIGNIFICANT", "autocorrelation_time", "delta_bic", "identify_machine", "servo_period_for"]
+__all__ = ["FORCE_CONSTANT", "MASS", "SIGNIFICANT", "WEAK_KP_VFF", "autocorrelation_time", "delta_bic", "identify_machine",
+           "servo_period_for"]
 
 #: ΔBIC a parameter or an effect must add to be kept (2·ln Bayes factor > 10: "very strong", Kass & Raftery 1995).
 SIGNIFICANT = 10.0
@@ -45,7 +55,12 @@ MASS = 100.0
 #: Force constant assumed for an identified axis [N/A]: with MASS, kv [A·s/m] = ω_v [rad/s].
 FORCE_CONSTANT = 100.0
 
+#: An identified velocity feedforward at or above this leaves almost no steady lag: kp is weakly identifiable.
+WEAK_KP_VFF = 0.9
+
 _FD_STEP = 1e-3
+_BANDWIDTH_FRACTION = 0.2  # highest identified velocity-loop bandwidth, a fraction of the Nyquist frequency
+_TI_RANGE = (1.5, 50.0)  # range of ti·ω_v of an identified PI velocity loop [-]
 
 
 def servo_period_for(dt):
@@ -65,10 +80,14 @@ def servo_period_for(dt):
 
 
 def _machine(axes, period, x):
-    """The machine of parameter vector ``x = (log kp, vff, log ω_v per axis)``."""
+    """The machine of ``x = (log kp, vff, log ω_v per axis[, log(ti·ω_v) per axis])`` (the last: a PI velocity loop)."""
     kp, vff = float(np.exp(x[0])), float(x[1])
-    servos = {a: AxisServo(mass=MASS, force_constant=FORCE_CONSTANT, kv=float(np.exp(w)) * MASS / FORCE_CONSTANT,
-                           kp=kp, vff=vff) for a, w in zip(axes, x[2:])}
+    d = len(axes)
+    servos = {}
+    for i, a in enumerate(axes):
+        w = float(np.exp(x[2 + i]))
+        ti = float(np.exp(x[2 + d + i])) / w if len(x) > 2 + d else None
+        servos[a] = AxisServo(mass=MASS, force_constant=FORCE_CONSTANT, kv=w * MASS / FORCE_CONSTANT, kp=kp, vff=vff, ti=ti)
     return Machine(servos, period, name="identified from the trace")
 
 
@@ -90,7 +109,7 @@ def _start(trace, reference, period):
     for b in curv:
         inv = b + 1.0 / kp**2  # 1/(kp·ω_v)
         w = 1.0 / (kp * inv) if inv > 0 else 10.0 * kp
-        x.append(np.log(np.clip(w, 3.0 * kp, 0.2 * nyquist)))
+        x.append(np.log(np.clip(w, 3.0 * kp, _BANDWIDTH_FRACTION * nyquist)))
     return np.array(x)
 
 
@@ -112,16 +131,19 @@ def identify_machine(trace, servo_period=None, progress=None):
     Machine
         Axes named as the trace's, each an :class:`AxisServo` with
         ``mass = MASS``, ``force_constant = FORCE_CONSTANT``, the shared
-        ``kp`` and ``vff`` and its own ``kv``.
+        ``kp`` and ``vff`` and its own ``kv`` (and ``ti`` where a PI
+        velocity loop explains the trace significantly better).
     """
     period = servo_period_for(trace.dt) if servo_period is None else float(servo_period)
     reference = measured_reference(trace, period)
     axes = trace.axes
     x0 = _start(trace, reference, period)
     nyquist = np.pi / period
-    lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * len(axes))
-    upper = np.array([np.log(0.5 * nyquist), 0.99] + [np.log(0.5 * nyquist)] * len(axes))
-    x0 = np.clip(x0, lower + 1e-6, upper - 1e-6)
+    d = len(axes)
+    top = _BANDWIDTH_FRACTION * nyquist
+    lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d)
+    upper = np.array([np.log(0.5 * top), 0.99] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d)
+    x0 = np.clip(x0, lower[: x0.size] + 1e-6, upper[: x0.size] - 1e-6)
     measured = trace.actual
     scale = max(float(np.std(trace.tracking_error)), 1e-6)
     cache = {}
@@ -139,6 +161,8 @@ def identify_machine(trace, servo_period=None, progress=None):
 
     def jac(x, free):
         steps = {j: _FD_STEP * (1 if x[j] + _FD_STEP <= upper[j] else -1) for j in np.flatnonzero(free)}
+        if not np.all(np.isfinite(fun(x))):
+            raise FloatingPointError("the identified loop diverged on this trace")
         rows = [x + h * np.eye(x.size)[j] for j, h in steps.items()]
         r0 = fun(x)
         cols = [((measured - y) / scale).ravel() for y in outputs(rows)]
@@ -154,20 +178,43 @@ def identify_machine(trace, servo_period=None, progress=None):
             full[free] = z
             return full
 
+        lo, hi = lower[: x.size][free], upper[: x.size][free]
         fit = least_squares(lambda z: fun(part(z)), x[free], jac=lambda z: jac(part(z), free),
-                            bounds=(lower[free], upper[free]), x_scale=1.0, max_nfev=40)
+                            bounds=(lo, hi), x_scale=1.0, max_nfev=40)
         return part(fit.x)
 
     # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
     # transients show it (ΔBIC over the fit without it), else a valley of (kp, vff) pairs fits alike
     x0[1] = 0.0
-    x1 = fitted(x0, np.array([j != 1 for j in range(x0.size)]))
+    try:  # a fit that drives the loop unstable on this trace stops where it was
+        x1 = fitted(x0, np.array([j != 1 for j in range(x0.size)]))
+    except FloatingPointError:
+        x1 = x0
     r1 = fun(x1).copy()
-    x2 = fitted(x1, np.ones(x0.size, bool))
-    r2 = fun(x2)
-    tau = autocorrelation_time(r2.reshape(len(trace.t), len(axes)))
-    keep = delta_bic(float(r1 @ r1), float(r2 @ r2), r2.size, 1, tau) > SIGNIFICANT
-    return _machine(axes, period, x2 if keep else x1)
+    try:
+        x2 = fitted(x1, np.ones(x0.size, bool))
+    except FloatingPointError:
+        x2 = x1
+    r2 = fun(x2).copy()
+    tau = autocorrelation_time(r2.reshape(len(trace.t), d))
+    feedforward = delta_bic(float(r1 @ r1), float(r2 @ r2), r2.size, 1, tau) > SIGNIFICANT
+    best, rss = (x2, float(r2 @ r2)) if feedforward else (x1, float(r1 @ r1))
+    # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
+    x3 = np.concatenate([best, np.full(d, np.log(4.0))])
+    x3[2: 2 + d] = np.minimum(x3[2: 2 + d], np.log(0.5 * top))
+    free = np.ones(x3.size, bool)
+    free[1] = feedforward
+    try:
+        x3 = fitted(x3, free)
+    except FloatingPointError:
+        return _machine(axes, period, best)
+    r3 = fun(x3)
+    tau = autocorrelation_time(r3.reshape(len(trace.t), d))
+    # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
+    pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
+    integral = np.all(np.isfinite(r3)) and (delta_bic(rss, float(r3 @ r3), r3.size, d, tau) > SIGNIFICANT
+                                             or (pressed and float(r3 @ r3) <= rss))
+    return _machine(axes, period, x3 if integral else best)
 
 
 def autocorrelation_time(x):

@@ -34,7 +34,7 @@ from .config import TomlFile
 from .exceptions import ConfigError, UnstableLoopError
 from .servo import AxisServo
 
-__all__ = ["CARTESIAN", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
+__all__ = ["CARTESIAN", "CONTROLLER_FIELDS", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
 
 CARTESIAN = ("x", "y", "z")
 
@@ -62,6 +62,10 @@ class Machine:
         Axis positions at which the tool tip is at the path's origin (the
         work offset, as G54 sets it) [mm, rad]. Axes not given sit at the
         middle of their travel (0 without one). Only with a `chain`.
+    uncertain : mapping str -> tuple of str, optional
+        Per axis, the controller settings (:data:`CONTROLLER_FIELDS`) that
+        are not known exactly: the diagnosis's nominal refit may move them
+        (it trusts the others, and doubts the plant).
     """
 
     axes: dict
@@ -70,6 +74,7 @@ class Machine:
     name: str = ""
     max_feed: float = None
     work_offset: dict = None
+    uncertain: dict = None
 
     def __post_init__(self):
         axes = dict(self.axes)
@@ -97,6 +102,15 @@ class Machine:
             raise ValueError(f"work_offset names axes {unknown} that the machine does not have")
         offset = {a: _validate.finite_array(f"work_offset[{a!r}]", v, ndim=0).item() for a, v in offset.items()}
         object.__setattr__(self, "work_offset", MappingProxyType(offset))
+        uncertain = {a: tuple(fields) for a, fields in (self.uncertain or {}).items() if fields}
+        for a, fields in uncertain.items():
+            if a not in axes:
+                raise ValueError(f"uncertain names axis {a!r}, which the machine does not have")
+            bad = [f for f in fields if f not in CONTROLLER_FIELDS or getattr(axes[a], f) is None]
+            if bad:
+                raise ValueError(f"uncertain: {bad[0]!r} of axis {a} is not a controller setting the axis has; "
+                                 f"controller settings: {', '.join(CONTROLLER_FIELDS)}")
+        object.__setattr__(self, "uncertain", MappingProxyType(uncertain))
         object.__setattr__(self, "axes", MappingProxyType(axes))
         object.__setattr__(self, "servo_period", _validate.positive("servo_period", self.servo_period))
         if self.max_feed is not None:
@@ -244,6 +258,8 @@ SERVO_KEYS = MappingProxyType({
     "kc_V_per_A": "kc",
     "ti_current_s": "ti_current",
 })
+#: The controller's settings among the servo parameters (the rest is the plant): what ``uncertain`` may list.
+CONTROLLER_FIELDS = ("kp", "kv", "ti", "vff", "aff", "kc", "ti_current")
 #: Keys of earlier versions -> the keys that replaced them.
 _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
 # a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")
@@ -319,9 +335,15 @@ def load_machine(name_or_file, geometry=True, effects=False):
         raise toml.error(str(exc), str(exc).split()[0]) from None
     fields = AxisServo.__dataclass_fields__
     required = [key for key, name in SERVO_KEYS.items() if fields[name].default is MISSING]
-    servos = {}
+    servos, uncertain = {}, {}
     for axis in toml.table("axes"):
-        table = toml.table("axes", axis, allowed=SERVO_KEYS, required=required, renamed=_RENAMED)
+        table = dict(toml.table("axes", axis, allowed=(*SERVO_KEYS, "uncertain"), required=required, renamed=_RENAMED))
+        listed = table.pop("uncertain", [])
+        controller = {key for key, name in SERVO_KEYS.items() if name in CONTROLLER_FIELDS}
+        if not isinstance(listed, list) or any(key not in controller or key not in table for key in listed):
+            raise toml.error(f"axis {axis}: uncertain must list controller keys given in [axes.{axis}] "
+                             f"(of {', '.join(sorted(controller))}), got {listed!r}", "axes", axis, "uncertain")
+        uncertain[axis] = tuple(SERVO_KEYS[key] for key in listed)
         try:
             servos[axis] = AxisServo(**{SERVO_KEYS[key]: value for key, value in table.items()})
         except (TypeError, ValueError) as exc:
@@ -338,7 +360,7 @@ def load_machine(name_or_file, geometry=True, effects=False):
             raise toml.error(_file_names(exc), "servo_period_ms") from None
     try:
         return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
-                       max_feed=max_feed, work_offset=offset)
+                       max_feed=max_feed, work_offset=offset, uncertain=uncertain)
     except (TypeError, ValueError) as exc:
         raise toml.error(str(exc), "axes") from None
 

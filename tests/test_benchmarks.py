@@ -3,6 +3,7 @@
 import runpy
 import sys
 
+import numpy as np
 import pytest
 
 from conftest import ROOT
@@ -16,3 +17,39 @@ def test_benchmark_script_loads(script, monkeypatch):
     namespace = runpy.run_path(str(script), run_name="benchmark_under_test")
     assert callable(namespace.get("main")), f"{script.name} has no main()"
     monkeypatch.delitem(sys.modules, "bench_chain", raising=False)
+
+
+@pytest.fixture
+def independent_truth(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import independent_truth
+
+    return independent_truth
+
+
+@pytest.mark.parametrize("vff, computation_delay", [(0.0, 0), (0.8, 1)])
+def test_independent_truth_lags_its_ramp_by_the_closed_form(independent_truth, vff, computation_delay):
+    """The independent simulator's axis (PI velocity loop on encoder differences, delays, current loop, stiff
+    screw) at constant speed lags its reference by v·(1 − vff)/kp, the P position loop's steady error."""
+    it = independent_truth
+    axis = dict(mass=300.0, kf=900.0, damping=600.0, kv=60.0, ti=0.02, kp=35.0, motor_share=0.3, tau_i=1.5e-4,
+                tau_v=2e-4, res_m=0.01 / 2**20, res_s=5e-8, screw_hz=2000.0, screw_zeta=0.02)
+    dt, speed = 2.5e-4, 0.05  # [s], [m/s]
+    t = np.arange(int(1.5 / dt)) * dt
+    ctrl = np.array([axis["kp"], axis["kv"], axis["ti"], vff, 50.0, computation_delay, axis["tau_v"], 0.0,
+                     axis["res_m"], axis["res_s"], 0.0])
+    table, _, _ = it._run_axis(speed * t, np.full(t.size, speed), it._plant_vector(axis, None, "rigid", "x"), ctrl, dt, 100)
+    lag = (speed * t - table)[t > 1.2]
+    assert np.mean(lag) == pytest.approx(speed * (1 - vff) / axis["kp"], rel=2e-3, abs=2e-9)
+    assert np.ptp(lag) < 1e-7  # steady: within 0.1 µm
+
+
+def test_independent_truth_writes_a_contract_trace_and_a_data_sheet(independent_truth, tmp_path):
+    from contoursim.model import load_model
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("two_mass", "backlash", 3, tmp_path)
+    trace, model = read_trace(case.csv), load_model(case.machine_file)
+    assert trace.axes == ("x", "y") and trace.dt == pytest.approx(case.notes["log_s"])
+    assert case.truth["name"] == "backlash" and case.signal_um > 0
+    assert all(servo.vff == case.notes["vff"] for servo in model.machine.axes.values())

@@ -33,7 +33,8 @@ def test_the_nightly_fleet_names_the_drifting_backlash_and_the_broken_log(tmp_pa
     (failed,) = summary["failed"]
     assert failed["trace"].endswith("night_2026-11-02.csv")
     assert failed["error"] == "night_2026-11-02.csv, line 201: expected 5 cells (as in the header), found 3"
-    assert re.search(r"backlash.x +on +4 of 5 traces: lost_motion_um 4 … 10", printed)
+    shown = re.search(r"backlash.x +on +4 of 5 traces: lost_motion_um ([\d.]+) … ([\d.]+)", printed)
+    assert [float(v) for v in shown.groups()] == pytest.approx([4.0, 10.0], abs=0.2)
     written = {p.name for p in (tmp_path / "out").iterdir()}
     assert {"fleet.json", "fleet.png"} | {f"night_{d}.json" for d in NIGHTS} <= written
     report = json.loads((tmp_path / "out" / "night_2026-10-05.json").read_text())
