@@ -15,7 +15,7 @@ from .exceptions import ConfigError
 __all__ = ["FORMAT_DOC", "TomlFile", "read_text"]
 
 #: Where messages send a user for the keys of every file.
-FORMAT_DOC = "README.md, section 'File format'"
+FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
 
 # what each kind of file looks like, for a message when one is given where another is expected
 _KINDS = {

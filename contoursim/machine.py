@@ -1,7 +1,7 @@
 """A machine: servo axes at a common servo period, and optionally their geometry.
 
 A machine file (TOML) holds both halves; every key carries its unit in its
-name (the README section "File format" lists them all). The servo half::
+name (the section "File format" of docs/machines-and-files.md lists them all). The servo half::
 
     name = "demo mill"
     servo_period_ms = 0.2

@@ -993,7 +993,7 @@ def chain_from_toml(toml, *keys, extra=()):
     This is the geometric half of a machine file (see
     :func:`contoursim.machine.load_machine`, which also reads the servo
     half). The description reads like the machine; every key carries its
-    unit (the README section "File format" lists them all)::
+    unit (the section "File format" of docs/machines-and-files.md lists them all)::
 
         name = "3-axis vertical mill"
         tool = "tool"                 # the body carrying the tool

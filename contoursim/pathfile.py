@@ -118,7 +118,7 @@ def read_path_file(file, direction=None):
     Parameters
     ----------
     file : str or os.PathLike
-        A ``.toml`` path file (keys in the README section "File format"), a
+        A ``.toml`` path file (keys in docs/machines-and-files.md, "File format"), a
         G-code program (a suffix of :data:`contoursim.gcode.SUFFIXES`; see
         :func:`contoursim.gcode.read_gcode`), or the name of either in the
         trajectories library (see :func:`library_file`).

@@ -1,6 +1,6 @@
 """A short tour of the contoursim API: machine, path, feed, simulation, trace and plots.
 
-The README's API tour is this script without its prints; a test checks that
+The API tour of docs/api.md is this script without its prints; a test checks that
 they agree and that both run twice in a row.
 
 python examples/api_tour.py [OUT_DIR]

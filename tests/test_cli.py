@@ -173,7 +173,7 @@ def test_keys_without_their_unit_are_refused_with_the_new_name(tmp_path, capsys)
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'm.toml'}, line 7: key 'mass' in [axes.x] is now 'mass_kg' (units in the key name): rename it" in err
-    assert "README.md, section 'File format'" in err
+    assert "docs/machines-and-files.md, section 'File format'" in err
     job = tmp_path / "job.toml"
     job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { x = 250 }\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "o")]) == 2

@@ -48,8 +48,8 @@ def _contour_within_tracking(folder):
 
 
 def _readme_tour():
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    return re.search(r"## API tour\n\n```python\n(.*?)```", readme, re.S).group(1)
+    page = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    return re.search(r"## API tour\n\n```python\n(.*?)```", page, re.S).group(1)
 
 
 def test_api_tour_agrees_with_the_readme_prints_v_over_kp_and_runs_twice(tmp_path, monkeypatch, capsys):
@@ -57,11 +57,11 @@ def test_api_tour_agrees_with_the_readme_prints_v_over_kp_and_runs_twice(tmp_pat
     script_lines = [line.strip() for line in tour.splitlines()]
     readme_lines = [line.strip() for line in _readme_tour().splitlines() if line.strip()]
     missing = [line for line in readme_lines if line not in script_lines and "output_dir(" not in line]
-    assert not missing, f"README lines not in examples/api_tour.py: {missing}"
+    assert not missing, f"docs/api.md lines not in examples/api_tour.py: {missing}"
 
     monkeypatch.chdir(tmp_path)
     for _ in range(2):  # the second run replaces its own files
-        exec(compile(_readme_tour(), "README.md", "exec"), {})
+        exec(compile(_readme_tour(), "docs/api.md", "exec"), {})
         monkeypatch.setattr(sys, "argv", ["api_tour.py", str(tmp_path / "out")])
         runpy.run_path(str(EXAMPLES / "api_tour.py"), run_name="__main__")
     assert {"circle.csv", "circle_path.png"} <= {p.name for p in (tmp_path / "contoursim-out").iterdir()}
