@@ -200,11 +200,9 @@ def _set_values(effect):
 
 def compare_command(args):
     """``contoursim compare FILE [--strategies a,b] [--json R.json]``: compensation strategies side by side."""
-    import json
-
     from .comparison import compare
     from .compensation import STRATEGY_NAMES
-    from .output import atomic_write
+    from .output import atomic_write, report_file
     from .plotting import save_comparison_figures
 
     model, path_file, job, geometric = _job(args)
@@ -212,14 +210,7 @@ def compare_command(args):
         raise job.error("compare runs the strategies of --strategies: compose geometric compensation there "
                         "(e.g. --strategies none,geometric,geometric+ccc_arc)", "geometric_compensation")
     names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
-    report = Path(args.json) if args.json else None
-    if report is not None and report.exists():  # replace only a comparison JSON, never a file the user keeps
-        try:
-            ours = isinstance(json.loads(report.read_text(encoding="utf-8")).get("runs"), dict)
-        except (ValueError, UnicodeDecodeError, AttributeError):
-            ours = False
-        if not ours:
-            raise FileExistsError(f"{report} exists and is not a comparison JSON; refusing to overwrite it")
+    report = report_file(args.json, "runs", "comparison JSON")  # never a file the user keeps
     comparison = compare(model, _trajectory(model, path_file, job), names)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)
@@ -244,23 +235,14 @@ def volumetric(args):
 
 def diagnose_command(args):
     """``contoursim diagnose MEASURED.csv [--model M.toml] [--report R.json]``: name what the nominal model lacks."""
-    import json
-
     from .diagnosis import diagnose, save_figures
     from .model import load_model
-    from .output import writing
+    from .output import report_file, writing
     from .traces import read_trace
 
     trace = read_trace(args.file)
     model = load_model(args.model) if args.model else None
-    report = Path(args.report) if args.report else None
-    if report is not None and report.exists():  # replace only a diagnosis report, never a file the user keeps
-        try:
-            ours = "residual_rms_before_um" in json.loads(report.read_text(encoding="utf-8"))
-        except (ValueError, UnicodeDecodeError, TypeError):
-            ours = False
-        if not ours:
-            raise FileExistsError(f"{report} exists and is not a diagnosis report; refusing to overwrite it")
+    report = report_file(args.report, "residual_rms_before_um", "diagnosis report")  # never a file the user keeps
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
     result = diagnose(trace, model, progress=lambda line: print(line, file=sys.stderr, flush=True))
