@@ -245,7 +245,12 @@ def diagnose_command(args):
     report = report_file(args.report, "residual_rms_before_um", "diagnosis report")  # never a file the user keeps
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
-    result = diagnose(trace, model, progress=lambda line: print(line, file=sys.stderr, flush=True))
+    try:
+        result = diagnose(trace, model, progress=lambda line: print(line, file=sys.stderr, flush=True))
+    except ConfigError:  # naming its own file (the model's)
+        raise
+    except ValueError as exc:  # what the trace cannot give: naming it
+        raise ConfigError(str(exc), args.file) from None
     if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")

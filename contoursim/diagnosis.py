@@ -853,7 +853,16 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     Returns
     -------
     Diagnosis
+
+    Raises
+    ------
+    ValueError
+        The trace has fewer than 3 samples (the noise floor is estimated
+        from second differences), or the model lacks one of its axes.
     """
+    if len(trace.t) < 3:
+        raise ValueError(f"a diagnosis needs at least 3 samples (its noise floor is estimated from second differences); "
+                         f"the trace has {len(trace.t)}")
     say = progress or (lambda text: None)
     identified = model is None
     if identified:
