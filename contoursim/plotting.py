@@ -238,9 +238,13 @@ def plot_path_error(result, ax=None, magnification=None):
         _, _, bend = traj.path.derivatives(contour.s[ia])  # curvature vector, towards the centre of the bend
         if np.any(k * np.einsum("ij,ij->i", result.tool_position[ia] - contour.foot[ia], bend[:, : traj.dim]) > 1):
             notes.append(f"loops: ×{k:g} error exceeds the bend radius, not overshoot")
-        corners = traj.path.breaks[1:-1][traj.path.corner_angles() > 1e-6]  # arc length of sharp corners
-        near = np.abs(contour.s[ia, None] - corners[None, :]) < 5 * contour.magnitude[ia, None]
-        if near.any():  # the foot switches between the two sides' normals there
+        corners = traj.path.breaks[1:-1][traj.path.corner_angles() > 1e-6]  # arc length of sharp corners, increasing
+        s_shown, gap = contour.s[ia], np.inf  # distance to the nearest corner: at - 1 or at, no (points, corners) table
+        if corners.size:
+            at = np.searchsorted(corners, s_shown)
+            gap = np.minimum(np.abs(s_shown - corners[np.maximum(at - 1, 0)]),
+                             np.abs(s_shown - corners[np.minimum(at, corners.size - 1)]))
+        if np.any(gap < 5 * contour.magnitude[ia]):  # the foot switches between the two sides' normals there
             notes.append(f"near sharp corners the ×{k:g} offset turns between two normals: fans, not overshoot")
     ax.set_title(title + "".join(f"\n{n}" for n in notes), fontsize="medium")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize="small", frameon=False)
