@@ -13,6 +13,7 @@ matplotlib) when they run, so that ``contoursim --help`` answers at once.
 
 import argparse
 import gc
+import math
 import os
 import sys
 import warnings
@@ -46,19 +47,35 @@ def _trajectory(model, path_file, job=None):
     """The path file's reference at the model's servo period; a job's ``[feed]`` overrides the file's key by key."""
     from .feed import sample
     from .model import as_model
-    from .pathfile import load_path_file, read_feed_table
+    from .pathfile import library_file, load_path_file, read_feed_table
 
     path, settings = load_path_file(path_file)
+    source = library_file(path_file)
     if job is not None and "feed" in job.data:
         settings = read_feed_table(job, base=settings)
+        source = job.source if "feed_mm_min" in job.data["feed"] else source
     machine = as_model(model).machine
-    return sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+    try:
+        return sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period)
+    except ConfigError:
+        raise
+    except ValueError as exc:  # a feed above the machine's max feed, a run too large for the memory: naming the file
+        raise ConfigError(str(exc), str(source)) from None
 
 
-def run_job(model, path_file, job=None, strategies=(), label=None):
+def _check_memory(samples, dt, path_file, runs, advice):
+    """Refuse `runs` runs of `samples` samples each (a path file's, settling included) that would not fit in memory."""
+    from ._memory import check
+
+    check(samples, f"{Path(path_file).name} runs for {samples * dt:.6g} s: at dt = {dt:.6g} s", advice, runs=runs)
+
+
+def run_job(model, path_file, job=None, strategies=(), label=None, runs=1):
     """Simulate `model` (a Model, or a Machine without effects) on a path file.
 
     A job file's ``[feed]`` table, when given, overrides the path file's key by key.
+    `runs` is the number of such runs the command will hold at once: refused
+    before this one starts when they would not fit in the memory available.
 
     Returns
     -------
@@ -71,6 +88,8 @@ def run_job(model, path_file, job=None, strategies=(), label=None):
 
     # held here as simulate would hold it, so that the reference before holding is freed before the run
     trajectory = _trajectory(model, path_file, job).held(default_settle(as_model(model).machine))
+    if runs > 1:  # one run is checked when the reference is sampled
+        _check_memory(len(trajectory), trajectory.dt, path_file, runs, "run without geometric compensation, or a shorter path")
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
@@ -177,7 +196,7 @@ def simulate_command(args):
     machine = model.machine
     if (geometric or args.geometric_compensation) and machine.chain is None:
         raise ConfigError(f"{machine.name} has no geometric model to compensate with")
-    runs = [run_job(model, path_file, job)]
+    runs = [run_job(model, path_file, job, runs=2 if geometric or args.geometric_compensation else 1)]
     if geometric or args.geometric_compensation:
         runs.append(run_job(model, path_file, job, [GeometricCompensation(machine.chain)],
                             label=f"{Path(path_file).stem}_geometric_comp"))
@@ -203,6 +222,7 @@ def compare_command(args):
     from .comparison import compare
     from .compensation import STRATEGY_NAMES
     from .output import atomic_write, report_file
+    from .simulation import default_settle
     from .plotting import save_comparison_figures
 
     model, path_file, job, geometric = _job(args)
@@ -211,7 +231,10 @@ def compare_command(args):
                         "(e.g. --strategies none,geometric,geometric+ccc_arc)", "geometric_compensation")
     names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
     report = report_file(args.json, "runs", "comparison JSON")  # never a file the user keeps
-    comparison = compare(model, _trajectory(model, path_file, job), names)
+    trajectory, dt = _trajectory(model, path_file, job), model.machine.servo_period
+    _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
+                  "compare fewer strategies (--strategies) or a shorter path")
+    comparison = compare(model, trajectory, names)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)
     if report is not None:  # the files before the table: a reader gone half-way (| head) costs none of them
@@ -305,19 +328,30 @@ def main(argv=None):
                                           help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")
     args = parser.parse_args(argv)
 
-    def show(message, category, *details):
+    def show(message, category, filename, lineno, *details):
         if issubclass(category, ContoursimWarning):
             print(f"contoursim {args.command}: warning: {message}", file=sys.stderr)
-        else:
-            default_show(message, category, *details)
+        else:  # a backstop: one line, saying where (the sources of such warnings are guarded)
+            print(f"contoursim {args.command}: warning: {category.__name__}: {message} "
+                  f"({Path(filename).name}, line {lineno})", file=sys.stderr)
 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("always", ContoursimWarning)
-            default_show, warnings.showwarning = warnings.showwarning, show
+            warnings.showwarning = show
             args.run(args)
     except (ConfigError, UnstableLoopError, ValueError, TypeError, FileExistsError, OutputError) as exc:
         print(f"contoursim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # the reader of the output is gone: run() ends the program
+        raise
+    except OSError as exc:  # a backstop: a file the checks above did not name
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"contoursim {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:  # a backstop: the memory checks estimate, the system decides
+        print(f"contoursim {args.command}: error: out of memory: the job needs more than this machine has free; "
+              "files already complete are kept", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"contoursim {args.command}: interrupted; files already complete are kept, none is left half-written",

@@ -56,7 +56,10 @@ class Comparison:
         return json.dumps({"runs": self.figures}, indent=2)
 
     def table(self):
-        """The comparison as a text table; the last column is the max contour error's change relative to ``none``."""
+        """The comparison as a text table; the last column is the max contour error's change relative to ``none``.
+
+        Where ``none`` has no contour error (a move along one axis), no change is relative to it: the column is empty.
+        """
         figures = self.figures
         base = figures.get("none", {}).get("contour_max_um")
         head = (f"{'strategy':<24}{'contour max':>13}{'contour RMS':>13}{'tracking max':>14}{'tracking RMS':>14}"
@@ -64,7 +67,7 @@ class Comparison:
         units = f"{'':<24}{'[µm]':>13}{'[µm]':>13}{'[µm]':>14}{'[µm]':>14}{'[A]':>14}{'':>11}{'[%]':>11}"
         lines = [head, units, "-" * len(head)]
         for name, f in figures.items():
-            change = "" if base is None or name == "none" else f"{100 * (f['contour_max_um'] / base - 1):+.4g}"
+            change = "" if not base or name == "none" else f"{100 * (f['contour_max_um'] / base - 1):+.4g}"
             lines.append(f"{name:<24}{f['contour_max_um']:>13.4g}{f['contour_rms_um']:>13.4g}{f['tracking_max_um']:>14.4g}"
                          f"{f['tracking_rms_um']:>14.4g}{f['peak_current_A']:>14.4g}{'yes' if f['saturated'] else 'no':>11}"
                          f"{change:>11}")

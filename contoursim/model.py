@@ -63,7 +63,9 @@ class Model:
     effects : tuple of Effect
         At most one effect of a name per axis (labels ``name.axis`` unique);
         in-loop, servo and command effects act on servo axes, geometric ones
-        on linear axes of the chain (any of x, y, z without one).
+        on linear axes of the chain (any of x, y, z without one). A feedback
+        ``time_delay`` is at most :data:`contoursim.kernel.MAX_DELAY_SAMPLES`
+        servo periods.
 
     Examples
     --------
@@ -98,6 +100,11 @@ class Model:
             if missing:
                 what = "linear axes" if e.stage == "geometry" else "servo axes"
                 raise ValueError(f"{e.label}: the machine has no axis {missing[0]!r} among its {what} ({', '.join(allowed)})")
+            most = kernel.MAX_DELAY_SAMPLES * self.machine.servo_period
+            if e.name == "time_delay" and e.stage == "loop" and e["delay_s"] > most * (1 + 1e-12):
+                raise ValueError(f"{e.label}: a feedback delay is at most {kernel.MAX_DELAY_SAMPLES} servo periods, "
+                                 f"{most:.6g} s on this machine, got delay_s = {e['delay_s']:g} s; "
+                                 'a command delay (kind = "command") may be up to 0.1 s')
         object.__setattr__(self, "effects", effects)
 
     # -- parameters --------------------------------------------------------------------------
@@ -260,7 +267,11 @@ def load_model(name_or_file, geometry=True):
 
 
 def with_file_effects(model, toml):
-    """`model` with the ``[[effect]]`` tables of a machine or job file added (same name and axis: replaced).
+    """`model` with the ``[[effect]]`` tables of a machine or job file added.
+
+    An effect of the same name and axis as one of `model` replaces it (a job
+    file's effect overrides its machine file's); the same effect twice in
+    one file is refused.
 
     Parameters
     ----------
@@ -275,9 +286,15 @@ def with_file_effects(model, toml):
     Raises
     ------
     ConfigError
-        Naming the file and line of a bad table, or of an effect on an axis the machine lacks.
+        Naming the file and line of a bad table, of an effect on an axis the
+        machine lacks or beyond what it allows, or of an effect given twice.
     """
+    first = {}
     for i, effect in enumerate(read_effects(toml)):
+        if effect.label in first:
+            raise toml.error(f"{effect.label} is given twice in this file (in [[effect]] tables {first[effect.label] + 1} "
+                             f"and {i + 1}): one effect of a name per axis; merge the two", "effect", i, "name")
+        first[effect.label] = i
         try:
             model = model.with_effect(effect)
         except (TypeError, ValueError) as exc:

@@ -669,7 +669,8 @@ def _loop_margins(loop):
     w_phase = w_phase[_loop_response(loop, w_phase).real < 0] if w_phase.size else w_phase
     gm, pm, wpc, wgc = np.inf, np.inf, np.nan, np.nan
     if w_phase.size:
-        gains = 1.0 / np.abs(_loop_response(loop, w_phase))
+        with np.errstate(divide="ignore", over="ignore"):  # a loop gain below 1e-308 there: an infinite margin
+            gains = 1.0 / np.abs(_loop_response(loop, w_phase))
         best = np.argmin(np.abs(np.log(gains)))  # the gain margin closest to 1
         gm, wpc = gains[best], w_phase[best]
     if w_gain.size:
@@ -845,11 +846,13 @@ def check(servo, dt, axis="x"):
         else:
             continue
         gain = _GAIN_OF[loop]
+        crossing = (f"phase margin {m['phase_margin']:.3g} deg at {m['gain_crossover'] / (2 * np.pi):.4g} Hz"
+                    if np.isfinite(m["gain_crossover"]) else "no gain crossover (the loop gain never reaches 1)")
         raise UnstableLoopError(
             f"the {loop} loop of axis {axis!r} {problem} at dt = {dt:.6g} s: gain margin "
-            f"{m['gain_margin']:.3g}, phase margin {m['phase_margin']:.3g} deg at "
-            f"{m['gain_crossover'] / (2 * np.pi):.4g} Hz, damping ratio {m['damping_ratio']:.3g} "
-            f"({gain} = {getattr(servo, gain):.6g}): {_REMEDY[loop]}.",
+            f"{m['gain_margin']:.3g}, {crossing}, damping ratio {m['damping_ratio']:.3g} "
+            f"({gain} = {getattr(servo, gain):.6g}): "
+            f"{_REMEDY[loop] if np.isfinite(m['gain_crossover']) else f'raise {gain}, or check the mass ({servo.mass:.6g} kg)'}.",
             margins=m,
         )
     return sampled
