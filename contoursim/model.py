@@ -100,11 +100,8 @@ class Model:
             if missing:
                 what = "linear axes" if e.stage == "geometry" else "servo axes"
                 raise ValueError(f"{e.label}: the machine has no axis {missing[0]!r} among its {what} ({', '.join(allowed)})")
-            most = kernel.MAX_DELAY_SAMPLES * self.machine.servo_period
-            if e.name == "time_delay" and e.stage == "loop" and e["delay_s"] > most * (1 + 1e-12):
-                raise ValueError(f"{e.label}: a feedback delay is at most {kernel.MAX_DELAY_SAMPLES} servo periods, "
-                                 f"{most:.6g} s on this machine, got delay_s = {e['delay_s']:g} s; "
-                                 'a command delay (kind = "command") may be up to 0.1 s')
+            if _delay_problem(e, self.machine):
+                raise ValueError(_delay_problem(e, self.machine))
         object.__setattr__(self, "effects", effects)
 
     # -- parameters --------------------------------------------------------------------------
@@ -295,11 +292,22 @@ def with_file_effects(model, toml):
             raise toml.error(f"{effect.label} is given twice in this file (in [[effect]] tables {first[effect.label] + 1} "
                              f"and {i + 1}): one effect of a name per axis; merge the two", "effect", i, "name")
         first[effect.label] = i
+        if _delay_problem(effect, model.machine):
+            raise toml.error(_delay_problem(effect, model.machine), "effect", i, "delay_s")
         try:
             model = model.with_effect(effect)
         except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "effect", i, "axis") from None
     return model
+
+
+def _delay_problem(effect, machine):
+    """What is wrong with `effect` as a feedback delay of `machine` (beyond the kernel's ring buffer), or None."""
+    most = kernel.MAX_DELAY_SAMPLES * machine.servo_period
+    if effect.name == "time_delay" and effect.stage == "loop" and effect["delay_s"] > most * (1 + 1e-12):
+        return (f"{effect.label}: a feedback delay is at most {kernel.MAX_DELAY_SAMPLES} servo periods, {most:.6g} s "
+                f"on this machine, got delay_s = {effect['delay_s']:g} s; a command delay (kind = \"command\") may be up to 0.1 s")
+    return None
 
 
 def _keep_vary(new, old):

@@ -664,7 +664,8 @@ def _loop_margins(loop):
     omega = _frequency_grid(loop)
     response = _loop_response(loop, omega)
     # gain crossovers: |L| = 1; phase crossovers: L crosses the negative real axis
-    w_gain = _crossings(loop, omega, lambda L: np.log(np.abs(L)))
+    with np.errstate(divide="ignore"):  # |L| = 0 (a loop gain below 1e-308): -inf, no crossing there
+        w_gain = _crossings(loop, omega, lambda L: np.log(np.abs(L)))
     w_phase = _crossings(loop, omega, lambda L: L.imag)
     w_phase = w_phase[_loop_response(loop, w_phase).real < 0] if w_phase.size else w_phase
     gm, pm, wpc, wgc = np.inf, np.inf, np.nan, np.nan
