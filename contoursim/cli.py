@@ -222,8 +222,8 @@ def compare_command(args):
     from .comparison import compare
     from .compensation import STRATEGY_NAMES
     from .output import atomic_write, report_file
-    from .simulation import default_settle
     from .plotting import save_comparison_figures
+    from .simulation import default_settle
 
     model, path_file, job, geometric = _job(args)
     if geometric:

@@ -240,8 +240,8 @@ def read_trace(file):
     if len(body) < 2:
         raise fail(f"needs at least 2 data rows, found {len(body)}")
     limits = np.array([MAX_TIME] + [MAX_POSITION] * (len(wanted) - 1))
-    data = _parse_rows(body, len(names), index, names, limits / scale, [units.get(n, "s" if n == "t" else "mm") for n in wanted],
-                       lambda msg, row: fail(msg, header_line + 1 + row))
+    written = [units.get(name, "s" if name == "t" else "mm") for name in wanted]  # the units of the cells
+    data = _parse_rows(body, len(names), index, names, limits / scale, written, lambda msg, row: fail(msg, header_line + 1 + row))
     if (scale != 1.0).any():
         data *= scale
     try:
@@ -256,13 +256,14 @@ def read_trace(file):
     for i, axis in enumerate(axes):
         gain = _following_gain(data[:, 1 + 2 * i], data[:, 2 + 2 * i])
         if not FOLLOWING_GAIN[0] <= gain <= FOLLOWING_GAIN[1]:
-            raise fail(f"column {axis!r}: the measured {axis} does not follow {axis}_ref: it moves {gain if abs(gain) >= 1e-3 else 0:.3g} mm per mm "
-                       f"of {axis}_ref (a servo axis following its command moves about 1): columns swapped or units wrong?")
+            gain = gain if abs(gain) >= 1e-3 else 0.0  # not -3.8e-18 for a swapped circle
+            raise fail(f"column {axis!r}: the measured {axis} does not follow {axis}_ref: it moves {gain:.3g} mm per mm of "
+                       f"{axis}_ref (a servo axis following its command moves about 1): columns swapped or units wrong?")
     return Trace(data[:, 0], data[:, 1::2], data[:, 2::2], axes, metadata)
 
 
 def _following_gain(reference, actual):
-    """The slope of `actual` regressed on `reference` [mm/mm]: about 1 for an axis that follows; 1 for a reference that does not move."""
+    """The slope of `actual` regressed on `reference` [mm/mm]: about 1 for an axis that follows (1 if it does not move)."""
     motion = reference - reference.mean()
     spread = float(motion @ motion)
     if spread <= (1e-3) ** 2 * reference.size:  # moves less than 1 µm RMS: nothing to tell
@@ -291,9 +292,8 @@ def _declared_units(text, wanted, fail):
     for name, unit in units.items():
         known = TIME_UNITS if name == "t" else LENGTH_UNITS
         if unit not in known:
-            kind = "time" if name == "t" else "position"
-            raise fail(f"column {name!r} is declared in {unit!r}; the {kind} columns are read in "
-                       f"{', '.join(known)}")
+            read = "column 't' is" if name == "t" else "the position columns are"
+            raise fail(f"column {name!r} is declared in {unit!r}; {read} read in {', '.join(known)}")
     return units
 
 

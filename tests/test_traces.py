@@ -203,7 +203,7 @@ def test_declared_units_are_honoured(tmp_path, units, t_scale, x_scale):
 
 @pytest.mark.parametrize("head, line, words", [
     ("# units: t [s]; x_ref, x [deg]\n", 1, "column 'x_ref' is declared in 'deg'; the position columns are read in mm, m"),
-    ("# units: t [min]\n", 1, "column 't' is declared in 'min'; the time columns are read in s, ms"),
+    ("# units: t [min]\n", 1, "column 't' is declared in 'min'; column 't' is read in s, ms"),
     ("# c\n# units: metric\n", 2, "the units 'metric' cannot be read: write them as contoursim does, "
                                   "'# units: t [s]; x_ref, x [mm]'"),
 ])
