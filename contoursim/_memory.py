@@ -2,7 +2,8 @@
 
 A run's samples are the unit: :data:`RUN_BYTES_PER_SAMPLE` covers one run
 from its reference to its trace CSV and plots, :data:`COMPARED_RUN_BYTES_PER_SAMPLE`
-each further run a comparison keeps beside it.
+each further run a comparison keeps beside it, :data:`DIAGNOSIS_BYTES_PER_SAMPLE`
+a diagnosis.
 """
 
 import os
@@ -16,6 +17,11 @@ RUN_BYTES_PER_SAMPLE = 450
 #: 79,000-sample circle of the demo mill peaked at 646 bytes a sample with one strategy and 1,479 with
 #: six, with its plots (tracemalloc), 167 bytes a further run; tests/test_cli.py checks the figure covers it.
 COMPARED_RUN_BYTES_PER_SAMPLE = 250
+
+#: Peak memory of ``diagnose`` per sample of the trace resampled at the servo period [bytes]: a diagnosis of a
+#: 2-D circle on the demo mill with backlash and noise, nominal model given, peaked at 3,739 bytes a sample on
+#: 78,551 samples and 3,932 on 224,404 (tracemalloc), 4,036 bytes per further sample.
+DIAGNOSIS_BYTES_PER_SAMPLE = 4500
 
 
 def available():
@@ -39,7 +45,7 @@ def available():
         return None
 
 
-def check(samples, what, advice, runs=1):
+def check(samples, what, advice, runs=1, per_sample=RUN_BYTES_PER_SAMPLE):
     """Refuse runs of `samples` samples that would not fit in the memory available.
 
     Parameters
@@ -51,15 +57,18 @@ def check(samples, what, advice, runs=1):
     advice : str
         What to check, ending the message.
     runs : int
-        Runs held at once: the first takes :data:`RUN_BYTES_PER_SAMPLE` a
-        sample, each further one :data:`COMPARED_RUN_BYTES_PER_SAMPLE`.
+        Runs held at once: the first takes `per_sample` bytes a sample,
+        each further one :data:`COMPARED_RUN_BYTES_PER_SAMPLE`.
+    per_sample : int
+        Bytes a sample of the first run takes: :data:`RUN_BYTES_PER_SAMPLE`
+        for a simulation, :data:`DIAGNOSIS_BYTES_PER_SAMPLE` for a diagnosis.
 
     Raises
     ------
     ValueError
         More memory is needed than is available (nothing is checked where that is unknown).
     """
-    needed = samples * (RUN_BYTES_PER_SAMPLE + (runs - 1) * COMPARED_RUN_BYTES_PER_SAMPLE)
+    needed = samples * (per_sample + (runs - 1) * COMPARED_RUN_BYTES_PER_SAMPLE)
     free = available()
     if free is not None and needed > free:
         held = "a run of them" if runs == 1 else f"{runs} runs of them"

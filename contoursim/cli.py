@@ -258,13 +258,20 @@ def volumetric(args):
 
 def diagnose_command(args):
     """``contoursim diagnose MEASURED.csv [--model M.toml] [--report R.json]``: name what the nominal model lacks."""
+    from ._memory import DIAGNOSIS_BYTES_PER_SAMPLE, check
     from .diagnosis import diagnose, save_figures
+    from .identify import servo_period_for
     from .model import load_model
     from .output import report_file, writing
     from .traces import read_trace
 
     trace = read_trace(args.file)
     model = load_model(args.model) if args.model else None
+    period = model.machine.servo_period if model is not None else servo_period_for(trace.dt)
+    duration = trace.t[-1] - trace.t[0]
+    check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
+          "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
+          per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
     report = report_file(args.report, "residual_rms_before_um", "diagnosis report")  # never a file the user keeps
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)

@@ -19,6 +19,8 @@ from contoursim.machine import load_machine, preset_file
 from contoursim.output import output_dir
 from contoursim.paths import circle
 from contoursim.plotting import save_comparison_figures
+from contoursim.simulation import measured_reference
+from contoursim.traces import read_trace
 
 SMALL_PATH = """
 [feed]
@@ -95,7 +97,9 @@ def test_measured_trace_faults_end_in_one_line_naming_the_file(tmp_path, capsys,
     slow = _trace(tmp_path / "slow.csv", 1e3 * t, x, x, head="# units: t [s]\n")
     _refused(capsys, ["diagnose", str(slow), "--model", "demo_mill", *out],
              f"{slow}: the trace lasts 1999 s: every servo period of 0.0002 s that is 9.995e+06 samples, a run of them needs "
-             "about 4.5 GB of memory and 1 GB are available")
+             "about 45 GB of memory and 1 GB are available")  # a diagnosis: 4,500 bytes a sample
+    with pytest.raises(ValueError, match="that is 9.995e.06 samples, a run of them needs about 4.5 GB"):
+        measured_reference(read_trace(slow), 2e-4)  # one simulated run (450 bytes a sample) in Python, refused before
     assert not (tmp_path / "out").exists()
 
 
