@@ -374,8 +374,8 @@ def locate(trace, reference, residual):
         scores = []
         for name, f in features.items():
             f = f - f.mean()
-            if np.any(f):
-                target = np.abs(r) - np.abs(r).mean() if name.startswith("reversals") else r
+            target = np.abs(r) - np.abs(r).mean() if name.startswith("reversals") else r
+            if np.ptp(f) > 0 and np.ptp(target) > 0:  # a constant (to its rounding) has none: corrcoef would divide by 0
                 scores.append((abs(float(np.corrcoef(target, f)[0, 1])), name))
         period, share = _spatial_period(trace.reference[:, i], r)
         if period is not None:

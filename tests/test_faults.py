@@ -221,3 +221,13 @@ def test_machine_values_far_out_of_range_end_in_one_line_without_a_warning(tmp_p
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
                       str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, line {line}: ", words)
+
+
+@pytest.mark.parametrize("n, dt, noise", [(5, 1e-3, 0.0), (50, 0.1, 1e-3), (500, 1e-4, 1e-6)])
+def test_a_trace_that_stands_still_is_diagnosed_without_a_numpy_warning(tmp_path, capsys, n, dt, noise):
+    t = np.arange(n) * dt
+    x = np.full(n, 420.735492)  # rounded as a logger writes it: its mean differs from it in the last bit
+    _trace(tmp_path / "still.csv", t, x, x + np.random.default_rng(3).normal(0, noise, n))
+    assert main(["diagnose", str(tmp_path / "still.csv"), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "Warning" not in err and "error" not in err, err
