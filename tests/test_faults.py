@@ -17,6 +17,7 @@ from contoursim.compensation import STRATEGY_NAMES
 from contoursim.feed import plan, sample
 from contoursim.machine import load_machine, preset_file
 from contoursim.output import output_dir
+from contoursim.pathfile import load_path_file
 from contoursim.paths import circle
 from contoursim.plotting import save_comparison_figures
 from contoursim.simulation import measured_reference
@@ -109,10 +110,9 @@ def test_measured_trace_faults_end_in_one_line_naming_the_file(tmp_path, capsys,
 def test_compare_is_refused_before_it_runs_when_its_runs_would_not_fit(tmp_path, capsys, monkeypatch):
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     machine = load_machine("demo_mill")
-    trajectory = sample(*(lambda p: (p, plan(p, 10.0, 500.0)))(circle((0, 0), 2.0)), machine.servo_period)
-    # the file's run is about this long; with room for three of its runs, six strategies are refused
-    n = len(trajectory)
-    monkeypatch.setattr(_memory, "available", lambda: 3 * _memory.RUN_BYTES_PER_SAMPLE * n)
+    path, settings = load_path_file(tmp_path / "small.toml")
+    n = len(sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period))  # the file's run
+    monkeypatch.setattr(_memory, "available", lambda: 3 * _memory.RUN_BYTES_PER_SAMPLE * n)  # room for one, not six
     _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out")],
              "small.toml runs for", "6 runs of them needs about", "compare fewer strategies (--strategies)")
     assert not (tmp_path / "out").exists()
