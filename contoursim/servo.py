@@ -72,6 +72,11 @@ class _LazyControl:
 
 ct = _LazyControl()
 
+#: Largest value of a servo parameter in its SI unit (kg, N/A, A·s/m, s, 1/s, N·s/m, H, Ω, ...), and the inverse of
+#: the smallest nonzero one (the feedforward fractions vff, aff aside): beyond, products of parameters in the loop
+#: analysis overflow, and no machine has them.
+MAX_PARAMETER = 1e12
+
 #: A loop whose phase margin [deg] is below this is rejected as badly damped.
 MIN_PHASE_MARGIN_DEG = 30.0
 #: A loop whose closed-loop poles have a damping ratio below this is rejected.
@@ -175,6 +180,9 @@ class AxisServo:
             checked["kc"] = _validate.positive("kc", self.kc)
             checked["ti_current"] = _validate.positive("ti_current", self.ti_current)
         for name, value in checked.items():
+            if name not in ("vff", "aff") and value != 0 and not 1.0 / MAX_PARAMETER <= value <= MAX_PARAMETER:
+                raise ValueError(f"{name} must lie within [{1.0 / MAX_PARAMETER:g}, {MAX_PARAMETER:g}] (in its SI unit), "
+                                 f"got {value:g}: not a physical value")
             object.__setattr__(self, name, value)
 
     # -- SI -> internal units (mm, s, A, V), the one place they are converted --------------

@@ -213,8 +213,10 @@ def test_compare_on_a_move_along_one_axis_has_no_change_relative_to_none(tmp_pat
 
 @pytest.mark.parametrize("key, value, line, words", [
     ("servo_period_ms = 0.5", "servo_period_ms = 1e-300", 3, "servo_period_ms must lie in [0.001, 1000] ms"),
-    ("ti_s = 0.016", "ti_s = 1e-300", 3, "is too long for the velocity loop of axis 'x'"),
-    ("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 1e-300", 6, "no gain crossover (the loop gain never reaches 1)"),
+    ("ti_s = 0.016", "ti_s = 1e-300", 10, "axis x: ti_s must lie within [1e-12, 1e+12] (in its SI unit), got 1e-300"),
+    ("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 1e-300", 9, "axis x: kv_A_s_per_m must lie within [1e-12, 1e+12]"),
+    ("force_constant_N_per_A = 942.0", "force_constant_N_per_A = 1e308", 8, "force_constant_N_per_A must lie within"),
+    ("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 1e-9", 6, "no gain crossover (the loop gain never reaches 1)"),
 ])
 def test_machine_values_far_out_of_range_end_in_one_line_without_a_warning(tmp_path, capsys, key, value, line, words):
     (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).replace(key, value, 1))
