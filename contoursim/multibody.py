@@ -67,6 +67,7 @@ _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
 MAX_TRAVEL = 1e6  # [mm or rad]: largest |end| of an axis's travel (a kilometre; a trace holds positions as far)
+_LARGEST_NUMBER = 1e12  # largest |number| in a machine file's geometric half (offsets, travels, error terms)
 SMALL_ERROR = 0.01  # a machine file's error motions stay within this: [rad] of angle, and of a linear travel's length
 
 
@@ -1236,4 +1237,6 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
 def _number(value, fail, *key):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
         raise fail(f"expected a finite number, got {value!r}", *key)
+    if abs(value) > _LARGEST_NUMBER:  # 1e308 overflows the error motions and the chain's products
+        raise fail(f"{value:g} is beyond ±{_LARGEST_NUMBER:g}, not a value a machine has", *key)
     return float(value)

@@ -183,21 +183,29 @@ def test_a_feed_over_the_machines_max_names_the_file(tmp_path, capsys):
 
 
 def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
-    (tmp_path / "m.toml").write_text(MACHINE.format(mass=1e20))
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=1e11))  # a heavy axis: the loop gain never reaches 1
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     message = _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"),
                                 "--out", str(tmp_path / "out")],
-                       f"{tmp_path / 'm.toml'}, line 6: the velocity loop of axis 'x' is unstable",
+                       f"{tmp_path / 'm.toml'}, line 6: the velocity loop of axis 'x' is badly damped",
                        "no gain crossover (the loop gain never reaches 1)", "raise kv_A_s_per_m, or check the mass")
     assert "nan" not in message and "inf deg" not in message
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=1e20))  # beyond any machine
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, line 7: axis x: mass_kg must lie within [1e-12, 1e+12]")
     preset = preset_file("vertical_mill_3axis").read_text()
     table = preset_file("vertical_mill_3axis").parent / "vertical_mill_x_laser.csv"  # the X body's error table, beside it
     (tmp_path / table.name).write_text(table.read_text())
-    for travel, words in (("[0, 4e12]", "Y.travel holds 4e+12 at index (1,), beyond ±1e+06"),
-                          ("[0, 4e5]", "its error motion dx reaches 7.992e+06 µm at 400000 mm of its travel: beyond the "
-                                       "small errors a machine's model is for (0.01 of the travel's length)")):
-        (tmp_path / "big.toml").write_text(preset.replace("travel_mm = [0, 400]", f"travel_mm = {travel}"))
-        line = preset.splitlines().index("[[body]]") + 1  # the first [[body]], Y's (1-based)
+    body = preset.splitlines().index("[[body]]") + 1  # the first [[body]], Y's (1-based)
+    for old, new, line, words in (
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e9]", body, "Y.travel holds 4e+09 at index (1,), beyond ±1e+06"),
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e13]", body + 5, "4e+13 is beyond ±1e+12, not a value a machine has"),
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e5]", body, "its error motion dx reaches 7.992e+06 µm at 400000 mm of "
+                                                               "its travel: beyond the small errors a machine's model is "
+                                                               "for (0.01 of the travel's length)"),
+        ("dx_um = { poly = [0, 0.02, -5e-5] }", "dx_um = { poly = [0, 1e308] }", body + 7, "1e+308 is beyond ±1e+12"),
+    ):
+        (tmp_path / "big.toml").write_text(preset.replace(old, new, 1))
         _refused(capsys, ["volumetric", str(tmp_path / "big.toml"), "--out", str(tmp_path / "out")],
                  f"{tmp_path / 'big.toml'}, line {line}: body 'Y': {words}")
 
