@@ -68,6 +68,7 @@ def check(samples, what, advice, runs=1, per_sample=RUN_BYTES_PER_SAMPLE):
     ValueError
         More memory is needed than is available (nothing is checked where that is unknown).
     """
+    samples = float(samples)  # a Python int of 1e300 samples would not convert in the message
     needed = samples * (per_sample + (runs - 1) * COMPARED_RUN_BYTES_PER_SAMPLE)
     free = available()
     if free is not None and needed > free:

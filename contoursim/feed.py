@@ -40,6 +40,10 @@ from .trajectory import Trajectory
 
 __all__ = ["FeedProfile", "FeedSettings", "plan", "sample"]
 
+#: Range of a feed [mm/s], acceleration [mm/s^2] and jerk [mm/s^3] of :class:`FeedSettings`: beyond, the
+#: planning's squares and ratios overflow, and no machine moves so.
+SETTING_RANGE = (1e-6, 1e12)
+
 @dataclass(frozen=True)
 class FeedProfile:
     """Piecewise-cubic motion along arc length, from rest at s = 0 to rest at s = length.
@@ -376,6 +380,11 @@ class FeedSettings:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _validate.positive(name, getattr(self, name)))
         object.__setattr__(self, "corner_tolerance", _validate.nonnegative("corner_tolerance", self.corner_tolerance))
+        for name in ("feed", "accel", "jerk", "centripetal_accel"):  # 1e-300 or 1e308 overflow the planning
+            values = np.atleast_1d(np.asarray(getattr(self, name) or 1.0, dtype=float))
+            if not (SETTING_RANGE[0] <= values.min() and values.max() <= SETTING_RANGE[1]):
+                raise ValueError(f"{name} must lie within [{SETTING_RANGE[0]:g}, {SETTING_RANGE[1]:g}] "
+                                 f"(mm/s, mm/s^2, mm/s^3), got {values.min() if values.min() < 1 else values.max():g}")
 
     def plan(self, path, max_feed=None):
         """:func:`plan` with these settings.

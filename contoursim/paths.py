@@ -239,8 +239,9 @@ def _scalar(check, name, value):
         value = check(name, value)
     except ValueError as exc:
         raise PathError(str(exc)) from None
-    if abs(value) > MAX_COORDINATE:  # 1e308 overflows (or hangs) the geometry
-        raise PathError(f"{name} = {value:g} is beyond {MAX_COORDINATE:g}, not a path a machine follows")
+    if not 1.0 / MAX_COORDINATE <= abs(value) <= MAX_COORDINATE and value != 0:  # 1e308 hangs, 1e-300 divides by 0
+        raise PathError(f"{name} = {value:g} is outside [{1.0 / MAX_COORDINATE:g}, {MAX_COORDINATE:g}], "
+                        "not a path a machine follows")
     return value
 
 

@@ -10,6 +10,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from contoursim import _memory
 from contoursim.cli import main
 from contoursim.comparison import compare
@@ -241,3 +242,16 @@ def test_a_trace_that_stands_still_is_diagnosed_without_a_numpy_warning(tmp_path
     assert main(["diagnose", str(tmp_path / "still.csv"), "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
     assert "Warning" not in err and "error" not in err, err
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("center_mm = [0, 0, 0]", "center_mm = [1e308, 0, 0]", "line 12: bad helix [path]: center holds 1e+308"),  # hung
+    ("radius_mm = 20", "radius_mm = 1e-300", "line 13: bad helix [path]: radius = 1e-300 is outside [1e-06, 1e+06]"),
+    ("feed_mm_min = 1000", "feed_mm_min = 1e-300", "feed must lie within [1e-06, 1e+12]"),
+    ("accel_mm_s2 = 1000", "accel_mm_s2 = 1e308", "accel must lie within [1e-06, 1e+12]"),
+])
+def test_path_numbers_far_out_of_range_end_in_one_line(tmp_path, capsys, old, new, words):
+    helix = (ROOT / "trajectories" / "helix.toml").read_text()
+    assert old in helix
+    (tmp_path / "h.toml").write_text(helix.replace(old, new, 1))
+    _refused(capsys, ["simulate", str(tmp_path / "h.toml"), "--out", str(tmp_path / "out")], f"{tmp_path / 'h.toml'}, ", words)
