@@ -13,6 +13,7 @@ matplotlib) when they run, so that ``contoursim --help`` answers at once.
 
 import argparse
 import gc
+import math
 import os
 import shutil
 import sys
@@ -59,22 +60,39 @@ def _trajectory(model, path_file, job=None, direction=None):
     """
     from .feed import sample
     from .model import as_model
-    from .pathfile import read_feed_table, read_path_file
+    from .pathfile import library_file, read_feed_table, read_path_file
     from .simulation import default_settle
 
     read = read_path_file(path_file, direction)
-    settings = read.feed if job is None or "feed" not in job.data else read_feed_table(job, base=read.feed)
+    settings, source = read.feed, library_file(path_file)
+    if job is not None and "feed" in job.data:
+        settings = read_feed_table(job, base=read.feed)
+        source = job.source if "feed_mm_min" in job.data["feed"] else source
     machine = as_model(model).machine
-    # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
-    profile = settings.plan(read.path, max_feed=machine.max_feed, in_position=default_settle(machine))
-    return sample(read.path, profile, machine.servo_period), read.program
+    try:
+        # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
+        profile = settings.plan(read.path, max_feed=machine.max_feed, in_position=default_settle(machine))
+        return sample(read.path, profile, machine.servo_period), read.program
+    except ConfigError:
+        raise
+    except ValueError as exc:  # a feed above the machine's max feed, a run too large for the memory: naming the file
+        raise ConfigError(str(exc), str(source)) from None
 
 
-def run_job(model, path_file, job=None, strategies=(), label=None, direction=None):
+def _check_memory(samples, dt, path_file, runs, advice):
+    """Refuse `runs` runs of `samples` samples each (a path file's, settling included) that would not fit in memory."""
+    from ._memory import check
+
+    check(samples, f"{Path(path_file).name} runs for {samples * dt:.6g} s: at dt = {dt:.6g} s", advice, runs=runs)
+
+
+def run_job(model, path_file, job=None, strategies=(), label=None, direction=None, runs=1):
     """Simulate `model` (a Model, or a Machine without effects) on a path file.
 
     A job file's ``[feed]`` table, when given, overrides the path file's key
-    by key; `direction` ("ccw" or "cw") replaces the path file's.
+    by key; `direction` ("ccw" or "cw") replaces the path file's. `runs` is
+    the number of such runs the command will hold at once: refused before
+    this one starts when they would not fit in the memory available.
 
     Returns
     -------
@@ -89,6 +107,9 @@ def run_job(model, path_file, job=None, strategies=(), label=None, direction=Non
     trajectory, program = _trajectory(model, path_file, job, direction)
     # held here as simulate would hold it, so that the reference before holding is freed before the run
     trajectory = trajectory.held(default_settle(as_model(model).machine))
+    if runs > 1:  # one run is checked when the reference is sampled
+        _check_memory(len(trajectory), trajectory.dt, path_file, runs, "run fewer runs (no geometric compensation, "
+                      "one direction, no nominal run) or a shorter path")
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
@@ -247,11 +268,13 @@ def simulate_command(args):
     directions, subtract = ballbar or ((None,), False)
     variants = [("", [])] + ([("_geometric_comp", [GeometricCompensation(machine.chain)])]
                              if geometric or args.geometric_compensation else [])
+    total = len(directions) * len(variants) * (2 if subtract else 1)  # the runs held at once
     runs, nominal = [], {}
     for direction in directions:
         for suffix, strategies in variants:
             name = (stem if direction is None else f"{stem}_{direction}") + suffix
-            runs.append(run_job(model, path_file, job, strategies, label=name, direction=direction))
+            runs.append(run_job(model, path_file, job, strategies, label=name, direction=direction,
+                                runs=1 if runs else total))  # fmt: skip
             if subtract:  # the same run on the machine without effects
                 nominal[name] = run_job(Model(machine), path_file, job, strategies, direction=direction)[2]
     out, rows, blocks = _write(args.out, {stem: runs}, args.every, nominal or None)
@@ -348,12 +371,11 @@ def compare_command(args):
     FILE as for ``simulate``; a job's ``geometric_compensation = true`` adds the strategy ``geometric``
     unless one of the strategies composes it already.
     """
-    import json
-
     from .comparison import compare
     from .compensation import STRATEGY_NAMES
-    from .output import atomic_write
+    from .output import atomic_write, report_file
     from .plotting import save_comparison_figures
+    from .simulation import default_settle
 
     model, path_file, job, geometric = _job(args)
     settings = {} if job is None else _strategy_settings(job)
@@ -362,15 +384,11 @@ def compare_command(args):
     names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
     if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
         names = [*names, "geometric"]
-    report = Path(args.json) if args.json else None
-    if report is not None and report.exists():  # replace only a comparison JSON, never a file the user keeps
-        try:
-            ours = isinstance(json.loads(report.read_text(encoding="utf-8")).get("runs"), dict)
-        except (ValueError, UnicodeDecodeError, AttributeError):
-            ours = False
-        if not ours:
-            raise FileExistsError(f"{report} exists and is not a comparison JSON; refusing to overwrite it")
-    comparison = compare(model, _trajectory(model, path_file, job)[0], names, settings=settings, tuned=args.tune)
+    report = report_file(args.json, "runs", "comparison JSON")  # never a file the user keeps
+    trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
+    _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
+                  "compare fewer strategies (--strategies) or a shorter path")
+    comparison = compare(model, trajectory, names, settings=settings, tuned=args.tune)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)
     if report is not None:  # the files before the table: a reader gone half-way (| head) costs none of them
@@ -397,11 +415,11 @@ def diagnose_command(args):
 
     Several traces, or a folder of them: :func:`fleet_command`.
     """
-    import json
-
+    from ._memory import DIAGNOSIS_BYTES_PER_SAMPLE, check
     from .diagnosis import diagnose, save_figures
+    from .identify import servo_period_for
     from .model import load_model
-    from .output import writing
+    from .output import report_file, writing
     from .traces import read_trace
 
     if len(args.file) > 1 or Path(args.file[0]).is_dir():
@@ -411,19 +429,23 @@ def diagnose_command(args):
     args.file = args.file[0]
     trace = read_trace(args.file)
     model = load_model(args.model) if args.model else None
-    report = Path(args.report) if args.report else None
-    if report is not None and report.exists():  # replace only a diagnosis report, never a file the user keeps
-        try:
-            ours = "residual_rms_before_um" in json.loads(report.read_text(encoding="utf-8"))
-        except (ValueError, UnicodeDecodeError, TypeError):
-            ours = False
-        if not ours:
-            raise FileExistsError(f"{report} exists and is not a diagnosis report; refusing to overwrite it")
+    period = model.machine.servo_period if model is not None else servo_period_for(trace.dt)
+    duration = trace.t[-1] - trace.t[0]
+    check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
+          "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
+          per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
+    report = report_file(args.report, "residual_rms_before_um", "diagnosis report")  # never a file the user keeps
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
-    result = diagnose(trace, model, progress=_progress_line(sys.stderr))
-    if sys.stderr.isatty():
-        sys.stderr.write("\n")
+    try:
+        result = diagnose(trace, model, progress=_progress_line(sys.stderr))
+    except ConfigError:  # naming its own file (the model's)
+        raise
+    except ValueError as exc:  # what the trace cannot give: naming it
+        raise ConfigError(str(exc), args.file) from None
+    finally:
+        if sys.stderr.isatty():
+            sys.stderr.write("\n")
     if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")
@@ -600,19 +622,30 @@ def main(argv=None, compile_notice=False):
                                           help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")
     args = parser.parse_args(argv)
 
-    def show(message, category, *details):
+    def show(message, category, filename, lineno, *details):
         if issubclass(category, ContoursimWarning):
             print(f"contoursim {args.command}: warning: {message}", file=sys.stderr)
-        else:
-            default_show(message, category, *details)
+        else:  # a backstop: one line, saying where (the sources of such warnings are guarded)
+            print(f"contoursim {args.command}: warning: {category.__name__}: {message} "
+                  f"({Path(filename).name}, line {lineno})", file=sys.stderr)
 
     try:
         with warnings.catch_warnings(), _compile_notice(args.command) if compile_notice else nullcontext():
             warnings.simplefilter("always", ContoursimWarning)
-            default_show, warnings.showwarning = warnings.showwarning, show
+            warnings.showwarning = show
             args.run(args)
     except (ConfigError, UnstableLoopError, ValueError, TypeError, FileExistsError, OutputError) as exc:
         print(f"contoursim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # the reader of the output is gone: run() ends the program
+        raise
+    except OSError as exc:  # a backstop: a file the checks above did not name
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"contoursim {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:  # a backstop: the memory checks estimate, the system decides
+        print(f"contoursim {args.command}: error: out of memory: the job needs more than this machine has free; "
+              "files already complete are kept", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"contoursim {args.command}: interrupted; files already complete are kept, none is left half-written",

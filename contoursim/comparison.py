@@ -170,7 +170,8 @@ class Comparison:
         Errors to the nm (0.001 µm, the trace CSV's resolution); ``clamped``
         is the share of the run's samples on which an axis's current
         command was clamped at its limit; ``PM`` and ``ζ`` those of the
-        coupled loop along the path.
+        coupled loop along the path. Where ``none`` has no contour error to the
+        nm (a move along one axis), no change is relative to it: the column is empty.
         """
         figures, loops = self.figures, self.coupled_loops
         base = figures.get("none", {}).get("contour_max_um")
@@ -179,7 +180,7 @@ class Comparison:
         units = f"{'':<22}{'[µm]':>12}{'[µm]':>12}{'[µm]':>13}{'[µm]':>13}{'[A]':>13}{'[%]':>9}{'[°]':>7}{'':>6}{'[%]':>9}"
         lines = [self.header(), "", head, units, "-" * len(head)]
         for name, f in figures.items():
-            change = "" if base is None or name == "none" else f"{100 * (f['contour_max_um'] / base - 1):+.1f}"
+            change = "" if not base or base < 5e-4 or name == "none" else f"{100 * (f['contour_max_um'] / base - 1):+.1f}"
             loop = loops[name]
             margins = f"{'':>7}{'':>6}" if loop is None else f"{loop['phase_margin']:>7.1f}{loop['damping_ratio']:>6.2f}"
             errors = "".join(f"{_nm(f[key]):>{width}}" for key, width in

@@ -450,8 +450,8 @@ def locate(trace, reference, residual):
         scores = []
         for name, f in features.items():
             f = f - f.mean()
-            if np.any(f):
-                target = np.abs(r) - np.abs(r).mean() if name.startswith("reversals") else r
+            target = np.abs(r) - np.abs(r).mean() if name.startswith("reversals") else r
+            if np.ptp(f) > 0 and np.ptp(target) > 0:  # a constant (to its rounding) has none: corrcoef would divide by 0
                 scores.append((abs(float(np.corrcoef(target, f)[0, 1])), name))
         period, share = _spatial_period(trace.reference[:, i], r)
         if period is not None:
@@ -1157,7 +1157,16 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     Returns
     -------
     Diagnosis
+
+    Raises
+    ------
+    ValueError
+        The trace has fewer than 3 samples (the noise floor is estimated
+        from second differences), or the model lacks one of its axes.
     """
+    if len(trace.t) < 3:
+        raise ValueError(f"a diagnosis needs at least 3 samples (its noise floor is estimated from second differences); "
+                         f"the trace has {len(trace.t)}")
     say = progress or (lambda text: None)
     identified = model is None
     if identified:

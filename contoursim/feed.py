@@ -31,43 +31,18 @@ across them.
 """
 
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import _validate
+from . import _memory, _validate
 from .trajectory import Trajectory
 
 __all__ = ["FeedProfile", "FeedSettings", "plan", "sample"]
 
-#: Peak memory a simulated sample takes in a run, from the reference to the trace CSV and the plots [bytes]:
-#: the limit of :func:`sample`, which refuses a motion whose run would not fit in the memory available.
-#: A 1 M-step run of a 2-D circle on the demo machine grows by ~360 bytes a step beyond what a short
-#: run takes (benchmarks/bench_user.py); tests/test_feed.py checks the figure covers 2-D and 3-D runs.
-RUN_BYTES_PER_SAMPLE = 450
-
-
-def _available_memory():
-    """Memory the system can give a run now [bytes]: ``MemAvailable`` of /proc/meminfo, else the physical memory.
-
-    Returns
-    -------
-    int or None
-        ``None`` where neither is known.
-    """
-    try:
-        with open("/proc/meminfo") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return 1024 * int(line.split()[1])
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, ValueError, OSError):
-        return None
-
+#: Range of a feed [mm/s], acceleration [mm/s^2] and jerk [mm/s^3] of :class:`FeedSettings`: beyond, the
+#: planning's squares and ratios overflow, and no machine moves so.
+SETTING_RANGE = (1e-6, 1e12)
 
 @dataclass(frozen=True)
 class FeedProfile:
@@ -417,6 +392,11 @@ class FeedSettings:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _validate.positive(name, getattr(self, name)))
         object.__setattr__(self, "corner_tolerance", _validate.nonnegative("corner_tolerance", self.corner_tolerance))
+        for name in ("feed", "accel", "jerk", "centripetal_accel"):  # 1e-300 or 1e308 overflow the planning
+            values = np.atleast_1d(np.asarray(getattr(self, name) or 1.0, dtype=float))
+            if not (SETTING_RANGE[0] <= values.min() and values.max() <= SETTING_RANGE[1]):
+                raise ValueError(f"{name} must lie within [{SETTING_RANGE[0]:g}, {SETTING_RANGE[1]:g}] "
+                                 f"(mm/s, mm/s^2, mm/s^3), got {values.min() if values.min() < 1 else values.max():g}")
 
     def plan(self, path, max_feed=None, in_position=0.0):
         """:func:`plan` with these settings.
@@ -465,20 +445,15 @@ def sample(path, profile, dt):
     ------
     ValueError
         The profile does not fit the path, or a run of the motion's samples
-        would need more memory than is available (:data:`RUN_BYTES_PER_SAMPLE`
-        per sample, against the memory the system has available; a very long path or a very slow feed).
+        would need more memory than is available (:func:`contoursim._memory.check`;
+        a very long path or a very slow feed).
     """
     dt = _validate.positive("dt", dt)
     if abs(profile.length - path.length) > 1e-9 * max(1.0, path.length):
         raise ValueError(f"profile length {profile.length} mm differs from the path length {path.length} mm")
     n = max(int(math.ceil(profile.duration / dt)), 1)
-    needed, available = RUN_BYTES_PER_SAMPLE * (n + 1), _available_memory()
-    if available is not None and needed > available:
-        raise ValueError(
-            f"the motion lasts {profile.duration:.6g} s: at dt = {dt:.6g} s that is {n + 1:.4g} samples, "
-            f"a run of them needs about {needed / 1e9:.3g} GB of memory and {available / 1e9:.3g} GB are available; "
-            "check the path length, the feed and the servo period"
-        )
+    _memory.check(n + 1, f"the motion lasts {profile.duration:.6g} s: at dt = {dt:.6g} s",
+                  "check the path length, the feed and the servo period")
     t = np.arange(n + 1) * dt
     s, sdot, sddot = profile.evaluate(t)
     s[-1], sdot[-1], sddot[-1] = path.length, 0.0, 0.0

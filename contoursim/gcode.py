@@ -68,6 +68,7 @@ from .paths import Line, Path, _arc_from_point
 __all__ = ["DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "read_gcode"]
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
+_LARGEST = 1e9  # largest |number| in a word [mm, mm/min, s]: a km-long axis is 1e6 mm
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
 _MODEL_G = (21, 40, 49, 80, 91.1, 94)  # mm, no cutter/tool length compensation, no canned cycle, I/J/K relative, F/min
 _IGNORED_G = {4: "G4 dwell", 43: "G43", 54: "G54", 55: "G55", 56: "G56", 57: "G57", 58: "G58", 59: "G59",
@@ -157,7 +158,10 @@ def _words(raw, fail):
     for match in _WORD.finditer(text):
         if text[pos:match.start()].strip():
             fail(f"cannot read {text[pos:match.start()].strip()!r}")
-        words.append((match.group(1).upper(), float(match.group(2))))
+        value = float(match.group(2))
+        if not abs(value) <= _LARGEST:  # 400 digits are inf, 300 overflow an arc's geometry
+            fail(f"{match.group(1)}{match.group(2)[:10]}...: the number is beyond ±{_LARGEST:g}")
+        words.append((match.group(1).upper(), value))
         pos = match.end()
     if text[pos:].strip():
         fail(f"cannot read {text[pos:].strip()!r}")

@@ -266,7 +266,7 @@ def delta_bic(rss0, rss1, n, k, tau):
     float
     """
     n_eff = n / tau
-    return n_eff * np.log(rss0 / max(rss1, 1e-300)) - k * np.log(n_eff)
+    return n_eff * np.log(max(rss0, 1e-300) / max(rss1, 1e-300)) - k * np.log(n_eff)  # rss0 = 0: a trace followed exactly
 
 
 def _on_trace(trace, t_sim, y):

@@ -264,6 +264,8 @@ CONTROLLER_FIELDS = ("kp", "kv", "ti", "vff", "aff", "kc", "ti_current")
 _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
 # a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")
 _SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| is| \(| \[|,| given| as well|\.|$))")
+#: Servo periods a machine file may give [s]: servo loops from 1 MHz down to 1 Hz.
+SERVO_PERIOD_RANGE = (1e-6, 1.0)
 _SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes", "effect")
 
 
@@ -329,6 +331,9 @@ def load_machine(name_or_file, geometry=True, effects=False):
         raise toml.error("missing key 'servo_period_ms': the servo period [ms]")
     try:
         period = _validate.positive("servo_period_ms", data["servo_period_ms"]) * 1e-3
+        if not SERVO_PERIOD_RANGE[0] <= period <= SERVO_PERIOD_RANGE[1]:
+            raise ValueError(f"servo_period_ms must lie in [{1e3 * SERVO_PERIOD_RANGE[0]:g}, {1e3 * SERVO_PERIOD_RANGE[1]:g}] ms "
+                             f"(servo loops from 1 MHz down to 1 Hz), got {data['servo_period_ms']:g}")
         max_feed = data.get("max_feed_mm_min")
         max_feed = None if max_feed is None else _validate.positive("max_feed_mm_min", max_feed) / 60.0
     except (TypeError, ValueError) as exc:

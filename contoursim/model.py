@@ -63,7 +63,9 @@ class Model:
     effects : tuple of Effect
         At most one effect of a name per axis (labels ``name.axis`` unique);
         in-loop, servo and command effects act on servo axes, geometric ones
-        on linear axes of the chain (any of x, y, z without one).
+        on linear axes of the chain (any of x, y, z without one). A feedback
+        ``time_delay`` is at most :data:`contoursim.kernel.MAX_DELAY_SAMPLES`
+        servo periods.
 
     Examples
     --------
@@ -98,6 +100,8 @@ class Model:
             if missing:
                 what = "linear axes" if e.stage == "geometry" else "servo axes"
                 raise ValueError(f"{e.label}: the machine has no axis {missing[0]!r} among its {what} ({', '.join(allowed)})")
+            if _delay_problem(e, self.machine):
+                raise ValueError(_delay_problem(e, self.machine))
         object.__setattr__(self, "effects", effects)
 
     # -- parameters --------------------------------------------------------------------------
@@ -260,7 +264,11 @@ def load_model(name_or_file, geometry=True):
 
 
 def with_file_effects(model, toml):
-    """`model` with the ``[[effect]]`` tables of a machine or job file added (same name and axis: replaced).
+    """`model` with the ``[[effect]]`` tables of a machine or job file added.
+
+    An effect of the same name and axis as one of `model` replaces it (a job
+    file's effect overrides its machine file's); the same effect twice in
+    one file is refused.
 
     Parameters
     ----------
@@ -275,14 +283,31 @@ def with_file_effects(model, toml):
     Raises
     ------
     ConfigError
-        Naming the file and line of a bad table, or of an effect on an axis the machine lacks.
+        Naming the file and line of a bad table, of an effect on an axis the
+        machine lacks or beyond what it allows, or of an effect given twice.
     """
+    first = {}
     for i, effect in enumerate(read_effects(toml)):
+        if effect.label in first:
+            raise toml.error(f"{effect.label} is given twice in this file (in [[effect]] tables {first[effect.label] + 1} "
+                             f"and {i + 1}): one effect of a name per axis; merge the two", "effect", i, "name")
+        first[effect.label] = i
+        if _delay_problem(effect, model.machine):
+            raise toml.error(_delay_problem(effect, model.machine), "effect", i, "delay_s")
         try:
             model = model.with_effect(effect)
         except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "effect", i, "axis") from None
     return model
+
+
+def _delay_problem(effect, machine):
+    """What is wrong with `effect` as a feedback delay of `machine` (beyond the kernel's ring buffer), or None."""
+    most = kernel.MAX_DELAY_SAMPLES * machine.servo_period
+    if effect.name == "time_delay" and effect.stage == "loop" and effect["delay_s"] > most * (1 + 1e-12):
+        return (f"{effect.label}: a feedback delay is at most {kernel.MAX_DELAY_SAMPLES} servo periods, {most:.6g} s "
+                f"on this machine, got delay_s = {effect['delay_s']:g} s; a command delay (kind = \"command\") may be up to 0.1 s")
+    return None
 
 
 def _keep_vary(new, old):

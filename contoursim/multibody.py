@@ -66,6 +66,9 @@ __all__ = [
 _DIRECTIONS = "xyz"
 _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+MAX_TRAVEL = 1e6  # [mm or rad]: largest |end| of an axis's travel (a kilometre; a trace holds positions as far)
+_LARGEST_NUMBER = 1e12  # largest |number| in a machine file's geometric half (offsets, travels, error terms)
+SMALL_ERROR = 0.01  # a machine file's error motions stay within this: [rad] of angle, and of a linear travel's length
 
 
 def lower_body_array(parents):
@@ -183,7 +186,7 @@ class Body:
         first order, ``rate·τ·(1 − exp(−t/τ))`` (rate at the start, levels
         off at rate·τ). The same for the growth.
     travel : tuple of float, optional
-        Axis travel (min, max) [mm or rad].
+        Axis travel (min, max) [mm or rad], within ±:data:`MAX_TRAVEL`.
     """
 
     name: str
@@ -230,7 +233,7 @@ class Body:
         object.__setattr__(self, "thermal_time_constant",
                            _validate.nonnegative(f"{self.name}.thermal_time_constant", self.thermal_time_constant))
         if self.travel is not None:
-            lo, hi = _validate.finite_array(f"{self.name}.travel", self.travel, shape=(2,))
+            lo, hi = _validate.finite_array(f"{self.name}.travel", self.travel, shape=(2,), limit=MAX_TRAVEL)
             if not lo < hi:
                 raise ValueError(f"{self.name}.travel must be (min, max) with min < max")
             object.__setattr__(self, "travel", (float(lo), float(hi)))
@@ -1138,7 +1141,7 @@ def _body_from_toml(toml, base, where, item, body_index):
         travel = tuple(np.deg2rad(travel)) if rotary else tuple(travel)
     motion = _motion_from_toml(toml, base, where, item, rotary, fail)
     try:
-        return Body(
+        body = Body(
             name=item["name"],
             parent=body_index(item.get("parent", "bed"), *where, "parent"),
             joint=kind,
@@ -1160,6 +1163,27 @@ def _body_from_toml(toml, base, where, item, body_index):
         if isinstance(exc, ConfigError):
             raise
         raise fail(str(exc).removeprefix(f"{item['name']}: ")) from None
+    _check_small_errors(body, fail)
+    return body
+
+
+def _check_small_errors(body, fail):
+    """Refuse error motions that leave the small errors the chain's model is for (:data:`SMALL_ERROR`) over the travel."""
+    if body.travel is None or not body.has_motion_error:
+        return
+    q = np.linspace(*body.travel, 201)
+    error = np.abs(body.motion_error(q))
+    span = body.travel[1] - body.travel[0]
+    limits = [(3, 6, SMALL_ERROR, 1e6, "µrad", "an angle")]
+    if body.joint == "linear":
+        limits.append((0, 3, SMALL_ERROR * span, 1e3, "µm", "of the travel's length"))
+    for first, last, limit, scale, unit, what in limits:
+        k, c = np.unravel_index(np.argmax(error[:, first:last]), (q.size, last - first))
+        if error[k, first + c] > limit:
+            at = f"{np.rad2deg(q[k]):g}°" if body.joint == "rotary" else f"{q[k]:g} mm"
+            raise fail(f"its error motion {COMPONENTS[first + c]} reaches {scale * error[k, first + c]:.4g} {unit} at {at} "
+                       f"of its travel: beyond the small errors a machine's model is for ({SMALL_ERROR:g} {what}); "
+                       "check the coefficients' units and the travel")
 
 
 def _motion_from_toml(toml, base, where, item, rotary, fail):
@@ -1213,4 +1237,6 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
 def _number(value, fail, *key):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
         raise fail(f"expected a finite number, got {value!r}", *key)
+    if abs(value) > _LARGEST_NUMBER:  # 1e308 overflows the error motions and the chain's products
+        raise fail(f"{value:g} is beyond ±{_LARGEST_NUMBER:g}, not a value a machine has", *key)
     return float(value)

@@ -3,10 +3,18 @@
 Every file contoursim writes goes through :func:`atomic_write`: the content
 goes to a temporary file in the same folder, renamed onto the target only once
 complete, so an interrupted run (Ctrl-C, a full disk) leaves either the old
-file or the new one, never a truncated one.
+file or the new one, never a truncated one. A temporary file is named
+``.<name>.<pid>-<8 hex digits>.part``; one left by a process that no longer
+runs (killed with SIGKILL) is removed by the next write of that folder.
+
+Nothing is written through a symbolic link: a file contoursim replaces is
+renamed over the link (the file it pointed at is left as it was), and the
+output folder's record is read and appended to only as a plain file.
 """
 
+import json
 import os
+import re
 import secrets
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
@@ -14,10 +22,11 @@ from pathlib import Path
 
 from .exceptions import ConfigError, OutputError
 
-__all__ = ["OutputDir", "atomic_write", "output_dir", "writing"]
+__all__ = ["OutputDir", "atomic_write", "output_dir", "report_file", "writing"]
 
 _MARKER = ".contoursim-out"
 _MARKER_HEADER = "# written by contoursim; the files it wrote here, one per line, are replaced on each run\n"
+_PART = re.compile(r"\.(?P<name>.+)\.(?P<pid>[0-9]+)-[0-9a-f]{8}\.part")  # atomic_write's temporary files
 
 
 @dataclass(frozen=True)
@@ -39,7 +48,8 @@ class OutputDir:
     Raises
     ------
     ConfigError
-        `path` is a file or holds files and no marker.
+        `path` is a file or holds files and no marker; the marker is a
+        symbolic link or not contoursim's (not UTF-8 text).
     OutputError
         `path` cannot be created (e.g. no permission).
     """
@@ -52,14 +62,21 @@ class OutputDir:
         marker = out / _MARKER
         if out.exists() and not out.is_dir():
             raise ConfigError(f"{out} is a file, not a directory; choose another output directory")
+        if marker.is_symlink():
+            raise _linked(marker)
         if out.exists() and any(out.iterdir()) and not marker.is_file():
             raise ConfigError(f"{out} holds files that contoursim did not write; choose another output directory")
         try:
             out.mkdir(parents=True, exist_ok=True)
-            if not marker.exists():
-                marker.write_text(_MARKER_HEADER, encoding="utf-8")
+            with os.fdopen(os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o666), "w",
+                           encoding="utf-8") as stream:
+                stream.write(_MARKER_HEADER)
+        except FileExistsError:
+            pass  # the folder's record, from an earlier run
         except OSError as exc:
             raise OutputError(f"cannot create the output directory {out}: {exc.strerror}") from None
+        self.written()  # a marker that is not contoursim's is refused before anything is written
+        _remove_stale_parts(out)
 
     def written(self):
         """Names of the files contoursim wrote into the folder (from its marker).
@@ -67,8 +84,23 @@ class OutputDir:
         Returns
         -------
         set of str
+
+        Raises
+        ------
+        ConfigError
+            The marker is a symbolic link or not UTF-8 text.
+        OutputError
+            The marker cannot be read.
         """
-        lines = (self.path / _MARKER).read_text(encoding="utf-8").splitlines()
+        marker = self.path / _MARKER
+        try:
+            with os.fdopen(os.open(marker, os.O_RDONLY | _NOFOLLOW), "rb") as stream:
+                lines = stream.read().decode("utf-8").splitlines()
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{marker} is not contoursim's record of the files it wrote (byte {exc.start} is not "
+                              "UTF-8 text): choose another output directory, or delete it if it is yours") from None
+        except OSError as exc:
+            raise _marker_error(marker, "read", exc) from None
         return {line for line in lines if line and not line.startswith("#")}
 
     def file(self, name):
@@ -117,25 +149,31 @@ class OutputDir:
         Yields
         ------
         file object
-            Open on a temporary file; `name` appears, and is listed in the
-            marker, only when the block ends without an exception.
+            Open on a temporary file; `name` appears only when the block ends
+            without an exception, and is listed in the marker just before
+            (a marker that cannot be written leaves no file it does not list).
 
         Raises
         ------
         FileExistsError
             A file `name` exists in the folder and contoursim did not write it.
         OutputError
-            The file cannot be written.
+            The file, or its line in the marker, cannot be written.
         """
         file = self.file(name)
-        with atomic_write(file, binary=binary) as stream:
+        with atomic_write(file, binary=binary, before_replace=lambda: self._record(name)) as stream:
             yield stream
-        if name not in self.written():
-            try:
-                with open(self.path / _MARKER, "a", encoding="utf-8") as marker:
-                    marker.write(name + "\n")
-            except OSError as exc:
-                raise OutputError(f"cannot record {file} in {self.path / _MARKER}: {exc.strerror}") from None
+
+    def _record(self, name):
+        """List `name` in the marker (once), appending to it as a plain file, never through a link."""
+        if name in self.written():
+            return
+        marker = self.path / _MARKER
+        try:
+            with os.fdopen(os.open(marker, os.O_WRONLY | os.O_APPEND | _NOFOLLOW), "w", encoding="utf-8") as stream:
+                stream.write(name + "\n")
+        except OSError as exc:
+            raise _marker_error(marker, f"record {self.path / name} in", exc) from None
 
     def __str__(self):
         return str(self.path)
@@ -161,12 +199,100 @@ def output_dir(out):
     return out if isinstance(out, OutputDir) else OutputDir(out)
 
 
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)  # POSIX; opening a symbolic link with it fails (ELOOP)
+
+
+def _linked(marker):
+    """The error of a marker that is a symbolic link (never followed: it could point at a user's file)."""
+    return ConfigError(f"{marker} is a symbolic link; contoursim keeps its record of the files it wrote only "
+                       "as a plain file: remove the link or choose another output directory")
+
+
+def _marker_error(marker, doing, exc):
+    """The error of a marker that cannot be read or appended to, saying why."""
+    return _linked(marker) if marker.is_symlink() else OutputError(f"cannot {doing} {marker}: {exc.strerror}")
+
+
+def _alive(pid):
+    """Whether process `pid` may still run (on this machine); True where it cannot be told."""
+    if pid == os.getpid() or os.name != "posix":
+        return True
+    try:
+        os.kill(pid, 0)  # signal 0: nothing is sent, the process's existence is checked
+    except ProcessLookupError:
+        return False
+    except OSError:  # e.g. another user's process
+        return True
+    return True
+
+
+def _remove_stale_parts(folder, name=None):
+    """Remove the temporary files of :func:`atomic_write` in `folder` (of `name` only, if given) whose writer is gone.
+
+    Only plain files named as :func:`atomic_write` names them, by a process
+    that no longer runs, are removed; anything else is left as it is.
+    """
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return
+    for entry in entries:
+        match = _PART.fullmatch(entry.name)
+        if (match and (name is None or match["name"] == name) and entry.is_file(follow_symlinks=False)
+                and not _alive(int(match["pid"]))):
+            try:
+                os.unlink(entry.path)
+            except OSError:
+                pass  # e.g. removed by another run meanwhile
+
+
+def report_file(file, key, what):
+    """Check that a JSON report may be written to `file`: a new name, or a report contoursim wrote there before.
+
+    Parameters
+    ----------
+    file : str or Path or None
+        The report's file (``None``: no report).
+    key : str
+        A key every such report has at its top level (e.g. ``"runs"``).
+    what : str
+        What the report is, for the messages (e.g. ``"comparison JSON"``).
+
+    Returns
+    -------
+    Path or None
+
+    Raises
+    ------
+    ConfigError
+        `file` is a directory.
+    FileExistsError
+        `file` exists and is not such a report: it is the user's, never overwritten.
+    """
+    if file is None:
+        return None
+    file = Path(file)
+    if file.is_dir():
+        raise ConfigError(f"{file} is a directory; name a file to write the {what} to")
+    if file.exists() or file.is_symlink():
+        try:
+            data = json.loads(file.read_text(encoding="utf-8"))
+        except (OSError, ValueError):  # unreadable, not UTF-8, not JSON
+            data = None
+        ours = isinstance(data, dict) and key in data
+        if not ours:
+            raise FileExistsError(f"{file} exists and is not a {what}; refusing to overwrite it")
+    return file
+
+
 @contextmanager
-def atomic_write(file, binary=False):
+def atomic_write(file, binary=False, before_replace=None):
     """Write `file` through a temporary file in the same folder, renamed onto `file` when complete.
 
     If the block raises (or is interrupted), the temporary file is removed and
-    `file` is left as it was.
+    `file` is left as it was. A symbolic link `file` is replaced, not written
+    through. Temporary files of `file` left by killed processes are removed
+    first (see the module docstring).
 
     Parameters
     ----------
@@ -174,6 +300,9 @@ def atomic_write(file, binary=False):
         The file to create or replace.
     binary : bool
         Open in binary mode; text is UTF-8 with the newlines written as given.
+    before_replace : callable, optional
+        Called without arguments once the content is complete, just before
+        it replaces `file`; if it raises, `file` is left as it was.
 
     Yields
     ------
@@ -185,7 +314,8 @@ def atomic_write(file, binary=False):
         The folder is not writable, the disk is full, ... (naming `file`).
     """
     file = Path(file)
-    temporary = file.with_name(f".{file.name}.{secrets.token_hex(4)}.part")
+    _remove_stale_parts(file.parent, file.name)
+    temporary = file.with_name(f".{file.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
     try:
         stream = open(temporary, "xb") if binary else open(temporary, "x", encoding="utf-8", newline="")
     except OSError as exc:
@@ -193,9 +323,13 @@ def atomic_write(file, binary=False):
     try:
         with stream:
             yield stream
+        if before_replace is not None:
+            before_replace()
         os.replace(temporary, file)
     except OSError as exc:
         temporary.unlink(missing_ok=True)
+        if isinstance(exc, OutputError):  # from before_replace, saying what failed
+            raise
         raise OutputError(f"cannot write {file}: {exc.strerror}") from None
     except BaseException:
         temporary.unlink(missing_ok=True)

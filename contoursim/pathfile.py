@@ -231,4 +231,7 @@ def read_feed_table(toml, base=None):
             settings[argument] = convert(key, value)
         except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "feed", key) from None
-    return FeedSettings(**settings)
+    try:
+        return FeedSettings(**settings)
+    except (TypeError, ValueError) as exc:  # a value out of the planner's range
+        raise toml.error(str(exc), "feed") from None

@@ -40,6 +40,7 @@ __all__ = [
 LINE, ARC, SPLINE = 0, 1, 2
 NCOL = 29
 CONTINUITY_TOL = 1e-9  # [mm] gap allowed between consecutive primitives
+MAX_COORDINATE = 1e6  # [mm]: largest |coordinate| and size of a path (a kilometre, as a measured trace's positions)
 _TABLE = 16  # arc-length table intervals per spline piece
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 _GL_X = 0.5 * (_GL_X + 1.0)  # nodes on [0, 1]
@@ -225,7 +226,7 @@ def _evaluate(kinds, rows, breaks, s):
 def _vector(name, value):
     """A 2- or 3-vector as a float (3,) array (z = 0 for 2-vectors)."""
     try:
-        v = _validate.finite_array(name, value, ndim=1)
+        v = _validate.finite_array(name, value, ndim=1, limit=MAX_COORDINATE)
     except ValueError as exc:
         raise PathError(str(exc)) from None
     if v.size not in (2, 3):
@@ -235,15 +236,19 @@ def _vector(name, value):
 
 def _scalar(check, name, value):
     try:
-        return check(name, value)
+        value = check(name, value)
     except ValueError as exc:
         raise PathError(str(exc)) from None
+    if not 1.0 / MAX_COORDINATE <= abs(value) <= MAX_COORDINATE and value != 0:  # 1e308 hangs, 1e-300 divides by 0
+        raise PathError(f"{name} = {value:g} is outside [{1.0 / MAX_COORDINATE:g}, {MAX_COORDINATE:g}], "
+                        "not a path a machine follows")
+    return value
 
 
 def _number(name, value):
-    """A finite float of any sign."""
+    """A finite float of any sign, within ±:data:`MAX_COORDINATE`."""
     try:
-        return float(_validate.finite_array(name, value, ndim=0))
+        return float(_validate.finite_array(name, value, ndim=0, limit=MAX_COORDINATE))
     except ValueError as exc:
         raise PathError(str(exc)) from None
 
@@ -928,7 +933,7 @@ def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi 
 
 def _point_rows(name, points, minimum):
     try:
-        pts = _validate.finite_array(name, points, ndim=2)
+        pts = _validate.finite_array(name, points, ndim=2, limit=MAX_COORDINATE)
     except ValueError as exc:
         raise PathError(str(exc)) from None
     if pts.shape[1] not in (2, 3) or pts.shape[0] < minimum:

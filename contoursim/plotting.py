@@ -821,9 +821,10 @@ def plot_compared_zoom(runs, fig=None):
         tangent = (centre - foot[nearest]) * np.sign(worst - nearest)
         tangent /= np.linalg.norm(tangent)
         up = actual[worst] - centre
-        if not np.any(up):  # no error at all: any direction across the path
-            up = np.eye(tangent.size)[np.argmin(np.abs(tangent))]
         up = up - (up @ tangent) * tangent
+        if np.linalg.norm(up) <= 1e-12 * max(1.0, np.linalg.norm(centre)):  # no error across the path (none at all,
+            up = np.eye(tangent.size)[np.argmin(np.abs(tangent))]           # or along it at a path end): any direction
+            up = up - (up @ tangent) * tangent
         up /= np.linalg.norm(up)
         reach = 1e-3 * 3 * half
         near = np.flatnonzero(np.linalg.norm(foot - centre, axis=1) < reach + 1e-3 * 10)  # samples around the spot

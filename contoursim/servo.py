@@ -72,6 +72,11 @@ class _LazyControl:
 
 ct = _LazyControl()
 
+#: Largest value of a servo parameter in its SI unit (kg, N/A, A·s/m, s, 1/s, N·s/m, H, Ω, ...), and the inverse of
+#: the smallest nonzero one (the feedforward fractions vff, aff aside): beyond, products of parameters in the loop
+#: analysis overflow, and no machine has them.
+MAX_PARAMETER = 1e12
+
 #: A loop whose phase margin [deg] is below this is rejected as badly damped.
 MIN_PHASE_MARGIN_DEG = 30.0
 #: A loop whose closed-loop poles have a damping ratio below this is rejected.
@@ -175,6 +180,9 @@ class AxisServo:
             checked["kc"] = _validate.positive("kc", self.kc)
             checked["ti_current"] = _validate.positive("ti_current", self.ti_current)
         for name, value in checked.items():
+            if name not in ("vff", "aff") and value != 0 and not 1.0 / MAX_PARAMETER <= value <= MAX_PARAMETER:
+                raise ValueError(f"{name} must lie within [{1.0 / MAX_PARAMETER:g}, {MAX_PARAMETER:g}] (in its SI unit), "
+                                 f"got {value:g}: not a physical value")
             object.__setattr__(self, name, value)
 
     # -- SI -> internal units (mm, s, A, V), the one place they are converted --------------
@@ -664,12 +672,14 @@ def _loop_margins(loop):
     omega = _frequency_grid(loop)
     response = _loop_response(loop, omega)
     # gain crossovers: |L| = 1; phase crossovers: L crosses the negative real axis
-    w_gain = _crossings(loop, omega, lambda L: np.log(np.abs(L)))
+    with np.errstate(divide="ignore"):  # |L| = 0 (a loop gain below 1e-308): -inf, no crossing there
+        w_gain = _crossings(loop, omega, lambda L: np.log(np.abs(L)))
     w_phase = _crossings(loop, omega, lambda L: L.imag)
     w_phase = w_phase[_loop_response(loop, w_phase).real < 0] if w_phase.size else w_phase
     gm, pm, wpc, wgc = np.inf, np.inf, np.nan, np.nan
     if w_phase.size:
-        gains = 1.0 / np.abs(_loop_response(loop, w_phase))
+        with np.errstate(divide="ignore", over="ignore"):  # a loop gain below 1e-308 there: an infinite margin
+            gains = 1.0 / np.abs(_loop_response(loop, w_phase))
         best = np.argmin(np.abs(np.log(gains)))  # the gain margin closest to 1
         gm, wpc = gains[best], w_phase[best]
     if w_gain.size:
@@ -845,11 +855,13 @@ def check(servo, dt, axis="x"):
         else:
             continue
         gain = _GAIN_OF[loop]
+        crossing = (f"phase margin {m['phase_margin']:.3g} deg at {m['gain_crossover'] / (2 * np.pi):.4g} Hz"
+                    if np.isfinite(m["gain_crossover"]) else "no gain crossover (the loop gain never reaches 1)")
         raise UnstableLoopError(
             f"the {loop} loop of axis {axis!r} {problem} at dt = {dt:.6g} s: gain margin "
-            f"{m['gain_margin']:.3g}, phase margin {m['phase_margin']:.3g} deg at "
-            f"{m['gain_crossover'] / (2 * np.pi):.4g} Hz, damping ratio {m['damping_ratio']:.3g} "
-            f"({gain} = {getattr(servo, gain):.6g}): {_REMEDY[loop]}.",
+            f"{m['gain_margin']:.3g}, {crossing}, damping ratio {m['damping_ratio']:.3g} "
+            f"({gain} = {getattr(servo, gain):.6g}): "
+            f"{_REMEDY[loop] if np.isfinite(m['gain_crossover']) else f'raise {gain}, or check the mass ({servo.mass:.6g} kg)'}.",
             margins=m,
         )
     return sampled

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import estimators, kernel
+from . import _memory, estimators, kernel
 from ._blocks import blocks
 from .compensation import Composition, Strategy
 from ._version import __version__
@@ -233,6 +233,12 @@ def measured_reference(trace, servo_period):
     Trajectory
         ``dim`` = the trace's number of axes.
 
+    Raises
+    ------
+    ValueError
+        A run of the reference's samples would not fit in the memory
+        available (:func:`contoursim._memory.check`), checked before it is made.
+
     Examples
     --------
     >>> from contoursim.traces import Trace
@@ -246,12 +252,16 @@ def measured_reference(trace, servo_period):
 
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
-    if abs(trace.dt - servo_period) <= 1e-3 * servo_period:
+    logged = abs(trace.dt - servo_period) <= 1e-3 * servo_period
+    duration = trace.t[-1] - trace.t[0]
+    n = trace.t.size if logged else int(np.floor(duration / servo_period * (1 + 1e-12))) + 1
+    _memory.check(n, f"the trace lasts {duration:.6g} s: every servo period of {servo_period:.6g} s",
+                  "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period")
+    if logged:
         t = trace.t[0] + servo_period * np.arange(trace.t.size)
         spline = CubicSpline(t, trace.reference)
         position = trace.reference
     else:
-        n = int(np.floor((trace.t[-1] - trace.t[0]) / servo_period * (1 + 1e-12))) + 1
         t = trace.t[0] + servo_period * np.arange(n)
         spline = CubicSpline(trace.t, trace.reference)
         position = spline(t)

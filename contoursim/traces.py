@@ -11,9 +11,22 @@ Values must be physically meaningful: positions within ±1e6 mm
 (:data:`MAX_POSITION`, a kilometre, far beyond any machine's travel) and
 times within ±1e9 s (:data:`MAX_TIME`, about 30 years), so that differences of
 positions stay exact to the nm and never overflow.
+
+Units: a ``# units:`` line declares them column by column, as contoursim
+writes it: ``# units: t [s]; x_ref, x, y_ref, y [mm]`` (groups separated by
+``;``, each a list of columns and a unit in brackets; a bare unit, ``# units:
+m``, is that of all the position columns). The reader converts ``t`` from
+:data:`TIME_UNITS` to s and positions from :data:`LENGTH_UNITS` to mm, and
+refuses any other unit of a column it reads (others' units are not read).
+Without a declared time unit, a sample period outside
+:data:`PLAUSIBLE_SAMPLE_PERIOD` is refused as no servo trace's (a time column
+in ms, µs or ns read as seconds): declaring ``t [s]`` accepts it. A measured
+column that does not follow its reference (:data:`FOLLOWING_GAIN`: swapped
+columns, a column in other units) is refused.
 """
 
 import io
+import re
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -29,6 +42,18 @@ __all__ = ["Trace", "read_trace", "write_trace"]
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
 MAX_POSITION = 1e6  # [mm]: largest |position| in a trace
 MAX_TIME = 1e9  # [s]: largest |t| in a trace
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
+"""Units of ``t`` a ``# units:`` line may declare, and their size [s]."""
+LENGTH_UNITS = {"mm": 1.0, "m": 1e3, "um": 1e-3, "µm": 1e-3, "nm": 1e-6, "in": 25.4}
+"""Units of the positions a ``# units:`` line may declare, and their size [mm]."""
+FOLLOWING_GAIN = (0.2, 5.0)
+"""Range of the slope of each measured column regressed on its reference [mm/mm] the reader accepts: about 1 for
+an axis that follows its command (less where it lags a fast motion), 0 for swapped columns of a circle, 1e-3 or
+1e3 for a column in m or µm read as mm, -1 for a reversed sign. Axes whose reference moves less than 1 µm RMS
+are not checked."""
+PLAUSIBLE_SAMPLE_PERIOD = (1e-6, 1.0)
+"""Sample periods [s] of a servo trace, from 1 MHz up to (not including) 1 Hz: outside, a time column without
+a declared unit is refused."""
 
 
 @dataclass(frozen=True)
@@ -166,17 +191,22 @@ def read_trace(file):
         column (saying what the header holds), a non-numeric, non-finite or
         out-of-range cell (see :data:`MAX_POSITION`, :data:`MAX_TIME`), a row
         with more or fewer cells than the header, non-monotonic or non-uniform
-        time, text that is not UTF-8.
+        time, text that is not UTF-8, a ``# units:`` line that cannot be read
+        or declares a unit the reader does not convert, a sample period
+        outside :data:`PLAUSIBLE_SAMPLE_PERIOD` without a declared time unit,
+        a measured column that does not follow its reference (:data:`FOLLOWING_GAIN`).
     """
     source = str(file)
     lines = read_text(file, TraceFormatError).splitlines()  # a leading BOM (Excel) is dropped
 
     metadata = {}
+    units_line = None
     first = 0
     while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
         key, colon, value = lines[first][1:].partition(":")
         if colon and key.strip():
             metadata[key.strip()] = value.strip()
+            units_line = first + 1 if key.strip() == "units" else units_line
         first += 1
     if first == len(lines):
         raise TraceFormatError("no header row", source)
@@ -201,6 +231,8 @@ def read_trace(file):
                 raise fail(f"missing column '{name}' in the header")
     wanted = ["t"] + [name for axis in axes for name in (f"{axis}_ref", axis)]
     index = [names.index(name) for name in wanted]
+    units = {} if units_line is None else _declared_units(metadata["units"], wanted, lambda msg: fail(msg, units_line))
+    scale = np.array([TIME_UNITS[units.get("t", "s")]] + [LENGTH_UNITS[units.get(n, "mm")] for n in wanted[1:]])
 
     body = lines[header_line:]
     while body and not body[-1].strip():
@@ -208,12 +240,61 @@ def read_trace(file):
     if len(body) < 2:
         raise fail(f"needs at least 2 data rows, found {len(body)}")
     limits = np.array([MAX_TIME] + [MAX_POSITION] * (len(wanted) - 1))
-    data = _parse_rows(body, len(names), index, names, limits, lambda msg, row: fail(msg, header_line + 1 + row))
+    written = [units.get(name, "s" if name == "t" else "mm") for name in wanted]  # the units of the cells
+    data = _parse_rows(body, len(names), index, names, limits / scale, written, lambda msg, row: fail(msg, header_line + 1 + row))
+    if (scale != 1.0).any():
+        data *= scale
     try:
-        _validate.time_base("column 't'", data[:, 0])
+        _, dt = _validate.time_base("column 't'", data[:, 0])
     except _validate.TimeStepError as exc:  # step k ends on data row k + 1
         raise fail(str(exc), header_line + 2 + exc.step) from None
+    low, high = PLAUSIBLE_SAMPLE_PERIOD
+    if "t" not in units and not low <= dt < high:
+        raise fail(f"column 't': a sample every {dt:.6g} s ({1 / dt:.6g} Hz) is no servo trace's (from {1 / high:g} Hz "
+                   f"to {1e-6 / low:g} MHz): is the time column in ms, µs or ns? Declare its unit on a line "
+                   "'# units: t [ms]' before the header ('t [s]' if seconds are right)")
+    for i, axis in enumerate(axes):
+        gain = _following_gain(data[:, 1 + 2 * i], data[:, 2 + 2 * i])
+        if not FOLLOWING_GAIN[0] <= gain <= FOLLOWING_GAIN[1]:
+            gain = gain if abs(gain) >= 1e-3 else 0.0  # not -3.8e-18 for a swapped circle
+            raise fail(f"column {axis!r}: the measured {axis} does not follow {axis}_ref: it moves {gain:.3g} mm per mm of "
+                       f"{axis}_ref (a servo axis following its command moves about 1): columns swapped or units wrong?")
     return Trace(data[:, 0], data[:, 1::2], data[:, 2::2], axes, metadata)
+
+
+def _following_gain(reference, actual):
+    """The slope of `actual` regressed on `reference` [mm/mm]: about 1 for an axis that follows (1 if it does not move)."""
+    motion = reference - reference.mean()
+    spread = float(motion @ motion)
+    if spread <= (1e-3) ** 2 * reference.size:  # moves less than 1 µm RMS: nothing to tell
+        return 1.0
+    return float(motion @ (actual - actual.mean())) / spread
+
+
+def _declared_units(text, wanted, fail):
+    """The units a ``# units:`` line declares for the columns `wanted` (a dict: column -> unit; others left out).
+
+    `fail` makes the error of a line that cannot be read or declares a unit the reader does not convert.
+    """
+    units = {}
+    for group in filter(None, (g.strip() for g in text.split(";"))):
+        match = re.fullmatch(r"(?P<columns>[^\[\]]*?)\s*\[(?P<unit>[^\[\]]*)\]", group)
+        if match is None and group in LENGTH_UNITS:  # a bare unit: all the positions'
+            units.update((name, group) for name in wanted[1:])
+        elif match is None:
+            raise fail(f"the units {group!r} cannot be read: write them as contoursim does, "
+                       "'# units: t [s]; x_ref, x [mm]' (columns, then the unit in brackets)")
+        else:
+            unit = match["unit"].strip()
+            for name in (c.strip() for c in match["columns"].split(",")):
+                if name in wanted:
+                    units[name] = unit
+    for name, unit in units.items():
+        known = TIME_UNITS if name == "t" else LENGTH_UNITS
+        if unit not in known:
+            read = "column 't' is" if name == "t" else "the position columns are"
+            raise fail(f"column {name!r} is declared in {unit!r}; {read} read in {', '.join(known)}")
+    return units
 
 
 def _header_problem(names):
@@ -229,10 +310,11 @@ def _header_problem(names):
     return f"missing column 't' in the header {found!r}; {expected}"
 
 
-def _parse_rows(body, width, index, names, limits, fail):
+def _parse_rows(body, width, index, names, limits, units, fail):
     """Parse the numeric rows; on any problem, name the first bad cell.
 
-    `limits` are the largest magnitudes allowed in the columns `index`.
+    `limits` are the largest magnitudes allowed in the columns `index`, in
+    their `units` (the names of the file's units, for the messages).
     """
     cells = np.array([text.count(",") + 1 for text in body])
     if np.any(cells != width):
@@ -258,7 +340,7 @@ def _parse_rows(body, width, index, names, limits, fail):
     bad = np.abs(data) > limits
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
-        unit = "s" if col == 0 else "mm"
-        raise fail(f"column '{names[index[col]]}': value {data[row, col]:g} is beyond ±{limits[col]:g} {unit}, "
-                   "not a position or time a trace can hold", row)
+        hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
+        raise fail(f"column '{names[index[col]]}': value {data[row, col]:g} is beyond ±{limits[col]:g} {units[col]}, "
+                   f"not a position or time a trace can hold{hint}", row)
     return data

@@ -40,7 +40,8 @@ def tue(data, name, every=4):
     t = np.arange(reference.size) / 4000.0
     keep = slice(None, None, every)
     return Trace(t[keep], reference[keep, None], (reference - error)[keep, None], ("x",),
-                 {"source": f"TU/e SPERTE feedforward/{name}.mat, every {every}th sample", "units": "rad written as mm"})
+                 {"source": f"TU/e SPERTE feedforward/{name}.mat, every {every}th sample",
+                  "positions": "the stage's rad, written as mm"})
 
 
 def umich(data, experiment):

@@ -5,7 +5,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from contoursim import feed, paths
+from contoursim import _memory, paths
 from contoursim.feed import FeedSettings, plan, sample
 from contoursim.machine import load_machine
 from contoursim.output import output_dir
@@ -177,13 +177,13 @@ def test_refuses_a_motion_whose_run_needs_more_memory_than_is_available(monkeypa
     line = paths.line((0, 0), (10, 0))
     profile = plan(line, 10.0, 1e6)
     assert profile.duration == pytest.approx(1.0, abs=1e-3)
-    monkeypatch.setattr(feed, "_available_memory", lambda: 400_000)
+    monkeypatch.setattr(_memory, "available", lambda: 400_000)
     with pytest.raises(ValueError, match=r"that is 1002 samples, a run of them needs about 0\.000451 GB of memory "
                                          r"and 0\.0004 GB are available"):
         sample(line, profile, 1e-3)
-    monkeypatch.setattr(feed, "_available_memory", lambda: 500_000)
+    monkeypatch.setattr(_memory, "available", lambda: 500_000)
     assert len(sample(line, profile, 1e-3)) == 1002
-    monkeypatch.setattr(feed, "_available_memory", lambda: None)  # unknown: not refused
+    monkeypatch.setattr(_memory, "available", lambda: None)  # unknown: not refused
     assert len(sample(line, profile, 1e-3)) == 1002
 
 
@@ -205,7 +205,7 @@ def test_the_memory_a_sample_is_allowed_covers_a_run(path, tmp_path):
     finally:
         tracemalloc.stop()
     assert len(result.trajectory) > 100_000
-    assert peak < feed.RUN_BYTES_PER_SAMPLE * len(result.trajectory)
+    assert peak < _memory.RUN_BYTES_PER_SAMPLE * len(result.trajectory)
 
 
 @pytest.mark.parametrize("jerk", [None, 2000.0, 50000.0])

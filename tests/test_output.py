@@ -1,6 +1,10 @@
 """The output folder: nothing a user keeps there is overwritten, nothing is left half-written."""
 
 import os
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 
@@ -95,3 +99,124 @@ def test_write_modes(tmp_path):
     assert (tmp_path / "a.png").read_bytes() == b"\x89PNG"
     assert (tmp_path / "b.txt").read_bytes() == "µm\r\n".encode()
     assert output.writing(stream).__enter__() is stream  # an open file object is written as is
+
+
+# -- faults: links, a marker that is not contoursim's or cannot be written, killed writers --------------------
+
+
+def test_a_linked_marker_is_refused_and_its_target_left_as_it_was(tmp_path):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine\n")
+    for target in (notes, tmp_path / "missing.txt"):  # a user's file; a dangling link (never created through)
+        out = tmp_path / f"out_{target.stem}"
+        out.mkdir()
+        (out / ".contoursim-out").symlink_to(target)
+        with pytest.raises(ConfigError, match="contoursim-out is a symbolic link"):
+            output_dir(out)
+    assert notes.read_text() == "mine\n"
+    assert not (tmp_path / "missing.txt").exists()
+    out = output_dir(tmp_path / "later")  # a marker replaced by a link after the folder was opened
+    (tmp_path / "later" / ".contoursim-out").unlink()
+    (tmp_path / "later" / ".contoursim-out").symlink_to(notes)
+    with pytest.raises(ConfigError, match="symbolic link"):
+        with out.write("a.csv") as stream:
+            stream.write("x")
+    assert notes.read_text() == "mine\n"
+    assert sorted(p.name for p in (tmp_path / "later").iterdir()) == [".contoursim-out"]
+
+
+def test_a_linked_output_file_is_replaced_not_written_through(tmp_path):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine\n")
+    out = output_dir(tmp_path / "out")
+    with out.write("a.csv") as stream:
+        stream.write("first")
+    (tmp_path / "out" / "a.csv").unlink()
+    (tmp_path / "out" / "a.csv").symlink_to(notes)
+    with out.write("a.csv") as stream:
+        stream.write("second")
+    assert notes.read_text() == "mine\n"
+    assert not (tmp_path / "out" / "a.csv").is_symlink() and (tmp_path / "out" / "a.csv").read_text() == "second"
+
+
+def test_a_marker_that_cannot_be_recorded_in_leaves_no_unlisted_file(tmp_path, monkeypatch):
+    out = output_dir(tmp_path / "out")
+    real_open = os.open
+
+    def read_only_marker(path, flags, *args):  # as chmod 444 does for a user who is not root
+        if str(path).endswith(".contoursim-out") and flags & os.O_APPEND:
+            raise PermissionError(13, "Permission denied")
+        return real_open(path, flags, *args)
+
+    monkeypatch.setattr(output.os, "open", read_only_marker)
+    with pytest.raises(OutputError, match=r"cannot record .*a\.csv in .*\.contoursim-out: Permission denied"):
+        with out.write("a.csv") as stream:
+            stream.write("x")
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [".contoursim-out"]  # nothing it does not list
+    monkeypatch.undo()  # the marker writable again: the next run is not refused
+    with output_dir(tmp_path / "out").write("a.csv") as stream:
+        stream.write("y")
+    assert output_dir(tmp_path / "out").written() == {"a.csv"}
+
+
+def test_a_marker_that_is_not_text_is_named(tmp_path):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / ".contoursim-out").write_bytes(b"# written by contoursim\n\xff\xfe\n")
+    with pytest.raises(ConfigError, match=r"out/\.contoursim-out is not contoursim's record .*byte 24 is not UTF-8"):
+        output_dir(tmp_path / "out")
+
+
+def test_a_report_file_that_is_a_directory_or_the_users_is_refused(tmp_path):
+    (tmp_path / "r.json").mkdir()
+    with pytest.raises(ConfigError, match=r"r\.json is a directory; name a file to write the comparison JSON to"):
+        output.report_file(tmp_path / "r.json", "runs", "comparison JSON")
+    for text in ('["runs"]', "runs", '{"other": 1}'):
+        (tmp_path / "mine.json").write_text(text)
+        with pytest.raises(FileExistsError, match="mine.json exists and is not a comparison JSON"):
+            output.report_file(tmp_path / "mine.json", "runs", "comparison JSON")
+    (tmp_path / "ours.json").write_text('{"runs": {}}')
+    assert output.report_file(tmp_path / "ours.json", "runs", "comparison JSON") == tmp_path / "ours.json"
+    assert output.report_file(None, "runs", "comparison JSON") is None
+
+
+_WRITER = """
+import sys, time
+from contoursim.output import output_dir
+with output_dir(sys.argv[1]).write("a.csv") as stream:
+    stream.write("half")
+    stream.flush()
+    time.sleep(60)
+"""
+
+
+def test_the_part_file_of_a_killed_writer_is_removed_by_the_next_run(tmp_path):
+    out = output_dir(tmp_path / "out")
+    writer = subprocess.Popen([sys.executable, "-c", _WRITER, str(tmp_path / "out")])
+    try:
+        for _ in range(600):  # the writer has its temporary file (a fresh interpreter: within a few seconds)
+            parts = [p.name for p in (tmp_path / "out").iterdir() if p.name.endswith(".part")]
+            if parts or writer.poll() is not None:
+                break
+            time.sleep(0.05)
+        live = output_dir(tmp_path / "out")  # a concurrent run leaves a running writer's file alone
+        assert [p.name for p in (tmp_path / "out").iterdir() if p.name.endswith(".part")] == parts
+    finally:
+        writer.send_signal(signal.SIGKILL)
+        writer.wait()
+    assert len(parts) == 1 and parts[0].startswith(f".a.csv.{writer.pid}-")
+    keep = [".notes.part", f".a.csv.{writer.pid}-notahex!.part"]  # not named as contoursim names its files
+    for name in keep:
+        (tmp_path / "out" / name).write_text("mine")
+    (tmp_path / "out" / f".b.csv.{writer.pid}-0123abcd.part").symlink_to(tmp_path / "out" / ".notes.part")
+    with live.write("c.csv") as stream:  # a write removes the stale files of its own name only ...
+        stream.write("c")
+    assert (tmp_path / "out" / parts[0]).exists()
+    output_dir(tmp_path / "out")  # ... a later run the folder's
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(
+        [".contoursim-out", "c.csv", *keep, f".b.csv.{writer.pid}-0123abcd.part"])
+    assert out.written() == {"c.csv"}
+    report = tmp_path / "r.json"  # a report outside any output folder: its own stale files
+    (tmp_path / f".r.json.{writer.pid}-0123abcd.part").write_text("half")
+    with atomic_write(report) as stream:
+        stream.write("{}")
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == ["r.json"]

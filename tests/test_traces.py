@@ -2,6 +2,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from contoursim.exceptions import TraceFormatError
 from contoursim.traces import Trace, read_trace, write_trace
@@ -172,3 +174,142 @@ def test_read_only_arrays_are_shared_not_copied(tmp_path):
     assert (tmp_path / "a.csv").read_text().splitlines()[1:3] == ["0,0,0,0", "0.001,0,0,1"]
     with pytest.raises(ValueError, match=r"measuring must have shape \(5,\)"):
         write_trace(tmp_path / "b.csv", trace, extra={"measuring": np.ones(4, bool)})
+
+
+# -- units, time base, columns that do not follow: honoured or refused, naming the file and line ------------------
+
+SINE = "\n".join(f"{k * 1e-3:.3f},{np.sin(k / 5):.6f},{np.sin((k - 1) / 5):.6f}" for k in range(40))
+
+
+@pytest.mark.parametrize("units, t_scale, x_scale", [
+    ("t [s]; x_ref, x [mm]", 1.0, 1.0),
+    ("t [ms]; x_ref, x [m]", 1e-3, 1e3),
+    ("t [µs]; x_ref, x [um]", 1e-6, 1e-3),
+    ("t [ns]; x_ref, x [in]", 1e-9, 25.4),
+    ("m", 1.0, 1e3),  # a bare unit: the positions'
+    ("t [s]; x_ref, x [nm]; contour [mm]; measuring [1 = test proper, 0 = not]", 1.0, 1e-6),  # others' units not read
+])
+def test_declared_units_are_honoured(tmp_path, units, t_scale, x_scale):
+    rows = SINE.splitlines()
+    (tmp_path / "u.csv").write_text(f"# units: {units}\nt,x_ref,x\n" + "\n".join(
+        ",".join(f"{float(v) / scale:.12g}" for v, scale in zip(row.split(","), (t_scale, x_scale, x_scale))) for row in rows))
+    (tmp_path / "mm.csv").write_text("t,x_ref,x\n" + SINE)
+    trace, plain = read_trace(tmp_path / "u.csv"), read_trace(tmp_path / "mm.csv")
+    np.testing.assert_allclose(trace.t, plain.t, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(trace.reference, plain.reference, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(trace.actual, plain.actual, rtol=1e-9, atol=1e-12)
+    assert trace.metadata == {"units": units}
+
+
+@pytest.mark.parametrize("head, line, words", [
+    ("# units: t [s]; x_ref, x [deg]\n", 1, "column 'x_ref' is declared in 'deg'; the position columns are read in mm, m"),
+    ("# units: t [min]\n", 1, "column 't' is declared in 'min'; column 't' is read in s, ms"),
+    ("# c\n# units: metric\n", 2, "the units 'metric' cannot be read: write them as contoursim does, "
+                                  "'# units: t [s]; x_ref, x [mm]'"),
+])
+def test_units_that_cannot_be_honoured_are_refused(tmp_path, head, line, words):
+    (tmp_path / "u.csv").write_text(head + "t,x_ref,x\n" + SINE)
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(tmp_path / "u.csv")
+    assert str(info.value).startswith(f"{tmp_path / 'u.csv'}, line {line}: {words}"), str(info.value)
+
+
+def test_a_time_base_no_servo_trace_has_is_refused_unless_declared(tmp_path):
+    in_ms = "\n".join(",".join([f"{1000 * float(t):g}", x, a]) for t, x, a in (r.split(",") for r in SINE.splitlines()))
+    (tmp_path / "ms.csv").write_text("# logged at 1 kHz\nt,x_ref,x\n" + in_ms)
+    with pytest.raises(TraceFormatError, match=r"ms\.csv, line 2: column 't': a sample every 1 s \(1 Hz\) is no servo "
+                                               r"trace's \(from 1 Hz to 1 MHz\): is the time column in ms, µs or ns\?"):
+        read_trace(tmp_path / "ms.csv")
+    (tmp_path / "ms.csv").write_text("# units: t [s]\nt,x_ref,x\n" + in_ms)  # seconds, declared: as the user says
+    assert read_trace(tmp_path / "ms.csv").dt == 1.0
+    in_ns = "\n".join(f"{k * 1e8:.0f},0,0" for k in range(40))  # 0.1 s a sample in ns: beyond the time limit
+    (tmp_path / "ns.csv").write_text("t,x_ref,x\n" + in_ns)
+    with pytest.raises(TraceFormatError, match=r"line 13: column 't': value 1\.1e\+09 is beyond ±1e\+09 s, not a position "
+                                               r"or time a trace can hold; is the time column in ns\?"):
+        read_trace(tmp_path / "ns.csv")
+    (tmp_path / "ns.csv").write_text("# units: t [ns]\nt,x_ref,x\n" + in_ns)
+    assert read_trace(tmp_path / "ns.csv").dt == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("actual, words", [
+    (lambda x, y: (y, x), "the measured x does not follow x_ref: it moves 0 mm per mm"),  # swapped columns of a circle
+    (lambda x, y: (x / 1e3, y / 1e3), "it moves 0.001 mm per mm of x_ref"),  # in m, read as mm
+    (lambda x, y: (-x, y), "it moves -1 mm per mm of x_ref"),
+])
+def test_a_measured_column_that_does_not_follow_its_reference_is_refused(tmp_path, actual, words):
+    t = np.arange(2000) * 1e-3
+    x, y = 10 * np.sin(2 * np.pi * t), 10 * np.cos(2 * np.pi * t)
+    ax, ay = actual(x, y)
+    rows = "\n".join(f"{a:.3f},{b:.9f},{c:.9f},{d:.9f},{e:.9f}" for a, b, c, d, e in zip(t, x, ax, y, ay))
+    (tmp_path / "s.csv").write_text("t,x_ref,x,y_ref,y\n" + rows)
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(tmp_path / "s.csv")
+    assert str(info.value).startswith(f"{tmp_path / 's.csv'}, line 1: column 'x': "), str(info.value)
+    assert words in str(info.value) and "columns swapped or units wrong?" in str(info.value)
+
+
+def test_a_reference_that_does_not_move_is_not_judged(tmp_path):
+    rows = "\n".join(f"{k * 1e-3:.3f},5,{5 + 1e-3 * np.sin(k):.6f}" for k in range(100))  # hunting at standstill
+    (tmp_path / "h.csv").write_text("t,x_ref,x\n" + rows)
+    assert read_trace(tmp_path / "h.csv").axes == ("x",)
+
+
+# -- property-based: any text is read or refused in one line naming the file; what is read is what was written ------
+
+_CELLS = st.one_of(st.sampled_from(["", "nan", "inf", "-inf", "1e308", "-1e400", "abc", " 1", "0x1", "1,5", "１"]),
+                   st.floats(allow_nan=False, allow_infinity=False).map(repr),
+                   st.integers(-10**7, 10**7).map(str))
+_HEADERS = st.sampled_from(["t,x_ref,x", "t,x_ref,x,y_ref,y", "t,x_ref,x,y_ref,y,z_ref,z", "t,x_ref,x,extra", "x_ref,x,t",
+                            "t,y_ref,y", "t;x_ref;x", "T,X_REF,X", "t,x_ref,x,x", "t,x_ref", ""])
+_HEADS = st.lists(st.sampled_from(["# units: t [ms]", "# units: t [s]; x_ref, x [m]", "# units: furlong", "# c", "",
+                                   "# units: t [s]; x_ref, x [deg]", "# key: value"]), max_size=3)
+
+
+def _outcome(file):
+    """read_trace's result: a Trace, or a TraceFormatError whose one line starts with the file (and line); nothing else."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a numpy warning would end here as an exception
+        try:
+            return read_trace(file)
+        except TraceFormatError as exc:
+            message = str(exc)
+            assert message.startswith(f"{file}: ") or message.startswith(f"{file}, line "), message
+            assert "\n" not in message, message
+            return exc
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(head=_HEADS, header=_HEADERS, rows=st.lists(st.lists(_CELLS, min_size=2, max_size=8).map(",".join), max_size=6),
+       times=st.booleans())
+def test_any_csv_is_read_or_refused_in_one_line_naming_the_file(tmp_path, head, header, rows, times):
+    if times:  # rows with a uniform time column, so that the parse gets past the time base
+        rows = [f"{k * 1e-3:g}," + row for k, row in enumerate(rows)]
+    file = tmp_path / "p.csv"
+    file.write_text("\n".join([*head, header, *rows]) + "\n", encoding="utf-8")
+    assert isinstance(_outcome(file), (Trace, TraceFormatError))
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.binary(max_size=300))
+def test_any_bytes_are_read_or_refused_in_one_line_naming_the_file(tmp_path, data):
+    file = tmp_path / "b.csv"
+    file.write_bytes(data)
+    assert isinstance(_outcome(file), (Trace, TraceFormatError))
+
+
+_POSITIONS = st.floats(-1e5, 1e5, allow_nan=False)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(n=st.integers(2, 30), dim=st.integers(1, 3), dt=st.sampled_from([1e-5, 2e-4, 1e-3, 0.1]),
+       t0=st.floats(-1e3, 1e3), data=st.data())
+def test_a_written_trace_reads_back_to_the_nm(tmp_path, n, dim, dt, t0, data):
+    reference = np.array(data.draw(st.lists(st.lists(_POSITIONS, min_size=dim, max_size=dim), min_size=n, max_size=n)))
+    offset = np.array(data.draw(st.lists(st.floats(-0.1, 0.1), min_size=dim, max_size=dim)))
+    trace = Trace(round(t0, 3) + dt * np.arange(n), reference, reference + offset, ("x", "y", "z")[:dim])
+    write_trace(tmp_path / "w.csv", trace, overwrite=True)
+    back = read_trace(tmp_path / "w.csv")
+    assert back.axes == trace.axes and back.t.size == n
+    np.testing.assert_allclose(back.t, trace.t, rtol=0, atol=0.5e-9 + 1e-12 * abs(t0))
+    np.testing.assert_allclose(back.reference, trace.reference, rtol=0, atol=0.5e-6 + 1e-11)
+    np.testing.assert_allclose(back.actual, trace.actual, rtol=0, atol=0.5e-6 + 1e-11)

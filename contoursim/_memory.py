@@ -1,0 +1,77 @@
+"""Memory a command will hold, checked before it starts: a run too large for the machine is refused in one line.
+
+A run's samples are the unit: :data:`RUN_BYTES_PER_SAMPLE` covers one run
+from its reference to its trace CSV and plots, :data:`COMPARED_RUN_BYTES_PER_SAMPLE`
+each further run a comparison keeps beside it, :data:`DIAGNOSIS_BYTES_PER_SAMPLE`
+a diagnosis.
+"""
+
+import os
+
+#: Peak memory a simulated sample takes in a run, from the reference to the trace CSV and the plots [bytes].
+#: A 1 M-step run of a 2-D circle on the demo machine grows by ~360 bytes a step beyond what a short
+#: run takes (benchmarks/bench_user.py); tests/test_feed.py checks the figure covers 2-D and 3-D runs.
+RUN_BYTES_PER_SAMPLE = 450
+
+#: Memory each strategy's run adds to a comparison, per sample [bytes]: ``contoursim compare`` on a
+#: 79,000-sample circle of the demo mill peaked at 646 bytes a sample with one strategy and 1,479 with
+#: six, with its plots (tracemalloc), 167 bytes a further run; tests/test_cli.py checks the figure covers it.
+COMPARED_RUN_BYTES_PER_SAMPLE = 250
+
+#: Peak memory of ``diagnose`` per sample of the trace resampled at the servo period [bytes]: a diagnosis of a
+#: 2-D circle on the demo mill with backlash and noise, nominal model given, peaked at 3,739 bytes a sample on
+#: 78,551 samples and 3,932 on 224,404 (tracemalloc), 4,036 bytes per further sample.
+DIAGNOSIS_BYTES_PER_SAMPLE = 4500
+
+
+def available():
+    """Memory the system can give a run now [bytes]: ``MemAvailable`` of /proc/meminfo, else the physical memory.
+
+    Returns
+    -------
+    int or None
+        ``None`` where neither is known.
+    """
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return 1024 * int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check(samples, what, advice, runs=1, per_sample=RUN_BYTES_PER_SAMPLE):
+    """Refuse runs of `samples` samples that would not fit in the memory available.
+
+    Parameters
+    ----------
+    samples : int
+        Samples of each run.
+    what : str
+        What the samples are, starting the message (e.g. ``"the motion lasts 10 s: at dt = 0.001 s"``).
+    advice : str
+        What to check, ending the message.
+    runs : int
+        Runs held at once: the first takes `per_sample` bytes a sample,
+        each further one :data:`COMPARED_RUN_BYTES_PER_SAMPLE`.
+    per_sample : int
+        Bytes a sample of the first run takes: :data:`RUN_BYTES_PER_SAMPLE`
+        for a simulation, :data:`DIAGNOSIS_BYTES_PER_SAMPLE` for a diagnosis.
+
+    Raises
+    ------
+    ValueError
+        More memory is needed than is available (nothing is checked where that is unknown).
+    """
+    samples = float(samples)  # a Python int of 1e300 samples would not convert in the message
+    needed = samples * (per_sample + (runs - 1) * COMPARED_RUN_BYTES_PER_SAMPLE)
+    free = available()
+    if free is not None and needed > free:
+        held = "a run of them" if runs == 1 else f"{runs} runs of them"
+        raise ValueError(f"{what} that is {samples:.4g} samples, {held} needs about {needed / 1e9:.3g} GB of memory "
+                         f"and {free / 1e9:.3g} GB are available; {advice}")

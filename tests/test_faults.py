@@ -1,0 +1,260 @@
+"""Fault classes of issue 20, through the command line: bad input ends in one line naming the file, exit 2.
+
+Each test injects one class of fault (the output folder, measured traces, memory, effects and machines
+out of range) and checks the whole answer: the exit status, one line on stderr naming the file (and line),
+no traceback or foreign warning, nothing written where it must not be.
+"""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from contoursim import _memory
+from contoursim.cli import main
+from contoursim.comparison import compare
+from contoursim.compensation import STRATEGY_NAMES
+from contoursim.feed import plan, sample
+from contoursim.machine import load_machine, preset_file
+from contoursim.output import output_dir
+from contoursim.pathfile import load_path_file
+from contoursim.paths import circle
+from contoursim.plotting import save_comparison_figures
+from contoursim.simulation import measured_reference
+from contoursim.traces import read_trace
+
+SMALL_PATH = """
+[feed]
+feed_mm_min = 600
+accel_mm_s2 = 500
+
+[path]
+type = "iso230_4_circle"
+radius_mm = 2
+"""
+
+
+def _refused(capsys, argv, *words):
+    """Run the command; it must end with status 2 and one line on stderr holding `words`, and print nothing."""
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    lines = [line for line in captured.err.splitlines() if not line.startswith(("identify:", "no nominal model"))]
+    assert len(lines) == 1 and lines[0].startswith(f"contoursim {argv[0]}: error: "), captured.err
+    for word in words:
+        assert word in lines[0], lines[0]
+    assert "Traceback" not in captured.err and "Warning" not in captured.err
+    return lines[0]
+
+
+def _trace(file, t, ref, actual, head=""):
+    rows = "\n".join(f"{a:.9g},{b:.9g},{c:.9g}" for a, b, c in zip(t, ref, actual))
+    file.write_text(head + "t,x_ref,x\n" + rows + "\n")
+    return file
+
+
+# -- the output folder ---------------------------------------------------------------------------------------------
+
+
+def test_output_folder_faults_end_in_one_line_and_change_no_users_file(tmp_path, capsys):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine\n")
+    (tmp_path / "linked").mkdir()
+    (tmp_path / "linked" / ".contoursim-out").symlink_to(notes)
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "linked")],
+             f"{tmp_path / 'linked' / '.contoursim-out'} is a symbolic link")
+    (tmp_path / "binary").mkdir()
+    (tmp_path / "binary" / ".contoursim-out").write_bytes(b"\xff\xfe")
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "binary")],
+             f"{tmp_path / 'binary' / '.contoursim-out'} is not contoursim's record")
+    (tmp_path / "r.json").mkdir()
+    _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--json", str(tmp_path / "r.json"), "--out",
+                      str(tmp_path / "out")], f"{tmp_path / 'r.json'} is a directory")
+    trace = _trace(tmp_path / "m.csv", np.arange(50) * 1e-3, np.zeros(50), np.zeros(50))
+    _refused(capsys, ["diagnose", str(trace), "--report", str(tmp_path / "r.json"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'r.json'} is a directory")
+    assert notes.read_text() == "mine\n"
+    assert sorted(p.name for p in (tmp_path / "linked").iterdir()) == [".contoursim-out"]
+    assert not (tmp_path / "out").exists()
+
+
+# -- measured traces -----------------------------------------------------------------------------------------------
+
+
+def test_measured_trace_faults_end_in_one_line_naming_the_file(tmp_path, capsys, monkeypatch):
+    t = np.arange(2000) * 1e-3
+    x = 10 * np.sin(2 * np.pi * t)
+    out = ["--out", str(tmp_path / "out")]
+    ms = _trace(tmp_path / "ms.csv", 1e3 * t, x, x)  # logged in ms, read as s: a sample a second
+    _refused(capsys, ["diagnose", str(ms), *out], f"{ms}, line 1: column 't': a sample every 1 s")
+    swapped = _trace(tmp_path / "swapped.csv", t, x, 10 * np.cos(2 * np.pi * t))
+    _refused(capsys, ["diagnose", str(swapped), *out], f"{swapped}, line 1: column 'x': the measured x does not follow x_ref")
+    two = _trace(tmp_path / "two.csv", t[:2], x[:2], x[:2])
+    _refused(capsys, ["diagnose", str(two), *out], f"{two}: a diagnosis needs at least 3 samples")
+    degrees = _trace(tmp_path / "deg.csv", t, x, x, head="# units: t [s]; x_ref, x [deg]\n")
+    _refused(capsys, ["diagnose", str(degrees), *out], f"{degrees}, line 1: column 'x_ref' is declared in 'deg'")
+    # declared seconds that are ms: 2000 s to resample at the demo mill's 0.2 ms, refused before it is made
+    monkeypatch.setattr(_memory, "available", lambda: 10**9)
+    slow = _trace(tmp_path / "slow.csv", 1e3 * t, x, x, head="# units: t [s]\n")
+    _refused(capsys, ["diagnose", str(slow), "--model", "demo_mill", *out],
+             f"{slow}: the trace lasts 1999 s: every servo period of 0.0002 s that is 9.995e+06 samples, a run of them needs "
+             "about 45 GB of memory and 1 GB are available")  # a diagnosis: 4,500 bytes a sample
+    with pytest.raises(ValueError, match="that is 9.995e.06 samples, a run of them needs about 4.5 GB"):
+        measured_reference(read_trace(slow), 2e-4)  # one simulated run (450 bytes a sample) in Python, refused before
+    assert not (tmp_path / "out").exists()
+
+
+# -- memory --------------------------------------------------------------------------------------------------------
+
+
+def test_compare_is_refused_before_it_runs_when_its_runs_would_not_fit(tmp_path, capsys, monkeypatch):
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    machine = load_machine("demo_mill")
+    path, settings = load_path_file(tmp_path / "small.toml")
+    n = len(sample(path, settings.plan(path, max_feed=machine.max_feed), machine.servo_period))  # the file's run
+    monkeypatch.setattr(_memory, "available", lambda: 3 * _memory.RUN_BYTES_PER_SAMPLE * n)  # room for one, not six
+    _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out")],
+             "small.toml runs for", "6 runs of them needs about", "compare fewer strategies (--strategies)")
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_memory_a_compared_run_is_allowed_covers_it(tmp_path):
+    """_memory's figures: a comparison of six strategies with its plots allocates less than the estimate."""
+    machine = load_machine("demo_mill")
+    path = circle((0, 0), 5.0)
+    compare(machine, sample(path, plan(path, 20.0, 1000.0), machine.servo_period), STRATEGY_NAMES)  # numba loaded first
+    tracemalloc.start()
+    try:
+        trajectory = sample(path, plan(path, 1.5, 1000.0), machine.servo_period)
+        comparison = compare(machine, trajectory, STRATEGY_NAMES)
+        del trajectory
+        save_comparison_figures(comparison, output_dir(tmp_path / "out"), "run")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    samples = len(comparison.runs["none"].trajectory)  # held: the settling the command's check counts too
+    assert samples > 100_000
+    assert peak < samples * (_memory.RUN_BYTES_PER_SAMPLE + 5 * _memory.COMPARED_RUN_BYTES_PER_SAMPLE), peak / samples
+
+
+# -- effects, feeds and machines out of range ----------------------------------------------------------------------
+
+
+MACHINE = """
+name = "two axes"
+servo_period_ms = 0.5
+max_feed_mm_min = 5000
+
+[axes.x]
+mass_kg = {mass}
+force_constant_N_per_A = 942.0
+kv_A_s_per_m = 80.0
+ti_s = 0.016
+kp_per_s = 40.0
+
+[axes.y]
+mass_kg = 300.0
+force_constant_N_per_A = 942.0
+kv_A_s_per_m = 80.0
+ti_s = 0.016
+kp_per_s = 40.0
+"""
+
+
+@pytest.mark.parametrize("effects, line, words", [
+    ('[[effect]]\nname = "time_delay"\naxis = "x"\nkind = "feedback"\ndelay_s = 0.05\n', 8,
+     "time_delay.x: a feedback delay is at most 63 servo periods, 0.0315 s on this machine, got delay_s = 0.05 s"),
+    ('[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 5\n'
+     '[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 8\n', 9,
+     "backlash.x is given twice in this file (in [[effect]] tables 1 and 2)"),
+])
+def test_effects_out_of_range_are_refused_by_file_and_line(tmp_path, capsys, effects, line, words):
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0))
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "job.toml").write_text(f'machine = "m.toml"\npath = "small.toml"\n\n{effects}')
+    _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'job.toml'}, line {line}: {words}")
+
+
+def test_a_feed_over_the_machines_max_names_the_file(tmp_path, capsys):
+    (tmp_path / "fast.nc").write_text("G21 G90 G17\nG1 X0 Y0 F99000\nG1 X50\nM30\n")
+    _refused(capsys, ["simulate", str(tmp_path / "fast.nc"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'fast.nc'}: feed 1650 mm/s (99000 mm/min, segment 0) exceeds max_feed = 500 mm/s")
+
+
+def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=1e11))  # a heavy axis: the loop gain never reaches 1
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    message = _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"),
+                                "--out", str(tmp_path / "out")],
+                       f"{tmp_path / 'm.toml'}, line 6: the velocity loop of axis 'x' is badly damped",
+                       "no gain crossover (the loop gain never reaches 1)", "raise kv_A_s_per_m, or check the mass")
+    assert "nan" not in message and "inf deg" not in message
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=1e20))  # beyond any machine
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, line 7: axis x: mass_kg must lie within [1e-12, 1e+12]")
+    preset = preset_file("vertical_mill_3axis").read_text()
+    table = preset_file("vertical_mill_3axis").parent / "vertical_mill_x_laser.csv"  # the X body's error table, beside it
+    (tmp_path / table.name).write_text(table.read_text())
+    body = preset.splitlines().index("[[body]]") + 1  # the first [[body]], Y's (1-based)
+    for old, new, line, words in (
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e9]", body, "Y.travel holds 4e+09 at index (1,), beyond ±1e+06"),
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e13]", body + 5, "4e+13 is beyond ±1e+12, not a value a machine has"),
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e5]", body, "its error motion dx reaches 7.992e+06 µm at 400000 mm of "
+                                                               "its travel: beyond the small errors a machine's model is "
+                                                               "for (0.01 of the travel's length)"),
+        ("dx_um = { poly = [0, 0.02, -5e-5] }", "dx_um = { poly = [0, 1e308] }", body + 7, "1e+308 is beyond ±1e+12"),
+    ):
+        (tmp_path / "big.toml").write_text(preset.replace(old, new, 1))
+        _refused(capsys, ["volumetric", str(tmp_path / "big.toml"), "--out", str(tmp_path / "out")],
+                 f"{tmp_path / 'big.toml'}, line {line}: body 'Y': {words}")
+
+
+def test_compare_on_a_move_along_one_axis_has_no_change_relative_to_none(tmp_path, capsys):
+    (tmp_path / "line.nc").write_text("G21 G90 G17\nG1 X0 Y0 F1000\nG1 X20\nG1 X0\nM30\n")
+    assert main(["compare", str(tmp_path / "line.nc"), "--strategies", "none,ccc_arc", "--out", str(tmp_path / "out")]) == 0
+    captured = capsys.readouterr()
+    assert not captured.err
+    none = next(line for line in captured.out.splitlines() if line.startswith("none "))
+    fields = none.split()  # strategy, 4 errors, peak current, clamped: no margins, and vs none empty
+    assert fields[1] in ("<0.001", "0.000") and len(fields) == 7, none
+    arc = next(line for line in captured.out.splitlines() if line.startswith("ccc_arc "))
+    assert len(arc.split()) == 9  # its loop's PM and ζ, and no change relative to a zero
+
+
+@pytest.mark.parametrize("key, value, line, words", [
+    ("servo_period_ms = 0.5", "servo_period_ms = 1e-300", 3, "servo_period_ms must lie in [0.001, 1000] ms"),
+    ("ti_s = 0.016", "ti_s = 1e-300", 10, "axis x: ti_s must lie within [1e-12, 1e+12] (in its SI unit), got 1e-300"),
+    ("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 1e-300", 9, "axis x: kv_A_s_per_m must lie within [1e-12, 1e+12]"),
+    ("force_constant_N_per_A = 942.0", "force_constant_N_per_A = 1e308", 8, "force_constant_N_per_A must lie within"),
+    ("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 1e-9", 6, "no gain crossover (the loop gain never reaches 1)"),
+])
+def test_machine_values_far_out_of_range_end_in_one_line_without_a_warning(tmp_path, capsys, key, value, line, words):
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).replace(key, value, 1))
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, line {line}: ", words)
+
+
+@pytest.mark.parametrize("n, dt, noise", [(5, 1e-3, 0.0), (50, 0.1, 1e-3), (500, 1e-4, 1e-6)])
+def test_a_trace_that_stands_still_is_diagnosed_without_a_numpy_warning(tmp_path, capsys, n, dt, noise):
+    t = np.arange(n) * dt
+    x = np.full(n, 420.735492)  # rounded as a logger writes it: its mean differs from it in the last bit
+    _trace(tmp_path / "still.csv", t, x, x + np.random.default_rng(3).normal(0, noise, n))
+    assert main(["diagnose", str(tmp_path / "still.csv"), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "Warning" not in err and "error" not in err, err
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("center_mm = [0, 0, 0]", "center_mm = [1e308, 0, 0]", "line 12: bad helix [path]: center holds 1e+308"),  # hung
+    ("radius_mm = 20", "radius_mm = 1e-300", "line 13: bad helix [path]: radius = 1e-300 is outside [1e-06, 1e+06]"),
+    ("feed_mm_min = 1000", "feed_mm_min = 1e-300", "feed must lie within [1e-06, 1e+12]"),
+    ("accel_mm_s2 = 1000", "accel_mm_s2 = 1e308", "accel must lie within [1e-06, 1e+12]"),
+])
+def test_path_numbers_far_out_of_range_end_in_one_line(tmp_path, capsys, old, new, words):
+    helix = (ROOT / "trajectories" / "helix.toml").read_text()
+    assert old in helix
+    (tmp_path / "h.toml").write_text(helix.replace(old, new, 1))
+    _refused(capsys, ["simulate", str(tmp_path / "h.toml"), "--out", str(tmp_path / "out")], f"{tmp_path / 'h.toml'}, ", words)
