@@ -23,16 +23,7 @@ from contoursim.paths import circle
 from contoursim.plotting import save_comparison_figures
 from contoursim.simulation import measured_reference
 from contoursim.traces import read_trace
-
-SMALL_PATH = """
-[feed]
-feed_mm_min = 600
-accel_mm_s2 = 500
-
-[path]
-type = "iso230_4_circle"
-radius_mm = 2
-"""
+from test_cli import SMALL_PATH
 
 
 def _refused(capsys, argv, *words):
