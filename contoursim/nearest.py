@@ -10,7 +10,7 @@ point of the same instant, not by the history of the search:
     the part of the path that is connected to R inside the ball of radius
     2|P - R| about R.
 
-Every path point nearer to P than R is lies in that ball, so the distance
+Every path point nearer to P than R lies in that ball, so the distance
 found is never larger than the tracking error |P - R| (R itself is a
 candidate), whatever the path does elsewhere: where it turns back on itself
 (a retract, a drilling cycle, back-and-forth passes, a circle cut twice) the
