@@ -15,11 +15,11 @@ tells when that happens, so the command line can say so.
 import time
 from pathlib import Path
 
-from numba import njit, prange
+from numba import njit
 from numba.core.caching import CacheImpl, UserWideCacheLocator
 from numba.core.event import Listener
 
-__all__ = ["CompileClock", "njit", "prange"]
+__all__ = ["CompileClock", "njit"]
 
 _PACKAGE = Path(__file__).resolve().parent
 
