@@ -68,14 +68,22 @@ def designed_gains(servos, dt, kd=0.0, kp=None):
         Even a coupling gain of 1 % of ``Kp`` leaves the loop damped below
         the design ratio (the axes' own loops are).
     """
-    from .servo import _damping_ratio
-
     servos = list(servos.values())
     position_gain = min(servo.kp for servo in servos)
     if kp is not None:
         return kp, (position_gain + kp) ** 2 / 4.0
-    rows = [kernel.pack(servo, dt) for servo in servos]
-    directions = _directions(len(servos))
+    rows = np.array([kernel.pack(servo, dt) for servo in servos])
+    kp = _designed_kp(rows.tobytes(), rows.shape, position_gain, dt, kd)
+    return kp, (position_gain + kp) ** 2 / 4.0
+
+
+@lru_cache(maxsize=256)
+def _designed_kp(rows, shape, position_gain, dt, kd):
+    """The bisection of :func:`designed_gains` for packed rows given as bytes: once per set of axes in a process."""
+    from .servo import _damping_ratio
+
+    rows = np.frombuffer(rows).reshape(shape)
+    directions = _directions(len(rows))
 
     def damping(kp):
         ki = (position_gain + kp) ** 2 / 4.0
@@ -91,7 +99,7 @@ def designed_gains(servos, dt, kd=0.0, kp=None):
     while high - low > 1e-6 * high:
         middle = 0.5 * (low + high)
         low, high = (middle, high) if damping(middle) >= DESIGN_DAMPING_RATIO else (low, middle)
-    return low, (position_gain + low) ** 2 / 4.0
+    return low
 
 
 def _directions(n):
