@@ -72,9 +72,17 @@ def designed_gains(servos, dt, kd=0.0, kp=None):
     position_gain = min(servo.kp for servo in servos)
     if kp is not None:
         return kp, (position_gain + kp) ** 2 / 4.0
-    rows = np.array([kernel.pack(servo, dt) for servo in servos])
+    rows = _loop_rows([kernel.pack(servo, dt) for servo in servos])
     kp = _designed_kp(rows.tobytes(), rows.shape, position_gain, dt, kd)
     return kp, (position_gain + kp) ** 2 / 4.0
+
+
+def _loop_rows(rows):
+    """Packed rows (n, NPAR) as the loop analyses key them: the feedforward gains, which act on the reference and not
+    on the loop, zeroed, so that a strategy with feedforward shares the analyses of the same loop without it."""
+    rows = np.array(rows, float)
+    rows[:, [kernel._VFF, kernel._AFF]] = 0.0
+    return rows
 
 
 @lru_cache(maxsize=256)
@@ -327,7 +335,7 @@ def margins_along(rows, kp, ki, kd, dt, path, up=(0.0, 0.0, 1.0)):
         worst over the frames; ``frames`` (how many) and ``sample`` (the
         reference sample of the frame with the least phase margin).
     """
-    rows = np.ascontiguousarray(rows, float)
+    rows = _loop_rows(rows)
     worst = dict(spectral_radius=0.0, damping_ratio=np.inf, phase_margin=np.inf, gain_margin=np.inf, sample=0)
     frames = path_frames(path, up)
     for sample, normals in frames:
