@@ -197,3 +197,28 @@ def positive_int(name, value):
     if value < 1:
         raise ValueError(f"{name} must be at least 1, got {value}")
     return int(value)
+
+
+def commanded(at, n_points, n_samples):
+    """The reference sample commanded at each of `n_points` actual points (`at`), checked; None for "point i at sample i".
+
+    Parameters
+    ----------
+    at : array_like of int, shape (n_points,), or None
+        Sample indices in [0, n_samples); None is allowed when there is one point per sample.
+    n_points, n_samples : int
+        Actual points, reference samples.
+
+    Returns
+    -------
+    ndarray of int, shape (n_points,), or None
+    """
+    if at is None:
+        if n_points != n_samples:
+            raise ValueError(f"actual has {n_points} rows but the reference {n_samples} samples: give `at`, "
+                             "the sample commanded at each actual point")  # fmt: skip
+        return None
+    at = np.asarray(at)
+    if at.shape != (n_points,) or at.dtype.kind not in "iu" or (n_points and (at.min() < 0 or at.max() >= n_samples)):
+        raise ValueError(f"at must hold {n_points} sample indices in [0, {n_samples}), got {at.dtype} {at.shape}")
+    return at

@@ -340,14 +340,7 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     if int(window) < 1:
         raise ValueError(f"window must be at least 1, got {window!r}")
     position, window, n = trajectory.position, int(window), act.shape[0]
-    if at is None:
-        if n != len(position):
-            raise ValueError(f"actual has {n} rows but the trajectory {len(position)} samples: "
-                             "give `at`, the sample commanded at each actual point")  # fmt: skip
-    else:
-        at = np.asarray(at)
-        if at.shape != (n,) or at.dtype.kind not in "iu" or (n and (at.min() < 0 or at.max() >= len(position))):
-            raise ValueError(f"at must hold {n} sample indices in [0, {len(position)}), got {at.dtype} {at.shape}")
+    at = _validate.commanded(at, n, len(position))  # None: no (N,) array of sample indices
     # the knots, the distinct reference samples: their first samples and, while the search needs them, positions
     first = np.flatnonzero(moved(position)).astype(np.int32)  # int32 (as idx): 2**31 samples would need ~1 TB
     knots = np.zeros((first.size, 4))  # x, y, z and the chord length

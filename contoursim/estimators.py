@@ -740,15 +740,8 @@ def _searching(method, name, reference, actual, up, window, at):
     act = _points("actual", actual, like=ref)
     params = search_params(up, window)
     knots, first, knot_of = distinct_samples(ref)
-    if at is None:
-        if len(act) != len(ref):
-            raise ValueError(f"actual has {len(act)} rows but the reference {len(ref)}: give `at`, "
-                             "the sample commanded at each actual point")  # fmt: skip
-        at = np.arange(len(act))
-    at = np.asarray(at)
-    if at.shape != (len(act),) or at.dtype.kind not in "iu" or at.min() < 0 or at.max() >= len(ref):
-        raise ValueError(f"at must hold {len(act)} sample indices in [0, {len(ref)}), got {at.dtype} {at.shape}")
-    out, idx = _run(method, knots, knot_of[at], act, params)
+    at = _validate.commanded(at, len(act), len(ref))
+    out, idx = _run(method, knots, knot_of if at is None else knot_of[at], act, params)
     return _result(out, first[idx], act.shape[1], name)
 
 

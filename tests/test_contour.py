@@ -165,6 +165,13 @@ def test_iso_circle_trajectory_and_input_checks():
     np.testing.assert_allclose(err.normal[ref.measuring], 1e-3, atol=1e-12)
     with pytest.raises(ValueError, match=r"actual must have shape \(N, 2\)"):
         exact_contour_error(ref, np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="give `at`, the sample commanded at each actual point"):
+        exact_contour_error(ref, actual[:10])
+    with pytest.raises(ValueError, match=rf"at must hold 10 sample indices in \[0, {len(ref.t)}\)"):
+        exact_contour_error(ref, actual[:10], at=np.arange(10) + len(ref.t))
+    from contoursim.estimators import three_point
+    with pytest.raises(ValueError, match="give `at`"):
+        three_point(ref.position, actual[:10])
     bare = Trajectory(ref.t, ref.position, ref.velocity, ref.acceleration, ref.s)
     with pytest.raises(ValueError, match="trajectory has no path"):
         exact_contour_error(bare, actual)
