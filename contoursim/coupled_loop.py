@@ -19,6 +19,8 @@ from functools import lru_cache
 import numpy as np
 
 from . import kernel
+from ._numba import njit
+from .estimators import _three_point_arc, distinct_samples, search_params
 
 __all__ = [
     "DESIGN_DAMPING_RATIO",
@@ -289,15 +291,12 @@ def path_frames(path, up=(0.0, 0.0, 1.0), resolution_deg=5.0):
         ``(sample, normals)``: the first reference sample of each bin and
         its error directions, shape (1, 2) for two axes, (2, 3) for three.
     """
-    from .estimators import _three_point_arc, distinct_samples, search_params
-
     path = np.asarray(path, float)
     n = path.shape[1]
     knots, first, _ = distinct_samples(path)
     up = tuple(float(c) for c in search_params(up)[:3])
     taken = np.arange(0, len(knots), max(1, len(knots) // FRAME_KNOTS))
-    arcs = [_three_point_arc(knots, j, up) for j in taken]
-    t, b = np.array([arc[1] for arc in arcs]), np.array([arc[2] for arc in arcs])
+    t, b = _arc_frames(knots, taken, up)
     normals = np.cross(b, t)[:, None, :2] if n == 2 else np.stack([np.cross(b, t), b], axis=1)  # (M, k, n)
     if n == 2:  # the normal's direction modulo 180° (±normal: the same loop)
         bins = round(180.0 / resolution_deg)
@@ -309,6 +308,17 @@ def path_frames(path, up=(0.0, 0.0, 1.0), resolution_deg=5.0):
         keys = np.round(angles.reshape(len(taken), -1) / resolution_deg).astype(np.int64)
     _, representative = np.unique(keys, axis=0, return_index=True)
     return [(int(first[taken[j]]), normals[j]) for j in np.sort(representative)]
+
+
+@njit(cache=True)
+def _arc_frames(knots, taken, up):
+    """Tangents and binormals of the three-point arcs at the knots `taken`, shape (len(taken), 3) each."""
+    t, b = np.empty((taken.size, 3)), np.empty((taken.size, 3))
+    for j in range(taken.size):
+        _, tj, bj, _ = _three_point_arc(knots, taken[j], up)
+        t[j, 0], t[j, 1], t[j, 2] = tj
+        b[j, 0], b[j, 1], b[j, 2] = bj
+    return t, b
 
 
 def margins_along(rows, kp, ki, kd, dt, path, up=(0.0, 0.0, 1.0)):
