@@ -1248,14 +1248,22 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             break
         step = _step(problem, best.fit.label, best.fit, best.uncertainty, best.delta_bic)
         if not step.rms_um < steps[-1].rms_um:  # an effect that does not close any of the gap is no explanation
-            warnings.append(f"{best.fit.label}: not named, its fit does not lower the residual "
-                            f"({steps[-1].rms_um:.4g} -> {step.rms_um:.4g} µm RMS)")
+            warnings.append(f"{best.fit.label}: not named, " + (
+                f"its fit does not lower the residual ({steps[-1].rms_um:.4g} -> {step.rms_um:.4g} µm RMS)"
+                if np.isfinite(step.rms_um) else "the model with it in place does not follow the trace (its simulation diverged)"))
             problem.set_base(base)
             break
         if ambiguity is not None:
             warnings.append(ambiguity)
         steps.append(step)
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
+    if identified and len(trace.axes) == 2:
+        for step in steps:
+            if step.effect is not None and step.effect.name == "gain_mismatch":
+                other = next(a for a in trace.axes if a != step.effect.axis)
+                warnings.append(f"{step.effect.label}: with one position gain identified for both axes only the ratio of "
+                                f"their gains is known; kp_ratio {step.effect['kp_ratio']:.4g} on "
+                                f"{step.effect.axis} is the same machine as {1.0 / step.effect['kp_ratio']:.4g} on {other}")
     after = problem.fitted()
     left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
     warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "

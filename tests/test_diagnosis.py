@@ -11,6 +11,7 @@ The full sweep is benchmarks/bench_diagnose.py.
 import json
 import runpy
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -151,6 +152,25 @@ def test_noise_level_from_the_second_differences():
     sigma = np.array([2e-4, 5e-5])
     estimate = noise_level(smooth + rng.normal(0, 1, smooth.shape) * sigma)
     np.testing.assert_allclose(estimate, sigma, rtol=0.05)
+
+
+@pytest.mark.parametrize("ratio", [0.9, 1.1])
+def test_without_a_model_a_gain_mismatch_of_two_axes_is_named_as_their_ratio(machine, ratio):
+    """Equal position gains, Y's off by `ratio`, no model: the ratio found on one axis or the other, and said so.
+
+    With one position gain identified for both axes, Y at kp·r and X at kp/r
+    are the same machine up to that gain: either answer is right, and the
+    report must say that only the ratio is known.
+    """
+    equal = Machine({a: replace(s, kp=40.0) for a, s in machine.axes.items()}, DT)
+    trace = synthetic_trace(Model(equal, (Effect("gain_mismatch", "y", kp_ratio=ratio),)), circle("ccw"), mismatch=0.03,
+                            noise_um=0.1, quantum_um=0.05, every=2, seed=3)
+    result = diagnose(trace)
+    (named,) = result.effects
+    assert named.name == "gain_mismatch", result.report()
+    assert named["kp_ratio"] == pytest.approx(ratio if named.axis == "y" else 1.0 / ratio, rel=0.01)
+    assert any(w.startswith(f"{named.label}: with one position gain identified for both axes only the ratio")
+               for w in result.warnings), result.warnings
 
 
 def test_identification_shares_one_position_gain_so_a_gain_mismatch_stays_visible():
