@@ -94,7 +94,7 @@ _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
 _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (the catalogue's modes: 0.01–0.2)
 _JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's jackknife leaves out in turn
-_REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
+_REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff", "velocity_filter_hz")  # servo parameters the refit may move
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 

@@ -24,14 +24,15 @@ def axis(**kw):
     return AxisServo(**{**dict(mass=MASS, force_constant=KF, kv=KV, kp=KP, ti=TI, damping=800.0), **kw})
 
 
-def reference_loop(servo, quantum, delay, start):
+def reference_loop(servo, quantum, delay, start, play=0.0, scale=False):
     """The sampled loop as python-control systems: ZOH plant, and the drive as one discrete nlsys.
 
-    The drive at step k: encoder ``enc = q·round(x/q)``, read `delay` periods late (``x_fb``); velocity
+    The drive at step k: the table behind a play of `play` [mm] around the motor position x; the encoder
+    on the table (`scale`) or on x, ``enc = q·round(·/q)``, read `delay` periods late (``x_fb``); velocity
     ``(x_fb[k] - x_fb[k-n])/(n·dt)`` low-passed ``a·y + (1 - a)·raw`` (or the motor velocity ``v``
     itself); P position + velocity feedforward; Tustin PI velocity + acceleration feedforward, clamped,
     the integrator held while clamped and pushed further; the command applied `computation_delay`
-    periods later. Inputs xr, vr, ar; outputs the position, x_fb and the applied current.
+    periods later. Inputs xr, vr, ar; outputs the table position, x_fb and the applied current.
     """
     A = np.array([[0.0, 1.0], [0.0, -servo.damping / servo.mass]])
     B = np.array([[0.0], [1000.0 * servo.force_constant / servo.mass]])  # mm/s^2 per A
@@ -43,12 +44,14 @@ def reference_loop(servo, quantum, delay, start):
     limit = np.inf if servo.current_limit is None else servo.current_limit
     i_ff = servo.aff * servo.mass / (1000.0 * servo.force_constant)
     d = servo.computation_delay
-    # states: encoder readings k-1 .. k-delay, x_fb k-1 .. k-n, y, z, commands k-1, k-2
-    ie, ip, iy, iz, ic = 0, delay, delay + n, delay + n + 1, delay + n + 2
+    # states: encoder readings k-1 .. k-delay, x_fb k-1 .. k-n, y, z, commands k-1, k-2, the table
+    ie, ip, iy, iz, ic, it = 0, delay, delay + n, delay + n + 1, delay + n + 2, delay + n + 4
 
     def signals(z, u):
         xr, vr, ar, x, v = u
-        enc = quantum * np.floor(x / quantum + 0.5) if quantum else x
+        table = min(max(z[it], x - play / 2), x + play / 2)
+        sensed = table if scale else x
+        enc = quantum * np.floor(sensed / quantum + 0.5) if quantum else sensed
         readings = np.r_[enc, z[ie:ip]]
         x_fb = readings[delay]
         if servo.velocity_feedback == "difference":
@@ -60,32 +63,37 @@ def reference_loop(servo, quantum, delay, start):
         command = np.clip(raw, -limit, limit)
         held = command != raw and e_v * raw > 0
         applied = np.r_[command, z[ic : ic + 2]][d]
-        return readings, x_fb, v_fb, e_v, held, command, applied
+        return table, readings, x_fb, v_fb, e_v, held, command, applied
 
     def update(t, z, u, params):
-        readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
+        table, readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
         past = np.r_[x_fb, z[ip:iy]]
         integrator = z[iz] if held or not servo.ti else z[iz] + DT * e_v
-        return np.r_[readings[:delay], past[:n], v_fb, integrator, command, z[ic]]
+        return np.r_[readings[:delay], past[:n], v_fb, integrator, command, z[ic], table]
 
     def output(t, z, u, params):
-        readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
-        return [applied, x_fb]
+        table, readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
+        return [applied, x_fb, table]
 
-    drive = ct.nlsys(update, output, inputs=["xr", "vr", "ar", "x", "v"], outputs=["i", "x_fb"],
-                     states=delay + n + 4, dt=DT, name="drive")
-    loop = ct.interconnect([plant, drive], inplist=["xr", "vr", "ar"], outlist=["x", "x_fb", "i"])
+    drive = ct.nlsys(update, output, inputs=["xr", "vr", "ar", "x", "v"], outputs=["i", "x_fb", "table"],
+                     states=delay + n + 5, dt=DT, name="drive")
+    loop = ct.interconnect([plant, drive], inplist=["xr", "vr", "ar"], outlist=["table", "x_fb", "i"])
     x0 = np.zeros(loop.nstates)
     x0[loop.state_labels.index("plant_x[0]")] = start
     enc = quantum * np.floor(start / quantum + 0.5) if quantum else start
     first = loop.state_labels.index("drive_x[0]")
     x0[first : first + delay + n] = enc  # at rest: the encoder history holds the first reading
+    x0[first + it] = start
     return loop, x0
 
 
 DRIVES = {
     "difference": (dict(velocity_feedback="difference"), 0.0, 0),
     "fir2": (dict(velocity_feedback="difference", velocity_taps=2), 0.0, 0),
+    "fir2_backlash_motor": (dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1), 0.0, 0,
+                            dict(backlash_mm=0.004)),
+    "fir2_backlash_scale": (dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=1000.0), 2e-4, 1,
+                            dict(backlash_mm=0.004, backlash_feedback="scale")),
     "fir3_lowpass_delay1": (dict(velocity_feedback="difference", velocity_taps=3, velocity_filter_hz=600.0,
                                  computation_delay=1), 0.0, 0),
     "quantised_delayed_delay2": (dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=1500.0,
@@ -100,15 +108,17 @@ DRIVES = {
 
 @pytest.mark.parametrize("name", list(DRIVES))
 def test_kernel_equals_python_control_reference(name):
-    kw, quantum, delay = DRIVES[name]
+    kw, quantum, delay, *backlash = DRIVES[name]
+    backlash = backlash[0] if backlash else {}
     servo = axis(**kw)
     n = 400
     t = np.arange(n) * DT
     w = 2 * np.pi * 40.0  # a 0.2 mm sine: reverses after 6.25 ms
     pos, vel, acc = 0.2 * np.sin(w * t), 0.2 * w * np.cos(w * t), -0.2 * w**2 * np.sin(w * t)
-    effects = LoopEffects(quantum_mm=quantum, feedback_delay_s=delay * DT)
+    effects = LoopEffects(quantum_mm=quantum, feedback_delay_s=delay * DT, **backlash)
     result = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None], effects={"x": effects})
-    loop, x0 = reference_loop(servo, quantum, delay, pos[0])
+    loop, x0 = reference_loop(servo, quantum, delay, pos[0], backlash.get("backlash_mm", 0.0),
+                              backlash.get("backlash_feedback") == "scale")
     ref = ct.input_output_response(loop, t, np.vstack([pos, vel, acc]), X0=x0).outputs
     np.testing.assert_allclose(result.position[:, 0], ref[0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(result.encoder[:, 0], ref[1], rtol=0, atol=1e-9)
@@ -185,7 +195,9 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
             servos[name] = axis(**kw)
             effects[name] = LoopEffects(quantum_mm=float(rng.choice([0.0, 2e-4])),
                                         feedback_delay_s=float(rng.choice([0.0, 1.5 * DT, 2 * DT])),
-                                        coulomb_N=float(rng.choice([0.0, 60.0])))
+                                        coulomb_N=float(rng.choice([0.0, 60.0])),
+                                        backlash_mm=float(rng.choice([0.0, 0.003])),
+                                        backlash_feedback=str(rng.choice(["motor", "scale"])))
         variants.append((servos, effects))
     variants[0] = ({name: axis() for name in ("x", "y")}, {})  # one variant as before the drive's structure
     rows = np.array([[pack(s, DT, e.get(name, LoopEffects())) for name, s in servos.items()]
