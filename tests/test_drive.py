@@ -17,6 +17,7 @@ from contoursim.machine import load_machine
 from contoursim.servo import AxisServo
 
 MASS, KF, KV, KP, TI = 300.0, 900.0, 200.0, 40.0, 0.01
+ELECTRICAL = dict(inductance=5e-3, resistance=1.2, kc=5e-3 * 2 * np.pi * 800, ti_current=5e-3 / 1.2)
 DT = 1e-4
 
 
@@ -147,8 +148,9 @@ def test_ramp_error_is_still_v_over_kp(kw):
                                 dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1),
                                 dict(velocity_feedback="difference", velocity_taps=3, velocity_filter_hz=800.0,
                                      computation_delay=2, ti=None),
-                                dict(computation_delay=2, inductance=5e-3, resistance=1.2, kc=5e-3 * 2 * np.pi * 800,
-                                     ti_current=5e-3 / 1.2)])
+                                dict(computation_delay=2, **ELECTRICAL),
+                                dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=2000.0,
+                                     computation_delay=1, **ELECTRICAL)])
 def test_spectral_radius_equals_python_control_closed_loop_poles(kw):
     # The kernel's linearised loop (loop_matrices) and servo.discretize's python-control interconnection of the
     # estimator and delay blocks: the same poles.
@@ -189,6 +191,8 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
         servos, effects = {}, {}
         for name in ("x", "y"):
             kw = dict(computation_delay=int(rng.integers(3)), current_limit=float(rng.choice([2.0, 50.0])))
+            if rng.random() < 0.3:
+                kw.update(ELECTRICAL)
             if rng.random() < 0.7:
                 kw.update(velocity_feedback="difference", velocity_taps=int(rng.integers(1, 9)),
                           velocity_filter_hz=rng.choice([None, float(rng.uniform(200.0, 3000.0))]))
@@ -210,6 +214,7 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
                                 ("current", "current"), ("saturated", "saturated")]:
                 np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=f"{name}, variant {b}")
     assert {s.computation_delay for servos, _ in variants for s in servos.values()} == {0, 1, 2}
+    assert any(s.electrical for servos, _ in variants for s in servos.values())
 
 
 def test_the_state_feedback_default_is_the_loop_of_before():
