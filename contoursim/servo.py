@@ -11,7 +11,11 @@ Block diagram (signal names as used by :func:`control.interconnect`)::
                  i
 
 Without electrical dynamics (no ``inductance``) the current loop is taken as
-ideal: the plant's input is the current command ``i_cmd`` itself.
+ideal: the plant's input is the current command ``i_cmd`` itself. The
+velocity loop compares ``v_cmd`` with ``v_fb``, the output of the block
+``estimator``: ``v`` itself, or, in the sampled loop of a drive with
+``velocity_feedback="difference"``, the filtered difference of ``x``; and
+``i_cmd`` leaves ``current_command_sum`` ``computation_delay`` periods late.
 
 Units inside are mm, s, A, V. The parameters are SI (kg, N, N·s/m, A·s/m,
 H, Ω) and are converted once, in the properties ``force_gain``,
@@ -159,6 +163,8 @@ class AxisServo:
         command reaching the drive: the command computed from the samples
         at ``t_k`` is applied over ``[t_k+d, t_k+d+1)``.
 
+    Notes
+    -----
     The last four are the drive's structure: the sampled loop
     (:func:`discretize`, :func:`margins` with ``dt``) and the kernel have
     them; the continuous analyses take the difference as the derivative
@@ -325,7 +331,8 @@ class DiscreteServo:
         electrical dynamics.
     closed_loop : control.StateSpace
         The whole sampled cascade, inputs ``'x_ref'`` [mm], ``'v_ref'``
-        [mm/s], ``'a_ref'`` [mm/s^2], outputs ``'x'``, ``'v'``, ``'i_cmd'``.
+        [mm/s], ``'a_ref'`` [mm/s^2], outputs ``'x'``, ``'v'``, ``'i_cmd'``
+        (the command applied, after any computation delay).
     """
 
     servo: AxisServo
