@@ -15,6 +15,7 @@ from contoursim.exceptions import ConfigError, UnstableLoopError
 from contoursim.kernel import LoopEffects, pack, run, run_batch
 from contoursim.machine import load_machine
 from contoursim.servo import AxisServo
+from contoursim.sweep import _job, read_sweep
 
 MASS, KF, KV, KP, TI = 300.0, 900.0, 200.0, 40.0, 0.01
 ELECTRICAL = dict(inductance=5e-3, resistance=1.2, kc=5e-3 * 2 * np.pi * 800, ti_current=5e-3 / 1.2)
@@ -284,3 +285,29 @@ def test_machine_file_keys_and_what_uncertain_may_list(tmp_path):
                                          'uncertain = ["computation_delay_periods"]'))
     with pytest.raises(ConfigError, match=r"line \d+: axis x: uncertain must list controller keys"):
         load_machine(file)
+
+
+SWEEP = """machine = "demo_mill"
+path = "rounded_square"
+[feed]
+feed_mm_min = 3000
+[sweep]
+method = "{method}"
+{count}
+[[vary]]
+name = "axes.x.computation_delay_periods"
+{values}
+"""
+
+
+def test_a_sweep_varies_the_computation_delay_over_whole_periods(tmp_path):
+    spec = tmp_path / "spec.toml"
+    spec.write_text(SWEEP.format(method="grid", count="", values="values = [0, 1, 2]"))
+    sweep = read_sweep(spec)
+    job = _job(sweep)
+    delays = [job.variant({"axes.x.computation_delay_periods": v})[0].machine.axes["x"].computation_delay
+              for v in sweep.values[:, 0]]
+    assert delays == [0, 1, 2] and all(isinstance(d, int) for d in delays)
+    spec.write_text(SWEEP.format(method="random", count="count = 4", values="min = 0.0\nmax = 2.0"))
+    with pytest.raises(ConfigError, match=r"vary 'axes.x.computation_delay_periods': computation_delay must be a whole"):
+        read_sweep(spec)
