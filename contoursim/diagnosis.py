@@ -94,7 +94,7 @@ _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
 _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (the catalogue's modes: 0.01–0.2)
 _JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's jackknife leaves out in turn
-_REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff")  # servo parameters (SI) the refit may move
+_REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff", "velocity_filter_hz")  # servo parameters the refit may move
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 
@@ -286,7 +286,7 @@ class Diagnosis:
             lines.append(f"max_feed_mm_min = {60.0 * machine.max_feed!r}")
         for axis, servo in machine.axes.items():
             lines += ["", f"[axes.{axis}]"]
-            lines += [f"{key} = {float(getattr(servo, name))!r}" for key, name in SERVO_KEYS.items()
+            lines += [f"{key} = {_toml_value(getattr(servo, name))}" for key, name in SERVO_KEYS.items()
                       if getattr(servo, name) is not None]
             if machine.uncertain.get(axis):
                 keys = {name: key for key, name in SERVO_KEYS.items()}
@@ -339,6 +339,13 @@ def _strict(value):
     if isinstance(value, (float, np.floating)):
         return float(value) if np.isfinite(value) else None
     return value
+
+
+def _toml_value(value):
+    """A servo setting as a machine file writes it: a name quoted, a whole number as one, else a float."""
+    if isinstance(value, str):
+        return json.dumps(value)
+    return str(value) if isinstance(value, int) else repr(float(value))
 
 
 def _rms_um(r):

@@ -45,6 +45,10 @@ output is held over ``[t_k, t_k+1)``):
 3. feedback delay: the position loop reads the encoder and the velocity loop
    the motor velocity `feedback_delay_s` late, linearly interpolated between
    samples (ring buffers in the state, at most :data:`MAX_DELAY_SAMPLES`);
+   then, with ``velocity_feedback="difference"`` (:class:`~contoursim.servo.AxisServo`),
+   the velocity loop reads instead the backward difference of the fed-back
+   positions over `velocity_taps` samples, low-passed when
+   `velocity_filter_hz` is set (ring buffer and filter state in the state);
 4. recorded: the tool position (table + deflection, plus measurement noise
    of `noise_mm` RMS when it is on the recording), the fed-back encoder
    position, ``v``;
@@ -52,7 +56,9 @@ output is held over ``[t_k, t_k+1)``):
    the contour error of the fed-back axis positions against its reference
    path and adds a correction to every axis's velocity command;
 6. position P + velocity feedforward, velocity PI + acceleration
-   feedforward, current clamp with anti-windup, current PI (when modelled);
+   feedforward, current clamp with anti-windup; the current command
+   computed `computation_delay` periods before reaches the drive (the
+   last two commands in the state); current PI (when modelled);
 7. the disturbance force: the constant offset minus viscous and stick-slip
    friction (see :class:`LoopEffects`): the dry friction is the force that
    would stop the carriage at ``t_k+1``, within its static or kinetic
@@ -117,7 +123,10 @@ _QUANTUM = 58  # encoder resolution [mm] (0: none)
 _NOISE = 59  # measurement noise on the tool position [mm RMS]
 _SEED = 60  # noise seed
 _MODE = 61  # 1.0 when the axis has a structural mode
-NPAR = 62  #: length of one axis's parameter row from :func:`pack`
+_VDIFF = 62  # 1.0 when the velocity loop closes on the encoder difference (AxisServo.velocity_feedback)
+_VTAPS, _VGAIN, _VPOLE = 63, 64, 65  # its taps n, 1/(n·dt) [1/s] and low-pass pole (0: none)
+_CDELAY = 66  # computation delay [servo periods]
+NPAR = 67  #: length of one axis's parameter row from :func:`pack`
 
 # Per-axis state ----------------------------------------------------------------------------
 _ZV, _ZC = 5, 6  # velocity / current controller integrators [mm], [A·s]
@@ -127,7 +136,11 @@ _BUFX = 8  # _NBUF encoder positions [mm]
 _BUFV = _BUFX + _NBUF  # _NBUF motor velocities [mm/s]
 _PAIR = _BUFV + _NBUF  # index of the pair of noise samples held (-1: none)
 _GAUSS = _PAIR + 1  # that pair of standard normal samples
-_NSTATE = _GAUSS + 2
+_VEST = _GAUSS + 2  # the velocity fed back at the last step (the low-pass's state) [mm/s]
+_SENT = _VEST + 1  # 2 entries: the current commands computed 1 and 2 periods ago [A]
+_NHIST = 16  # ring buffer length of the fed-back positions the velocity difference reads
+_HIST = _SENT + 2  # _NHIST fed-back positions [mm]
+_NSTATE = _HIST + _NHIST
 
 _CLAMPED, _DIVERGED, _BAD_REFERENCE = 0, 1, 2  # per-axis status counters of a run
 
@@ -365,12 +378,15 @@ class ServoResponse:
         encoder or linear scale, quantised and delayed (:func:`run` returns
         `position` itself when no axis has an effect between the two).
     velocity : ndarray, shape (N, n)
-        Motor (carriage) velocities at ``t_k`` [mm/s].
+        Motor (carriage) velocities at ``t_k`` [mm/s] (the plant's, not a
+        drive's estimate of it).
     current : ndarray, shape (N, n)
         Current command held over ``[t_k, t_k+1)`` [A]: velocity-controller
-        output plus acceleration feedforward, after saturation.
+        output plus acceleration feedforward, after saturation (computed
+        ``computation_delay`` periods before, when the servo has one).
     saturated : ndarray of bool, shape (N, n)
-        True where the current command was clamped at the current limit.
+        True where the current command computed at ``t_k`` was clamped at
+        the current limit.
     contour_estimate : ndarray, shape (N, 3), or None
         The contour error the :class:`Coupling` estimated at each step: the
         vector from the fed-back axis position to the foot point [mm];
@@ -446,6 +462,18 @@ def _delayed(buf, a, base, k, n, f):
 def _between(now, before, f):
     """Linear interpolation a fraction `f` of a period back from the sample `now` towards `before`."""
     return (1.0 - f) * now + f * before
+
+
+@njit(cache=True)
+def _difference(x_fb, x_past, gain, pole, previous):
+    """The drive's velocity [mm/s]: ``(x_fb - x_past)·gain`` low-passed by ``pole`` (0: none) from `previous`."""
+    return pole * previous + (1.0 - pole) * ((x_fb - x_past) * gain)
+
+
+@njit(cache=True)
+def _applied(delay, now, last, before):
+    """The current command reaching the drive [A]: the one computed `delay` (0, 1 or 2) periods ago."""
+    return now if delay == 0.0 else (last if delay == 1.0 else before)
 
 
 @njit(cache=True)
@@ -596,6 +624,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                                          par[a, _QUANTUM])  # fmt: skip
         state[a, _BUFX : _BUFX + _NBUF] = enc
         state[a, _BUFV : _BUFV + _NBUF] = state[a, 1]
+        state[a, _HIST : _HIST + _NHIST] = enc
         status[a, _CLAMPED] = 0
         status[a, _DIVERGED] = -1
         status[a, _BAD_REFERENCE] = -1
@@ -618,6 +647,11 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 # np.int64(constant): numba compiles a callee once per literal argument, once per type otherwise
                 x_fb[a] = _delayed(state, a, np.int64(_BUFX), k, n, f)
                 v_fb[a] = _delayed(state, a, np.int64(_BUFV), k, n, f)
+            if par[a, _VDIFF] != 0.0:  # the drive's velocity: the difference of the fed-back positions
+                state[a, _HIST + k % _NHIST] = x_fb[a]
+                past = state[a, _HIST + (k - int(par[a, _VTAPS])) % _NHIST]
+                v_fb[a] = _difference(x_fb[a], past, par[a, _VGAIN], par[a, _VPOLE], state[a, _VEST])
+                state[a, _VEST] = v_fb[a]
             if record:
                 if write_tool:
                     y = table + state[a, 2]
@@ -643,6 +677,9 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 par[a, _VB], par[a, _VC], par[a, _VD], par[a, _ILIM], state[a, _ZV], v_cmd - v_fb[a], i_ff
             )
             status[a, _CLAMPED] += clamped
+            computed = i_cmd
+            i_cmd = _applied(par[a, _CDELAY], computed, state[a, _SENT], state[a, _SENT + 1])
+            state[a, _SENT + 1], state[a, _SENT] = state[a, _SENT], computed
             if status[a, _BAD_REFERENCE] < 0 and not math.isfinite(ref_pos[k, a] + ref_vel[k, a] + ref_acc[k, a]):
                 status[a, _BAD_REFERENCE] = k
             if record:
@@ -699,9 +736,10 @@ _LZV, _LZC, _LTABLE = NPAR + _ZV, NPAR + _ZC, NPAR + _TABLE  # integrators, tabl
 _LXFB, _LVFB = NPAR + 8, NPAR + 9  # fed-back position [mm] and velocity [mm/s] of the step
 _LDRIVE, _LCLAMPED, _LCLAMPS, _LLEVEL = NPAR + 10, NPAR + 11, NPAR + 12, NPAR + 13  # current command, clamped (0/1),
 # clamped steps so far (exact as a float up to 2**53), friction level of the step
-_LROWS = NPAR + 14
+_LVEST, _LSENT = NPAR + 14, NPAR + 15  # as _variant's _VEST and (2 entries) _SENT
+_LROWS = NPAR + 17
 # Effects a block's axis has in any lane (the steps of the others are skipped for the whole block)
-_ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP = range(5)
+_ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP, _ANY_DIFFERENCE = range(6)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -723,12 +761,12 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
     n_steps = ref_pos.shape[0]
     s = np.empty((n_axes, _LROWS, LANES))  # see _LROWS; `p` where parameters are read
     p = s
-    has = np.empty((n_axes, 5), np.bool_)
+    has = np.empty((n_axes, 6), np.bool_)
     for a in range(n_axes):
         for j in range(NPAR):
             for l in range(n_lanes):
                 p[a, j, l] = rows[l, a, j]
-        for e in range(5):
+        for e in range(6):
             has[a, e] = False
         for l in range(n_lanes):
             has[a, _ANY_QUANTUM] |= p[a, _QUANTUM, l] != 0.0
@@ -736,7 +774,9 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
             has[a, _ANY_NOISE] |= p[a, _NOISE, l] > 0.0
             has[a, _ANY_STRIBECK] |= p[a, _FRICTION, l] != 0.0 and p[a, _FS, l] != 0.0
             has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, _MODE, l] != 0.0 or p[a, _ELEC, l] != 0.0
+            has[a, _ANY_DIFFERENCE] |= p[a, _VDIFF, l] != 0.0
     buf_x = np.empty((n_axes, _NBUF, LANES))
+    hist = np.empty((n_axes, _NHIST, LANES))
     buf_v = np.empty((n_axes, _NBUF, LANES))
     gauss = np.empty((n_axes, 2, LANES))
     keys = np.empty((n_axes, LANES), np.uint64)
@@ -761,6 +801,8 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
             for q in range(_NBUF):
                 buf_x[a, q, l] = enc
                 buf_v[a, q, l] = 0.0
+            for q in range(_NHIST):
+                hist[a, q, l] = enc
             keys[a, l] = _mix(np.uint64(p[a, _SEED, l]) * np.uint64(n_axes + 1) + np.uint64(a))
             diverged[a, l] = -1
     pair = -1  # the pair of noise samples held (the same for every lane)
@@ -794,6 +836,14 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
                         i0, i1 = (k - n) % _NBUF, (k - n - 1) % _NBUF
                         s[a, _LXFB, l] = _between(buf_x[a, i0, l], buf_x[a, i1, l], f)
                         s[a, _LVFB, l] = _between(buf_v[a, i0, l], buf_v[a, i1, l], f)
+            if has[a, _ANY_DIFFERENCE]:  # the drive's velocity, as in _variant
+                slot = k % _NHIST
+                for l in range(n_lanes):
+                    hist[a, slot, l] = s[a, _LXFB, l]
+                    past = hist[a, (k - int(p[a, _VTAPS, l])) % _NHIST, l]
+                    estimate = _difference(s[a, _LXFB, l], past, p[a, _VGAIN, l], p[a, _VPOLE, l], s[a, _LVEST, l])
+                    s[a, _LVEST, l] = estimate
+                    s[a, _LVFB, l] = estimate if p[a, _VDIFF, l] != 0.0 else s[a, _LVFB, l]
             if record and write_tool:
                 for l in range(n_lanes):
                     kept_tool[row, a, l] = s[a, _LTABLE, l] + s[a, _LD, l]
@@ -855,6 +905,10 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, rigid):
         i_cmd, sat, s[a, _LZV, l] = _velocity_controller(p[a, _VB, l], p[a, _VC, l], p[a, _VD, l],
                                                          p[a, _ILIM, l], s[a, _LZV, l], v_cmd - s[a, _LVFB, l],
                                                          p[a, _AFF, l] * a_ref)  # fmt: skip
+        applied = _applied(p[a, _CDELAY, l], i_cmd, s[a, _LSENT, l], s[a, _LSENT + 1, l])
+        s[a, _LSENT + 1, l] = s[a, _LSENT, l]
+        s[a, _LSENT, l] = i_cmd
+        i_cmd = applied
         s[a, _LDRIVE, l] = i_cmd
         s[a, _LCLAMPED, l] = 1.0 if sat else 0.0
         s[a, _LCLAMPS, l] += 1.0 if sat else 0.0
@@ -973,8 +1027,9 @@ def pack(servo, dt, effects=LoopEffects()):
     -------
     ndarray, shape (NPAR,)
         The exact ZOH plant (:func:`contoursim.servo.zoh`), the Tustin
-        controllers of :func:`contoursim.servo.discretize`, gains, limit
-        and the effects' parameters.
+        controllers of :func:`contoursim.servo.discretize`, gains, limit,
+        the drive's velocity difference and computation delay, and the
+        effects' parameters.
 
     Raises
     ------
@@ -1032,17 +1087,22 @@ def pack(servo, dt, effects=LoopEffects()):
     whole = math.floor(delay + 1e-9)
     row[_DELAY_N], row[_DELAY_F] = whole, max(delay - whole, 0.0)
     row[_QUANTUM], row[_NOISE], row[_SEED] = e.quantum_mm, e.noise_mm if e.noise_at == "recorded" else 0.0, e.seed
+    row[_VDIFF] = float(servo.velocity_feedback == "difference")
+    row[_VTAPS], row[_VGAIN] = servo.velocity_taps, 1.0 / (servo.velocity_taps * dt)
+    row[_VPOLE] = 0.0 if servo.velocity_filter_hz is None else math.exp(-2.0 * math.pi * servo.velocity_filter_hz * dt)
+    row[_CDELAY] = servo.computation_delay
     return row
 
 
 def loop_matrices(row):
     """The linear sampled loop of a packed axis, with an extra velocity command as its input.
 
-    The plant (with its structural mode and current loop), the controllers
-    and the feedback delay, without saturation, backlash, friction and
-    quantisation: ``s_{k+1} = phi·s_k + b·w_k`` and ``x_fb,k = c·s_k``, with
-    ``w`` added to the velocity command [mm/s] (what a :class:`Coupling`
-    does) and ``x_fb`` the position the loop closes on [mm].
+    The plant (with its structural mode and current loop), the controllers,
+    the feedback delay, the drive's velocity difference and computation
+    delay, without saturation, backlash, friction and quantisation:
+    ``s_{k+1} = phi·s_k + b·w_k`` and ``x_fb,k = c·s_k``, with ``w`` added
+    to the velocity command [mm/s] (what a :class:`Coupling` does) and
+    ``x_fb`` the position the loop closes on [mm].
 
     Parameters
     ----------
@@ -1052,7 +1112,8 @@ def loop_matrices(row):
     Returns
     -------
     phi : ndarray, shape (S, S)
-        State transition: plant, integrators in use, delayed samples [-].
+        State transition: plant, integrators in use, delayed samples,
+        velocity low-pass, commands not yet applied [-].
     b : ndarray, shape (S,)
         Input vector of the extra velocity command.
     c : ndarray, shape (S,)
@@ -1061,33 +1122,50 @@ def loop_matrices(row):
     p = _validate.finite_array("row", row, shape=(NPAR,))
     electrical, integral = p[_ELEC] != 0.0, p[_VC] != 0.0
     n_delay, f = int(p[_DELAY_N]), p[_DELAY_F]
-    depth = n_delay + 1 if (n_delay or f) else 0  # past samples of x and v the loop reads
-    # state: plant (5), then the integrators in use, then the delayed x and v samples (k-1 .. k-depth);
-    # the input w rides along as entry `size` of every row vector
+    delayed, difference = bool(n_delay or f), p[_VDIFF] != 0.0
+    taps, filtered, n_sent = int(p[_VTAPS]), difference and p[_VPOLE] != 0.0, int(p[_CDELAY])
+    # past samples of x and v the loop reads (x_fb = (1 - f)·x[k - n] + f·x[k - n - 1], and `taps` steps before)
+    depth_x = max(n_delay + 1 if delayed else 0, n_delay + taps + (f != 0.0) if difference else 0)
+    depth_v = n_delay + 1 if delayed and not difference else 0
+    # state: plant (5), then the integrators in use, the delayed x and v samples (k-1 .. k-depth), the low-passed
+    # velocity of the last step, the commands computed 1 (.. n_sent) periods ago; the input w rides along as entry
+    # `size` of every row vector
     zv, zc = _NS, _NS + integral
     hx = zc + electrical
-    hv = hx + depth
-    size = hv + depth
+    hv = hx + depth_x
+    vf = hv + depth_v
+    sent = vf + filtered
+    size = sent + n_sent
     Ad = p[_AD : _AD + _NS * _NS].reshape(_NS, _NS)
     Bu = p[_BU : _BU + _NS]
 
-    def sample(signal, history, back):
-        """Row picking the plant state `signal` (0: x, 1: v) `back` samples ago."""
+    def unit(index):
         r = np.zeros(size + 1)
-        r[signal if back == 0 else history + back - 1] = 1.0
+        r[index] = 1.0
         return r
 
-    def fed_back(signal, history):
-        return (1.0 - f) * sample(signal, history, n_delay) + (f * sample(signal, history, n_delay + 1) if f else 0.0)
+    def sample(signal, history, back):
+        """Row picking the plant state `signal` (0: x, 1: v) `back` samples ago."""
+        return unit(signal if back == 0 else history + back - 1)
 
-    e_v = -p[_KP] * fed_back(0, hx) - fed_back(1, hv)
+    def fed_back(signal, history, back=0):
+        back += n_delay
+        return (1.0 - f) * sample(signal, history, back) + (f * sample(signal, history, back + 1) if f else 0.0)
+
+    if difference:
+        v_fb = (fed_back(0, hx) - fed_back(0, hx, taps)) * p[_VGAIN]
+        if filtered:
+            v_fb = p[_VPOLE] * unit(vf) + (1.0 - p[_VPOLE]) * v_fb
+    else:
+        v_fb = fed_back(1, hv)
+    e_v = -p[_KP] * fed_back(0, hx) - v_fb
     e_v[size] = 1.0
     i_cmd = p[_VD] * e_v
     if integral:
         i_cmd[zv] += p[_VC]
-    u = i_cmd
+    u = unit(sent + n_sent - 1) if n_sent else i_cmd  # the command reaching the drive
     if electrical:
-        e_i = i_cmd.copy()
+        e_i = u.copy()
         e_i[4] -= 1.0
         u = p[_CD] * e_i
         u[zc] += p[_CC]
@@ -1100,9 +1178,13 @@ def loop_matrices(row):
     if electrical:
         phi[zc] = p[_CB] * e_i
         phi[zc, zc] += 1.0
-    for history, signal in ((hx, 0), (hv, 1)):
+    for history, signal, depth in ((hx, 0, depth_x), (hv, 1, depth_v)):
         for j in range(depth):
             phi[history + j] = sample(signal, history, j)
+    if filtered:
+        phi[vf] = v_fb
+    for j in range(n_sent):
+        phi[sent + j] = i_cmd if j == 0 else unit(sent + j - 1)
     return phi[:, :size], phi[:, size], fed_back(0, hx)[:size]
 
 

@@ -11,7 +11,11 @@ Block diagram (signal names as used by :func:`control.interconnect`)::
                  i
 
 Without electrical dynamics (no ``inductance``) the current loop is taken as
-ideal: the plant's input is the current command ``i_cmd`` itself.
+ideal: the plant's input is the current command ``i_cmd`` itself. The
+velocity loop compares ``v_cmd`` with ``v_fb``, the output of the block
+``estimator``: ``v`` itself, or, in the sampled loop of a drive with
+``velocity_feedback="difference"``, the filtered difference of ``x``; and
+``i_cmd`` leaves ``current_command_sum`` ``computation_delay`` periods late.
 
 Units inside are mm, s, A, V. The parameters are SI (kg, N, N·s/m, A·s/m,
 H, Ω) and are converted once, in the properties ``force_gain``,
@@ -58,6 +62,9 @@ __all__ = [
     "MIN_PHASE_MARGIN_DEG",
     "MIN_DAMPING_RATIO",
     "MAX_CROSSOVER_FRACTION",
+    "VELOCITY_FEEDBACK",
+    "MAX_VELOCITY_TAPS",
+    "MAX_COMPUTATION_DELAY",
 ]
 
 
@@ -83,6 +90,13 @@ MIN_PHASE_MARGIN_DEG = 30.0
 MIN_DAMPING_RATIO = 0.2
 #: A loop's gain crossover must stay below this fraction of the Nyquist frequency.
 MAX_CROSSOVER_FRACTION = 0.25
+
+#: Where the velocity loop's feedback comes from (:class:`AxisServo` ``velocity_feedback``).
+VELOCITY_FEEDBACK = ("state", "difference")
+#: Most taps of the moving average on the position before the velocity difference.
+MAX_VELOCITY_TAPS = 8
+#: Longest computation delay [servo periods].
+MAX_COMPUTATION_DELAY = 2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -129,6 +143,32 @@ class AxisServo:
     ti_current : float, optional
         Current-controller integral time [s]; ``inductance/resistance``
         cancels the electrical pole.
+    velocity_feedback : {"state", "difference"}, default "state"
+        What the velocity loop closes on: ``"state"``, the motor velocity
+        itself (an ideal tachometer); ``"difference"``, as real drives do,
+        the backward difference of the encoder position the position loop
+        reads (quantised and delayed as it is), after a moving average of
+        `velocity_taps` samples: ``(x_fb[k] - x_fb[k-n])/(n·dt)``.
+    velocity_taps : int, default 1
+        Taps ``n`` of that moving average (1: none; 2: the ``0.5/0.5`` FIR,
+        ``(x[k] - x[k-2])/(2·dt)``), at most :data:`MAX_VELOCITY_TAPS`.
+        Only with ``velocity_feedback="difference"``.
+    velocity_filter_hz : float, optional
+        Corner [Hz] of a first-order low-pass on the velocity difference,
+        discretised with its pole mapped exactly and unit gain at DC:
+        ``v_fb[k] = a·v_fb[k-1] + (1 - a)·raw[k]``, ``a = exp(-2π·f·dt)``
+        (``None``: no filter). Only with ``velocity_feedback="difference"``.
+    computation_delay : int, default 0
+        Whole servo periods (0, 1 or 2) between sampling and the current
+        command reaching the drive: the command computed from the samples
+        at ``t_k`` is applied over ``[t_k+d, t_k+d+1)``.
+
+    Notes
+    -----
+    The last four are the drive's structure: the sampled loop
+    (:func:`discretize`, :func:`margins` with ``dt``) and the kernel have
+    them; the continuous analyses take the difference as the derivative
+    (with its low-pass) and no computation delay.
 
     Examples
     --------
@@ -150,6 +190,10 @@ class AxisServo:
     resistance: float | None = None
     kc: float | None = None
     ti_current: float | None = None
+    velocity_feedback: str = "state"
+    velocity_taps: int = 1
+    velocity_filter_hz: float | None = None
+    computation_delay: int = 0
 
     def __post_init__(self):
         required = ("mass", "force_constant", "kv", "kp")
@@ -179,11 +223,31 @@ class AxisServo:
             checked["resistance"] = _validate.nonnegative("resistance", self.resistance)
             checked["kc"] = _validate.positive("kc", self.kc)
             checked["ti_current"] = _validate.positive("ti_current", self.ti_current)
+        checked.update(self._drive_structure())
         for name, value in checked.items():
             if name not in ("vff", "aff") and value != 0 and not 1.0 / MAX_PARAMETER <= value <= MAX_PARAMETER:
                 raise ValueError(f"{name} must lie within [{1.0 / MAX_PARAMETER:g}, {MAX_PARAMETER:g}] (in its SI unit), "
                                  f"got {value:g}: not a physical value")
             object.__setattr__(self, name, value)
+
+    def _drive_structure(self):
+        """The velocity feedback and computation delay settings, checked: ``{name: value}``."""
+        if self.velocity_feedback not in VELOCITY_FEEDBACK:
+            raise ValueError(f'velocity_feedback must be "state" or "difference", got {self.velocity_feedback!r}')
+        checked = {"velocity_taps": _validate.positive_int("velocity_taps", self.velocity_taps)}
+        if checked["velocity_taps"] > MAX_VELOCITY_TAPS:
+            raise ValueError(f"velocity_taps must be at most {MAX_VELOCITY_TAPS}, got {self.velocity_taps}")
+        delay = self.computation_delay
+        if isinstance(delay, (bool, np.bool_)) or not isinstance(delay, (int, np.integer)):
+            raise TypeError(f"computation_delay must be a whole number of servo periods, got {delay!r}")
+        if not 0 <= delay <= MAX_COMPUTATION_DELAY:
+            raise ValueError(f"computation_delay must be 0, 1 or {MAX_COMPUTATION_DELAY} servo periods, got {delay}")
+        if self.velocity_filter_hz is not None:
+            checked["velocity_filter_hz"] = _validate.positive("velocity_filter_hz", self.velocity_filter_hz)
+        if self.velocity_feedback == "state" and (checked["velocity_taps"] != 1 or self.velocity_filter_hz is not None):
+            raise ValueError('velocity_taps and velocity_filter_hz filter the encoder difference: they need '
+                             'velocity_feedback = "difference"')
+        return checked | {"computation_delay": int(delay)}
 
     # -- SI -> internal units (mm, s, A, V), the one place they are converted --------------
 
@@ -267,7 +331,8 @@ class DiscreteServo:
         electrical dynamics.
     closed_loop : control.StateSpace
         The whole sampled cascade, inputs ``'x_ref'`` [mm], ``'v_ref'``
-        [mm/s], ``'a_ref'`` [mm/s^2], outputs ``'x'``, ``'v'``, ``'i_cmd'``.
+        [mm/s], ``'a_ref'`` [mm/s^2], outputs ``'x'``, ``'v'``, ``'i_cmd'``
+        (the command applied, after any computation delay).
     """
 
     servo: AxisServo
@@ -400,9 +465,10 @@ def _blocks(servo, dt):
         "position_sum": ct.summing_junction(["x_ref", "-x"], "e_x"),
         "vff": _gain(servo.vff, "v_ref", "v_ff", dt),
         "command_sum": ct.summing_junction(["v_p", "v_ff"], "v_cmd"),
-        "velocity_sum": ct.summing_junction(["v_cmd", "-v"], "e_v"),
+        "estimator": _velocity_estimator(servo, dt),
+        "velocity_sum": ct.summing_junction(["v_cmd", "-v_fb"], "e_v"),
         "aff": _gain(servo.aff / servo.force_gain, "a_ref", "i_ff", dt),
-        "current_command_sum": ct.summing_junction(["i_pi", "i_ff"], "i_cmd"),
+        "current_command_sum": _command_sum(servo, dt),
     }
     if servo.electrical:
         blocks["current"] = _pi(servo.kc, servo.ti_current, "e_i", "u", dt, "current_controller")
@@ -415,6 +481,52 @@ def _blocks(servo, dt):
             Aw, Bw = zoh(Aw, Bw, dt)
         blocks["winding"] = ct.ss(Aw, Bw, [[1.0]], 0.0, dt, inputs="u", outputs="i", name="winding")
     return blocks
+
+
+def _difference(servo, dt):
+    """True when the velocity loop closes on the encoder difference at the period `dt` (0: continuous)."""
+    return bool(dt) and servo.velocity_feedback == "difference"
+
+
+def _velocity_estimator(servo, dt):
+    """The velocity the loop feeds back, ``'v_fb'`` [mm/s], from ``'x'`` (the difference) or ``'v'``.
+
+    Sampled with ``velocity_feedback="difference"``: ``(x[k] - x[k-n])/(n·dt)``
+    (the moving average of n taps, then the backward difference), then the
+    low-pass ``a·y[k-1] + (1 - a)·raw[k]``, ``a = exp(-2π·f·dt)``. Otherwise
+    ``v`` itself, through the continuous low-pass ``ω/(s + ω)`` when the
+    difference has one and ``dt = 0``.
+    """
+    f = servo.velocity_filter_hz
+    if _difference(servo, dt):  # states: x[k-1] .. x[k-n], then the low-passed velocity of the last step
+        n, gain = servo.velocity_taps, 1.0 / (servo.velocity_taps * dt)
+        a = 0.0 if f is None else np.exp(-2.0 * np.pi * f * dt)
+        m = n + (f is not None)
+        A, B, C = np.zeros((m, m)), np.zeros((m, 1)), np.zeros((1, m))
+        A[1:n, : n - 1] = np.eye(n - 1)
+        B[0, 0] = 1.0
+        C[0, n - 1], D = -(1.0 - a) * gain, (1.0 - a) * gain
+        if f is not None:
+            C[0, n] = a
+            A[n], B[n] = C[0], D
+        states = [f"past{j}" for j in range(1, n + 1)] + (["lowpass"] if f is not None else [])
+        return ct.ss(A, B, C, D, dt, inputs="x", outputs="v_fb", states=states, name="estimator")
+    if f is not None and not dt:
+        return ct.ss(ct.tf([2.0 * np.pi * f], [1.0, 2.0 * np.pi * f]), inputs="v", outputs="v_fb", name="estimator")
+    return _gain(1.0, "v", "v_fb", dt).copy(name="estimator")
+
+
+def _command_sum(servo, dt):
+    """``'i_cmd'`` [A] = ``'i_pi' + 'i_ff'``, applied `computation_delay` periods late when sampled."""
+    n = servo.computation_delay if dt else 0
+    if n == 0:
+        return ct.summing_junction(["i_pi", "i_ff"], "i_cmd")
+    B = np.zeros((n, 2))
+    B[0] = 1.0
+    C = np.zeros((1, n))
+    C[0, -1] = 1.0  # states: the sums of the last n periods, newest first
+    return ct.ss(np.eye(n, k=-1), B, C, np.zeros((1, 2)), dt, inputs=["i_pi", "i_ff"], outputs="i_cmd",
+                 name="computation_delay")
 
 
 def _connect(blocks, roles, inputs, outputs, unused_inputs=(), unused_outputs=()):
@@ -435,7 +547,8 @@ _INNER = ("current_sum", "current", "plant")  # the current loop (or the bare pl
 
 def _cascade(blocks):
     """The whole closed cascade: inputs x_ref, v_ref, a_ref; outputs x, v, i_cmd."""
-    roles = ("position_sum", "position", "vff", "command_sum", "velocity_sum", "velocity", "aff", "current_command_sum")
+    roles = ("position_sum", "position", "vff", "command_sum", "velocity_sum", "velocity", "aff", "current_command_sum",
+             "estimator")
     roles += _INNER
     return _connect(blocks, roles, ["x_ref", "v_ref", "a_ref"], ["x", "v", "i_cmd"])
 
@@ -459,6 +572,24 @@ def _drop_unread_states(sys):
     return ct.ss(A, B, C, sys.D, sys.dt, inputs=sys.input_labels, outputs=sys.output_labels)
 
 
+def _differences_of_x(loop):
+    """`loop` with the estimator's past positions as differences ``x - x[k-j]``, so that x alone is unread.
+
+    The velocity difference reads x only through such differences: in these
+    coordinates the plant's position integrator (z = 1, cancelled by the
+    difference's zero at z = 1) is a state nothing reads, which
+    :func:`_drop_unread_states` removes, as it does without the difference.
+    """
+    labels = loop.state_labels
+    past = [i for i, label in enumerate(labels) if label.startswith("estimator_past")]
+    if not past:
+        return loop
+    T = np.eye(loop.nstates)  # its own inverse
+    T[past, labels.index("plant_x")], T[past, past] = 1.0, -1.0
+    return ct.ss(T @ loop.A @ T, T @ loop.B, loop.C @ T, loop.D, loop.dt, inputs=loop.input_labels,
+                 outputs=loop.output_labels, states=labels)
+
+
 def _loop_gains(blocks):
     """Loop transfer functions, innermost first, each broken at its own error signal.
 
@@ -466,14 +597,17 @@ def _loop_gains(blocks):
     closed and its outer loops open; the current loop sees the winding with
     the rotor blocked. Feedforward does not enter a loop gain.
     """
-    velocity_chain = ("velocity", "current_command_sum") + _INNER
+    velocity_chain = ("velocity", "current_command_sum", "estimator") + _INNER
     loops = {}
     if "current" in blocks:
         loops["current"] = _connect(blocks, ("current", "winding"), ["e_i"], ["i"])
-    loops["velocity"] = _connect(blocks, velocity_chain, ["e_v"], ["v"], unused_inputs=["i_ff"], unused_outputs=["x"])
-    loops = {name: _drop_unread_states(loop) for name, loop in loops.items()}
+    unread = "v" if blocks["estimator"].input_labels == ["x"] else "x"  # the plant output the estimator does not read
+    loops["velocity"] = _connect(blocks, velocity_chain, ["e_v"], ["v_fb"], unused_inputs=["i_ff"],
+                                 unused_outputs=[unread])
+    loops = {name: _drop_unread_states(_differences_of_x(loop)) for name, loop in loops.items()}
     position_chain = ("position", "command_sum", "velocity_sum") + velocity_chain
-    loops["position"] = _connect(blocks, position_chain, ["e_x"], ["x"], unused_inputs=["i_ff", "v_ff"])
+    loops["position"] = _connect(blocks, position_chain, ["e_x"], ["x"], unused_inputs=["i_ff", "v_ff"],
+                                 unused_outputs=[unread] if unread == "v" else [])
     return loops
 
 
@@ -509,7 +643,7 @@ def velocity_loop(servo):
     -------
     control.StateSpace
     """
-    roles = ("velocity_sum", "velocity", "current_command_sum") + _INNER
+    roles = ("velocity_sum", "velocity", "current_command_sum", "estimator") + _INNER
     return _connect(_blocks(servo, 0), roles, ["v_cmd"], ["v"], unused_inputs=["i_ff"], unused_outputs=["x"])
 
 
@@ -568,7 +702,8 @@ def sensitivity(servo):
     control.StateSpace
         ``'x_ref'`` [mm] -> ``'e_x'`` [mm].
     """
-    roles = ("position_sum", "position", "command_sum", "velocity_sum", "velocity", "current_command_sum") + _INNER
+    roles = ("position_sum", "position", "command_sum", "velocity_sum", "velocity", "current_command_sum",
+             "estimator") + _INNER
     return _connect(_blocks(servo, 0), roles, ["x_ref"], ["e_x"], unused_inputs=["v_ff", "i_ff"])
 
 

@@ -278,6 +278,8 @@ class _Job:
             value = float(value)
             if kind == "axes" and len(parts) == 2:
                 field = _servo_field(machine, *parts)
+                if isinstance(getattr(axes[parts[0]], field), int) and value.is_integer():
+                    value = int(value)  # a count (velocity_taps, computation_delay_periods): a grid's whole numbers
                 axes[parts[0]] = dataclasses.replace(axes[parts[0]], **{field: value})
             elif kind == "effect" and len(parts) == 3:
                 effects[name[len("effect.") :]] = value

@@ -37,6 +37,8 @@ def compare(file=DATA):
         kv=float(d["kv"]),                # [V·s/m] velocity gain
         kp=float(d["kp"]),                # [1/s]   position gain
         current_limit=10.0,               # [V]     ±10 V drive input
+        velocity_feedback="difference",   # velocity: backward difference of the encoder position ...
+        velocity_taps=2,                  # ... after the 2-tap FIR 0.5/0.5
     )
     result = simulate(Machine({"x": axis}, dt), trace)  # no feedforward: the reference's v and a go unused
     return -result.tracking_error[:, 0], -trace.tracking_error[:, 0]

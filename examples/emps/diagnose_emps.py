@@ -5,7 +5,8 @@ logged the commanded (qg) and measured (qm) position of a ball-screw axis
 under a documented P position / P velocity loop. This example converts
 DATA_EMPS.mat to the measured-trace CSV (``t``, ``x_ref`` = qg, ``x`` = qm,
 in mm) in its output folder and runs the diagnosis against the documented
-nominal loop, ``emps_axis.toml`` (no friction in it) — what
+nominal loop, ``emps_axis.toml`` (no friction in it; the drive's velocity
+from the 2-tap filtered encoder position by a backward difference) — what
 
     contoursim diagnose OUT/emps.csv --model examples/emps/emps_axis.toml --report OUT/emps_report.json --out OUT
 

@@ -1,0 +1,313 @@
+"""The structure real drives have: velocity from encoder differences, a computation delay (AxisServo settings).
+
+The kernel is checked against a python-control simulation of the same sampled loop written here from the
+equations (not from the kernel's code), against closed forms, and run_batch against run() bit for bit.
+"""
+
+import control as ct
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from contoursim import kernel
+from contoursim.exceptions import ConfigError, UnstableLoopError
+from contoursim.kernel import LoopEffects, pack, run, run_batch
+from contoursim.machine import load_machine
+from contoursim.servo import AxisServo
+from contoursim.sweep import _job, read_sweep
+
+MASS, KF, KV, KP, TI = 300.0, 900.0, 200.0, 40.0, 0.01
+ELECTRICAL = dict(inductance=5e-3, resistance=1.2, kc=5e-3 * 2 * np.pi * 800, ti_current=5e-3 / 1.2)
+DT = 1e-4
+
+
+def axis(**kw):
+    return AxisServo(**{**dict(mass=MASS, force_constant=KF, kv=KV, kp=KP, ti=TI, damping=800.0), **kw})
+
+
+def reference_loop(servo, quantum, delay, start, play=0.0, scale=False):
+    """The sampled loop as python-control systems: ZOH plant, and the drive as one discrete nlsys.
+
+    The drive at step k: the table behind a play of `play` [mm] around the motor position x; the encoder
+    on the table (`scale`) or on x, ``enc = q·round(·/q)``, read `delay` periods late (``x_fb``); velocity
+    ``(x_fb[k] - x_fb[k-n])/(n·dt)`` low-passed ``a·y + (1 - a)·raw`` (or the motor velocity ``v``
+    itself); P position + velocity feedforward; Tustin PI velocity + acceleration feedforward, clamped,
+    the integrator held while clamped and pushed further; the command applied `computation_delay`
+    periods later. Inputs xr, vr, ar; outputs the table position, x_fb and the applied current.
+    """
+    A = np.array([[0.0, 1.0], [0.0, -servo.damping / servo.mass]])
+    B = np.array([[0.0], [1000.0 * servo.force_constant / servo.mass]])  # mm/s^2 per A
+    plant = ct.sample_system(ct.ss(A, B, np.eye(2), 0), DT, method="zoh")
+    plant = ct.ss(plant.A, plant.B, plant.C, plant.D, DT, inputs="i", outputs=["x", "v"], name="plant")
+    n = servo.velocity_taps
+    a = 0.0 if servo.velocity_filter_hz is None else np.exp(-2 * np.pi * servo.velocity_filter_hz * DT)
+    kv = servo.kv / 1000.0  # A per mm/s
+    limit = np.inf if servo.current_limit is None else servo.current_limit
+    i_ff = servo.aff * servo.mass / (1000.0 * servo.force_constant)
+    d = servo.computation_delay
+    # states: encoder readings k-1 .. k-delay, x_fb k-1 .. k-n, y, z, commands k-1, k-2, the table
+    ie, ip, iy, iz, ic, it = 0, delay, delay + n, delay + n + 1, delay + n + 2, delay + n + 4
+
+    def signals(z, u):
+        xr, vr, ar, x, v = u
+        table = min(max(z[it], x - play / 2), x + play / 2)
+        sensed = table if scale else x
+        enc = quantum * np.floor(sensed / quantum + 0.5) if quantum else sensed
+        readings = np.r_[enc, z[ie:ip]]
+        x_fb = readings[delay]
+        if servo.velocity_feedback == "difference":
+            v_fb = a * z[iy] + (1 - a) * (x_fb - np.r_[x_fb, z[ip:iy]][n]) / (n * DT)
+        else:
+            v_fb = v
+        e_v = servo.kp * (xr - x_fb) + servo.vff * vr - v_fb
+        raw = (kv / servo.ti * (z[iz] + DT / 2 * e_v) if servo.ti else 0.0) + kv * e_v + i_ff * ar
+        command = np.clip(raw, -limit, limit)
+        held = command != raw and e_v * raw > 0
+        applied = np.r_[command, z[ic : ic + 2]][d]
+        return table, readings, x_fb, v_fb, e_v, held, command, applied
+
+    def update(t, z, u, params):
+        table, readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
+        past = np.r_[x_fb, z[ip:iy]]
+        integrator = z[iz] if held or not servo.ti else z[iz] + DT * e_v
+        return np.r_[readings[:delay], past[:n], v_fb, integrator, command, z[ic], table]
+
+    def output(t, z, u, params):
+        table, readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
+        return [applied, x_fb, table]
+
+    drive = ct.nlsys(update, output, inputs=["xr", "vr", "ar", "x", "v"], outputs=["i", "x_fb", "table"],
+                     states=delay + n + 5, dt=DT, name="drive")
+    loop = ct.interconnect([plant, drive], inplist=["xr", "vr", "ar"], outlist=["table", "x_fb", "i"])
+    x0 = np.zeros(loop.nstates)
+    x0[loop.state_labels.index("plant_x[0]")] = start
+    enc = quantum * np.floor(start / quantum + 0.5) if quantum else start
+    first = loop.state_labels.index("drive_x[0]")
+    x0[first : first + delay + n] = enc  # at rest: the encoder history holds the first reading
+    x0[first + it] = start
+    return loop, x0
+
+
+DRIVES = {
+    "difference": (dict(velocity_feedback="difference"), 0.0, 0),
+    "fir2": (dict(velocity_feedback="difference", velocity_taps=2), 0.0, 0),
+    "fir2_backlash_motor": (dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1), 0.0, 0,
+                            dict(backlash_mm=0.004)),
+    "fir2_backlash_scale": (dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=1000.0), 2e-4, 1,
+                            dict(backlash_mm=0.004, backlash_feedback="scale")),
+    "fir3_lowpass_delay1": (dict(velocity_feedback="difference", velocity_taps=3, velocity_filter_hz=600.0,
+                                 computation_delay=1), 0.0, 0),
+    "quantised_delayed_delay2": (dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=1500.0,
+                                      computation_delay=2), 5e-4, 2),
+    "state_delay2": (dict(computation_delay=2), 0.0, 0),
+    "p_velocity_clamped": (dict(ti=None, kv=300.0, velocity_feedback="difference", velocity_taps=2,
+                                computation_delay=1, current_limit=4.0, vff=1.0, aff=0.7), 2e-4, 1),
+    "pi_clamped": (dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1,
+                        current_limit=3.0, vff=0.5), 0.0, 0),
+}
+
+
+@pytest.mark.parametrize("name", list(DRIVES))
+def test_kernel_equals_python_control_reference(name):
+    kw, quantum, delay, *backlash = DRIVES[name]
+    backlash = backlash[0] if backlash else {}
+    servo = axis(**kw)
+    n = 400
+    t = np.arange(n) * DT
+    w = 2 * np.pi * 40.0  # a 0.2 mm sine: reverses after 6.25 ms
+    pos, vel, acc = 0.2 * np.sin(w * t), 0.2 * w * np.cos(w * t), -0.2 * w**2 * np.sin(w * t)
+    effects = LoopEffects(quantum_mm=quantum, feedback_delay_s=delay * DT, **backlash)
+    result = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None], effects={"x": effects})
+    loop, x0 = reference_loop(servo, quantum, delay, pos[0], backlash.get("backlash_mm", 0.0),
+                              backlash.get("backlash_feedback") == "scale")
+    ref = ct.input_output_response(loop, t, np.vstack([pos, vel, acc]), X0=x0).outputs
+    np.testing.assert_allclose(result.position[:, 0], ref[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.encoder[:, 0], ref[1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.current[:, 0], ref[2], rtol=0, atol=1e-9 * np.abs(ref[2]).max())
+    if servo.current_limit is not None:
+        assert result.saturated.any()  # the clamp and its anti-windup are exercised
+    plain = run({"x": axis(**{k: v for k, v in kw.items() if k in ("ti", "kv", "current_limit", "vff", "aff")})},
+                DT, pos[:, None], vel[:, None], acc[:, None], effects={"x": effects})
+    assert np.abs(result.position - plain.position).max() > 1e-7  # the drive's structure shows in 400 steps
+
+
+@pytest.mark.parametrize("kw", [dict(velocity_feedback="difference", velocity_taps=2),
+                                dict(velocity_feedback="difference", velocity_taps=4, velocity_filter_hz=300.0,
+                                     computation_delay=2)])
+def test_ramp_error_is_still_v_over_kp(kw):
+    # A constant velocity's difference is that velocity exactly (any taps, the low-pass has unit DC gain): with a PI
+    # velocity loop and no damping the current settles to 0, so the following error is v/kp, as with a tachometer.
+    servo = axis(damping=0.0, **kw)
+    t = np.arange(6000) * DT
+    ramp = (10.0 * t)[:, None]
+    r = run([servo], DT, ramp, np.full_like(ramp, 10.0), np.zeros_like(ramp))
+    assert ramp[-1, 0] - r.position[-1, 0] == pytest.approx(10.0 / KP, abs=1e-9)
+
+
+@pytest.mark.parametrize("kw", [dict(velocity_feedback="difference"),
+                                dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1),
+                                dict(velocity_feedback="difference", velocity_taps=3, velocity_filter_hz=800.0,
+                                     computation_delay=2, ti=None),
+                                dict(computation_delay=2, **ELECTRICAL),
+                                dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=2000.0,
+                                     computation_delay=1, **ELECTRICAL)])
+def test_spectral_radius_equals_python_control_closed_loop_poles(kw):
+    # The kernel's linearised loop (loop_matrices) and servo.discretize's python-control interconnection of the
+    # estimator and delay blocks: the same poles.
+    servo = axis(**kw)
+    want = np.abs(servo.discretize(DT).closed_loop.poles()).max()
+    assert kernel.spectral_radius(pack(servo, DT)) == pytest.approx(want, abs=1e-12)
+
+
+@settings(max_examples=15, deadline=None)
+@given(taps=st.integers(1, 8), filter_hz=st.one_of(st.none(), st.floats(50.0, 5000.0)), delay=st.integers(0, 2),
+       feedback_delay=st.floats(0.0, 3.0))
+def test_loop_matrices_match_the_simulated_growth_of_any_drive(taps, filter_hz, delay, feedback_delay):
+    # Without a nonlinearity in play the kernel is linear: its response to an initial offset is phi^k applied to it.
+    servo = axis(velocity_feedback="difference", velocity_taps=taps, velocity_filter_hz=filter_hz,
+                 computation_delay=delay, damping=0.0)
+    row = pack(servo, DT, LoopEffects(feedback_delay_s=feedback_delay * DT))
+    phi, b, c = kernel.loop_matrices(row)
+    n = 300
+    ref = np.full((n, 1), 1e-3)  # a step of 1 µm from rest at 0: the response from the loop's matrices
+    ref[0] = 0.0
+    x = run_batch(row[None, None], DT, ref, np.zeros_like(ref), np.zeros_like(ref), outputs=("encoder",))
+    s = np.zeros(phi.shape[0])
+    want = []
+    for k in range(n):  # the step as w = kp·1e-3 on the velocity command (x_ref enters through kp only)
+        want.append(c @ s)
+        s = phi @ s + b * (servo.kp * ref[k, 0])
+    np.testing.assert_allclose(x["encoder"][0, :, 0], want, rtol=0, atol=1e-12)
+
+
+def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
+    rng = np.random.default_rng(18)
+    t = np.arange(1200) * DT
+    w = 2 * np.pi * 30.0
+    refs = tuple(np.column_stack([r, 0.5 * r]) for r in (0.3 * np.sin(w * t), 0.3 * w * np.cos(w * t),
+                                                           -0.3 * w**2 * np.sin(w * t)))
+    variants = []
+    for b in range(9):
+        servos, effects = {}, {}
+        for name in ("x", "y"):
+            kw = dict(computation_delay=int(rng.integers(3)), current_limit=float(rng.choice([2.0, 50.0])))
+            if rng.random() < 0.3:
+                kw.update(ELECTRICAL)
+            if rng.random() < 0.7:
+                kw.update(velocity_feedback="difference", velocity_taps=int(rng.integers(1, 9)),
+                          velocity_filter_hz=rng.choice([None, float(rng.uniform(200.0, 3000.0))]))
+            servos[name] = axis(**kw)
+            effects[name] = LoopEffects(quantum_mm=float(rng.choice([0.0, 2e-4])),
+                                        feedback_delay_s=float(rng.choice([0.0, 1.5 * DT, 2 * DT])),
+                                        coulomb_N=float(rng.choice([0.0, 60.0])),
+                                        backlash_mm=float(rng.choice([0.0, 0.003])),
+                                        backlash_feedback=str(rng.choice(["motor", "scale"])))
+        variants.append((servos, effects))
+    variants[0] = ({name: axis() for name in ("x", "y")}, {})  # one variant as before the drive's structure
+    rows = np.array([[pack(s, DT, e.get(name, LoopEffects())) for name, s in servos.items()]
+                     for servos, e in variants])
+    for chosen in (slice(None), slice(0, 3)):  # blocks in lanes; a narrow block one variant at a time
+        batch = run_batch(rows[chosen], DT, *refs, outputs=kernel.BATCH_OUTPUTS)
+        for b, (servos, effects) in enumerate(variants[chosen]):
+            single = run(servos, DT, *refs, effects=effects)
+            for name, field in [("tool", "position"), ("encoder", "encoder"), ("velocity", "velocity"),
+                                ("current", "current"), ("saturated", "saturated")]:
+                np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=f"{name}, variant {b}")
+    assert {s.computation_delay for servos, _ in variants for s in servos.values()} == {0, 1, 2}
+    assert any(s.electrical for servos, _ in variants for s in servos.values())
+
+
+def test_the_state_feedback_default_is_the_loop_of_before():
+    servo = axis()
+    assert (servo.velocity_feedback, servo.velocity_taps, servo.velocity_filter_hz, servo.computation_delay) == (
+        "state", 1, None, 0)
+    row = pack(servo, DT)
+    assert row[kernel._VDIFF] == 0.0 and row[kernel._CDELAY] == 0.0
+
+
+def test_a_loop_the_computation_delay_destabilises_is_refused_with_its_margins():
+    # 95 Hz velocity crossover at 1 ms: stable on the tachometer, not once the difference and 2 periods of
+    # computation add 2.5 periods of lag (120 deg at the crossover).
+    dt, fast = 1e-3, dict(ti=None, damping=0.0)
+    margins = axis(**fast).check(dt)
+    assert margins["velocity"]["stable"] and margins["velocity"]["phase_margin"] > 30
+    slow = axis(**fast, velocity_feedback="difference", computation_delay=2)
+    with pytest.raises(UnstableLoopError, match=r"the velocity loop of axis 'x' is unstable at dt = 0.001 s") as info:
+        slow.check(dt)
+    assert info.value.margins["phase_margin"] < 0
+    assert kernel.spectral_radius(pack(slow, dt)) > 1.0 > kernel.spectral_radius(pack(axis(**fast), dt))
+    lagging = slow.margins(dt)["velocity"]["phase_margin"]
+    assert lagging < axis(**fast, velocity_feedback="difference").margins(dt)["velocity"]["phase_margin"]
+
+
+@pytest.mark.parametrize("kw, error, message", [
+    (dict(velocity_feedback="tacho"), ValueError, 'velocity_feedback must be "state" or "difference"'),
+    (dict(velocity_feedback="difference", velocity_taps=0), ValueError, "velocity_taps must be at least 1"),
+    (dict(velocity_feedback="difference", velocity_taps=9), ValueError, "velocity_taps must be at most 8"),
+    (dict(velocity_feedback="difference", velocity_taps=2.0), TypeError, "velocity_taps must be a whole number"),
+    (dict(velocity_feedback="difference", velocity_filter_hz=-1.0), ValueError, "velocity_filter_hz"),
+    (dict(velocity_taps=2), ValueError, 'they need velocity_feedback = "difference"'),
+    (dict(velocity_filter_hz=500.0), ValueError, 'they need velocity_feedback = "difference"'),
+    (dict(computation_delay=3), ValueError, "computation_delay must be 0, 1 or 2"),
+    (dict(computation_delay=True), TypeError, "computation_delay must be a whole number"),
+])
+def test_bad_drive_settings_name_the_parameter(kw, error, message):
+    with pytest.raises(error, match=message):
+        axis(**kw)
+
+
+MACHINE = """name = "drive"
+servo_period_ms = 0.1
+[axes.x]
+mass_kg = 300.0
+force_constant_N_per_A = 900.0
+kv_A_s_per_m = 200.0
+ti_s = 0.01
+{extra}
+"""
+
+
+def test_machine_file_keys_and_what_uncertain_may_list(tmp_path):
+    file = tmp_path / "m.toml"
+    file.write_text(MACHINE.format(extra='velocity_feedback = "difference"\nvelocity_taps = 2\n'
+                                         'velocity_filter_hz = 900.0\ncomputation_delay_periods = 1\n'
+                                         'uncertain = ["velocity_filter_hz"]'))
+    machine = load_machine(file)
+    servo = machine.axes["x"]
+    assert (servo.velocity_feedback, servo.velocity_taps, servo.velocity_filter_hz, servo.computation_delay) == (
+        "difference", 2, 900.0, 1)
+    assert machine.uncertain["x"] == ("velocity_filter_hz",)
+    file.write_text(MACHINE.format(extra="computation_delay_periods = 3"))
+    with pytest.raises(ConfigError, match=r"m.toml, line 8: axis x: computation_delay_periods must be 0, 1 or 2"):
+        load_machine(file)
+    file.write_text(MACHINE.format(extra='velocity_feedback = "difference"\ncomputation_delay_periods = 1\n'
+                                         'uncertain = ["computation_delay_periods"]'))
+    with pytest.raises(ConfigError, match=r"line \d+: axis x: uncertain must list controller keys"):
+        load_machine(file)
+
+
+SWEEP = """machine = "demo_mill"
+path = "rounded_square"
+[feed]
+feed_mm_min = 3000
+[sweep]
+method = "{method}"
+{count}
+[[vary]]
+name = "axes.x.computation_delay_periods"
+{values}
+"""
+
+
+def test_a_sweep_varies_the_computation_delay_over_whole_periods(tmp_path):
+    spec = tmp_path / "spec.toml"
+    spec.write_text(SWEEP.format(method="grid", count="", values="values = [0, 1, 2]"))
+    sweep = read_sweep(spec)
+    job = _job(sweep)
+    delays = [job.variant({"axes.x.computation_delay_periods": v})[0].machine.axes["x"].computation_delay
+              for v in sweep.values[:, 0]]
+    assert delays == [0, 1, 2] and all(isinstance(d, int) for d in delays)
+    spec.write_text(SWEEP.format(method="random", count="count = 4", values="min = 0.0\nmax = 2.0"))
+    with pytest.raises(ConfigError, match=r"vary 'axes.x.computation_delay_periods': computation_delay must be a whole"):
+        read_sweep(spec)
