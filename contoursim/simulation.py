@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _memory, estimators, kernel
+from . import _memory, _validate, estimators, kernel
 from ._blocks import blocks
 from .compensation import Composition, Strategy
 from ._version import __version__
@@ -32,7 +32,8 @@ from .machine import CARTESIAN, Machine
 from .model import as_model
 from .trajectory import Trajectory
 
-__all__ = ["SimResult", "SUMMARY_KEYS", "default_settle", "measured_reference", "simulate", "simulate_batch"]
+__all__ = ["SimResult", "SUMMARY_KEYS", "default_settle", "measured_force", "measured_reference", "simulate",
+           "simulate_batch"]
 
 
 
@@ -252,9 +253,9 @@ def measured_reference(trace, servo_period):
 
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
-    logged = abs(trace.dt - servo_period) <= 1e-3 * servo_period
+    logged = _logged(trace, servo_period)
     duration = trace.t[-1] - trace.t[0]
-    n = trace.t.size if logged else int(np.floor(duration / servo_period * (1 + 1e-12))) + 1
+    n = _servo_samples(trace, servo_period)
     _memory.check(n, f"the trace lasts {duration:.6g} s: every servo period of {servo_period:.6g} s",
                   "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period")
     if logged:
@@ -269,9 +270,63 @@ def measured_reference(trace, servo_period):
     return Trajectory(t, position, spline(t, 1), spline(t, 2), s)
 
 
-def _reference(machine, reference, settle, preview=0):
-    """The reference as a Trajectory at the servo period, after a dwell of `preview` samples and held `settle` seconds."""
+def _logged(trace, servo_period):
+    """Whether `trace` was logged at the servo period (its samples are the servo steps, within 0.1 % jitter)."""
+    return abs(trace.dt - servo_period) <= 1e-3 * servo_period
+
+
+def _servo_samples(trace, servo_period):
+    """The samples of `trace`'s measured reference: its own when logged at the servo period, else every period."""
+    if _logged(trace, servo_period):
+        return trace.t.size
+    return int(np.floor((trace.t[-1] - trace.t[0]) / servo_period * (1 + 1e-12))) + 1
+
+
+def measured_force(trace, servo_period):
+    """A measured trace's known external forces at the servo period, on the samples of :func:`measured_reference`.
+
+    A force column is a sampled input: each of its samples holds from its
+    time to the next (zero-order hold), the last to the end. A trace logged
+    at the servo period gives its own samples.
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+        The measured trace (its ``force`` columns are used).
+    servo_period : float
+        The servo period [s].
+
+    Returns
+    -------
+    dict of str -> ndarray, shape (M,)
+        The force on each axis that has one [N], M the samples of
+        ``measured_reference(trace, servo_period)``; empty without a force column.
+
+    Examples
+    --------
+    >>> from contoursim.traces import Trace
+    >>> t = np.arange(4) * 1e-3
+    >>> trace = Trace(t, t[:, None], t[:, None], ("x",), force={"x": [0.0, 5.0, 5.0, 0.0]})
+    >>> measured_force(trace, 5e-4)["x"].tolist()           # logged at 1 ms, servo at 0.5 ms
+    [0.0, 0.0, 5.0, 5.0, 5.0, 5.0, 0.0]
+    """
+    if not isinstance(trace, Trace):
+        raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
+    if _logged(trace, servo_period) or not trace.force:
+        return dict(trace.force)
+    t = trace.t[0] + servo_period * np.arange(_servo_samples(trace, servo_period))
+    held = np.searchsorted(trace.t, t + 1e-6 * trace.dt, side="right") - 1  # the last sample at or before each t
+    return {axis: values[held] for axis, values in trace.force.items()}
+
+
+def _reference(machine, reference, settle, preview=0, force=None):
+    """The reference as a Trajectory at the servo period, after a dwell of `preview` samples and held `settle` seconds.
+
+    Also returns the known external forces on the servo axes at its samples, shape (N, n_servo) [N], or ``None``
+    (`force`: by axis name, on the reference's samples; a trace's own by default), held over the dwell and the hold.
+    """
     if isinstance(reference, Trace):
+        force = measured_force(reference, machine.servo_period) if force is None else force
         reference = measured_reference(reference, machine.servo_period)
         settle = 0.0 if settle is None else settle
     elif not isinstance(reference, Trajectory):
@@ -290,7 +345,23 @@ def _reference(machine, reference, settle, preview=0):
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
             f"{machine.servo_period:g} s: sample the path at the servo period"
         )
-    return reference.preceded(preview).held(default_settle(machine) if settle is None else settle)
+    trajectory = reference.preceded(preview).held(default_settle(machine) if settle is None else settle)
+    return trajectory, _held_force(machine, force, len(reference), preview, len(trajectory) - preview - len(reference))
+
+
+def _held_force(machine, force, n, before, after):
+    """The forces `force` (axis -> (n,) [N]) as an array (before + n + after, n_servo), edges held; None for none."""
+    if not force:
+        return None
+    unknown = [axis for axis in force if axis not in machine.axes]
+    if unknown:
+        raise ValueError(f"force names axis {unknown[0]!r}, which is not a servo axis of the machine "
+                         f"({', '.join(machine.axes)})")
+    columns = np.zeros((n, len(machine.axes)))
+    for i, axis in enumerate(machine.axes):
+        if axis in force:
+            columns[:, i] = _validate.finite_array(f"force[{axis!r}]", force[axis], shape=(n,))
+    return np.pad(columns, ((before, after), (0, 0)), mode="edge")
 
 
 def default_settle(machine):
@@ -324,8 +395,10 @@ def _sent(model, composition, servos, target):
     return model.commands(q, v, a)
 
 
-def _servo_run(model, composition, trajectory):
+def _servo_run(model, composition, trajectory, force):
     """Target commands (N, n_axes), the servo kernel's response to what is sent, and the servos with the drive settings.
+
+    `force`: the known external forces on the servo axes, shape (N, n_servo) [N], or None.
 
     The velocity and acceleration commands and what is sent are freed on return.
     """
@@ -334,7 +407,7 @@ def _servo_run(model, composition, trajectory):
     servos = composition.drive(model.servos())
     coupling = composition.coupling(_servo_part(model, q), servos, dt)
     qd, vd, ad = (_servo_part(model, x) for x in _sent(model, composition, servos, (q, v, a)))
-    return q, kernel.run(servos, dt, qd, vd, ad, coupling=coupling, effects=model.loop_effects()), servos
+    return q, kernel.run(servos, dt, qd, vd, ad, coupling=coupling, effects=model.loop_effects(), force=force), servos
 
 
 def _elapsed(trajectory):
@@ -363,7 +436,7 @@ def _actual(model, q, servo_position):
     return actual
 
 
-def simulate(model, reference, strategies=(), settle=None, contour=True):
+def simulate(model, reference, strategies=(), settle=None, contour=True, force=None):
     """Simulate a machine, or a model (machine + effects), following a reference.
 
     Parameters
@@ -390,6 +463,12 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     contour : bool
         Compute the contour error (exact on a path; the three-point estimate
         on a measured reference of 2 or 3 axes).
+    force : dict of str -> array_like, shape (N,), optional
+        A known external force on servo axes [N] by axis name, one value per
+        sample of the reference, positive towards positive positions (the
+        disturbance input of :func:`contoursim.kernel.run`), held over a
+        dwell before and the settle after the reference. Default: a measured
+        trace's own force columns (:func:`measured_force`); none otherwise.
 
     Returns
     -------
@@ -430,8 +509,8 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     machine = model.machine
     composition = Composition(strategies)
     preview = composition.preview(composition.drive(model.servos()), machine.servo_period)
-    trajectory = _reference(machine, reference, settle, preview)
-    q, response, servos = _servo_run(model, composition, trajectory)
+    trajectory, pushing = _reference(machine, reference, settle, preview, force)
+    q, response, servos = _servo_run(model, composition, trajectory, pushing)
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
@@ -451,7 +530,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
 #: Largest kernel output one chunk of a batch may hold [bytes].
 BATCH_CHUNK_BYTES = 2**27
 
-_BATCH_OUTPUTS = ("tool_position", "axis_position", "summary")
+_BATCH_OUTPUTS = ("tool_position", "axis_position", "current", "summary")
 
 #: Figures of a batch's ``"summary"`` output, one value per variant.
 SUMMARY_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um", "peak_current_A", "saturated",
@@ -459,7 +538,7 @@ SUMMARY_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking
 
 
 def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64,
-                   check=True):
+                   check=True, force=None):
     """Simulate B variants of one structure on one reference, in as few kernel calls as possible.
 
     The variants may differ in any effect value, and in which effects they
@@ -493,7 +572,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     outputs : tuple of str
         Any of ``"tool_position"`` (shape (B, M, d)) [mm],
         ``"axis_position"`` (the actual positions of all the machine's axes,
-        shape (B, M, n_axes)) [mm, rad] and ``"summary"``: per variant the
+        shape (B, M, n_axes)) [mm, rad], ``"current"`` (the servo axes'
+        current commands, shape (B, M, n_servo)) [A] and ``"summary"``: per variant the
         figures of :data:`SUMMARY_KEYS`, each an array (B,): contour and
         tracking error max and RMS over the test proper [µm] as in
         :meth:`SimResult.summary` (NaN without a contour error), the peak
@@ -524,6 +604,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         nominal parameters moved by a few %, or a sweep; a diverged row says
         what failed, and a variant whose coupled-loop check fails is not run
         and counts as diverged).
+    force : dict of str -> array_like, shape (N,), optional
+        A known external force on servo axes [N], shared by the variants, as
+        for :func:`simulate` (a measured trace's own by default).
 
     Returns
     -------
@@ -570,13 +653,13 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     for machine in {id(m.machine): m.machine for m in models}.values() if check else ():
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
-    trajectory = _reference(first, reference, settle, preview)
+    trajectory, pushing = _reference(first, reference, settle, preview, force)
     q, v, a = _target(models[0], trajectory, compositions[0])
     summary = "summary" in outputs
     traces = [name for name in outputs if name != "summary"]
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))
-    width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
+    width = {"tool_position": trajectory.dim, "axis_position": q.shape[1], "current": servo.size}
     result = {"t": trajectory.t[keep].copy()}
     result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in traces})
     result["diverged_step"] = np.empty((len(models), servo.size), np.int64)
@@ -587,7 +670,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     for i, m in enumerate(models):
         groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
     kernel_every = 1 if summary else every  # the summary is over every sample
-    kernel_outputs = ("tool", "current") if summary else ("tool",)
+    kernel_outputs = ("tool", "current") if summary or "current" in outputs else ("tool",)
     n_kernel = len(range(0, len(trajectory), kernel_every))
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * len(kernel_outputs) * n_kernel * servo.size))
     elapsed = _elapsed(trajectory)
@@ -619,7 +702,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
             part = distinct[start : start + chunk]
             packed = np.array([p for p, _, _ in part])
             run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=kernel_outputs,
-                                   every=kernel_every, couplings=[c for _, c, _ in part] if coupled else None)
+                                   every=kernel_every, couplings=[c for _, c, _ in part] if coupled else None,
+                                   force=pushing)
             for b, (_, _, same) in enumerate(part):
                 diverged = run["diverged_step"][b]
                 for i in same:
@@ -636,6 +720,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                         result["axis_position"][i] = actual[::every] if summary else actual
                     if "tool_position" in result:
                         result["tool_position"][i] = tool[::every] if summary else tool
+                    if "current" in result:
+                        result["current"][i] = run["current"][b][::every] if summary else run["current"][b]
                     if summary:
                         static = models[i].geometry.tool_position(q, elapsed, trajectory.dim)
                         figures = _error_figures(trajectory, tool, _contour_error(trajectory, tool), static)
