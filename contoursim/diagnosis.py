@@ -106,9 +106,11 @@ def noise_level(residual, measured=None):
     part of the residual (model error), white noise of level σ gives
     ``var(Δ²r) = 6σ²``, and the median absolute deviation ignores the few
     samples at steps and spikes. Positions logged with a resolution q
-    (the smallest step between the values an axis takes) carry at least
-    the rounding noise ``q/√12``, which coarse logs hide from the second
-    differences (most are zero).
+    (the smallest step between the values an axis takes, where it takes
+    some value more than once: a log in steps of q; in a log of distinct
+    values that smallest step is only how far the axis moved) carry at
+    least the rounding noise ``q/√12``, which coarse logs hide from the
+    second differences (most are zero).
 
     Parameters
     ----------
@@ -126,8 +128,8 @@ def noise_level(residual, measured=None):
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
     sigma = 1.4826 * mad / np.sqrt(6.0)
     if measured is not None:
-        steps = [np.diff(np.unique(x)) for x in np.asarray(measured, dtype=float).T]
-        quantum = np.array([s.min() if s.size else 0.0 for s in steps])
+        values = [np.unique(x) for x in np.asarray(measured, dtype=float).T]
+        quantum = np.array([np.diff(v).min() if 1 < v.size < len(measured) else 0.0 for v in values])
         sigma = np.maximum(sigma, quantum / np.sqrt(12.0))
     return np.maximum(sigma, 1e-6)
 

@@ -398,16 +398,76 @@ def _sent(model, composition, servos, target):
 def _servo_run(model, composition, trajectory, force):
     """Target commands (N, n_axes), the servo kernel's response to what is sent, and the servos with the drive settings.
 
-    `force`: the known external forces on the servo axes, shape (N, n_servo) [N], or None.
+    `force`: the known external forces on the servo axes, shape (N, n_servo) [N], or None. Commands that do not
+    start at rest are stepped after a run-in (:func:`_lead`), left out of the response.
 
     The velocity and acceleration commands and what is sent are freed on return.
     """
     q, v, a = _target(model, trajectory, composition)
     dt = model.machine.servo_period
     servos = composition.drive(model.servos())
-    coupling = composition.coupling(_servo_part(model, q), servos, dt)
-    qd, vd, ad = (_servo_part(model, x) for x in _sent(model, composition, servos, (q, v, a)))
-    return q, kernel.run(servos, dt, qd, vd, ad, coupling=coupling, effects=model.loop_effects(), force=force), servos
+    lead = _lead(model.machine, *(_servo_part(model, x) for x in (v, a)))
+    path = _run_in(*(_servo_part(model, x) for x in (q, v, a)), lead, dt)[0]
+    coupling = composition.coupling(path, servos, dt)
+    sent = _run_in(*(_servo_part(model, x) for x in _sent(model, composition, servos, (q, v, a))), lead, dt)
+    force = None if force is None else np.pad(force, ((lead, 0), (0, 0)), mode="edge")
+    response = kernel.run(servos, dt, *sent, coupling=coupling, effects=model.loop_effects(), force=force)
+    if lead:
+        position = response.position[lead:]
+        encoder = position if response.encoder is response.position else response.encoder[lead:]
+        estimate = None if response.contour_estimate is None else response.contour_estimate[lead:]
+        response = kernel.ServoResponse(dt, position, encoder, response.velocity[lead:], response.current[lead:],
+                                        response.saturated[lead:], estimate)  # fmt: skip
+    return q, response, servos
+
+
+def _lead(machine, v, a, every=1):
+    """Servo periods of run-in the kernel steps before servo commands that do not start at rest (0 when they do).
+
+    The kernel starts at rest on its first command; a measured trace may
+    start with the axes moving. Taken as the machine did it before: each
+    axis moved at its first acceleration (:func:`_run_in`), back to where
+    it stood still if that is within :func:`default_settle`, else over
+    that long (the loops settle on the run-in); a whole number of `every`
+    periods.
+
+    Parameters
+    ----------
+    machine : Machine
+    v, a : ndarray, shape (N, n_servo)
+        Velocity [mm/s] and acceleration [mm/s^2] commands of the servo axes.
+    every : int
+        The run-in is a multiple of it.
+    """
+    speed = np.linalg.norm(v, axis=1)
+    if not speed[0] > 1e-3 * speed.max():  # at rest, or within the measured reference's wiggle of it
+        return 0
+    back = min(float(_to_rest(v[0], a[0]).max()), default_settle(machine))  # [s]
+    periods = int(np.ceil(back / machine.servo_period)) + 1
+    return -(-periods // every) * every
+
+
+def _to_rest(v0, a0):
+    """How long ago [s] axes at velocity `v0` [mm/s] accelerating at `a0` [mm/s^2] stood still (inf: never)."""
+    accelerating = v0 * a0 > 0
+    return np.where(accelerating, np.abs(v0) / np.where(accelerating, np.abs(a0), 1.0), np.where(v0 == 0, 0.0, np.inf))
+
+
+def _run_in(q, v, a, lead, dt):
+    """Commands `q`, `v`, `a` (N, n) [mm, mm/s, mm/s^2] preceded by `lead` rows of run-in (:func:`_lead`), new arrays.
+
+    Back from the first row at the first acceleration, each axis standing
+    still before the time it was at rest (:func:`_to_rest`).
+    """
+    if not lead:
+        return q, v, a
+    back = dt * np.arange(lead, 0, -1)[:, None]  # [s] before the first row, (lead, 1)
+    v0, a0 = v[0], a[0]
+    rest = _to_rest(v0, a0)
+    moving = back < rest
+    u = np.minimum(back, rest)
+    head = (q[0] - v0 * u + 0.5 * a0 * u**2, np.where(moving, v0 - a0 * u, 0.0), np.where(moving, a0, 0.0))
+    return tuple(np.concatenate([h, x]) for h, x in zip(head, (q, v, a)))
 
 
 def _elapsed(trajectory):
@@ -498,6 +558,13 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     Thermal drift, the machine's and the ``thermal_drift`` effects', runs
     from the reference's first sample (a measured trace's clock may start
     anywhere); strategies see that time too.
+
+    A reference that does not start at rest (a measured trace that begins
+    in motion) is entered as the machine entered it: the kernel first steps
+    a run-in, back from the first sample at its first acceleration to
+    rest, over :func:`default_settle` at most, which
+    the result leaves out; without it the simulation would start at rest on a
+    moving command, a transient the machine never had.
 
     A pre-filter reads some samples ahead (ZPETC,
     :meth:`contoursim.compensation.Strategy.preview`): the machine dwells
@@ -674,12 +741,17 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     n_kernel = len(range(0, len(trajectory), kernel_every))
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * len(kernel_outputs) * n_kernel * servo.size))
     elapsed = _elapsed(trajectory)
-    path = _servo_part(models[0], q)
+    # commands that do not start at rest: the kernel steps a run-in first, left out of the outputs (see _servo_run)
+    lead = _lead(first, *(_servo_part(models[0], x) for x in (v, a)), every=kernel_every)
+    skip = lead // kernel_every
+    pushing = None if pushing is None else np.pad(pushing, ((lead, 0), (0, 0)), mode="edge")
+    path = _run_in(*(_servo_part(models[0], x) for x in (q, v, a)), lead, dt)[0]
     couplings = {}
     for rows in groups.values():
         # the pre-filter designs from the first variant of the group (pass a `model` to the strategy to fix it)
         composition = compositions[rows[0]]
-        qd, vd, ad = _sent(models[rows[0]], composition, composition.drive(models[rows[0]].servos()), (q, v, a))
+        sent = _sent(models[rows[0]], composition, composition.drive(models[rows[0]].servos()), (q, v, a))
+        qd, vd, ad = _run_in(*(x[:, servo] for x in sent), lead, dt)
         # variants that differ only in their geometry share one kernel run
         runs = {}
         for i in rows:
@@ -701,11 +773,12 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         for start in range(0, len(distinct), chunk):
             part = distinct[start : start + chunk]
             packed = np.array([p for p, _, _ in part])
-            run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=kernel_outputs,
-                                   every=kernel_every, couplings=[c for _, c, _ in part] if coupled else None,
-                                   force=pushing)
+            run = kernel.run_batch(packed, dt, qd, vd, ad, outputs=kernel_outputs, every=kernel_every,
+                                   couplings=[c for _, c, _ in part] if coupled else None, force=pushing)
+            for name in kernel_outputs:
+                run[name] = run[name][:, skip:]
             for b, (_, _, same) in enumerate(part):
-                diverged = run["diverged_step"][b]
+                diverged = np.where(run["diverged_step"][b] >= 0, np.maximum(run["diverged_step"][b] - lead, 0), -1)
                 for i in same:
                     result["diverged_step"][i] = diverged
                     if (diverged >= 0).any():  # an unstable variant: no positions, no figures

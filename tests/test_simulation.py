@@ -13,6 +13,7 @@ from contoursim.traces import Trace, read_trace
 from contoursim.machine import Machine
 from contoursim.plotting import circular_deviation
 from contoursim.servo import AxisServo
+from contoursim.trajectory import Trajectory
 from contoursim.simulation import measured_force, measured_reference, simulate, simulate_batch
 
 DT = 2e-4
@@ -342,3 +343,39 @@ def test_a_force_on_an_axis_the_machine_lacks_is_refused():
         simulate(machine, reference, force={"z": np.zeros(len(reference))})
     with pytest.raises(ValueError, match=r"force\['x'\] must have shape \(400\)"):
         simulate_batch([machine], reference, force={"x": np.zeros(5)})
+
+
+# --- a measured reference that starts in motion --------------------------------------------------
+
+
+def _ramp(t, accel, t_move):
+    """A command standing at 1 mm, then accelerating at `accel` [mm/s²] from `t_move` [s]: (position, velocity, acceleration)."""
+    u = np.maximum(t - t_move, 0.0)
+    return 1.0 + 0.5 * accel * u**2, accel * u, np.where(t >= t_move, accel, 0.0)
+
+
+def test_a_trace_that_starts_accelerating_is_entered_as_the_machine_entered_it():
+    # The command accelerates from rest at t = 0.05 s; a trace of it starts at 0.1 s, in motion. Its simulation steps
+    # the run-in back to rest at the trace's first acceleration: the same commands as the whole motion's, so the
+    # same positions from the trace's first sample on (to rounding), not a start at rest on a moving command.
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS)}, DT)
+    t = np.arange(1500) * DT
+    position, velocity, acceleration = (x[:, None] for x in _ramp(t, 400.0, 0.05))
+    whole = simulate(machine, Trajectory(t, position, velocity, acceleration, position[:, 0] - 1.0), settle=0.0)
+    cut = slice(500, None)
+    trace = Trace(t[cut], position[cut], position[cut], ("x",))
+    started = simulate(machine, trace, contour=False)
+    np.testing.assert_allclose(started.tool_position, whole.tool_position[cut], rtol=0, atol=1e-9)
+    assert np.abs(whole.tool_position[cut] - position[cut]).max() > 1e-3  # the axis lags by more than that: a start
+    # at rest on the moving command would be off by as much at first
+
+
+def test_a_trace_that_starts_at_constant_velocity_starts_in_the_steady_following_error():
+    # P-P loop without damping: the steady ramp error is v/kp (test_kernel); after the run-in at the first velocity (no
+    # acceleration) over default_settle (five position-loop time constants) the first sample is within 1 % of it.
+    machine = Machine({"x": AxisServo(kp=40.0, mass=300.0, force_constant=942.0, kv=80.0)}, DT)
+    t = np.arange(1000) * DT
+    trace = Trace(t, (3.0 + 25.0 * t)[:, None], (3.0 + 25.0 * t)[:, None], ("x",))
+    started = simulate(machine, trace, contour=False)
+    assert trace.reference[0, 0] - started.tool_position[0, 0] == pytest.approx(25.0 / 40.0, rel=0.01)
+    assert len(started.trajectory) == len(trace.t)
