@@ -848,10 +848,10 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
 def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
     """Controllers and plant of axis `a` of the lanes of :func:`_lanes` for one step, and the next step's encoder.
 
-    `pushing`: the known external force of the step [N], the same for every lane.
     Every lane computes every branch and a select keeps its own, so that the
     loop vectorises. ``rigid`` (a constant where this is inlined): no lane
     has a structural mode or a current loop, whose rows are then skipped.
+    `pushing`: the known external force of the step [N], the same for every lane.
     """
     p = s
     for l in range(n_lanes):

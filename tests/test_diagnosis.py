@@ -186,13 +186,18 @@ def test_identification_shares_one_position_gain_so_a_gain_mismatch_stays_visibl
 
 def test_without_a_model_axes_of_different_gains_and_noise_never_crash_and_report_strict_json():
     """The demo mill's own ISO circle (X and Y tuned to different gains), noise added, diagnosed without a model:
-    an answer, no NaN in it (strict JSON), whatever is named lowers the residual."""
+    an answer, no NaN in it (strict JSON), whatever is named lowers the residual. A force column is said to be left
+    out (newtons have no scale on an identified machine); a current column is compared all the same."""
     mill = load_machine("demo_mill")
     xy = Machine({a: mill.axes[a] for a in "xy"}, DT)
     trace = synthetic_trace(xy, circle("ccw"), mismatch=0.0, noise_um=0.3, every=2, seed=4)
+    trace = Trace(trace.t, trace.reference, trace.actual, trace.axes, force={"x": np.zeros(len(trace.t))},
+                  current={"y": np.zeros(len(trace.t))})
     result = diagnose(trace)
     report = json.loads(result.to_json(), parse_constant=lambda name: pytest.fail(f"{name} in the report"))
     assert report["residual_rms_after_um"] is not None
+    assert any(w.startswith("the trace's force column(s) (x_force) are not used") for w in report["warnings"])
+    assert set(report["current_residual_rms_before_A"]) == set(report["current_residual_rms_after_A"]) == {"y"}
     rms = [s.rms_um for s in result.steps[1:]]
     assert all(b < a for a, b in zip(rms, rms[1:])), result.report()
 
