@@ -421,30 +421,26 @@ def _servo_run(model, composition, trajectory, force):
     return q, response, servos
 
 
-def _lead(machine, v, a, every=1):
+def _lead(machine, v, a):
     """Servo periods of run-in the kernel steps before servo commands that do not start at rest (0 when they do).
 
     The kernel starts at rest on its first command; a measured trace may
     start with the axes moving. Taken as the machine did it before: each
     axis moved at its first acceleration (:func:`_run_in`), back to where
     it stood still if that is within :func:`default_settle`, else over
-    that long (the loops settle on the run-in); a whole number of `every`
-    periods.
+    that long (the loops settle on the run-in).
 
     Parameters
     ----------
     machine : Machine
     v, a : ndarray, shape (N, n_servo)
         Velocity [mm/s] and acceleration [mm/s^2] commands of the servo axes.
-    every : int
-        The run-in is a multiple of it.
     """
     speed = np.linalg.norm(v, axis=1)
     if not speed[0] > 1e-3 * speed.max():  # at rest, or within the measured reference's wiggle of it
         return 0
     back = min(float(_to_rest(v[0], a[0]).max()), default_settle(machine))  # [s]
-    periods = int(np.ceil(back / machine.servo_period)) + 1
-    return -(-periods // every) * every
+    return int(np.ceil(back / machine.servo_period)) + 1
 
 
 def _to_rest(v0, a0):
@@ -736,14 +732,16 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     groups = {}
     for i, m in enumerate(models):
         groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
-    kernel_every = 1 if summary else every  # the summary is over every sample
+    # commands that do not start at rest: the kernel steps a run-in first, left out of the outputs (see _servo_run)
+    lead = _lead(first, *(_servo_part(models[0], x) for x in (v, a)))
+    # the summary is over every sample; the kernel keeps every `every`-th from its first, so from the reference's first
+    # only after a run-in of whole `every`s (else all, and the reference's every `every`-th taken here)
+    kernel_every = 1 if summary or lead % every else every
+    taken = slice(lead // kernel_every, None, 1 if summary else every // kernel_every)
     kernel_outputs = ("tool", "current") if summary or "current" in outputs else ("tool",)
-    n_kernel = len(range(0, len(trajectory), kernel_every))
+    n_kernel = len(range(0, lead + len(trajectory), kernel_every))
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * len(kernel_outputs) * n_kernel * servo.size))
     elapsed = _elapsed(trajectory)
-    # commands that do not start at rest: the kernel steps a run-in first, left out of the outputs (see _servo_run)
-    lead = _lead(first, *(_servo_part(models[0], x) for x in (v, a)), every=kernel_every)
-    skip = lead // kernel_every
     pushing = None if pushing is None else np.pad(pushing, ((lead, 0), (0, 0)), mode="edge")
     path = _run_in(*(_servo_part(models[0], x) for x in (q, v, a)), lead, dt)[0]
     couplings = {}
@@ -776,7 +774,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
             run = kernel.run_batch(packed, dt, qd, vd, ad, outputs=kernel_outputs, every=kernel_every,
                                    couplings=[c for _, c, _ in part] if coupled else None, force=pushing)
             for name in kernel_outputs:
-                run[name] = run[name][:, skip:]
+                run[name] = run[name][:, taken]
             for b, (_, _, same) in enumerate(part):
                 diverged = np.where(run["diverged_step"][b] >= 0, np.maximum(run["diverged_step"][b] - lead, 0), -1)
                 for i in same:
