@@ -256,7 +256,7 @@ def main():
 
     def inner_loop():
         state = kernel._initial_state((3,), pos[0])
-        kernel._variant(rows, state, *refs, *coupling_off, np.empty((0, 3)), 1, *outputs)
+        kernel._variant(rows, state, *refs, *coupling_off, np.empty((0, 3)), np.empty((0, 3)), 1, *outputs)
 
     (t_plain, t_effects, t_noisy, t_inner), cpu = side_by_side([
         lambda: run(plain, DT, pos, vel, acc),

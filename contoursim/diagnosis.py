@@ -62,7 +62,7 @@ from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, i
 from .kernel import MAX_DELAY_SAMPLES
 from .model import Model, as_model
 from .plotting import fit_circle_center
-from .simulation import measured_reference, simulate_batch
+from .simulation import measured_force, measured_reference, simulate_batch
 
 __all__ = [
     "DAMPING_SPREAD", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
@@ -106,9 +106,11 @@ def noise_level(residual, measured=None):
     part of the residual (model error), white noise of level σ gives
     ``var(Δ²r) = 6σ²``, and the median absolute deviation ignores the few
     samples at steps and spikes. Positions logged with a resolution q
-    (the smallest step between the values an axis takes) carry at least
-    the rounding noise ``q/√12``, which coarse logs hide from the second
-    differences (most are zero).
+    (the smallest step between the values an axis takes, where it takes
+    some value more than once: a log in steps of q; in a log of distinct
+    values that smallest step is only how far the axis moved) carry at
+    least the rounding noise ``q/√12``, which coarse logs hide from the
+    second differences (most are zero).
 
     Parameters
     ----------
@@ -126,8 +128,8 @@ def noise_level(residual, measured=None):
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
     sigma = 1.4826 * mad / np.sqrt(6.0)
     if measured is not None:
-        steps = [np.diff(np.unique(x)) for x in np.asarray(measured, dtype=float).T]
-        quantum = np.array([s.min() if s.size else 0.0 for s in steps])
+        values = [np.unique(x) for x in np.asarray(measured, dtype=float).T]
+        quantum = np.array([np.diff(v).min() if 1 < v.size < len(measured) else 0.0 for v in values])
         sigma = np.maximum(sigma, quantum / np.sqrt(12.0))
     return np.maximum(sigma, 1e-6)
 
@@ -192,6 +194,9 @@ class Diagnosis:
         item ``axis``, ``signature`` (what it is: a limit cycle at
         standstill, a period, a correlation) and ``rms_um`` (its share of
         the residual [µm RMS]); never counted as noise.
+    current_before, current_after : dict of str -> ndarray, shape (N,)
+        For each axis whose current the trace measured, the current command
+        of the nominal and of the final model at the trace's samples [A].
     """
 
     trace: object
@@ -206,6 +211,8 @@ class Diagnosis:
     where: tuple = ()
     warnings: tuple = field(default=())
     unexplained: tuple = field(default=())
+    current_before: dict = field(default_factory=dict)
+    current_after: dict = field(default_factory=dict)
 
     @property
     def effects(self):
@@ -256,7 +263,16 @@ class Diagnosis:
         if normal_before is not None:
             report["residual_normal_rms_before_um"] = 1e3 * float(np.sqrt(np.mean(normal_before**2)))
             report["residual_normal_rms_after_um"] = 1e3 * float(np.sqrt(np.mean(normal_after**2)))
+        if self.current_before:
+            report["current_residual_rms_before_A"] = self.current_residual_rms(self.current_before)
+            report["current_residual_rms_after_A"] = self.current_residual_rms(self.current_after)
         return _strict(report)
+
+    def current_residual_rms(self, simulated):
+        """RMS of the measured minus the `simulated` current (:attr:`current_before` or `current_after`) on the
+        scored samples, by axis [A]."""
+        keep = self.scored
+        return {a: float(np.sqrt(np.mean((self.trace.current[a][keep] - y[keep]) ** 2))) for a, y in simulated.items()}
 
     def to_json(self):
         """:meth:`to_dict` as strict JSON text (no NaN or Infinity: a value that is not finite is ``null``)."""
@@ -313,6 +329,10 @@ class Diagnosis:
             lines.append(f"{s.label:<28}{text:<52}{s.rms_um:>10.3f}{s.max_um:>10.3f}{bic:>10}")
         noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
         lines.append(f"noise floor [µm RMS]: {noise}")
+        if self.current_before:
+            before, after = self.current_residual_rms(self.current_before), self.current_residual_rms(self.current_after)
+            lines.append("measured − simulated current [A RMS]: "
+                         + ", ".join(f"{a} {before[a]:.4g} -> {after[a]:.4g}" for a in before))
         lines += [f"unexplained on {u['axis']}: {u['signature']} ({u['rms_um']:.3g} µm RMS)" for u in self.unexplained]
         if not self.effects and not self.unexplained and self.steps[-1].rms_um <= NOISE_FLOOR * float(np.linalg.norm(self.noise_um)):
             lines.append("no effect named: the measurement is explained by the nominal model within noise "
@@ -665,10 +685,11 @@ def _spatial_period(q, r):
 class _Problem:
     """A measured trace against variants of one model: predictions, whitening, nominal refit."""
 
-    def __init__(self, trace, model, noise, scored, identified=False):
+    def __init__(self, trace, model, noise, scored, identified=False, force=None):
         self.trace = trace
         self.identified = identified  # the controller too was identified: its parameters carry the prior
         self.reference = measured_reference(trace, model.machine.servo_period)
+        self.force = force or {}  # the known external forces on the reference's samples [N], by axis
         self.scored = scored  # samples the fit scores, shape (N,)
         self.weight = scored[:, None] / noise  # 1/σ per axis on scored samples, 0 elsewhere [1/mm], (N, d)
         self.n = int(scored.sum()) * len(noise)  # residual entries scored
@@ -684,7 +705,8 @@ class _Problem:
         if loop:
             for start in range(0, len(loop), 64):
                 part = loop[start : start + 64]
-                tool = simulate_batch(part, self.reference, outputs=("tool_position",), settle=0.0, check=False)["tool_position"]
+                tool = simulate_batch(part, self.reference, outputs=("tool_position",), settle=0.0, check=False,
+                                      force=self.force)["tool_position"]
                 out += [_on_trace(self.trace, self.reference.t, y) for y in tool]
         loop_results = iter(out)
         results = []
@@ -749,7 +771,8 @@ class _Problem:
 
     def _linearise(self, model):
         self.base = None
-        run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0, check=False)
+        run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0, check=False,
+                             force=self.force)
         self.axis_position = run["axis_position"][0]
         self.base_prediction = _on_trace(self.trace, self.reference.t, run["tool_position"][0])
         self.changes = _nuisance_changes(model, self.trace.axes, self.identified)
@@ -1185,7 +1208,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         raise ValueError(f"the model has no servo axis {missing[0]!r} for the trace's column {missing[0]!r}; "
                          f"its axes are {', '.join(model.machine.axes)}")
     reference = measured_reference(trace, model.machine.servo_period)
-    before = _on_trace(trace, reference.t, simulate_batch([model], reference, settle=0.0, check=not identified)["tool_position"][0])
+    # a known force in N has no scale on an identified machine (its mass is assumed): used with a given model only
+    force = {} if identified else measured_force(trace, model.machine.servo_period)
+    before = _on_trace(trace, reference.t, simulate_batch([model], reference, settle=0.0, check=not identified,
+                                                          force=force)["tool_position"][0])
     cycles = standstill_cycles(trace, reference, trace.actual - before)
     noise = noise_level(trace.actual - before, trace.actual)
     for i, cycle in cycles.items():  # the noise is what is white: a limit cycle is left out of its estimate
@@ -1204,9 +1230,12 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     if identified:
         warnings.append("the nominal machine was identified from the trace with an assumed mass "
                         "(forces such as force_N are relative to that axis, not in real newtons)")
+    if identified and trace.force:
+        warnings.append(f"the trace's force column(s) ({', '.join(f'{a}_force' for a in trace.force)}) are not used: "
+                        "a force in newtons has no scale on an identified machine; give the nominal model (--model)")
     if len(trace.axes) == 1:
         warnings.append("one axis: gain_mismatch cannot be told from the nominal position gain and is not a candidate")
-    problem = _Problem(trace, model, noise, scored, identified)
+    problem = _Problem(trace, model, noise, scored, identified, force)
     raw = (trace.actual - before)[scored]
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
@@ -1275,8 +1304,19 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
     warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "
                  f"{c['frequency']:.3g} Hz while the reference stands still (not noise)" for i, c in cycles.items()]
+    currents = [_currents(trace, m, reference, force) for m in (model, problem.base)]
     return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, after, scored,
-                     problem.base, where, tuple(warnings), tuple(left))
+                     problem.base, where, tuple(warnings), tuple(left), *currents)
+
+
+def _currents(trace, model, reference, force):
+    """`model`'s current commands at the trace's samples for the axes whose current the trace measured [A], by axis
+    (the nominal loop was checked by the first simulation)."""
+    if not trace.current:
+        return {}
+    run = simulate_batch([model], reference, outputs=("current",), settle=0.0, check=False, force=force)["current"][0]
+    names = list(model.machine.axes)
+    return {a: _on_trace(trace, reference.t, run[:, [names.index(a)]])[:, 0] for a in trace.current}
 
 
 def _settle(problem, base, best, warnings):

@@ -60,9 +60,10 @@ output is held over ``[t_k, t_k+1)``):
    computed `computation_delay` periods before reaches the drive (the
    last two commands in the state); current PI (when modelled);
 7. the disturbance force: the constant offset minus viscous and stick-slip
-   friction (see :class:`LoopEffects`): the dry friction is the force that
-   would stop the carriage at ``t_k+1``, within its static or kinetic
-   bounds at the velocity sampled at ``t_k``; held;
+   friction (see :class:`LoopEffects`), plus the known external force of
+   step k (the `force` argument of :func:`run` and :func:`run_batch`): the
+   dry friction is the force that would stop the carriage at ``t_k+1``,
+   within its static or kinetic bounds at the velocity sampled at ``t_k``; held;
 8. the exact ZOH plant update with the held voltage (or current) and force.
 
 The helpers take and return scalars (state goes in and comes back out) or
@@ -591,15 +592,15 @@ def _coupling_step(k, cpar, knots, knot_of_sample, cstate, x_fb, dvel):
 
 
 @njit(cache=True, nogil=True)
-def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, encoder_noise, every,
-             tool, encoder, velocity, current, saturated, estimate, status):  # fmt: skip
+def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, encoder_noise, external,
+             every, tool, encoder, velocity, current, saturated, estimate, status):  # fmt: skip
     """Step all axes of one variant over the reference, advancing `state` and `cstate` in place.
 
     ``par`` (n, NPAR) and ``state`` (n, _NSTATE) follow the layouts above;
     ``cpar`` (_C_NPAR,), ``knots`` (M, 3), ``knot_of_sample`` (N,) and
     ``cstate`` (_C_NSTATE,) are the coupling's (kind 0: none);
-    ``encoder_noise`` (N, n) is added to the encoder readings (no rows:
-    none). Samples
+    ``encoder_noise`` (N, n) is added to the encoder readings and
+    ``external`` (N, n) to the disturbance forces [N] (no rows: none). Samples
     ``k = 0, every, 2·every, …`` go to the outputs of shape
     (ceil(N / every), n) (`estimate`: (ceil(N / every), 3)) that have rows
     (an output with no rows is not asked for). `status` (n, 3) gets per
@@ -612,7 +613,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
     write_tool, write_encoder = tool.shape[0] > 0, encoder.shape[0] > 0
     write_velocity, write_current, write_saturated = velocity.shape[0] > 0, current.shape[0] > 0, saturated.shape[0] > 0
     write_estimate, coupled = estimate.shape[0] > 0, cpar[_C_KIND] != 0.0
-    noisy_encoder = encoder_noise.shape[0] > 0
+    noisy_encoder, pushed = encoder_noise.shape[0] > 0, external.shape[0] > 0
     x_fb = np.empty(n_axes)
     v_fb = np.empty(n_axes)
     dvel = np.empty(n_axes)  # zeroed below: np.zeros would compile three more functions (~0.07 s)
@@ -696,7 +697,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
             # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
             # (rows as np.int64: one compiled _plant_row, not one per literal row number)
             friction = par[a, _FRICTION] != 0.0
-            force = par[a, _F0] - par[a, _FV] * v if friction else 0.0
+            force = (par[a, _F0] - par[a, _FV] * v if friction else 0.0) + (external[k, a] if pushed else 0.0)
             v_next = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
             if friction:  # stick-slip: the force that stops the carriage at t_k+1, within the friction bounds
                 level = _friction_level(par[a, _FC], par[a, _FS], par[a, _VS], v)
@@ -743,7 +744,7 @@ _ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, current, saturated, status):
+def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velocity, current, saturated, status):
     """Step up to :data:`LANES` variants `rows` (L, n, NPAR) together, the variant index innermost.
 
     What :func:`_variant` does (coupling off), with the same operations in
@@ -754,11 +755,12 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
     (noise, the Stribeck exponential, the delay's reads) run only for the
     axes that have them. Outputs (L, ceil(N / every), n) with no rows are
     not asked for; the kept samples go to them :data:`_CHUNK` at a time.
+    `external` (N, n): the known external forces [N] every lane gets (no rows: none).
     `status` (L, n, 3) as for :func:`_variant` (the reference is checked
     before).
     """
     n_lanes, n_axes = rows.shape[0], rows.shape[1]
-    n_steps = ref_pos.shape[0]
+    n_steps, pushed = ref_pos.shape[0], external.shape[0] > 0
     s = np.empty((n_axes, _LROWS, LANES))  # see _LROWS; `p` where parameters are read
     p = s
     has = np.empty((n_axes, 6), np.bool_)
@@ -863,10 +865,11 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
                 for l in range(n_lanes):
                     s[a, _LLEVEL, l] = _friction_level(p[a, _FC, l], p[a, _FS, l], p[a, _VS, l], s[a, _LV, l])
             x_ref, v_ref, a_ref = ref_pos[k, a], ref_vel[k, a], ref_acc[k, a]
+            pushing = external[k, a] if pushed else 0.0
             if has[a, _ANY_MODE_OR_CURRENT_LOOP]:  # two versions of the step, compiled apart
-                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, False)
+                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, False)
             else:
-                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, True)
+                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, True)
             if record and write_current:
                 for l in range(n_lanes):
                     kept_current[row, a, l] = s[a, _LDRIVE, l]
@@ -892,12 +895,13 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, rigid):
+def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
     """Controllers and plant of axis `a` of the lanes of :func:`_lanes` for one step, and the next step's encoder.
 
     Every lane computes every branch and a select keeps its own, so that the
     loop vectorises. ``rigid`` (a constant where this is inlined): no lane
     has a structural mode or a current loop, whose rows are then skipped.
+    `pushing`: the known external force of the step [N], the same for every lane.
     """
     p = s
     for l in range(n_lanes):
@@ -920,7 +924,7 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, rigid):
             u = u if electrical else i_cmd
             s[a, _LZC, l] = zc if electrical else s[a, _LZC, l]
         rubbing = p[a, _FRICTION, l] != 0.0
-        force = p[a, _F0, l] - p[a, _FV, l] * v if rubbing else 0.0
+        force = (p[a, _F0, l] - p[a, _FV, l] * v if rubbing else 0.0) + pushing
         v_next = _lane_row(p, a, l, 1, x, v, d, w, i, u, force)
         bf = p[a, _BF + 1, l]
         dry = _dry_friction(s[a, _LLEVEL, l], p[a, _FA, l], -v_next / bf)
@@ -1244,6 +1248,16 @@ def _reference(n_axes, ref_pos, ref_vel, ref_acc, finite):
     return tuple(_read_only(np.ascontiguousarray(r)) for r in (ref_pos, ref_vel, ref_acc))
 
 
+def _external(force, n_steps, n):
+    """The known external forces checked, shape (n_steps, n) [N], as a writeable C-contiguous copy (no rows: none).
+
+    Writeable always (the compiled kernel has one signature: numba types read-only arrays apart).
+    """
+    if force is None:
+        return np.empty((0, n))
+    return np.array(_validate.finite_array("force", force, shape=(n_steps, n)), order="C")
+
+
 def _read_only(array):
     view = array.view()
     view.flags.writeable = False
@@ -1274,7 +1288,7 @@ def _encoder_noise(effects, n_steps):
     return noise
 
 
-def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
+def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None, force=None):
     """Simulate all axes' servo loops, with their in-loop effects, on a sampled reference.
 
     Every axis's nominal loop is checked first (:func:`contoursim.servo.check`:
@@ -1301,6 +1315,10 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
     effects : mapping str -> LoopEffects, optional
         In-loop and sensor effects by axis name (axes not named, or named
         with ``None``, have none).
+    force : array_like, shape (N, n), optional
+        A known external force on each axis's carriage [N], positive towards
+        positive positions, held over each servo period (step 7 of the
+        module docstring: added to the disturbance force); none by default.
 
     Returns
     -------
@@ -1348,6 +1366,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
     par = np.array([pack(servo, dt, effects.get(name) or LoopEffects()) for name, servo in zip(names, servos)])
 
     n_steps = ref_pos.shape[0]
+    external = _external(force, n_steps, n)
     state = _initial_state((n,), ref_pos[0])
     # Without a sensor effect between them (a mode, noise, delay, quantisation, or backlash behind a motor
     # encoder) the encoder reads the tool position exactly: one array holds both, written twice with the same values.
@@ -1369,7 +1388,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
         cpar[_C_DT], cstate = dt, np.zeros(_C_NSTATE)
         estimate = np.empty((n_steps, 3))
     outputs = (position, encoder, velocity, current, saturated, estimate, status)
-    _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, noise, 1, *outputs)
+    _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample, cstate, noise, external, 1, *outputs)
     if status[:, _BAD_REFERENCE].max() >= 0:
         _reference(n, ref_pos, ref_vel, ref_acc, finite=True)  # names the first non-finite value
     diverged = status[:, _DIVERGED]
@@ -1382,7 +1401,8 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None):
     return ServoResponse(dt, *outputs[:5], contour_estimate=None if coupling is None else estimate)
 
 
-def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, dtype=np.float64, couplings=None):
+def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, dtype=np.float64, couplings=None,
+              force=None):
     """Run B variants of one machine on one reference, the variants side by side in SIMD lanes.
 
     Each variant is a stack of :func:`pack` rows (one per axis); row ``b``
@@ -1425,6 +1445,9 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     couplings : sequence of Coupling, optional
         One cross-coupled controller per variant (gains may differ), all on
         one path (equal ``path`` arrays); none by default.
+    force : array_like, shape (N, n), optional
+        A known external force on each axis [N], shared by all variants
+        (see :func:`run`); none by default.
 
     Returns
     -------
@@ -1456,6 +1479,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
         raise ValueError(f"dtype must be float64 or float32, got {dtype}")
     n_steps = ref_pos.shape[0]
     kept = -(-n_steps // every)
+    external = _external(force, n_steps, n)
 
     def out(name, kind):
         # Not touched here: the blocks write their rows whole, _CHUNK samples at a time, so the page faults of a
@@ -1490,13 +1514,13 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
         # a time (_variant, as run() does: the same numbers).
         hi = min(lo + lanes, n_variants)
         if lanes >= _MIN_LANES and couplings is None:
-            _lanes(rows[lo:hi], ref_pos, ref_vel, ref_acc, every, *(a[lo:hi] for a in signals), status[lo:hi])
+            _lanes(rows[lo:hi], ref_pos, ref_vel, ref_acc, external, every, *(a[lo:hi] for a in signals), status[lo:hi])
             return
         no_noise, no_estimate = np.empty((0, n)), np.empty((0, 3))
         for b in range(lo, hi):
             state = _initial_state((n,), ref_pos[0])
             _variant(rows[b], state, ref_pos, ref_vel, ref_acc, cpars[b], knots, knot_of_sample, cstate.copy(),
-                     no_noise, every, *(a[b] for a in signals), no_estimate, status[b])  # fmt: skip
+                     no_noise, external, every, *(a[b] for a in signals), no_estimate, status[b])  # fmt: skip
 
     starts = range(0, n_variants, lanes)
     if len(starts) == 1 or threads == 1:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _memory, estimators, kernel
+from . import _memory, _validate, estimators, kernel
 from ._blocks import blocks
 from .compensation import Composition, Strategy
 from ._version import __version__
@@ -32,7 +32,8 @@ from .machine import CARTESIAN, Machine
 from .model import as_model
 from .trajectory import Trajectory
 
-__all__ = ["SimResult", "SUMMARY_KEYS", "default_settle", "measured_reference", "simulate", "simulate_batch"]
+__all__ = ["SimResult", "SUMMARY_KEYS", "default_settle", "measured_force", "measured_reference", "simulate",
+           "simulate_batch"]
 
 
 
@@ -252,9 +253,9 @@ def measured_reference(trace, servo_period):
 
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
-    logged = abs(trace.dt - servo_period) <= 1e-3 * servo_period
+    logged = _logged(trace, servo_period)
     duration = trace.t[-1] - trace.t[0]
-    n = trace.t.size if logged else int(np.floor(duration / servo_period * (1 + 1e-12))) + 1
+    n = _servo_samples(trace, servo_period)
     _memory.check(n, f"the trace lasts {duration:.6g} s: every servo period of {servo_period:.6g} s",
                   "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period")
     if logged:
@@ -269,9 +270,63 @@ def measured_reference(trace, servo_period):
     return Trajectory(t, position, spline(t, 1), spline(t, 2), s)
 
 
-def _reference(machine, reference, settle, preview=0):
-    """The reference as a Trajectory at the servo period, after a dwell of `preview` samples and held `settle` seconds."""
+def _logged(trace, servo_period):
+    """Whether `trace` was logged at the servo period (its samples are the servo steps, within 0.1 % jitter)."""
+    return abs(trace.dt - servo_period) <= 1e-3 * servo_period
+
+
+def _servo_samples(trace, servo_period):
+    """The samples of `trace`'s measured reference: its own when logged at the servo period, else every period."""
+    if _logged(trace, servo_period):
+        return trace.t.size
+    return int(np.floor((trace.t[-1] - trace.t[0]) / servo_period * (1 + 1e-12))) + 1
+
+
+def measured_force(trace, servo_period):
+    """A measured trace's known external forces at the servo period, on the samples of :func:`measured_reference`.
+
+    A force column is a sampled input: each of its samples holds from its
+    time to the next (zero-order hold), the last to the end. A trace logged
+    at the servo period gives its own samples.
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+        The measured trace (its ``force`` columns are used).
+    servo_period : float
+        The servo period [s].
+
+    Returns
+    -------
+    dict of str -> ndarray, shape (M,)
+        The force on each axis that has one [N], M the samples of
+        ``measured_reference(trace, servo_period)``; empty without a force column.
+
+    Examples
+    --------
+    >>> from contoursim.traces import Trace
+    >>> t = np.arange(4) * 1e-3
+    >>> trace = Trace(t, t[:, None], t[:, None], ("x",), force={"x": [0.0, 5.0, 5.0, 0.0]})
+    >>> measured_force(trace, 5e-4)["x"].tolist()           # logged at 1 ms, servo at 0.5 ms
+    [0.0, 0.0, 5.0, 5.0, 5.0, 5.0, 0.0]
+    """
+    if not isinstance(trace, Trace):
+        raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
+    if _logged(trace, servo_period) or not trace.force:
+        return dict(trace.force)
+    t = trace.t[0] + servo_period * np.arange(_servo_samples(trace, servo_period))
+    held = np.searchsorted(trace.t, t + 1e-6 * trace.dt, side="right") - 1  # the last sample at or before each t
+    return {axis: values[held] for axis, values in trace.force.items()}
+
+
+def _reference(machine, reference, settle, preview=0, force=None):
+    """The reference as a Trajectory at the servo period, after a dwell of `preview` samples and held `settle` seconds.
+
+    Also returns the known external forces on the servo axes at its samples, shape (N, n_servo) [N], or ``None``
+    (`force`: by axis name, on the reference's samples; a trace's own by default), held over the dwell and the hold.
+    """
     if isinstance(reference, Trace):
+        force = measured_force(reference, machine.servo_period) if force is None else force
         reference = measured_reference(reference, machine.servo_period)
         settle = 0.0 if settle is None else settle
     elif not isinstance(reference, Trajectory):
@@ -290,7 +345,23 @@ def _reference(machine, reference, settle, preview=0):
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
             f"{machine.servo_period:g} s: sample the path at the servo period"
         )
-    return reference.preceded(preview).held(default_settle(machine) if settle is None else settle)
+    trajectory = reference.preceded(preview).held(default_settle(machine) if settle is None else settle)
+    return trajectory, _held_force(machine, force, len(reference), preview, len(trajectory) - preview - len(reference))
+
+
+def _held_force(machine, force, n, before, after):
+    """The forces `force` (axis -> (n,) [N]) as an array (before + n + after, n_servo), edges held; None for none."""
+    if not force:
+        return None
+    unknown = [axis for axis in force if axis not in machine.axes]
+    if unknown:
+        raise ValueError(f"force names axis {unknown[0]!r}, which is not a servo axis of the machine "
+                         f"({', '.join(machine.axes)})")
+    columns = np.zeros((n, len(machine.axes)))
+    for i, axis in enumerate(machine.axes):
+        if axis in force:
+            columns[:, i] = _validate.finite_array(f"force[{axis!r}]", force[axis], shape=(n,))
+    return np.pad(columns, ((before, after), (0, 0)), mode="edge")
 
 
 def default_settle(machine):
@@ -324,17 +395,75 @@ def _sent(model, composition, servos, target):
     return model.commands(q, v, a)
 
 
-def _servo_run(model, composition, trajectory):
+def _servo_run(model, composition, trajectory, force):
     """Target commands (N, n_axes), the servo kernel's response to what is sent, and the servos with the drive settings.
+
+    `force`: the known external forces on the servo axes, shape (N, n_servo) [N], or None. Commands that do not
+    start at rest are stepped after a run-in (:func:`_lead`), left out of the response.
 
     The velocity and acceleration commands and what is sent are freed on return.
     """
     q, v, a = _target(model, trajectory, composition)
     dt = model.machine.servo_period
     servos = composition.drive(model.servos())
-    coupling = composition.coupling(_servo_part(model, q), servos, dt)
-    qd, vd, ad = (_servo_part(model, x) for x in _sent(model, composition, servos, (q, v, a)))
-    return q, kernel.run(servos, dt, qd, vd, ad, coupling=coupling, effects=model.loop_effects()), servos
+    lead = _lead(model.machine, *(_servo_part(model, x) for x in (v, a)))
+    path = _run_in(*(_servo_part(model, x) for x in (q, v, a)), lead, dt)[0]
+    coupling = composition.coupling(path, servos, dt)
+    sent = _run_in(*(_servo_part(model, x) for x in _sent(model, composition, servos, (q, v, a))), lead, dt)
+    force = None if force is None else np.pad(force, ((lead, 0), (0, 0)), mode="edge")
+    response = kernel.run(servos, dt, *sent, coupling=coupling, effects=model.loop_effects(), force=force)
+    if lead:
+        position = response.position[lead:]
+        encoder = position if response.encoder is response.position else response.encoder[lead:]
+        estimate = None if response.contour_estimate is None else response.contour_estimate[lead:]
+        response = kernel.ServoResponse(dt, position, encoder, response.velocity[lead:], response.current[lead:],
+                                        response.saturated[lead:], estimate)  # fmt: skip
+    return q, response, servos
+
+
+def _lead(machine, v, a):
+    """Servo periods of run-in the kernel steps before servo commands that do not start at rest (0 when they do).
+
+    The kernel starts at rest on its first command; a measured trace may
+    start with the axes moving. Taken as the machine did it before: each
+    axis moved at its first acceleration (:func:`_run_in`), back to where
+    it stood still if that is within :func:`default_settle`, else over
+    that long (the loops settle on the run-in).
+
+    Parameters
+    ----------
+    machine : Machine
+    v, a : ndarray, shape (N, n_servo)
+        Velocity [mm/s] and acceleration [mm/s^2] commands of the servo axes.
+    """
+    speed = np.linalg.norm(v, axis=1)
+    if not speed[0] > 1e-3 * speed.max():  # at rest, or within the measured reference's wiggle of it
+        return 0
+    back = min(float(_to_rest(v[0], a[0]).max()), default_settle(machine))  # [s]
+    return int(np.ceil(back / machine.servo_period)) + 1
+
+
+def _to_rest(v0, a0):
+    """How long ago [s] axes at velocity `v0` [mm/s] accelerating at `a0` [mm/s^2] stood still (inf: never)."""
+    accelerating = v0 * a0 > 0
+    return np.where(accelerating, np.abs(v0) / np.where(accelerating, np.abs(a0), 1.0), np.where(v0 == 0, 0.0, np.inf))
+
+
+def _run_in(q, v, a, lead, dt):
+    """Commands `q`, `v`, `a` (N, n) [mm, mm/s, mm/s^2] preceded by `lead` rows of run-in (:func:`_lead`), new arrays.
+
+    Back from the first row at the first acceleration, each axis standing
+    still before the time it was at rest (:func:`_to_rest`).
+    """
+    if not lead:
+        return q, v, a
+    back = dt * np.arange(lead, 0, -1)[:, None]  # [s] before the first row, (lead, 1)
+    v0, a0 = v[0], a[0]
+    rest = _to_rest(v0, a0)
+    moving = back < rest
+    u = np.minimum(back, rest)
+    head = (q[0] - v0 * u + 0.5 * a0 * u**2, np.where(moving, v0 - a0 * u, 0.0), np.where(moving, a0, 0.0))
+    return tuple(np.concatenate([h, x]) for h, x in zip(head, (q, v, a)))
 
 
 def _elapsed(trajectory):
@@ -363,7 +492,7 @@ def _actual(model, q, servo_position):
     return actual
 
 
-def simulate(model, reference, strategies=(), settle=None, contour=True):
+def simulate(model, reference, strategies=(), settle=None, contour=True, force=None):
     """Simulate a machine, or a model (machine + effects), following a reference.
 
     Parameters
@@ -390,6 +519,12 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     contour : bool
         Compute the contour error (exact on a path; the three-point estimate
         on a measured reference of 2 or 3 axes).
+    force : dict of str -> array_like, shape (N,), optional
+        A known external force on servo axes [N] by axis name, one value per
+        sample of the reference, positive towards positive positions (the
+        disturbance input of :func:`contoursim.kernel.run`), held over a
+        dwell before and the settle after the reference. Default: a measured
+        trace's own force columns (:func:`measured_force`); none otherwise.
 
     Returns
     -------
@@ -420,6 +555,13 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     from the reference's first sample (a measured trace's clock may start
     anywhere); strategies see that time too.
 
+    A reference that does not start at rest (a measured trace that begins
+    in motion) is entered as the machine entered it: the kernel first steps
+    a run-in, back from the first sample at its first acceleration to
+    rest, over :func:`default_settle` at most, which
+    the result leaves out; without it the simulation would start at rest on a
+    moving command, a transient the machine never had.
+
     A pre-filter reads some samples ahead (ZPETC,
     :meth:`contoursim.compensation.Strategy.preview`): the machine dwells
     that long at the start point while the filter fills, as a controller
@@ -430,8 +572,8 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
     machine = model.machine
     composition = Composition(strategies)
     preview = composition.preview(composition.drive(model.servos()), machine.servo_period)
-    trajectory = _reference(machine, reference, settle, preview)
-    q, response, servos = _servo_run(model, composition, trajectory)
+    trajectory, pushing = _reference(machine, reference, settle, preview, force)
+    q, response, servos = _servo_run(model, composition, trajectory, pushing)
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
@@ -451,7 +593,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True):
 #: Largest kernel output one chunk of a batch may hold [bytes].
 BATCH_CHUNK_BYTES = 2**27
 
-_BATCH_OUTPUTS = ("tool_position", "axis_position", "summary")
+_BATCH_OUTPUTS = ("tool_position", "axis_position", "current", "summary")
 
 #: Figures of a batch's ``"summary"`` output, one value per variant.
 SUMMARY_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um", "peak_current_A", "saturated",
@@ -459,7 +601,7 @@ SUMMARY_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking
 
 
 def simulate_batch(models, reference, outputs=("tool_position",), strategies=(), settle=None, every=1, dtype=np.float64,
-                   check=True):
+                   check=True, force=None):
     """Simulate B variants of one structure on one reference, in as few kernel calls as possible.
 
     The variants may differ in any effect value, and in which effects they
@@ -493,7 +635,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     outputs : tuple of str
         Any of ``"tool_position"`` (shape (B, M, d)) [mm],
         ``"axis_position"`` (the actual positions of all the machine's axes,
-        shape (B, M, n_axes)) [mm, rad] and ``"summary"``: per variant the
+        shape (B, M, n_axes)) [mm, rad], ``"current"`` (the servo axes'
+        current commands, shape (B, M, n_servo)) [A] and ``"summary"``: per variant the
         figures of :data:`SUMMARY_KEYS`, each an array (B,): contour and
         tracking error max and RMS over the test proper [µm] as in
         :meth:`SimResult.summary` (NaN without a contour error), the peak
@@ -524,6 +667,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         nominal parameters moved by a few %, or a sweep; a diverged row says
         what failed, and a variant whose coupled-loop check fails is not run
         and counts as diverged).
+    force : dict of str -> array_like, shape (N,), optional
+        A known external force on servo axes [N], shared by the variants, as
+        for :func:`simulate` (a measured trace's own by default).
 
     Returns
     -------
@@ -570,13 +716,13 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     for machine in {id(m.machine): m.machine for m in models}.values() if check else ():
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
-    trajectory = _reference(first, reference, settle, preview)
+    trajectory, pushing = _reference(first, reference, settle, preview, force)
     q, v, a = _target(models[0], trajectory, compositions[0])
     summary = "summary" in outputs
     traces = [name for name in outputs if name != "summary"]
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))
-    width = {"tool_position": trajectory.dim, "axis_position": q.shape[1]}
+    width = {"tool_position": trajectory.dim, "axis_position": q.shape[1], "current": servo.size}
     result = {"t": trajectory.t[keep].copy()}
     result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in traces})
     result["diverged_step"] = np.empty((len(models), servo.size), np.int64)
@@ -586,17 +732,24 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     groups = {}
     for i, m in enumerate(models):
         groups.setdefault(tuple((e.axis, e["delay_s"]) for e in m.stage("command")), []).append(i)
-    kernel_every = 1 if summary else every  # the summary is over every sample
-    kernel_outputs = ("tool", "current") if summary else ("tool",)
-    n_kernel = len(range(0, len(trajectory), kernel_every))
+    # commands that do not start at rest: the kernel steps a run-in first, left out of the outputs (see _servo_run)
+    lead = _lead(first, *(_servo_part(models[0], x) for x in (v, a)))
+    # the summary is over every sample; the kernel keeps every `every`-th from its first, so from the reference's first
+    # only after a run-in of whole `every`s (else all, and the reference's every `every`-th taken here)
+    kernel_every = 1 if summary or lead % every else every
+    taken = slice(lead // kernel_every, None, 1 if summary else every // kernel_every)
+    kernel_outputs = ("tool", "current") if summary or "current" in outputs else ("tool",)
+    n_kernel = len(range(0, lead + len(trajectory), kernel_every))
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * len(kernel_outputs) * n_kernel * servo.size))
     elapsed = _elapsed(trajectory)
-    path = _servo_part(models[0], q)
+    pushing = None if pushing is None else np.pad(pushing, ((lead, 0), (0, 0)), mode="edge")
+    path = _run_in(*(_servo_part(models[0], x) for x in (q, v, a)), lead, dt)[0]
     couplings = {}
     for rows in groups.values():
         # the pre-filter designs from the first variant of the group (pass a `model` to the strategy to fix it)
         composition = compositions[rows[0]]
-        qd, vd, ad = _sent(models[rows[0]], composition, composition.drive(models[rows[0]].servos()), (q, v, a))
+        sent = _sent(models[rows[0]], composition, composition.drive(models[rows[0]].servos()), (q, v, a))
+        qd, vd, ad = _run_in(*(x[:, servo] for x in sent), lead, dt)
         # variants that differ only in their geometry share one kernel run
         runs = {}
         for i in rows:
@@ -618,10 +771,12 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         for start in range(0, len(distinct), chunk):
             part = distinct[start : start + chunk]
             packed = np.array([p for p, _, _ in part])
-            run = kernel.run_batch(packed, dt, qd[:, servo], vd[:, servo], ad[:, servo], outputs=kernel_outputs,
-                                   every=kernel_every, couplings=[c for _, c, _ in part] if coupled else None)
+            run = kernel.run_batch(packed, dt, qd, vd, ad, outputs=kernel_outputs, every=kernel_every,
+                                   couplings=[c for _, c, _ in part] if coupled else None, force=pushing)
+            for name in kernel_outputs:
+                run[name] = run[name][:, taken]
             for b, (_, _, same) in enumerate(part):
-                diverged = run["diverged_step"][b]
+                diverged = np.where(run["diverged_step"][b] >= 0, np.maximum(run["diverged_step"][b] - lead, 0), -1)
                 for i in same:
                     result["diverged_step"][i] = diverged
                     if (diverged >= 0).any():  # an unstable variant: no positions, no figures
@@ -636,6 +791,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                         result["axis_position"][i] = actual[::every] if summary else actual
                     if "tool_position" in result:
                         result["tool_position"][i] = tool[::every] if summary else tool
+                    if "current" in result:
+                        result["current"][i] = run["current"][b][::every] if summary else run["current"][b]
                     if summary:
                         static = models[i].geometry.tool_position(q, elapsed, trajectory.dim)
                         figures = _error_figures(trajectory, tool, _contour_error(trajectory, tool), static)

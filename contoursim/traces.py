@@ -5,19 +5,24 @@ metadata), a header row, numeric rows. Required columns: ``t`` [s], strictly
 increasing and uniform, and for each axis the pair ``<axis>_ref``, ``<axis>``
 [mm] for the axis sets ``x``, ``x, y`` or ``x, y, z``. ``*_ref`` are the
 commanded (interpolator) positions, the others the measured tool positions.
-Extra columns are ignored on reading.
+Optional measured inputs, per axis: ``<axis>_force`` [N], a known external
+force on the axis (test pulses, a cutting force), and ``<axis>_current`` [A],
+the measured motor current; read and checked like the positions. Other
+columns are ignored on reading.
 
 Values must be physically meaningful: positions within ±1e6 mm
 (:data:`MAX_POSITION`, a kilometre, far beyond any machine's travel) and
 times within ±1e9 s (:data:`MAX_TIME`, about 30 years), so that differences of
-positions stay exact to the nm and never overflow.
+positions stay exact to the nm and never overflow; forces within ±1e9 N
+(:data:`MAX_FORCE`) and currents within ±1e6 A (:data:`MAX_CURRENT`).
 
 Units: a ``# units:`` line declares them column by column, as contoursim
 writes it: ``# units: t [s]; x_ref, x, y_ref, y [mm]`` (groups separated by
 ``;``, each a list of columns and a unit in brackets; a bare unit, ``# units:
 m``, is that of all the position columns). The reader converts ``t`` from
-:data:`TIME_UNITS` to s and positions from :data:`LENGTH_UNITS` to mm, and
-refuses any other unit of a column it reads (others' units are not read).
+:data:`TIME_UNITS` to s, positions from :data:`LENGTH_UNITS` to mm, forces
+from :data:`FORCE_UNITS` to N and currents from :data:`CURRENT_UNITS` to A,
+and refuses any other unit of a column it reads (others' units are not read).
 Without a declared time unit, a sample period outside
 :data:`PLAUSIBLE_SAMPLE_PERIOD` is refused as no servo trace's (a time column
 in ms, µs or ns read as seconds): declaring ``t [s]`` accepts it. A measured
@@ -42,10 +47,18 @@ __all__ = ["Trace", "read_trace", "write_trace"]
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
 MAX_POSITION = 1e6  # [mm]: largest |position| in a trace
 MAX_TIME = 1e9  # [s]: largest |t| in a trace
+MAX_FORCE = 1e9  # [N]: largest |force| in a trace
+MAX_CURRENT = 1e6  # [A]: largest |current| in a trace
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 """Units of ``t`` a ``# units:`` line may declare, and their size [s]."""
 LENGTH_UNITS = {"mm": 1.0, "m": 1e3, "um": 1e-3, "µm": 1e-3, "nm": 1e-6, "in": 25.4}
 """Units of the positions a ``# units:`` line may declare, and their size [mm]."""
+FORCE_UNITS = {"N": 1.0, "kN": 1e3}
+"""Units of the ``<axis>_force`` columns a ``# units:`` line may declare, and their size [N]."""
+CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
+"""Units of the ``<axis>_current`` columns a ``# units:`` line may declare, and their size [A]."""
+INPUTS = {"force": (FORCE_UNITS, "N", MAX_FORCE), "current": (CURRENT_UNITS, "A", MAX_CURRENT)}
+"""The optional measured inputs ``<axis>_<kind>``: kind -> (units, the unit read by default, the largest magnitude)."""
 FOLLOWING_GAIN = (0.2, 5.0)
 """Range of the slope of each measured column regressed on its reference [mm/mm] the reader accepts: about 1 for
 an axis that follows its command (less where it lags a fast motion), 0 for swapped columns of a circle, 1e-3 or
@@ -72,6 +85,12 @@ class Trace:
         Axis names of the d columns: ``("x",)``, ``("x", "y")`` or ``("x", "y", "z")``.
     metadata : dict
         ``# key: value`` header lines.
+    force : dict of str -> ndarray, shape (N,), optional
+        A known external force on an axis [N] (positive pushing it towards
+        positive positions), sampled at `t`, by axis name; axes not named
+        have none.
+    current : dict of str -> ndarray, shape (N,), optional
+        The measured motor current of an axis [A], by axis name.
     """
 
     t: np.ndarray
@@ -79,6 +98,8 @@ class Trace:
     actual: np.ndarray
     axes: tuple
     metadata: dict = field(default_factory=dict)
+    force: dict = field(default_factory=dict)
+    current: dict = field(default_factory=dict)
 
     def __post_init__(self):
         t, dt = _validate.time_base("t", _validate.finite_array("t", self.t, ndim=1, limit=MAX_TIME))
@@ -95,6 +116,17 @@ class Trace:
             object.__setattr__(self, name, value)
         object.__setattr__(self, "axes", axes)
         object.__setattr__(self, "dt", dt)
+        for kind, (_, unit, limit) in INPUTS.items():
+            columns = {}
+            for axis, values in dict(getattr(self, kind)).items():
+                if axis not in axes:
+                    raise ValueError(f"{kind} names axis {axis!r}, which is not one of the trace's axes {', '.join(axes)}")
+                values = _validate.finite_array(f"{axis}_{kind}", values, shape=(t.size,), limit=limit)
+                if values.flags.writeable:  # as above
+                    values = values.copy()
+                    values.flags.writeable = False
+                columns[axis] = values
+            object.__setattr__(self, kind, columns)
 
     @property
     def tracking_error(self):
@@ -114,7 +146,8 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
 
     Numbers are written in fixed point without trailing zeros: ``t`` to the
     ns (:data:`TIME_DECIMALS`), positions and float `extra` columns to the nm
-    (:data:`POSITION_DECIMALS` decimals of a mm), integer and boolean `extra`
+    (:data:`POSITION_DECIMALS` decimals of a mm; the trace's forces and
+    currents to as many decimals of a N, an A), integer and boolean `extra`
     columns as whole numbers (``1``/``0``). A value that rounds to zero is
     written ``0``, never ``-0`` or ``3.55e-12``.
 
@@ -147,6 +180,8 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
     for i, axis in enumerate(trace.axes):
         columns[f"{axis}_ref"] = (trace.reference[:, i], POSITION_DECIMALS)
         columns[axis] = (trace.actual[:, i], POSITION_DECIMALS)
+    for kind in INPUTS:
+        columns.update((f"{axis}_{kind}", (values, POSITION_DECIMALS)) for axis, values in getattr(trace, kind).items())
     for name, values in (extra or {}).items():
         if name in columns:
             raise ValueError(f"extra column {name!r} clashes with a trace column")
@@ -229,18 +264,26 @@ def read_trace(file):
         for name in (f"{axis}_ref", axis):
             if name not in names:
                 raise fail(f"missing column '{name}' in the header")
-    wanted = ["t"] + [name for axis in axes for name in (f"{axis}_ref", axis)]
+    stray = [f"{axis}_{kind}" for kind in INPUTS for axis in ("x", "y", "z") if f"{axis}_{kind}" in names and axis not in axes]
+    if stray:
+        raise fail(f"column {stray[0]!r} is an input of axis {stray[0][0]!r}, which the trace does not cover "
+                   f"(no {stray[0][0]}_ref, {stray[0][0]} columns)")
+    positions = [name for axis in axes for name in (f"{axis}_ref", axis)]
+    inputs = {f"{axis}_{kind}": kind for kind in INPUTS for axis in axes if f"{axis}_{kind}" in names}
+    wanted = ["t"] + positions + list(inputs)
     index = [names.index(name) for name in wanted]
-    units = {} if units_line is None else _declared_units(metadata["units"], wanted, lambda msg: fail(msg, units_line))
-    scale = np.array([TIME_UNITS[units.get("t", "s")]] + [LENGTH_UNITS[units.get(n, "mm")] for n in wanted[1:]])
+    units = {} if units_line is None else _declared_units(metadata["units"], wanted, inputs, lambda msg: fail(msg, units_line))
+    default = {"t": "s", **dict.fromkeys(positions, "mm"), **{name: INPUTS[kind][1] for name, kind in inputs.items()}}
+    written = [units.get(name, default[name]) for name in wanted]  # the units of the cells
+    scale = np.array([TIME_UNITS[written[0]]] + [LENGTH_UNITS[u] for u in written[1 : 1 + len(positions)]]
+                     + [INPUTS[kind][0][u] for kind, u in zip(inputs.values(), written[1 + len(positions) :])])
 
     body = lines[header_line:]
     while body and not body[-1].strip():
         body = body[:-1]
     if len(body) < 2:
         raise fail(f"needs at least 2 data rows, found {len(body)}")
-    limits = np.array([MAX_TIME] + [MAX_POSITION] * (len(wanted) - 1))
-    written = [units.get(name, "s" if name == "t" else "mm") for name in wanted]  # the units of the cells
+    limits = np.array([MAX_TIME] + [MAX_POSITION] * len(positions) + [INPUTS[kind][2] for kind in inputs.values()])
     data = _parse_rows(body, len(names), index, names, limits / scale, written, lambda msg, row: fail(msg, header_line + 1 + row))
     if (scale != 1.0).any():
         data *= scale
@@ -259,7 +302,11 @@ def read_trace(file):
             gain = gain if abs(gain) >= 1e-3 else 0.0  # not -3.8e-18 for a swapped circle
             raise fail(f"column {axis!r}: the measured {axis} does not follow {axis}_ref: it moves {gain:.3g} mm per mm of "
                        f"{axis}_ref (a servo axis following its command moves about 1): columns swapped or units wrong?")
-    return Trace(data[:, 0], data[:, 1::2], data[:, 2::2], axes, metadata)
+    measured = {kind: {} for kind in INPUTS}
+    for column, name in enumerate(inputs, start=1 + len(positions)):
+        measured[inputs[name]][name.partition("_")[0]] = data[:, column]
+    d = len(axes)
+    return Trace(data[:, 0], data[:, 1 : 1 + 2 * d : 2], data[:, 2 : 2 + 2 * d : 2], axes, metadata, **measured)
 
 
 def _following_gain(reference, actual):
@@ -271,16 +318,18 @@ def _following_gain(reference, actual):
     return float(motion @ (actual - actual.mean())) / spread
 
 
-def _declared_units(text, wanted, fail):
+def _declared_units(text, wanted, inputs, fail):
     """The units a ``# units:`` line declares for the columns `wanted` (a dict: column -> unit; others left out).
 
-    `fail` makes the error of a line that cannot be read or declares a unit the reader does not convert.
+    `inputs` maps the measured-input columns among `wanted` to their kind (a key of :data:`INPUTS`); a bare
+    unit is the positions'. `fail` makes the error of a line that cannot be read or declares a unit the
+    reader does not convert.
     """
     units = {}
     for group in filter(None, (g.strip() for g in text.split(";"))):
         match = re.fullmatch(r"(?P<columns>[^\[\]]*?)\s*\[(?P<unit>[^\[\]]*)\]", group)
         if match is None and group in LENGTH_UNITS:  # a bare unit: all the positions'
-            units.update((name, group) for name in wanted[1:])
+            units.update((name, group) for name in wanted[1:] if name not in inputs)
         elif match is None:
             raise fail(f"the units {group!r} cannot be read: write them as contoursim does, "
                        "'# units: t [s]; x_ref, x [mm]' (columns, then the unit in brackets)")
@@ -290,9 +339,12 @@ def _declared_units(text, wanted, fail):
                 if name in wanted:
                     units[name] = unit
     for name, unit in units.items():
-        known = TIME_UNITS if name == "t" else LENGTH_UNITS
-        if unit not in known:
+        if name in inputs:
+            known, read = INPUTS[inputs[name]][0], f"the {inputs[name]} columns are"
+        else:
+            known = TIME_UNITS if name == "t" else LENGTH_UNITS
             read = "column 't' is" if name == "t" else "the position columns are"
+        if unit not in known:
             raise fail(f"column {name!r} is declared in {unit!r}; {read} read in {', '.join(known)}")
     return units
 
@@ -341,6 +393,7 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
         hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
+        what = next((kind for kind, (known, _, _) in INPUTS.items() if units[col] in known), "position or time")
         raise fail(f"column '{names[index[col]]}': value {data[row, col]:g} is beyond ±{limits[col]:g} {units[col]}, "
-                   f"not a position or time a trace can hold{hint}", row)
+                   f"not a {what} a trace can hold{hint}", row)
     return data

@@ -85,6 +85,10 @@ def test_measured_trace_faults_end_in_one_line_naming_the_file(tmp_path, capsys,
     _refused(capsys, ["diagnose", str(two), *out], f"{two}: a diagnosis needs at least 3 samples")
     degrees = _trace(tmp_path / "deg.csv", t, x, x, head="# units: t [s]; x_ref, x [deg]\n")
     _refused(capsys, ["diagnose", str(degrees), *out], f"{degrees}, line 1: column 'x_ref' is declared in 'deg'")
+    pushed = tmp_path / "pushed.csv"
+    pushed.write_text("t,x_ref,x,x_force\n" + "\n".join(f"{a:.3f},{b:.6f},{b:.6f},{'5 N' if k == 7 else 5}"
+                                                        for k, (a, b) in enumerate(zip(t, x))) + "\n")
+    _refused(capsys, ["diagnose", str(pushed), *out], f"{pushed}, line 9: column 'x_force': '5 N' is not a number")
     # declared seconds that are ms: 2000 s to resample at the demo mill's 0.2 ms, refused before it is made
     monkeypatch.setattr(_memory, "available", lambda: 10**9)
     slow = _trace(tmp_path / "slow.csv", 1e3 * t, x, x, head="# units: t [s]\n")

@@ -127,6 +127,66 @@ def test_circle_radius_follows_closed_loop_gain(extra, radius, feed):
     np.testing.assert_allclose(settled, radius * gain, rtol=1e-3)
 
 
+# --- a known external force -------------------------------------------------------------------
+
+
+def pulses(n, level, period):
+    """A force of `level` [N] on for the second half of every `period` samples, shape (n, 1)."""
+    return level * ((np.arange(n) % period) >= period // 2).astype(float)[:, None]
+
+
+@pytest.mark.parametrize("force", [-178.0, 60.0])
+def test_external_force_at_standstill_p_p_and_p_pi(force):
+    # At rest the force must be balanced by the drive: kf·i + F = 0. P-P: the current comes from the position error
+    # through both gains, i = (kv/1000)·kp·(x_ref - x), so x - x_ref = 1000·F/(kf·kv·kp) [mm] (damping plays no
+    # part at rest); P-PI: the integrator supplies it and the error vanishes.
+    n = 20000
+    ref = np.full((n, 1), 3.0)
+    f = np.full((n, 1), force)
+    p_p = run([axis(kp=40.0, damping=C)], DT, ref, np.zeros_like(ref), np.zeros_like(ref), force=f)
+    assert p_p.position[-1, 0] - 3.0 == pytest.approx(1000.0 * force / (KF * KV * 40.0), rel=1e-9)
+    assert p_p.current[-1, 0] == pytest.approx(-force / KF, rel=1e-9)
+    p_pi = run([axis(kp=40.0, ti=0.01, damping=C)], DT, ref, np.zeros_like(ref), np.zeros_like(ref), force=f)
+    assert abs(p_pi.position[-1, 0] - 3.0) < 1e-9
+    assert p_pi.current[-1, 0] == pytest.approx(-force / KF, rel=1e-9)
+
+
+def test_external_force_response_equals_python_control():
+    # The sampled P-PI loop wired in python-control with the force as a second plant input, both inputs held over
+    # the period (the plant sampled by ct.sample_system's own ZOH), driven by a moving reference and force pulses.
+    servo = axis(kp=35.0, ti=0.01, damping=1500.0)
+    d = servo.discretize(DT)
+    n = 3000
+    t, pos, vel, acc = wiggly_reference(n, DT, 0.5)
+    force = pulses(n, 250.0, 400) - 80.0 * np.sin(2 * np.pi * 9.0 * t)[:, None]
+    m, c = servo.mass, servo.damping
+    plant = ct.sample_system(ct.ss([[0.0, 1.0], [0.0, -c / m]], [[0.0, 0.0], [1000.0 * KF / m, 1000.0 / m]], np.eye(2),
+                                   np.zeros((2, 2)), inputs=["i_cmd", "F"], outputs=["x", "v"], states=["x", "v"]),
+                             DT, "zoh", name="plant")  # fmt: skip
+    kp = ct.ss(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[servo.kp]], DT, inputs="ex", outputs="vp")
+    loop = ct.interconnect([plant, d.velocity_controller, kp, ct.summing_junction(["xr", "-x"], "ex"),
+                            ct.summing_junction(["vp", "-v"], "e_v"), ct.summing_junction(["i_pi"], "i_cmd")],
+                           inplist=["xr", "F"], outlist=["x", "v", "i_cmd"])  # fmt: skip
+    x0 = np.zeros(loop.nstates)
+    x0[loop.state_labels.index("plant_x")] = pos[0]
+    want = ct.forced_response(loop, t, np.vstack([pos, force[:, 0]]), X0=x0).outputs
+    got = run([servo], DT, pos[:, None], vel[:, None], acc[:, None], force=force)
+    no_force = run([servo], DT, pos[:, None], vel[:, None], acc[:, None])
+    for signal, ref in zip((got.position, got.velocity, got.current), want):
+        assert np.max(np.abs(signal[:, 0] - ref)) <= 1e-9 * np.max(np.abs(ref))
+    assert np.max(np.abs(got.position - no_force.position)) > 1e-3  # the force moves the axis by µm, not rounding
+
+
+def test_external_force_is_checked():
+    ref = np.zeros((10, 2))
+    with pytest.raises(ValueError, match=r"force must have shape \(10, 2\)"):
+        run([axis(), axis()], DT, ref, ref, ref, force=np.zeros((10, 1)))
+    bad = np.zeros((10, 2))
+    bad[3, 1] = np.inf
+    with pytest.raises(ValueError, match=r"force contains a non-finite value \(inf\) at index \(3, 1\)"):
+        run([axis(), axis()], DT, ref, ref, ref, force=bad)
+
+
 # --- saturation ------------------------------------------------------------------------------
 
 

@@ -562,14 +562,18 @@ def random_effects(rng):
     return LoopEffects(**kw)
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-@pytest.mark.parametrize("n_variants", [5, 64, 70])
-def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants):
+@pytest.mark.parametrize("threads, n_variants, pushed", [
+    (1, 5, False), (1, 64, True), (1, 70, False), (2, 5, True), (2, 64, False), (2, 70, True)])  # fmt: skip
+def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants, pushed):
     # Variants in the lanes of blocks (64: blocks of kernel.LANES = 32; 70: narrower ones; 5: a small one per thread):
     # each lane mixes effects and values with its neighbours', and a block skips only what none of its lanes has;
-    # every row must still be run() of that row exactly.
+    # every row must still be run() of that row exactly, with and without a known external force.
     servos, _, refs = batch_case()
     refs = tuple(r[:1500] for r in refs)
+    force = None
+    if pushed:  # pulses of ±200 N on every axis, plus a ramp of force on x: the stick-slip sees them
+        force = 200.0 * np.sign(np.sin(np.arange(1500)[:, None] * DT * 2 * np.pi * np.array([7.0, 11.0, 13.0])))
+        force[:, 0] += np.linspace(0.0, 150.0, 1500)
     rng = np.random.default_rng(n_variants)
     variants = [{name: random_effects(rng) for name in servos} for _ in range(n_variants)]
     variants[0] = dict.fromkeys(servos, LoopEffects())  # one variant without any effect
@@ -577,12 +581,12 @@ def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants):
     previous = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
-        batch = run_batch(rows, DT, *refs, outputs=kernel.BATCH_OUTPUTS)
-        decimated = run_batch(rows, DT, *refs, outputs=("tool", "encoder"), every=3, dtype=np.float32)
+        batch = run_batch(rows, DT, *refs, outputs=kernel.BATCH_OUTPUTS, force=force)
+        decimated = run_batch(rows, DT, *refs, outputs=("tool", "encoder"), every=3, dtype=np.float32, force=force)
     finally:
         numba.set_num_threads(previous)
     for b, effects in enumerate(variants):
-        single = run(servos, DT, *refs, effects=effects)
+        single = run(servos, DT, *refs, effects=effects, force=force)
         for name, field in [("tool", "position"), ("encoder", "encoder"), ("velocity", "velocity"),
                             ("current", "current"), ("saturated", "saturated")]:  # fmt: skip
             np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=f"{name}, variant {b}")

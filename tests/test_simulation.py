@@ -9,11 +9,12 @@ import pytest
 from contoursim import paths
 from contoursim.exceptions import ContoursimWarning
 from contoursim.feed import plan, sample
-from contoursim.traces import read_trace
+from contoursim.traces import Trace, read_trace
 from contoursim.machine import Machine
 from contoursim.plotting import circular_deviation
 from contoursim.servo import AxisServo
-from contoursim.simulation import simulate
+from contoursim.trajectory import Trajectory
+from contoursim.simulation import measured_force, measured_reference, simulate, simulate_batch
 
 DT = 2e-4
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, damping=500.0)
@@ -287,3 +288,94 @@ def test_what_follows_a_run_allocates_no_arrays_of_its_length(tmp_path):
     limits = dict(contour=52, summary=16, csv=4, plots=8)  # [bytes per step]
     for name, ((n1, p1), (n2, p2)) in peaks.items():
         assert (p2 - p1) / (n2 - n1) <= limits[name], (name, (p2 - p1) / (n2 - n1))
+
+
+# --- a measured trace's known force ----------------------------------------------------------
+
+
+def _pushed_trace(force_at, level, logged_every=5):
+    """A two-axis trace at standstill (x 2 mm, y -1 mm) logged every `logged_every` servo periods, with a force step
+    of `level` [N] on y from the logged sample `force_at`."""
+    t = np.arange(400) * logged_every * DT
+    reference = np.column_stack([np.full(t.size, 2.0), np.full(t.size, -1.0)])
+    force = np.where(np.arange(t.size) >= force_at, level, 0.0)
+    return Trace(t, reference, reference, ("x", "y"), force={"y": force})
+
+
+def test_a_traces_force_is_a_held_input_whose_standstill_error_is_the_closed_form():
+    # P-P loops (no integrator): at rest the drive balances the force, kf·(kv/1000)·kp·(x_ref - x) + F = 0, so
+    # y - y_ref = 1000·F/(kf·kv·kp) [mm]; x has no force and stays put. The force column is sampled every 5 servo
+    # periods: held (zero-order) from its sample on, so nothing moves before the servo step at its time.
+    servo = AxisServo(kp=40.0, mass=300.0, force_constant=942.0, kv=80.0, damping=500.0)
+    machine = Machine({"x": servo, "y": servo}, DT)
+    trace = _pushed_trace(force_at=100, level=-250.0)
+    result = simulate(machine, trace, contour=False)
+    y = result.tool_position[:, 1]
+    step = 100 * 5  # the servo sample at the force's logged time
+    assert np.array_equal(y[: step + 1], np.full(step + 1, -1.0))  # the force acts over [t_step, t_step+1) first
+    assert y[step + 1] < -1.0
+    assert y[-1] - (-1.0) == pytest.approx(1000.0 * -250.0 / (942.0 * 80.0 * 40.0), rel=1e-6)
+    assert np.array_equal(result.tool_position[:, 0], np.full(len(y), 2.0))
+    measured = measured_force(trace, DT)["y"]
+    assert measured.size == len(y) and np.array_equal(np.flatnonzero(np.diff(measured)), [step - 1])
+
+
+def test_a_batch_with_a_force_is_simulate_bit_for_bit_and_returns_the_current():
+    servo = AxisServo(kp=40.0, **AXIS)
+    machine = Machine({"x": servo, "y": servo}, DT)
+    trace = _pushed_trace(force_at=50, level=400.0)
+    models = [machine, Machine({"x": servo, "y": AxisServo(kp=30.0, **AXIS)}, DT)]
+    batch = simulate_batch(models, trace, outputs=("tool_position", "current"))
+    for b, model in enumerate(models):
+        single = simulate(model, trace, contour=False)
+        np.testing.assert_array_equal(batch["tool_position"][b], single.tool_position)
+        np.testing.assert_array_equal(batch["current"][b], single.servo_response.current)
+    assert batch["current"][0, -1, 1] == pytest.approx(-400.0 / 942.0, rel=1e-6)  # the PI loop's integrator holds it
+    unforced = simulate_batch(models, Trace(trace.t, trace.reference, trace.actual, trace.axes), outputs=("current",))
+    assert np.all(unforced["current"] == 0.0)
+
+
+def test_a_force_on_an_axis_the_machine_lacks_is_refused():
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    trace = _pushed_trace(force_at=10, level=5.0, logged_every=1)
+    reference = measured_reference(trace, DT)
+    with pytest.raises(ValueError, match=r"force names axis 'z', which is not a servo axis of the machine \(x, y\)"):
+        simulate(machine, reference, force={"z": np.zeros(len(reference))})
+    with pytest.raises(ValueError, match=r"force\['x'\] must have shape \(400\)"):
+        simulate_batch([machine], reference, force={"x": np.zeros(5)})
+
+
+# --- a measured reference that starts in motion --------------------------------------------------
+
+
+def _ramp(t, accel, t_move):
+    """A command standing at 1 mm, then accelerating at `accel` [mm/s²] from `t_move` [s]: (position, velocity, acceleration)."""
+    u = np.maximum(t - t_move, 0.0)
+    return 1.0 + 0.5 * accel * u**2, accel * u, np.where(t >= t_move, accel, 0.0)
+
+
+def test_a_trace_that_starts_accelerating_is_entered_as_the_machine_entered_it():
+    # The command accelerates from rest at t = 0.05 s; a trace of it starts at 0.1 s, in motion. Its simulation steps
+    # the run-in back to rest at the trace's first acceleration: the same commands as the whole motion's, so the
+    # same positions from the trace's first sample on (to rounding), not a start at rest on a moving command.
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS)}, DT)
+    t = np.arange(1500) * DT
+    position, velocity, acceleration = (x[:, None] for x in _ramp(t, 400.0, 0.05))
+    whole = simulate(machine, Trajectory(t, position, velocity, acceleration, position[:, 0] - 1.0), settle=0.0)
+    cut = slice(500, None)
+    trace = Trace(t[cut], position[cut], position[cut], ("x",))
+    started = simulate(machine, trace, contour=False)
+    np.testing.assert_allclose(started.tool_position, whole.tool_position[cut], rtol=0, atol=1e-9)
+    assert np.abs(whole.tool_position[cut] - position[cut]).max() > 1e-3  # the axis lags by more than that: a start
+    # at rest on the moving command would be off by as much at first
+
+
+def test_a_trace_that_starts_at_constant_velocity_starts_in_the_steady_following_error():
+    # P-P loop without damping: the steady ramp error is v/kp (test_kernel); after the run-in at the first velocity (no
+    # acceleration) over default_settle (five position-loop time constants) the first sample is within 1 % of it.
+    machine = Machine({"x": AxisServo(kp=40.0, mass=300.0, force_constant=942.0, kv=80.0)}, DT)
+    t = np.arange(1000) * DT
+    trace = Trace(t, (3.0 + 25.0 * t)[:, None], (3.0 + 25.0 * t)[:, None], ("x",))
+    started = simulate(machine, trace, contour=False)
+    assert trace.reference[0, 0] - started.tool_position[0, 0] == pytest.approx(25.0 / 40.0, rel=0.01)
+    assert len(started.trajectory) == len(trace.t)

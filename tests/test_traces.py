@@ -260,9 +260,11 @@ _CELLS = st.one_of(st.sampled_from(["", "nan", "inf", "-inf", "1e308", "-1e400",
                    st.floats(allow_nan=False, allow_infinity=False).map(repr),
                    st.integers(-10**7, 10**7).map(str))
 _HEADERS = st.sampled_from(["t,x_ref,x", "t,x_ref,x,y_ref,y", "t,x_ref,x,y_ref,y,z_ref,z", "t,x_ref,x,extra", "x_ref,x,t",
-                            "t,y_ref,y", "t;x_ref;x", "T,X_REF,X", "t,x_ref,x,x", "t,x_ref", ""])
+                            "t,y_ref,y", "t;x_ref;x", "T,X_REF,X", "t,x_ref,x,x", "t,x_ref", "t,x_ref,x,x_force,x_current",
+                            "t,x_ref,x,y_force", ""])
 _HEADS = st.lists(st.sampled_from(["# units: t [ms]", "# units: t [s]; x_ref, x [m]", "# units: furlong", "# c", "",
-                                   "# units: t [s]; x_ref, x [deg]", "# key: value"]), max_size=3)
+                                   "# units: t [s]; x_ref, x [deg]", "# key: value", "# units: x_force [kN]; x_current [V]"]),
+                  max_size=3)
 
 
 def _outcome(file):
@@ -313,3 +315,72 @@ def test_a_written_trace_reads_back_to_the_nm(tmp_path, n, dim, dt, t0, data):
     np.testing.assert_allclose(back.t, trace.t, rtol=0, atol=0.5e-9 + 1e-12 * abs(t0))
     np.testing.assert_allclose(back.reference, trace.reference, rtol=0, atol=0.5e-6 + 1e-11)
     np.testing.assert_allclose(back.actual, trace.actual, rtol=0, atol=0.5e-6 + 1e-11)
+
+
+# -- measured inputs: a known force and the motor current per axis ----------------------------------------------------
+
+
+def test_force_and_current_columns_are_read_and_written(tmp_path):
+    t = np.arange(40) * 1e-3
+    ref = np.column_stack([np.sin(t), np.cos(t)])
+    trace = Trace(t, ref, ref + 1e-3, ("x", "y"), force={"y": np.where(t > 0.02, 178.2, 0.0)},
+                  current={"x": 0.5 * np.sin(3 * t), "y": np.full(40, -1.25)})
+    write_trace(tmp_path / "f.csv", trace)
+    assert (tmp_path / "f.csv").read_text().splitlines()[0] == "t,x_ref,x,y_ref,y,y_force,x_current,y_current"
+    back = read_trace(tmp_path / "f.csv")
+    assert set(back.force) == {"y"} and set(back.current) == {"x", "y"}
+    np.testing.assert_array_equal(back.force["y"], trace.force["y"])
+    np.testing.assert_allclose(back.current["x"], trace.current["x"], rtol=0, atol=0.5e-6)
+    assert not back.force["y"].flags.writeable
+    plain = Trace(t, ref, ref, ("x", "y"))
+    assert plain.force == {} and plain.current == {}
+
+
+@pytest.mark.parametrize("units, force_scale, current_scale", [
+    ("t [s]; x_ref, x [mm]; x_force [kN]; x_current [mA]", 1e3, 1e-3),
+    ("m; x_force [N]", 1.0, 1.0),  # a bare unit is the positions' only
+    ("t [s]; x_current, x_force [A]", None, None),  # a force in A: refused below
+])
+def test_force_and_current_units_are_honoured_or_refused(tmp_path, units, force_scale, current_scale):
+    rows = "\n".join(f"{k * 1e-3:.3f},{np.sin(k / 5):.6f},{np.sin((k - 1) / 5):.6f},2.5,{0.1 * k:.1f}" for k in range(40))
+    (tmp_path / "u.csv").write_text(f"# units: {units}\nt,x_ref,x,x_force,x_current\n{rows}")
+    if force_scale is None:
+        with pytest.raises(TraceFormatError) as info:
+            read_trace(tmp_path / "u.csv")
+        assert str(info.value) == f"{tmp_path / 'u.csv'}, line 1: column 'x_force' is declared in 'A'; the force columns are read in N, kN"
+        return
+    trace = read_trace(tmp_path / "u.csv")
+    np.testing.assert_allclose(trace.force["x"], 2.5 * force_scale, rtol=1e-12)
+    np.testing.assert_allclose(trace.current["x"], 0.1 * np.arange(40) * current_scale, rtol=1e-12)
+
+
+@pytest.mark.parametrize("cell, words", [
+    ("nan", "column 'x_force': value nan is not finite"),
+    ("5 N", "column 'x_force': '5 N' is not a number"),
+    ("2e9", "column 'x_force': value 2e+09 is beyond ±1e+09 N, not a force a trace can hold"),
+])
+def test_a_bad_force_cell_is_refused_naming_file_line_and_column(tmp_path, cell, words):
+    rows = [f"{k * 1e-3:.3f},{k * 1e-3:.3f},{k * 1e-3:.3f},0,1" for k in range(10)]
+    rows[6] = rows[6].rsplit(",", 2)[0] + f",{cell},1"
+    (tmp_path / "b.csv").write_text("# pulses\nt,x_ref,x,x_force,x_current\n" + "\n".join(rows))
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(tmp_path / "b.csv")
+    assert str(info.value).startswith(f"{tmp_path / 'b.csv'}, line 9: {words}"), str(info.value)
+
+
+def test_an_input_of_an_axis_the_trace_does_not_cover_is_refused(tmp_path):
+    (tmp_path / "y.csv").write_text("t,x_ref,x,y_force\n0,0,0,1\n0.001,0,0,1\n")
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(tmp_path / "y.csv")
+    assert str(info.value) == (f"{tmp_path / 'y.csv'}, line 1: column 'y_force' is an input of axis 'y', which the "
+                               "trace does not cover (no y_ref, y columns)")
+
+
+def test_a_trace_checks_its_inputs():
+    t = np.arange(5) * 1e-3
+    with pytest.raises(ValueError, match="force names axis 'y', which is not one of the trace's axes x"):
+        Trace(t, t[:, None], t[:, None], ("x",), force={"y": np.zeros(5)})
+    with pytest.raises(ValueError, match=r"x_current must have shape \(5\), got \(4,\)"):
+        Trace(t, t[:, None], t[:, None], ("x",), current={"x": np.zeros(4)})
+    with pytest.raises(ValueError, match="x_force contains a non-finite value"):
+        Trace(t, t[:, None], t[:, None], ("x",), force={"x": [0, 1, np.inf, 0, 0]})
