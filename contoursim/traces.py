@@ -273,6 +273,8 @@ def read_trace(file):
     wanted = ["t"] + positions + list(inputs)
     index = [names.index(name) for name in wanted]
     units = {} if units_line is None else _declared_units(metadata["units"], wanted, inputs, lambda msg: fail(msg, units_line))
+    if units_line is not None:  # the trace holds s, mm, N, A: its metadata says so, and a trace written back reads the same
+        metadata["units"] = _units_as_read(metadata["units"], positions, inputs)
     default = {"t": "s", **dict.fromkeys(positions, "mm"), **{name: INPUTS[kind][1] for name, kind in inputs.items()}}
     written = [units.get(name, default[name]) for name in wanted]  # the units of the cells
     scale = np.array([TIME_UNITS[written[0]]] + [LENGTH_UNITS[u] for u in written[1 : 1 + len(positions)]]
@@ -318,6 +320,9 @@ def _following_gain(reference, actual):
     return float(motion @ (actual - actual.mean())) / spread
 
 
+_GROUP = re.compile(r"(?P<columns>[^\[\]]*?)\s*\[(?P<unit>[^\[\]]*)\]")  # one group of a units line: "x_ref, x [mm]"
+
+
 def _declared_units(text, wanted, inputs, fail):
     """The units a ``# units:`` line declares for the columns `wanted` (a dict: column -> unit; others left out).
 
@@ -327,7 +332,7 @@ def _declared_units(text, wanted, inputs, fail):
     """
     units = {}
     for group in filter(None, (g.strip() for g in text.split(";"))):
-        match = re.fullmatch(r"(?P<columns>[^\[\]]*?)\s*\[(?P<unit>[^\[\]]*)\]", group)
+        match = _GROUP.fullmatch(group)
         if match is None and group in LENGTH_UNITS:  # a bare unit: all the positions'
             units.update((name, group) for name in wanted[1:] if name not in inputs)
         elif match is None:
@@ -347,6 +352,22 @@ def _declared_units(text, wanted, inputs, fail):
         if unit not in known:
             raise fail(f"column {name!r} is declared in {unit!r}; {read} read in {', '.join(known)}")
     return units
+
+
+def _units_as_read(text, positions, inputs):
+    """The ``# units:`` line of a trace as read: its columns in s, mm, N and A, the groups of columns not read as declared."""
+    read = {"t", *positions, *inputs}
+    groups = [f"t [s]; {', '.join(positions)} [mm]"]
+    for kind, (_, unit, _) in INPUTS.items():
+        names = [name for name, k in inputs.items() if k == kind]
+        if names:
+            groups.append(f"{', '.join(names)} [{unit}]")
+    for group in filter(None, (g.strip() for g in text.split(";"))):
+        match = _GROUP.fullmatch(group)
+        others = [] if match is None else [c.strip() for c in match["columns"].split(",") if c.strip() not in read]
+        if others:
+            groups.append(f"{', '.join(others)} [{match['unit'].strip()}]")
+    return "; ".join(groups)
 
 
 def _header_problem(names):
