@@ -60,6 +60,7 @@ from scipy.optimize import least_squares
 from .effects import Effect, effect_kind
 from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identify_machine
 from .kernel import MAX_DELAY_SAMPLES
+from .machine import CONTROLLER_FIELDS
 from .model import Model, as_model
 from .plotting import fit_circle_center
 from .simulation import measured_force, measured_reference, simulate_batch
@@ -94,7 +95,7 @@ _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
 _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (the catalogue's modes: 0.01–0.2)
 _JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's jackknife leaves out in turn
-_REFIT_FIELDS = ("kp", "kv", "damping", "ti", "mass", "vff", "velocity_filter_hz")  # servo parameters the refit may move
+_REFIT_FIELDS = ("mass", "damping") + CONTROLLER_FIELDS  # servo parameters the refit may move (the controller's if uncertain)
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 
