@@ -736,6 +736,9 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
             has[a, _ANY_NOISE] |= p[a, _NOISE, l] > 0.0
             has[a, _ANY_STRIBECK] |= p[a, _FRICTION, l] != 0.0 and p[a, _FS, l] != 0.0
             has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, _MODE, l] != 0.0 or p[a, _ELEC, l] != 0.0
+            for q in (_AD + 2, _AD + 3, _AD + 4, _AD + _NS + 2, _AD + _NS + 3, _AD + _NS + 4):
+                # x and v do not depend on d, ḋ, i (pack's +0.0; see _rigid_row)
+                has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, q, l] != 0.0 or math.copysign(1.0, p[a, q, l]) < 0.0
     buf_x = np.empty((n_axes, _NBUF, LANES))
     buf_v = np.empty((n_axes, _NBUF, LANES))
     gauss = np.empty((n_axes, 2, LANES))
@@ -867,12 +870,12 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, rigid):
             s[a, _LZC, l] = zc if electrical else s[a, _LZC, l]
         rubbing = p[a, _FRICTION, l] != 0.0
         force = p[a, _F0, l] - p[a, _FV, l] * v if rubbing else 0.0
-        v_next = _lane_row(p, a, l, 1, x, v, d, w, i, u, force)
+        v_next = _rigid_row(p, a, l, 1, x, v, u, force) if rigid else _lane_row(p, a, l, 1, x, v, d, w, i, u, force)
         bf = p[a, _BF + 1, l]
         dry = _dry_friction(s[a, _LLEVEL, l], p[a, _FA, l], -v_next / bf)
         force = force + dry if rubbing else force
         v_next = v_next + bf * dry if rubbing else v_next
-        x_next = _lane_row(p, a, l, 0, x, v, d, w, i, u, force)
+        x_next = _rigid_row(p, a, l, 0, x, v, u, force) if rigid else _lane_row(p, a, l, 0, x, v, d, w, i, u, force)
         s[a, _LX, l] = x_next
         s[a, _LV, l] = v_next
         if rigid:
@@ -897,6 +900,20 @@ def _lane_row(p, a, l, r, x, v, d, w, i, u, force):
 
 
 @njit(cache=True)
+def _rigid_row(p, a, l, r, x, v, u, force):
+    """Row `r` (0: x, 1: v) of a rigid axis without current loop: :func:`_lane_row` without its zero terms, bit for bit.
+
+    There ``d = ḋ = +0`` always and the row's coefficients of ``d, ḋ, i`` are
+    +0.0 (:func:`_lanes` checks), so :func:`_affine` adds ``+0, +0, ±0`` (``±0·i``,
+    `i` finite; a NaN `i` has made `x` and `v` NaN already) after
+    ``c0·x + c1·v``: the first turns a -0 into +0 and the others change
+    nothing, which is what ``+ 0.0`` does.
+    """
+    base = _AD + _NS * r
+    return ((p[a, base, l] * x + p[a, base + 1, l] * v) + 0.0) + p[a, _BU + r, l] * u + p[a, _BF + r, l] * force
+
+
+@njit(cache=True)
 def _flush(kept, out, first, count):
     """Write the first `count` kept samples (sample, axis, lane) to `out` (lane, sample, axis) from sample `first`.
 
@@ -904,9 +921,9 @@ def _flush(kept, out, first, count):
     """
     if kept.shape[0] == 0:
         return
-    for l in range(out.shape[0]):
-        for j in range(count):
-            for a in range(out.shape[2]):
+    for j in range(count):  # this order writes faster than lane by lane (float64 1.3x, float32 1.2x, bool 1.9x)
+        for a in range(out.shape[2]):
+            for l in range(out.shape[0]):
                 out[l, first + j, a] = kept[j, a, l]
 
 
