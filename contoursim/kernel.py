@@ -504,7 +504,14 @@ def _friction_level(fc, fs, vs, v):
 @njit(cache=True)
 def _dry_friction(level, fa, f_stop):
     """Stick-slip friction force [N]: `f_stop` [N] clipped to the friction bounds of `level` and asymmetry `fa`."""
-    return min(max(f_stop, -(level + fa)), level - fa)
+    lower, upper = _friction_bounds(level, fa)
+    return min(max(f_stop, lower), upper)
+
+
+@njit(cache=True)
+def _friction_bounds(level, fa):
+    """The dry friction's range ``(lower, upper)`` [N] at friction level `level` [N] with asymmetry `fa` [N]."""
+    return -(level + fa), level - fa
 
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -697,9 +704,10 @@ _MIN_LANES = 4  # narrower blocks step one variant at a time (faster below 4 lan
 _LX, _LV, _LD, _LW, _LI = range(NPAR, NPAR + _NS)  # plant state (as _variant's state 0 .. 4)
 _LZV, _LZC, _LTABLE = NPAR + _ZV, NPAR + _ZC, NPAR + _TABLE  # integrators, table behind the play
 _LXFB, _LVFB = NPAR + 8, NPAR + 9  # fed-back position [mm] and velocity [mm/s] of the step
-_LDRIVE, _LCLAMPED, _LCLAMPS, _LLEVEL = NPAR + 10, NPAR + 11, NPAR + 12, NPAR + 13  # current command, clamped (0/1),
-# clamped steps so far (exact as a float up to 2**53), friction level of the step
-_LROWS = NPAR + 14
+_LDRIVE, _LCLAMPED, _LCLAMPS = NPAR + 10, NPAR + 11, NPAR + 12  # current command, clamped (0/1), clamped steps so
+# far (exact as a float up to 2**53)
+_LLOWER, _LUPPER = NPAR + 13, NPAR + 14  # the dry friction's range of the step (_friction_bounds)
+_LROWS = NPAR + 15
 # Effects a block's axis has in any lane (the steps of the others are skipped for the whole block)
 _ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP = range(5)
 
@@ -757,7 +765,7 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
             for q in range(NPAR, _LROWS):
                 s[a, q, l] = 0.0
             s[a, _LX, l] = start
-            s[a, _LLEVEL, l] = p[a, _FC, l]
+            s[a, _LLOWER, l], s[a, _LUPPER, l] = _friction_bounds(p[a, _FC, l], p[a, _FA, l])
             table, enc = _sensors(start, start, p[a, _HALF_PLAY, l], p[a, _SCALE, l] != 0.0, p[a, _QUANTUM, l])
             s[a, _LTABLE, l] = table
             s[a, _LXFB, l] = table if p[a, _SCALE, l] != 0.0 else start  # quantised in the first step
@@ -812,9 +820,10 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
             if record and write_velocity:
                 for l in range(n_lanes):
                     kept_velocity[row, a, l] = s[a, _LV, l]
-            if has[a, _ANY_STRIBECK]:  # math.exp does not vectorise: apart, for the axes that need it (else: fc)
+            if has[a, _ANY_STRIBECK]:  # math.exp does not vectorise: apart, for the axes that need it (else: fc's)
                 for l in range(n_lanes):
-                    s[a, _LLEVEL, l] = _friction_level(p[a, _FC, l], p[a, _FS, l], p[a, _VS, l], s[a, _LV, l])
+                    level = _friction_level(p[a, _FC, l], p[a, _FS, l], p[a, _VS, l], s[a, _LV, l])
+                    s[a, _LLOWER, l], s[a, _LUPPER, l] = _friction_bounds(level, p[a, _FA, l])
             x_ref, v_ref, a_ref = ref_pos[k, a], ref_vel[k, a], ref_acc[k, a]
             if has[a, _ANY_MODE_OR_CURRENT_LOOP]:  # two versions of the step, compiled apart
                 _advance(s, a, n_lanes, x_ref, v_ref, a_ref, False)
@@ -872,7 +881,7 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, rigid):
         force = p[a, _F0, l] - p[a, _FV, l] * v if rubbing else 0.0
         v_next = _rigid_row(p, a, l, 1, x, v, u, force) if rigid else _lane_row(p, a, l, 1, x, v, d, w, i, u, force)
         bf = p[a, _BF + 1, l]
-        dry = _dry_friction(s[a, _LLEVEL, l], p[a, _FA, l], -v_next / bf)
+        dry = min(max(-v_next / bf, s[a, _LLOWER, l]), s[a, _LUPPER, l])  # _dry_friction, its bounds found before
         force = force + dry if rubbing else force
         v_next = v_next + bf * dry if rubbing else v_next
         x_next = _rigid_row(p, a, l, 0, x, v, u, force) if rigid else _lane_row(p, a, l, 0, x, v, d, w, i, u, force)
