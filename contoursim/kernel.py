@@ -19,7 +19,8 @@ reference path is data of its own), so switching effects or coupling on or
 off never compiles anything; it is cached on disk (:mod:`contoursim._numba`).
 :func:`run` steps one variant (:func:`_variant`); :func:`run_batch` steps
 blocks of variants together, the variant index innermost (:func:`_lanes`:
-the same operations in the same order, lane by lane, so the same numbers).
+the same operations in the same order, lane by lane, but for terms that are
+zero by construction: the same numbers).
 
 The plant of one axis (states ``x, v, d, ḋ, i``)::
 
@@ -717,7 +718,8 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
     """Step up to :data:`LANES` variants `rows` (L, n, NPAR) together, the variant index innermost.
 
     What :func:`_variant` does (coupling off), with the same operations in
-    the same order for each lane: bit for bit equal. The loops over the
+    the same order for each lane (:func:`_rigid_row` leaves out terms that
+    change nothing): bit for bit equal. The loops over the
     lanes vectorise: every lane computes every branch of the controllers
     and the plant and a select keeps its own; an effect that no lane of an
     axis has is skipped for the block, and the steps that do not vectorise
@@ -726,6 +728,19 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, every, tool, encoder, velocity, curr
     not asked for; the kept samples go to them :data:`_CHUNK` at a time.
     `status` (L, n, 3) as for :func:`_variant` (the reference is checked
     before).
+
+    Where a new per-lane effect goes: its parameters are entries of the
+    packed row (copied into ``p`` whole); a state of its own is a row of
+    ``s`` after the others (``_LROWS`` grows; set in the loop that starts
+    the lanes at rest); what it does each step goes into :func:`_advance`'s
+    loop, branch-free (``x if on else y``: both computed, a select keeps
+    one) so that it stays vectorised, or, when it does not vectorise (a
+    call like ``math.exp``, a data-dependent read), into a loop of its own
+    over the lanes before :func:`_advance`, run only when
+    ``has[a, _ANY_...]`` (found from the rows before the steps) says a lane
+    of the axis has it. An input sampled like the reference is read once
+    per step and axis, like ``x_ref``, and passed to :func:`_advance` as a
+    number shared by the lanes.
     """
     n_lanes, n_axes = rows.shape[0], rows.shape[1]
     n_steps = ref_pos.shape[0]
