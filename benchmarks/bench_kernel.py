@@ -34,7 +34,7 @@ per turn) sampled at 5 kHz:
   and the system time of a call). Not timed: the first two such calls of
   the process, printed apart: on the 2-core virtual machine these figures
   come from, each of the first two 77 MB outputs (huge pages: numpy asks
-  for them for large arrays) costs 0.08-0.19 s of system time, where later
+  for them for large arrays) costs 0.08-0.27 s of system time, where later
   calls, given the pages an earlier one freed, spend 7-16 ms (no compaction:
   /proc/vmstat's compact_stall stays 0; presumably the host backing pages
   the guest had not used lately); that, not the steps, made this figure vary
@@ -300,9 +300,9 @@ def main():
         held = run_batch(batch_rows, DT, *refs)
         first.append((time.perf_counter() - start, system_seconds(usage)))
     del held
-    t_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3)
+    t_batch = best_of(lambda: run_batch(batch_rows, DT, *refs), 3)[0]  # (no result kept: a third output's new pages)
     usage = resource.getrusage(resource.RUSAGE_SELF)
-    cpu_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3, clock=time.process_time)
+    cpu_batch = best_of(lambda: run_batch(batch_rows, DT, *refs), 3, clock=time.process_time)[0]
     batch_sys = system_seconds(usage) / 3
     t_loaded, kernel_result = best_of(lambda: run(loaded, DT, pos, vel, acc), 5)
 
