@@ -35,7 +35,7 @@ per turn) sampled at 5 kHz:
   the process, printed apart: on the 2-core virtual machine these figures
   come from, each of the first two 77 MB outputs (huge pages: numpy asks
   for them for large arrays) costs 0.08-0.27 s of system time, where later
-  calls, given the pages an earlier one freed, spend 7-16 ms (no compaction:
+  calls, given the pages an earlier one freed, spend 7-27 ms (no compaction:
   /proc/vmstat's compact_stall stays 0; presumably the host backing pages
   the guest had not used lately); that, not the steps, made this figure vary
   from run to run;
