@@ -30,7 +30,15 @@ per turn) sampled at 5 kHz:
 * ``kernel_batch_axis_steps_per_s``: ``run_batch`` of 64 variants (friction
   and backlash on every axis, values varying per variant) on the first
   50,000 steps of the helix, tool position only (float64), all cores, best of 3
-  (also printed: axis-steps per CPU-second of all threads, for a loaded machine);
+  (also printed: axis-steps per CPU-second of all threads, for a loaded machine,
+  and the system time of a call). Not timed: the first two such calls of
+  the process, printed apart: on the 2-core virtual machine these figures
+  come from, each of the first two 77 MB outputs (huge pages: numpy asks
+  for them for large arrays) costs 0.08-0.27 s of system time, where later
+  calls, given the pages an earlier one freed, spend 7-27 ms (no compaction:
+  /proc/vmstat's compact_stall stays 0; presumably the host backing pages
+  the guest had not used lately); that, not the steps, made this figure vary
+  from run to run;
 * ``kernel_batch_vs_reference``: ``run_batch`` of 128 variants (kv and
   Coulomb friction varying per variant, tool position only, float64) on the
   first 20,000 steps of the helix, over a reference written here from the
@@ -56,6 +64,7 @@ Figures are axis-steps per second: simulated samples x axes / wall seconds.
 Run: python benchmarks/bench_kernel.py
 """
 
+import resource
 import time
 from dataclasses import replace
 
@@ -102,6 +111,11 @@ def best_of(fn, repeat, clock=time.perf_counter):
         result = fn()
         times.append(clock() - start)
     return min(times), result
+
+
+def system_seconds(since):
+    """System CPU time of this process since the `resource.getrusage` result `since` [s] (page faults, mostly)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_stime - since.ru_stime
 
 
 def side_by_side(fns, repeat):
@@ -280,8 +294,16 @@ def main():
     ])  # fmt: skip
     refs = (pos[:N_BATCH], vel[:N_BATCH], acc[:N_BATCH])
     run_batch(batch_rows[:2], DT, *refs)  # compile or load
-    t_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3)
-    cpu_batch, _ = best_of(lambda: run_batch(batch_rows, DT, *refs), 3, clock=time.process_time)
+    first = []  # the process's first two outputs of this size (best_of holds one while it makes the next): new pages
+    for _ in range(2):
+        usage, start = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
+        held = run_batch(batch_rows, DT, *refs)
+        first.append((time.perf_counter() - start, system_seconds(usage)))
+    del held
+    t_batch = best_of(lambda: run_batch(batch_rows, DT, *refs), 3)[0]  # (no result kept: a third output's new pages)
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    cpu_batch = best_of(lambda: run_batch(batch_rows, DT, *refs), 3, clock=time.process_time)[0]
+    batch_sys = system_seconds(usage) / 3
     t_loaded, kernel_result = best_of(lambda: run(loaded, DT, pos, vel, acc), 5)
 
     # the batch against the reference written here, then on one thread against all
@@ -349,7 +371,10 @@ def main():
     print(f"{'kernel, batch of 64 variants, friction + backlash':58s} {N_BATCH:8d} {t_batch:10.4f} "
           f"{B * N_BATCH * 3 / t_batch:14.4g}")  # fmt: skip
     print(f"  the same batch per CPU-second of all its threads: {B * N_BATCH * 3 / cpu_batch:.4g} axis-steps "
-          f"({numba.get_num_threads()} threads; the wall figure is lower when other processes share the cores)")
+          f"({numba.get_num_threads()} threads; the wall figure is lower when other processes share the cores); "
+          f"{1e3 * batch_sys:.0f} ms of system time per call (the fresh output's page faults)")
+    print(f"  its first two calls in this process (excluded above: pages new to it): {first[0][0]:.4f} and "
+          f"{first[1][0]:.4f} s, {1e3 * first[0][1]:.0f} and {1e3 * first[1][1]:.0f} ms of them system time")
     ref_steps = B_REF * N_REF * len(AXES)
     print(f"{'kernel, batch of 128 variants, kv + Coulomb friction':58s} {N_REF:8d} {t_kernel_ref:10.4f} "
           f"{ref_steps / t_kernel_ref:14.4g}")  # fmt: skip
