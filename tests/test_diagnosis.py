@@ -11,6 +11,7 @@ The full sweep is benchmarks/bench_diagnose.py.
 import json
 import runpy
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from conftest import ROOT, ReaderGone
 
 from contoursim import paths
 from contoursim.cli import main
-from contoursim.diagnosis import diagnose, noise_level, synthetic_trace
+from contoursim.diagnosis import diagnose, noise_level, synthetic_trace, turning
 from contoursim.effects import Effect
 from contoursim.feed import plan, sample
 from contoursim.identify import identify_machine
@@ -141,6 +142,56 @@ def test_two_equivalent_explanations_are_reported_with_the_test_that_separates_t
     ambiguous = [w for w in result.warnings if "almost equally" in w]
     assert ambiguous and "scale_error.x" in ambiguous[0] and "thermal_drift.x" in ambiguous[0], result.report()
     assert "a drift grows with time, a scale error with position" in ambiguous[0]
+
+
+def both_ways():
+    """The ISO 230-4 circle run CCW, then CW (a ballbar test's two runs in one trace)."""
+    path = paths.join(paths.iso230_4_circle(10.0, direction="ccw"), paths.iso230_4_circle(10.0, direction="cw"))
+    return sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), DT)
+
+
+def test_turning_counts_the_share_of_the_path_run_each_way():
+    for reference, shares in ((circle("ccw"), (1.0, 0.0)), (circle("cw"), (0.0, 1.0)), (both_ways(), (0.5, 0.5))):
+        assert turning(reference.position, reference.velocity) == pytest.approx(shares, abs=1e-3)
+    line = np.column_stack([np.linspace(0.0, 1.0, 50), np.zeros(50)])
+    assert turning(line, np.gradient(line, axis=0)) == (0.0, 0.0)  # no turn either way
+
+
+@pytest.mark.parametrize("hidden, servo", [(Effect("squareness", "xy", angle_urad=150.0), False),
+                                           (Effect("gain_mismatch", "y", kp_ratio=0.99), True)],
+                         ids=["squareness", "gain mismatch"])
+def test_a_circle_run_both_ways_tells_squareness_from_a_servo_mismatch(machine, hidden, servo):
+    """Ballbar reasoning: both draw an oval at 45° (the Y gain 1 % low, as large as 690 µrad of squareness at this
+    feed); the squareness's keeps its orientation CW and CCW, the servo mismatch's flips. Run both ways, the right
+    kind is named and no ambiguity is left; run one way, the diagnosis says it cannot tell which."""
+    result = run_blind(machine, (hidden,), both_ways(), seed=7)
+    named = result.effects[0]
+    if servo:  # on a circle a command delay of Y is a gain mismatch's first-order twin: either is the servo's
+        assert (named.name, named.axis) in {("gain_mismatch", "y"), ("time_delay", "y")}, result.report()
+        assert "squareness" not in {e.name for e in result.effects}, result.report()
+    else:
+        assert (named.name, named.axis) == ("squareness", "xy") and named["angle_urad"] == pytest.approx(150.0, rel=0.05)
+    assert not [w for w in result.warnings if "oval at 45°" in w], result.report()
+    one_way = run_blind(machine, (hidden,), circle("ccw"), seed=7)
+    said = [w for w in one_way.warnings if "oval at 45°" in w and "one way only" in w]
+    assert said and "squareness.xy" in said[0] and "run the circle in the other direction" in said[0], one_way.report()
+
+
+def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine):
+    """The guideway of X bows 10 µm in Y over its travel of 0 .. 300 mm; the test circle lies at 40 .. 60 mm of it,
+    where the bow is mostly a slope (a squareness would fit that slope, not the curvature with it)."""
+    placed = replace(machine, axis_travel={"x": (-50.0, 250.0), "y": (-150.0, 150.0)})
+    hidden = Effect("straightness", "x", peak_um=10.0, span_mm=300.0, start_mm=-50.0, error_direction="y")
+    path = paths.iso230_4_circle(10.0, direction="ccw")
+    reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), DT)
+    trace = synthetic_trace(Model(placed, (hidden,)), reference, mismatch=0.03, noise_um=0.05, quantum_um=0.01,
+                            every=2, seed=3)
+    result = diagnose(trace, Model(placed))
+    named = result.effects[0]
+    assert (named.name, named.axis, named.options["error_direction"]) == ("straightness", "x", "y"), result.report()
+    assert (named["start_mm"], named["span_mm"]) == (-50.0, 300.0)
+    assert named["peak_um"] == pytest.approx(10.0, rel=0.1), result.report()
+    assert not [w for w in result.warnings if "no travel" in w]
 
 
 def test_noise_level_from_the_second_differences():
