@@ -30,8 +30,8 @@ sampled at the row's time plus a jitter of up to ±2 % of the servo period
 (the CSV's ``t`` stays uniform, as the contract requires), seen by an
 instrument with white noise (0.05–0.3 µm RMS) and a 0.05 µm resolution.
 The data sheet gives the controller exactly (kp, kv, ti, vff, servo
-period) and the plant (total mass, force constant, damping) each off by up
-to ±3 %; it knows nothing of the current loop, the velocity estimator, the
+period), the plant (total mass, force constant, damping) each off by up
+to ±3 % and each axis's travel (0–400 mm, the trace's coordinates); it knows nothing of the current loop, the velocity estimator, the
 computation delay, the encoder resolution or the screw's compliance.
 
 The hidden effects, each as physics rather than as contoursim models them:
@@ -234,7 +234,8 @@ class Case:
 
     ``truth`` is ``None`` (no effect) or ``{"name", "axis", "parameters", "options"}`` in
     contoursim's names and units; ``signal_um`` is the RMS the effect adds to the logged
-    positions (the same truth run with and without it, noise-free) [µm].
+    positions (the same truth run with and without it, noise-free), its mean per axis (a
+    constant shift, the instrument's zero) left out [µm].
     """
 
     family: str
@@ -474,7 +475,9 @@ def make_case(family, effect_name, seed, folder, path=None):
             continue
         tool = _simulate(axes, machine, reference, velocity, hidden, family, period, every, jitter)
         measured[name] = _geometry(tool, t[rows], hidden)
-    signal = 1e3 * float(np.sqrt(np.mean(np.sum((measured["with"] - measured["without"]) ** 2, axis=1))))
+    added = measured["with"] - measured["without"]
+    added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
+    signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
     actual = measured["with"] + rng.normal(0.0, noise_um * 1e-3, measured["with"].shape)
     actual = np.round(actual / 5e-5) * 5e-5
     folder = Path(folder)
@@ -499,11 +502,13 @@ def _write_csv(file, t, reference, actual, axes, comment):
 
 
 def _write_data_sheet(file, machine, period, rng, name):
-    """The machine as its data sheet gives it: controller exact, total mass, force constant and damping within ±3 %."""
+    """The machine as its data sheet gives it: controller exact, total mass, force constant and damping within ±3 %,
+    each axis's travel."""
     off = lambda: rng.uniform(0.97, 1.03)  # noqa: E731
     lines = [f'name = "{name}"', f"servo_period_ms = {1e3 * period:.6g}", ""]
     for a, axis in machine.items():
         lines += [f"[axes.{a}]", f"mass_kg = {axis['mass'] * off():.6g}", f"force_constant_N_per_A = {axis['kf'] * off():.6g}",
                   f"kv_A_s_per_m = {axis['kv']:.10g}", f"ti_s = {axis['ti']:.10g}", f"kp_per_s = {axis['kp']:.10g}",
-                  f"damping_N_s_per_m = {axis['damping'] * off():.6g}", f"vff = {axis['vff']:.6g}", ""]
+                  f"damping_N_s_per_m = {axis['damping'] * off():.6g}", f"vff = {axis['vff']:.6g}",
+                  f"travel_mm = [0, {TRAVEL_MM:g}]", ""]
     Path(file).write_text("\n".join(lines), encoding="utf-8")

@@ -53,3 +53,16 @@ def test_independent_truth_writes_a_contract_trace_and_a_data_sheet(independent_
     assert trace.axes == ("x", "y") and trace.dt == pytest.approx(case.notes["log_s"])
     assert case.truth["name"] == "backlash" and case.signal_um > 0
     assert all(servo.vff == case.notes["vff"] for servo in model.machine.axes.values())
+    assert model.machine.travel == {a: (0.0, independent_truth.TRAVEL_MM) for a in "xy"}  # the data sheet's travel
+
+
+def test_independent_straightness_is_the_guideways_over_its_travel(independent_truth):
+    """The independent generator's straightness of X in Y: zero at both ends of X's travel, the peak in its middle,
+    whatever Y; its squareness reads x as x − α·y."""
+    it = independent_truth
+    end = it.TRAVEL_MM
+    q = np.array([[0.0, 50.0], [end / 2, 350.0], [end, 120.0]])
+    bow = dict(name="straightness", axis="x", parameters=dict(peak_um=7.0, span_mm=end), options=dict(error_direction="y"))
+    np.testing.assert_allclose(1e3 * (it._geometry(q, np.zeros(3), bow) - q), [[0, 0], [0, 7.0], [0, 0]], atol=1e-9)
+    square = dict(name="squareness", axis="xy", parameters=dict(angle_urad=100.0), options={})
+    np.testing.assert_allclose(it._geometry(q, np.zeros(3), square)[:, 0] - q[:, 0], -100e-6 * q[:, 1], atol=1e-12)
