@@ -1168,10 +1168,13 @@ def turning(position, velocity):
     return float(np.mean(cross[moving] > 0)), float(np.mean(cross[moving] < 0))
 
 
-def _twin_ambiguity(problem, best, cands, both_ways):
-    """A warning when another candidate closes nearly as much of the gap as the best for a reason the trace cannot decide.
+def _twin(problem, best, cands, both_ways):
+    """The candidate the trace cannot tell from `best`, and why: ``(candidate, reason)``, or ``(None, None)``.
 
-    Two pairs whose difference lies in what a trace may not hold:
+    Either a rival within :data:`SIGNIFICANT` of the best's ΔBIC, or one of a
+    pair whose difference lies in what a trace may not hold
+    (:func:`_twins`) that closes at least :data:`_TWIN_SHARE` of what the
+    best closes:
 
     - a squareness and a position-gain mismatch (or a command delay) of one
       axis both draw an oval at 45° on a circle (ballbar reasoning, ISO 230-4,
@@ -1183,29 +1186,54 @@ def _twin_ambiguity(problem, best, cands, both_ways):
     - a squareness and a straightness in its plane: over a path small against
       the travel a straightness is mostly a slope, the shear of a squareness;
       only its curvature, the sag over the path, tells it.
-
-    Twins: the other candidate closes at least :data:`_TWIN_SHARE` of what the
-    best closes. The best is still named (it fits better), the other said, with
-    the test that would separate them.
     """
+    rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
+    if rival is not None:
+        return rival, f"they explain the data almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f})"
     rss0 = float(problem.base_residual @ problem.base_residual)
     closed = rss0 - best.cost
-    if closed <= 0:
-        return None
-    for twin in cands[1:]:
+    for twin in cands[1:] if closed > 0 else ():
         why = _twins(best.fit, twin.fit, both_ways)
-        if why is None or rss0 - twin.cost < _TWIN_SHARE * closed:
-            continue
-        size = lambda e: f"{e.kind.parameters[0].name} = {e.values()[e.kind.parameters[0].name]:.4g}"  # noqa: E731
-        return (f"{best.fit.label}{_options(best.fit)} ({size(best.fit)}) and {twin.fit.label}{_options(twin.fit)} "
-                f"({size(twin.fit)}) both explain the trace ({100 * (rss0 - twin.cost) / closed:.0f} % of what the first "
-                f"explains): {why}, which it is is not decided by this trace. To separate them: "
-                f"{_separating_test(best.fit, twin.fit, both_ways)}")
-    return None
+        if why is not None and rss0 - twin.cost >= _TWIN_SHARE * closed:
+            return twin, f"both explain the trace (one {100 * (rss0 - twin.cost) / closed:.0f} % of what the other does): {why}"
+    return None, None
+
+
+def _choose(problem, cands, both_ways):
+    """The candidate to name among `cands` (sorted best first), and the ambiguity to report (or ``None``).
+
+    The best, unless the trace cannot tell it from a twin (:func:`_twin`) and
+    only the twin's size lies within the catalogue's typical range: what the
+    trace cannot decide, the typical sizes of machines may. Either way the
+    pair is reported, with the test that would separate them.
+    """
+    best = cands[0]
+    twin, reason = _twin(problem, best, cands, both_ways)
+    if twin is None:
+        return best, None
+    swap = not _typical(best.fit) and _typical(twin.fit)
+    if swap:
+        best, twin = twin, best
+    return best, (f"{best.fit.label}{_options(best.fit)} ({_size(best.fit)}) and {twin.fit.label}{_options(twin.fit)} "
+                  f"({_size(twin.fit)}): {reason}; "
+                  + ("the first is named, its size typical and the second's not; " if swap else "")
+                  + f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
+
+
+def _typical(effect):
+    """The effect's size (its first parameter; the magnitude of a signed one) lies within its typical range."""
+    size = effect.parameters[0]
+    lo, hi = size.typical
+    return lo <= (abs(size.value) if size.signed else size.value) <= hi
+
+
+def _size(effect):
+    size = effect.parameters[0]
+    return f"{size.name} = {size.value:.4g}"
 
 
 def _twins(a, b, both_ways):
-    """Why effects `a` and `b` look alike on a trace (:func:`_twin_ambiguity`), or ``None``."""
+    """Why effects `a` and `b` look alike on a trace (:func:`_twin`), or ``None``."""
     if {_oval_kind(a), _oval_kind(b)} == {"geometry", "servo"} and not both_ways:
         return "both draw an oval at 45° on a circle, and the trace runs its path one way only"
     if {a.name, b.name} == {"squareness", "straightness"}:
@@ -1346,14 +1374,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
             say("nothing significant left: stopping")
             break
-        best = cands[0]
-        rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
-        ambiguity = None if rival is None else (
-            f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
-            f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
-            f"{_separating_test(best.fit, rival.fit, both_ways)}")
-        if ambiguity is None:
-            ambiguity = _twin_ambiguity(problem, best, cands, both_ways)
+        best, ambiguity = _choose(problem, cands, both_ways)
         try:
             _settle(problem, base, best, warnings)
         except _FIT_FAILURES as exc:

@@ -177,6 +177,31 @@ def test_a_circle_run_both_ways_tells_squareness_from_a_servo_mismatch(machine, 
     assert said and "squareness.xy" in said[0] and "run the circle in the other direction" in said[0], one_way.report()
 
 
+def test_twins_the_trace_cannot_tell_apart_are_said_and_the_one_of_typical_size_is_named():
+    """Candidates closing 90 % and 88 % of a gap: a straightness's slope and a squareness's shear are twins on any
+    trace, a squareness and a gain mismatch on one run one way only; of twins, one of typical size is named."""
+    from types import SimpleNamespace
+
+    from contoursim.diagnosis import _Candidate, _choose
+
+    problem = SimpleNamespace(base_residual=np.ones(100))  # the gap: a cost of 100
+
+    def fitted(effect, cost, delta_bic):
+        return _Candidate(effect, (), [], cost=cost, fit=effect, delta_bic=delta_bic)
+
+    square = Effect("squareness", "xy", angle_urad=-198.0)
+    bow = Effect("straightness", "y", peak_um=-37.7, span_mm=400.0, error_direction="x")  # 2.5 times the typical 15 µm
+    gain = Effect("gain_mismatch", "x", kp_ratio=1.04)
+    named, said = _choose(problem, [fitted(bow, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=True)
+    assert named.fit is square and "the first is named, its size typical" in said and "placed elsewhere in the travel" in said
+    named, said = _choose(problem, [fitted(bow.with_values(peak_um=-10.0), 10.0, 500.0), fitted(square, 12.0, 480.0)], True)
+    assert named.fit.name == "straightness" and "the first is named" not in said  # both typical: the better fit
+    named, said = _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=False)
+    assert named.fit is square and "one way only" in said and "run the circle in the other direction" in said
+    assert _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=True) == (named, None)
+    assert _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 40.0, 400.0)], both_ways=False)[1] is None
+
+
 def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine):
     """The guideway of X bows 10 µm in Y over its travel of 0 .. 300 mm; the test circle lies at 40 .. 60 mm of it,
     where the bow is mostly a slope (a squareness would fit that slope, not the curvature with it)."""
