@@ -1221,8 +1221,10 @@ def _choose(problem, cands, both_ways):
 
 
 def _typical(effect):
-    """The effect's size (its first parameter; the magnitude of a signed one) lies within its typical range."""
+    """The effect's size (its first parameter; the magnitude of a signed one) lies within its typical range (if any)."""
     size = effect.parameters[0]
+    if size.typical is None:
+        return True
     lo, hi = size.typical
     return lo <= (abs(size.value) if size.signed else size.value) <= hi
 
