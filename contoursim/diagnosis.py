@@ -405,7 +405,9 @@ def locate(trace, reference, residual):
     tuple of str
         The time spans (and path stations, the distance along the commanded
         path) holding most of it; for a circle test the angles of
-        the largest radial residual; per axis the features (reversals,
+        the largest radial residual and, run both ways, its oval per
+        direction (:func:`_ovals`): the part keeping its orientation
+        (geometric) and the part flipping (servo); per axis the features (reversals,
         velocity, acceleration, position, time, a spatial period) it
         correlates with best.
     """
@@ -439,6 +441,18 @@ def locate(trace, reference, residual):
                      + ", ".join(f"{10 * k + 5}° ({1e3 * mean[k]:+.2f} µm)" for k in top))
     v = _on_trace(trace, reference.t, reference.velocity)
     a = _on_trace(trace, reference.t, reference.acceleration)
+    if circle is not None:
+        on = np.abs(np.linalg.norm(rel[:, :2], axis=1) - radius) < 1e-3 * radius
+        sense = np.sign(rel[:, 0] * v[:, 1] - rel[:, 1] * v[:, 0])
+        ovals = _ovals(np.radians(theta[on]), radial[on], sense[on])
+        if ovals is not None:
+            ccw, cw = ovals
+            keeps, flips = (ccw + cw) / 2, (ccw - cw) / 2
+            angle = lambda c: np.degrees(np.angle(c)) / 2 % 180  # noqa: E731  major axis of A·cos(2(θ − φ))
+            found.append(f"circle run both ways (ballbar): the oval (2θ term of the radial residual) {1e3 * abs(ccw):.3g} µm "
+                         f"at {angle(ccw):.0f}° CCW, {1e3 * abs(cw):.3g} µm at {angle(cw):.0f}° CW: {1e3 * abs(keeps):.3g} µm "
+                         f"keeps its orientation (geometric: squareness, scale), {1e3 * abs(flips):.3g} µm flips with the "
+                         "direction (servo: a gain mismatch, a delay)")
     for i, axis in enumerate(trace.axes):
         r = residual[:, i] - residual[:, i].mean()
         if not np.any(r):
@@ -464,6 +478,26 @@ def locate(trace, reference, residual):
         scores.sort(reverse=True)
         found.append(f"axis {axis}: correlates with " + ", ".join(f"{name} ({c:.2f})" for c, name in scores[:3]))
     return tuple(found)
+
+
+def _ovals(theta, radial, sense):
+    """The oval of a circle's radial residual run each way: the 2θ terms ``(CCW, CW)`` as complex amplitudes, or ``None``.
+
+    ``radial ≈ c0 + c1·cos θ + s1·sin θ + Re(A·e^(−2iθ))`` fitted over the
+    samples of each sense of motion (+1 CCW, −1 CW); ``None`` unless each
+    holds at least :data:`_BOTH_WAYS` of them. ``A = c2 + i·s2`` [mm]: the
+    oval's size |A| and its major axis at ``arg(A)/2``.
+    """
+    fits = []
+    for way in (1.0, -1.0):
+        mine = sense == way
+        if mine.sum() < max(16, _BOTH_WAYS * sense.size):
+            return None
+        t = theta[mine]
+        basis = np.column_stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)])
+        coef = np.linalg.lstsq(basis, radial[mine], rcond=None)[0]
+        fits.append(complex(coef[3], coef[4]))
+    return tuple(fits)
 
 
 def _not_following(trace, simulated, scored):

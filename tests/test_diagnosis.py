@@ -177,6 +177,29 @@ def test_a_circle_run_both_ways_tells_squareness_from_a_servo_mismatch(machine, 
     assert said and "squareness.xy" in said[0] and "run the circle in the other direction" in said[0], one_way.report()
 
 
+def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
+    """The oval's 2θ term per direction: a squareness's keeps its orientation, at 135° and of size αR/2 (closed
+    form); a Y gain 1 % low gives one as large that flips between CCW (at 135°) and CW (at 45°)."""
+    import re
+
+    from contoursim.diagnosis import locate
+    from contoursim.simulation import measured_reference
+
+    reference = both_ways()
+    nominal = synthetic_trace(Model(machine), reference, mismatch=0.0, noise_um=0.0, quantum_um=0.0, every=2)
+    read = {}
+    for hidden in (Effect("squareness", "xy", angle_urad=150.0), Effect("gain_mismatch", "y", kp_ratio=0.99)):
+        trace = synthetic_trace(Model(machine, (hidden,)), reference, mismatch=0.0, noise_um=0.0, quantum_um=0.0, every=2)
+        line = next(w for w in locate(trace, measured_reference(trace, DT), trace.actual - nominal.actual) if "ballbar" in w)
+        numbers = re.search(r"([\d.]+) µm at (\d+)° CCW, ([\d.]+) µm at (\d+)° CW: ([\d.]+) µm keeps .*, ([\d.]+) µm flips", line)
+        read[hidden.name] = [float(g) for g in numbers.groups()]
+    ccw, ccw_angle, cw, cw_angle, keeps, flips = read["squareness"]
+    assert ccw == pytest.approx(150e-6 * 10.0 / 2 * 1e3, rel=0.02) and cw == pytest.approx(ccw, rel=0.02)
+    assert abs(ccw_angle - 135) <= 3 and abs(cw_angle - 135) <= 3 and flips < 0.1 * keeps
+    ccw, ccw_angle, cw, cw_angle, keeps, flips = read["gain_mismatch"]
+    assert abs(ccw_angle - 135) <= 5 and abs(cw_angle - 45) <= 5 and keeps < 0.2 * flips
+
+
 def test_twins_the_trace_cannot_tell_apart_are_said_and_the_one_of_typical_size_is_named():
     """Candidates closing 90 % and 88 % of a gap: a straightness's slope and a squareness's shear are twins on any
     trace, a squareness and a gain mismatch on one run one way only; of twins, one of typical size is named."""
