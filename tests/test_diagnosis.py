@@ -225,7 +225,7 @@ def test_twins_the_trace_cannot_tell_apart_are_said_and_the_one_of_typical_size_
     assert _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 40.0, 400.0)], both_ways=False)[1] is None
 
 
-def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine):
+def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine, tmp_path):
     """The guideway of X bows 10 µm in Y over its travel of 0 .. 300 mm; the test circle lies at 40 .. 60 mm of it,
     where the bow is mostly a slope (a squareness would fit that slope, not the curvature with it)."""
     placed = replace(machine, axis_travel={"x": (-50.0, 250.0), "y": (-150.0, 150.0)})
@@ -240,6 +240,9 @@ def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine):
     assert (named["start_mm"], named["span_mm"]) == (-50.0, 300.0)
     assert named["peak_um"] == pytest.approx(10.0, rel=0.1), result.report()
     assert not [w for w in result.warnings if "no travel" in w]
+    (tmp_path / "corrected.toml").write_text(result.corrected_model())  # travel and bow carried into the machine file
+    corrected = load_model(tmp_path / "corrected.toml")
+    assert corrected.machine.travel == placed.travel and corrected.effects == (named,)
 
 
 def test_noise_level_from_the_second_differences():
