@@ -237,7 +237,9 @@ class Machine:
             if column.min() < lo - 1e-9 or column.max() > hi + 1e-9:
                 raise ValueError(
                     f"axis {axis} would move over {column.min():.6g} .. {column.max():.6g}, outside its travel "
-                    f"{lo:.6g} .. {hi:.6g} [mm or rad]: move the path with work_offset or make it smaller"
+                    f"{lo:.6g} .. {hi:.6g} [mm or rad]: "
+                    + ("move the path with work_offset or make it smaller" if self.chain is not None else
+                       "place the path inside it or make it smaller (without bodies the path's coordinates are the axes')")
                 )
 
     def tool_position(self, q, t, dim):
