@@ -430,7 +430,8 @@ def make_case(family, effect_name, seed, folder, path=None):
     folder : Path
         Receives ``case_<seed>.csv`` and ``case_<seed>.toml`` (the data sheet).
     path : str, optional
-        ``"circle_ccw"``, ``"circle_cw"``, ``"trefoil"``, ``"square"`` (default: drawn).
+        ``"circle_ccw"``, ``"circle_cw"``, ``"trefoil"``, ``"square"`` (default: drawn from these), or
+        ``"circle_both"`` (never drawn): the circle run CCW, then after a stop CW, as a ballbar test does.
 
     Returns
     -------
@@ -455,6 +456,7 @@ def make_case(family, effect_name, seed, folder, path=None):
     path = path or str(rng.choice(["circle_ccw", "circle_cw", "trefoil", "square"]))
     size = rng.uniform(10.0, 60.0)
     points = {"circle_ccw": lambda: _circle(size, "ccw"), "circle_cw": lambda: _circle(size, "cw"),
+              "circle_both": lambda: _circle(size, "ccw"),
               "trefoil": lambda: _trefoil(size), "square": lambda: _rounded_square(2 * size, rng.uniform(1.0, 5.0))}[path]()
     start = rng.uniform(TRAVEL_MM * 0.3, TRAVEL_MM * 0.7, 2) + np.array([size, 0.0])
     station = np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))
@@ -462,7 +464,8 @@ def make_case(family, effect_name, seed, folder, path=None):
     accel = rng.uniform(500.0, 3000.0)
     windows = (() if rng.integers(0, 2) else (rng.uniform(4e-3, 1.5e-2),)) if family == "rigid" else \
         (rng.uniform(4e-3, 1.5e-2), rng.uniform(2e-3, 8e-3))
-    reference, velocity = _reference(points + start, feed, accel, windows, period)
+    runs = [points, _circle(size, "cw")] if path == "circle_both" else [points]  # a ballbar's two runs, a stop between
+    reference, velocity = (np.vstack(x) for x in zip(*[_reference(p + start, feed, accel, windows, period) for p in runs]))
     effect = None if effect_name is None else _hidden(rng, effect_name, axes, period)
     t = np.arange(reference.shape[0]) * period
     rows = np.arange(0, t.size, every)
