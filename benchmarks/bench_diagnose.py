@@ -3,7 +3,9 @@
 **own**: the demo mill's X, Y (and Z for the helix) servo axes at a 0.5 ms
 servo period, every position gain set to X's (the mill's Y is tuned 10 %
 lower on purpose: a gain mismatch of its own, which a case would hide
-without naming it and which a diagnosis without the model rightly finds); a path of trajectories/ (ISO 230-4 circle CCW or CW, the
+without naming it and which a diagnosis without the model rightly finds),
+each with a travel 2–4 times the path's extent (the path anywhere in it);
+a path of trajectories/ (ISO 230-4 circle CCW or CW, the
 butterfly free-form curve, the 3-D helix); a "truth" that is the nominal
 machine with each axis's mass, force constant and damping off by up to
 ±3 %, the controller exact (:func:`contoursim.diagnosis.synthetic_trace`:
@@ -26,14 +28,17 @@ axis, as the ratio of their gains: one shared position gain is identified,
 so that ratio is all the trace can tell. Printed per family and mode: the
 cases answered, named right (the named effects are exactly the hidden one,
 or nothing on a null case), the same over the cases whose effect adds at
-least the noise level (its RMS contribution, the same truth with and without it, against the noise the
-diagnosis estimates), the cases with a false positive (an effect named that
+least the noise level (its RMS contribution, the same truth with and
+without it, its mean per axis left out, against the noise the diagnosis
+estimates), the cases with a false positive (an effect named that
 is not hidden), the null cases kept clean, the median error of the main
 parameter and its 2σ coverage (the truth within twice the reported
 uncertainty) where the hidden effect was named, the median seconds per
-30 s of trace; then per effect: named right / cases. Progress goes to stderr.
+30 s of trace; then per effect: named right / cases, the hidden effect among those named, its
+median parameter error and 2σ coverage. Progress goes to stderr.
 
 Run:  python benchmarks/bench_diagnose.py [--cases 22] [--seed 1] [--families own,rigid,two_mass] [--modes model,identified]
+                                         [--effects none,squareness,straightness]
       python benchmarks/bench_diagnose.py --fast      (one null case and one effect per family and mode)
 """
 
@@ -63,7 +68,7 @@ MAIN = {"backlash": "lost_motion_um", "coulomb_friction": "force_N", "gain_misma
         "time_delay": "delay_s", "thermal_drift": "rate_um_per_min", "vibration": "freq_hz"}
 
 
-def hidden_effect(name, axes, span, rng):
+def hidden_effect(name, axes, travel, rng):
     """One effect `name` of random size within its typical range, on a random axis of `axes`."""
     sign = rng.choice([-1.0, 1.0])
     axis = str(rng.choice(axes))
@@ -82,7 +87,8 @@ def hidden_effect(name, axes, span, rng):
         return Effect(name, axis, amplitude_um=rng.uniform(1, 5), period_mm=rng.uniform(4, 40), phase_deg=rng.uniform(0, 360))
     if name == "straightness":
         other = str(rng.choice([a for a in axes if a != axis]))
-        return Effect(name, axis, peak_um=sign * rng.uniform(2, 15), span_mm=span[axis], error_direction=other)
+        start, end = travel[axis]
+        return Effect(name, axis, peak_um=sign * rng.uniform(2, 15), span_mm=end - start, start_mm=start, error_direction=other)
     if name == "time_delay":
         return Effect(name, axis, delay_s=rng.uniform(1e-4, 3e-3), kind=str(rng.choice(["command", "feedback"])))
     if name == "thermal_drift":
@@ -92,11 +98,25 @@ def hidden_effect(name, axes, span, rng):
     raise ValueError(name)
 
 
-def cases(n, seed):
-    """`n` cases: one in eleven a null case, the others cycling through the catalogue; ``(effect name, seed)``."""
+def cases(n, seed, effects=(None,) + CATALOGUE):
+    """`n` cases cycling through `effects` (``None``: a null case), ``(effect name, seed)``.
+
+    By default one in eleven is a null case, the others cycle through the catalogue.
+    """
     rng = np.random.default_rng(seed)
-    names = [None] + list(CATALOGUE)
-    return [(names[i % len(names)], int(rng.integers(1 << 30))) for i in range(n)]
+    return [(effects[i % len(effects)], int(rng.integers(1 << 30))) for i in range(n)]
+
+
+def travel(reference, axes, seed):
+    """Each axis's travel [mm]: 2–4 times the path's extent, the path somewhere within it (its own random stream)."""
+    rng = np.random.default_rng([seed, 1])
+    out = {}
+    for i, a in enumerate(axes):
+        lo, hi = float(reference.position[:, i].min()), float(reference.position[:, i].max())
+        length = max(hi - lo, 1.0) * rng.uniform(2.0, 4.0)
+        start = lo - rng.uniform(0.0, 1.0) * (length - (hi - lo))
+        out[a] = (start, start + length)
+    return out
 
 
 def own_case(mill, name, seed):
@@ -105,16 +125,18 @@ def own_case(mill, name, seed):
     path_name = PATHS[int(rng.integers(len(PATHS)))]
     path, settings = load_path_file(path_name)
     axes = ("x", "y", "z") if path.dim == 3 else ("x", "y")
-    machine = Machine({a: replace(mill.axes[a], kp=mill.axes["x"].kp) for a in axes}, SERVO_PERIOD)
     reference = sample(path, settings.plan(path), SERVO_PERIOD)
-    span = {a: float(np.ptp(reference.position[:, i])) or 1.0 for i, a in enumerate(axes)}
-    truth = () if name is None else (hidden_effect(name, axes, span, rng),)
+    machine = Machine({a: replace(mill.axes[a], kp=mill.axes["x"].kp) for a in axes}, SERVO_PERIOD,
+                      axis_travel=travel(reference, axes, seed))
+    truth = () if name is None else (hidden_effect(name, axes, machine.travel, rng),)
     noise = rng.uniform(0.05, 0.5)
     trace = synthetic_trace(Model(machine, truth), reference, mismatch=0.03, noise_um=noise, quantum_um=0.05,
                             every=2, seed=seed)
     clean = [synthetic_trace(Model(machine, effects), reference, mismatch=0.03, noise_um=0.0, quantum_um=0.0, every=2,
                              seed=seed).actual for effects in (truth, ())]
-    signal = 1e3 * float(np.sqrt(np.mean(np.sum((clean[0] - clean[1]) ** 2, axis=1))))
+    added = clean[0] - clean[1]
+    added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
+    signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
     described = None if not truth else dict(name=truth[0].name, axis=truth[0].axis, parameters=truth[0].values(),
                                             options=dict(truth[0].options))
     return path_name, trace, Model(machine), described, signal
@@ -215,11 +237,17 @@ def main():
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--families", default="own,rigid,two_mass")
     parser.add_argument("--modes", default="model,identified")
+    parser.add_argument("--effects", default=",".join(("none",) + CATALOGUE),
+                        help="the hidden effects cycled through, 'none' for a null case (default: none and the catalogue)")
     parser.add_argument("--fast", action="store_true", help="two cases per family (a null case and a backlash)")
     args = parser.parse_args()
     families, modes = args.families.split(","), args.modes.split(",")
+    effects = tuple(None if name == "none" else name for name in args.effects.split(","))
+    unknown = [name for name in effects if name is not None and name not in CATALOGUE]
+    if unknown:
+        parser.error(f"--effects: unknown effect {unknown[0]!r}; the effects are: none, {', '.join(CATALOGUE)}")
     mill = load_machine("demo_mill")
-    plan = cases(2 if args.fast else args.cases, args.seed)
+    plan = cases(2, args.seed) if args.fast else cases(args.cases, args.seed, effects)
     results = {}
     with tempfile.TemporaryDirectory() as folder:
         for family in families:
@@ -239,12 +267,14 @@ def main():
     lines = {key: summary(results[key]) for key in columns}
     for row in next(iter(lines.values())):
         print(f"{row:<{width}}" + "".join(f"{lines[key][row]:>24}" for key in columns))
-    print("\nper effect: named right / cases (hidden effect among those named)")
-    for name in [None] + list(CATALOGUE):
+    print("\nper effect: named right / cases (hidden effect among those named) median parameter error, 2σ covered / found")
+    for name in dict.fromkeys(effects):
         row = []
         for key in columns:
             these = [c for c in results[key] if (c["truth"] or {}).get("name") == name]
-            row.append(f"{sum(c['right'] for c in these)}/{len(these)} ({sum(c['found'] for c in these)})" if these else "-")
+            errors = [c["parameter_error"] for c in these if "parameter_error" in c]
+            fit = f" {np.median(errors):.2f} {sum(c['covered'] for c in these if 'covered' in c)}/{len(errors)}" if errors else ""
+            row.append(f"{sum(c['right'] for c in these)}/{len(these)} ({sum(c['found'] for c in these)}){fit}" if these else "-")
         print(f"{name or 'none':<{width}}" + "".join(f"{r:>24}" for r in row))
 
 

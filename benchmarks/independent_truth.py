@@ -31,10 +31,11 @@ sampled at the row's time plus a jitter of up to ±2 % of the servo period
 instrument with white noise (0.05–0.3 µm RMS) and a 0.05 µm resolution.
 The data sheet gives the controller exactly (kp, kv, ti, vff, servo
 period, and the drive's settings: velocity from encoder differences, its
-filter's time constant as a cut-off frequency, the computation delay) and
-the plant (total mass, force constant, damping) each off by up to ±3 %; it
-knows nothing of the current loop, the encoder resolution, the screw's
-compliance or the motor's share of the mass.
+filter's time constant as a cut-off frequency, the computation delay), the
+plant (total mass, force constant, damping) each off by up to ±3 % and
+each axis's travel (0–400 mm, the trace's coordinates); it knows nothing
+of the current loop, the encoder resolution, the screw's compliance or the
+motor's share of the mass.
 
 The hidden effects, each as physics rather than as contoursim models them:
 ``backlash`` (a dead zone in the screw coupling, position loop on the motor
@@ -236,7 +237,8 @@ class Case:
 
     ``truth`` is ``None`` (no effect) or ``{"name", "axis", "parameters", "options"}`` in
     contoursim's names and units; ``signal_um`` is the RMS the effect adds to the logged
-    positions (the same truth run with and without it, noise-free) [µm].
+    positions (the same truth run with and without it, noise-free), its mean per axis (a
+    constant shift, the instrument's zero) left out [µm].
     """
 
     family: str
@@ -431,7 +433,8 @@ def make_case(family, effect_name, seed, folder, path=None):
     folder : Path
         Receives ``case_<seed>.csv`` and ``case_<seed>.toml`` (the data sheet).
     path : str, optional
-        ``"circle_ccw"``, ``"circle_cw"``, ``"trefoil"``, ``"square"`` (default: drawn).
+        ``"circle_ccw"``, ``"circle_cw"``, ``"trefoil"``, ``"square"`` (default: drawn from these), or
+        ``"circle_both"`` (never drawn): the circle run CCW, then after a stop CW, as a ballbar test does.
 
     Returns
     -------
@@ -456,6 +459,7 @@ def make_case(family, effect_name, seed, folder, path=None):
     path = path or str(rng.choice(["circle_ccw", "circle_cw", "trefoil", "square"]))
     size = rng.uniform(10.0, 60.0)
     points = {"circle_ccw": lambda: _circle(size, "ccw"), "circle_cw": lambda: _circle(size, "cw"),
+              "circle_both": lambda: _circle(size, "ccw"),
               "trefoil": lambda: _trefoil(size), "square": lambda: _rounded_square(2 * size, rng.uniform(1.0, 5.0))}[path]()
     start = rng.uniform(TRAVEL_MM * 0.3, TRAVEL_MM * 0.7, 2) + np.array([size, 0.0])
     station = np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))
@@ -463,7 +467,8 @@ def make_case(family, effect_name, seed, folder, path=None):
     accel = rng.uniform(500.0, 3000.0)
     windows = (() if rng.integers(0, 2) else (rng.uniform(4e-3, 1.5e-2),)) if family == "rigid" else \
         (rng.uniform(4e-3, 1.5e-2), rng.uniform(2e-3, 8e-3))
-    reference, velocity = _reference(points + start, feed, accel, windows, period)
+    runs = [points, _circle(size, "cw")] if path == "circle_both" else [points]  # a ballbar's two runs, a stop between
+    reference, velocity = (np.vstack(x) for x in zip(*[_reference(p + start, feed, accel, windows, period) for p in runs]))
     effect = None if effect_name is None else _hidden(rng, effect_name, axes, period)
     t = np.arange(reference.shape[0]) * period
     rows = np.arange(0, t.size, every)
@@ -476,7 +481,9 @@ def make_case(family, effect_name, seed, folder, path=None):
             continue
         tool = _simulate(axes, machine, reference, velocity, hidden, family, period, every, jitter)
         measured[name] = _geometry(tool, t[rows], hidden)
-    signal = 1e3 * float(np.sqrt(np.mean(np.sum((measured["with"] - measured["without"]) ** 2, axis=1))))
+    added = measured["with"] - measured["without"]
+    added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
+    signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
     actual = measured["with"] + rng.normal(0.0, noise_um * 1e-3, measured["with"].shape)
     actual = np.round(actual / 5e-5) * 5e-5
     folder = Path(folder)
@@ -501,14 +508,16 @@ def _write_csv(file, t, reference, actual, axes, comment):
 
 
 def _write_data_sheet(file, machine, period, rng, name):
-    """The machine as its data sheet gives it: controller and drive settings exact, total mass, force constant and damping within ±3 %."""
+    """The machine as its data sheet gives it: controller and drive settings exact, total mass, force constant and
+    damping within ±3 %, each axis's travel."""
     off = lambda: rng.uniform(0.97, 1.03)  # noqa: E731
     lines = [f'name = "{name}"', f"servo_period_ms = {1e3 * period:.6g}", ""]
     for a, axis in machine.items():
         lines += [f"[axes.{a}]", f"mass_kg = {axis['mass'] * off():.6g}", f"force_constant_N_per_A = {axis['kf'] * off():.6g}",
                   f"kv_A_s_per_m = {axis['kv']:.10g}", f"ti_s = {axis['ti']:.10g}", f"kp_per_s = {axis['kp']:.10g}",
                   f"damping_N_s_per_m = {axis['damping'] * off():.6g}", f"vff = {axis['vff']:.6g}",
-                  'velocity_feedback = "difference"', f"computation_delay_periods = {axis['computation_delay']}"]
+                  'velocity_feedback = "difference"', f"computation_delay_periods = {axis['computation_delay']}",
+                  f"travel_mm = [0, {TRAVEL_MM:g}]"]
         if axis["tau_v"] > 0:  # the drive's filter time constant, as the cut-off frequency it is quoted by
             lines.append(f"velocity_filter_hz = {1.0 / (2 * np.pi * axis['tau_v']):.10g}")
         lines.append("")

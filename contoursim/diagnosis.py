@@ -67,7 +67,7 @@ from .simulation import measured_force, measured_reference, simulate_batch
 
 __all__ = [
     "DAMPING_SPREAD", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
-    "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "unexplained",
+    "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
 
@@ -95,6 +95,9 @@ _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
 _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (the catalogue's modes: 0.01–0.2)
 _JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's jackknife leaves out in turn
+_STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
+_BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
+_TWIN_SHARE = 0.8  # two candidates alike for a reason the trace cannot decide are twins when one closes this share of the other's gap
 _REFIT_FIELDS = ("mass", "damping") + CONTROLLER_FIELDS  # servo parameters the refit may move (the controller's if uncertain)
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
@@ -305,6 +308,8 @@ class Diagnosis:
             lines += ["", f"[axes.{axis}]"]
             lines += [f"{key} = {_toml_value(getattr(servo, name))}" for key, name in SERVO_KEYS.items()
                       if getattr(servo, name) is not None]
+            if axis in machine.axis_travel:
+                lines.append(f"travel_mm = [{machine.axis_travel[axis][0]!r}, {machine.axis_travel[axis][1]!r}]")
             if machine.uncertain.get(axis):
                 keys = {name: key for key, name in SERVO_KEYS.items()}
                 lines.append(f"uncertain = {json.dumps([keys[name] for name in machine.uncertain[axis]])}")
@@ -428,7 +433,9 @@ def locate(trace, reference, residual):
     tuple of str
         The time spans (and path stations, the distance along the commanded
         path) holding most of it; for a circle test the angles of
-        the largest radial residual; per axis the features (reversals,
+        the largest radial residual and, run both ways, its oval per
+        direction (:func:`_ovals`): the part keeping its orientation
+        (geometric) and the part flipping (servo); per axis the features (reversals,
         velocity, acceleration, position, time, a spatial period) it
         correlates with best.
     """
@@ -462,6 +469,18 @@ def locate(trace, reference, residual):
                      + ", ".join(f"{10 * k + 5}° ({1e3 * mean[k]:+.2f} µm)" for k in top))
     v = _on_trace(trace, reference.t, reference.velocity)
     a = _on_trace(trace, reference.t, reference.acceleration)
+    if circle is not None:
+        on = np.abs(np.linalg.norm(rel[:, :2], axis=1) - radius) < 1e-3 * radius
+        sense = np.sign(rel[:, 0] * v[:, 1] - rel[:, 1] * v[:, 0])
+        ovals = _ovals(np.radians(theta[on]), radial[on], sense[on])
+        if ovals is not None:
+            ccw, cw = ovals
+            keeps, flips = (ccw + cw) / 2, (ccw - cw) / 2
+            angle = lambda c: np.degrees(np.angle(c)) / 2 % 180  # noqa: E731  major axis of A·cos(2(θ − φ))
+            found.append(f"circle run both ways (ballbar): the oval (2θ term of the radial residual) {1e3 * abs(ccw):.3g} µm "
+                         f"at {angle(ccw):.0f}° CCW, {1e3 * abs(cw):.3g} µm at {angle(cw):.0f}° CW: {1e3 * abs(keeps):.3g} µm "
+                         f"keeps its orientation (geometric: squareness, scale), {1e3 * abs(flips):.3g} µm flips with the "
+                         "direction (servo: a gain mismatch, a delay)")
     for i, axis in enumerate(trace.axes):
         r = residual[:, i] - residual[:, i].mean()
         if not np.any(r):
@@ -487,6 +506,26 @@ def locate(trace, reference, residual):
         scores.sort(reverse=True)
         found.append(f"axis {axis}: correlates with " + ", ".join(f"{name} ({c:.2f})" for c, name in scores[:3]))
     return tuple(found)
+
+
+def _ovals(theta, radial, sense):
+    """The oval of a circle's radial residual run each way: the 2θ terms ``(CCW, CW)`` as complex amplitudes, or ``None``.
+
+    ``radial ≈ c0 + c1·cos θ + s1·sin θ + Re(A·e^(−2iθ))`` fitted over the
+    samples of each sense of motion (+1 CCW, −1 CW); ``None`` unless each
+    holds at least :data:`_BOTH_WAYS` of them. ``A = c2 + i·s2`` [mm]: the
+    oval's size |A| and its major axis at ``arg(A)/2``.
+    """
+    fits = []
+    for way in (1.0, -1.0):
+        mine = sense == way
+        if mine.sum() < max(16, _BOTH_WAYS * sense.size):
+            return None
+        t = theta[mine]
+        basis = np.column_stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)])
+        coef = np.linalg.lstsq(basis, radial[mine], rcond=None)[0]
+        fits.append(complex(coef[3], coef[4]))
+    return tuple(fits)
 
 
 def _not_following(trace, simulated, scored):
@@ -756,19 +795,30 @@ class _Problem:
     def set_base(self, model, refit=0):
         """Make `model` the base: its prediction, axis positions and the nominal refit's sensitivities.
 
-        With `refit` > 0, that many Gauss–Newton steps first move the base's
-        nominal parameters to their (prior-weighted) least-squares values,
-        the linearised refit then handling only what is left.
+        With `refit` > 0, up to that many Gauss–Newton steps first move the
+        base's nominal parameters to their (prior-weighted) least-squares
+        values, the linearised refit then handling only what is left. A step
+        is kept unless it raises the residual (:meth:`residual`, its linearised
+        refit included) by more than :data:`_STEP_TOLERANCE`: within reach of
+        the linearisation the new base's residual is the old one's but for
+        second-order terms; where the trace's dynamics lie beyond it (a plant
+        the model lacks), a full step can overshoot, and the base stays where
+        it was.
         """
-        for step in range(refit + 1):
-            self._linearise(model)
-            if step == refit or not self.changes:
+        self._linearise(model)
+        for _ in range(refit):
+            if not self.changes:
                 break
-            d = self.trace.actual.shape[1]
             coef = self.coefficients(self.whitened(self.base_prediction))[self.instrument:]
             if not np.all(np.isfinite(coef)):
                 break
-            model = _refitted(model, [change for change, _ in self.changes], coef)
+            cost = float(self.base_residual @ self.base_residual)
+            trial = _refitted(model, [change for change, _ in self.changes], coef)
+            self._linearise(trial)
+            if float(self.base_residual @ self.base_residual) > (1.0 + _STEP_TOLERANCE) * cost:
+                self._linearise(model)  # the step made it worse: back to the last base
+                break
+            model = trial
 
     def _linearise(self, model):
         self.base = None
@@ -956,11 +1006,12 @@ def _candidates(problem, model):
         if period is not None and 0.1 <= period <= 1000.0:
             add(Effect("cyclic_error", a, amplitude_um=1.0, period_mm=period), ("amplitude_um", "phase_deg", "period_mm"),
                 [{"amplitude_um": v, "phase_deg": ph} for v in (1.0, 3.0) for ph in (0.0, 90.0, 180.0, 270.0)])
-        span = float(np.ptp(q))
+        # the guideway's bow over the axis's travel (machine coordinates); without one, over the trace's own extent
+        start, end = model.machine.travel.get(a, (float(q.min()), float(q.max())))
         for b in axes:
-            if b != a and span > 0:
-                add(Effect("straightness", a, peak_um=1.0, span_mm=span, error_direction=b), ("peak_um",),
-                    [{"peak_um": v} for v in sizes("straightness")])
+            if b != a and end > start:
+                add(Effect("straightness", a, peak_um=1.0, span_mm=end - start, start_mm=start, error_direction=b),
+                    ("peak_um",), [{"peak_um": v} for v in sizes("straightness")])
     for a, b in combinations(axes, 2):
         add(Effect("squareness", a + b, angle_urad=1.0), ("angle_urad",), [{"angle_urad": v} for v in sizes("squareness")])
     return [c for c in out if c.grid]
@@ -1150,16 +1201,140 @@ def _scale(p):
     return (hi - lo) if np.isfinite(hi - lo) and hi - lo < 1e3 else 1.0
 
 
-def _separating_test(a, b):
-    """The extra test that tells effect `a` from effect `b`."""
+def turning(position, velocity):
+    """How much of a path turns counterclockwise and how much clockwise in the plane of its first two axes.
+
+    The sense of each moving sample is the sign of ``(p − c) × v``, ``c`` the
+    middle of the path's bounding box: a circle, a square or a trefoil run
+    one way turns one way all along; run out and back (CCW then CW, as a
+    ballbar test does), half each.
+
+    Parameters
+    ----------
+    position, velocity : ndarray, shape (N, d)
+        Commanded positions [mm] and velocities [mm/s].
+
+    Returns
+    -------
+    (float, float)
+        Shares of the moving samples turning counterclockwise and clockwise
+        [-]; (0, 0) for one axis or a path that does not move.
+    """
+    if position.shape[1] < 2:
+        return 0.0, 0.0
+    p = position[:, :2] - (position[:, :2].max(axis=0) + position[:, :2].min(axis=0)) / 2
+    cross = p[:, 0] * velocity[:, 1] - p[:, 1] * velocity[:, 0]
+    speed = np.linalg.norm(velocity[:, :2], axis=1)
+    moving = cross != 0
+    moving &= np.abs(cross) > 1e-9 * float(np.max(np.abs(cross), initial=0.0))
+    moving &= speed > 1e-3 * float(speed.max(initial=0.0))
+    if not moving.any():
+        return 0.0, 0.0
+    return float(np.mean(cross[moving] > 0)), float(np.mean(cross[moving] < 0))
+
+
+def _twin(problem, best, cands, both_ways):
+    """The candidate the trace cannot tell from `best`, and why: ``(candidate, reason)``, or ``(None, None)``.
+
+    Either a rival within :data:`SIGNIFICANT` of the best's ΔBIC, or one of a
+    pair whose difference lies in what a trace may not hold
+    (:func:`_twins`) that closes at least :data:`_TWIN_SHARE` of what the
+    best closes:
+
+    - a squareness and a position-gain mismatch (or a command delay) of one
+      axis both draw an oval at 45° on a circle (ballbar reasoning, ISO 230-4,
+      Renishaw QC20): the squareness's keeps its orientation in both
+      directions and its size at any feed, the servo effect's flips between
+      CW and CCW and grows with the feed. A trace run both ways (:func:`turning`)
+      lets the fit tell them apart, each candidate being simulated both ways;
+      one run one way cannot;
+    - a squareness and a straightness in its plane: over a path small against
+      the travel a straightness is mostly a slope, the shear of a squareness;
+      only its curvature, the sag over the path, tells it.
+    """
+    rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
+    if rival is not None:
+        return rival, f"they explain the data almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f})"
+    rss0 = float(problem.base_residual @ problem.base_residual)
+    closed = rss0 - best.cost
+    for twin in cands[1:] if closed > 0 else ():
+        why = _twins(best.fit, twin.fit, both_ways)
+        if why is not None and rss0 - twin.cost >= _TWIN_SHARE * closed:
+            return twin, f"both explain the trace (one {100 * (rss0 - twin.cost) / closed:.0f} % of what the other does): {why}"
+    return None, None
+
+
+def _choose(problem, cands, both_ways):
+    """The candidate to name among `cands` (sorted best first), and the ambiguity to report (or ``None``).
+
+    The best, unless the trace cannot tell it from a twin (:func:`_twin`) and
+    only the twin's size lies within the catalogue's typical range: what the
+    trace cannot decide, the typical sizes of machines may. Either way the
+    pair is reported, with the test that would separate them.
+    """
+    best = cands[0]
+    twin, reason = _twin(problem, best, cands, both_ways)
+    if twin is None:
+        return best, None
+    swap = not _typical(best.fit) and _typical(twin.fit)
+    if swap:
+        best, twin = twin, best
+    return best, (f"{best.fit.label}{_options(best.fit)} ({_size(best.fit)}) and {twin.fit.label}{_options(twin.fit)} "
+                  f"({_size(twin.fit)}): {reason}; "
+                  + ("the first is named, its size typical and the second's not; " if swap else "")
+                  + f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
+
+
+def _typical(effect):
+    """The effect's size (its first parameter; the magnitude of a signed one) lies within its typical range (if any)."""
+    size = effect.parameters[0]
+    if size.typical is None:
+        return True
+    lo, hi = size.typical
+    return lo <= (abs(size.value) if size.signed else size.value) <= hi
+
+
+def _size(effect):
+    size = effect.parameters[0]
+    return f"{size.name} = {size.value:.4g}"
+
+
+def _twins(a, b, both_ways):
+    """Why effects `a` and `b` look alike on a trace (:func:`_twin`), or ``None``."""
+    if {_oval_kind(a), _oval_kind(b)} == {"geometry", "servo"} and not both_ways:
+        return "both draw an oval at 45° on a circle, and the trace runs its path one way only"
+    if {a.name, b.name} == {"squareness", "straightness"}:
+        square, bow = (a, b) if a.name == "squareness" else (b, a)
+        if set(bow.axis + bow.options["error_direction"]) == set(square.axis):
+            return "over a path small against the travel a straightness is mostly a slope, a squareness's shear"
+    return None
+
+
+def _oval_kind(effect):
+    """``"geometry"`` for a squareness, ``"servo"`` for a gain mismatch or a command delay (both draw a 45° oval on a
+    circle), else ``None``."""
+    if effect.name == "squareness":
+        return "geometry"
+    if effect.name == "gain_mismatch" or (effect.name == "time_delay" and effect.options["kind"] == "command"):
+        return "servo"
+    return None
+
+
+def _separating_test(a, b, both_ways=False):
+    """The extra test that tells effect `a` from effect `b` (`both_ways`: the trace already runs its path both ways)."""
     if a.name == b.name == "time_delay":
         return "a step or a faster reversal: a feedback delay changes the loop's damping (overshoot), a command delay only shifts the response"
     if a.name == b.name == "backlash":
         return "a reversal test read on the motor encoder and on a linear scale: with motor feedback the table lags, with scale feedback the loop chases the lost motion"
+    if {a.name, b.name} == {"squareness", "straightness"}:
+        return ("the same path placed elsewhere in the travel, or a straightness measurement over the whole travel "
+                "(ISO 230-1): a straightness's slope changes with where the path lies, a squareness's does not")
     if {a.name, b.name} == {"scale_error", "thermal_drift"}:
         return "the same move at another feed, or with a dwell: a drift grows with time, a scale error with position"
     stages = {a.stage, b.stage}
     if "geometry" in stages and len(stages) > 1:
+        if both_ways:
+            return "run the path again at a second feed: geometric errors keep their size, servo effects grow with the feed"
         return ("run the circle in the other direction and at a second feed: geometric errors keep their shape, "
                 "servo effects flip with the direction and grow with the feed")
     if stages == {"geometry"}:
@@ -1241,6 +1416,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
     where = locate(trace, problem.reference, np.where(scored[:, None], trace.actual - before - raw.mean(axis=0), 0.0))
+    both_ways = min(turning(problem.reference.position, problem.reference.velocity)) >= _BOTH_WAYS
     lost = _not_following(trace, before, scored)
     warnings += lost
     for round_ in range(0 if lost else max_effects):
@@ -1271,12 +1447,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
             say("nothing significant left: stopping")
             break
-        best = cands[0]
-        rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
-        ambiguity = None if rival is None else (
-            f"{best.fit.label}{_options(best.fit)} and {rival.fit.label}{_options(rival.fit)} explain the data "
-            f"almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f}); to separate them: "
-            f"{_separating_test(best.fit, rival.fit)}")
+        best, ambiguity = _choose(problem, cands, both_ways)
         try:
             _settle(problem, base, best, warnings)
         except _FIT_FAILURES as exc:
@@ -1292,6 +1463,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             break
         if ambiguity is not None:
             warnings.append(ambiguity)
+        if best.fit.name == "straightness" and best.fit.axis not in base.machine.travel:
+            warnings.append(f"{best.fit.label}: the machine gives no travel for axis {best.fit.axis} (travel_mm): the bow "
+                            "is fitted over the trace's own extent, its curvature the guideway's, its slope there "
+                            "not told apart from a squareness")
         steps.append(step)
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
     if identified and len(trace.axes) == 2:

@@ -395,11 +395,13 @@ _register(EffectKind(
 _register(EffectKind(
     "straightness", "geometry",
     (
-        _p("peak_um", 0.0, "µm", (-1e4, 1e4), (2.0, 15.0), doc="deviation at the middle of the span, perpendicular to the motion"),
-        _p("span_mm", 100.0, "mm", (1.0, 1e5), vary=False, doc="length over which the bow rises from 0 to peak_um and back"),
+        _p("peak_um", 0.0, "µm", (-1e4, 1e4), (2.0, 15.0),
+           doc="deviation perpendicular to the motion at the middle of the travel, off the line through its ends"),
+        _p("span_mm", 100.0, "mm", (1.0, 1e5), vary=False, doc="length of the axis's travel, over which the bow rises from 0 to peak_um and back"),
+        _p("start_mm", 0.0, "mm", (-1e5, 1e5), vary=False, doc="axis position (machine coordinates) where the travel starts"),
     ),
     options={"error_direction": "axes"},
-    doc="bow of one axis's motion perpendicular to it, centred on the path's origin",
+    doc="bow of one axis's guideway over its travel: peak·(1 − (2(q − start)/span − 1)²) at axis position q",
 ))
 _register(EffectKind(
     "time_delay", ("kind", {"command": "command", "feedback": "loop"}),

@@ -13,6 +13,7 @@ name (the section "File format" of docs/machines-and-files.md lists them all). T
     kv_A_s_per_m = 120.0
     ti_s = 0.01
     kp_per_s = 40.0
+    travel_mm = [0, 500]     # optional, without bodies: the axis's travel in machine coordinates
 
 and, optionally, the geometric half — bodies, joints and their errors, read
 by :func:`contoursim.multibody.chain_from_toml` (see that function for the
@@ -32,6 +33,7 @@ import numpy as np
 from . import _validate
 from .config import TomlFile
 from .exceptions import ConfigError, UnstableLoopError
+from .multibody import MAX_TRAVEL
 from .servo import AxisServo
 
 __all__ = ["CARTESIAN", "CONTROLLER_FIELDS", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
@@ -66,6 +68,10 @@ class Machine:
         Per axis, the controller settings (:data:`CONTROLLER_FIELDS`) that
         are not known exactly: the diagnosis's nominal refit may move them
         (it trusts the others, and doubts the plant).
+    axis_travel : mapping str -> (float, float), optional
+        Travel (min, max) of servo axes [mm] on a machine without a chain
+        (with one, the bodies give it). Its positions are the trace's: the
+        path's origin stays at the axes' zero.
     """
 
     axes: dict
@@ -75,6 +81,7 @@ class Machine:
     max_feed: float = None
     work_offset: dict = None
     uncertain: dict = None
+    axis_travel: dict = None
 
     def __post_init__(self):
         axes = dict(self.axes)
@@ -111,6 +118,17 @@ class Machine:
                 raise ValueError(f"uncertain: {bad[0]!r} of axis {a} is not a controller setting the axis has; "
                                  f"controller settings: {', '.join(CONTROLLER_FIELDS)}")
         object.__setattr__(self, "uncertain", MappingProxyType(uncertain))
+        travel = dict(self.axis_travel or {})
+        if travel and self.chain is not None:
+            raise ValueError("axis_travel is for a machine without geometry: with bodies, a body's travel gives its axis's")
+        for a, span in travel.items():
+            if a not in axes:
+                raise ValueError(f"axis_travel names axis {a!r}, which the machine does not have")
+            lo, hi = _validate.finite_array(f"travel of axis {a}", span, shape=(2,), limit=MAX_TRAVEL)
+            if not lo < hi:
+                raise ValueError(f"the travel of axis {a} must be [min, max] with min < max, got [{lo:g}, {hi:g}]")
+            travel[a] = (float(lo), float(hi))
+        object.__setattr__(self, "axis_travel", MappingProxyType(travel))
         object.__setattr__(self, "axes", MappingProxyType(axes))
         object.__setattr__(self, "servo_period", _validate.positive("servo_period", self.servo_period))
         if self.max_feed is not None:
@@ -128,9 +146,9 @@ class Machine:
 
     @property
     def travel(self):
-        """Travel (min, max) of each chain axis that has one [mm, rad]."""
+        """Travel (min, max) of each axis that has one [mm, rad]: the chain's bodies', else :attr:`axis_travel`."""
         if self.chain is None:
-            return {}
+            return dict(self.axis_travel)
         return {b.axis: b.travel for b in self.chain.bodies if b.axis is not None and b.travel is not None}
 
     def home(self):
@@ -138,7 +156,10 @@ class Machine:
 
         The work offset where given; else the middle of a linear axis's travel
         and 0 for a rotary axis (clipped into its travel), 0 without a travel.
+        Without a chain the path's origin is the axes' zero.
         """
+        if self.chain is None:
+            return np.zeros(len(self.axis_names))
         travel, rotary = self.travel, self.chain is not None and self.chain.rotary_axes
         home = []
         for i, axis in enumerate(self.axis_names):
@@ -182,6 +203,7 @@ class Machine:
             n = len(self.axes)
             if np.abs(p[:, n:]).max(initial=0.0) > 0:
                 raise ValueError(f"the path moves in {trajectory.dim} coordinates but the machine has only {n} axes")
+            self._check_travel(p[:, :n])
             return p[:, :n], v[:, :n], a[:, :n]
         home = self.home()
         linear = ~self.chain.rotary_axes
@@ -215,7 +237,9 @@ class Machine:
             if column.min() < lo - 1e-9 or column.max() > hi + 1e-9:
                 raise ValueError(
                     f"axis {axis} would move over {column.min():.6g} .. {column.max():.6g}, outside its travel "
-                    f"{lo:.6g} .. {hi:.6g} [mm or rad]: move the path with work_offset or make it smaller"
+                    f"{lo:.6g} .. {hi:.6g} [mm or rad]: "
+                    + ("move the path with work_offset or make it smaller" if self.chain is not None else
+                       "place the path inside it or make it smaller (without bodies the path's coordinates are the axes')")
                 )
 
     def tool_position(self, q, t, dim):
@@ -273,6 +297,8 @@ _SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| is| \(
 #: Servo periods a machine file may give [s]: servo loops from 1 MHz down to 1 Hz.
 SERVO_PERIOD_RANGE = (1e-6, 1.0)
 _SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes", "effect")
+#: Keys of an ``[axes.<name>]`` table besides the servo parameters.
+_AXIS_KEYS = ("uncertain", "travel_mm")
 
 
 def preset_names():
@@ -346,10 +372,12 @@ def load_machine(name_or_file, geometry=True, effects=False):
         raise toml.error(str(exc), str(exc).split()[0]) from None
     fields = AxisServo.__dataclass_fields__
     required = [key for key, name in SERVO_KEYS.items() if fields[name].default is MISSING]
-    servos, uncertain = {}, {}
+    servos, uncertain, travel = {}, {}, {}
     for axis in toml.table("axes"):
-        table = dict(toml.table("axes", axis, allowed=(*SERVO_KEYS, "uncertain"), required=required, renamed=_RENAMED))
+        table = dict(toml.table("axes", axis, allowed=(*SERVO_KEYS, *_AXIS_KEYS), required=required, renamed=_RENAMED))
         listed = table.pop("uncertain", [])
+        if "travel_mm" in table:
+            travel[axis] = _axis_travel(toml, axis, table.pop("travel_mm"), chain)
         controller = {key for key, name in SERVO_KEYS.items() if name in CONTROLLER_FIELDS}
         if not isinstance(listed, list) or any(key not in controller or key not in table for key in listed):
             raise toml.error(f"axis {axis}: uncertain must list controller keys given in [axes.{axis}] "
@@ -371,9 +399,23 @@ def load_machine(name_or_file, geometry=True, effects=False):
             raise toml.error(_file_names(exc), "servo_period_ms") from None
     try:
         return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
-                       max_feed=max_feed, work_offset=offset, uncertain=uncertain)
+                       max_feed=max_feed, work_offset=offset, uncertain=uncertain, axis_travel=travel if geometry else None)
     except (TypeError, ValueError) as exc:
         raise toml.error(str(exc), "axes") from None
+
+
+def _axis_travel(toml, axis, value, chain):
+    """The ``travel_mm = [min, max]`` of ``[axes.<axis>]`` [mm], checked against the file."""
+    if chain is not None:
+        raise toml.error(f"axis {axis}: a machine with bodies gives the travel on the axis's [[body]] (travel_mm), "
+                         "not in [axes]", "axes", axis, "travel_mm")
+    if not isinstance(value, list) or len(value) != 2 or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+        raise toml.error(f"axis {axis}: travel_mm must be [min, max] in mm, got {value!r}", "axes", axis, "travel_mm")
+    lo, hi = (float(v) for v in value)
+    if not (np.isfinite(lo) and np.isfinite(hi) and -MAX_TRAVEL <= lo < hi <= MAX_TRAVEL):
+        raise toml.error(f"axis {axis}: travel_mm must be [min, max] with min < max within ±{MAX_TRAVEL:g} mm, got {value!r}",
+                         "axes", axis, "travel_mm")
+    return lo, hi
 
 
 def _file_names(exc):

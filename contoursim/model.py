@@ -29,8 +29,9 @@ How each stage realises its effects (:data:`contoursim.effects.STAGES`):
                  (a, b) for a motion of a, the angle between +a and +b exceeds 90°
   scale_error    positioning error ``p1 += s·ppm·1e-6``: tool travel q·(1 + ppm·1e-6)
   cyclic_error   ``s·amplitude·sin(2π·q/period + phase)`` on the positioning error
-  straightness   ``side·(−peak·(2(q − q0)/span)²)`` on the error motion along
-                 error_direction; q0 the axis position at the path origin
+  straightness   ``side·peak·(1 − (2(q − start)/span − 1)²)`` on the error motion along
+                 error_direction: zero at both ends of the travel [start, start + span],
+                 peak in its middle, wherever the path lies
   thermal_drift  ``thermal[dir] += s·rate``, ``thermal_growth[dir] += s·growth`` from
                  ``reference_mm`` (with ``time_constant_s`` the body's first-order time
                  constant): the drift ``τ(t)·(rate + growth·(q − reference))``
@@ -209,15 +210,15 @@ class Model:
             return self.machine
         chain = self.machine.chain or cartesian_chain(tuple(self.machine.axes))
         bodies = list(chain.bodies)
-        home = dict(zip(self.machine.axis_names, self.machine.home()))
         for e in effects:
             try:
                 j = _linear_body(chain, e.axis[0])
                 side = 1.0 if j in chain.tool_chain else -1.0
-                bodies[j - 1] = _GEOMETRY[e.name](e, bodies[j - 1], side, chain, home)
+                bodies[j - 1] = _GEOMETRY[e.name](e, bodies[j - 1], side, chain)
             except ValueError as exc:
                 raise ValueError(f"{e.label}: {exc}") from None
-        return replace(self.machine, chain=replace(chain, bodies=tuple(bodies)))
+        # a machine without bodies keeps its coordinates: the Cartesian chain's origin at the axes' zero, travel aside
+        return replace(self.machine, chain=replace(chain, bodies=tuple(bodies)), axis_travel=None)
 
 
 def as_model(model_or_machine):
@@ -347,32 +348,33 @@ def _add_motion(body, component, poly=(), cyclic=()):
     return replace(body, motion=tuple(motion))
 
 
-def _squareness(e, body, side, chain, home):
+def _squareness(e, body, side, chain):
     towards = chain.bodies[_linear_body(chain, e.axis[1]) - 1].direction
     squareness = body.squareness.copy()
     squareness[towards] += e["angle_urad"] * _RAD_PER_URAD
     return replace(body, squareness=squareness)
 
 
-def _scale_error(e, body, side, chain, home):
+def _scale_error(e, body, side, chain):
     return _add_motion(body, body.direction, poly=(0.0, body.sign * e["ppm"] * 1e-6))
 
 
-def _cyclic_error(e, body, side, chain, home):
+def _cyclic_error(e, body, side, chain):
     term = Cyclic.from_amplitude(body.sign * e["amplitude_um"] * _MM_PER_UM, e["period_mm"], np.radians(e["phase_deg"]))
     return _add_motion(body, body.direction, cyclic=(term,))
 
 
-def _straightness(e, body, side, chain, home):
+def _straightness(e, body, side, chain):
     direction = "xyz".index(e.options["error_direction"])
     if direction == body.direction:
         raise ValueError(f"error_direction {e.options['error_direction']!r} is the axis's own direction of motion")
-    c = -side * e["peak_um"] * _MM_PER_UM * (2.0 / e["span_mm"]) ** 2  # side·(−peak·(2(q − q0)/span)²) = c·(q − q0)²
-    q0 = home[e.axis]
-    return _add_motion(body, direction, poly=(c * q0**2, -2.0 * c * q0, c))
+    peak = side * e["peak_um"] * _MM_PER_UM
+    middle = e["start_mm"] + e["span_mm"] / 2
+    c = -peak * (2.0 / e["span_mm"]) ** 2  # peak·(1 − (2(q − middle)/span)²) = peak + c·(q − middle)²
+    return _add_motion(body, direction, poly=(peak + c * middle**2, -2.0 * c * middle, c))
 
 
-def _thermal_drift(e, body, side, chain, home):
+def _thermal_drift(e, body, side, chain):
     tau = e["time_constant_s"]
     if body.drifts and body.thermal_time_constant != tau:
         raise ValueError(

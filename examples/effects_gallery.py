@@ -41,7 +41,8 @@ EFFECTS = (
     Effect("squareness", "xy", angle_urad=150.0),
     Effect("scale_error", "x", ppm=100.0),
     Effect("cyclic_error", "x", amplitude_um=2.0, period_mm=10.0),
-    Effect("straightness", "x", peak_um=8.0, span_mm=2 * RADIUS, error_direction="y"),
+    # a guideway as long as the circle is wide, to show the bow's shape (on a real travel it is mostly a slope)
+    Effect("straightness", "x", peak_um=8.0, span_mm=2 * RADIUS, start_mm=-RADIUS, error_direction="y"),
     Effect("thermal_drift", "x", rate_um_per_min=10.0),
     Effect("vibration", "y", freq_hz=40.0, damping_ratio=0.05, mass_ratio=0.3),
 )

@@ -53,3 +53,40 @@ def test_independent_truth_writes_a_contract_trace_and_a_data_sheet(independent_
     assert trace.axes == ("x", "y") and trace.dt == pytest.approx(case.notes["log_s"])
     assert case.truth["name"] == "backlash" and case.signal_um > 0
     assert all(servo.vff == case.notes["vff"] for servo in model.machine.axes.values())
+    assert model.machine.travel == {a: (0.0, independent_truth.TRAVEL_MM) for a in "xy"}  # the data sheet's travel
+
+
+def test_independent_straightness_is_the_guideways_over_its_travel(independent_truth):
+    """The independent generator's straightness of X in Y: zero at both ends of X's travel, the peak in its middle,
+    whatever Y; its squareness reads x as x − α·y."""
+    it = independent_truth
+    end = it.TRAVEL_MM
+    q = np.array([[0.0, 50.0], [end / 2, 350.0], [end, 120.0]])
+    bow = dict(name="straightness", axis="x", parameters=dict(peak_um=7.0, span_mm=end), options=dict(error_direction="y"))
+    np.testing.assert_allclose(1e3 * (it._geometry(q, np.zeros(3), bow) - q), [[0, 0], [0, 7.0], [0, 0]], atol=1e-9)
+    square = dict(name="squareness", axis="xy", parameters=dict(angle_urad=100.0), options={})
+    np.testing.assert_allclose(it._geometry(q, np.zeros(3), square)[:, 0] - q[:, 0], -100e-6 * q[:, 1], atol=1e-12)
+
+
+@pytest.mark.parametrize("effect, seed", [("squareness", 11), ("gain_mismatch", 14)])
+def test_the_diagnosis_tells_squareness_from_a_gain_mismatch_on_independent_circles_run_both_ways(independent_truth, tmp_path,
+                                                                                                    effect, seed):
+    """A ballbar's two runs (CCW, then CW) from the independent simulator, diagnosed with the data sheet: the oval
+    of a squareness keeps its orientation and a squareness is named; a gain mismatch's flips and it is named."""
+    import re
+
+    from contoursim.diagnosis import diagnose
+    from contoursim.model import load_model
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("rigid", effect, seed, tmp_path, path="circle_both")
+    result = diagnose(read_trace(case.csv), load_model(case.machine_file))
+    truth = case.truth
+    named = result.effects[0]
+    assert (named.name, named.axis) == (truth["name"], truth["axis"]), result.report()
+    size = named.kind.parameters[0].name
+    assert named[size] == pytest.approx(truth["parameters"][size], rel=0.02), result.report()
+    ballbar = next(w for w in result.where if "ballbar" in w)
+    keeps, flips = (float(x) for x in re.search(r"([\d.]+) µm keeps .*, ([\d.]+) µm flips", ballbar).groups())
+    assert (keeps > 10 * flips) if effect == "squareness" else (flips > 10 * keeps), ballbar
+    assert not [w for w in result.warnings if "one way only" in w], result.report()

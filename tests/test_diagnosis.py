@@ -21,7 +21,7 @@ from conftest import ROOT, ReaderGone
 
 from contoursim import paths
 from contoursim.cli import main
-from contoursim.diagnosis import diagnose, noise_level, synthetic_trace
+from contoursim.diagnosis import diagnose, noise_level, synthetic_trace, turning
 from contoursim.effects import Effect
 from contoursim.feed import plan, sample
 from contoursim.identify import identify_machine
@@ -143,6 +143,107 @@ def test_two_equivalent_explanations_are_reported_with_the_test_that_separates_t
     ambiguous = [w for w in result.warnings if "almost equally" in w]
     assert ambiguous and "scale_error.x" in ambiguous[0] and "thermal_drift.x" in ambiguous[0], result.report()
     assert "a drift grows with time, a scale error with position" in ambiguous[0]
+
+
+def both_ways():
+    """The ISO 230-4 circle run CCW, then CW (a ballbar test's two runs in one trace)."""
+    path = paths.join(paths.iso230_4_circle(10.0, direction="ccw"), paths.iso230_4_circle(10.0, direction="cw"))
+    return sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), DT)
+
+
+def test_turning_counts_the_share_of_the_path_run_each_way():
+    for reference, shares in ((circle("ccw"), (1.0, 0.0)), (circle("cw"), (0.0, 1.0)), (both_ways(), (0.5, 0.5))):
+        assert turning(reference.position, reference.velocity) == pytest.approx(shares, abs=1e-3)
+    line = np.column_stack([np.linspace(0.0, 1.0, 50), np.zeros(50)])
+    assert turning(line, np.gradient(line, axis=0)) == (0.0, 0.0)  # no turn either way
+
+
+@pytest.mark.parametrize("hidden, servo", [(Effect("squareness", "xy", angle_urad=150.0), False),
+                                           (Effect("gain_mismatch", "y", kp_ratio=0.99), True)],
+                         ids=["squareness", "gain mismatch"])
+def test_a_circle_run_both_ways_tells_squareness_from_a_servo_mismatch(machine, hidden, servo):
+    """Ballbar reasoning: both draw an oval at 45° (the Y gain 1 % low, as large as 690 µrad of squareness at this
+    feed); the squareness's keeps its orientation CW and CCW, the servo mismatch's flips. Run both ways, the right
+    kind is named and no ambiguity is left; run one way, the diagnosis says it cannot tell which."""
+    result = run_blind(machine, (hidden,), both_ways(), seed=7)
+    named = result.effects[0]
+    if servo:  # on a circle a command delay of Y is a gain mismatch's first-order twin: either is the servo's
+        assert (named.name, named.axis) in {("gain_mismatch", "y"), ("time_delay", "y")}, result.report()
+        assert "squareness" not in {e.name for e in result.effects}, result.report()
+    else:
+        assert (named.name, named.axis) == ("squareness", "xy") and named["angle_urad"] == pytest.approx(150.0, rel=0.05)
+    assert not [w for w in result.warnings if "oval at 45°" in w], result.report()
+    one_way = run_blind(machine, (hidden,), circle("ccw"), seed=7)
+    said = [w for w in one_way.warnings if "oval at 45°" in w and "one way only" in w]
+    assert said and "squareness.xy" in said[0] and "run the circle in the other direction" in said[0], one_way.report()
+
+
+def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
+    """The oval's 2θ term per direction: a squareness's keeps its orientation, at 135° and of size αR/2 (closed
+    form); a Y gain 1 % low gives one as large that flips between CCW (at 135°) and CW (at 45°)."""
+    import re
+
+    from contoursim.diagnosis import locate
+    from contoursim.simulation import measured_reference
+
+    reference = both_ways()
+    nominal = synthetic_trace(Model(machine), reference, mismatch=0.0, noise_um=0.0, quantum_um=0.0, every=2)
+    read = {}
+    for hidden in (Effect("squareness", "xy", angle_urad=150.0), Effect("gain_mismatch", "y", kp_ratio=0.99)):
+        trace = synthetic_trace(Model(machine, (hidden,)), reference, mismatch=0.0, noise_um=0.0, quantum_um=0.0, every=2)
+        line = next(w for w in locate(trace, measured_reference(trace, DT), trace.actual - nominal.actual) if "ballbar" in w)
+        numbers = re.search(r"([\d.]+) µm at (\d+)° CCW, ([\d.]+) µm at (\d+)° CW: ([\d.]+) µm keeps .*, ([\d.]+) µm flips", line)
+        read[hidden.name] = [float(g) for g in numbers.groups()]
+    ccw, ccw_angle, cw, cw_angle, keeps, flips = read["squareness"]
+    assert ccw == pytest.approx(150e-6 * 10.0 / 2 * 1e3, rel=0.02) and cw == pytest.approx(ccw, rel=0.02)
+    assert abs(ccw_angle - 135) <= 3 and abs(cw_angle - 135) <= 3 and flips < 0.1 * keeps
+    ccw, ccw_angle, cw, cw_angle, keeps, flips = read["gain_mismatch"]
+    assert abs(ccw_angle - 135) <= 5 and abs(cw_angle - 45) <= 5 and keeps < 0.2 * flips
+
+
+def test_twins_the_trace_cannot_tell_apart_are_said_and_the_one_of_typical_size_is_named():
+    """Candidates closing 90 % and 88 % of a gap: a straightness's slope and a squareness's shear are twins on any
+    trace, a squareness and a gain mismatch on one run one way only; of twins, one of typical size is named."""
+    from types import SimpleNamespace
+
+    from contoursim.diagnosis import _Candidate, _choose
+
+    problem = SimpleNamespace(base_residual=np.ones(100))  # the gap: a cost of 100
+
+    def fitted(effect, cost, delta_bic):
+        return _Candidate(effect, (), [], cost=cost, fit=effect, delta_bic=delta_bic)
+
+    square = Effect("squareness", "xy", angle_urad=-198.0)
+    bow = Effect("straightness", "y", peak_um=-37.7, span_mm=400.0, error_direction="x")  # 2.5 times the typical 15 µm
+    gain = Effect("gain_mismatch", "x", kp_ratio=1.04)
+    named, said = _choose(problem, [fitted(bow, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=True)
+    assert named.fit is square and "the first is named, its size typical" in said and "placed elsewhere in the travel" in said
+    named, said = _choose(problem, [fitted(bow.with_values(peak_um=-10.0), 10.0, 500.0), fitted(square, 12.0, 480.0)], True)
+    assert named.fit.name == "straightness" and "the first is named" not in said  # both typical: the better fit
+    named, said = _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=False)
+    assert named.fit is square and "one way only" in said and "run the circle in the other direction" in said
+    assert _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=True) == (named, None)
+    assert _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 40.0, 400.0)], both_ways=False)[1] is None
+
+
+def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine, tmp_path):
+    """The guideway of X bows 10 µm in Y over its travel of 0 .. 300 mm; the test circle lies at 40 .. 60 mm of it,
+    where the bow is mostly a slope (a squareness would fit that slope, not the curvature with it)."""
+    placed = replace(machine, axis_travel={"x": (-50.0, 250.0), "y": (-150.0, 150.0)})
+    hidden = Effect("straightness", "x", peak_um=10.0, span_mm=300.0, start_mm=-50.0, error_direction="y")
+    path = paths.iso230_4_circle(10.0, direction="ccw")
+    reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), DT)
+    trace = synthetic_trace(Model(placed, (hidden,)), reference, mismatch=0.03, noise_um=0.05, quantum_um=0.01,
+                            every=2, seed=3)
+    result = diagnose(trace, Model(placed))
+    named = result.effects[0]
+    assert (named.name, named.axis, named.options["error_direction"]) == ("straightness", "x", "y"), result.report()
+    assert (named["start_mm"], named["span_mm"]) == (-50.0, 300.0)
+    assert named["peak_um"] == pytest.approx(10.0, rel=0.1), result.report()
+    assert not [w for w in result.warnings if "no travel" in w]
+    (tmp_path / "corrected.toml").write_text(result.corrected_model())  # travel and bow carried into the machine file
+    corrected = load_model(tmp_path / "corrected.toml")
+    assert corrected.machine.travel == placed.travel and corrected.effects == (named,)
 
 
 def test_noise_level_from_the_second_differences():

@@ -136,19 +136,45 @@ def test_geometric_effects_land_in_the_chain_of_a_machine_with_bodies():
     machine = load_machine("vertical_mill_3axis")
     q = machine.home() + np.array([[30.0, -20.0, -10.0], [-40.0, 25.0, -60.0]])
     t = np.array([0.0, 60.0])
+    start, end = machine.travel["x"]
     base = machine.tool_position(q, t, 3)
     cases = [
         (Effect("scale_error", "x", ppm=100.0), lambda d: 100e-6 * q[:, 0], 0),  # from the axis's zero
         (Effect("thermal_drift", "y", rate_um_per_min=6.0), lambda d: 6e-3 / 60 * t, 1),
         (Effect("thermal_drift", "x", rate_um_per_min=2.0, growth_ppm_per_min=3.0, reference_mm=100.0),
          lambda d: (2e-3 + 3e-6 * (q[:, 0] - 100.0)) / 60 * t, 0),  # from the axis position reference_mm
-        (Effect("straightness", "x", peak_um=5.0, span_mm=100.0, error_direction="z"),
-         lambda d: -5e-3 * (2 * d[:, 0] / 100.0) ** 2, 2),
+        (Effect("straightness", "x", peak_um=5.0, span_mm=end - start, start_mm=start, error_direction="z"),
+         lambda d: 5e-3 * (1.0 - (2 * (q[:, 0] - start) / (end - start) - 1.0) ** 2), 2),  # over the travel of X
     ]
     for effect, shift, column in cases:
         moved = Model(machine, (effect,)).geometry.tool_position(q, t, 3)
         d = q - machine.home()  # positions from the path origin
         np.testing.assert_allclose(moved[:, column] - base[:, column], shift(d), atol=2e-7)  # first order in the errors
+
+
+def test_a_machine_without_bodies_takes_each_axis_travel_from_its_axes_table(tmp_path):
+    """``travel_mm`` in ``[axes.x]``: the travel a straightness bows over; commands leaving it are refused; the
+    trace's coordinates stay the axes' (the path's origin at their zero)."""
+    servo = "mass_kg = 300\nforce_constant_N_per_A = 942\nkv_A_s_per_m = 80\nti_s = 0.016\nkp_per_s = 40\n"
+    text = f"servo_period_ms = 0.5\n[axes.x]\n{servo}travel_mm = [0, 400]\n[axes.y]\n{servo}"
+    (tmp_path / "m.toml").write_text(text)
+    machine = load_machine(tmp_path / "m.toml")
+    assert machine.travel == {"x": (0.0, 400.0)} and machine.home().tolist() == [0.0, 0.0]
+    q = np.array([[0.0, 5.0], [200.0, 5.0], [400.0, 5.0]])
+    effect = Effect("straightness", "x", peak_um=6.0, span_mm=400.0, error_direction="y")
+    dy = Model(machine, (effect,)).geometry.tool_position(q, np.zeros(3), 2)[:, 1] - q[:, 1]
+    np.testing.assert_allclose(1e3 * dy, [0.0, 6.0, 0.0], atol=1e-9)
+    line = paths.line((390.0, 0.0), (410.0, 0.0))
+    with pytest.raises(ValueError, match=r"axis x would move over 390 \.\. 410, outside its travel 0 \.\. 400 .*: place the path inside"):
+        simulate(machine, sample(line, plan(line, feed=50.0, accel=2000.0), 5e-4))
+    (tmp_path / "bad.toml").write_text(text.replace("[0, 400]", "[400, 0]"))
+    with pytest.raises(ConfigError, match=r"bad.toml, line 8: axis x: travel_mm must be \[min, max\] with min < max"):
+        load_machine(tmp_path / "bad.toml")
+    bodies = (tmp_path / "bodies.toml")
+    bodies.write_text(GROWING_MILL.replace('axis = "x"', 'axis = "x"\ntravel_mm = [0, 300]', 1)
+                      .replace("[axes.x]", "[axes.x]\ntravel_mm = [0, 300]", 1))
+    with pytest.raises(ConfigError, match=r"axis x: a machine with bodies gives the travel on the axis's \[\[body\]\]"):
+        load_model(bodies)
 
 
 GROWING_MILL = """

@@ -14,6 +14,8 @@ from functools import lru_cache
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from contoursim import paths
 from contoursim.effects import Effect
@@ -105,14 +107,39 @@ def test_cyclic_error_is_a_ripple_at_the_lead():
 
 
 def test_straightness_is_a_bow():
-    peak, span = 5.0, 40.0  # the line runs over the whole span, centred on the origin
-    effect = Effect("straightness", "x", peak_um=peak, span_mm=span, error_direction="y")
+    peak, span = 5.0, 40.0  # the line runs over the whole travel, -20 .. 20 mm
+    effect = Effect("straightness", "x", peak_um=peak, span_mm=span, start_mm=-20.0, error_direction="y")
     dy = 1e3 * _deviation(effect, ("line",))[:, 1]
     x = _nominal(("line",))[:, 0]
     coeffs = np.polyfit(x, dy, 2)
     assert np.abs(np.polyval(coeffs, x) - dy).max() < 1e-9  # a parabola ...
     chord = (np.polyval(coeffs, 20.0) + np.polyval(coeffs, -20.0)) / 2
     assert np.polyval(coeffs, 0.0) - chord == pytest.approx(peak, rel=1e-6)  # ... whose middle is peak off the chord
+    assert chord == pytest.approx(0.0, abs=1e-9)  # and whose ends, the travel's, are on the line
+
+
+@given(start=st.floats(-500.0, 500.0), span=st.floats(10.0, 2000.0), peak=st.floats(-15.0, 15.0),
+       where=st.floats(0.0, 1.0), other=st.floats(-300.0, 300.0))
+@settings(max_examples=60, deadline=None)
+def test_straightness_is_zero_at_the_travel_ends_and_peak_in_its_middle_wherever_the_path_lies(start, span, peak, where, other):
+    """The bow is the guideway's: a function of the axis's own position over its travel, not of the path."""
+    effect = Effect("straightness", "x", peak_um=peak, span_mm=span, start_mm=start, error_direction="y")
+    geometry = Model(MACHINE, (effect,)).geometry
+    q = np.array([[start, other], [start + span, other], [start + span / 2, other], [start + where * span, -other]])
+    dy = 1e3 * (geometry.tool_position(q, np.zeros(4), 2) - q)[:, 1]
+    bow = peak * (1.0 - (2.0 * where - 1.0) ** 2)  # closed form at a fraction `where` of the travel
+    np.testing.assert_allclose(dy, [0.0, 0.0, peak, bow], atol=1e-9 * (1.0 + abs(peak)) + 1e-12 * (abs(start) + span) ** 2)
+
+
+def test_straightness_on_a_line_away_from_the_middle_of_the_travel_slopes():
+    """The 40 mm line lies at -20 .. 20 mm of a travel -150 .. 50 mm: the deviation follows the travel's bow there
+    (its curvature and its slope), not a bow centred on the line."""
+    peak, start, span = 8.0, -150.0, 200.0
+    effect = Effect("straightness", "x", peak_um=peak, span_mm=span, start_mm=start, error_direction="y")
+    dy = 1e3 * _deviation(effect, ("line",))[:, 1]
+    x = _nominal(("line",))[:, 0]
+    np.testing.assert_allclose(dy, peak * (1.0 - (2.0 * (x - start) / span - 1.0) ** 2), atol=1e-9)
+    assert np.polyfit(x, dy, 2)[1] == pytest.approx(-8.0 * peak * (0.0 - (start + span / 2)) / span**2, rel=1e-6)  # slope at x = 0
 
 
 @pytest.mark.parametrize("tau", [0.0, 1.0])
