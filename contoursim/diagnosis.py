@@ -43,7 +43,10 @@ The workflow (:func:`diagnose`):
    from the residual's second differences) and ``n_eff`` is the number of
    samples over the residual's integrated autocorrelation time (correlated
    model error counts for less than white noise). The best is accepted when
-   ``ΔBIC > SIGNIFICANT`` (very strong evidence on the Kass–Raftery scale);
+   ``ΔBIC > SIGNIFICANT`` (very strong evidence on the Kass–Raftery scale)
+   and it closes at least :data:`GAP_SHARE` of the residual's power above
+   the noise floor (where unmodelled dynamics dominate the residual, a
+   catalogue effect bent to them is significant yet closes a sliver);
    the search repeats for a second and a third effect and stops when
    nothing is significant or the residual is at the noise floor
    (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
@@ -66,7 +69,7 @@ from .plotting import fit_circle_center
 from .simulation import measured_force, measured_reference, simulate_batch
 
 __all__ = [
-    "DAMPING_SPREAD", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
+    "DAMPING_SPREAD", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
     "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
@@ -82,6 +85,9 @@ STRUCTURE_SHARE = 0.5
 #: The residual is at the noise floor when its RMS is within this factor of the noise estimated from the
 #: trace (the estimate itself is good to a few % on quantised, non-Gaussian noise): nothing more is named.
 NOISE_FLOOR = 1.1
+#: An effect is named only when it closes at least this share of the residual's power above the noise floor
+#: (RMS² − floor²): a significant fit that closes a sliver of a gap made by unmodelled dynamics is not the missing effect.
+GAP_SHARE = 0.25
 #: How well a nominal servo parameter is known (1σ, relative): the prior of the nominal refit (for the moving
 #: mass of a given model, and for every servo parameter of an identified one).
 NOMINAL_SPREAD = 0.05
@@ -1459,6 +1465,14 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             warnings.append(f"{best.fit.label}: not named, " + (
                 f"its fit does not lower the residual ({steps[-1].rms_um:.4g} -> {step.rms_um:.4g} µm RMS)"
                 if np.isfinite(step.rms_um) else "the model with it in place does not follow the trace (its simulation diverged)"))
+            problem.set_base(base)
+            break
+        floor = float(np.linalg.norm(noise)) * 1e3
+        share = (steps[-1].rms_um**2 - step.rms_um**2) / max(steps[-1].rms_um**2 - floor**2, 1e-300)
+        if share < GAP_SHARE:  # significant, but a sliver of the gap: model error the effect bends to, not the effect
+            warnings.append(f"{best.fit.label}: not named, it closes {share:.0%} of the residual above the noise floor "
+                            f"({steps[-1].rms_um:.4g} -> {step.rms_um:.4g} µm RMS, floor {floor:.3g} µm; named from "
+                            f"{GAP_SHARE:.0%})")
             problem.set_base(base)
             break
         if ambiguity is not None:
