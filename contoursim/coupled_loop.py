@@ -13,8 +13,11 @@ axis loop.
 """
 
 import dataclasses
+import hashlib
 import math
+import sys
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -212,9 +215,21 @@ class _Loop:
 
 @lru_cache(maxsize=4096)
 def _stored_margins(rows, shape, kp, ki, kd, dt, normals, k):
-    """:func:`coupled_margins` of rows and normals given as bytes: one analysis per loop and frame in a process."""
-    rows = np.frombuffer(rows).reshape(shape)
-    return coupled_margins(rows, kp, ki, kd, dt, np.frombuffer(normals).reshape(k, -1))
+    """:func:`coupled_margins` of rows and normals given as bytes: analysed once per loop and frame, and stored on disk
+    like an axis loop's margins (:func:`contoursim.servo._stored`, keyed by the inputs and the code that analyses)."""
+    from .servo import _stored
+
+    key = hashlib.sha256(repr((rows, shape, kp, ki, kd, dt, normals, k, _code())).encode()).hexdigest()
+    return _stored("coupled_margins", key, lambda: coupled_margins(
+        np.frombuffer(rows).reshape(shape), kp, ki, kd, dt, np.frombuffer(normals).reshape(k, -1)))
+
+
+@lru_cache(maxsize=1)
+def _code():
+    """Digest of the modules a coupled loop's analysis runs: this one, the kernel's loop matrices, the servo's margins."""
+    from . import servo
+
+    return hashlib.sha256(b"".join(Path(m.__file__).read_bytes() for m in (sys.modules[__name__], kernel, servo))).hexdigest()
 
 
 def coupled_margins(rows, kp, ki, kd, dt, normals):

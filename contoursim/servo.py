@@ -861,23 +861,32 @@ def _analysis_key(servo, dt):
 
 @lru_cache(maxsize=1024)
 def _margins(servo, dt):
-    """:func:`margins` for ``dt`` [s] (0: continuous), analysed once per (servo, dt) and stored (:func:`_cache_dir`).
+    """:func:`margins` for ``dt`` [s] (0: continuous), analysed once per (servo, dt) and stored (:func:`_stored`).
 
     A stored analysis is read back only under its key (:func:`_analysis_key`):
     other parameters, another version of this module or of python-control
-    analyse anew. A folder that cannot be written stores nothing.
+    analyse anew.
     """
-    file = _cache_dir() / "margins" / f"{_analysis_key(servo, dt)}.json"
+    return _stored("margins", _analysis_key(servo, dt), lambda: _analysed(servo, dt))
+
+
+def _stored(kind, key, analyse):
+    """The JSON result of `analyse()` stored as `kind`/`key` in :func:`_cache_dir`: read back if there, else made and stored.
+
+    A folder that cannot be written stores nothing; a file is complete or
+    absent when processes analyse at once.
+    """
+    file = _cache_dir() / kind / f"{key}.json"
     try:
         return json.loads(file.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         pass
-    result = _analysed(servo, dt)
+    result = analyse()
     try:
         file.parent.mkdir(parents=True, exist_ok=True)
         partial = file.with_name(f"{file.stem}.{os.getpid()}.tmp")
         partial.write_text(json.dumps(result), encoding="utf-8")
-        os.replace(partial, file)  # complete or absent, when processes analyse at once
+        os.replace(partial, file)
     except OSError:
         pass
     return result

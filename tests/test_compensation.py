@@ -374,3 +374,25 @@ def test_batch_runs_cross_coupled_variants_each_equal_to_its_single_run():
         simulate_batch([machine], trajectory, strategies=[cp.CrossCoupled("arc", kp=1e5)])
     with pytest.raises(ValueError, match="one sequence per model: 2 models, 4 sequences"):
         simulate_batch([machine] * 2, trajectory, strategies=per_variant)
+
+
+def test_the_coupled_loop_analyses_are_stored_and_read_back(tmp_path, monkeypatch):
+    """margins_along's per-frame analyses go to the cache folder as the axis loops' do, and a later call reads them back."""
+    import json
+
+    from contoursim import coupled_loop
+
+    monkeypatch.setenv("CONTOURSIM_CACHE_DIR", str(tmp_path))
+    coupled_loop._stored_margins.cache_clear()  # analysed here, not remembered from another test
+    servos = [AxisServo(kp=40.0, **AXIS), AxisServo(kp=40.0, **{**AXIS, "kv": AXIS["kv"] * 1.3})]
+    rows = [kernel.pack(s, DT) for s in servos]
+    path = sample(paths.iso230_4_circle(10.0), plan(paths.iso230_4_circle(10.0), feed=25.0, accel=500.0), DT).position
+    first = coupled_loop.margins_along(rows, 50.0, 600.0, 0.0, DT, path)
+    stored = sorted((tmp_path / "coupled_margins").glob("*.json"))
+    assert len(stored) == first["frames"] > 1
+    coupled_loop._stored_margins.cache_clear()
+    assert coupled_loop.margins_along(rows, 50.0, 600.0, 0.0, DT, path) == first
+    for file in stored:  # what is on disk is what a later call returns: read back, not analysed again
+        file.write_text(json.dumps({**json.loads(file.read_text()), "phase_margin": 12.5}))
+    coupled_loop._stored_margins.cache_clear()
+    assert coupled_loop.margins_along(rows, 50.0, 600.0, 0.0, DT, path)["phase_margin"] == 12.5
