@@ -92,10 +92,17 @@ def _loop_rows(rows):
 
 @lru_cache(maxsize=256)
 def _designed_kp(rows, shape, position_gain, dt, kd):
-    """The bisection of :func:`designed_gains` for packed rows given as bytes: once per set of axes in a process."""
+    """The bisection of :func:`designed_gains` for packed rows given as bytes: once per set of axes, stored on disk."""
+    from .servo import _stored
+
+    key = hashlib.sha256(repr((rows, shape, position_gain, dt, kd, _code())).encode()).hexdigest()
+    return _stored("coupling_gains", key, lambda: _bisected_kp(np.frombuffer(rows).reshape(shape), position_gain, dt, kd))
+
+
+def _bisected_kp(rows, position_gain, dt, kd):
+    """The coupling's kp [1/s] that damps the coupled loop at :data:`DESIGN_DAMPING_RATIO` on its worst line (bisection)."""
     from .servo import _damping_ratio
 
-    rows = np.frombuffer(rows).reshape(shape)
     directions = _directions(len(rows))
 
     def damping(kp):
