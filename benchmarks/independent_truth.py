@@ -31,11 +31,12 @@ sampled at the row's time plus a jitter of up to ±2 % of the servo period
 instrument with white noise (0.05–0.3 µm RMS) and a 0.05 µm resolution.
 The data sheet gives the controller exactly (kp, kv, ti, vff, servo
 period, and the drive's settings: velocity from encoder differences, its
-filter's time constant as a cut-off frequency, the computation delay), the
-plant (total mass, force constant, damping) each off by up to ±3 % and
-each axis's travel (0–400 mm, the trace's coordinates); it knows nothing
-of the current loop, the encoder resolution, the screw's compliance or the
-motor's share of the mass.
+filter's time constant as a cut-off frequency, the computation delay, the
+current loop's bandwidth as drives quote it, to 10 Hz), the plant (total
+mass, force constant, damping) each off by up to ±3 % and each axis's
+travel (0–400 mm, the trace's coordinates); it knows nothing of the
+encoder resolution, the screw's compliance or the motor's share of the
+mass.
 
 The hidden effects, each as physics rather than as contoursim models them:
 ``backlash`` (a dead zone in the screw coupling, position loop on the motor
@@ -508,8 +509,8 @@ def _write_csv(file, t, reference, actual, axes, comment):
 
 
 def _write_data_sheet(file, machine, period, rng, name):
-    """The machine as its data sheet gives it: controller and drive settings exact, total mass, force constant and
-    damping within ±3 %, each axis's travel."""
+    """The machine as its data sheet gives it: controller and drive settings exact (the current loop's bandwidth to
+    10 Hz), total mass, force constant and damping within ±3 %, each axis's travel."""
     off = lambda: rng.uniform(0.97, 1.03)  # noqa: E731
     lines = [f'name = "{name}"', f"servo_period_ms = {1e3 * period:.6g}", ""]
     for a, axis in machine.items():
@@ -517,6 +518,7 @@ def _write_data_sheet(file, machine, period, rng, name):
                   f"kv_A_s_per_m = {axis['kv']:.10g}", f"ti_s = {axis['ti']:.10g}", f"kp_per_s = {axis['kp']:.10g}",
                   f"damping_N_s_per_m = {axis['damping'] * off():.6g}", f"vff = {axis['vff']:.6g}",
                   'velocity_feedback = "difference"', f"computation_delay_periods = {axis['computation_delay']}",
+                  f"current_bandwidth_hz = {round(1.0 / (2 * np.pi * axis['tau_i']), -1):g}",
                   f"travel_mm = [0, {TRAVEL_MM:g}]"]
         if axis["tau_v"] > 0:  # the drive's filter time constant, as the cut-off frequency it is quoted by
             lines.append(f"velocity_filter_hz = {1.0 / (2 * np.pi * axis['tau_v']):.10g}")

@@ -33,7 +33,8 @@ so `mode_freq_hz` and `mode_damping_ratio` are those of the tool-side mass
 on its spring with the carriage held still, and `mode_mass_ratio` is
 ``r = m2/m``; without a mode ``d ≡ 0`` and ``m1 = m``. With electrical
 dynamics ``L·di/dt = u - R·i - kf·v`` as in :mod:`contoursim.servo`;
-without, ``i`` holds the current command of the period.
+with `current_bandwidth_hz` the lag ``di/dt = ω_c·(u - i)`` on the current
+command ``u``; without either, ``i`` holds the current command of the period.
 
 Step k of one axis, from the state sampled at ``t_k`` (every controller
 output is held over ``[t_k, t_k+1)``):
@@ -128,7 +129,8 @@ _MODE = 61  # 1.0 when the axis has a structural mode
 _VDIFF = 62  # 1.0 when the velocity loop closes on the encoder difference (AxisServo.velocity_feedback)
 _VTAPS, _VGAIN, _VPOLE = 63, 64, 65  # its taps n, 1/(n·dt) [1/s] and low-pass pole (0: none)
 _CDELAY = 66  # computation delay [servo periods]
-NPAR = 67  #: length of one axis's parameter row from :func:`pack`
+_LAGGED = 67  # 1.0 when the current lags its command (AxisServo.current_bandwidth_hz): the plant's row 4 steps it
+NPAR = 68  #: length of one axis's parameter row from :func:`pack`
 
 # Per-axis state ----------------------------------------------------------------------------
 _ZV, _ZC = 5, 6  # velocity / current controller integrators [mm], [A·s]
@@ -702,7 +704,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
             else:
                 u = i_cmd
             # plant: Ad [x, v, d, ḋ, i] + Bu u + BF F, skipping the rows that are zero by construction
-            # (a rigid axis has no d, ḋ; without electrical dynamics i is the held command u)
+            # (a rigid axis has no d, ḋ; without electrical dynamics or a lag i is the held command u)
             # (rows as np.int64: one compiled _plant_row, not one per literal row number)
             friction = par[a, _FRICTION] != 0.0
             force = (par[a, _F0] - par[a, _FV] * v if friction else 0.0) + (external[k, a] if pushed else 0.0)
@@ -717,7 +719,8 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
             if par[a, _MODE] != 0.0:
                 state[a, 2] = _plant_row(par, a, np.int64(2), x, v, d, w, i, u, force)
                 state[a, 3] = _plant_row(par, a, np.int64(3), x, v, d, w, i, u, force)
-            state[a, 4] = _plant_row(par, a, np.int64(4), x, v, d, w, i, u, force) if electrical else u
+            stepped = electrical or par[a, _LAGGED] != 0.0
+            state[a, 4] = _plant_row(par, a, np.int64(4), x, v, d, w, i, u, force) if stepped else u
         if k % _DIVERGENCE_CHECK == 0 or k == n_steps - 1:
             for a in range(n_axes):
                 if status[a, _DIVERGED] < 0 and not math.isfinite(state[a, 0] + state[a, 1] + state[a, 4]):
@@ -798,7 +801,7 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
             has[a, _ANY_DELAY] |= p[a, _DELAY_N, l] != 0.0 or p[a, _DELAY_F, l] != 0.0
             has[a, _ANY_NOISE] |= p[a, _NOISE, l] > 0.0
             has[a, _ANY_STRIBECK] |= p[a, _FRICTION, l] != 0.0 and p[a, _FS, l] != 0.0
-            has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, _MODE, l] != 0.0 or p[a, _ELEC, l] != 0.0
+            has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, _MODE, l] != 0.0 or p[a, _ELEC, l] != 0.0 or p[a, _LAGGED, l] != 0.0
             has[a, _ANY_DIFFERENCE] |= p[a, _VDIFF, l] != 0.0
             for q in (_AD + 2, _AD + 3, _AD + 4, _AD + _NS + 2, _AD + _NS + 3, _AD + _NS + 4):
                 # x and v do not depend on d, ḋ, i (pack's +0.0; see _rigid_row)
@@ -966,7 +969,8 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
             mode = p[a, _MODE, l] != 0.0
             s[a, _LD, l] = _lane_row(p, a, l, 2, x, v, d, w, i, u, force) if mode else d
             s[a, _LW, l] = _lane_row(p, a, l, 3, x, v, d, w, i, u, force) if mode else w
-            s[a, _LI, l] = _lane_row(p, a, l, 4, x, v, d, w, i, u, force) if electrical else u
+            stepped = electrical or p[a, _LAGGED, l] != 0.0
+            s[a, _LI, l] = _lane_row(p, a, l, 4, x, v, d, w, i, u, force) if stepped else u
         table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])  # the next step's play and encoder
         s[a, _LTABLE, l] = table
         s[a, _LXFB, l] = table if p[a, _SCALE, l] != 0.0 else x_next
@@ -1022,7 +1026,8 @@ def _continuous_plant(servo, effects):
         m2 = servo.mass * effects.mode_mass_ratio
         wn = 2.0 * np.pi * effects.mode_freq_hz
         k, c = wn * wn, 2.0 * effects.mode_damping_ratio * wn  # spring and damper per tool-side mass
-    states = [0, 1] + ([2, 3] if mode else []) + ([4] if servo.electrical else [])
+    lagged = servo.current_bandwidth_hz is not None
+    states = [0, 1] + ([2, 3] if mode else []) + ([4] if servo.electrical or lagged else [])
     full_A, full_B = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
     per_amp, damping, per_newton = 1000.0 * servo.force_constant / m1, servo.damping / m1, 1000.0 / m1
     carriage = np.zeros(_NS)  # dv/dt per state, without the current (an input without electrical dynamics)
@@ -1038,12 +1043,16 @@ def _continuous_plant(servo, effects):
         full_A[3, 2] -= k
         full_A[3, 3] -= c
         full_B[3, 1] = -per_newton
-    if servo.electrical:
-        L = servo.inductance
+    if servo.electrical or lagged:
         full_A[1, 4] = per_amp
         full_A[3, 4] = -per_amp if mode else 0.0
+    if servo.electrical:
+        L = servo.inductance
         full_A[4, 1], full_A[4, 4] = -servo.emf_mm / L, -servo.resistance / L
         full_B[4, 0] = 1.0 / L
+    elif lagged:
+        w = 2.0 * np.pi * servo.current_bandwidth_hz
+        full_A[4, 4], full_B[4, 0] = -w, w
     else:
         full_B[1, 0] = per_amp
         full_B[3, 0] = -per_amp if mode else 0.0
@@ -1110,7 +1119,7 @@ def pack(servo, dt, effects=LoopEffects()):
     Ad, Bd = zoh(A, B, dt)
     full_Ad, full_Bd = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
     full_Ad[np.ix_(states, states)], full_Bd[states] = Ad, Bd
-    if not servo.electrical:
+    if 4 not in states:
         full_Bd[4, 0] = 1.0  # ideal current loop: the current state holds the command of the period
     row[_AD : _AD + _NS * _NS] = full_Ad.ravel()
     row[_BU : _BU + _NS] = full_Bd[:, 0]
@@ -1136,6 +1145,7 @@ def pack(servo, dt, effects=LoopEffects()):
     row[_VTAPS], row[_VGAIN] = servo.velocity_taps, 1.0 / (servo.velocity_taps * dt)
     row[_VPOLE] = 0.0 if servo.velocity_filter_hz is None else math.exp(-2.0 * math.pi * servo.velocity_filter_hz * dt)
     row[_CDELAY] = servo.computation_delay
+    row[_LAGGED] = float(servo.current_bandwidth_hz is not None)
     return row
 
 

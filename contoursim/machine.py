@@ -281,6 +281,7 @@ SERVO_KEYS = MappingProxyType({
     "resistance_ohm": "resistance",
     "kc_V_per_A": "kc",
     "ti_current_s": "ti_current",
+    "current_bandwidth_hz": "current_bandwidth_hz",
     "velocity_feedback": "velocity_feedback",
     "velocity_taps": "velocity_taps",
     "velocity_filter_hz": "velocity_filter_hz",
@@ -289,7 +290,7 @@ SERVO_KEYS = MappingProxyType({
 #: The controller's settings among the servo parameters (the rest is the plant): what ``uncertain`` may list. The
 #: drive's structure (velocity_feedback, velocity_taps, computation_delay: names and whole numbers) is the controller
 #: too, trusted always: a refit cannot step it.
-CONTROLLER_FIELDS = ("kp", "kv", "ti", "vff", "aff", "kc", "ti_current", "velocity_filter_hz")
+CONTROLLER_FIELDS = ("kp", "kv", "ti", "vff", "aff", "kc", "ti_current", "current_bandwidth_hz", "velocity_filter_hz")
 #: Keys of earlier versions -> the keys that replaced them.
 _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
 # a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")

@@ -11,7 +11,10 @@ Block diagram (signal names as used by :func:`control.interconnect`)::
                  i
 
 Without electrical dynamics (no ``inductance``) the current loop is taken as
-ideal: the plant's input is the current command ``i_cmd`` itself. The
+ideal: the plant's input is the current command ``i_cmd`` itself, or, with
+``current_bandwidth_hz``, the current follows it as the first-order lag the
+closed current loop of a drive is (``di/dt = ω_c·(i_cmd - i)``, continuous
+time: exact at any bandwidth, however close to the servo rate). The
 velocity loop compares ``v_cmd`` with ``v_fb``, the output of the block
 ``estimator``: ``v`` itself, or, in the sampled loop of a drive with
 ``velocity_feedback="difference"``, the filtered difference of ``x``; and
@@ -26,6 +29,7 @@ The plant (a rigid translating mass ``m`` driven by the force ``kf·i``)::
     dx/dt = v                                        [mm/s]
     dv/dt = -(c/m)·v + (1000·kf/m)·i                 [mm/s^2]   (1000 mm per m)
     di/dt = (u - R·i - kf·v/1000) / L                [A/s]      (back-EMF constant = kf in SI)
+    di/dt = ω_c·(i_cmd - i),  ω_c = 2π·current_bandwidth_hz        (instead: the closed current loop as a lag)
 
 The sampled loop (:func:`discretize`) is what the kernel steps: the plant is
 discretised exactly for a zero-order-hold input, the PI controllers by the
@@ -143,6 +147,14 @@ class AxisServo:
     ti_current : float, optional
         Current-controller integral time [s]; ``inductance/resistance``
         cancels the electrical pole.
+    current_bandwidth_hz : float, optional
+        Bandwidth [Hz] of the closed current loop taken as a first-order lag
+        of the current behind its command, ``ω_c/(s + ω_c)`` with ``ω_c =
+        2π·f``: what a drive's data sheet quotes (typically 0.5–3 kHz).
+        Part of the continuous plant (discretised exactly with it), so it
+        may be as fast as it is, unlike the sampled current PI of
+        `inductance`, which it replaces. ``None`` (default): an ideal
+        current loop.
     velocity_feedback : {"state", "difference"}, default "state"
         What the velocity loop closes on: ``"state"``, the motor velocity
         itself (an ideal tachometer); ``"difference"``, as real drives do,
@@ -190,6 +202,7 @@ class AxisServo:
     resistance: float | None = None
     kc: float | None = None
     ti_current: float | None = None
+    current_bandwidth_hz: float | None = None
     velocity_feedback: str = "state"
     velocity_taps: int = 1
     velocity_filter_hz: float | None = None
@@ -223,6 +236,11 @@ class AxisServo:
             checked["resistance"] = _validate.nonnegative("resistance", self.resistance)
             checked["kc"] = _validate.positive("kc", self.kc)
             checked["ti_current"] = _validate.positive("ti_current", self.ti_current)
+        if self.current_bandwidth_hz is not None:
+            if self.inductance is not None:
+                raise ValueError("current_bandwidth_hz takes the closed current loop as a lag and inductance models "
+                                 "it in detail: give one or the other")
+            checked["current_bandwidth_hz"] = _validate.positive("current_bandwidth_hz", self.current_bandwidth_hz)
         checked.update(self._drive_structure())
         for name, value in checked.items():
             if name not in ("vff", "aff") and value != 0 and not 1.0 / MAX_PARAMETER <= value <= MAX_PARAMETER:
@@ -348,8 +366,11 @@ class DiscreteServo:
 
 
 def _plant_matrices(servo):
-    """Continuous plant matrices ``A, B`` (states x [mm], v [mm/s] and, when modelled, i [A])."""
+    """Continuous plant matrices ``A, B`` (states x [mm], v [mm/s] and, when modelled or lagged, i [A])."""
     b, d = servo.force_gain, servo.damping_rate
+    if servo.current_bandwidth_hz is not None:
+        w = 2.0 * np.pi * servo.current_bandwidth_hz
+        return np.array([[0.0, 1.0, 0.0], [0.0, -d, b], [0.0, 0.0, -w]]), np.array([[0.0], [0.0], [w]])
     if not servo.electrical:
         return np.array([[0.0, 1.0], [0.0, -d]]), np.array([[0.0], [b]])
     L, R = servo.inductance, servo.resistance
@@ -360,8 +381,10 @@ def _plant_matrices(servo):
 def _plant_system(servo, A, B, dt):
     n = A.shape[0]
     names = ["x", "v", "i"][:n]
+    outputs = names if servo.electrical else names[:2]  # the lagged current is read by no controller
     inputs = "u" if servo.electrical else "i_cmd"
-    return ct.ss(A, B, np.eye(n), 0.0, dt, inputs=inputs, outputs=names, states=names, name="plant")
+    C = np.eye(n)[: len(outputs)]
+    return ct.ss(A, B, C, 0.0, dt, inputs=inputs, outputs=outputs, states=names, name="plant")
 
 
 def zoh(A, B, dt):
@@ -625,9 +648,9 @@ def plant(servo):
     Returns
     -------
     control.StateSpace
-        Input ``'i_cmd'`` [A] (ideal current loop) or ``'u'`` [V] (electrical
-        dynamics modelled); outputs and states ``'x'`` [mm], ``'v'`` [mm/s]
-        (and ``'i'`` [A]).
+        Input ``'i_cmd'`` [A] (ideal or lagged current loop) or ``'u'`` [V]
+        (electrical dynamics modelled); outputs and states ``'x'`` [mm],
+        ``'v'`` [mm/s] (and ``'i'`` [A]: a state only, with the lag).
     """
     return _plant_system(servo, *_plant_matrices(servo), 0)
 

@@ -38,7 +38,11 @@ def reference_loop(servo, quantum, delay, start, play=0.0, scale=False):
     """
     A = np.array([[0.0, 1.0], [0.0, -servo.damping / servo.mass]])
     B = np.array([[0.0], [1000.0 * servo.force_constant / servo.mass]])  # mm/s^2 per A
-    plant = ct.sample_system(ct.ss(A, B, np.eye(2), 0), DT, method="zoh")
+    if servo.current_bandwidth_hz is not None:  # the current behind its command: i' = w·(i_cmd - i), drives v
+        w = 2 * np.pi * servo.current_bandwidth_hz
+        A = np.block([[A, B], [np.zeros((1, 2)), -w]])
+        B = np.array([[0.0], [0.0], [w]])
+    plant = ct.sample_system(ct.ss(A, B, np.eye(A.shape[0])[:2], 0), DT, method="zoh")
     plant = ct.ss(plant.A, plant.B, plant.C, plant.D, DT, inputs="i", outputs=["x", "v"], name="plant")
     n = servo.velocity_taps
     a = 0.0 if servo.velocity_filter_hz is None else np.exp(-2 * np.pi * servo.velocity_filter_hz * DT)
@@ -105,6 +109,9 @@ DRIVES = {
                                 computation_delay=1, current_limit=4.0, vff=1.0, aff=0.7), 2e-4, 1),
     "pi_clamped": (dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1,
                         current_limit=3.0, vff=0.5), 0.0, 0),
+    "current_lag": (dict(current_bandwidth_hz=1200.0), 0.0, 0),
+    "current_lag_fir2_delay1_clamped": (dict(current_bandwidth_hz=800.0, velocity_feedback="difference",
+                                             velocity_taps=2, computation_delay=1, current_limit=2.0, vff=0.5), 2e-4, 1),
 }
 
 
@@ -151,7 +158,9 @@ def test_ramp_error_is_still_v_over_kp(kw):
                                      computation_delay=2, ti=None),
                                 dict(computation_delay=2, **ELECTRICAL),
                                 dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=2000.0,
-                                     computation_delay=1, **ELECTRICAL)])
+                                     computation_delay=1, **ELECTRICAL),
+                                dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1,
+                                     current_bandwidth_hz=700.0)])
 def test_spectral_radius_equals_python_control_closed_loop_poles(kw):
     # The kernel's linearised loop (loop_matrices) and servo.discretize's python-control interconnection of the
     # estimator and delay blocks: the same poles.
@@ -194,6 +203,8 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
             kw = dict(computation_delay=int(rng.integers(3)), current_limit=float(rng.choice([2.0, 50.0])))
             if rng.random() < 0.3:
                 kw.update(ELECTRICAL)
+            elif rng.random() < 0.4:
+                kw.update(current_bandwidth_hz=float(rng.uniform(300.0, 3000.0)))
             if rng.random() < 0.7:
                 kw.update(velocity_feedback="difference", velocity_taps=int(rng.integers(1, 9)),
                           velocity_filter_hz=rng.choice([None, float(rng.uniform(200.0, 3000.0))]))
@@ -216,6 +227,7 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
                 np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=f"{name}, variant {b}")
     assert {s.computation_delay for servos, _ in variants for s in servos.values()} == {0, 1, 2}
     assert any(s.electrical for servos, _ in variants for s in servos.values())
+    assert any(s.current_bandwidth_hz for servos, _ in variants for s in servos.values())
 
 
 def test_the_state_feedback_default_is_the_loop_of_before():
@@ -251,6 +263,8 @@ def test_a_loop_the_computation_delay_destabilises_is_refused_with_its_margins()
     (dict(velocity_filter_hz=500.0), ValueError, 'they need velocity_feedback = "difference"'),
     (dict(computation_delay=3), ValueError, "computation_delay must be 0, 1 or 2"),
     (dict(computation_delay=True), TypeError, "computation_delay must be a whole number"),
+    (dict(current_bandwidth_hz=0.0), ValueError, "current_bandwidth_hz must be"),
+    (dict(current_bandwidth_hz=1000.0, **ELECTRICAL), ValueError, "give one or the other"),
 ])
 def test_bad_drive_settings_name_the_parameter(kw, error, message):
     with pytest.raises(error, match=message):
@@ -272,12 +286,14 @@ def test_machine_file_keys_and_what_uncertain_may_list(tmp_path):
     file = tmp_path / "m.toml"
     file.write_text(MACHINE.format(extra='velocity_feedback = "difference"\nvelocity_taps = 2\n'
                                          'velocity_filter_hz = 900.0\ncomputation_delay_periods = 1\n'
-                                         'uncertain = ["velocity_filter_hz"]'))
+                                         'current_bandwidth_hz = 1500.0\n'
+                                         'uncertain = ["velocity_filter_hz", "current_bandwidth_hz"]'))
     machine = load_machine(file)
     servo = machine.axes["x"]
     assert (servo.velocity_feedback, servo.velocity_taps, servo.velocity_filter_hz, servo.computation_delay) == (
         "difference", 2, 900.0, 1)
-    assert machine.uncertain["x"] == ("velocity_filter_hz",)
+    assert servo.current_bandwidth_hz == 1500.0
+    assert machine.uncertain["x"] == ("velocity_filter_hz", "current_bandwidth_hz")
     file.write_text(MACHINE.format(extra="computation_delay_periods = 3"))
     with pytest.raises(ConfigError, match=r"m.toml, line 8: axis x: computation_delay_periods must be 0, 1 or 2"):
         load_machine(file)
