@@ -614,6 +614,12 @@ def unexplained(trace, reference, residual, noise, scored):
     (:func:`standstill_cycles`), the largest spectral line, and a
     correlation with the commanded velocity, acceleration, direction of
     motion, position or time (the sign of the correlation coefficient given).
+    A residual above :data:`NOISE_FLOOR` times the noise level that none of
+    these accounts for (their shares together under half of what lies
+    beyond the noise) is listed all the same, as what lies beyond the
+    noise, with where its power is: concentrated where the command
+    accelerates, or spread over the run. Nothing above the noise is left
+    unsaid.
 
     Parameters
     ----------
@@ -661,10 +667,24 @@ def unexplained(trace, reference, residual, noise, scored):
             rho = float(np.dot(r, f) / (np.linalg.norm(r) * np.linalg.norm(f)))
             if abs(rho) >= 0.3:
                 items.append((abs(rho) * float(np.sqrt(np.mean(r**2))), f"correlated with {name} (r = {rho:+.2f})"))
-        for rms, signature in sorted(items, reverse=True):
-            if rms >= share:
-                found.append({"axis": axis, "signature": signature, "rms_um": 1e3 * rms})
+        items = [(rms, signature) for rms, signature in sorted(items, reverse=True) if rms >= share]
+        total = float(np.sqrt(np.mean(r**2)))
+        beyond = float(np.sqrt(max(total**2 - noise[i] ** 2, 0.0)))
+        if total > NOISE_FLOOR * noise[i] and np.hypot.reduce([rms for rms, _ in items] or [0.0]) < 0.5 * beyond:
+            items.append((beyond, f"beyond the white noise ({1e3 * noise[i]:.3g} µm) and matching no signature: "
+                                  + _where_power_is(r, acc[:, i])))
+        found += [{"axis": axis, "signature": signature, "rms_um": 1e3 * rms} for rms, signature in items]
     return found
+
+
+def _where_power_is(r, acc):
+    """Where a residual's power lies in words: concentrated where the command accelerates, or spread over the run."""
+    moving = np.abs(acc) > 0.1 * np.abs(acc).max() if np.any(acc) else np.zeros(r.size, bool)
+    samples, power = moving.mean(), float(np.sum(r[moving] ** 2) / np.sum(r**2))
+    if 0.0 < samples < 0.5 and power >= 2.0 * samples:
+        return (f"concentrated where the command accelerates ({100 * power:.0f} % of its power in the "
+                f"{100 * samples:.0f} % of the samples), dynamics the model lacks")
+    return "spread over the run"
 
 
 def _circle(position):
