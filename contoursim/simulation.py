@@ -71,6 +71,10 @@ class SimResult:
         The compensation strategies that were applied.
     model : contoursim.model.Model
         The model simulated (the machine and its effects).
+    force : dict of str -> ndarray, shape (N,)
+        The known external force applied per servo axis [N] (the `force`
+        of :func:`simulate`, or the trace's own), held over the dwell and
+        the hold; empty without one.
     """
 
     trajectory: object
@@ -82,6 +86,7 @@ class SimResult:
     contour: object
     strategies: tuple = field(default=())
     model: object = None
+    force: dict = field(default_factory=dict)
 
     @property
     def tracking_error(self):
@@ -124,15 +129,17 @@ class SimResult:
         return _error_figures(self.trajectory, self.tool_position, self.contour, self.static_tool_position, measuring_only)
 
     def to_trace(self, metadata=None):
-        """The result in the measured-trace format: reference vs actual tool position."""
+        """The result in the measured-trace format: reference vs actual tool position, and the known forces applied."""
         axes = CARTESIAN[: self.trajectory.dim]
-        return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}))
+        force = {axis: values for axis, values in self.force.items() if axis in axes}
+        return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}), force=force)
 
     def save_csv(self, file, metadata=None, overwrite=False, every=1):
         """Write the trace CSV (DESIGN.md contract) with the contour error (if any) and the test proper.
 
         Besides ``t`` [s] and the positions ``<axis>_ref``, ``<axis>`` [mm],
-        the columns ``contour`` (distance to the path) and ``contour_normal``
+        the known forces applied ``<axis>_force`` [N] (:attr:`force`, on the
+        Cartesian axes), the columns ``contour`` (distance to the path) and ``contour_normal``
         (its signed in-plane component, positive to the left of travel) [mm],
         (without a contour error, as for a single-axis measured reference:
         not there), ``measuring``: 1 on the test proper (``trajectory.measuring``),
@@ -156,13 +163,14 @@ class SimResult:
         """
         columns = ", ".join(f"{a}_ref, {a}" for a in CARTESIAN[: self.trajectory.dim])
         contour = "" if self.contour is None else ", contour, contour_normal"
+        force = "".join(f"; {axis}_force [N]" for axis in self.force if axis in CARTESIAN[: self.trajectory.dim])
         standard = {
             "contoursim": __version__,
             "machine": self.machine.name,
             "servo_period_s": f"{self.machine.servo_period:g}",
             "every_nth_sample": every,
             "feed_mm_min": f"{60 * self.trajectory.feed:.6g}",
-            "units": f"t [s]; {columns}{contour} [mm]; measuring [1 = test proper, 0 = not]; rapid [1 = G0, 0 = not]",
+            "units": f"t [s]; {columns}{contour} [mm]{force}; measuring [1 = test proper, 0 = not]; rapid [1 = G0, 0 = not]",
         }
         extra = {} if self.contour is None else {"contour": self.contour.magnitude, "contour_normal": self.contour.normal}
         extra["measuring"] = self.trajectory.measuring
@@ -323,7 +331,8 @@ def _reference(machine, reference, settle, preview=0, force=None):
     """The reference as a Trajectory at the servo period, after a dwell of `preview` samples and held `settle` seconds.
 
     Also returns the known external forces on the servo axes at its samples, shape (N, n_servo) [N], or ``None``
-    (`force`: by axis name, on the reference's samples; a trace's own by default), held over the dwell and the hold.
+    (`force`: by axis name, on the reference's samples; a trace's own by default), held over the dwell and the hold,
+    and the names of the axes that have one.
     """
     if isinstance(reference, Trace):
         force = measured_force(reference, machine.servo_period) if force is None else force
@@ -346,7 +355,8 @@ def _reference(machine, reference, settle, preview=0, force=None):
             f"{machine.servo_period:g} s: sample the path at the servo period"
         )
     trajectory = reference.preceded(preview).held(default_settle(machine) if settle is None else settle)
-    return trajectory, _held_force(machine, force, len(reference), preview, len(trajectory) - preview - len(reference))
+    pushing = _held_force(machine, force, len(reference), preview, len(trajectory) - preview - len(reference))
+    return trajectory, pushing, tuple(force or ())
 
 
 def _held_force(machine, force, n, before, after):
@@ -572,7 +582,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     machine = model.machine
     composition = Composition(strategies)
     preview = composition.preview(composition.drive(model.servos()), machine.servo_period)
-    trajectory, pushing = _reference(machine, reference, settle, preview, force)
+    trajectory, pushing, pushed = _reference(machine, reference, settle, preview, force)
     q, response, servos = _servo_run(model, composition, trajectory, pushing)
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
@@ -580,7 +590,8 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     del elapsed  # before the contour error is computed
     tool.flags.writeable = False  # the contour error keeps it as its actual points, without a copy
     error = _contour_error(trajectory, tool) if contour else None
-    result = SimResult(trajectory, machine, q, response, tool, static, error, composition.strategies, model)
+    known = {axis: pushing[:, list(machine.axes).index(axis)] for axis in pushed}
+    result = SimResult(trajectory, machine, q, response, tool, static, error, composition.strategies, model, known)
     clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
     if clipped:
         axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A)"
@@ -716,7 +727,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     for machine in {id(m.machine): m.machine for m in models}.values() if check else ():
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
-    trajectory, pushing = _reference(first, reference, settle, preview, force)
+    trajectory, pushing, _ = _reference(first, reference, settle, preview, force)
     q, v, a = _target(models[0], trajectory, compositions[0])
     summary = "summary" in outputs
     traces = [name for name in outputs if name != "summary"]

@@ -335,6 +335,23 @@ def test_a_batch_with_a_force_is_simulate_bit_for_bit_and_returns_the_current():
     assert np.all(unforced["current"] == 0.0)
 
 
+def test_a_simulated_force_is_written_with_the_result_and_read_back(tmp_path):
+    # What a simulation was pushed by goes with its result: to_trace and save_csv carry the y_force column (as
+    # held at the servo period), and simulating the file written gives the same positions again.
+    servo = AxisServo(kp=40.0, **AXIS)
+    machine = Machine({"x": servo, "y": servo}, DT)
+    result = simulate(machine, _pushed_trace(force_at=50, level=-120.0), contour=False)
+    assert set(result.force) == {"y"} and result.force["y"].shape == (len(result.tool_position),)
+    np.testing.assert_array_equal(result.to_trace().force["y"], result.force["y"])
+    result.save_csv(tmp_path / "pushed.csv")
+    back = read_trace(tmp_path / "pushed.csv")
+    assert set(back.force) == {"y"} and back.metadata["units"].count("y_force [N]") == 1
+    np.testing.assert_allclose(back.force["y"], result.force["y"], rtol=0, atol=1e-6)
+    again = simulate(machine, back, contour=False, settle=0.0)
+    np.testing.assert_allclose(again.tool_position, back.actual, rtol=0, atol=2e-6)
+    assert simulate(machine, _pushed_trace(force_at=50, level=0.0), contour=False).force.keys() == {"y"}
+
+
 def test_a_force_on_an_axis_the_machine_lacks_is_refused():
     machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
     trace = _pushed_trace(force_at=10, level=5.0, logged_every=1)
