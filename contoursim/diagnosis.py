@@ -59,6 +59,7 @@ from itertools import combinations
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.signal import lombscargle
 
 from .effects import Effect, effect_kind
 from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identify_machine
@@ -506,7 +507,7 @@ def locate(trace, reference, residual):
             target = np.abs(r) - np.abs(r).mean() if name.startswith("reversals") else r
             if np.ptp(f) > 0 and np.ptp(target) > 0:  # a constant (to its rounding) has none: corrcoef would divide by 0
                 scores.append((abs(float(np.corrcoef(target, f)[0, 1])), name))
-        period, share = _spatial_period(trace.reference[:, i], r)
+        period, share = _spatial_period(trace.actual[:, i], r)
         if period is not None:
             scores.append((np.sqrt(share), f"a spatial period of {period:.3g} mm"))
         scores.sort(reverse=True)
@@ -728,21 +729,24 @@ def _time_since_reversal(t, v):
 
 
 def _spatial_period(q, r):
-    """The spatial period [mm] best explaining `r` over position `q`, and the share of the variance it explains."""
-    travel = np.ptp(q)
-    if travel <= 0:
+    """The spatial period [mm] best explaining `r` over position `q`, and the share of the variance it explains.
+
+    The Lomb–Scargle periodogram of `r` over `q` (unevenly sampled: the axis
+    moves back and forth, dwells and crosses its stroke at varying speed),
+    from one period over the stroke to 200 (and none shorter than 0.5 mm),
+    four frequencies per resolution step ``1/stroke``: a peak then falls
+    within an eighth of a period's drift over the stroke of a grid line.
+    """
+    travel = float(np.ptp(q))
+    if travel <= 1.0:
         return None, 0.0
-    periods = np.geomspace(max(travel / 200, 0.5), travel / 2, 60) if travel > 1.0 else ()
-    best = (None, 0.0)
-    var = float(r @ r)
-    for period in periods:
-        w = 2 * np.pi * q / period
-        basis = np.column_stack([np.sin(w), np.cos(w)])
-        coef = np.linalg.lstsq(basis, r, rcond=None)[0]
-        share = float(np.sum((basis @ coef) ** 2)) / var
-        if share > best[1]:
-            best = (float(period), share)
-    return best
+    cycles = np.arange(1.0, min(200.0, 2.0 * travel) + 1e-9, 0.25)  # periods over the stroke
+    power = lombscargle(q, r, 2 * np.pi * cycles / travel, floating_mean=True)
+    period = travel / float(cycles[np.argmax(power)])
+    w = 2 * np.pi * q / period
+    basis = np.column_stack([np.sin(w), np.cos(w)])
+    coef = np.linalg.lstsq(basis, r, rcond=None)[0]
+    return period, float(np.sum((basis @ coef) ** 2)) / float(r @ r)
 
 
 # -- the fit -----------------------------------------------------------------------------------
@@ -1028,7 +1032,9 @@ def _candidates(problem, model):
         add(Effect("scale_error", a, ppm=1.0), ("ppm",), [{"ppm": v} for v in sizes("scale_error")])
         add(Effect("thermal_drift", a, rate_um_per_min=1.0), ("rate_um_per_min",),
             [{"rate_um_per_min": v} for v in sizes("thermal_drift")])
-        period, _ = _spatial_period(q, residual[:, i] - residual[:, i].mean())
+        # over where the axis is, not where it was told to be: the following error shifts the reference by up to a
+        # few mm, the other way on the way back, and smears a screw's period over the reference
+        period, _ = _spatial_period(trace.actual[:, i], residual[:, i] - residual[:, i].mean())
         if period is not None and 0.1 <= period <= 1000.0:
             add(Effect("cyclic_error", a, amplitude_um=1.0, period_mm=period), ("amplitude_um", "phase_deg", "period_mm"),
                 [{"amplitude_um": v, "phase_deg": ph} for v in (1.0, 3.0) for ph in (0.0, 90.0, 180.0, 270.0)])
@@ -1064,9 +1070,9 @@ def _bounds(problem, cand):
     elif effect.name == "time_delay":
         top = 0.1 if effect.options["kind"] == "command" else (MAX_DELAY_SAMPLES - 1) * problem.reference.dt
         limits["delay_s"] = (0.0, top)
-    elif effect.name == "cyclic_error":  # at least two periods within the travel, else it is not cyclic
+    elif effect.name == "cyclic_error":  # at least one period within the stroke, else it is a bow or a slope
         travel = float(np.ptp(problem.trace.reference[:, problem.trace.axes.index(effect.axis)]))
-        limits["period_mm"] = (params["period_mm"].bounds[0], max(travel / 2, 2 * params["period_mm"].bounds[0]))
+        limits["period_mm"] = (params["period_mm"].bounds[0], max(travel, 2 * params["period_mm"].bounds[0]))
     lower = np.array([limits.get(n, params[n].bounds)[0] for n in cand.free])
     upper = np.array([limits.get(n, params[n].bounds)[1] for n in cand.free])
     return lower, upper
