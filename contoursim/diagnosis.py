@@ -682,7 +682,7 @@ def _where_power_is(r, acc):
     """Where a residual's power lies in words: concentrated where the command accelerates, or spread over the run."""
     moving = np.abs(acc) > 0.1 * np.abs(acc).max() if np.any(acc) else np.zeros(r.size, bool)
     samples, power = moving.mean(), float(np.sum(r[moving] ** 2) / np.sum(r**2))
-    if 0.0 < samples < 0.5 and power >= 2.0 * samples:
+    if 0.0 < samples < 0.5 and power >= max(0.5, 2.0 * samples):  # at least half its power, twice its share of time
         return (f"concentrated where the command accelerates ({100 * power:.0f} % of its power in the "
                 f"{100 * samples:.0f} % of the samples), dynamics the model lacks")
     return "spread over the run"
