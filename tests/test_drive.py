@@ -141,7 +141,8 @@ def test_kernel_equals_python_control_reference(name):
 
 @pytest.mark.parametrize("kw", [dict(velocity_feedback="difference", velocity_taps=2),
                                 dict(velocity_feedback="difference", velocity_taps=4, velocity_filter_hz=300.0,
-                                     computation_delay=2)])
+                                     computation_delay=2),
+                                dict(velocity_feedback="difference", velocity_taps=2, current_bandwidth_hz=900.0)])
 def test_ramp_error_is_still_v_over_kp(kw):
     # A constant velocity's difference is that velocity exactly (any taps, the low-pass has unit DC gain): with a PI
     # velocity loop and no damping the current settles to 0, so the following error is v/kp, as with a tachometer.
