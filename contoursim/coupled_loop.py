@@ -38,6 +38,7 @@ __all__ = [
 
 #: The closed-loop damping ratio the coupling's default gains are designed for [-].
 DESIGN_DAMPING_RATIO = 0.7
+_SETTLED = math.exp(-1.0)  # a sampled pole at most this far from 0 decays by e within a servo period [-]
 
 
 def designed_gains(servos, dt, kd=0.0, kp=None):
@@ -48,8 +49,11 @@ def designed_gains(servos, dt, kd=0.0, kp=None):
     loop's gain. ``kp`` is the largest gain for which the least damped
     pole of the sampled coupled loop (:func:`coupled_margins`), closed
     across every straight line of :func:`_directions`, has a damping ratio
-    of at least :data:`DESIGN_DAMPING_RATIO` (bisection to 1e-6 relative);
-    a given `kp` is kept and only ``ki`` follows from it.
+    of at least :data:`DESIGN_DAMPING_RATIO` (bisection to 1e-6 relative),
+    among the poles that last longer than a servo period (``|z| > 1/e``:
+    faster ones, such as the alternating poles of a drive's velocity
+    filter, ``z ≈ -0.1`` for two taps, have settled before they could
+    ring); a given `kp` is kept and only ``ki`` follows from it.
 
     Parameters
     ----------
@@ -107,8 +111,8 @@ def _bisected_kp(rows, position_gain, dt, kd):
 
     def damping(kp):
         ki = (position_gain + kp) ** 2 / 4.0
-        return min(_damping_ratio(np.linalg.eigvals(a + b @ c), dt)
-                   for a, b, c in (_coupled_system(rows, kp, ki, kd, dt, d) for d in directions))
+        poles = (np.linalg.eigvals(a + b @ c) for a, b, c in (_coupled_system(rows, kp, ki, kd, dt, d) for d in directions))
+        return min(_damping_ratio(p[np.abs(p) > _SETTLED], dt) for p in poles)
 
     low, high = 0.01 * position_gain, position_gain
     if damping(low) < DESIGN_DAMPING_RATIO:
