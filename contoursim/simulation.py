@@ -749,7 +749,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     # only after a run-in of whole `every`s (else all, and the reference's every `every`-th taken here)
     kernel_every = 1 if summary or lead % every else every
     taken = slice(lead // kernel_every, None, 1 if summary else every // kernel_every)
-    kernel_outputs = ("tool", "current") if summary or "current" in outputs else ("tool",)
+    kernel_outputs = ("tool",) + (("current",) if summary or "current" in outputs else ()) + (("saturated",) if summary else ())
     n_kernel = len(range(0, lead + len(trajectory), kernel_every))
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * len(kernel_outputs) * n_kernel * servo.size))
     elapsed = _elapsed(trajectory)
@@ -808,7 +808,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                         static = models[i].geometry.tool_position(q, elapsed, trajectory.dim)
                         figures = _error_figures(trajectory, tool, _contour_error(trajectory, tool), static)
                         figures["peak_current_A"] = float(np.abs(run["current"][b]).max())
-                        figures["saturated"] = float(run["saturated_count"][b].max()) / len(trajectory)
+                        figures["saturated"] = float(run["saturated"][b].sum(axis=0).max()) / len(trajectory)
                         for key, value in figures.items():
                             if key in result["summary"]:
                                 result["summary"][key][i] = value

@@ -352,6 +352,22 @@ def test_a_simulated_force_is_written_with_the_result_and_read_back(tmp_path):
     assert simulate(machine, _pushed_trace(force_at=50, level=0.0), contour=False).force.keys() == {"y"}
 
 
+@pytest.mark.parametrize("limit", [0.15, 0.05])
+def test_a_batchs_saturated_fraction_is_over_the_trace_not_its_run_in(limit):
+    # A trace that starts moving is entered through a run-in, which may clamp too: the fraction is over the
+    # trace's samples, as simulate's (it counted the run-in's clamped steps too, up to 131 % of the samples).
+    servo = AxisServo(kp=40.0, current_limit=limit, **AXIS)
+    machine = Machine({"x": servo, "y": servo}, DT)
+    t = np.arange(400) * 1e-3
+    reference = np.column_stack([50.0 * t, np.zeros_like(t)])
+    trace = Trace(t, reference, reference, ("x", "y"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ContoursimWarning)  # the clamping is the point
+        single = simulate(machine, trace, contour=False)
+        batch = simulate_batch([machine], trace, outputs=("summary",))
+    assert 0.0 < batch["summary"]["saturated"][0] == max(single.saturation.values()) <= 1.0
+
+
 def test_a_force_on_an_axis_the_machine_lacks_is_refused():
     machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
     trace = _pushed_trace(force_at=10, level=5.0, logged_every=1)
