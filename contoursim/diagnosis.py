@@ -79,8 +79,12 @@ __all__ = [
 MAX_EFFECTS = 3
 #: How the reported uncertainties are obtained (the report's ``uncertainty_method``).
 UNCERTAINTY_METHOD = ("the larger of the Gauss-Newton standard deviation (noise, scaled by the residual's "
-                      "autocorrelation time) and a linearised block jackknife over 10 consecutive segments of the "
-                      "trace (model error that pulls the parameter differently along the trace)")
+                      "autocorrelation time) and linearised block jackknives over 40, 20 and 10 consecutive segments "
+                      "of the trace (model error that pulls the parameter differently along the trace; the largest "
+                      "spread over the segment lengths), the mass, damping and instrument refit profiled out; added in "
+                      "quadrature, how far the fit moves when each of the effect's parameters held at a default "
+                      "(a vibration's mass ratio, a friction's Stribeck and viscous parts) lies elsewhere in its "
+                      "typical range (by its RMS distance over that range)")
 #: A residual share of at least this fraction of the noise level [-] is listed as unexplained structure.
 STRUCTURE_SHARE = 0.5
 #: The residual is at the noise floor when its RMS is within this factor of the noise estimated from the
@@ -101,7 +105,10 @@ _GRID = 4  # starting values per size parameter over its typical range (each sig
 _UM = 1e-3
 _REFIT_STEPS = 2  # Gauss–Newton steps of the nominal refit once an effect is named
 _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (the catalogue's modes: 0.01–0.2)
-_JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's jackknife leaves out in turn
+# the uncertainty's block jackknife, blocking analysis: leaving out in turn each of this many consecutive segments of
+# the trace, the largest spread (the estimate grows with the segments' length until they outlast the residual's
+# correlations, and the fewer the segments the noisier it is: no one length is right for every trace)
+_JACKKNIFE_BLOCKS = (40, 20, 10)
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
 _TWIN_SHARE = 0.8  # two candidates alike for a reason the trace cannot decide are twins when one closes this share of the other's gap
@@ -1012,9 +1019,11 @@ def _candidates(problem, model):
         # its assumed mass (the TU/e rig: 2.4 N, which a start at 5 N misses)
         add(Effect("coulomb_friction", a, force_N=1.0), ("force_N",),
             [{"force_N": v} for v in sizes("coulomb_friction", below=1)])
-        if len(servo) > 1:
+        if len(servo) > 1:  # ln(kp_ratio) from 1 % to the typical range's edge, geometrically, each sign: a
+            # mismatch of 2 % can leave a gap of many µm, which a start at ±5 % overshoots (no better than none)
+            edge = -np.log(effect_kind("gain_mismatch").parameters[0].typical[0])
             add(Effect("gain_mismatch", a, kp_ratio=1.0), ("kp_ratio",),
-                [{"kp_ratio": r} for r in (0.7, 0.85, 0.95, 1.05, 1.15, 1.3)])
+                [{"kp_ratio": float(np.exp(sign * u))} for u in np.geomspace(0.01, edge, _GRID + 1) for sign in (-1, 1)])
         for kind in ("command", "feedback"):
             top = 3e-3 if kind == "command" else min(3e-3, (MAX_DELAY_SAMPLES - 1) * dt)
             add(Effect("time_delay", a, delay_s=1e-4, kind=kind), ("delay_s",),
@@ -1183,14 +1192,45 @@ def _refine(problem, cand, model):
     j = jac(fit.x)
     n, k = problem.n, len(cand.free)
     try:
-        cov = np.linalg.inv(j.T @ j) * (cand.cost / max(n - k, 1) * cand.tau)
-        err = np.maximum(np.sqrt(np.clip(np.diag(cov), 0, None)), _jackknife(problem, j, cand.residual))
+        inverse = np.linalg.inv(j.T @ j)
+        cov = inverse * (cand.cost / max(n - k, 1) * cand.tau)
+        spread = [_jackknife(problem, j, cand.residual, blocks) for blocks in _JACKKNIFE_BLOCKS]
+        err = np.max([np.sqrt(np.clip(np.diag(cov), 0, None))] + spread, axis=0)
+        err = np.sqrt(err**2 + np.sum(_held(problem, cand, model, inverse @ j.T) ** 2, axis=0))
     except np.linalg.LinAlgError:
         err = np.full(k, np.inf)
     cand.uncertainty = {name: float(e) for name, e in zip(cand.free, err)}
 
 
-def _jackknife(problem, j, r, blocks=_JACKKNIFE_BLOCKS):
+def _held(problem, cand, model, pseudo):
+    """How far each of `cand`'s parameters held at a default moves its fitted ones: one row per held parameter [units
+    of the free ones], shape (h, k).
+
+    An effect's parameters the fit does not vary but whose true value lies
+    anywhere in a typical range (a vibration's tool-side mass ratio, a
+    friction's Stribeck hump or viscous part) are nuisance parameters held
+    at a guess: the fitted ones depend on the guess. Each held value φ₀ is
+    moved by ``s``, the RMS distance of a value uniform over its typical
+    range from φ₀; the secant's Gauss–Newton step, ``−pseudo·Δr``
+    (`pseudo` = ``(JᵀJ)⁻¹Jᵀ`` of the fit, the nuisance refit profiled in
+    `Δr`), is how far the fit would move if the truth lay there.
+    """
+    effect = cand.fit
+    moved = []
+    for p in effect.parameters:
+        if p.name in cand.free or p.vary or p.typical is None:
+            continue
+        lo, hi = p.typical
+        s = float(np.sqrt((hi - lo) ** 2 / 12.0 + ((hi + lo) / 2.0 - p.value) ** 2))
+        value = p.value + s if p.value + s <= p.bounds[1] else p.value - s
+        if s > 0 and p.bounds[0] <= value <= p.bounds[1]:
+            moved.append(model.with_effect(effect.with_values(**{p.name: value})))
+    if not moved:
+        return np.zeros((0, len(cand.free)))
+    return np.array([-pseudo @ (_finite(problem.residual(y)) - cand.residual) for y in problem.predict(moved)])
+
+
+def _jackknife(problem, j, r, blocks):
     """Block-jackknife standard deviation of a fit's parameters, linearised around the optimum.
 
     The scored samples are cut into `blocks` consecutive segments; leaving
@@ -1206,6 +1246,8 @@ def _jackknife(problem, j, r, blocks=_JACKKNIFE_BLOCKS):
     j : ndarray, shape (M, k)
         Jacobian of the residual `r` (:meth:`_Problem.residual`) in the free parameters.
     r : ndarray, shape (M,)
+    blocks : int
+        Segments (0 when the trace has fewer than 4 scored samples per segment).
 
     Returns
     -------
@@ -1356,6 +1398,10 @@ def _separating_test(a, b, both_ways=False):
     """The extra test that tells effect `a` from effect `b` (`both_ways`: the trace already runs its path both ways)."""
     if a.name == b.name == "time_delay":
         return "a step or a faster reversal: a feedback delay changes the loop's damping (overshoot), a command delay only shifts the response"
+    if {a.name, b.name} == {"gain_mismatch", "time_delay"}:
+        return ("a position step, or the path at a higher acceleration: both lengthen the lag in proportion to the "
+                "speed, but a gain change alters the closed loop's dynamics (how it settles after a start, a stop or a "
+                "corner, and the lag while accelerating), a delay only shifts the response in time")
     if a.name == b.name == "backlash":
         return "a reversal test read on the motor encoder and on a linear scale: with motor feedback the table lags, with scale feedback the loop chases the lost motion"
     if {a.name, b.name} == {"squareness", "straightness"}:
