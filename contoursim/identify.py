@@ -38,7 +38,7 @@ first without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
 transients tell them apart; then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
-integrator; likewise for the feedforward). These stages run on the state
+integrator). These stages run on the state
 structure; each drive structure of :data:`DRIVES` is then fitted from
 there with the same parameters free, and the best one replaces the state
 structure when it is significant (:func:`delta_bic`, the choice counted
@@ -226,10 +226,6 @@ def identify_machine(trace, servo_period=None, progress=None):
         r = fun(x, structure)
         return float(r @ r) if np.all(np.isfinite(r)) else np.inf, autocorrelation_time(r.reshape(len(trace.t), d))
 
-    def pressed(x):
-        """Some axis's velocity-loop bandwidth at its bound."""
-        return bool(np.any(x[2: 2 + d] > np.log(top) - 0.01))
-
     def cascade(structure):
         """The P, feedforward and PI stages on one drive structure: ``(x, feedforward kept)``."""
         # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
@@ -239,8 +235,7 @@ def identify_machine(trace, servo_period=None, progress=None):
         x1 = fitted(start, np.array([j != 1 for j in range(x0.size)]), structure)
         x2 = fitted(x1, np.ones(x0.size, bool), structure)
         (rss1, _), (rss2, tau) = rss(x1, structure), rss(x2, structure)
-        # a P loop pressed against the bandwidth bound is imitating what it lacks: the feedforward is kept then too
-        feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT or (pressed(x1) and rss2 < rss1)
+        feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
         best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
         # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
         x3 = np.concatenate([best, np.full(d, np.log(4.0))])
@@ -250,7 +245,8 @@ def identify_machine(trace, servo_period=None, progress=None):
         x3 = fitted(x3, free, structure)
         rss3, tau = rss(x3, structure)
         # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
-        integral = delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed(best) and rss3 <= rss0)
+        pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
+        integral = delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed and rss3 <= rss0)
         return (x3 if integral else best), feedforward
 
     x, feedforward = cascade(STATE)
