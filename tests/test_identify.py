@@ -11,7 +11,7 @@ import pytest
 from conftest import ROOT
 
 from contoursim import paths
-from contoursim.diagnosis import synthetic_trace
+from contoursim.diagnosis import diagnose, synthetic_trace
 from contoursim.feed import plan, sample
 from contoursim.identify import WEAK_KP_VFF, identify_machine, identification_warnings
 from contoursim.machine import Machine
@@ -70,11 +70,14 @@ def test_independent_drive_gains_are_identified(independent_truth, tmp_path):
     assert not any("weakly determined" in w for w in identification_warnings(identified))
 
 
-def test_full_feedforward_leaves_kp_weakly_determined_and_it_is_said(independent_truth, tmp_path):
-    """Velocity feedforward 1 (independent truth): the identified vff reaches WEAK_KP_VFF and the warning says kp is
-    weakly determined."""
+def test_full_feedforward_leaves_kp_weakly_determined_and_the_diagnosis_says_so(independent_truth, tmp_path):
+    """Velocity feedforward 1 (independent truth): the identified vff reaches WEAK_KP_VFF and the diagnosis without a
+    model warns that kp is weakly determined, beside the drive structure it identified."""
     case = independent_truth.make_case("rigid", None, 32, tmp_path)
     assert load_model(case.machine_file).machine.axes["x"].vff == 1.0
-    identified = identify_machine(read_trace(case.csv))
-    assert identified.axes["x"].vff >= WEAK_KP_VFF
-    assert any("weakly determined" in w for w in identification_warnings(identified))
+    result = diagnose(read_trace(case.csv))
+    assert result.model.machine.axes["x"].vff >= WEAK_KP_VFF
+    said = identification_warnings(result.model.machine)
+    assert any(w.startswith("identified drive structure: ") for w in said)
+    assert any("kp" in w and "weakly determined" in w for w in said)
+    assert all(w in result.warnings for w in said), result.warnings
