@@ -207,7 +207,8 @@ def identify_machine(trace, servo_period=None, progress=None):
         return np.column_stack([(c - r0) / h for c, h in zip(cols, steps.values())])
 
     def fitted(x, free, structure):
-        """Least squares over the coordinates `free` of `x`, the others held; where the loop diverges, `x`."""
+        """Least squares over the coordinates `free` of `x`, the others held; where the loop diverges, the last point
+        reached."""
         def part(z):
             full = x.copy()
             full[free] = z
@@ -226,43 +227,41 @@ def identify_machine(trace, servo_period=None, progress=None):
         r = fun(x, structure)
         return float(r @ r) if np.all(np.isfinite(r)) else np.inf, autocorrelation_time(r.reshape(len(trace.t), d))
 
-    def cascade(structure):
-        """The P, feedforward and PI stages on one drive structure: ``(x, feedforward kept)``."""
-        # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
-        # transients show it (ΔBIC over the fit without it), else a valley of (kp, vff) pairs fits alike
-        start = x0.copy()
-        start[1] = 0.0
-        x1 = fitted(start, np.array([j != 1 for j in range(x0.size)]), structure)
-        x2 = fitted(x1, np.ones(x0.size, bool), structure)
-        (rss1, _), (rss2, tau) = rss(x1, structure), rss(x2, structure)
-        feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
-        best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
-        # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
-        x3 = np.concatenate([best, np.full(d, np.log(4.0))])
-        x3[2: 2 + d] = np.minimum(x3[2: 2 + d], np.log(0.5 * top))
-        free = np.ones(x3.size, bool)
-        free[1] = feedforward
-        x3 = fitted(x3, free, structure)
-        rss3, tau = rss(x3, structure)
-        # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
-        pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
-        integral = delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed and rss3 <= rss0)
-        return (x3 if integral else best), feedforward
-
-    x, feedforward = cascade(STATE)
-    found = [(rss(x, STATE)[0], STATE, x)]
-    free = np.ones(x.size, bool)
+    # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
+    # transients show it (ΔBIC over the fit without it), else a valley of (kp, vff) pairs fits alike
+    start = x0.copy()
+    start[1] = 0.0
+    x1 = fitted(start, np.array([j != 1 for j in range(x0.size)]), STATE)
+    x2 = fitted(x1, np.ones(x0.size, bool), STATE)
+    (rss1, _), (rss2, tau) = rss(x1, STATE), rss(x2, STATE)
+    feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
+    best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
+    # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
+    x3 = np.concatenate([best, np.full(d, np.log(4.0))])
+    x3[2: 2 + d] = np.minimum(x3[2: 2 + d], np.log(0.5 * top))
+    free = np.ones(x3.size, bool)
+    free[1] = feedforward
+    x3 = fitted(x3, free, STATE)
+    rss3, tau = rss(x3, STATE)
+    # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
+    pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
+    if delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed and rss3 <= rss0):
+        best, rss0 = x3, rss3
+    # the sampled drive structures, each fitted from the state structure's fit with the same parameters free
+    found = [(rss0, STATE, best)]
+    free = np.ones(best.size, bool)
     free[1] = feedforward
     for drive in DRIVES:
-        xd = x.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
-        xd[2: 2 + d] = np.minimum(xd[2: 2 + d], np.log(0.5 * top))
-        xd = fitted(xd, free, drive)
-        found.append((rss(xd, drive)[0], drive, xd))
-    best = min(found, key=lambda f: f[0])
-    _, tau = rss(best[2], best[1])
-    if best[1] != STATE and delta_bic(found[0][0], best[0], measured.size, 1, tau) > SIGNIFICANT:
-        return _machine(axes, period, best[2], best[1])
-    return _machine(axes, period, x)
+        x = best.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
+        x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
+        x = fitted(x, free, drive)
+        found.append((rss(x, drive)[0], drive, x))
+    low, structure, x = min(found, key=lambda f: f[0])
+    _, tau = rss(x, structure)
+    # a drive structure replaces the state one when significantly better (the choice counted as one parameter)
+    if structure != STATE and delta_bic(rss0, low, measured.size, 1, tau) > SIGNIFICANT:
+        return _machine(axes, period, x, structure)
+    return _machine(axes, period, best)
 
 
 def identification_warnings(machine):
