@@ -62,7 +62,7 @@ from scipy.optimize import least_squares
 from scipy.signal import lombscargle
 
 from .effects import Effect, effect_kind
-from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identify_machine
+from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identification_warnings, identify_machine
 from .kernel import MAX_DELAY_SAMPLES
 from .machine import CONTROLLER_FIELDS
 from .model import Model, as_model
@@ -1484,6 +1484,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     if identified:
         warnings.append("the nominal machine was identified from the trace with an assumed mass "
                         "(forces such as force_N are relative to that axis, not in real newtons)")
+        warnings += identification_warnings(model.machine)
     if identified and trace.force:
         warnings.append(f"the trace's force column(s) ({', '.join(f'{a}_force' for a in trace.force)}) are not used: "
                         "a force in newtons has no scale on an identified machine; give the nominal model (--model)")

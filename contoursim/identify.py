@@ -16,7 +16,13 @@ position loop around a P or PI velocity loop with velocity feedforward:
   the position loop's damping follows from ``kp/ω_v``;
 - per axis, where the trace shows it, the velocity loop's integral time
   ``ti`` (as ``ti·ω_v``, between 1.5 and 50): most drives run PI velocity
-  loops, which a P loop can only imitate with an unbounded ``ω_v``.
+  loops, which a P loop can only imitate with an unbounded ``ω_v``;
+- ONE drive structure for all axes (:data:`STATE` or one of
+  :data:`DRIVES`): the velocity loop closed on the motor velocity itself,
+  or, as real drives do, on the backward difference of the encoder over 1
+  or 2 servo periods with the command applied 0 or 1 period late. Each is
+  a different lag in the velocity loop, which ``ω_v`` alone cannot
+  imitate at the same time in the steady lag and the transients.
 
 A position trace carries no force, so the mass is not identifiable: forces
 of in-loop effects fitted on an identified machine (``force_N`` of
@@ -32,7 +38,15 @@ first without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
 transients tell them apart; then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
-integrator).
+integrator). These stages run on the state
+structure; each drive structure of :data:`DRIVES` is then fitted from
+there with the same parameters free, and the best one replaces the state
+structure when it is significant (:func:`delta_bic`, the choice counted
+as one parameter). The structures are those of a sampled loop at the
+identified servo period (:func:`servo_period_for`, the trace's own up to
+1 ms): a drive that runs faster than it logs is identified by the
+structure whose lags match its own best at that period, not necessarily
+by its own.
 With a feedforward near 1 the steady lag is gone and kp shows only in the
 transients: :func:`identify_machine` is then weakly determined in kp
 (:data:`WEAK_KP_VFF`; the diagnosis says so).
@@ -45,8 +59,8 @@ from .machine import Machine
 from .servo import AxisServo
 from .simulation import measured_reference, simulate_batch
 
-__all__ = ["FORCE_CONSTANT", "MASS", "SIGNIFICANT", "WEAK_KP_VFF", "autocorrelation_time", "delta_bic", "identify_machine",
-           "servo_period_for"]
+__all__ = ["DRIVES", "FORCE_CONSTANT", "MASS", "SIGNIFICANT", "STATE", "WEAK_KP_VFF", "autocorrelation_time", "delta_bic",
+           "identification_warnings", "identify_machine", "servo_period_for"]
 
 #: ΔBIC a parameter or an effect must add to be kept (2·ln Bayes factor > 10: "very strong", Kass & Raftery 1995).
 SIGNIFICANT = 10.0
@@ -58,7 +72,15 @@ FORCE_CONSTANT = 100.0
 #: An identified velocity feedforward at or above this leaves almost no steady lag: kp is weakly identifiable.
 WEAK_KP_VFF = 0.9
 
+#: A drive structure, as :class:`AxisServo` fields ``(velocity_feedback, velocity_taps, computation_delay)``: the
+#: velocity loop closed on the motor velocity itself, no computation delay.
+STATE = ("state", 1, 0)
+#: The sampled drive structures identification tries beside :data:`STATE` (one for all axes): the velocity from the
+#: backward difference of the encoder over 1 or 2 periods, the command applied 0 or 1 period late.
+DRIVES = tuple(("difference", n, k) for n in (1, 2) for k in (0, 1))
+
 _FD_STEP = 1e-3
+_DIVERGED = 1e6  # a residual entry beyond this many tracking errors (its RMS) is a loop that diverged
 _BANDWIDTH_FRACTION = 0.2  # highest identified velocity-loop bandwidth, a fraction of the Nyquist frequency
 _TI_RANGE = (1.5, 50.0)  # range of ti·ω_v of an identified PI velocity loop [-]
 
@@ -79,15 +101,17 @@ def servo_period_for(dt):
     return dt / max(1, int(np.ceil(dt / 1e-3 - 1e-9)))
 
 
-def _machine(axes, period, x):
-    """The machine of ``x = (log kp, vff, log ω_v per axis[, log(ti·ω_v) per axis])`` (the last: a PI velocity loop)."""
+def _machine(axes, period, x, structure=STATE):
+    """The machine of ``x = (log kp, vff, log ω_v per axis[, log(ti·ω_v) per axis])`` (the last: a PI velocity loop)
+    with the drive `structure` on every axis."""
     kp, vff = float(np.exp(x[0])), float(x[1])
     d = len(axes)
     servos = {}
     for i, a in enumerate(axes):
         w = float(np.exp(x[2 + i]))
         ti = float(np.exp(x[2 + d + i])) / w if len(x) > 2 + d else None
-        servos[a] = AxisServo(mass=MASS, force_constant=FORCE_CONSTANT, kv=w * MASS / FORCE_CONSTANT, kp=kp, vff=vff, ti=ti)
+        servos[a] = AxisServo(mass=MASS, force_constant=FORCE_CONSTANT, kv=w * MASS / FORCE_CONSTANT, kp=kp, vff=vff, ti=ti,
+                              velocity_feedback=structure[0], velocity_taps=structure[1], computation_delay=structure[2])
     return Machine(servos, period, name="identified from the trace")
 
 
@@ -142,79 +166,129 @@ def identify_machine(trace, servo_period=None, progress=None):
     d = len(axes)
     top = _BANDWIDTH_FRACTION * nyquist
     lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d)
-    upper = np.array([np.log(0.5 * top), 0.99] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d)
+    upper = np.array([np.log(0.5 * top), 1.0] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d)
     x0 = np.clip(x0, lower[: x0.size] + 1e-6, upper[: x0.size] - 1e-6)
     measured = trace.actual
     scale = max(float(np.std(trace.tracking_error)), 1e-6)
     cache = {}
+    reached = {}  # per structure, the last point a fit's Jacobian was taken at (where a diverging fit stops)
 
-    def outputs(xs):
-        tool = simulate_batch([_machine(axes, period, x) for x in xs], reference, settle=0.0, check=False)["tool_position"]
+    def outputs(xs, structure):
+        tool = simulate_batch([_machine(axes, period, x, structure) for x in xs], reference, settle=0.0,
+                              check=False)["tool_position"]
         return [_on_trace(trace, reference.t, y) for y in tool]
 
-    def fun(x):
-        key = x.tobytes()
+    def fun(x, structure):
+        key = (x.tobytes(), structure)
         if key not in cache:
             cache.clear()
-            cache[key] = ((measured - outputs([x])[0]) / scale).ravel()
+            cache[key] = residual(outputs([x], structure)[0])
         return cache[key]
 
-    def jac(x, free):
+    def residual(y):
+        """The whitened residual of simulated positions `y`; NaN where the loop diverged (or all but: beyond
+        :data:`_DIVERGED` tracking errors, a residual whose square overflows)."""
+        r = ((measured - y) / scale).ravel()
+        return r if np.all(np.abs(r) < _DIVERGED) else np.full(r.size, np.nan)
+
+    def jac(x, free, structure):
         steps = {j: _FD_STEP * (1 if x[j] + _FD_STEP <= upper[j] else -1) for j in np.flatnonzero(free)}
-        if not np.all(np.isfinite(fun(x))):
+        r0 = fun(x, structure)
+        if not np.all(np.isfinite(r0)):
             raise FloatingPointError("the identified loop diverged on this trace")
         rows = [x + h * np.eye(x.size)[j] for j, h in steps.items()]
-        r0 = fun(x)
-        cols = [((measured - y) / scale).ravel() for y in outputs(rows)]
+        cols = [residual(y) for y in outputs(rows, structure)]
+        if not all(np.all(np.isfinite(c)) for c in cols):
+            raise FloatingPointError("a step of the identified loop diverged on this trace")
+        reached[structure] = x
         if progress is not None:
             progress(f"identify: kp = {np.exp(x[0]):.2f} 1/s, vff = {x[1]:.3f}, "
                      f"RMS {1e3 * scale * np.sqrt(np.mean(r0**2)):.3g} µm")
         return np.column_stack([(c - r0) / h for c, h in zip(cols, steps.values())])
 
-    def fitted(x, free):
-        """Least squares over the coordinates `free` of `x`, the others held."""
+    def fitted(x, free, structure):
+        """Least squares over the coordinates `free` of `x`, the others held; where the loop diverges, the last point
+        reached."""
         def part(z):
             full = x.copy()
             full[free] = z
             return full
 
         lo, hi = lower[: x.size][free], upper[: x.size][free]
-        fit = least_squares(lambda z: fun(part(z)), x[free], jac=lambda z: jac(part(z), free),
-                            bounds=(lo, hi), x_scale=1.0, max_nfev=40)
+        reached[structure] = x
+        try:
+            fit = least_squares(lambda z: fun(part(z), structure), x[free], jac=lambda z: jac(part(z), free, structure),
+                                bounds=(lo, hi), x_scale=1.0, max_nfev=40)
+        except FloatingPointError:  # a fit that drives the loop unstable on this trace stops at its last stable point
+            return reached[structure]
         return part(fit.x)
+
+    def rss(x, structure):
+        r = fun(x, structure)
+        return float(r @ r) if np.all(np.isfinite(r)) else np.inf, autocorrelation_time(r.reshape(len(trace.t), d))
 
     # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
     # transients show it (ΔBIC over the fit without it), else a valley of (kp, vff) pairs fits alike
-    x0[1] = 0.0
-    try:  # a fit that drives the loop unstable on this trace stops where it was
-        x1 = fitted(x0, np.array([j != 1 for j in range(x0.size)]))
-    except FloatingPointError:
-        x1 = x0
-    r1 = fun(x1).copy()
-    try:
-        x2 = fitted(x1, np.ones(x0.size, bool))
-    except FloatingPointError:
-        x2 = x1
-    r2 = fun(x2).copy()
-    tau = autocorrelation_time(r2.reshape(len(trace.t), d))
-    feedforward = delta_bic(float(r1 @ r1), float(r2 @ r2), r2.size, 1, tau) > SIGNIFICANT
-    best, rss = (x2, float(r2 @ r2)) if feedforward else (x1, float(r1 @ r1))
+    start = x0.copy()
+    start[1] = 0.0
+    x1 = fitted(start, np.array([j != 1 for j in range(x0.size)]), STATE)
+    x2 = fitted(x1, np.ones(x0.size, bool), STATE)
+    (rss1, _), (rss2, tau) = rss(x1, STATE), rss(x2, STATE)
+    feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
+    best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
     # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
     x3 = np.concatenate([best, np.full(d, np.log(4.0))])
     x3[2: 2 + d] = np.minimum(x3[2: 2 + d], np.log(0.5 * top))
     free = np.ones(x3.size, bool)
     free[1] = feedforward
-    try:
-        x3 = fitted(x3, free)
-    except FloatingPointError:
-        return _machine(axes, period, best)
-    r3 = fun(x3)
-    tau = autocorrelation_time(r3.reshape(len(trace.t), d))
+    x3 = fitted(x3, free, STATE)
+    rss3, tau = rss(x3, STATE)
     # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
     pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
-    integral = np.all(np.isfinite(r3)) and (delta_bic(rss, float(r3 @ r3), r3.size, d, tau) > SIGNIFICANT
-                                             or (pressed and float(r3 @ r3) <= rss))
-    return _machine(axes, period, x3 if integral else best)
+    if delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed and rss3 <= rss0):
+        best, rss0 = x3, rss3
+    # the sampled drive structures, each fitted from the state structure's fit with the same parameters free
+    found = [(rss0, STATE, best)]
+    free = np.ones(best.size, bool)
+    free[1] = feedforward
+    for drive in DRIVES:
+        x = best.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
+        x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
+        x = fitted(x, free, drive)
+        found.append((rss(x, drive)[0], drive, x))
+    low, structure, x = min(found, key=lambda f: f[0])
+    _, tau = rss(x, structure)
+    # a drive structure replaces the state one when significantly better (the choice counted as one parameter)
+    if structure != STATE and delta_bic(rss0, low, measured.size, 1, tau) > SIGNIFICANT:
+        return _machine(axes, period, x, structure)
+    return _machine(axes, period, best)
+
+
+def identification_warnings(machine):
+    """What a diagnosis on an identified `machine` says of it: the drive structure chosen, a weakly determined kp.
+
+    Parameters
+    ----------
+    machine : Machine
+        A machine of :func:`identify_machine` (one kp, vff and structure for all axes).
+
+    Returns
+    -------
+    list of str
+    """
+    servo = next(iter(machine.axes.values()))
+    period_ms = 1e3 * machine.servo_period
+    if servo.velocity_feedback == "difference":
+        drive = (f"velocity loops on the encoder's backward difference over {servo.velocity_taps} period(s), the command "
+                 f"{servo.computation_delay} period(s) late, at a servo period of {period_ms:.3g} ms")
+    else:
+        drive = f"velocity loops on the motor velocity, at a servo period of {period_ms:.3g} ms"
+    said = [f"identified drive structure: {drive} (chosen among the candidate structures by the fit)"]
+    if servo.vff >= WEAK_KP_VFF:
+        said.append(f"the identified velocity feedforward is {servo.vff:.3g}: with almost no steady lag left, the "
+                    f"position gain kp = {servo.kp:.4g} 1/s shows only in the transients and is weakly determined "
+                    "(a gain_mismatch or time_delay named on it is as uncertain)")
+    return said
 
 
 def autocorrelation_time(x):

@@ -1,0 +1,83 @@
+"""Identification without a model (contoursim.identify): the drive structure and the gains, from positions only.
+
+Two truths: contoursim's own kernel with a known drive structure, logged at
+its servo period (so that the identified machine's period is the truth's and
+its structures are the truth's candidates), and a trace of the independent
+simulator of benchmarks/independent_truth.py, written apart from the kernel.
+"""
+
+import pytest
+
+from conftest import ROOT
+
+from contoursim import paths
+from contoursim.diagnosis import diagnose, synthetic_trace
+from contoursim.feed import plan, sample
+from contoursim.identify import WEAK_KP_VFF, identify_machine, identification_warnings
+from contoursim.machine import Machine
+from contoursim.model import load_model
+from contoursim.servo import AxisServo
+from contoursim.traces import read_trace
+
+DT = 1e-3  # servo period [s], the traces logged at it
+
+
+def own_trace(**drive):
+    """A CCW circle on two PI axes of contoursim's kernel with the drive settings `drive`, 0.1 µm noise, fixed seed."""
+    servo = dict(mass=100.0, force_constant=100.0, damping=0.0, kp=30.0, vff=0.0, **drive)
+    truth = Machine({"x": AxisServo(kv=150.0, ti=0.03, **servo), "y": AxisServo(kv=120.0, ti=0.04, **servo)}, DT)
+    path = paths.iso230_4_circle(10.0, direction="ccw")
+    reference = sample(path, plan(path, feed=2000 / 60, accel=1500.0, jerk=5e4), DT)
+    return synthetic_trace(truth, reference, mismatch=0.0, noise_um=0.1, every=1, seed=5)
+
+
+def structure(machine):
+    """The identified drive structure of every axis, ``{(velocity_feedback, velocity_taps, computation_delay)}``."""
+    return {(s.velocity_feedback, s.velocity_taps, s.computation_delay) for s in machine.axes.values()}
+
+
+def test_a_drive_on_encoder_differences_with_a_computation_delay_is_identified_as_such():
+    """The velocity from the encoder's backward difference, the command one period late: that structure, kp within 2 %."""
+    identified = identify_machine(own_trace(velocity_feedback="difference", computation_delay=1))
+    assert structure(identified) == {("difference", 1, 1)}
+    assert identified.axes["x"].kp == pytest.approx(30.0, rel=0.02)
+
+
+def test_a_drive_on_the_motor_velocity_is_not_given_a_difference():
+    """The velocity loop on the motor velocity itself, no delay: the state structure, kp within 2 %."""
+    identified = identify_machine(own_trace())
+    assert structure(identified) == {("state", 1, 0)}
+    assert identified.axes["x"].kp == pytest.approx(30.0, rel=0.02)
+
+
+@pytest.fixture
+def independent_truth(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import independent_truth
+
+    return independent_truth
+
+
+def test_independent_drive_gains_are_identified(independent_truth, tmp_path):
+    """An independent rigid axis pair (PI on encoder differences, current loop, 0.25 ms servo logged at 1 ms) with
+    velocity feedforward 0.8: the shared kp within 5 % and vff within 0.03 of the data sheet's, no weak-kp warning."""
+    case = independent_truth.make_case("rigid", None, 22, tmp_path)
+    sheet = load_model(case.machine_file).machine.axes["x"]
+    assert sheet.vff == 0.8
+    identified = identify_machine(read_trace(case.csv))
+    assert identified.axes["x"].kp == pytest.approx(sheet.kp, rel=0.05)
+    assert identified.axes["x"].vff == pytest.approx(0.8, abs=0.03)
+    assert not any("weakly determined" in w for w in identification_warnings(identified))
+
+
+def test_full_feedforward_leaves_kp_weakly_determined_and_the_diagnosis_says_so(independent_truth, tmp_path):
+    """Velocity feedforward 1 (independent truth): the identified vff reaches WEAK_KP_VFF and the diagnosis without a
+    model warns that kp is weakly determined, beside the drive structure it identified."""
+    case = independent_truth.make_case("rigid", None, 32, tmp_path)
+    assert load_model(case.machine_file).machine.axes["x"].vff == 1.0
+    result = diagnose(read_trace(case.csv))
+    assert result.model.machine.axes["x"].vff >= WEAK_KP_VFF
+    said = identification_warnings(result.model.machine)
+    assert any(w.startswith("identified drive structure: ") for w in said)
+    assert any("kp" in w and "weakly determined" in w for w in said)
+    assert all(w in result.warnings for w in said), result.warnings
