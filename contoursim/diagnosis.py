@@ -957,8 +957,12 @@ class _Candidate:
     tau: float = 1.0
 
 
-def _candidates(problem, model):
-    """Every catalogue effect on every axis of the trace it can act on, not yet in `model`."""
+def _candidates(problem, model, warnings):
+    """Every catalogue effect on every axis of the trace it can act on, not yet in `model`.
+
+    A vibration is no candidate on an axis with a compliant screw (the kernel holds one mode per axis, the
+    screw's): said once in `warnings`.
+    """
     trace = problem.trace
     axes = trace.axes
     servo = [a for a in axes if a in model.machine.axes]
@@ -980,9 +984,8 @@ def _candidates(problem, model):
     dt = model.machine.servo_period
     for a in servo:
         s = model.machine.axes[a]
-        for feedback in ("motor", "scale"):
-            add(Effect("backlash", a, lost_motion_um=1.0, feedback=feedback), ("lost_motion_um",),
-                [{"lost_motion_um": v} for v in sizes("backlash")])
+        add(Effect("backlash", a, lost_motion_um=1.0), ("lost_motion_um",),  # read where the axis's encoder is
+            [{"lost_motion_um": v} for v in sizes("backlash")])
         # one step below the typical range too: a loop without velocity integrator stands still short of its
         # target by force/(kf·kv·kp), steep in the force, and an identified machine's forces are relative to
         # its assumed mass (the TU/e rig: 2.4 N, which a start at 5 N misses)
@@ -999,7 +1002,11 @@ def _candidates(problem, model):
         freqs = [f for f in np.geomspace(30.0, 150.0, _GRID) if f < 0.4 * nyquist]
         peak = _spectral_peak(trace.t, residual[:, axes.index(a)], 0.4 * min(nyquist, 0.5 / trace.dt))
         freqs += [peak] if peak is not None else []
-        if freqs:
+        if freqs and s.compliant:
+            dropped = (f"vibration.{a}: not a candidate, the axis's one structural mode is its compliant screw's "
+                       f"({s.screw_mode_hz:.4g} Hz)")
+            warnings += [] if dropped in warnings else [dropped]
+        elif freqs:
             add(Effect("vibration", a, freq_hz=freqs[0]), ("freq_hz", "damping_ratio"),
                 [{"freq_hz": f, "damping_ratio": z} for f in freqs for z in (0.02, 0.1)])
     for a in axes:
@@ -1431,7 +1438,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         if rss0 <= problem.n * NOISE_FLOOR**2:
             say("the residual is at the noise floor: stopping")
             break
-        cands = _candidates(problem, base)
+        cands = _candidates(problem, base, warnings)
         say(f"[effect {round_ + 1}] starting values of {len(cands)} candidates (one batch)")
         cands = _start(problem, cands, base, warnings)
         cands = [c for c in cands if c.delta_bic > 0]  # no row of its grid explains anything: not refined
