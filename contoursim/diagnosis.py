@@ -104,7 +104,9 @@ _JACKKNIFE_BLOCKS = 10  # consecutive segments of the trace the uncertainty's ja
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
 _TWIN_SHARE = 0.8  # two candidates alike for a reason the trace cannot decide are twins when one closes this share of the other's gap
-_REFIT_FIELDS = ("mass", "damping") + CONTROLLER_FIELDS  # servo parameters the refit may move (the controller's if uncertain)
+_REFIT_FIELDS = ("mass", "damping", "motor_mass", "screw_stiffness", "screw_damping_ratio") + CONTROLLER_FIELDS  # servo
+# parameters the refit may move (the controller's if uncertain)
+_SCREW_DAMPING_SPREAD = 0.5  # prior spread of a compliant screw's damping ratio [-, relative]: a data sheet guesses it
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 
@@ -880,7 +882,8 @@ def _nuisance_changes(model, axes, identified):
     A given model's controller (gains, integral time, feedforward, period) is
     software, set exactly: only the plant carries a prior, the moving mass
     (with the force constant fixed, it sets the velocity loop's gain and
-    the acceleration feedforward's match) and the viscous damping, and the
+    the acceleration feedforward's match), the viscous damping, a compliant
+    screw's motor-side mass, stiffness and damping ratio, and the
     controller settings the machine file lists as ``uncertain``. An
     identified controller is itself uncertain: one position gain and one
     feedforward fraction for all axes, the velocity gain per axis.
@@ -894,6 +897,10 @@ def _nuisance_changes(model, axes, identified):
             changes.append(({a: {"mass": s.mass * h}}, NOMINAL_SPREAD))
             if s.damping > 0:
                 changes.append(({a: {"damping": s.damping * h}}, DAMPING_SPREAD))
+            if s.compliant:  # the screw: its motor side's mass and stiffness as a data sheet gives them, its damping guessed
+                changes += [({a: {"motor_mass": s.motor_mass * h}}, NOMINAL_SPREAD),
+                            ({a: {"screw_stiffness": s.screw_stiffness * h}}, NOMINAL_SPREAD),
+                            ({a: {"screw_damping_ratio": s.screw_damping_ratio * h}}, _SCREW_DAMPING_SPREAD)]
             for name in model.machine.uncertain.get(a, ()):  # settings the machine file marks as not known exactly
                 value = getattr(s, name)
                 stepped = value * h if name not in ("vff", "aff") or value * h <= 1 else value / h
@@ -919,11 +926,19 @@ def _steps_from(nominal, machine, change):
 
 
 def _with_servos(model, change):
-    """`model` with some servo fields changed, ``{axis: {field: value}}`` (same chain: one structure for a batch)."""
+    """`model` with some servo fields changed, ``{axis: {field: value}}`` (same chain: one structure for a batch).
+
+    A compliant screw's motor side keeps its share of a changed mass (and stays within 95 % of it).
+    """
     machine = model.machine
     servos = dict(machine.axes)
     for axis, fields in change.items():
-        servos[axis] = replace(servos[axis], **fields)
+        s = servos[axis]
+        if s.compliant:
+            mass = fields.get("mass", s.mass)
+            motor = fields.get("motor_mass", s.motor_mass * mass / s.mass)
+            fields = {**fields, "motor_mass": min(motor, 0.95 * mass)}
+        servos[axis] = replace(s, **fields)
     return Model(replace(machine, axes=servos), model.effects)
 
 

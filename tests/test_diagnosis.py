@@ -74,8 +74,8 @@ def assert_found(result, truth, main):
 
 
 CASES = [
-    ("backlash on Y, scale feedback, CW circle", lambda: Effect("backlash", str(RNG.choice(["x", "y"])),
-     lost_motion_um=uniform(2, 20), feedback="scale"), lambda: circle("cw"), "lost_motion_um"),
+    ("backlash, scale feedback, CW circle", lambda: Effect("backlash", str(RNG.choice(["x", "y"])),
+     lost_motion_um=uniform(2, 20)), lambda: circle("cw"), "lost_motion_um"),  # on scales: see the test
     ("squareness, CCW circle", lambda: Effect("squareness", "xy", angle_urad=float(RNG.choice([-1, 1])) * uniform(20, 200)),
      lambda: circle("ccw"), "angle_urad"),
     ("friction, free-form", lambda: Effect("coulomb_friction", str(RNG.choice(["x", "y"])),
@@ -90,6 +90,8 @@ CASES = [
 @pytest.mark.parametrize("make_effect, make_reference, main_parameter", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_names_the_hidden_effect_its_axis_and_size(machine, make_effect, make_reference, main_parameter):
     truth = make_effect()
+    if truth.name == "backlash":  # behind linear scales, which the machine says: the loop sees the lost motion
+        machine = replace(machine, axes={a: replace(s, position_feedback="scale") for a, s in machine.axes.items()})
     result = run_blind(machine, (truth,), make_reference(), seed=int(RNG.integers(1 << 30)))
     assert_found(result, truth, main_parameter)
 
