@@ -31,7 +31,13 @@ The plant of one axis (states ``x, v, d, ḋ, i``)::
 
 so `mode_freq_hz` and `mode_damping_ratio` are those of the tool-side mass
 on its spring with the carriage held still, and `mode_mass_ratio` is
-``r = m2/m``; without a mode ``d ≡ 0`` and ``m1 = m``. With electrical
+``r = m2/m``; without a mode ``d ≡ 0`` and ``m1 = m``. An axis with a
+compliant screw (:class:`~contoursim.servo.AxisServo` ``motor_mass``,
+``screw_stiffness``) has the same states for its two masses: the carriage
+is the motor side (``m1 = motor_mass``, what the motor encoder reads), the
+other mass the table (``m2 = m - m1``, at ``x + d``) on the screw's spring
+``k = 1e6·screw_stiffness`` [N/m] and damper (:mod:`contoursim.servo`):
+one mode per axis, so such an axis takes no `mode_freq_hz`. With electrical
 dynamics ``L·di/dt = u - R·i - kf·v`` as in :mod:`contoursim.servo`;
 with `current_bandwidth_hz` the lag ``di/dt = ω_c·(u - i)`` on the current
 command ``u``; without either, ``i`` holds the current command of the period.
@@ -41,11 +47,14 @@ output is held over ``[t_k, t_k+1)``):
 
 1. backlash: the table follows the motor/screw position ``x`` with a play of
    width `backlash_mm` (play operator, state: the table position);
-2. the encoder: ``x`` (``backlash_feedback="motor"``, semi-closed loop) or the
-   table (``"scale"``, closed loop), rounded to `quantum_mm`, plus the
-   measurement noise when it is on the encoder (``noise_at="encoder"``);
+2. the encoders (the servo's ``position_feedback``): the position loop reads
+   ``x`` (``"motor"``, semi-closed loop) or the table (``"scale"``, closed
+   loop: behind the play, plus a compliant screw's ``d``), rounded to
+   `quantum_mm`, plus the measurement noise when it is on the encoder
+   (``noise_at="encoder"``); the motor encoder ``x``, rounded, is what the
+   velocity difference reads either way (a drive's dual feedback);
 3. feedback delay: the position loop reads the encoder and the velocity loop
-   the motor velocity `feedback_delay_s` late, linearly interpolated between
+   the motor velocity (or encoder) `feedback_delay_s` late, linearly interpolated between
    samples (ring buffers in the state, at most :data:`MAX_DELAY_SAMPLES`);
    then, with ``velocity_feedback="difference"`` (:class:`~contoursim.servo.AxisServo`),
    the velocity loop reads instead the backward difference of the fed-back
