@@ -975,8 +975,8 @@ class _Candidate:
 def _candidates(problem, model, warnings):
     """Every catalogue effect on every axis of the trace it can act on, not yet in `model`.
 
-    A vibration is no candidate on an axis with a compliant screw (the kernel holds one mode per axis, the
-    screw's): said once in `warnings`.
+    A vibration on an axis with a compliant screw is tried with the screw taken as rigid (:func:`_with_effect`):
+    said once in `warnings`.
     """
     trace = problem.trace
     axes = trace.axes
@@ -1018,10 +1018,10 @@ def _candidates(problem, model, warnings):
         peak = _spectral_peak(trace.t, residual[:, axes.index(a)], 0.4 * min(nyquist, 0.5 / trace.dt))
         freqs += [peak] if peak is not None else []
         if freqs and s.compliant:
-            dropped = (f"vibration.{a}: not a candidate, the axis's one structural mode is its compliant screw's "
-                       f"({s.screw_mode_hz:.4g} Hz)")
-            warnings += [] if dropped in warnings else [dropped]
-        elif freqs:
+            rigid = (f"vibration.{a}: tried with the axis's screw taken as rigid (its mode at {s.screw_mode_hz:.4g} Hz): "
+                     "the kernel holds one structural mode per axis")
+            warnings += [] if rigid in warnings else [rigid]
+        if freqs:
             add(Effect("vibration", a, freq_hz=freqs[0]), ("freq_hz", "damping_ratio"),
                 [{"freq_hz": f, "damping_ratio": z} for f in freqs for z in (0.02, 0.1)])
     for a in axes:
@@ -1076,7 +1076,20 @@ def _bounds(problem, cand):
 
 def _model_of(model, cand, x):
     """`model` with `cand`'s effect at free-parameter values `x`."""
-    return model.with_effect(cand.effect.with_values(**dict(zip(cand.free, x))))
+    return _with_effect(model, cand.effect.with_values(**dict(zip(cand.free, x))))
+
+
+def _with_effect(model, effect):
+    """`model` with `effect`; a vibration on an axis with a compliant screw takes the axis rigid first.
+
+    The kernel holds one structural mode per axis: a tool-side mode (30–150 Hz) below the screw's (hundreds of
+    Hz) is the one the trace shows, the screw's quasi-static stretch what is given up.
+    """
+    servo = model.machine.axes.get(effect.axis)
+    if effect.name == "vibration" and servo is not None and servo.compliant:
+        rigid = replace(servo, motor_mass=None, screw_stiffness=None, screw_damping_ratio=None)
+        model = Model(replace(model.machine, axes={**model.machine.axes, effect.axis: rigid}), model.effects)
+    return model.with_effect(effect)
 
 
 def _score(problem, cand, r, tau=None):
@@ -1534,14 +1547,14 @@ def _currents(trace, model, reference, force):
 def _settle(problem, base, best, warnings):
     """Make `base` with `best`'s effect the problem's base: nominal parameters refitted with it in place, then the
     effect refitted around them, then the nominal parameters again."""
-    problem.set_base(base.with_effect(best.fit), refit=_REFIT_STEPS)
+    problem.set_base(_with_effect(base, best.fit), refit=_REFIT_STEPS)
     problem.set_base(Model(problem.base.machine, base.effects))
     best.x = np.array([best.fit[name] for name in best.free])
     _refine(problem, best, problem.base)
-    problem.set_base(problem.base.with_effect(best.fit), refit=_REFIT_STEPS)
+    problem.set_base(_with_effect(problem.base, best.fit), refit=_REFIT_STEPS)
     if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
         best.fit = _constant_force(problem, best.fit)
-        problem.set_base(problem.base.with_effect(best.fit))
+        problem.set_base(_with_effect(problem.base, best.fit))
         warnings.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
                         "measurement's zero offset; without an integrator in the velocity loop the two "
                         "cannot be told apart")

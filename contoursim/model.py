@@ -103,6 +103,10 @@ class Model:
                 raise ValueError(f"{e.label}: the machine has no axis {missing[0]!r} among its {what} ({', '.join(allowed)})")
             if _delay_problem(e, self.machine):
                 raise ValueError(_delay_problem(e, self.machine))
+        for e in effects:
+            if e.name == "vibration" and self.machine.axes[e.axis].compliant:
+                raise ValueError(f"{e.label}: axis {e.axis} has a compliant screw (motor_mass, screw_stiffness), whose "
+                                 "mode is the one structural mode the kernel holds per axis: no vibration beside it")
         effects = tuple(_bound_feedback(e, self.machine) for e in effects)
         object.__setattr__(self, "effects", effects)
 

@@ -433,6 +433,8 @@ def test_one_mode_per_axis_and_one_place_for_the_encoder():
     with pytest.raises(ValueError, match=r"a structural mode \(vibration\) on an axis with a compliant screw"):
         pack(axis(**SCREW), DT, LoopEffects(mode_freq_hz=80.0))
     machine = Machine({"x": axis(**SCREW, position_feedback="scale")}, DT)
+    with pytest.raises(ValueError, match=r"vibration.x: axis x has a compliant screw .* no vibration beside it"):
+        Model(machine, (Effect("vibration", "x", freq_hz=80.0),))
     bound = Model(machine, (Effect("backlash", "x", lost_motion_um=5.0),)).effects[0]
     assert bound.options["feedback"] == "scale"  # left out: the axis's
     with pytest.raises(ValueError, match=r'backlash.x: feedback = "motor", but axis x\'s position loop reads the '
