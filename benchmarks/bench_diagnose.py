@@ -261,7 +261,8 @@ def main():
                     case = run(family, mode, name, seed, mill, Path(folder))
                     results.setdefault((family, mode), []).append(case)
                     named = ", ".join(e.label for e in case["named"]) or "nothing"
-                    what = case["error"] or f"named {named}; RMS {case['before']:.3f} -> {case['after']:.3f} µm (noise {case['floor']:.3f})"
+                    what = case["error"] or (f"named {named}; RMS {case['before'] or np.nan:.3f} -> {case['after'] or np.nan:.3f} µm "
+                                             f"(noise {case['floor']:.3f})")  # a report's null (not finite) as nan
                     print(f"[{family}/{mode} {i + 1}/{len(plan)}] {'ok ' if case['right'] else 'BAD'} {case['path']:<20} "
                           f"hidden {case['truth']['name'] + '.' + case['truth']['axis'] if case['truth'] else 'none'}; "
                           f"{what}; effect {case['signal']:.3f} µm RMS; {case['seconds']:.1f} s", file=sys.stderr, flush=True)

@@ -823,8 +823,8 @@ class _Problem:
             cost = float(self.base_residual @ self.base_residual)
             trial = _refitted(model, [change for change, _ in self.changes], coef)
             self._linearise(trial)
-            if float(self.base_residual @ self.base_residual) > (1.0 + _STEP_TOLERANCE) * cost:
-                self._linearise(model)  # the step made it worse: back to the last base
+            if not float(self.base_residual @ self.base_residual) <= (1.0 + _STEP_TOLERANCE) * cost:
+                self._linearise(model)  # the step made it worse (or the loop diverge): back to the last base
                 break
             model = trial
 
@@ -1018,8 +1018,8 @@ def _candidates(problem, model, warnings):
         peak = _spectral_peak(trace.t, residual[:, axes.index(a)], 0.4 * min(nyquist, 0.5 / trace.dt))
         freqs += [peak] if peak is not None else []
         if freqs and s.compliant:
-            rigid = (f"vibration.{a}: tried with the axis's screw taken as rigid (its mode at {s.screw_mode_hz:.4g} Hz): "
-                     "the kernel holds one structural mode per axis")
+            rigid = (f"vibration.{a}: tried with the axis's compliant screw taken as rigid: the kernel holds one "
+                     "structural mode per axis")
             warnings += [] if rigid in warnings else [rigid]
         if freqs:
             add(Effect("vibration", a, freq_hz=freqs[0]), ("freq_hz", "damping_ratio"),
