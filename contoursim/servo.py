@@ -1146,7 +1146,9 @@ def check(servo, dt, axis="x"):
        the unit circle, phase margin >= ``MIN_PHASE_MARGIN_DEG`` (30°) and
        closed-loop damping ratio >= ``MIN_DAMPING_RATIO`` (0.2) — otherwise
        :class:`~contoursim.exceptions.UnstableLoopError` naming the axis, the
-       loop and its margins.
+       loop and its margins (on an axis with a compliant screw the phase
+       margin and damping criteria apply below its antiresonance, the mode
+       above must only be stable: see :func:`margins`).
 
     Parameters
     ----------
