@@ -112,7 +112,9 @@ _JACKKNIFE_BLOCKS = (40, 20, 10)
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
 _TWIN_SHARE = 0.8  # two candidates alike for a reason the trace cannot decide are twins when one closes this share of the other's gap
-_REFIT_FIELDS = ("mass", "damping") + CONTROLLER_FIELDS  # servo parameters the refit may move (the controller's if uncertain)
+_REFIT_FIELDS = ("mass", "damping", "motor_mass", "screw_stiffness", "screw_damping_ratio") + CONTROLLER_FIELDS  # servo
+# parameters the refit may move (the controller's if uncertain)
+_SCREW_DAMPING_SPREAD = 0.5  # prior spread of a compliant screw's damping ratio [-, relative]: a data sheet guesses it
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 
@@ -852,8 +854,8 @@ class _Problem:
             cost = float(self.base_residual @ self.base_residual)
             trial = _refitted(model, [change for change, _ in self.changes], coef)
             self._linearise(trial)
-            if float(self.base_residual @ self.base_residual) > (1.0 + _STEP_TOLERANCE) * cost:
-                self._linearise(model)  # the step made it worse: back to the last base
+            if not float(self.base_residual @ self.base_residual) <= (1.0 + _STEP_TOLERANCE) * cost:
+                self._linearise(model)  # the step made it worse (or the loop diverge): back to the last base
                 break
             model = trial
 
@@ -911,7 +913,8 @@ def _nuisance_changes(model, axes, identified):
     A given model's controller (gains, integral time, feedforward, period) is
     software, set exactly: only the plant carries a prior, the moving mass
     (with the force constant fixed, it sets the velocity loop's gain and
-    the acceleration feedforward's match) and the viscous damping, and the
+    the acceleration feedforward's match), the viscous damping, a compliant
+    screw's motor-side mass, stiffness and damping ratio, and the
     controller settings the machine file lists as ``uncertain``. An
     identified controller is itself uncertain: one position gain and one
     feedforward fraction for all axes, the velocity gain per axis.
@@ -925,6 +928,10 @@ def _nuisance_changes(model, axes, identified):
             changes.append(({a: {"mass": s.mass * h}}, NOMINAL_SPREAD))
             if s.damping > 0:
                 changes.append(({a: {"damping": s.damping * h}}, DAMPING_SPREAD))
+            if s.compliant:  # the screw: its motor side's mass and stiffness as a data sheet gives them, its damping guessed
+                changes += [({a: {"motor_mass": s.motor_mass * h}}, NOMINAL_SPREAD),
+                            ({a: {"screw_stiffness": s.screw_stiffness * h}}, NOMINAL_SPREAD),
+                            ({a: {"screw_damping_ratio": s.screw_damping_ratio * h}}, _SCREW_DAMPING_SPREAD)]
             for name in model.machine.uncertain.get(a, ()):  # settings the machine file marks as not known exactly
                 value = getattr(s, name)
                 stepped = value * h if name not in ("vff", "aff") or value * h <= 1 else value / h
@@ -950,11 +957,19 @@ def _steps_from(nominal, machine, change):
 
 
 def _with_servos(model, change):
-    """`model` with some servo fields changed, ``{axis: {field: value}}`` (same chain: one structure for a batch)."""
+    """`model` with some servo fields changed, ``{axis: {field: value}}`` (same chain: one structure for a batch).
+
+    A compliant screw's motor side keeps its share of a changed mass (and stays within 95 % of it).
+    """
     machine = model.machine
     servos = dict(machine.axes)
     for axis, fields in change.items():
-        servos[axis] = replace(servos[axis], **fields)
+        s = servos[axis]
+        if s.compliant:
+            mass = fields.get("mass", s.mass)
+            motor = fields.get("motor_mass", s.motor_mass * mass / s.mass)
+            fields = {**fields, "motor_mass": min(motor, 0.95 * mass)}
+        servos[axis] = replace(s, **fields)
     return Model(replace(machine, axes=servos), model.effects)
 
 
@@ -988,8 +1003,12 @@ class _Candidate:
     tau: float = 1.0
 
 
-def _candidates(problem, model):
-    """Every catalogue effect on every axis of the trace it can act on, not yet in `model`."""
+def _candidates(problem, model, warnings):
+    """Every catalogue effect on every axis of the trace it can act on, not yet in `model`.
+
+    A vibration on an axis with a compliant screw is tried with the screw taken as rigid (:func:`_with_effect`):
+    said once in `warnings`.
+    """
     trace = problem.trace
     axes = trace.axes
     servo = [a for a in axes if a in model.machine.axes]
@@ -1011,9 +1030,8 @@ def _candidates(problem, model):
     dt = model.machine.servo_period
     for a in servo:
         s = model.machine.axes[a]
-        for feedback in ("motor", "scale"):
-            add(Effect("backlash", a, lost_motion_um=1.0, feedback=feedback), ("lost_motion_um",),
-                [{"lost_motion_um": v} for v in sizes("backlash")])
+        add(Effect("backlash", a, lost_motion_um=1.0), ("lost_motion_um",),  # read where the axis's encoder is
+            [{"lost_motion_um": v} for v in sizes("backlash")])
         # one step below the typical range too: a loop without velocity integrator stands still short of its
         # target by force/(kf·kv·kp), steep in the force, and an identified machine's forces are relative to
         # its assumed mass (the TU/e rig: 2.4 N, which a start at 5 N misses)
@@ -1032,6 +1050,10 @@ def _candidates(problem, model):
         freqs = [f for f in np.geomspace(30.0, 150.0, _GRID) if f < 0.4 * nyquist]
         peak = _spectral_peak(trace.t, residual[:, axes.index(a)], 0.4 * min(nyquist, 0.5 / trace.dt))
         freqs += [peak] if peak is not None else []
+        if freqs and s.compliant:
+            rigid = (f"vibration.{a}: tried with the axis's compliant screw taken as rigid: the kernel holds one "
+                     "structural mode per axis")
+            warnings += [] if rigid in warnings else [rigid]
         if freqs:
             add(Effect("vibration", a, freq_hz=freqs[0]), ("freq_hz", "damping_ratio"),
                 [{"freq_hz": f, "damping_ratio": z} for f in freqs for z in (0.02, 0.1)])
@@ -1089,7 +1111,20 @@ def _bounds(problem, cand):
 
 def _model_of(model, cand, x):
     """`model` with `cand`'s effect at free-parameter values `x`."""
-    return model.with_effect(cand.effect.with_values(**dict(zip(cand.free, x))))
+    return _with_effect(model, cand.effect.with_values(**dict(zip(cand.free, x))))
+
+
+def _with_effect(model, effect):
+    """`model` with `effect`; a vibration on an axis with a compliant screw takes the axis rigid first.
+
+    The kernel holds one structural mode per axis: a tool-side mode (30–150 Hz) below the screw's (hundreds of
+    Hz) is the one the trace shows, the screw's quasi-static stretch what is given up.
+    """
+    servo = model.machine.axes.get(effect.axis)
+    if effect.name == "vibration" and servo is not None and servo.compliant:
+        rigid = replace(servo, motor_mass=None, screw_stiffness=None, screw_damping_ratio=None)
+        model = Model(replace(model.machine, axes={**model.machine.axes, effect.axis: rigid}), model.effects)
+    return model.with_effect(effect)
 
 
 def _score(problem, cand, r, tau=None):
@@ -1504,7 +1539,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         if rss0 <= problem.n * NOISE_FLOOR**2:
             say("the residual is at the noise floor: stopping")
             break
-        cands = _candidates(problem, base)
+        cands = _candidates(problem, base, warnings)
         say(f"[effect {round_ + 1}] starting values of {len(cands)} candidates (one batch)")
         cands = _start(problem, cands, base, warnings)
         cands = [c for c in cands if c.delta_bic > 0]  # no row of its grid explains anything: not refined
@@ -1585,14 +1620,14 @@ def _currents(trace, model, reference, force):
 def _settle(problem, base, best, warnings):
     """Make `base` with `best`'s effect the problem's base: nominal parameters refitted with it in place, then the
     effect refitted around them, then the nominal parameters again."""
-    problem.set_base(base.with_effect(best.fit), refit=_REFIT_STEPS)
+    problem.set_base(_with_effect(base, best.fit), refit=_REFIT_STEPS)
     problem.set_base(Model(problem.base.machine, base.effects))
     best.x = np.array([best.fit[name] for name in best.free])
     _refine(problem, best, problem.base)
-    problem.set_base(problem.base.with_effect(best.fit), refit=_REFIT_STEPS)
+    problem.set_base(_with_effect(problem.base, best.fit), refit=_REFIT_STEPS)
     if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
         best.fit = _constant_force(problem, best.fit)
-        problem.set_base(problem.base.with_effect(best.fit))
+        problem.set_base(_with_effect(problem.base, best.fit))
         warnings.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
                         "measurement's zero offset; without an integrator in the velocity loop the two "
                         "cannot be told apart")

@@ -138,7 +138,8 @@ class EffectKind:
         size, which a file or a constructor must always give.
     options : mapping str -> tuple
         Structural choices: option name -> allowed values, the first being
-        the default. ``int`` instead of a tuple: any integer, default 0.
+        the default (``None``: decided by the machine, see :class:`Effect`).
+        ``int`` instead of a tuple: any integer, default 0.
         ``"axes"``: any axis letter other than the effect's own.
     n_axes : int
         Letters in the effect's axis: 1, or 2 for a cross-axis effect.
@@ -228,9 +229,14 @@ class Effect:
 
     Examples
     --------
-    >>> e = Effect("backlash", "x", lost_motion_um=8.0)
+    >>> e = Effect("backlash", "x", lost_motion_um=8.0, feedback="motor")
     >>> e.label, e["lost_motion_um"], e.options["feedback"], e.stage
     ('backlash.x', 8.0, 'motor', 'loop')
+
+    A backlash's ``feedback`` says where the position loop's encoder is,
+    which is the axis's setting (``position_feedback``): left out
+    (``None``), a :class:`~contoursim.model.Model` fills in the axis's;
+    given, it must agree with it.
     """
 
     name: str
@@ -336,7 +342,8 @@ def _option(name, axis, key, allowed, value):
     if value is None:
         return default
     if value not in choices:
-        raise ValueError(f"{name}.{axis}: {key} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+        listed = ", ".join(repr(c) for c in choices if c is not None)
+        raise ValueError(f"{name}.{axis}: {key} must be one of {listed}, got {value!r}")
     return value
 
 
@@ -352,8 +359,9 @@ def _p(name, value, unit, bounds, typical=None, vary=True, doc=""):
 _register(EffectKind(
     "backlash", "loop",
     (_p("lost_motion_um", 0.0, "µm", (0.0, 1000.0), (2.0, 20.0), doc="lost motion between motor/screw and table"),),
-    options={"feedback": ("motor", "scale")},
-    doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk)",
+    options={"feedback": (None, "motor", "scale")},
+    doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk); "
+        "the axis's position_feedback when not given",
 ))
 _register(EffectKind(
     "coulomb_friction", "loop",

@@ -31,7 +31,13 @@ The plant of one axis (states ``x, v, d, ḋ, i``)::
 
 so `mode_freq_hz` and `mode_damping_ratio` are those of the tool-side mass
 on its spring with the carriage held still, and `mode_mass_ratio` is
-``r = m2/m``; without a mode ``d ≡ 0`` and ``m1 = m``. With electrical
+``r = m2/m``; without a mode ``d ≡ 0`` and ``m1 = m``. An axis with a
+compliant screw (:class:`~contoursim.servo.AxisServo` ``motor_mass``,
+``screw_stiffness``) has the same states for its two masses: the carriage
+is the motor side (``m1 = motor_mass``, what the motor encoder reads), the
+other mass the table (``m2 = m - m1``, at ``x + d``) on the screw's spring
+``k = 1e6·screw_stiffness`` [N/m] and damper (:mod:`contoursim.servo`):
+one mode per axis, so such an axis takes no `mode_freq_hz`. With electrical
 dynamics ``L·di/dt = u - R·i - kf·v`` as in :mod:`contoursim.servo`;
 with `current_bandwidth_hz` the lag ``di/dt = ω_c·(u - i)`` on the current
 command ``u``; without either, ``i`` holds the current command of the period.
@@ -41,11 +47,14 @@ output is held over ``[t_k, t_k+1)``):
 
 1. backlash: the table follows the motor/screw position ``x`` with a play of
    width `backlash_mm` (play operator, state: the table position);
-2. the encoder: ``x`` (``backlash_feedback="motor"``, semi-closed loop) or the
-   table (``"scale"``, closed loop), rounded to `quantum_mm`, plus the
-   measurement noise when it is on the encoder (``noise_at="encoder"``);
+2. the encoders (the servo's ``position_feedback``): the position loop reads
+   ``x`` (``"motor"``, semi-closed loop) or the table (``"scale"``, closed
+   loop: behind the play, plus a compliant screw's ``d``), rounded to
+   `quantum_mm`, plus the measurement noise when it is on the encoder
+   (``noise_at="encoder"``); the motor encoder ``x``, rounded, is what the
+   velocity difference reads either way (a drive's dual feedback);
 3. feedback delay: the position loop reads the encoder and the velocity loop
-   the motor velocity `feedback_delay_s` late, linearly interpolated between
+   the motor velocity (or encoder) `feedback_delay_s` late, linearly interpolated between
    samples (ring buffers in the state, at most :data:`MAX_DELAY_SAMPLES`);
    then, with ``velocity_feedback="difference"`` (:class:`~contoursim.servo.AxisServo`),
    the velocity loop reads instead the backward difference of the fed-back
@@ -86,7 +95,7 @@ from ._numba import njit
 from .estimators import _arc_parts, _linear_arc, _three_point_arc, distinct_samples, search_params
 from .nearest import nearest_knot
 from .exceptions import UnstableLoopError
-from .servo import AxisServo, zoh
+from .servo import AxisServo, _plant_matrices, zoh
 
 __all__ = [
     "Coupling",
@@ -118,7 +127,7 @@ _CB, _CC, _CD = 42, 43, 44  # current controller: z += CB·e; u = CC·z + CD·e
 _ILIM = 45  # current limit [A] (the largest float: none, so that a row is finite)
 _ELEC = 46  # 1.0 when the current loop is modelled
 _HALF_PLAY = 47  # half the backlash [mm]
-_SCALE = 48  # 1.0 when the loop closes on the table (linear scale)
+_SCALE = 48  # 1.0 when the position loop closes on the table (AxisServo.position_feedback = "scale")
 _FRICTION = 49  # 1.0 when any friction or offset force is set
 _FC, _FV, _FS, _VS, _FA, _F0 = 50, 51, 52, 53, 54, 55  # friction, see LoopEffects
 _DELAY_N, _DELAY_F = 56, 57  # feedback delay: whole periods, fraction of a period
@@ -130,7 +139,8 @@ _VDIFF = 62  # 1.0 when the velocity loop closes on the encoder difference (Axis
 _VTAPS, _VGAIN, _VPOLE = 63, 64, 65  # its taps n, 1/(n·dt) [1/s] and low-pass pole (0: none)
 _CDELAY = 66  # computation delay [servo periods]
 _LAGGED = 67  # 1.0 when the current lags its command (AxisServo.current_bandwidth_hz): the plant's row 4 steps it
-NPAR = 68  #: length of one axis's parameter row from :func:`pack`
+_SCREW = 68  # 1.0 when the mode is a compliant screw (AxisServo.motor_mass): d is the table's, which a scale reads
+NPAR = 69  #: length of one axis's parameter row from :func:`pack`
 
 # Per-axis state ----------------------------------------------------------------------------
 _ZV, _ZC = 5, 6  # velocity / current controller integrators [mm], [A·s]
@@ -168,11 +178,9 @@ class LoopEffects:
     backlash_mm : float, default 0
         Lost motion between the motor/screw and the table [mm]: the table
         stands still after a reversal until the screw has moved this far.
-    backlash_feedback : {"motor", "scale"}, default "motor"
-        Where the position loop closes: on the motor encoder (the table
-        lags at reversal, the loop does not see it) or on a linear scale on
-        the table (the loop sees the lost motion: hunting risk with integral
-        action).
+        Where the position loop reads (the motor, which does not see it, or
+        the table, which does: hunting risk with integral action) is the
+        servo's ``position_feedback``.
     coulomb_N : float, default 0
         Coulomb friction level [N].
     viscous_N_s_per_m : float, default 0
@@ -234,7 +242,6 @@ class LoopEffects:
     """
 
     backlash_mm: float = 0.0
-    backlash_feedback: str = "motor"
     coulomb_N: float = 0.0
     viscous_N_s_per_m: float = 0.0
     stribeck_N: float = 0.0
@@ -257,8 +264,6 @@ class LoopEffects:
         checked["stribeck_velocity_mm_s"] = _validate.positive("stribeck_velocity_mm_s", self.stribeck_velocity_mm_s)
         for name in ("asymmetry_N", "offset_N"):
             checked[name] = _validate.finite(name, getattr(self, name))
-        if self.backlash_feedback not in ("motor", "scale"):
-            raise ValueError(f'backlash_feedback must be "motor" or "scale", got {self.backlash_feedback!r}')
         if self.noise_at not in ("recorded", "encoder"):
             raise ValueError(f'noise_at must be "recorded" or "encoder", got {self.noise_at!r}')
         if self.mode_freq_hz is not None:
@@ -436,10 +441,13 @@ class ServoResponse:
 
 
 @njit(cache=True)
-def _sensors(x, table, half_play, scale, quantum):
-    """Table behind the play and the encoder reading: ``(table, encoder)`` [mm]."""
+def _sensors(x, d, table, half_play, scale, quantum):
+    """Table behind the play and the position loop's reading: ``(table, encoder)`` [mm].
+
+    The motor encoder reads `x`, a scale the table plus `d` (a compliant screw's deflection; 0 else).
+    """
     table = _play(x, table, half_play)
-    return table, _quantised(table if scale else x, quantum)
+    return table, _quantised(table + d if scale else x, quantum)
 
 
 @njit(cache=True)
@@ -631,11 +639,13 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
     for a in range(n_axes):  # at rest: the delay buffers hold the first encoder reading
         dvel[a] = 0.0
         keys[a] = _mix(np.uint64(par[a, _SEED]) * np.uint64(n_axes + 1) + np.uint64(a))
-        state[a, _TABLE], enc = _sensors(state[a, 0], state[a, _TABLE], par[a, _HALF_PLAY], par[a, _SCALE] != 0.0,
-                                         par[a, _QUANTUM])  # fmt: skip
+        scale, screw = par[a, _SCALE] != 0.0, par[a, _SCREW] != 0.0
+        state[a, _TABLE], enc = _sensors(state[a, 0], state[a, 2] if screw else 0.0, state[a, _TABLE],
+                                         par[a, _HALF_PLAY], scale, par[a, _QUANTUM])  # fmt: skip
+        motor = _quantised(state[a, 0], par[a, _QUANTUM]) if scale else enc
         state[a, _BUFX : _BUFX + _NBUF] = enc
-        state[a, _BUFV : _BUFV + _NBUF] = state[a, 1]
-        state[a, _HIST : _HIST + _NHIST] = enc
+        state[a, _BUFV : _BUFV + _NBUF] = motor if par[a, _VDIFF] != 0.0 else state[a, 1]
+        state[a, _HIST : _HIST + _NHIST] = motor
         status[a, _CLAMPED] = 0
         status[a, _DIVERGED] = -1
         status[a, _BAD_REFERENCE] = -1
@@ -643,25 +653,28 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
         j = k // every
         record = k - j * every == 0
         for a in range(n_axes):
-            table, enc = _sensors(state[a, 0], state[a, _TABLE], par[a, _HALF_PLAY], par[a, _SCALE] != 0.0,
-                                  par[a, _QUANTUM])  # fmt: skip
+            scale, difference = par[a, _SCALE] != 0.0, par[a, _VDIFF] != 0.0
+            table, enc = _sensors(state[a, 0], state[a, 2] if par[a, _SCREW] != 0.0 else 0.0, state[a, _TABLE],
+                                  par[a, _HALF_PLAY], scale, par[a, _QUANTUM])  # fmt: skip
             state[a, _TABLE] = table
             if noisy_encoder:
                 enc += encoder_noise[k, a]
+            # what the velocity loop reads: the motor encoder (its difference, below), else the motor velocity
+            motor = (_quantised(state[a, 0], par[a, _QUANTUM]) if scale else enc) if difference else state[a, 1]
             n, f = int(par[a, _DELAY_N]), par[a, _DELAY_F]
             if n == 0 and f == 0.0:
-                x_fb[a], v_fb[a] = enc, state[a, 1]
+                x_fb[a], v_fb[a] = enc, motor
             else:
                 slot = k % _NBUF
                 state[a, _BUFX + slot] = enc
-                state[a, _BUFV + slot] = state[a, 1]
+                state[a, _BUFV + slot] = motor
                 # np.int64(constant): numba compiles a callee once per literal argument, once per type otherwise
                 x_fb[a] = _delayed(state, a, np.int64(_BUFX), k, n, f)
                 v_fb[a] = _delayed(state, a, np.int64(_BUFV), k, n, f)
-            if par[a, _VDIFF] != 0.0:  # the drive's velocity: the difference of the fed-back positions
-                state[a, _HIST + k % _NHIST] = x_fb[a]
+            if difference:  # the drive's velocity: the difference of the motor encoder's (delayed) readings
+                state[a, _HIST + k % _NHIST] = v_fb[a]
                 past = state[a, _HIST + (k - int(par[a, _VTAPS])) % _NHIST]
-                v_fb[a] = _difference(x_fb[a], past, par[a, _VGAIN], par[a, _VPOLE], state[a, _VEST])
+                v_fb[a] = _difference(v_fb[a], past, par[a, _VGAIN], par[a, _VPOLE], state[a, _VEST])
                 state[a, _VEST] = v_fb[a]
             if record:
                 if write_tool:
@@ -826,14 +839,17 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
                 s[a, q, l] = 0.0
             s[a, _LX, l] = start
             s[a, _LLOWER, l], s[a, _LUPPER, l] = _friction_bounds(p[a, _FC, l], p[a, _FA, l])
-            table, enc = _sensors(start, start, p[a, _HALF_PLAY, l], p[a, _SCALE, l] != 0.0, p[a, _QUANTUM, l])
+            scale, difference = p[a, _SCALE, l] != 0.0, p[a, _VDIFF, l] != 0.0
+            table, enc = _sensors(start, 0.0, start, p[a, _HALF_PLAY, l], scale, p[a, _QUANTUM, l])
+            motor = _quantised(start, p[a, _QUANTUM, l]) if scale else enc
             s[a, _LTABLE, l] = table
-            s[a, _LXFB, l] = table if p[a, _SCALE, l] != 0.0 else start  # quantised in the first step
+            s[a, _LXFB, l] = table + 0.0 if scale else start  # quantised in the first step
+            s[a, _LVFB, l] = start if difference else 0.0  # the motor encoder (the difference's), or the velocity
             for q in range(_NBUF):
                 buf_x[a, q, l] = enc
-                buf_v[a, q, l] = 0.0
+                buf_v[a, q, l] = motor if difference else 0.0
             for q in range(_NHIST):
-                hist[a, q, l] = enc
+                hist[a, q, l] = motor
             keys[a, l] = _mix(np.uint64(p[a, _SEED, l]) * np.uint64(n_axes + 1) + np.uint64(a))
             diverged[a, l] = -1
     pair = -1  # the pair of noise samples held (the same for every lane)
@@ -857,6 +873,8 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
             if has[a, _ANY_QUANTUM]:
                 for l in range(n_lanes):
                     s[a, _LXFB, l] = _quantised(s[a, _LXFB, l], p[a, _QUANTUM, l])
+                    motor = _quantised(s[a, _LVFB, l], p[a, _QUANTUM, l])
+                    s[a, _LVFB, l] = motor if p[a, _VDIFF, l] != 0.0 else s[a, _LVFB, l]
             if has[a, _ANY_DELAY]:
                 slot = k % _NBUF
                 for l in range(n_lanes):
@@ -867,12 +885,12 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
                         i0, i1 = (k - n) % _NBUF, (k - n - 1) % _NBUF
                         s[a, _LXFB, l] = _between(buf_x[a, i0, l], buf_x[a, i1, l], f)
                         s[a, _LVFB, l] = _between(buf_v[a, i0, l], buf_v[a, i1, l], f)
-            if has[a, _ANY_DIFFERENCE]:  # the drive's velocity, as in _variant
+            if has[a, _ANY_DIFFERENCE]:  # the drive's velocity, as in _variant (_LVFB: the motor encoder's reading)
                 slot = k % _NHIST
                 for l in range(n_lanes):
-                    hist[a, slot, l] = s[a, _LXFB, l]
+                    hist[a, slot, l] = s[a, _LVFB, l]
                     past = hist[a, (k - int(p[a, _VTAPS, l])) % _NHIST, l]
-                    estimate = _difference(s[a, _LXFB, l], past, p[a, _VGAIN, l], p[a, _VPOLE, l], s[a, _LVEST, l])
+                    estimate = _difference(s[a, _LVFB, l], past, p[a, _VGAIN, l], p[a, _VPOLE, l], s[a, _LVEST, l])
                     s[a, _LVEST, l] = estimate
                     s[a, _LVFB, l] = estimate if p[a, _VDIFF, l] != 0.0 else s[a, _LVFB, l]
             if record and write_tool:
@@ -971,10 +989,11 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
             s[a, _LW, l] = _lane_row(p, a, l, 3, x, v, d, w, i, u, force) if mode else w
             stepped = electrical or p[a, _LAGGED, l] != 0.0
             s[a, _LI, l] = _lane_row(p, a, l, 4, x, v, d, w, i, u, force) if stepped else u
-        table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])  # the next step's play and encoder
+        table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])  # the next step's play and encoders
         s[a, _LTABLE, l] = table
-        s[a, _LXFB, l] = table if p[a, _SCALE, l] != 0.0 else x_next
-        s[a, _LVFB, l] = v_next
+        deflection = s[a, _LD, l] if p[a, _SCREW, l] != 0.0 else 0.0  # what a scale reads beyond the table
+        s[a, _LXFB, l] = table + deflection if p[a, _SCALE, l] != 0.0 else x_next
+        s[a, _LVFB, l] = x_next if p[a, _VDIFF, l] != 0.0 else v_next
 
 
 @njit(cache=True)
@@ -1018,45 +1037,19 @@ def _flush(kept, out, first, count):
 
 
 def _continuous_plant(servo, effects):
-    """``(A, B, states)``: the plant's continuous matrices over its present states, inputs (u or i, F)."""
-    m1 = servo.mass
-    mode = effects.mode_freq_hz is not None
-    if mode:
-        m1 = servo.mass * (1.0 - effects.mode_mass_ratio)
+    """``(A, B, states)``: the plant's continuous matrices over its present states, inputs (u or i, F).
+
+    The servo's (:func:`contoursim.servo._plant_matrices`), with the structural mode of `effects` if any.
+    """
+    mode = None
+    if effects.mode_freq_hz is not None:
+        if servo.compliant:
+            raise ValueError("a structural mode (vibration) on an axis with a compliant screw (motor_mass, "
+                             "screw_stiffness): the kernel holds one mode per axis, the screw's")
         m2 = servo.mass * effects.mode_mass_ratio
         wn = 2.0 * np.pi * effects.mode_freq_hz
-        k, c = wn * wn, 2.0 * effects.mode_damping_ratio * wn  # spring and damper per tool-side mass
-    lagged = servo.current_bandwidth_hz is not None
-    states = [0, 1] + ([2, 3] if mode else []) + ([4] if servo.electrical or lagged else [])
-    full_A, full_B = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
-    per_amp, damping, per_newton = 1000.0 * servo.force_constant / m1, servo.damping / m1, 1000.0 / m1
-    carriage = np.zeros(_NS)  # dv/dt per state, without the current (an input without electrical dynamics)
-    carriage[1] = -damping
-    if mode:
-        carriage[2], carriage[3] = k * m2 / m1, c * m2 / m1
-    full_A[0, 1] = 1.0
-    full_A[1] = carriage
-    full_B[1, 1] = per_newton
-    if mode:
-        full_A[2, 3] = 1.0
-        full_A[3] = -carriage
-        full_A[3, 2] -= k
-        full_A[3, 3] -= c
-        full_B[3, 1] = -per_newton
-    if servo.electrical or lagged:
-        full_A[1, 4] = per_amp
-        full_A[3, 4] = -per_amp if mode else 0.0
-    if servo.electrical:
-        L = servo.inductance
-        full_A[4, 1], full_A[4, 4] = -servo.emf_mm / L, -servo.resistance / L
-        full_B[4, 0] = 1.0 / L
-    elif lagged:
-        w = 2.0 * np.pi * servo.current_bandwidth_hz
-        full_A[4, 4], full_B[4, 0] = -w, w
-    else:
-        full_B[1, 0] = per_amp
-        full_B[3, 0] = -per_amp if mode else 0.0
-    return full_A[np.ix_(states, states)], full_B[states], states
+        mode = (m2, m2 * wn * wn, 2.0 * effects.mode_damping_ratio * m2 * wn)
+    return _plant_matrices(servo, mode)
 
 
 def _pi_row(gain, ti, dt):
@@ -1115,7 +1108,8 @@ def pack(servo, dt, effects=LoopEffects()):
         )
     A, B, states = _continuous_plant(servo, effects)
     row = np.zeros(NPAR)
-    row[_MODE] = float(effects.mode_freq_hz is not None)
+    row[_MODE] = float(effects.mode_freq_hz is not None or servo.compliant)
+    row[_SCREW] = float(servo.compliant)
     Ad, Bd = zoh(A, B, dt)
     full_Ad, full_Bd = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
     full_Ad[np.ix_(states, states)], full_Bd[states] = Ad, Bd
@@ -1133,7 +1127,7 @@ def pack(servo, dt, effects=LoopEffects()):
     row[_ILIM] = np.finfo(float).max if servo.current_limit is None else servo.current_limit
     e = effects
     row[_HALF_PLAY] = e.backlash_mm / 2.0
-    row[_SCALE] = float(e.backlash_feedback == "scale")
+    row[_SCALE] = float(servo.position_feedback == "scale")
     friction = (e.coulomb_N, e.viscous_N_s_per_m / 1000.0, e.stribeck_N, e.stribeck_velocity_mm_s, e.asymmetry_N,
                 e.offset_N)  # fmt: skip
     row[_FRICTION] = float(any(friction[i] != 0.0 for i in (0, 1, 2, 4, 5)))
@@ -1179,15 +1173,18 @@ def loop_matrices(row):
     n_delay, f = int(p[_DELAY_N]), p[_DELAY_F]
     delayed, difference = bool(n_delay or f), p[_VDIFF] != 0.0
     taps, filtered, n_sent = int(p[_VTAPS]), difference and p[_VPOLE] != 0.0, int(p[_CDELAY])
-    # past samples of x and v the loop reads (x_fb = (1 - f)·x[k - n] + f·x[k - n - 1], and `taps` steps before)
-    depth_x = max(n_delay + 1 if delayed else 0, n_delay + taps + (f != 0.0) if difference else 0)
+    table = p[_SCREW] != 0.0 and p[_SCALE] != 0.0  # the position loop reads the table x + d, the difference x
+    # past samples of x, x + d and v the loop reads (x_fb = (1 - f)·x[k - n] + f·x[k - n - 1], and `taps` steps before)
+    depth_x = max(n_delay + 1 if delayed and not table else 0, n_delay + taps + (f != 0.0) if difference else 0)
+    depth_s = n_delay + 1 if delayed and table else 0
     depth_v = n_delay + 1 if delayed and not difference else 0
-    # state: plant (5), then the integrators in use, the delayed x and v samples (k-1 .. k-depth), the low-passed
-    # velocity of the last step, the commands computed 1 (.. n_sent) periods ago; the input w rides along as entry
-    # `size` of every row vector
+    # state: plant (5), then the integrators in use, the delayed x, x + d and v samples (k-1 .. k-depth), the
+    # low-passed velocity of the last step, the commands computed 1 (.. n_sent) periods ago; the input w rides along
+    # as entry `size` of every row vector
     zv, zc = _NS, _NS + integral
     hx = zc + electrical
-    hv = hx + depth_x
+    hs = hx + depth_x
+    hv = hs + depth_s
     vf = hv + depth_v
     sent = vf + filtered
     size = sent + n_sent
@@ -1199,21 +1196,24 @@ def loop_matrices(row):
         r[index] = 1.0
         return r
 
-    def sample(signal, history, back):
-        """Row picking the plant state `signal` (0: x, 1: v) `back` samples ago."""
-        return unit(signal if back == 0 else history + back - 1)
+    def sample(now, history, back):
+        """Row picking the signal whose row is `now` now (x, x + d or v) `back` samples ago."""
+        return now if back == 0 else unit(history + back - 1)
 
-    def fed_back(signal, history, back=0):
+    def fed_back(now, history, back=0):
         back += n_delay
-        return (1.0 - f) * sample(signal, history, back) + (f * sample(signal, history, back + 1) if f else 0.0)
+        return (1.0 - f) * sample(now, history, back) + (f * sample(now, history, back + 1) if f else 0.0)
 
+    x_now, v_now = unit(0), unit(1)
+    reading, h_reading = (x_now + unit(2), hs) if table else (x_now, hx)  # what the position loop reads
     if difference:
-        v_fb = (fed_back(0, hx) - fed_back(0, hx, taps)) * p[_VGAIN]
+        v_fb = (fed_back(x_now, hx) - fed_back(x_now, hx, taps)) * p[_VGAIN]
         if filtered:
             v_fb = p[_VPOLE] * unit(vf) + (1.0 - p[_VPOLE]) * v_fb
     else:
-        v_fb = fed_back(1, hv)
-    e_v = -p[_KP] * fed_back(0, hx) - v_fb
+        v_fb = fed_back(v_now, hv)
+    x_fb = fed_back(reading, h_reading)
+    e_v = -p[_KP] * x_fb - v_fb
     e_v[size] = 1.0
     i_cmd = p[_VD] * e_v
     if integral:
@@ -1233,14 +1233,14 @@ def loop_matrices(row):
     if electrical:
         phi[zc] = p[_CB] * e_i
         phi[zc, zc] += 1.0
-    for history, signal, depth in ((hx, 0, depth_x), (hv, 1, depth_v)):
+    for history, now, depth in ((hx, x_now, depth_x), (hs, reading, depth_s), (hv, v_now, depth_v)):
         for j in range(depth):
-            phi[history + j] = sample(signal, history, j)
+            phi[history + j] = sample(now, history, j)
     if filtered:
         phi[vf] = v_fb
     for j in range(n_sent):
         phi[sent + j] = i_cmd if j == 0 else unit(sent + j - 1)
-    return phi[:, :size], phi[:, size], fed_back(0, hx)[:size]
+    return phi[:, :size], phi[:, size], x_fb[:size]
 
 
 def spectral_radius(row):

@@ -286,6 +286,10 @@ SERVO_KEYS = MappingProxyType({
     "velocity_taps": "velocity_taps",
     "velocity_filter_hz": "velocity_filter_hz",
     "computation_delay_periods": "computation_delay",
+    "position_feedback": "position_feedback",
+    "motor_mass_kg": "motor_mass",
+    "screw_stiffness_N_per_um": "screw_stiffness",
+    "screw_damping_ratio": "screw_damping_ratio",
 })
 #: The controller's settings among the servo parameters (the rest is the plant): what ``uncertain`` may list. The
 #: drive's structure (velocity_feedback, velocity_taps, computation_delay: names and whole numbers) is the controller

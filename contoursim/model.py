@@ -103,6 +103,11 @@ class Model:
                 raise ValueError(f"{e.label}: the machine has no axis {missing[0]!r} among its {what} ({', '.join(allowed)})")
             if _delay_problem(e, self.machine):
                 raise ValueError(_delay_problem(e, self.machine))
+        for e in effects:
+            if e.name == "vibration" and self.machine.axes[e.axis].compliant:
+                raise ValueError(f"{e.label}: axis {e.axis} has a compliant screw (motor_mass, screw_stiffness), whose "
+                                 "mode is the one structural mode the kernel holds per axis: no vibration beside it")
+        effects = tuple(_bound_feedback(e, self.machine) for e in effects)
         object.__setattr__(self, "effects", effects)
 
     # -- parameters --------------------------------------------------------------------------
@@ -311,6 +316,22 @@ def _delay_problem(effect, machine):
     return None
 
 
+def _bound_feedback(effect, machine):
+    """`effect`, a backlash's ``feedback`` filled in with where its axis's position loop reads (checked when given)."""
+    if effect.name != "backlash":
+        return effect
+    servo = machine.axes[effect.axis]
+    given = effect.options["feedback"]
+    if given is None:
+        return _keep_vary(effect.with_values(feedback=servo.position_feedback), effect)
+    if given != servo.position_feedback:
+        raise ValueError(f'{effect.label}: feedback = "{given}", but axis {effect.axis}\'s position loop reads the '
+                         f'{"motor encoder" if servo.position_feedback == "motor" else "scale"} (position_feedback = '
+                         f'"{servo.position_feedback}" in its [axes.{effect.axis}] table): where the encoder is is the '
+                         "axis's setting; leave feedback out or make the two agree")
+    return effect
+
+
 def _keep_vary(new, old):
     """`new` with the vary flags of `old`'s parameters."""
     return new.with_vary(**{p.name: p.vary for p in old.parameters})
@@ -400,7 +421,7 @@ _GEOMETRY = {
 }
 
 _LOOP = {
-    "backlash": lambda e: dict(backlash_mm=e["lost_motion_um"] * _MM_PER_UM, backlash_feedback=e.options["feedback"]),
+    "backlash": lambda e: dict(backlash_mm=e["lost_motion_um"] * _MM_PER_UM),  # feedback: the servo's, bound by Model
     "coulomb_friction": lambda e: dict(
         coulomb_N=e["force_N"],
         viscous_N_s_per_m=e["viscous_N_s_per_m"],

@@ -74,8 +74,8 @@ def assert_found(result, truth, main):
 
 
 CASES = [
-    ("backlash on Y, scale feedback, CW circle", lambda: Effect("backlash", str(RNG.choice(["x", "y"])),
-     lost_motion_um=uniform(2, 20), feedback="scale"), lambda: circle("cw"), "lost_motion_um"),
+    ("backlash, scale feedback, CW circle", lambda: Effect("backlash", str(RNG.choice(["x", "y"])),
+     lost_motion_um=uniform(2, 20)), lambda: circle("cw"), "lost_motion_um"),  # on scales: see the test
     ("squareness, CCW circle", lambda: Effect("squareness", "xy", angle_urad=float(RNG.choice([-1, 1])) * uniform(20, 200)),
      lambda: circle("ccw"), "angle_urad"),
     ("friction, free-form", lambda: Effect("coulomb_friction", str(RNG.choice(["x", "y"])),
@@ -90,6 +90,8 @@ CASES = [
 @pytest.mark.parametrize("make_effect, make_reference, main_parameter", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_names_the_hidden_effect_its_axis_and_size(machine, make_effect, make_reference, main_parameter):
     truth = make_effect()
+    if truth.name == "backlash":  # behind linear scales, which the machine says: the loop sees the lost motion
+        machine = replace(machine, axes={a: replace(s, position_feedback="scale") for a, s in machine.axes.items()})
     result = run_blind(machine, (truth,), make_reference(), seed=int(RNG.integers(1 << 30)))
     assert_found(result, truth, main_parameter)
 
@@ -608,3 +610,19 @@ def test_a_known_force_is_an_input_not_an_effect(machine):
         assert report["current_residual_rms_before_A"][axis] <= 1e-3 * np.std(trace.current[axis])
     unforced = simulate(machine, Trace(trace.t, trace.reference, trace.actual, trace.axes), contour=False)
     assert 1e3 * np.std(trace.actual - unforced.tool_position[::2]) > 20 * floor  # the servo samples at the trace's
+
+
+def test_a_compliant_screw_in_the_model_the_friction_is_still_named(machine):
+    """Both axes two masses on a 450 Hz screw behind scales (a data sheet would say so): a hidden friction is named
+    with the screw in the model; a vibration is tried on those axes with the screw taken as rigid (the kernel holds
+    one mode per axis), said once in the warnings rather than failing."""
+    screwed = replace(machine, axes={a: replace(s, motor_mass=0.3 * s.mass, screw_stiffness=1e-6 * 0.21 * s.mass
+                                                * (2 * np.pi * 450.0) ** 2, position_feedback="scale")
+                                     for a, s in machine.axes.items()})
+    assert all(s.screw_mode_hz == pytest.approx(450.0) for s in screwed.axes.values())
+    truth = Effect("coulomb_friction", "y", force_N=60.0)
+    result = run_blind(screwed, (truth,), circle("ccw"), seed=3)
+    assert_found(result, truth, "force_N")
+    dropped = [w for w in result.warnings if w.startswith("vibration.")]
+    assert sorted(w.split(":")[0] for w in dropped) == ["vibration.x", "vibration.y"], result.report()
+    assert "tried with the axis's compliant screw taken as rigid" in dropped[0]

@@ -1,8 +1,11 @@
-"""The structure real drives have: velocity from encoder differences, a computation delay (AxisServo settings).
+"""The structure real drives have: velocity from encoder differences, a computation delay, a compliant screw, a
+motor encoder or a scale (AxisServo settings).
 
 The kernel is checked against a python-control simulation of the same sampled loop written here from the
 equations (not from the kernel's code), against closed forms, and run_batch against run() bit for bit.
 """
+
+from dataclasses import replace
 
 import control as ct
 import numpy as np
@@ -20,48 +23,77 @@ from contoursim.sweep import _job, read_sweep
 MASS, KF, KV, KP, TI = 300.0, 900.0, 200.0, 40.0, 0.01
 ELECTRICAL = dict(inductance=5e-3, resistance=1.2, kc=5e-3 * 2 * np.pi * 800, ti_current=5e-3 / 1.2)
 DT = 1e-4
+SCREW = dict(motor_mass=90.0, screw_stiffness=400.0, screw_damping_ratio=0.03)  # its relative mode: 401 Hz
 
 
 def axis(**kw):
     return AxisServo(**{**dict(mass=MASS, force_constant=KF, kv=KV, kp=KP, ti=TI, damping=800.0), **kw})
 
 
-def reference_loop(servo, quantum, delay, start, play=0.0, scale=False):
-    """The sampled loop as python-control systems: ZOH plant, and the drive as one discrete nlsys.
-
-    The drive at step k: the table behind a play of `play` [mm] around the motor position x; the encoder
-    on the table (`scale`) or on x, ``enc = q·round(·/q)``, read `delay` periods late (``x_fb``); velocity
-    ``(x_fb[k] - x_fb[k-n])/(n·dt)`` low-passed ``a·y + (1 - a)·raw`` (or the motor velocity ``v``
-    itself); P position + velocity feedforward; Tustin PI velocity + acceleration feedforward, clamped,
-    the integrator held while clamped and pushed further; the command applied `computation_delay`
-    periods later. Inputs xr, vr, ar; outputs the table position, x_fb and the applied current.
-    """
-    A = np.array([[0.0, 1.0], [0.0, -servo.damping / servo.mass]])
-    B = np.array([[0.0], [1000.0 * servo.force_constant / servo.mass]])  # mm/s^2 per A
+def continuous_plant(servo):
+    """The axis's mechanics from Newton's law, states (x, v[, x2, v2][, i]): motor side, its velocity[, the table's
+    position and velocity on a compliant screw][, the current]; input the current command; outputs x, v, x2 (the
+    table: x itself on a rigid axis) [mm, mm/s]."""
+    if servo.motor_mass is None:
+        A = np.array([[0.0, 1.0], [0.0, -servo.damping / servo.mass]])
+        B = np.array([[0.0], [1000.0 * servo.force_constant / servo.mass]])  # mm/s^2 per A
+        C = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 0.0]])
+    else:  # two masses: m1·a1 = 1000·kf·i - c_v·v1 - k·(x1 - x2) - c·(v1 - v2), m2·a2 = k·(x1 - x2) + c·(v1 - v2)
+        m1, m2 = servo.motor_mass, servo.mass - servo.motor_mass
+        k = servo.screw_stiffness * 1e6  # N/m: N/m·mm = mN = kg·mm/s^2
+        c = 2 * servo.screw_damping_ratio * np.sqrt(k * m1 * m2 / servo.mass)
+        A = np.array([[0.0, 1.0, 0.0, 0.0],
+                      [-k / m1, -(servo.damping + c) / m1, k / m1, c / m1],
+                      [0.0, 0.0, 0.0, 1.0],
+                      [k / m2, c / m2, -k / m2, -c / m2]])  # fmt: skip
+        B = np.array([[0.0], [1000.0 * servo.force_constant / m1], [0.0], [0.0]])
+        C = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
     if servo.current_bandwidth_hz is not None:  # the current behind its command: i' = w·(i_cmd - i), drives v
         w = 2 * np.pi * servo.current_bandwidth_hz
-        A = np.block([[A, B], [np.zeros((1, 2)), -w]])
-        B = np.array([[0.0], [0.0], [w]])
-    plant = ct.sample_system(ct.ss(A, B, np.eye(A.shape[0])[:2], 0), DT, method="zoh")
-    plant = ct.ss(plant.A, plant.B, plant.C, plant.D, DT, inputs="i", outputs=["x", "v"], name="plant")
+        A = np.block([[A, B], [np.zeros((1, A.shape[0])), -w]])
+        B = np.zeros((A.shape[0], 1))
+        B[-1] = w
+        C = np.hstack([C, np.zeros((3, 1))])
+    return ct.ss(A, B, C, 0, inputs="i", outputs=["x", "v", "x2"], name="plant")
+
+
+def reference_loop(servo, quantum, delay, start, play=0.0):
+    """The sampled loop as python-control systems: ZOH plant, and the drive as one discrete nlsys.
+
+    The drive at step k: the table behind a play of `play` [mm] around the motor position x (behind a
+    compliant screw, deflected by ``x2 - x`` from there); the position encoder on the table
+    (``position_feedback="scale"``) or on x, ``enc = q·round(·/q)``, read `delay` periods late (``x_fb``);
+    velocity from the motor encoder x, quantised and read as late, ``(m[k] - m[k-n])/(n·dt)`` low-passed
+    ``a·y + (1 - a)·raw`` (or the motor velocity ``v`` itself); P position + velocity feedforward; Tustin
+    PI velocity + acceleration feedforward, clamped, the integrator held while clamped and pushed further;
+    the command applied `computation_delay` periods later. Inputs xr, vr, ar; outputs the table position,
+    x_fb and the applied current.
+    """
+    plant = ct.sample_system(continuous_plant(servo), DT, method="zoh")
+    plant = ct.ss(plant.A, plant.B, plant.C, plant.D, DT, inputs="i", outputs=["x", "v", "x2"], name="plant")
     n = servo.velocity_taps
     a = 0.0 if servo.velocity_filter_hz is None else np.exp(-2 * np.pi * servo.velocity_filter_hz * DT)
     kv = servo.kv / 1000.0  # A per mm/s
     limit = np.inf if servo.current_limit is None else servo.current_limit
     i_ff = servo.aff * servo.mass / (1000.0 * servo.force_constant)
     d = servo.computation_delay
-    # states: encoder readings k-1 .. k-delay, x_fb k-1 .. k-n, y, z, commands k-1, k-2, the table
-    ie, ip, iy, iz, ic, it = 0, delay, delay + n, delay + n + 1, delay + n + 2, delay + n + 4
+    scale = servo.position_feedback == "scale"
+    # states: encoder and motor encoder readings k-1 .. k-delay, the motor's read k-1 .. k-n, y, z, commands k-1,
+    # k-2, the table behind the play
+    ie, im, ip = 0, delay, 2 * delay
+    iy, iz, ic, it = ip + n, ip + n + 1, ip + n + 2, ip + n + 4
+
+    def rounded(position):
+        return quantum * np.floor(position / quantum + 0.5) if quantum else position
 
     def signals(z, u):
-        xr, vr, ar, x, v = u
+        xr, vr, ar, x, v, x2 = u
         table = min(max(z[it], x - play / 2), x + play / 2)
-        sensed = table if scale else x
-        enc = quantum * np.floor(sensed / quantum + 0.5) if quantum else sensed
-        readings = np.r_[enc, z[ie:ip]]
-        x_fb = readings[delay]
+        tool = table + (x2 - x)  # the table behind the play, deflected as the screw is
+        readings, motors = np.r_[rounded(tool if scale else x), z[ie:im]], np.r_[rounded(x), z[im:ip]]
+        x_fb, m_fb = readings[delay], motors[delay]
         if servo.velocity_feedback == "difference":
-            v_fb = a * z[iy] + (1 - a) * (x_fb - np.r_[x_fb, z[ip:iy]][n]) / (n * DT)
+            v_fb = a * z[iy] + (1 - a) * (m_fb - np.r_[m_fb, z[ip:iy]][n]) / (n * DT)
         else:
             v_fb = v
         e_v = servo.kp * (xr - x_fb) + servo.vff * vr - v_fb
@@ -69,26 +101,27 @@ def reference_loop(servo, quantum, delay, start, play=0.0, scale=False):
         command = np.clip(raw, -limit, limit)
         held = command != raw and e_v * raw > 0
         applied = np.r_[command, z[ic : ic + 2]][d]
-        return table, readings, x_fb, v_fb, e_v, held, command, applied
+        return table, tool, readings, motors, m_fb, v_fb, e_v, held, command, applied
 
     def update(t, z, u, params):
-        table, readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
-        past = np.r_[x_fb, z[ip:iy]]
+        table, tool, readings, motors, m_fb, v_fb, e_v, held, command, applied = signals(z, u)
+        past = np.r_[m_fb, z[ip:iy]]
         integrator = z[iz] if held or not servo.ti else z[iz] + DT * e_v
-        return np.r_[readings[:delay], past[:n], v_fb, integrator, command, z[ic], table]
+        return np.r_[readings[:delay], motors[:delay], past[:n], v_fb, integrator, command, z[ic], table]
 
     def output(t, z, u, params):
-        table, readings, x_fb, v_fb, e_v, held, command, applied = signals(z, u)
-        return [applied, x_fb, table]
+        table, tool, readings, motors, m_fb, v_fb, e_v, held, command, applied = signals(z, u)
+        return [applied, readings[delay], tool]
 
-    drive = ct.nlsys(update, output, inputs=["xr", "vr", "ar", "x", "v"], outputs=["i", "x_fb", "table"],
-                     states=delay + n + 5, dt=DT, name="drive")
-    loop = ct.interconnect([plant, drive], inplist=["xr", "vr", "ar"], outlist=["table", "x_fb", "i"])
-    x0 = np.zeros(loop.nstates)
+    drive = ct.nlsys(update, output, inputs=["xr", "vr", "ar", "x", "v", "x2"], outputs=["i", "x_fb", "tool"],
+                     states=2 * delay + n + 5, dt=DT, name="drive")
+    loop = ct.interconnect([plant, drive], inplist=["xr", "vr", "ar"], outlist=["tool", "x_fb", "i"])
+    x0 = np.zeros(loop.nstates)  # at rest at `start`: the ZOH plant's states are the continuous ones
     x0[loop.state_labels.index("plant_x[0]")] = start
-    enc = quantum * np.floor(start / quantum + 0.5) if quantum else start
+    if servo.motor_mass is not None:
+        x0[loop.state_labels.index("plant_x[2]")] = start
     first = loop.state_labels.index("drive_x[0]")
-    x0[first : first + delay + n] = enc  # at rest: the encoder history holds the first reading
+    x0[first : first + 2 * delay + n] = rounded(start)  # at rest: the encoder histories hold the first reading
     x0[first + it] = start
     return loop, x0
 
@@ -98,8 +131,8 @@ DRIVES = {
     "fir2": (dict(velocity_feedback="difference", velocity_taps=2), 0.0, 0),
     "fir2_backlash_motor": (dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1), 0.0, 0,
                             dict(backlash_mm=0.004)),
-    "fir2_backlash_scale": (dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=1000.0), 2e-4, 1,
-                            dict(backlash_mm=0.004, backlash_feedback="scale")),
+    "fir2_backlash_scale": (dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=1000.0,
+                                 position_feedback="scale"), 2e-4, 1, dict(backlash_mm=0.004)),
     "fir3_lowpass_delay1": (dict(velocity_feedback="difference", velocity_taps=3, velocity_filter_hz=600.0,
                                  computation_delay=1), 0.0, 0),
     "quantised_delayed_delay2": (dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=1500.0,
@@ -112,6 +145,17 @@ DRIVES = {
     "current_lag": (dict(current_bandwidth_hz=1200.0), 0.0, 0),
     "current_lag_fir2_delay1_clamped": (dict(current_bandwidth_hz=800.0, velocity_feedback="difference",
                                              velocity_taps=2, computation_delay=1, current_limit=2.0, vff=0.5), 2e-4, 1),
+    "screw_motor": (dict(SCREW, velocity_feedback="difference", computation_delay=1, vff=1.0), 0.0, 0),
+    "screw_scale": (dict(SCREW, position_feedback="scale", velocity_feedback="difference", computation_delay=1,
+                         vff=1.0), 0.0, 0),
+    "screw_state_scale_lag": (dict(SCREW, position_feedback="scale", current_bandwidth_hz=1500.0, aff=0.5), 0.0, 0),
+    "screw_scale_quantised_delayed_clamped": (dict(SCREW, position_feedback="scale", velocity_feedback="difference",
+                                                   velocity_taps=2, velocity_filter_hz=2000.0, current_limit=0.6,
+                                                   current_bandwidth_hz=1500.0), 2e-4, 1),
+    "screw_motor_backlash": (dict(SCREW, velocity_feedback="difference", computation_delay=1), 2e-4, 0,
+                             dict(backlash_mm=0.004)),
+    "screw_scale_backlash": (dict(SCREW, position_feedback="scale", velocity_feedback="difference"), 0.0, 1,
+                             dict(backlash_mm=0.004)),
 }
 
 
@@ -126,15 +170,15 @@ def test_kernel_equals_python_control_reference(name):
     pos, vel, acc = 0.2 * np.sin(w * t), 0.2 * w * np.cos(w * t), -0.2 * w**2 * np.sin(w * t)
     effects = LoopEffects(quantum_mm=quantum, feedback_delay_s=delay * DT, **backlash)
     result = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None], effects={"x": effects})
-    loop, x0 = reference_loop(servo, quantum, delay, pos[0], backlash.get("backlash_mm", 0.0),
-                              backlash.get("backlash_feedback") == "scale")
+    loop, x0 = reference_loop(servo, quantum, delay, pos[0], backlash.get("backlash_mm", 0.0))
     ref = ct.input_output_response(loop, t, np.vstack([pos, vel, acc]), X0=x0).outputs
     np.testing.assert_allclose(result.position[:, 0], ref[0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(result.encoder[:, 0], ref[1], rtol=0, atol=1e-9)
     np.testing.assert_allclose(result.current[:, 0], ref[2], rtol=0, atol=1e-9 * np.abs(ref[2]).max())
     if servo.current_limit is not None:
         assert result.saturated.any()  # the clamp and its anti-windup are exercised
-    plain = run({"x": axis(**{k: v for k, v in kw.items() if k in ("ti", "kv", "current_limit", "vff", "aff")})},
+    plant = ("ti", "kv", "current_limit", "vff", "aff", "motor_mass", "screw_stiffness", "position_feedback")
+    plain = run({"x": axis(**{k: v for k, v in kw.items() if k in plant})},
                 DT, pos[:, None], vel[:, None], acc[:, None], effects={"x": effects})
     assert np.abs(result.position - plain.position).max() > 1e-7  # the drive's structure shows in 400 steps
 
@@ -161,7 +205,12 @@ def test_ramp_error_is_still_v_over_kp(kw):
                                 dict(velocity_feedback="difference", velocity_taps=2, velocity_filter_hz=2000.0,
                                      computation_delay=1, **ELECTRICAL),
                                 dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1,
-                                     current_bandwidth_hz=700.0)])
+                                     current_bandwidth_hz=700.0),
+                                dict(SCREW, velocity_feedback="difference", computation_delay=1),
+                                dict(SCREW, position_feedback="scale", velocity_feedback="difference", velocity_taps=2,
+                                     velocity_filter_hz=1500.0, current_bandwidth_hz=1200.0),
+                                dict(SCREW, position_feedback="scale", computation_delay=2),
+                                dict(SCREW, position_feedback="scale", **ELECTRICAL)])
 def test_spectral_radius_equals_python_control_closed_loop_poles(kw):
     # The kernel's linearised loop (loop_matrices) and servo.discretize's python-control interconnection of the
     # estimator and delay blocks: the same poles.
@@ -172,11 +221,11 @@ def test_spectral_radius_equals_python_control_closed_loop_poles(kw):
 
 @settings(max_examples=15, deadline=None)
 @given(taps=st.integers(1, 8), filter_hz=st.one_of(st.none(), st.floats(50.0, 5000.0)), delay=st.integers(0, 2),
-       feedback_delay=st.floats(0.0, 3.0))
-def test_loop_matrices_match_the_simulated_growth_of_any_drive(taps, filter_hz, delay, feedback_delay):
+       feedback_delay=st.floats(0.0, 3.0), screw=st.sampled_from([{}, dict(SCREW), dict(SCREW, position_feedback="scale")]))
+def test_loop_matrices_match_the_simulated_growth_of_any_drive(taps, filter_hz, delay, feedback_delay, screw):
     # Without a nonlinearity in play the kernel is linear: its response to an initial offset is phi^k applied to it.
     servo = axis(velocity_feedback="difference", velocity_taps=taps, velocity_filter_hz=filter_hz,
-                 computation_delay=delay, damping=0.0)
+                 computation_delay=delay, damping=0.0, **screw)
     row = pack(servo, DT, LoopEffects(feedback_delay_s=feedback_delay * DT))
     phi, b, c = kernel.loop_matrices(row)
     n = 300
@@ -198,7 +247,7 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
     refs = tuple(np.column_stack([r, 0.5 * r]) for r in (0.3 * np.sin(w * t), 0.3 * w * np.cos(w * t),
                                                            -0.3 * w**2 * np.sin(w * t)))
     variants = []
-    for b in range(9):
+    for b in range(12):
         servos, effects = {}, {}
         for name in ("x", "y"):
             kw = dict(computation_delay=int(rng.integers(3)), current_limit=float(rng.choice([2.0, 50.0])))
@@ -209,12 +258,18 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
             if rng.random() < 0.7:
                 kw.update(velocity_feedback="difference", velocity_taps=int(rng.integers(1, 9)),
                           velocity_filter_hz=rng.choice([None, float(rng.uniform(200.0, 3000.0))]))
-            servos[name] = axis(**kw)
+            servos[name] = axis(**kw, position_feedback=str(rng.choice(["motor", "scale"])))
+            if rng.random() < 0.6:  # a compliant screw, where the drawn drive keeps it stable
+                compliant = replace(servos[name], motor_mass=float(rng.uniform(60.0, 120.0)),
+                                    screw_stiffness=float(rng.uniform(300.0, 1500.0)))
+                try:
+                    servos[name] = compliant if compliant.check(DT) else servos[name]
+                except UnstableLoopError:
+                    pass
             effects[name] = LoopEffects(quantum_mm=float(rng.choice([0.0, 2e-4])),
                                         feedback_delay_s=float(rng.choice([0.0, 1.5 * DT, 2 * DT])),
                                         coulomb_N=float(rng.choice([0.0, 60.0])),
-                                        backlash_mm=float(rng.choice([0.0, 0.003])),
-                                        backlash_feedback=str(rng.choice(["motor", "scale"])))
+                                        backlash_mm=float(rng.choice([0.0, 0.003])))
         variants.append((servos, effects))
     variants[0] = ({name: axis() for name in ("x", "y")}, {})  # one variant as before the drive's structure
     rows = np.array([[pack(s, DT, e.get(name, LoopEffects())) for name, s in servos.items()]
@@ -229,7 +284,41 @@ def test_batch_rows_with_drive_structures_equal_their_single_runs_bit_for_bit():
     assert {s.computation_delay for servos, _ in variants for s in servos.values()} == {0, 1, 2}
     assert any(s.electrical for servos, _ in variants for s in servos.values())
     assert any(s.current_bandwidth_hz for servos, _ in variants for s in servos.values())
+    assert {(s.compliant, s.position_feedback) for servos, _ in variants for s in servos.values()} == {
+        (c, f) for c in (False, True) for f in ("motor", "scale")}
 
+
+@pytest.mark.parametrize("kw", [dict(), dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1,
+                                             current_bandwidth_hz=1500.0)])
+def test_the_table_lags_the_motor_by_m2_a_over_k_under_constant_acceleration(kw):
+    # Closed form: under a constant acceleration a the screw carries the table's inertia force m2·a, so once the
+    # mode has died out the table (the tool position) trails the motor encoder by m2·a/k, whatever the controller.
+    servo = axis(**SCREW, vff=1.0, aff=1.0, **kw)
+    accel = 2000.0  # [mm/s^2]
+    t = np.arange(4000) * DT
+    pos = 0.5 * accel * t**2
+    r = run([servo], DT, pos[:, None], (accel * t)[:, None], np.full((t.size, 1), accel))
+    lag = r.encoder[-1, 0] - r.position[-1, 0]
+    m2, k = MASS - SCREW["motor_mass"], SCREW["screw_stiffness"] * 1e6  # [kg], [N/m]
+    assert lag == pytest.approx(m2 * accel / k, rel=1e-6)  # [mm]: 1.05 µm (the loop's slowest poles, 6 Hz, leave 1e-9)
+    stiff = run([axis(vff=1.0, aff=1.0, **kw)], DT, pos[:, None], (accel * t)[:, None], np.full((t.size, 1), accel))
+    assert stiff.encoder is stiff.position  # a rigid axis's encoder reads the tool position itself
+
+
+def test_a_loop_the_screw_destabilises_is_refused_with_its_margins():
+    # A 63 Hz screw (10 N/µm) inside a 190 Hz velocity loop: on the scale the whole loop is unstable, refused
+    # at its velocity loop; on a 400 N/µm screw (401 Hz) the same drive passes.
+    drive = dict(kv=400.0, velocity_feedback="difference", computation_delay=1, position_feedback="scale")
+    soft = axis(**drive, motor_mass=90.0, screw_stiffness=10.0)
+    with pytest.raises(UnstableLoopError, match=r"the velocity loop of axis 'x' is badly damped \(needs .*\) at "
+                                                r"dt = 0.0001 s: gain margin [\d.]+, phase margin") as info:
+        soft.check(DT)
+    assert info.value.margins["damping_ratio"] < 0.2
+    assert kernel.spectral_radius(pack(soft, DT)) > 1.0
+    stiff = axis(**drive, **SCREW)
+    margins = stiff.check(DT)
+    assert margins["velocity"]["stable"] and margins["velocity"]["phase_margin"] > 30
+    assert kernel.spectral_radius(pack(stiff, DT)) < 1.0
 
 def test_the_state_feedback_default_is_the_loop_of_before():
     servo = axis()
@@ -266,6 +355,13 @@ def test_a_loop_the_computation_delay_destabilises_is_refused_with_its_margins()
     (dict(computation_delay=True), TypeError, "computation_delay must be a whole number"),
     (dict(current_bandwidth_hz=0.0), ValueError, "current_bandwidth_hz must be"),
     (dict(current_bandwidth_hz=1000.0, **ELECTRICAL), ValueError, "give one or the other"),
+    (dict(position_feedback="table"), ValueError, 'position_feedback must be "motor" or "scale"'),
+    (dict(motor_mass=90.0), ValueError, "needs screw_stiffness"),
+    (dict(screw_stiffness=400.0), ValueError, "screw_stiffness given without motor_mass"),
+    (dict(screw_damping_ratio=0.03), ValueError, "screw_damping_ratio given without motor_mass"),
+    (dict(motor_mass=300.0, screw_stiffness=400.0), ValueError, "motor_mass must be less than mass"),
+    (dict(motor_mass=90.0, screw_stiffness=-1.0), ValueError, "screw_stiffness must be"),
+    (dict(SCREW, screw_damping_ratio=1.0), ValueError, "screw_damping_ratio must be between 0 and 1"),
 ])
 def test_bad_drive_settings_name_the_parameter(kw, error, message):
     with pytest.raises(error, match=message):
@@ -302,6 +398,49 @@ def test_machine_file_keys_and_what_uncertain_may_list(tmp_path):
                                          'uncertain = ["computation_delay_periods"]'))
     with pytest.raises(ConfigError, match=r"line \d+: axis x: uncertain must list controller keys"):
         load_machine(file)
+
+
+def test_machine_file_keys_of_a_compliant_screw_and_a_scale(tmp_path):
+    file = tmp_path / "m.toml"
+    file.write_text(MACHINE.format(extra='position_feedback = "scale"\nmotor_mass_kg = 90.0\n'
+                                         'screw_stiffness_N_per_um = 400.0\nscrew_damping_ratio = 0.04'))
+    servo = load_machine(file).axes["x"]
+    assert (servo.position_feedback, servo.motor_mass, servo.screw_stiffness, servo.screw_damping_ratio) == (
+        "scale", 90.0, 400.0, 0.04)
+    assert servo.screw_mode_hz == pytest.approx(np.sqrt(400e6 * 300.0 / (90.0 * 210.0)) / (2 * np.pi))
+    file.write_text(MACHINE.format(extra="motor_mass_kg = 90.0\nscrew_stiffness_N_per_um = 400.0"))
+    assert load_machine(file).axes["x"].screw_damping_ratio == 0.03  # the typical value, said in the docs
+    for extra, message in [
+        ("motor_mass_kg = 90.0", r"m.toml, line 8: axis x: motor_mass_kg is given, so the compliant screw needs "
+                                 r"screw_stiffness_N_per_um"),
+        ("motor_mass_kg = 300.0\nscrew_stiffness_N_per_um = 400.0", r"m.toml, line 8: axis x: motor_mass_kg must be "
+                                                                      r"less than mass"),
+        ('position_feedback = "encoder"', r"m.toml, line 8: axis x: position_feedback must be"),
+        ("screw_stiffness_N_per_um = 400.0", r"m.toml, line 8: axis x: screw_stiffness_N_per_um given without "
+                                             r"motor_mass_kg, the part of mass"),
+        ("motor_mass_kg = 90.0\nscrew_stiffness_N_per_um = 0.0", r"m.toml, line 9: axis x: screw_stiffness_N_per_um "
+                                                                   r"must be"),
+    ]:
+        file.write_text(MACHINE.format(extra=extra))
+        with pytest.raises(ConfigError, match=message):
+            load_machine(file)
+
+
+def test_one_mode_per_axis_and_one_place_for_the_encoder():
+    from contoursim.effects import Effect
+    from contoursim.machine import Machine
+    from contoursim.model import Model
+
+    with pytest.raises(ValueError, match=r"a structural mode \(vibration\) on an axis with a compliant screw"):
+        pack(axis(**SCREW), DT, LoopEffects(mode_freq_hz=80.0))
+    machine = Machine({"x": axis(**SCREW, position_feedback="scale")}, DT)
+    with pytest.raises(ValueError, match=r"vibration.x: axis x has a compliant screw .* no vibration beside it"):
+        Model(machine, (Effect("vibration", "x", freq_hz=80.0),))
+    bound = Model(machine, (Effect("backlash", "x", lost_motion_um=5.0),)).effects[0]
+    assert bound.options["feedback"] == "scale"  # left out: the axis's
+    with pytest.raises(ValueError, match=r'backlash.x: feedback = "motor", but axis x\'s position loop reads the '
+                                         r'scale \(position_feedback = "scale"'):
+        Model(machine, (Effect("backlash", "x", lost_motion_um=5.0, feedback="motor"),))
 
 
 SWEEP = """machine = "demo_mill"

@@ -95,9 +95,12 @@ def test_a_model_names_its_parameters_flat_and_makes_variants():
     assert model.values()["backlash.x.lost_motion_um"] == 8.0  # the model itself is unchanged
     assert variant.parameters()["coulomb_friction.y.viscous_N_s_per_m"].vary  # vary flags survive
     assert variant.machine is model.machine
-    replaced = model.with_effect(Effect("backlash", "x", lost_motion_um=3.0, feedback="scale"))
+    assert model.effects[0].options["feedback"] == MACHINE.axes["x"].position_feedback == "motor"  # the axis's
+    replaced = model.with_effect(Effect("backlash", "x", lost_motion_um=3.0, feedback="motor"))
     assert [e.label for e in replaced.effects] == ["coulomb_friction.y", "backlash.x"]
-    assert replaced.effects[1].options["feedback"] == "scale"
+    assert replaced.effects[1]["lost_motion_um"] == 3.0
+    with pytest.raises(ValueError, match=r'backlash.x: feedback = "scale", but axis x\'s position loop reads the motor'):
+        model.with_effect(Effect("backlash", "x", lost_motion_um=3.0, feedback="scale"))
     with pytest.raises(ValueError, match="unknown model parameter 'backlash.y.lost_motion_um'; the model's parameters are: backlash.x"):
         model.with_values({"backlash.y.lost_motion_um": 1.0})
 
@@ -415,10 +418,10 @@ def test_the_command_line_runs_a_jobs_effects(tmp_path, capsys):
     grows = tmp_path / "grows.toml"
     grows.write_text(job.read_text() + '\n[[effect]]\nname = "thermal_drift"\naxis = "x"\nrate_um_per_min = 0\n'
                      'growth_ppm_per_min = 2\n\n[[effect]]\nname = "backlash"\naxis = "y"\nlost_motion_um = 8\n'
-                     'feedback = "scale"\n')  # fmt: skip
+                     'feedback = "motor"\n')  # fmt: skip
     assert main(["simulate", str(grows), "--out", str(tmp_path / "grows")]) == 0
     assert ("thermal_drift.x (rate_um_per_min = 0, growth_ppm_per_min = 2); backlash.y (lost_motion_um = 8, "
-            "feedback = 'scale')") in capsys.readouterr().out  # the values set, not the defaults
+            "feedback = 'motor')") in capsys.readouterr().out  # the values set, not the defaults
     job.write_text(job.read_text() + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 8\nfeedback = "linear"\n')
     assert main(["simulate", str(job), "--out", str(tmp_path / "bad")]) == 2
     assert f"{job}, line 13: [[effect]] backlash.x: feedback must be one of 'motor', 'scale'" in capsys.readouterr().err

@@ -136,7 +136,7 @@ def reference_loop(servo, effects, start):
         """Table, encoder, and the (current, past...) encoder and velocity histories."""
         x, v = u[0], u[1]
         table = min(max(z[0], x - h), x + h)
-        enc = table if effects.backlash_feedback == "scale" else x
+        enc = table if servo.position_feedback == "scale" else x
         if q:
             enc = q * np.floor(enc / q + 0.5)
         return table, enc, np.concatenate([[enc], z[1 : 1 + m]]), np.concatenate([[v], z[1 + m :]])
@@ -212,7 +212,7 @@ EFFECTS = {
     "none": LoopEffects(),
     "friction": LoopEffects(**REVERSING),
     "backlash_motor": LoopEffects(backlash_mm=0.004),
-    "backlash_scale": LoopEffects(backlash_mm=0.004, backlash_feedback="scale"),
+    "backlash_scale": LoopEffects(backlash_mm=0.004),  # on a scale: SCALE
     "delay_whole": LoopEffects(feedback_delay_s=3 * DT),
     "delay_fraction": LoopEffects(feedback_delay_s=2.37 * DT),
     "mode": LoopEffects(**MODE),
@@ -221,10 +221,13 @@ EFFECTS = {
 }
 
 
+SCALE = ("backlash_scale",)  # the effects whose axis closes its position loop on a scale
+
+
 @pytest.mark.parametrize("name", list(EFFECTS))
 @pytest.mark.parametrize("extra", [dict(current_limit=3.0, vff=1.0, aff=0.8), dict(**ELECTRICAL)])
 def test_kernel_equals_python_control_reference(name, extra):
-    effects, servo = EFFECTS[name], axis(**extra)
+    effects, servo = EFFECTS[name], axis(**extra, position_feedback="scale" if name in SCALE else "motor")
     n = 300
     t = np.arange(n) * DT
     w = 2 * np.pi * 40.0  # a 0.2 mm sine: reverses after 6.25 ms
@@ -346,9 +349,9 @@ def test_backlash_with_scale_feedback_and_stiction_hunts(feedback):
     # On the motor encoder the motor hunts inside the play and the table stays put.
     dt, lost, n = 2e-4, 0.010, 15000
     step = np.where(np.arange(n) * dt > 0.1, 0.002, 0.0)[:, None]
-    effects = LoopEffects(backlash_mm=lost, backlash_feedback=feedback, coulomb_N=100.0, stribeck_N=100.0,
-                          stribeck_velocity_mm_s=0.1)  # fmt: skip
-    table = run([axis()], dt, step, np.zeros_like(step), np.zeros_like(step), effects={"x": effects}).position[:, 0]
+    effects = LoopEffects(backlash_mm=lost, coulomb_N=100.0, stribeck_N=100.0, stribeck_velocity_mm_s=0.1)
+    servo = axis(position_feedback=feedback)
+    table = run([servo], dt, step, np.zeros_like(step), np.zeros_like(step), effects={"x": effects}).position[:, 0]
     p2p = [np.ptp(table[int(a / dt) : int((a + 1) / dt)]) for a in (1.0, 2.0)]
     if feedback == "scale":
         assert min(p2p) > 0.3 * lost and max(p2p) < lost  # a limit cycle of the order of the play
@@ -368,8 +371,8 @@ def back_and_forth(dt, stroke=1.0, move=0.3, dwell=0.6):
 def test_backlash_lost_motion_at_reversal(feedback):
     dt, lost = 2e-4, 0.010
     pos, vel, forward_end, back_end = back_and_forth(dt)
-    effects = {"x": LoopEffects(backlash_mm=lost, backlash_feedback=feedback)}
-    r = run([axis()], dt, pos[:, None], vel[:, None], np.zeros((pos.size, 1)), effects=effects)
+    effects = {"x": LoopEffects(backlash_mm=lost)}
+    r = run([axis(position_feedback=feedback)], dt, pos[:, None], vel[:, None], np.zeros((pos.size, 1)), effects=effects)
     table_error = r.position[:, 0] - pos
     encoder_error = r.encoder[:, 0] - pos
     # the loop settles what it sees onto the command in both dwells
@@ -482,22 +485,23 @@ def test_encoder_noise_is_inside_the_loop_as_python_control_says():
         LoopEffects(noise_mm=noise, noise_at="loop")
 
 
-@pytest.mark.parametrize("effects, separate", [
-    ({}, False),
-    ({"y": LoopEffects(backlash_mm=0.004, backlash_feedback="scale", coulomb_N=50.0)}, False),  # the scale reads the table
-    ({"y": LoopEffects(backlash_mm=0.004)}, True),  # the motor encoder does not
-    ({"y": LoopEffects(quantum_mm=1e-4)}, True),
-    ({"x": LoopEffects(feedback_delay_s=0.5 * DT)}, True),
-    ({"x": LoopEffects(mode_freq_hz=80.0)}, True),
-    ({"x": LoopEffects(noise_mm=1e-4)}, True),
+@pytest.mark.parametrize("effects, y, separate", [
+    ({}, {}, False),
+    ({"y": LoopEffects(backlash_mm=0.004, coulomb_N=50.0)}, dict(position_feedback="scale"), False),  # the scale reads the table
+    ({"y": LoopEffects(backlash_mm=0.004)}, {}, True),  # the motor encoder does not
+    ({"y": LoopEffects(quantum_mm=1e-4)}, {}, True),
+    ({"x": LoopEffects(feedback_delay_s=0.5 * DT)}, {}, True),
+    ({"x": LoopEffects(mode_freq_hz=80.0)}, {}, True),
+    ({"x": LoopEffects(noise_mm=1e-4)}, {}, True),
 ])  # fmt: skip
-def test_run_shares_the_encoder_array_only_when_it_reads_the_tool_position(effects, separate):
+def test_run_shares_the_encoder_array_only_when_it_reads_the_tool_position(effects, y, separate):
     pos, vel = back_and_forth(DT)[:2]
     refs = [np.column_stack([r, 0.5 * r]) for r in (pos, vel, np.gradient(vel, DT))]
-    r = run([axis(), axis()], DT, *refs, effects=effects)
+    servos = {"x": axis(), "y": axis(**y)}
+    r = run(servos, DT, *refs, effects=effects)
     assert (r.encoder is not r.position) == separate
     # the batch writes the two signals apart: equal exactly where run() shares them
-    rows = np.array([[pack(axis(), DT, effects.get(name, LoopEffects())) for name in ("x", "y")]])
+    rows = np.array([[pack(servos[name], DT, effects.get(name, LoopEffects())) for name in ("x", "y")]])
     batch = run_batch(rows, DT, *refs, outputs=("tool", "encoder"))
     assert np.array_equal(batch["tool"][0], batch["encoder"][0]) != separate
     np.testing.assert_array_equal(batch["encoder"][0], r.encoder)
@@ -539,10 +543,12 @@ def test_batch_row_equals_single_run_bit_for_bit():
 
 
 def random_effects(rng):
-    """In-loop and sensor effects of one axis, each on or off and of random size (a lane of its own)."""
-    kw = {}
+    """In-loop and sensor effects of one axis, each on or off and of random size (a lane of its own), and where its
+    position loop reads: ``(position_feedback, LoopEffects)``."""
+    kw, feedback = {}, "motor"
     if rng.random() < 0.5:
-        kw.update(backlash_mm=rng.uniform(0.001, 0.01), backlash_feedback=str(rng.choice(["motor", "scale"])))
+        kw.update(backlash_mm=rng.uniform(0.001, 0.01))
+        feedback = str(rng.choice(["motor", "scale"]))
     if rng.random() < 0.6:
         kw.update(coulomb_N=rng.uniform(10.0, 150.0), viscous_N_s_per_m=rng.choice([0.0, rng.uniform(0.0, 500.0)]),
                   asymmetry_N=rng.choice([0.0, rng.uniform(-10.0, 10.0)]),
@@ -560,7 +566,7 @@ def random_effects(rng):
         kw.update(quantum_mm=rng.choice([1e-4, 5e-4, 1e-3]))
     if rng.random() < 0.4:
         kw.update(noise_mm=rng.uniform(1e-4, 2e-3), seed=int(rng.integers(2**53)))
-    return LoopEffects(**kw)
+    return feedback, LoopEffects(**kw)
 
 
 @pytest.mark.parametrize("threads, n_variants, pushed", [
@@ -576,9 +582,11 @@ def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants, 
         force = 200.0 * np.sign(np.sin(np.arange(1500)[:, None] * DT * 2 * np.pi * np.array([7.0, 11.0, 13.0])))
         force[:, 0] += np.linspace(0.0, 150.0, 1500)
     rng = np.random.default_rng(n_variants)
-    variants = [{name: random_effects(rng) for name in servos} for _ in range(n_variants)]
-    variants[0] = dict.fromkeys(servos, LoopEffects())  # one variant without any effect
-    rows = np.array([[pack(s, DT, v[name]) for name, s in servos.items()] for v in variants])
+    drawn = [{name: random_effects(rng) for name in servos} for _ in range(n_variants)]
+    drawn[0] = dict.fromkeys(servos, ("motor", LoopEffects()))  # one variant without any effect
+    variants = [{name: e for name, (_, e) in v.items()} for v in drawn]
+    axes = [{name: replace(s, position_feedback=v[name][0]) for name, s in servos.items()} for v in drawn]
+    rows = np.array([[pack(s, DT, v[name]) for name, s in a.items()] for a, v in zip(axes, variants)])
     previous = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
@@ -587,7 +595,7 @@ def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants, 
     finally:
         numba.set_num_threads(previous)
     for b, effects in enumerate(variants):
-        single = run(servos, DT, *refs, effects=effects, force=force)
+        single = run(axes[b], DT, *refs, effects=effects, force=force)
         for name, field in [("tool", "position"), ("encoder", "encoder"), ("velocity", "velocity"),
                             ("current", "current"), ("saturated", "saturated")]:  # fmt: skip
             np.testing.assert_array_equal(batch[name][b], getattr(single, field), err_msg=f"{name}, variant {b}")
@@ -612,12 +620,14 @@ def test_rigid_lanes_equal_single_runs_to_the_last_bit_and_the_sign_of_zero():
         r[:300] = -0.0
         r[300:] -= r[300]
     rng = np.random.default_rng(7)
-    variants = [{name: replace(random_effects(rng), mode_freq_hz=None) for name in servos} for _ in range(9)]
-    variants[0] = dict.fromkeys(servos, LoopEffects())
-    rows = np.array([[pack(s, DT, v[name]) for name, s in servos.items()] for v in variants])
+    drawn = [{name: random_effects(rng) for name in servos} for _ in range(9)]
+    drawn[0] = dict.fromkeys(servos, ("motor", LoopEffects()))
+    variants = [{name: replace(e, mode_freq_hz=None) for name, (_, e) in v.items()} for v in drawn]
+    axes = [{name: replace(s, position_feedback=v[name][0]) for name, s in servos.items()} for v in drawn]
+    rows = np.array([[pack(s, DT, v[name]) for name, s in a.items()] for a, v in zip(axes, variants)])
     batch = run_batch(rows, DT, *refs, outputs=kernel.BATCH_OUTPUTS)
     for b, effects in enumerate(variants):
-        single = run(servos, DT, *refs, effects=effects)
+        single = run(axes[b], DT, *refs, effects=effects)
         # (run() writes the encoder over the tool position when it reads it: the same values, not always the same
         # zeros, so the tool position is compared as numbers then)
         for name, field in [("tool", "position"), ("encoder", "encoder"), ("velocity", "velocity"),
@@ -654,7 +664,6 @@ def test_importing_the_kernel_does_not_import_python_control():
     "kw, message",
     [
         (dict(backlash_mm=-0.001), "backlash_mm"),
-        (dict(backlash_feedback="table"), "backlash_feedback"),
         (dict(coulomb_N=float("nan")), "coulomb_N"),
         (dict(stribeck_velocity_mm_s=0.0), "stribeck_velocity_mm_s"),
         (dict(mode_freq_hz=-5.0), "mode_freq_hz"),
