@@ -1030,8 +1030,11 @@ def _candidates(problem, model, warnings):
     dt = model.machine.servo_period
     for a in servo:
         s = model.machine.axes[a]
-        add(Effect("backlash", a, lost_motion_um=1.0), ("lost_motion_um",),  # read where the axis's encoder is
-            [{"lost_motion_um": v} for v in sizes("backlash")])
+        # read where the axis's encoder is; on a rigid axis whose file says motor (the default), on a scale too:
+        # the file may not say where its encoder is
+        for feedback in (s.position_feedback,) + (("scale",) if s.position_feedback == "motor" and not s.compliant else ()):
+            add(Effect("backlash", a, lost_motion_um=1.0, feedback=feedback), ("lost_motion_um",),
+                [{"lost_motion_um": v} for v in sizes("backlash")])
         # one step below the typical range too: a loop without velocity integrator stands still short of its
         # target by force/(kf·kv·kp), steep in the force, and an identified machine's forces are relative to
         # its assumed mass (the TU/e rig: 2.4 N, which a start at 5 N misses)
@@ -1259,7 +1262,7 @@ def _held(problem, cand, model, pseudo):
         s = float(np.sqrt((hi - lo) ** 2 / 12.0 + ((hi + lo) / 2.0 - p.value) ** 2))
         value = p.value + s if p.value + s <= p.bounds[1] else p.value - s
         if s > 0 and p.bounds[0] <= value <= p.bounds[1]:
-            moved.append(model.with_effect(effect.with_values(**{p.name: value})))
+            moved.append(_with_effect(model, effect.with_values(**{p.name: value})))
     if not moved:
         return np.zeros((0, len(cand.free)))
     return np.array([-pseudo @ (_finite(problem.residual(y)) - cand.residual) for y in problem.predict(moved)])

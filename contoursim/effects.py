@@ -236,7 +236,8 @@ class Effect:
     A backlash's ``feedback`` says where the position loop's encoder is,
     which is the axis's setting (``position_feedback``): left out
     (``None``), a :class:`~contoursim.model.Model` fills in the axis's;
-    given, it must agree with it.
+    given, the model's axis reads there (a machine file that does not say
+    where its encoder is, with a backlash found on a scale).
     """
 
     name: str
@@ -361,7 +362,7 @@ _register(EffectKind(
     (_p("lost_motion_um", 0.0, "µm", (0.0, 1000.0), (2.0, 20.0), doc="lost motion between motor/screw and table"),),
     options={"feedback": (None, "motor", "scale")},
     doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk); "
-        "the axis's position_feedback when not given",
+        "the axis's position_feedback when not given, and the axis's when given",
 ))
 _register(EffectKind(
     "coulomb_friction", "loop",

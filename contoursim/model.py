@@ -107,7 +107,13 @@ class Model:
             if e.name == "vibration" and self.machine.axes[e.axis].compliant:
                 raise ValueError(f"{e.label}: axis {e.axis} has a compliant screw (motor_mass, screw_stiffness), whose "
                                  "mode is the one structural mode the kernel holds per axis: no vibration beside it")
-        effects = tuple(_bound_feedback(e, self.machine) for e in effects)
+        machine = self.machine
+        for e in effects:  # a backlash's feedback, given, is where its axis's position loop reads
+            servo = machine.axes.get(e.axis) if e.name == "backlash" else None
+            if servo is not None and e.options["feedback"] not in (None, servo.position_feedback):
+                machine = replace(machine, axes={**machine.axes, e.axis: replace(servo, position_feedback=e.options["feedback"])})
+        effects = tuple(_bound_feedback(e, machine) for e in effects)
+        object.__setattr__(self, "machine", machine)
         object.__setattr__(self, "effects", effects)
 
     # -- parameters --------------------------------------------------------------------------
@@ -317,19 +323,10 @@ def _delay_problem(effect, machine):
 
 
 def _bound_feedback(effect, machine):
-    """`effect`, a backlash's ``feedback`` filled in with where its axis's position loop reads (checked when given)."""
-    if effect.name != "backlash":
+    """`effect`, a backlash's ``feedback`` filled in with where its axis's position loop reads."""
+    if effect.name != "backlash" or effect.options["feedback"] is not None:
         return effect
-    servo = machine.axes[effect.axis]
-    given = effect.options["feedback"]
-    if given is None:
-        return _keep_vary(effect.with_values(feedback=servo.position_feedback), effect)
-    if given != servo.position_feedback:
-        raise ValueError(f'{effect.label}: feedback = "{given}", but axis {effect.axis}\'s position loop reads the '
-                         f'{"motor encoder" if servo.position_feedback == "motor" else "scale"} (position_feedback = '
-                         f'"{servo.position_feedback}" in its [axes.{effect.axis}] table): where the encoder is is the '
-                         "axis's setting; leave feedback out or make the two agree")
-    return effect
+    return _keep_vary(effect.with_values(feedback=machine.axes[effect.axis].position_feedback), effect)
 
 
 def _keep_vary(new, old):

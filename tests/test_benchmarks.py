@@ -112,18 +112,20 @@ def test_a_screws_cyclic_error_longer_than_half_the_stroke_is_found_where_the_ax
 
 
 def test_no_effect_is_named_for_a_sliver_of_a_gap_the_models_dynamics_leave(independent_truth, tmp_path):
-    """An independent trace with no hidden effect, its data sheet stripped of the current loop's bandwidth (the screw
-    and the motor's share of the mass it lacks anyway): the residual stays above the noise floor, a backlash fitted
-    to the corners is significant (ΔBIC 62) but closes a sliver of that gap, and is not named (GAP_SHARE); the
-    report says why."""
+    """An independent trace with no hidden effect, its data sheet stripped of the current loop's bandwidth and the
+    screw (the motor's share of the mass and the screw's stiffness): the residual stays above the noise floor, a
+    backlash fitted to the corners is significant but closes a sliver of that gap, and is not named (GAP_SHARE);
+    the report says why."""
     from contoursim.diagnosis import GAP_SHARE, diagnose
     from contoursim.model import load_model
     from contoursim.traces import read_trace
 
     case = independent_truth.make_case("rigid", None, 508082495, tmp_path)
     sheet = case.machine_file.read_text(encoding="utf-8")
-    assert "current_bandwidth_hz" in sheet
-    case.machine_file.write_text(re.sub(r"current_bandwidth_hz = .*\n", "", sheet), encoding="utf-8")
+    stripped = re.sub(r"(current_bandwidth_hz|motor_mass_kg|screw_stiffness_N_per_um|screw_damping_ratio) = .*\n", "",
+                      sheet)
+    assert len(stripped.splitlines()) == len(sheet.splitlines()) - 8  # four lines per axis
+    case.machine_file.write_text(stripped, encoding="utf-8")
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
     assert result.effects == (), result.report()
     assert result.steps[-1].rms_um > 1.2 * float(np.linalg.norm(result.noise_um))  # a gap, not noise

@@ -438,9 +438,8 @@ def test_one_mode_per_axis_and_one_place_for_the_encoder():
         Model(machine, (Effect("vibration", "x", freq_hz=80.0),))
     bound = Model(machine, (Effect("backlash", "x", lost_motion_um=5.0),)).effects[0]
     assert bound.options["feedback"] == "scale"  # left out: the axis's
-    with pytest.raises(ValueError, match=r'backlash.x: feedback = "motor", but axis x\'s position loop reads the '
-                                         r'scale \(position_feedback = "scale"'):
-        Model(machine, (Effect("backlash", "x", lost_motion_um=5.0, feedback="motor"),))
+    motor = Model(machine, (Effect("backlash", "x", lost_motion_um=5.0, feedback="motor"),))  # given: read there
+    assert motor.machine.axes["x"].position_feedback == "motor" and motor.machine.axes["x"].compliant
 
 
 SWEEP = """machine = "demo_mill"

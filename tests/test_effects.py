@@ -99,8 +99,9 @@ def test_a_model_names_its_parameters_flat_and_makes_variants():
     replaced = model.with_effect(Effect("backlash", "x", lost_motion_um=3.0, feedback="motor"))
     assert [e.label for e in replaced.effects] == ["coulomb_friction.y", "backlash.x"]
     assert replaced.effects[1]["lost_motion_um"] == 3.0
-    with pytest.raises(ValueError, match=r'backlash.x: feedback = "scale", but axis x\'s position loop reads the motor'):
-        model.with_effect(Effect("backlash", "x", lost_motion_um=3.0, feedback="scale"))
+    scale = model.with_effect(Effect("backlash", "x", lost_motion_um=3.0, feedback="scale"))  # given: the axis reads there
+    assert scale.machine.axes["x"].position_feedback == "scale" and scale.effects[1].options["feedback"] == "scale"
+    assert scale.machine.axes["y"] == model.machine.axes["y"] and model.machine.axes["x"].position_feedback == "motor"
     with pytest.raises(ValueError, match="unknown model parameter 'backlash.y.lost_motion_um'; the model's parameters are: backlash.x"):
         model.with_values({"backlash.y.lost_motion_um": 1.0})
 
