@@ -96,6 +96,16 @@ def test_names_the_hidden_effect_its_axis_and_size(machine, make_effect, make_re
     assert_found(result, truth, main_parameter)
 
 
+def test_a_backlash_behind_a_scale_the_machine_file_does_not_declare_is_found_there(machine):
+    """The machine file says nothing of where the encoders are (motor, the default); the trace's Y runs on a scale
+    behind 9 µm of lost motion, which its loop sees. The backlash is named on the scale, the size within 20 %."""
+    truth = Effect("backlash", "y", lost_motion_um=9.0, feedback="scale")
+    assert machine.axes["y"].position_feedback == "motor"
+    result = run_blind(machine, (truth,), circle("cw"), seed=21)
+    assert_found(result, truth, "lost_motion_um")
+    assert result.effects[0].options["feedback"] == "scale", result.report()
+
+
 def test_null_case_names_nothing(machine):
     result = run_blind(machine, (), circle("ccw"), seed=5, noise_um=0.3)
     assert result.effects == ()
