@@ -28,8 +28,6 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-from dataclasses import replace
-
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -52,9 +50,8 @@ def table_positions(machine):
     at_rest = np.zeros_like(command)  # no velocity or acceleration feedforward for a step
     table = []
     for feedback, static in CASES:
-        scaled = replace(machine, axes={**machine.axes, "x": replace(machine.axes["x"], position_feedback=feedback)})
-        model = Model(scaled, (
-            Effect("backlash", "x", lost_motion_um=LOST_MOTION_UM),  # read where the axis's encoder is
+        model = Model(machine, (
+            Effect("backlash", "x", lost_motion_um=LOST_MOTION_UM, feedback=feedback),
             Effect("coulomb_friction", "x", force_N=COULOMB_N, stribeck_N=static, stribeck_velocity_mm_s=0.1),
         ))  # fmt: skip
         response = kernel.run({"x": model.servos()["x"]}, dt, command, at_rest, at_rest,
