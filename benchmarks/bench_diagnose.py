@@ -200,8 +200,8 @@ def run(family, mode, name, seed, mill, folder):
                 error=None, named=(), right=False, false_positive=False, found=False, floor=np.inf)
     start = time.perf_counter()
     try:
-        if mode == "model" and isinstance(model, Path):  # a data sheet the loop check refuses is an error to count too
-            model = load_model(model)
+        if mode == "model" and isinstance(model, Path):  # as `contoursim diagnose --model` reads it
+            model = load_model(model, check=False)
         result = diagnose(trace, model if mode == "model" else None)
         report = result.to_dict()
     except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is a result to count, not a reason to stop

@@ -428,7 +428,7 @@ def diagnose_command(args):
         raise ValueError("--summary and --scheduler are for several traces (or a folder of them); one trace runs here")
     args.file = args.file[0]
     trace = read_trace(args.file)
-    model = load_model(args.model) if args.model else None
+    model = load_model(args.model, check=False) if args.model else None  # the trace judges its loops' stability
     period = model.machine.servo_period if model is not None else servo_period_for(trace.dt)
     duration = trace.t[-1] - trace.t[0]
     check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
@@ -441,6 +441,8 @@ def diagnose_command(args):
         result = diagnose(trace, model, progress=_progress_line(sys.stderr))
     except ConfigError:  # naming its own file (the model's)
         raise
+    except UnstableLoopError as exc:  # a loop of the model no plant within its prior makes stable
+        raise UnstableLoopError(f"{args.model}: {exc}", exc.margins) from None
     except ValueError as exc:  # what the trace cannot give: naming it
         raise ConfigError(str(exc), args.file) from None
     finally:

@@ -62,6 +62,7 @@ from scipy.optimize import least_squares
 from scipy.signal import lombscargle
 
 from .effects import Effect, effect_kind
+from .exceptions import UnstableLoopError
 from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identification_warnings, identify_machine
 from .kernel import MAX_DELAY_SAMPLES
 from .machine import CONTROLLER_FIELDS
@@ -116,6 +117,7 @@ _REFIT_FIELDS = ("mass", "damping", "motor_mass", "screw_stiffness", "screw_damp
 # parameters the refit may move (the controller's if uncertain)
 _SCREW_DAMPING_SPREAD = 0.5  # prior spread of a compliant screw's damping ratio [-, relative]: a data sheet guesses it
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
+_STABILISING = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)  # moves of one plant parameter tried on a loop the check refuses [prior widths]
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 
 
@@ -949,6 +951,61 @@ def _nuisance_changes(model, axes, identified):
     return changes
 
 
+def _stable_start(model, axes):
+    """Where the loop check refuses an axis of a given model, the nearest plant within its prior that it accepts.
+
+    A data sheet may describe a machine commissioned at its stability edge
+    that the check refuses (a screw's damping guessed, a mass a few % off)
+    while the measured trace shows the machine stable: the trace is the
+    judge. On each refused axis one plant parameter of the nominal refit
+    (:func:`_nuisance_changes`) moves by the fewest prior widths of
+    :data:`_STABILISING` (the largest gain margin among equals) to where the
+    check passes; the diagnosis starts there (its prior centred there too).
+
+    Returns
+    -------
+    (Model, list of str)
+        The model to start from (`model` when the check accepts every axis)
+        and one warning per moved axis.
+
+    Raises
+    ------
+    UnstableLoopError
+        No such move makes an axis's loop pass the check (the check's message).
+    """
+    dt = model.machine.servo_period
+    warnings = []
+    for a in axes:
+        try:
+            model.machine.axes[a].check(dt, a)
+            continue
+        except UnstableLoopError as exc:
+            refused = exc
+        start = None
+        for widths in _STABILISING:
+            for change, spread in _nuisance_changes(model, (a,), identified=False):
+                (name, _), = change[a].items()
+                value = getattr(model.machine.axes[a], name)
+                for moved in (value * (1.0 + widths * spread), value * (1.0 - widths * spread)):
+                    trial = _with_servos(model, {a: {name: moved}})
+                    try:
+                        margin = min(m["gain_margin"] for m in trial.machine.axes[a].check(dt, a).values())
+                    except (UnstableLoopError, ValueError):
+                        continue
+                    if start is None or margin > start[0]:
+                        start = (margin, trial, name, value, moved, widths)
+            if start is not None:
+                break
+        if start is None:
+            raise UnstableLoopError(f"{refused} No plant within {_STABILISING[-1]:g} prior widths of the model's "
+                                    "(one parameter moved) makes it pass", refused.margins)
+        margin, model, name, value, moved, widths = start
+        warnings.append(f"axis {a}: the model's loop fails the loop check ({refused}) while the trace shows the machine "
+                        f"stable: the diagnosis starts from {name} = {moved:.6g} (the model's {value:.6g}, {widths:g} "
+                        f"prior widths), where the check passes (gain margin {margin:.3g})")
+    return model, warnings
+
+
 def _steps_from(nominal, machine, change):
     """How far `machine` is from `nominal` in the parameters of one nominal step, in units of that step (mean over its fields)."""
     steps = [(getattr(machine.axes[a], f) - getattr(nominal.axes[a], f)) / (v - getattr(machine.axes[a], f))
@@ -1499,6 +1556,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     if missing:
         raise ValueError(f"the model has no servo axis {missing[0]!r} for the trace's column {missing[0]!r}; "
                          f"its axes are {', '.join(model.machine.axes)}")
+    model, warnings = (model, []) if identified else _stable_start(model, trace.axes)
     reference = measured_reference(trace, model.machine.servo_period)
     # a known force in N has no scale on an identified machine (its mass is assumed): used with a given model only
     force = {} if identified else measured_force(trace, model.machine.servo_period)
@@ -1510,7 +1568,6 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         quiet = ~cycle["samples"]
         if quiet.sum() >= 16:
             noise[i] = noise_level((trace.actual - before)[quiet, i:i + 1], trace.actual[quiet, i:i + 1])[0]
-    warnings = []
     scored = np.ones(len(trace.t), bool)
     speed = np.linalg.norm(reference.velocity, axis=1)
     if speed[0] > 1e-3 * speed.max():

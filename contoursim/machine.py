@@ -322,7 +322,7 @@ def preset_file(name_or_file):
     raise ConfigError(f"no machine file {str(name_or_file)!r} and no preset of that name; presets: {', '.join(preset_names())}")
 
 
-def load_machine(name_or_file, geometry=True, effects=False):
+def load_machine(name_or_file, geometry=True, effects=False, check=True):
     """Load a machine from a preset name or a machine TOML file.
 
     Parameters
@@ -336,6 +336,12 @@ def load_machine(name_or_file, geometry=True, effects=False):
         The caller reads the file's ``[[effect]]`` tables
         (:func:`contoursim.model.load_model` does); otherwise a file that has
         them is refused rather than loaded without them.
+    check : bool
+        Refuse an axis whose sampled loop is unstable or badly damped.
+        ``False`` loads it as the file gives it (a diagnosis does: the
+        measured trace, not the loop check, says whether the machine is
+        stable; :func:`contoursim.diagnosis.diagnose`). A servo period too
+        long for a loop is refused either way.
 
     Returns
     -------
@@ -347,8 +353,9 @@ def load_machine(name_or_file, geometry=True, effects=False):
         Naming the file and line of an unknown key or a bad value, or of the
         servo period when it is too long for an axis's loops.
     UnstableLoopError
-        An axis's sampled loop is unstable or badly damped: the message names
-        the file, the line of its ``[axes.*]`` table, the loop and its margins.
+        With `check`, an axis's sampled loop is unstable or badly damped: the
+        message names the file, the line of its ``[axes.*]`` table, the loop
+        and its margins.
     """
     from .multibody import chain_from_toml
 
@@ -399,7 +406,9 @@ def load_machine(name_or_file, geometry=True, effects=False):
         try:
             servo.check(period, axis)
         except UnstableLoopError as exc:
-            raise UnstableLoopError(f"{toml.source}, line {toml.line_of('axes', axis)}: {_file_names(exc)}", exc.margins) from None
+            if check:
+                raise UnstableLoopError(f"{toml.source}, line {toml.line_of('axes', axis)}: {_file_names(exc)}",
+                                        exc.margins) from None
         except ValueError as exc:
             raise toml.error(_file_names(exc), "servo_period_ms") from None
     try:

@@ -250,14 +250,14 @@ def as_model(model_or_machine):
     raise TypeError(f"expected a Model or a Machine, got {type(model_or_machine).__name__}")
 
 
-def load_model(name_or_file, geometry=True):
+def load_model(name_or_file, geometry=True, check=True):
     """A machine file (or preset) with its ``[[effect]]`` tables, as a :class:`Model`.
 
     Parameters
     ----------
     name_or_file : str or Path
         As for :func:`contoursim.machine.load_machine`.
-    geometry : bool
+    geometry, check : bool
         As for :func:`contoursim.machine.load_machine`.
 
     Returns
@@ -269,9 +269,11 @@ def load_model(name_or_file, geometry=True):
     ConfigError
         Naming the file and line of a bad machine key or ``[[effect]]`` table,
         or of an effect on an axis the machine lacks.
+    UnstableLoopError
+        As for :func:`contoursim.machine.load_machine`.
     """
     file = preset_file(name_or_file)
-    machine = load_machine(file, geometry=geometry, effects=True)
+    machine = load_machine(file, geometry=geometry, effects=True, check=check)
     return with_file_effects(Model(machine), TomlFile.read(file))
 
 

@@ -30,6 +30,15 @@ def real_data():
     return SHARED_DATA
 
 
+@pytest.fixture
+def independent_truth(monkeypatch):
+    """benchmarks/independent_truth.py: the hidden-effect trace generator written apart from contoursim."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import independent_truth
+
+    return independent_truth
+
+
 class ReaderGone:
     """A command's standard output whose reader stops after the first line, as ``contoursim ... | head -1``.
 

@@ -20,14 +20,6 @@ def test_benchmark_script_loads(script, monkeypatch):
     monkeypatch.delitem(sys.modules, "bench_chain", raising=False)
 
 
-@pytest.fixture
-def independent_truth(monkeypatch):
-    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
-    import independent_truth
-
-    return independent_truth
-
-
 @pytest.mark.parametrize("vff, computation_delay", [(0.0, 0), (0.8, 1)])
 def test_independent_truth_lags_its_ramp_by_the_closed_form(independent_truth, vff, computation_delay):
     """The independent simulator's axis (PI velocity loop on encoder differences, delays, current loop, stiff

@@ -23,6 +23,7 @@ from contoursim import paths
 from contoursim.cli import main
 from contoursim.diagnosis import diagnose, noise_level, synthetic_trace, turning
 from contoursim.effects import Effect
+from contoursim.exceptions import UnstableLoopError
 from contoursim.feed import plan, sample
 from contoursim.identify import identify_machine
 from contoursim.machine import Machine, load_machine
@@ -536,6 +537,32 @@ def test_cli_writes_report_and_plots_before_a_reader_can_go(tmp_path, monkeypatc
     assert reader_gone.text.startswith("contoursim diagnose — measured.csv: ")
     assert "residual_rms_before_um" in json.loads(report.read_text())
     assert {p.name for p in (tmp_path / "out").glob("*.png")} == {"diagnosis_residual.png", "diagnosis_trace.png", "diagnosis_polar.png"}
+
+
+def test_a_data_sheet_at_its_stability_edge_is_judged_by_the_trace(independent_truth, tmp_path):
+    """An independent two-mass machine commissioned at its edge: its data sheet (the screw's damping guessed, the
+    plant a few % off) describes a velocity loop the check refuses, the trace a stable machine. The diagnosis
+    starts from the nearest plant the check accepts, says which, and follows the trace within a µm."""
+    case = independent_truth.make_case("two_mass", "thermal_drift", 334826472, tmp_path)
+    with pytest.raises(UnstableLoopError, match="velocity loop of axis 'x' is unstable.*gain margin 0.984"):
+        load_model(case.machine_file)
+    report = json.loads(diagnose(read_trace(case.csv), load_model(case.machine_file, check=False)).to_json())
+    moved = [w for w in report["warnings"] if "fails the loop check" in w]
+    assert len(moved) == 1 and moved[0].startswith("axis x:") and "the diagnosis starts from screw_damping_ratio" in moved[0]
+    assert report["residual_rms_after_um"] < report["residual_rms_before_um"] < 1.0
+
+
+def test_cli_diagnose_names_the_model_file_when_no_plant_in_its_prior_passes_the_check(tmp_path, capsys):
+    """A position gain of 900/s fails the check for any plant within its prior: the check's message, naming the file."""
+    mill = load_machine("demo_mill")
+    path = paths.iso230_4_circle(10.0)
+    reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), mill.servo_period)
+    write_trace(tmp_path / "measured.csv", synthetic_trace(Model(mill), reference, every=5, seed=3))
+    model = tmp_path / "edge.toml"
+    model.write_text((ROOT / "contoursim" / "presets" / "demo_mill.toml").read_text().replace("kp_per_s = 40.0", "kp_per_s = 900.0", 1))
+    assert main(["diagnose", str(tmp_path / "measured.csv"), "--model", str(model), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"{model}: the position loop of axis 'x' is badly damped" in err and "No plant within 3 prior widths" in err
 
 
 def test_emps_real_axis_names_coulomb_friction_first(real_data, tmp_path, capsys):

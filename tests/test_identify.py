@@ -8,8 +8,6 @@ simulator of benchmarks/independent_truth.py, written apart from the kernel.
 
 import pytest
 
-from conftest import ROOT
-
 from contoursim import paths
 from contoursim.diagnosis import diagnose, synthetic_trace
 from contoursim.feed import plan, sample
@@ -48,14 +46,6 @@ def test_a_drive_on_the_motor_velocity_is_not_given_a_difference():
     identified = identify_machine(own_trace())
     assert structure(identified) == {("state", 1, 0)}
     assert identified.axes["x"].kp == pytest.approx(30.0, rel=0.02)
-
-
-@pytest.fixture
-def independent_truth(monkeypatch):
-    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
-    import independent_truth
-
-    return independent_truth
 
 
 def test_independent_drive_gains_are_identified(independent_truth, tmp_path):
