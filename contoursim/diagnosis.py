@@ -110,6 +110,7 @@ _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (
 # the trace, the largest spread (the estimate grows with the segments' length until they outlast the residual's
 # correlations, and the fewer the segments the noisier it is: no one length is right for every trace)
 _JACKKNIFE_BLOCKS = (40, 20, 10)
+_BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–Newton step tried, the first that helps kept
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
 _TWIN_SHARE = 0.8  # two candidates alike for a reason the trace cannot decide are twins when one closes this share of the other's gap
@@ -843,8 +844,9 @@ class _Problem:
         refit included) by more than :data:`_STEP_TOLERANCE`: within reach of
         the linearisation the new base's residual is the old one's but for
         second-order terms; where the trace's dynamics lie beyond it (a plant
-        the model lacks), a full step can overshoot, and the base stays where
-        it was.
+        the model lacks, a loop near its stability edge), a full step can
+        overshoot: it is shortened by the fractions of :data:`_BACKTRACK`, and
+        where none helps the base stays where it was.
         """
         self._linearise(model)
         for _ in range(refit):
@@ -854,10 +856,16 @@ class _Problem:
             if not np.all(np.isfinite(coef)):
                 break
             cost = float(self.base_residual @ self.base_residual)
-            trial = _refitted(model, [change for change, _ in self.changes], coef)
-            self._linearise(trial)
-            if not float(self.base_residual @ self.base_residual) <= (1.0 + _STEP_TOLERANCE) * cost:
-                self._linearise(model)  # the step made it worse (or the loop diverge): back to the last base
+            changes = [change for change, _ in self.changes]
+            for fraction in _BACKTRACK:
+                trial = _refitted(model, changes, coef, fraction)
+                self._linearise(trial)
+                with np.errstate(over="ignore"):  # a trial whose loop runs away: an infinite cost, refused
+                    worse = not float(self.base_residual @ self.base_residual) <= (1.0 + _STEP_TOLERANCE) * cost
+                if not worse:
+                    break
+            else:
+                self._linearise(model)  # every fraction of the step made it worse (or the loop diverge): the last base
                 break
             model = trial
 
@@ -879,9 +887,13 @@ class _Problem:
         if self.changes:
             ys = self.predict([_with_servos(model, change) for change, _ in self.changes])
             r0 = self.whitened(self.base_prediction)
-            finite = [bool(np.all(np.isfinite(y))) for y in ys]  # a step that makes the loop diverge is left out
-            self.changes = [c for c, ok in zip(self.changes, finite) if ok]
-            columns += [r0 - self.whitened(y) for y, ok in zip(ys, finite) if ok]  # each nominal step's effect, whitened
+            # a step that makes the loop diverge is left out: its prediction is not finite or, growing slowly,
+            # moves further from the base's than the trace moves at all (no sensitivity of a 2 % step does)
+            reach = max(float(np.ptp(self.trace.actual)), 1.0)
+            with np.errstate(invalid="ignore", over="ignore"):
+                kept = [bool(np.all(np.abs(y - self.base_prediction) <= reach)) for y in ys]
+            self.changes = [c for c, ok in zip(self.changes, kept) if ok]
+            columns += [r0 - self.whitened(y) for y, ok in zip(ys, kept) if ok]  # each nominal step's effect, whitened
         s = self.columns = np.column_stack(columns)
         self.prior = np.concatenate([np.zeros(self.instrument), [_NUISANCE_STEP / spread for _, spread in self.changes]])
         # ridge: the prior on the nominal parameters, centred on the nominal machine (the base may have moved from it)
@@ -1030,18 +1042,18 @@ def _with_servos(model, change):
     return Model(replace(machine, axes=servos), model.effects)
 
 
-def _refitted(model, changes, coef):
-    """`model` moved by `coef` times each change (a Gauss–Newton step), each field kept within ±50 % (vff in [0, 1])."""
+def _refitted(model, changes, coef, fraction=1.0):
+    """`model` moved by `fraction` of `coef` times each change (a Gauss–Newton step), vff kept in [0, 1].
+
+    Each field's move is first kept within ±50 % of its value, then scaled by `fraction`.
+    """
     new = {}
     for change, c in zip(changes, coef):
-        if not np.isfinite(c):
-            continue
         for axis, fields in change.items():
             for field, stepped in fields.items():
                 old = getattr(model.machine.axes[axis], field)
-                value = old + c * (stepped - old)
-                scale = old if old > 0 else abs(stepped)
-                value = float(np.clip(value, max(0.0, old - 0.5 * scale), old + 0.5 * scale))
+                reach = 0.5 * (old if old > 0 else abs(stepped))
+                value = old + fraction * float(np.clip(c * (stepped - old), -reach, reach))
                 new.setdefault(axis, {})[field] = min(value, 1.0) if field == "vff" else value
     return _with_servos(model, new)
 
