@@ -882,7 +882,8 @@ class _Problem:
         for i, j in combinations(range(d), 2):  # the instrument's frame turned a little in the plane of axes i, j
             turn = np.zeros((n, d))
             turn[:, i], turn[:, j] = -q[:, j], q[:, i]
-            columns.append((turn * self.weight).ravel())
+            if np.any(turn[self.scored]):  # two axes that stand still have no frame to turn
+                columns.append((turn * self.weight).ravel())
         self.instrument = len(columns)  # the instrument's columns (zero and alignment), free
         if self.changes:
             ys = self.predict([_with_servos(model, change) for change, _ in self.changes])

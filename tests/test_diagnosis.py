@@ -416,6 +416,20 @@ def test_hunting_at_standstill_is_reported_as_unexplained_structure_not_noise(ma
     assert result.to_dict()["unexplained"][0]["signature"].startswith("limit cycle")
 
 
+def test_a_trace_that_never_moves_is_diagnosed_for_hunting_with_a_model_and_refused_without(machine):
+    """Both axes stand still (no instrument frame to turn: its column would be all zero) and X hunts, ±12 µm at
+    25 Hz: with the model, the cycle is said; without, the loops cannot be identified and the error says so."""
+    t = np.arange(1500) * 1e-3
+    reference = np.zeros((t.size, 2))
+    measured = reference + np.random.default_rng(2).normal(0.0, 2e-4, reference.shape)
+    measured[:, 0] += 0.012 * np.sign(np.sin(2 * np.pi * 25.0 * t))
+    trace = Trace(t, reference, measured, ("x", "y"))
+    result = diagnose(trace, Model(machine))
+    assert any(w.startswith("hunting at standstill on x") for w in result.warnings), result.report()
+    with pytest.raises(ValueError, match="the trace's reference never moves: the servo loops cannot be identified"):
+        diagnose(trace)
+
+
 def test_a_residual_above_the_noise_without_a_signature_is_said_where_it_is_never_taken_as_noise(machine):
     """X moves 5 mm and back; while it accelerates the measurement carries 2 µm RMS of random error (no line, no
     correlation: dynamics no catalogue effect has). Not named, not noise: listed as beyond the white noise,
