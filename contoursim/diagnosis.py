@@ -112,6 +112,7 @@ _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (
 _JACKKNIFE_BLOCKS = (40, 20, 10)
 _BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–Newton step tried, the first that helps kept
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
+_SLOWEST_LOG = 0.01  # a trace sampled slower than this [s] does not resolve servo dynamics (a position loop's 1/kp)
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
 _TWIN_SHARE = 0.8  # two candidates alike for a reason the trace cannot decide are twins when one closes this share of the other's gap
 _REFIT_FIELDS = ("mass", "damping", "motor_mass", "screw_stiffness", "screw_damping_ratio") + CONTROLLER_FIELDS  # servo
@@ -1570,6 +1571,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         raise ValueError(f"the model has no servo axis {missing[0]!r} for the trace's column {missing[0]!r}; "
                          f"its axes are {', '.join(model.machine.axes)}")
     model, warnings = (model, []) if identified else _stable_start(model, trace.axes)
+    if trace.dt > _SLOWEST_LOG:
+        warnings.append(f"the trace is sampled every {1e3 * trace.dt:.4g} ms, slower than a position loop lags (1/kp, "
+                        "10–100 ms): the loops' dynamics are not resolved; check the time unit (e.g. a line "
+                        "'# units: t [ms]')")
     reference = measured_reference(trace, model.machine.servo_period)
     # a known force in N has no scale on an identified machine (its mass is assumed): used with a given model only
     force = {} if identified else measured_force(trace, model.machine.servo_period)

@@ -430,6 +430,16 @@ def test_a_trace_that_never_moves_is_diagnosed_for_hunting_with_a_model_and_refu
         diagnose(trace)
 
 
+def test_a_trace_whose_time_column_is_in_milliseconds_is_said_to_be_too_slow_for_servo_dynamics(machine):
+    """The first samples of a trace logged every 2.5 ms with t in ms read as seconds (no units line): sampled every
+    2.5 "s", which no servo loop's dynamics survive; the report says so and points at the time unit."""
+    trace = synthetic_trace(Model(machine), circle("ccw"), every=5, seed=1)
+    slow = Trace(1e3 * trace.t[:40], trace.reference[:40], trace.actual[:40], trace.axes)
+    result = diagnose(slow, Model(machine), max_effects=0)
+    assert any(w.startswith("the trace is sampled every 2500 ms") and "'# units: t [ms]'" in w for w in result.warnings)
+    assert not any("sampled every" in w for w in diagnose(trace, Model(machine), max_effects=0).warnings)
+
+
 def test_a_residual_above_the_noise_without_a_signature_is_said_where_it_is_never_taken_as_noise(machine):
     """X moves 5 mm and back; while it accelerates the measurement carries 2 µm RMS of random error (no line, no
     correlation: dynamics no catalogue effect has). Not named, not noise: listed as beyond the white noise,
