@@ -50,7 +50,9 @@ The workflow (:func:`diagnose`):
    the search repeats for a second and a third effect and stops when
    nothing is significant or the residual is at the noise floor
    (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
-   reported as ambiguous, with the test that would separate them.
+   reported as ambiguous, with the test that would separate them (of a gain
+   mismatch and a delay of the position loop's reading, to first order that
+   gain, the gain is named).
 """
 
 import json
@@ -1045,7 +1047,7 @@ def _candidates(problem, model, warnings):
             edge = -np.log(effect_kind("gain_mismatch").parameters[0].typical[0])
             add(Effect("gain_mismatch", a, kp_ratio=1.0), ("kp_ratio",),
                 [{"kp_ratio": float(np.exp(sign * u))} for u in np.geomspace(0.01, edge, _GRID + 1) for sign in (-1, 1)])
-        for kind in ("command", "feedback"):
+        for kind in ("command", "feedback", "position"):
             top = 3e-3 if kind == "command" else min(3e-3, (MAX_DELAY_SAMPLES - 1) * dt)
             add(Effect("time_delay", a, delay_s=1e-4, kind=kind), ("delay_s",),
                 [{"delay_s": v} for v in np.geomspace(min(1e-4, top / 4), top, _GRID)])
@@ -1353,8 +1355,8 @@ def _twin(problem, best, cands, both_ways):
     (:func:`_twins`) that closes at least :data:`_TWIN_SHARE` of what the
     best closes:
 
-    - a squareness and a position-gain mismatch (or a command delay) of one
-      axis both draw an oval at 45° on a circle (ballbar reasoning, ISO 230-4,
+    - a squareness and a position-gain mismatch (or a command delay, or a
+      delay of the position loop's reading) of one axis both draw an oval at 45° on a circle (ballbar reasoning, ISO 230-4,
       Renishaw QC20): the squareness's keeps its orientation in both
       directions and its size at any feed, the servo effect's flips between
       CW and CCW and grows with the feed. A trace run both ways (:func:`turning`)
@@ -1381,20 +1383,35 @@ def _choose(problem, cands, both_ways):
 
     The best, unless the trace cannot tell it from a twin (:func:`_twin`) and
     only the twin's size lies within the catalogue's typical range: what the
-    trace cannot decide, the typical sizes of machines may. Either way the
-    pair is reported, with the test that would separate them.
+    trace cannot decide, the typical sizes of machines may; or unless the best
+    is a delay of an axis's position-loop reading and the twin a gain mismatch
+    of that axis (:func:`_first_order`), which is named. Either way the pair is
+    reported, with the test that would separate them.
     """
     best = cands[0]
     twin, reason = _twin(problem, best, cands, both_ways)
     if twin is None:
         return best, None
-    swap = not _typical(best.fit) and _typical(twin.fit)
+    gain = _first_order(best.fit, twin.fit)
+    swap = gain or (not _typical(best.fit) and _typical(twin.fit))
     if swap:
         best, twin = twin, best
+    why = ("the first is named: the second is to first order that gain, kp/(1 − kp·τ); " if gain else
+           "the first is named, its size typical and the second's not; " if swap else "")
     return best, (f"{best.fit.label}{_options(best.fit)} ({_size(best.fit)}) and {twin.fit.label}{_options(twin.fit)} "
-                  f"({_size(twin.fit)}): {reason}; "
-                  + ("the first is named, its size typical and the second's not; " if swap else "")
-                  + f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
+                  f"({_size(twin.fit)}): {reason}; {why}"
+                  f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
+
+
+def _first_order(delay, gain):
+    """Whether `delay` is a delay τ of an axis's position-loop reading and `gain` a gain mismatch of that axis.
+
+    At constant speed the loop drives what it reads to a lag v/kp, the axis v·τ further on: the lag of a gain
+    kp/(1 − kp·τ). The delay's own mark, the phase ω·τ it takes beyond that gain's, is of second order; where a
+    trace does not resolve it the first-order term, the gain, is what the trace shows and is named.
+    """
+    return (delay.name == "time_delay" and delay.options["kind"] == "position" and gain.name == "gain_mismatch"
+            and gain.axis == delay.axis)
 
 
 def _typical(effect):
@@ -1423,19 +1440,27 @@ def _twins(a, b, both_ways):
 
 
 def _oval_kind(effect):
-    """``"geometry"`` for a squareness, ``"servo"`` for a gain mismatch or a command delay (both draw a 45° oval on a
-    circle), else ``None``."""
+    """``"geometry"`` for a squareness, ``"servo"`` for a gain mismatch, a command delay or a position-loop delay (to
+    first order a gain, ``kp/(1 − kp·τ)``: all draw a 45° oval on a circle), else ``None``."""
     if effect.name == "squareness":
         return "geometry"
-    if effect.name == "gain_mismatch" or (effect.name == "time_delay" and effect.options["kind"] == "command"):
+    if effect.name == "gain_mismatch" or (effect.name == "time_delay" and effect.options["kind"] in ("command", "position")):
         return "servo"
     return None
 
 
 def _separating_test(a, b, both_ways=False):
     """The extra test that tells effect `a` from effect `b` (`both_ways`: the trace already runs its path both ways)."""
+    kinds = {e.options["kind"] for e in (a, b) if e.name == "time_delay"}
+    if a.name == b.name == "time_delay" and "command" not in kinds:
+        return ("a velocity step, or the drive's own velocity record: a delay of both loops' feedback slows the velocity "
+                "loop too (it overshoots at its own bandwidth), a delay of the position loop's reading leaves it as it was")
     if a.name == b.name == "time_delay":
         return "a step or a faster reversal: a feedback delay changes the loop's damping (overshoot), a command delay only shifts the response"
+    if {a.name, b.name} == {"gain_mismatch", "time_delay"} and kinds != {"command"}:
+        return ("a position step: to first order a delay τ of the loop's reading is a gain kp/(1 − kp·τ), but a higher "
+                "gain speeds the response from the first servo period, while the delayed loop starts at the nominal "
+                "rate and overshoots more (the phase it loses, ω·τ, grows with the frequency)")
     if {a.name, b.name} == {"gain_mismatch", "time_delay"}:
         return ("a position step, or the path at a higher acceleration: both lengthen the lag in proportion to the "
                 "speed, but a gain change alters the closed loop's dynamics (how it settles after a start, a stop or a "
