@@ -50,9 +50,11 @@ The workflow (:func:`diagnose`):
    the search repeats for a second and a third effect and stops when
    nothing is significant or the residual is at the noise floor
    (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
-   reported as ambiguous, with the test that would separate them (of a gain
-   mismatch and a delay of the position loop's reading, to first order that
-   gain, the gain is named).
+   reported as ambiguous, with the test that would separate them; so is a
+   delay of an axis's position-loop reading (to first order a gain) that does
+   not beat the gain mismatch of its axis as an effect is named (by
+   ``SIGNIFICANT`` and :data:`GAP_SHARE` of what the gain leaves), and the
+   gain is named.
 """
 
 import json
@@ -1381,37 +1383,54 @@ def _twin(problem, best, cands, both_ways):
 def _choose(problem, cands, both_ways):
     """The candidate to name among `cands` (sorted best first), and the ambiguity to report (or ``None``).
 
-    The best, unless the trace cannot tell it from a twin (:func:`_twin`) and
-    only the twin's size lies within the catalogue's typical range: what the
-    trace cannot decide, the typical sizes of machines may; or unless the best
-    is a delay of an axis's position-loop reading and the twin a gain mismatch
-    of that axis (:func:`_first_order`), which is named. Either way the pair is
-    reported, with the test that would separate them.
+    The best, unless it is a delay of an axis's position-loop reading that
+    the trace does not tell from a gain mismatch of that axis
+    (:func:`_first_order_twin`: the gain is named), or the trace cannot tell
+    it from a twin (:func:`_twin`) and only the twin's size lies within the
+    catalogue's typical range: what the trace cannot decide, the typical
+    sizes of machines may. Either way the pair is reported, with the test
+    that would separate them.
     """
     best = cands[0]
+    gain = _first_order_twin(problem, best, cands)
+    if gain is not None:
+        share = (gain.cost - best.cost) / max(gain.cost - problem.n, 1e-300)
+        return gain, (f"{gain.fit.label} ({_size(gain.fit)}) and {best.fit.label}{_options(best.fit)} ({_size(best.fit)}): "
+                      f"to first order a delay τ of the position loop's reading is a gain kp/(1 − kp·τ), and the trace "
+                      f"does not tell the delay's own mark (ΔBIC {best.delta_bic:.0f} vs {gain.delta_bic:.0f}, closing "
+                      f"{max(share, 0.0):.0%} of what the gain leaves above the noise floor; told apart beyond "
+                      f"{SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
+                      f"to separate them: {_separating_test(gain.fit, best.fit, both_ways)}")
     twin, reason = _twin(problem, best, cands, both_ways)
     if twin is None:
         return best, None
-    gain = _first_order(best.fit, twin.fit)
-    swap = gain or (not _typical(best.fit) and _typical(twin.fit))
+    swap = not _typical(best.fit) and _typical(twin.fit)
     if swap:
         best, twin = twin, best
-    why = ("the first is named: the second is to first order that gain, kp/(1 − kp·τ); " if gain else
-           "the first is named, its size typical and the second's not; " if swap else "")
     return best, (f"{best.fit.label}{_options(best.fit)} ({_size(best.fit)}) and {twin.fit.label}{_options(twin.fit)} "
-                  f"({_size(twin.fit)}): {reason}; {why}"
-                  f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
+                  f"({_size(twin.fit)}): {reason}; "
+                  + ("the first is named, its size typical and the second's not; " if swap else "")
+                  + f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
 
 
-def _first_order(delay, gain):
-    """Whether `delay` is a delay τ of an axis's position-loop reading and `gain` a gain mismatch of that axis.
+def _first_order_twin(problem, best, cands):
+    """The gain-mismatch candidate the trace does not tell from `best`, a delay of its axis's position-loop reading;
+    ``None`` when `best` is not such a delay, or the trace tells it apart.
 
     At constant speed the loop drives what it reads to a lag v/kp, the axis v·τ further on: the lag of a gain
-    kp/(1 − kp·τ). The delay's own mark, the phase ω·τ it takes beyond that gain's, is of second order; where a
-    trace does not resolve it the first-order term, the gain, is what the trace shows and is named.
+    kp/(1 − kp·τ). The delay's own mark, the phase ω·τ it takes beyond that gain's, is of second order, and a model
+    a little wrong elsewhere fits it as readily: it is told apart as an effect is named, when beyond the gain's fit
+    the delay's is significant (ΔBIC more than :data:`SIGNIFICANT` higher) and closes at least :data:`GAP_SHARE` of
+    what the gain's leaves above the noise floor.
     """
-    return (delay.name == "time_delay" and delay.options["kind"] == "position" and gain.name == "gain_mismatch"
-            and gain.axis == delay.axis)
+    if best.fit.name != "time_delay" or best.fit.options["kind"] != "position":
+        return None
+    gain = next((c for c in cands if c.fit.name == "gain_mismatch" and c.fit.axis == best.fit.axis), None)
+    if gain is None:
+        return None
+    above = gain.cost - problem.n  # what the gain's fit leaves above the noise floor (whitened: n entries of 1)
+    told = best.delta_bic > gain.delta_bic + SIGNIFICANT and above > 0 and gain.cost - best.cost >= GAP_SHARE * above
+    return None if told else gain
 
 
 def _typical(effect):
