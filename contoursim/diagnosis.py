@@ -1358,7 +1358,8 @@ def _twin(problem, best, cands, both_ways):
     best closes:
 
     - a squareness and a position-gain mismatch (or a command delay, or a
-      delay of the position loop's reading) of one axis both draw an oval at 45° on a circle (ballbar reasoning, ISO 230-4,
+      delay of the position loop's reading) of one axis both draw an oval at
+      45° on a circle (ballbar reasoning, ISO 230-4,
       Renishaw QC20): the squareness's keeps its orientation in both
       directions and its size at any feed, the servo effect's flips between
       CW and CCW and grows with the feed. A trace run both ways (:func:`turning`)
