@@ -1397,10 +1397,9 @@ def _choose(problem, cands, both_ways):
     if gain is not None:
         share = (gain.cost - best.cost) / max(gain.cost - problem.n, 1e-300)
         return gain, (f"{gain.fit.label} ({_size(gain.fit)}) and {best.fit.label}{_options(best.fit)} ({_size(best.fit)}): "
-                      f"to first order a delay τ of the position loop's reading is a gain kp/(1 − kp·τ), and the trace "
-                      f"does not tell the delay's own mark (ΔBIC {best.delta_bic:.0f} vs {gain.delta_bic:.0f}, closing "
-                      f"{max(share, 0.0):.0%} of what the gain leaves above the noise floor; told apart beyond "
-                      f"{SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
+                      f"the trace does not tell the delay from the gain it is to first order (ΔBIC {best.delta_bic:.0f} "
+                      f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
+                      f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
                       f"to separate them: {_separating_test(gain.fit, best.fit, both_ways)}")
     twin, reason = _twin(problem, best, cands, both_ways)
     if twin is None:

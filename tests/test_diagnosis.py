@@ -304,7 +304,7 @@ def test_a_position_loop_delay_is_named_only_where_the_trace_tells_it_from_the_g
     named, said = choose(300.0, 800.0)  # the gain leaves 200 above the floor, the delay closes 190 of it
     assert named.fit is delay and said is None
     named, said = choose(112.0, 1000.0 - 3 * SIGNIFICANT)  # significant, but 2 of the 12 the gain leaves
-    assert named.fit is gain and "closing 17% of what the gain leaves" in said and f"from {GAP_SHARE:.0%}" in said
+    assert named.fit is gain and "the delay closing 17% of what the gain leaves" in said and f"from {GAP_SHARE:.0%}" in said
     assert "time_delay.x (kind = position) (delay_s = 0.0008)" in said and "a position step" in said
     assert choose(300.0, 1000.0 - SIGNIFICANT / 2)[0].fit is gain  # not significant
     assert choose(90.0, 800.0, delay_cost=80.0)[0].fit is gain  # the gain at the noise floor already
