@@ -50,7 +50,11 @@ The workflow (:func:`diagnose`):
    the search repeats for a second and a third effect and stops when
    nothing is significant or the residual is at the noise floor
    (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
-   reported as ambiguous, with the test that would separate them.
+   reported as ambiguous, with the test that would separate them; so is a
+   delay of an axis's position-loop reading (to first order a gain) that does
+   not beat the gain mismatch of its axis as an effect is named (by
+   ``SIGNIFICANT`` and :data:`GAP_SHARE` of what the gain leaves), and the
+   gain is named.
 """
 
 import json
@@ -1116,7 +1120,7 @@ def _candidates(problem, model, warnings):
             edge = -np.log(effect_kind("gain_mismatch").parameters[0].typical[0])
             add(Effect("gain_mismatch", a, kp_ratio=1.0), ("kp_ratio",),
                 [{"kp_ratio": float(np.exp(sign * u))} for u in np.geomspace(0.01, edge, _GRID + 1) for sign in (-1, 1)])
-        for kind in ("command", "feedback"):
+        for kind in ("command", "feedback", "position"):
             top = 3e-3 if kind == "command" else min(3e-3, (MAX_DELAY_SAMPLES - 1) * dt)
             add(Effect("time_delay", a, delay_s=1e-4, kind=kind), ("delay_s",),
                 [{"delay_s": v} for v in np.geomspace(min(1e-4, top / 4), top, _GRID)])
@@ -1424,8 +1428,9 @@ def _twin(problem, best, cands, both_ways):
     (:func:`_twins`) that closes at least :data:`_TWIN_SHARE` of what the
     best closes:
 
-    - a squareness and a position-gain mismatch (or a command delay) of one
-      axis both draw an oval at 45° on a circle (ballbar reasoning, ISO 230-4,
+    - a squareness and a position-gain mismatch (or a command delay, or a
+      delay of the position loop's reading) of one axis both draw an oval at
+      45° on a circle (ballbar reasoning, ISO 230-4,
       Renishaw QC20): the squareness's keeps its orientation in both
       directions and its size at any feed, the servo effect's flips between
       CW and CCW and grows with the feed. A trace run both ways (:func:`turning`)
@@ -1450,12 +1455,23 @@ def _twin(problem, best, cands, both_ways):
 def _choose(problem, cands, both_ways):
     """The candidate to name among `cands` (sorted best first), and the ambiguity to report (or ``None``).
 
-    The best, unless the trace cannot tell it from a twin (:func:`_twin`) and
-    only the twin's size lies within the catalogue's typical range: what the
-    trace cannot decide, the typical sizes of machines may. Either way the
-    pair is reported, with the test that would separate them.
+    The best, unless it is a delay of an axis's position-loop reading that
+    the trace does not tell from a gain mismatch of that axis
+    (:func:`_first_order_twin`: the gain is named), or the trace cannot tell
+    it from a twin (:func:`_twin`) and only the twin's size lies within the
+    catalogue's typical range: what the trace cannot decide, the typical
+    sizes of machines may. Either way the pair is reported, with the test
+    that would separate them.
     """
     best = cands[0]
+    gain = _first_order_twin(problem, best, cands)
+    if gain is not None:
+        share = (gain.cost - best.cost) / max(gain.cost - problem.n, 1e-300)
+        return gain, (f"{gain.fit.label} ({_size(gain.fit)}) and {best.fit.label}{_options(best.fit)} ({_size(best.fit)}): "
+                      f"the trace does not tell the delay from the gain it is to first order (ΔBIC {best.delta_bic:.0f} "
+                      f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
+                      f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
+                      f"to separate them: {_separating_test(gain.fit, best.fit, both_ways)}")
     twin, reason = _twin(problem, best, cands, both_ways)
     if twin is None:
         return best, None
@@ -1466,6 +1482,26 @@ def _choose(problem, cands, both_ways):
                   f"({_size(twin.fit)}): {reason}; "
                   + ("the first is named, its size typical and the second's not; " if swap else "")
                   + f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
+
+
+def _first_order_twin(problem, best, cands):
+    """The gain-mismatch candidate the trace does not tell from `best`, a delay of its axis's position-loop reading;
+    ``None`` when `best` is not such a delay, or the trace tells it apart.
+
+    At constant speed the loop drives what it reads to a lag v/kp, the axis v·τ further on: the lag of a gain
+    kp/(1 − kp·τ). The delay's own mark, the phase ω·τ it takes beyond that gain's, is of second order, and a model
+    a little wrong elsewhere fits it as readily: it is told apart as an effect is named, when beyond the gain's fit
+    the delay's is significant (ΔBIC more than :data:`SIGNIFICANT` higher) and closes at least :data:`GAP_SHARE` of
+    what the gain's leaves above the noise floor.
+    """
+    if best.fit.name != "time_delay" or best.fit.options["kind"] != "position":
+        return None
+    gain = next((c for c in cands if c.fit.name == "gain_mismatch" and c.fit.axis == best.fit.axis), None)
+    if gain is None:
+        return None
+    above = gain.cost - problem.n  # what the gain's fit leaves above the noise floor (whitened: n entries of 1)
+    told = best.delta_bic > gain.delta_bic + SIGNIFICANT and above > 0 and gain.cost - best.cost >= GAP_SHARE * above
+    return None if told else gain
 
 
 def _typical(effect):
@@ -1494,19 +1530,27 @@ def _twins(a, b, both_ways):
 
 
 def _oval_kind(effect):
-    """``"geometry"`` for a squareness, ``"servo"`` for a gain mismatch or a command delay (both draw a 45° oval on a
-    circle), else ``None``."""
+    """``"geometry"`` for a squareness, ``"servo"`` for a gain mismatch, a command delay or a position-loop delay (to
+    first order a gain, ``kp/(1 − kp·τ)``: all draw a 45° oval on a circle), else ``None``."""
     if effect.name == "squareness":
         return "geometry"
-    if effect.name == "gain_mismatch" or (effect.name == "time_delay" and effect.options["kind"] == "command"):
+    if effect.name == "gain_mismatch" or (effect.name == "time_delay" and effect.options["kind"] in ("command", "position")):
         return "servo"
     return None
 
 
 def _separating_test(a, b, both_ways=False):
     """The extra test that tells effect `a` from effect `b` (`both_ways`: the trace already runs its path both ways)."""
+    kinds = {e.options["kind"] for e in (a, b) if e.name == "time_delay"}
+    if a.name == b.name == "time_delay" and "command" not in kinds:
+        return ("a velocity step, or the drive's own velocity record: a delay of both loops' feedback slows the velocity "
+                "loop too (it overshoots at its own bandwidth), a delay of the position loop's reading leaves it as it was")
     if a.name == b.name == "time_delay":
         return "a step or a faster reversal: a feedback delay changes the loop's damping (overshoot), a command delay only shifts the response"
+    if {a.name, b.name} == {"gain_mismatch", "time_delay"} and kinds != {"command"}:
+        return ("a position step: to first order a delay τ of the loop's reading is a gain kp/(1 − kp·τ), but a higher "
+                "gain speeds the response from the first servo period, while the delayed loop starts at the nominal "
+                "rate and overshoots more (the phase it loses, ω·τ, grows with the frequency)")
     if {a.name, b.name} == {"gain_mismatch", "time_delay"}:
         return ("a position step, or the path at a higher acceleration: both lengthen the lag in proportion to the "
                 "speed, but a gain change alters the closed loop's dynamics (how it settles after a start, a stop or a "

@@ -13,8 +13,9 @@ stage       effects                                                 how it runs
 command     ``time_delay`` with ``kind = "command"``                shifts the axis commands
 servo       ``gain_mismatch``                                       a different servo variant
 loop        ``backlash``, ``coulomb_friction``, ``time_delay`` with  the kernel's per-axis
-            ``kind = "feedback"``, ``vibration``, ``quantisation``, ``LoopEffects``
-            ``noise``
+            ``kind = "feedback"`` (both loops read late) or         ``LoopEffects``
+            ``"position"`` (the position loop only),
+            ``vibration``, ``quantisation``, ``noise``
 geometry    ``squareness``, ``scale_error``, ``cyclic_error``,       terms of the multibody chain
             ``straightness``, ``thermal_drift``
 =========== ======================================================= ==============================
@@ -413,10 +414,11 @@ _register(EffectKind(
     doc="bow of one axis's guideway over its travel: peak·(1 − (2(q − start)/span − 1)²) at axis position q",
 ))
 _register(EffectKind(
-    "time_delay", ("kind", {"command": "command", "feedback": "loop"}),
+    "time_delay", ("kind", {"command": "command", "feedback": "loop", "position": "loop"}),
     (_p("delay_s", 0.0, "s", (0.0, 0.1), (1e-4, 3e-3), doc="extra delay, fractions of the servo period interpolated"),),
-    options={"kind": ("command", "feedback")},
-    doc="extra command or feedback delay on one axis",
+    options={"kind": ("command", "feedback", "position")},
+    doc="extra delay on one axis: of its command, of its position and velocity loops' feedback, or of its "
+        "position loop's only",
 ))
 _register(EffectKind(
     "thermal_drift", "geometry",

@@ -55,8 +55,10 @@ output is held over ``[t_k, t_k+1)``):
    velocity difference reads either way (a drive's dual feedback);
 3. feedback delay: the position loop reads the encoder and the velocity loop
    the motor velocity (or encoder) `feedback_delay_s` late, linearly interpolated between
-   samples (ring buffers in the state, at most :data:`MAX_DELAY_SAMPLES`);
-   then, with ``velocity_feedback="difference"`` (:class:`~contoursim.servo.AxisServo`),
+   samples (ring buffers in the state, at most :data:`MAX_DELAY_SAMPLES`); with
+   ``feedback_delay_on="position"`` the velocity loop reads its signal now
+   (an NC's position loop fed over a fieldbus, the drive's velocity loop on
+   its own encoder); then, with ``velocity_feedback="difference"`` (:class:`~contoursim.servo.AxisServo`),
    the velocity loop reads instead the backward difference of the fed-back
    positions over `velocity_taps` samples, low-passed when
    `velocity_filter_hz` is set (ring buffer and filter state in the state);
@@ -140,7 +142,8 @@ _VTAPS, _VGAIN, _VPOLE = 63, 64, 65  # its taps n, 1/(n·dt) [1/s] and low-pass 
 _CDELAY = 66  # computation delay [servo periods]
 _LAGGED = 67  # 1.0 when the current lags its command (AxisServo.current_bandwidth_hz): the plant's row 4 steps it
 _SCREW = 68  # 1.0 when the mode is a compliant screw (AxisServo.motor_mass): d is the table's, which a scale reads
-NPAR = 69  #: length of one axis's parameter row from :func:`pack`
+_DELAY_POSITION = 69  # 1.0 when the feedback delay is the position loop's only (LoopEffects.feedback_delay_on)
+NPAR = 70  #: length of one axis's parameter row from :func:`pack`
 
 # Per-axis state ----------------------------------------------------------------------------
 _ZV, _ZC = 5, 6  # velocity / current controller integrators [mm], [A·s]
@@ -201,6 +204,12 @@ class LoopEffects:
         The loop reads the encoder (and the motor velocity) this late [s];
         fractions of a period are interpolated linearly. At most
         :data:`MAX_DELAY_SAMPLES` servo periods.
+    feedback_delay_on : {"both", "position"}, default "both"
+        ``"both"``: the position loop reads the encoder and the velocity
+        loop its signal (the motor velocity, or the encoder it differences)
+        `feedback_delay_s` late; ``"position"``: the position loop only, the
+        velocity loop reads now (a position loop in the NC fed over a
+        fieldbus, the drive's velocity loop on its own encoder).
     mode_freq_hz : float, optional
         Natural frequency [Hz] of a structural mode (the tool-side mass on
         its spring, carriage held); ``None``: rigid axis.
@@ -249,6 +258,7 @@ class LoopEffects:
     asymmetry_N: float = 0.0
     offset_N: float = 0.0
     feedback_delay_s: float = 0.0
+    feedback_delay_on: str = "both"
     mode_freq_hz: float | None = None
     mode_damping_ratio: float = 0.05
     mode_mass_ratio: float = 0.2
@@ -266,6 +276,8 @@ class LoopEffects:
             checked[name] = _validate.finite(name, getattr(self, name))
         if self.noise_at not in ("recorded", "encoder"):
             raise ValueError(f'noise_at must be "recorded" or "encoder", got {self.noise_at!r}')
+        if self.feedback_delay_on not in ("both", "position"):
+            raise ValueError(f'feedback_delay_on must be "both" or "position", got {self.feedback_delay_on!r}')
         if self.mode_freq_hz is not None:
             checked["mode_freq_hz"] = _validate.positive("mode_freq_hz", self.mode_freq_hz)
         for name in ("mode_damping_ratio", "mode_mass_ratio"):
@@ -670,7 +682,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
                 state[a, _BUFV + slot] = motor
                 # np.int64(constant): numba compiles a callee once per literal argument, once per type otherwise
                 x_fb[a] = _delayed(state, a, np.int64(_BUFX), k, n, f)
-                v_fb[a] = _delayed(state, a, np.int64(_BUFV), k, n, f)
+                v_fb[a] = motor if par[a, _DELAY_POSITION] != 0.0 else _delayed(state, a, np.int64(_BUFV), k, n, f)
             if difference:  # the drive's velocity: the difference of the motor encoder's (delayed) readings
                 state[a, _HIST + k % _NHIST] = v_fb[a]
                 past = state[a, _HIST + (k - int(par[a, _VTAPS])) % _NHIST]
@@ -884,7 +896,8 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
                     if n != 0 or f != 0.0:
                         i0, i1 = (k - n) % _NBUF, (k - n - 1) % _NBUF
                         s[a, _LXFB, l] = _between(buf_x[a, i0, l], buf_x[a, i1, l], f)
-                        s[a, _LVFB, l] = _between(buf_v[a, i0, l], buf_v[a, i1, l], f)
+                        late = _between(buf_v[a, i0, l], buf_v[a, i1, l], f)
+                        s[a, _LVFB, l] = s[a, _LVFB, l] if p[a, _DELAY_POSITION, l] != 0.0 else late
             if has[a, _ANY_DIFFERENCE]:  # the drive's velocity, as in _variant (_LVFB: the motor encoder's reading)
                 slot = k % _NHIST
                 for l in range(n_lanes):
@@ -1134,6 +1147,7 @@ def pack(servo, dt, effects=LoopEffects()):
     row[_FC : _F0 + 1] = friction
     whole = math.floor(delay + 1e-9)
     row[_DELAY_N], row[_DELAY_F] = whole, max(delay - whole, 0.0)
+    row[_DELAY_POSITION] = float(e.feedback_delay_on == "position")
     row[_QUANTUM], row[_NOISE], row[_SEED] = e.quantum_mm, e.noise_mm if e.noise_at == "recorded" else 0.0, e.seed
     row[_VDIFF] = float(servo.velocity_feedback == "difference")
     row[_VTAPS], row[_VGAIN] = servo.velocity_taps, 1.0 / (servo.velocity_taps * dt)
@@ -1172,12 +1186,13 @@ def loop_matrices(row):
     electrical, integral = p[_ELEC] != 0.0, p[_VC] != 0.0
     n_delay, f = int(p[_DELAY_N]), p[_DELAY_F]
     delayed, difference = bool(n_delay or f), p[_VDIFF] != 0.0
+    n_v, f_v = (0, 0.0) if p[_DELAY_POSITION] != 0.0 else (n_delay, f)  # the velocity loop's delay
     taps, filtered, n_sent = int(p[_VTAPS]), difference and p[_VPOLE] != 0.0, int(p[_CDELAY])
     table = p[_SCREW] != 0.0 and p[_SCALE] != 0.0  # the position loop reads the table x + d, the difference x
     # past samples of x, x + d and v the loop reads (x_fb = (1 - f)·x[k - n] + f·x[k - n - 1], and `taps` steps before)
-    depth_x = max(n_delay + 1 if delayed and not table else 0, n_delay + taps + (f != 0.0) if difference else 0)
+    depth_x = max(n_delay + 1 if delayed and not table else 0, n_v + taps + (f_v != 0.0) if difference else 0)
     depth_s = n_delay + 1 if delayed and table else 0
-    depth_v = n_delay + 1 if delayed and not difference else 0
+    depth_v = n_v + 1 if (n_v or f_v) and not difference else 0
     # state: plant (5), then the integrators in use, the delayed x, x + d and v samples (k-1 .. k-depth), the
     # low-passed velocity of the last step, the commands computed 1 (.. n_sent) periods ago; the input w rides along
     # as entry `size` of every row vector
@@ -1200,19 +1215,20 @@ def loop_matrices(row):
         """Row picking the signal whose row is `now` now (x, x + d or v) `back` samples ago."""
         return now if back == 0 else unit(history + back - 1)
 
-    def fed_back(now, history, back=0):
-        back += n_delay
+    def fed_back(now, history, n, f, back=0):
+        """Row of the signal `now` read ``n + f`` samples late, `back` samples before that."""
+        back += n
         return (1.0 - f) * sample(now, history, back) + (f * sample(now, history, back + 1) if f else 0.0)
 
     x_now, v_now = unit(0), unit(1)
     reading, h_reading = (x_now + unit(2), hs) if table else (x_now, hx)  # what the position loop reads
     if difference:
-        v_fb = (fed_back(x_now, hx) - fed_back(x_now, hx, taps)) * p[_VGAIN]
+        v_fb = (fed_back(x_now, hx, n_v, f_v) - fed_back(x_now, hx, n_v, f_v, taps)) * p[_VGAIN]
         if filtered:
             v_fb = p[_VPOLE] * unit(vf) + (1.0 - p[_VPOLE]) * v_fb
     else:
-        v_fb = fed_back(v_now, hv)
-    x_fb = fed_back(reading, h_reading)
+        v_fb = fed_back(v_now, hv, n_v, f_v)
+    x_fb = fed_back(reading, h_reading, n_delay, f)
     e_v = -p[_KP] * x_fb - v_fb
     e_v[size] = 1.0
     i_cmd = p[_VD] * e_v

@@ -429,7 +429,8 @@ _LOOP = {
         asymmetry_N=e["asymmetry_N"],
         offset_N=e["offset_N"],
     ),
-    "time_delay": lambda e: dict(feedback_delay_s=e["delay_s"]),
+    "time_delay": lambda e: dict(feedback_delay_s=e["delay_s"],
+                                 feedback_delay_on="position" if e.options["kind"] == "position" else "both"),
     "vibration": lambda e: dict(
         mode_freq_hz=e["freq_hz"], mode_damping_ratio=e["damping_ratio"], mode_mass_ratio=e["mass_ratio"]
     ),

@@ -57,13 +57,14 @@ def continuous_plant(servo):
     return ct.ss(A, B, C, 0, inputs="i", outputs=["x", "v", "x2"], name="plant")
 
 
-def reference_loop(servo, quantum, delay, start, play=0.0):
+def reference_loop(servo, quantum, delay, start, play=0.0, position_only=False):
     """The sampled loop as python-control systems: ZOH plant, and the drive as one discrete nlsys.
 
     The drive at step k: the table behind a play of `play` [mm] around the motor position x (behind a
     compliant screw, deflected by ``x2 - x`` from there); the position encoder on the table
     (``position_feedback="scale"``) or on x, ``enc = q·round(·/q)``, read `delay` periods late (``x_fb``);
-    velocity from the motor encoder x, quantised and read as late, ``(m[k] - m[k-n])/(n·dt)`` low-passed
+    velocity from the motor encoder x, quantised and read as late (now with `position_only`: the delay is the
+    position loop's alone), ``(m[k] - m[k-n])/(n·dt)`` low-passed
     ``a·y + (1 - a)·raw`` (or the motor velocity ``v`` itself); P position + velocity feedforward; Tustin
     PI velocity + acceleration feedforward, clamped, the integrator held while clamped and pushed further;
     the command applied `computation_delay` periods later. Inputs xr, vr, ar; outputs the table position,
@@ -91,7 +92,7 @@ def reference_loop(servo, quantum, delay, start, play=0.0):
         table = min(max(z[it], x - play / 2), x + play / 2)
         tool = table + (x2 - x)  # the table behind the play, deflected as the screw is
         readings, motors = np.r_[rounded(tool if scale else x), z[ie:im]], np.r_[rounded(x), z[im:ip]]
-        x_fb, m_fb = readings[delay], motors[delay]
+        x_fb, m_fb = readings[delay], motors[0 if position_only else delay]
         if servo.velocity_feedback == "difference":
             v_fb = a * z[iy] + (1 - a) * (m_fb - np.r_[m_fb, z[ip:iy]][n]) / (n * DT)
         else:
@@ -183,6 +184,30 @@ def test_kernel_equals_python_control_reference(name):
     assert np.abs(result.position - plain.position).max() > 1e-7  # the drive's structure shows in 400 steps
 
 
+@pytest.mark.parametrize("name", ["difference", "fir3_lowpass_delay1", "quantised_delayed_delay2", "state_delay2",
+                                  "screw_scale_quantised_delayed_clamped"])
+@pytest.mark.parametrize("delay", [1, 3])
+def test_position_loop_delay_equals_python_control_reference(name, delay):
+    # The NC's position loop reads the encoder `delay` periods late (a fieldbus), the drive's velocity loop its own
+    # motor encoder now: z^-delay on the position reading alone.
+    kw, quantum = DRIVES[name][:2]
+    servo = axis(**kw)
+    n = 400
+    t = np.arange(n) * DT
+    w = 2 * np.pi * 40.0
+    pos, vel, acc = 0.2 * np.sin(w * t), 0.2 * w * np.cos(w * t), -0.2 * w**2 * np.sin(w * t)
+    runs = {on: run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None],
+                    effects={"x": LoopEffects(quantum_mm=quantum, feedback_delay_s=delay * DT, feedback_delay_on=on)})
+            for on in ("position", "both")}  # fmt: skip
+    loop, x0 = reference_loop(servo, quantum, delay, pos[0], position_only=True)
+    ref = ct.input_output_response(loop, t, np.vstack([pos, vel, acc]), X0=x0).outputs
+    result = runs["position"]
+    np.testing.assert_allclose(result.position[:, 0], ref[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.encoder[:, 0], ref[1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.current[:, 0], ref[2], rtol=0, atol=1e-9 * np.abs(ref[2]).max())
+    assert np.abs(result.position - runs["both"].position).max() > 1e-7  # not the delay of both loops
+
+
 @pytest.mark.parametrize("kw", [dict(velocity_feedback="difference", velocity_taps=2),
                                 dict(velocity_feedback="difference", velocity_taps=4, velocity_filter_hz=300.0,
                                      computation_delay=2),
@@ -221,12 +246,13 @@ def test_spectral_radius_equals_python_control_closed_loop_poles(kw):
 
 @settings(max_examples=15, deadline=None)
 @given(taps=st.integers(1, 8), filter_hz=st.one_of(st.none(), st.floats(50.0, 5000.0)), delay=st.integers(0, 2),
-       feedback_delay=st.floats(0.0, 3.0), screw=st.sampled_from([{}, dict(SCREW), dict(SCREW, position_feedback="scale")]))
-def test_loop_matrices_match_the_simulated_growth_of_any_drive(taps, filter_hz, delay, feedback_delay, screw):
+       feedback_delay=st.floats(0.0, 3.0), on=st.sampled_from(["both", "position"]),
+       screw=st.sampled_from([{}, dict(SCREW), dict(SCREW, position_feedback="scale")]))
+def test_loop_matrices_match_the_simulated_growth_of_any_drive(taps, filter_hz, delay, feedback_delay, on, screw):
     # Without a nonlinearity in play the kernel is linear: its response to an initial offset is phi^k applied to it.
     servo = axis(velocity_feedback="difference", velocity_taps=taps, velocity_filter_hz=filter_hz,
                  computation_delay=delay, damping=0.0, **screw)
-    row = pack(servo, DT, LoopEffects(feedback_delay_s=feedback_delay * DT))
+    row = pack(servo, DT, LoopEffects(feedback_delay_s=feedback_delay * DT, feedback_delay_on=on))
     phi, b, c = kernel.loop_matrices(row)
     n = 300
     ref = np.full((n, 1), 1e-3)  # a step of 1 µm from rest at 0: the response from the loop's matrices

@@ -8,6 +8,7 @@ from contoursim.config import TomlFile
 from contoursim.effects import CATALOGUE, STAGES, Effect, effect_kind, effect_names, read_effects
 from contoursim.exceptions import ConfigError
 from contoursim.feed import plan, sample
+from contoursim.kernel import LoopEffects
 from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
 from contoursim.servo import AxisServo
@@ -44,6 +45,7 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     e = Effect("time_delay", "y", delay_s=1e-3, kind="feedback")
     assert (e.label, e.stage, e["delay_s"], e.options["kind"]) == ("time_delay.y", "loop", 1e-3, "feedback")
     assert Effect("time_delay", "y", delay_s=1e-3).stage == "command"
+    assert Effect("time_delay", "y", delay_s=1e-3, kind="position").stage == "loop"
     sizes = {n: effect_kind(n).parameters[0] for n in effect_names()}
     assert {Effect(n, "xy" if n == "squareness" else "x", **{p.name: p.typical[0]}).stage
             for n, p in sizes.items()} == set(STAGES)
@@ -66,6 +68,8 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     (("squareness", "xx"), {"angle_urad": 8.0}, "axis must be 2 different axis letters"),
     (("straightness", "x"), {"peak_um": 3.0, "error_direction": "x"}, "error_direction must be one of 'y', 'z'"),
     (("noise", "x"), {"rms_um": 0.1, "seed": -1}, "seed must be a non-negative integer"),
+    (("time_delay", "x"), {"delay_s": 1e-3, "kind": "velocity"},
+     "kind must be one of 'command', 'feedback', 'position', got 'velocity'"),
 ])
 def test_a_bad_effect_says_what_is_wrong(args, kwargs, message):
     with pytest.raises(ValueError, match=message):
@@ -376,6 +380,8 @@ angle_urad = -40
     ('name = "backlash"\naxis = "x"\nlost_motion = 8', "line 5: .*unknown parameter 'lost_motion'; its parameters are lost_motion_um, feedback"),
     ('name = "backlash"\naxis = "x"\nlost_motion_um = -8', r"line 5: .*lost_motion_um must lie in \[0, 1000\] µm"),
     ('name = "backlash"\nlost_motion_um = 8', r"line 2: \[\[effect\]\] needs 'axis'"),
+    ('name = "time_delay"\naxis = "x"\ndelay_s = 1e-3\nkind = "velocity"',
+     "line 6: .*kind must be one of 'command', 'feedback', 'position', got 'velocity'"),
 ])
 def test_a_bad_effect_table_names_the_file_and_line(body, message):
     with pytest.raises(ConfigError, match="job.toml, " + message):
@@ -393,6 +399,20 @@ def test_a_machine_file_with_effects_loads_as_a_model(tmp_path):
     file.write_text(text + '\n[[effect]]\nname = "backlash"\naxis = "w"\nlost_motion_um = 1\n')
     with pytest.raises(ConfigError, match="mill.toml, line .*axis must be one axis letter of x, y, z, got 'w'"):
         load_model(file)
+
+
+@pytest.mark.parametrize("kind, delay_on", [("feedback", "both"), ("position", "position")])
+def test_a_feedback_delay_of_a_machine_file_reaches_the_loops_it_names(tmp_path, kind, delay_on):
+    # kind = "position": the position loop alone reads late (LoopEffects.feedback_delay_on), "feedback" both loops
+    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    file = tmp_path / "mill.toml"
+    file.write_text(text + f'\n[[effect]]\nname = "time_delay"\naxis = "y"\ndelay_s = 1e-3\nkind = "{kind}"\n')
+    model = load_model(file)
+    q = np.ones((3, len(model.machine.axis_names)))
+    assert model.effects[0].stage == "loop" and model.commands(q, q, q)[0] is q  # the commands are not delayed
+    loop = model.loop_effects()
+    assert (loop["y"].feedback_delay_s, loop["y"].feedback_delay_on) == (1e-3, delay_on)
+    assert loop["x"] == LoopEffects()
 
 
 def test_thermal_drift_runs_from_the_start_of_a_measured_run():

@@ -8,6 +8,8 @@ import control as ct
 import numba
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from contoursim import kernel
 from contoursim.exceptions import UnstableLoopError
@@ -147,7 +149,8 @@ def reference_loop(servo, effects, start):
 
     def sensors_output(t, z, u, params):
         table, enc, hx, hv = history(z, u)
-        return [(1 - f) * hx[n] + f * hx[n + 1], (1 - f) * hv[n] + f * hv[n + 1], table + (u[2] - u[0])]
+        v_fb = hv[0] if effects.feedback_delay_on == "position" else (1 - f) * hv[n] + f * hv[n + 1]
+        return [(1 - f) * hx[n] + f * hx[n + 1], v_fb, table + (u[2] - u[0])]
 
     sensors = ct.nlsys(sensors_update, sensors_output, inputs=["x", "v", "xt"], outputs=["x_fb", "v_fb", "tool"],
                        states=1 + 2 * m, dt=DT, name="sensors")  # fmt: skip
@@ -215,9 +218,14 @@ EFFECTS = {
     "backlash_scale": LoopEffects(backlash_mm=0.004),  # on a scale: SCALE
     "delay_whole": LoopEffects(feedback_delay_s=3 * DT),
     "delay_fraction": LoopEffects(feedback_delay_s=2.37 * DT),
+    # the position loop late, the velocity loop on the motor now: z^-3 on the position reading alone, or interpolated
+    "position_delay_whole": LoopEffects(feedback_delay_s=3 * DT, feedback_delay_on="position"),
+    "position_delay_fraction": LoopEffects(feedback_delay_s=2.37 * DT, feedback_delay_on="position"),
     "mode": LoopEffects(**MODE),
     "quantisation": LoopEffects(quantum_mm=0.0005),
     "all": LoopEffects(backlash_mm=0.003, **REVERSING, feedback_delay_s=1.6 * DT, **MODE, quantum_mm=0.0002),
+    "all_position_delay": LoopEffects(backlash_mm=0.003, **REVERSING, feedback_delay_s=1.6 * DT,
+                                      feedback_delay_on="position", **MODE, quantum_mm=0.0002),
 }
 
 
@@ -241,6 +249,10 @@ def test_kernel_equals_python_control_reference(name, extra):
     if name != "none":
         plain = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None])
         assert np.abs(result.position - plain.position).max() > 1e-6  # the effect shows in 300 steps
+    if effects.feedback_delay_on == "position":  # and it is not the delay of both loops
+        both = run({"x": servo}, DT, pos[:, None], vel[:, None], acc[:, None],
+                   effects={"x": replace(effects, feedback_delay_on="both")})
+        assert np.abs(result.position - both.position).max() > 1e-6
 
 
 STICKY = dict(coulomb_N=100.0, stribeck_N=80.0, stribeck_velocity_mm_s=1.0, asymmetry_N=10.0, offset_N=-20.0)
@@ -391,17 +403,21 @@ def test_backlash_lost_motion_at_reversal(feedback):
         assert motor_travel == pytest.approx(lost, rel=0.05)
 
 
-@pytest.mark.parametrize("delay", [3e-4, 2.37e-4])
-def test_feedback_delay_ramp(delay):
-    # Steady ramp, P-PI: the loop drives what it sees to kp·(r - x_fb) = v, so the encoder it reads lags
-    # by v/kp; that reading is `delay` old, so the axis itself is v·delay further on: lag v/kp - v·delay.
-    dt, v, kp = 1e-4, 50.0, 40.0
+@settings(max_examples=20, deadline=None)
+@given(periods=st.floats(0.0, 3.0), on=st.sampled_from(["both", "position"]), v=st.floats(-100.0, 100.0),
+       kp=st.floats(20.0, 80.0))
+def test_feedback_delay_ramp(periods, on, v, kp):
+    # Steady ramp, P-PI: the velocity loop's integrator settles where the velocity read is v (a constant velocity
+    # read late is still v), so the position loop drives what it sees to kp·(r - x_fb) = v: the encoder it reads
+    # lags by v/kp. That reading is `delay` old, so the axis itself is v·delay further on: lag v/kp - v·delay, a
+    # position gain kp/(1 - kp·delay), whether the velocity loop reads late too or not.
+    dt, delay = 1e-4, periods * 1e-4
     t = np.arange(20000) * dt
     ramp = (v * t)[:, None]
     r = run([axis(kp=kp)], dt, ramp, np.full_like(ramp, v), np.zeros_like(ramp),
-            effects={"x": LoopEffects(feedback_delay_s=delay)})  # fmt: skip
-    assert ramp[-1, 0] - r.encoder[-1, 0] == pytest.approx(v / kp, rel=1e-9)
-    assert ramp[-1, 0] - r.position[-1, 0] == pytest.approx(v / kp - v * delay, rel=1e-9)
+            effects={"x": LoopEffects(feedback_delay_s=delay, feedback_delay_on=on)})  # fmt: skip
+    assert ramp[-1, 0] - r.encoder[-1, 0] == pytest.approx(v / kp, rel=1e-9, abs=1e-12)
+    assert ramp[-1, 0] - r.position[-1, 0] == pytest.approx(v / kp - v * delay, rel=1e-9, abs=1e-12)
 
 
 def fft_peak_hz(signal, dt, above_hz):
@@ -558,7 +574,8 @@ def random_effects(rng):
     elif rng.random() < 0.2:
         kw.update(offset_N=rng.uniform(-30.0, 30.0))
     if rng.random() < 0.4:
-        kw.update(feedback_delay_s=rng.choice([rng.integers(1, 6), rng.uniform(0.1, 5.0)]) * DT)
+        kw.update(feedback_delay_s=rng.choice([rng.integers(1, 6), rng.uniform(0.1, 5.0)]) * DT,
+                  feedback_delay_on=str(rng.choice(["both", "position"])))
     if rng.random() < 0.4:
         kw.update(mode_freq_hz=rng.uniform(40.0, 200.0), mode_damping_ratio=rng.uniform(0.02, 0.2),
                   mode_mass_ratio=rng.uniform(0.05, 0.4))
@@ -607,6 +624,7 @@ def test_every_batch_row_equals_its_single_run_bit_for_bit(threads, n_variants, 
                     "noise_mm")  # fmt: skip
     for effect in every_effect:
         assert any(getattr(e, effect) for v in variants[1:] for e in v.values()), effect  # every effect is there
+    assert {e.feedback_delay_on for v in variants for e in v.values() if e.feedback_delay_s} == {"both", "position"}
 
 
 def test_rigid_lanes_equal_single_runs_to_the_last_bit_and_the_sign_of_zero():
@@ -671,6 +689,7 @@ def test_importing_the_kernel_does_not_import_python_control():
         (dict(mode_mass_ratio=0.0), "mode_mass_ratio"),
         (dict(noise_mm=-1.0), "noise_mm"),
         (dict(seed=-1), "seed"),
+        (dict(feedback_delay_on="velocity"), "feedback_delay_on"),
     ],
 )
 def test_bad_effects_name_the_parameter(kw, message):
@@ -734,9 +753,11 @@ def test_spectral_radius_equals_python_control_closed_loop_poles(extra):
 
 
 @pytest.mark.parametrize("delay", [30.0, 37.5, 45.0])
-def test_spectral_radius_with_delay_is_the_simulated_growth_rate(delay):
-    # A loop made unstable by the feedback delay: its simulated oscillation grows by the radius per step.
-    row = pack(axis(), DT, LoopEffects(feedback_delay_s=delay * DT))
+@pytest.mark.parametrize("kp, on", [(40.0, "both"), (400.0, "position")])
+def test_spectral_radius_with_delay_is_the_simulated_growth_rate(delay, kp, on):
+    # A loop made unstable by the feedback delay: its simulated oscillation grows by the radius per step. (Late on
+    # the position loop only, the velocity loop stays stable: it takes a stiffer position loop to ring.)
+    row = pack(axis(kp=kp), DT, LoopEffects(feedback_delay_s=delay * DT, feedback_delay_on=on))
     rho = kernel.spectral_radius(row)
     assert rho > 1.0
     ref = np.full((12000, 1), 1e-6)
