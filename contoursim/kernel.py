@@ -829,7 +829,8 @@ _LDRIVE, _LCLAMPED, _LCLAMPS = NPAR + 10, NPAR + 11, NPAR + 12  # current comman
 # far (exact as a float up to 2**53)
 _LLOWER, _LUPPER = NPAR + 13, NPAR + 14  # the dry friction's range of the step (_friction_bounds)
 _LVEST, _LSENT = NPAR + 15, NPAR + 16  # as _variant's _VEST and (2 entries) _SENT
-_LROWS = NPAR + 18
+_LU, _LFORCE = NPAR + 18, NPAR + 19  # the plant's held input [V or A] and force [N] of the step (a non-rigid axis)
+_LROWS = NPAR + 20
 # Effects a block's axis has in any lane (the steps of the others are skipped for the whole block)
 _ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP, _ANY_DIFFERENCE, _ANY_GAP = range(7)
 
@@ -887,6 +888,7 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
                 # x and v do not depend on d, ḋ, i (pack's +0.0; see _rigid_row)
                 has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, q, l] != 0.0 or math.copysign(1.0, p[a, q, l]) < 0.0
     buf_x = np.empty((n_axes, _NBUF, LANES))
+    before = np.empty((_NS, LANES))
     hist = np.empty((n_axes, _NHIST, LANES))
     buf_v = np.empty((n_axes, _NBUF, LANES))
     gauss = np.empty((n_axes, 2, LANES))
@@ -981,12 +983,22 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
                     s[a, _LLOWER, l], s[a, _LUPPER, l] = _friction_bounds(level, p[a, _FA, l])
             x_ref, v_ref, a_ref = ref_pos[k, a], ref_vel[k, a], ref_acc[k, a]
             pushing = external[k, a] if pushed else 0.0
-            if has[a, _ANY_GAP]:  # three versions of the step, compiled apart
-                _advance(s, rows, a, n_lanes, x_ref, v_ref, a_ref, pushing, False, True)
-            elif has[a, _ANY_MODE_OR_CURRENT_LOOP]:
-                _advance(s, rows, a, n_lanes, x_ref, v_ref, a_ref, pushing, False, False)
+            if has[a, _ANY_GAP]:  # the state the gap's substeps start from (a loop of their own: they do not vectorise)
+                for q in range(_NS):
+                    for l in range(n_lanes):
+                        before[q, l] = s[a, _LX + q, l]
+            if has[a, _ANY_MODE_OR_CURRENT_LOOP]:  # two versions of the step, compiled apart
+                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, False)
             else:
-                _advance(s, rows, a, n_lanes, x_ref, v_ref, a_ref, pushing, True, False)
+                _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, True)
+            if has[a, _ANY_GAP]:  # a backlash in a compliant screw: its plant, from the step's input and force
+                for l in range(n_lanes):
+                    if p[a, _HALF_GAP, l] != 0.0:
+                        x_next, v_next, s[a, _LD, l], s[a, _LW, l], s[a, _LI, l] = _gap_plant(
+                            rows[l], a, before[0, l], before[1, l], before[2, l], before[3, l], before[4, l],
+                            s[a, _LU, l], s[a, _LFORCE, l])  # fmt: skip
+                        s[a, _LX, l], s[a, _LV, l] = x_next, v_next
+                        _readings(s, a, l, x_next, v_next)
             if record and write_current:
                 for l in range(n_lanes):
                     kept_current[row, a, l] = s[a, _LDRIVE, l]
@@ -1012,14 +1024,14 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _advance(s, rows, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid, gapped):
+def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
     """Controllers and plant of axis `a` of the lanes of :func:`_lanes` for one step, and the next step's encoder.
 
     Every lane computes every branch and a select keeps its own, so that the
     loop vectorises. ``rigid`` (a constant where this is inlined): no lane
     has a structural mode or a current loop, whose rows are then skipped;
-    ``gapped`` (a constant): a lane has a compliant screw with a backlash,
-    whose plant (:func:`_gap_plant`, reading `rows` (L, n, NPAR)) does not vectorise.
+    else the plant's input and force are kept for a compliant screw's
+    backlash, whose plant :func:`_lanes` steps after this.
     `pushing`: the known external force of the step [N], the same for every lane.
     """
     p = s
@@ -1045,7 +1057,7 @@ def _advance(s, rows, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid, gapped):
         rubbing = p[a, _FRICTION, l] != 0.0
         force = (p[a, _F0, l] - p[a, _FV, l] * v if rubbing else 0.0) + pushing
         sprung = d
-        if gapped:  # as in _variant
+        if not rigid:  # as in _variant
             sprung = _sprung(d, p[a, _HALF_GAP, l]) if p[a, _HALF_GAP, l] != 0.0 else d
         v_next = _rigid_row(p, a, l, 1, x, v, u, force) if rigid else _lane_row(p, a, l, 1, x, v, sprung, w, i, u, force)
         bf = p[a, _BF + 1, l]
@@ -1063,16 +1075,19 @@ def _advance(s, rows, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid, gapped):
             s[a, _LW, l] = _lane_row(p, a, l, 3, x, v, d, w, i, u, force) if mode else w
             stepped = electrical or p[a, _LAGGED, l] != 0.0
             s[a, _LI, l] = _lane_row(p, a, l, 4, x, v, d, w, i, u, force) if stepped else u
-            if gapped:
-                if p[a, _HALF_GAP, l] != 0.0:
-                    x_next, v_next, s[a, _LD, l], s[a, _LW, l], s[a, _LI, l] = _gap_plant(rows[l], a, x, v, d, w, i,
-                                                                                            u, force)  # fmt: skip
-                    s[a, _LX, l], s[a, _LV, l] = x_next, v_next
-        table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])  # the next step's play and encoders
-        s[a, _LTABLE, l] = table
-        deflection = s[a, _LD, l] if p[a, _SCREW, l] != 0.0 else 0.0  # what a scale reads beyond the table
-        s[a, _LXFB, l] = table + deflection if p[a, _SCALE, l] != 0.0 else x_next
-        s[a, _LVFB, l] = x_next if p[a, _VDIFF, l] != 0.0 else v_next
+            s[a, _LU, l], s[a, _LFORCE, l] = u, force
+        _readings(s, a, l, x_next, v_next)
+
+
+@njit(cache=True)
+def _readings(s, a, l, x_next, v_next):
+    """Lane `l`'s next play and encoder readings from its next motor position and velocity (:func:`_advance`)."""
+    p = s
+    table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])
+    s[a, _LTABLE, l] = table
+    deflection = s[a, _LD, l] if p[a, _SCREW, l] != 0.0 else 0.0  # what a scale reads beyond the table
+    s[a, _LXFB, l] = table + deflection if p[a, _SCALE, l] != 0.0 else x_next
+    s[a, _LVFB, l] = x_next if p[a, _VDIFF, l] != 0.0 else v_next
 
 
 @njit(cache=True)
