@@ -1185,7 +1185,9 @@ def pack(servo, dt, effects=LoopEffects()):
         The exact ZOH plant (:func:`contoursim.servo.zoh`), the Tustin
         controllers of :func:`contoursim.servo.discretize`, gains, limit,
         the drive's velocity difference and computation delay, and the
-        effects' parameters.
+        effects' parameters (a backlash in a compliant screw: the ZOH
+        plants of its substeps, the gap closed and open, step 1 of the
+        module docstring).
 
     Raises
     ------
