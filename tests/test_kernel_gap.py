@@ -128,3 +128,17 @@ def test_batch_equals_run_bit_for_bit_with_screw_backlash():
         for name, signal in (("tool", r.position), ("encoder", r.encoder), ("velocity", r.velocity),
                              ("current", r.current)):  # fmt: skip
             assert np.array_equal(batch[name][b], signal), (b, name)
+
+
+def test_an_open_gap_leaves_the_table_at_rest_and_the_motor_side_alone_in_the_loop():
+    # a gap wider than the motion: the table, at rest in its middle, is never touched, and the loop drives the motor
+    # side alone, the rigid axis of mass m1 with its share of the damping (the kernel's rigid plant, packed apart)
+    servo = screw_axis(150.0, kv=1000.0)
+    x, v, a = sine(2000, amplitude=0.1)
+    rows = np.array([[pack(servo, DT, LoopEffects(backlash_mm=1.0))],
+                     [pack(AxisServo(mass=MOTOR, force_constant=KF, kv=1000.0, ti=TI, kp=KP, vff=VFF,
+                                     damping=DAMPING * MOTOR / MASS), DT)]])  # fmt: skip
+    out = run_batch(rows, DT, x, v, a, outputs=("tool", "encoder"))
+    assert np.abs(out["encoder"][0] - x).max() > 1e-3  # the motor side moves
+    assert np.array_equal(out["tool"][0], np.zeros_like(x))  # the table stays where it started
+    np.testing.assert_allclose(out["encoder"][0], out["encoder"][1], rtol=0, atol=1e-12)  # (all the damping: 1e-4 mm off)
