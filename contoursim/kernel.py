@@ -554,7 +554,7 @@ def _affine(c0, c1, c2, c3, c4, bu, bf, x, v, d, w, i, u, force):
 
 @njit(cache=True)
 def _gap_plant(q, a, x, v, d, w, i, u, force):
-    """A compliant screw with a backlash over one period: ``(x, v, d, ḋ, i)`` after :data:`_SUBSTEPS` exact ZOH substeps.
+    """A compliant screw with a backlash over one period: ``(x, v, d, ḋ, i)`` after `M` exact ZOH substeps.
 
     Each substep takes the plant of the gap's state at its start: closed
     (``|d| > h/2``: the screw's spring and damper on ``d ∓ h/2``) or open
@@ -781,7 +781,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
             friction = par[a, _FRICTION] != 0.0
             gapped = par[a, _HALF_GAP] != 0.0
             force = (par[a, _F0] - par[a, _FV] * v if friction else 0.0) + (external[k, a] if pushed else 0.0)
-            # (a backlash in the screw: the stick-slip's prediction over the period takes the spring's stretch beyond it)
+            # (a backlash in the screw: the stick-slip's prediction takes the spring's stretch beyond the gap)
             v_next = _plant_row(par, a, np.int64(1), x, v, _sprung(d, par[a, _HALF_GAP]) if gapped else d, w, i, u,
                                 force)  # fmt: skip
             if friction:  # stick-slip: the force that stops the carriage at t_k+1, within the friction bounds
