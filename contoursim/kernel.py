@@ -567,11 +567,12 @@ def _gap_plant(q, a, x, v, d, w, i, u, force):
         offset = half if d > half else (-half if d < -half else 0.0)
         base = _OPEN if offset == 0.0 else _ENGAGED
         e = d - offset
-        x, v, e, w, i = (_substep_row(q, a, base, 0, x, v, e, w, i, u, force),
-                         _substep_row(q, a, base, 1, x, v, e, w, i, u, force),
-                         _substep_row(q, a, base, 2, x, v, e, w, i, u, force),
-                         _substep_row(q, a, base, 3, x, v, e, w, i, u, force),
-                         _substep_row(q, a, base, 4, x, v, e, w, i, u, force))  # fmt: skip
+        # (rows as np.int64: one compiled _substep_row, not one per literal row number)
+        x, v, e, w, i = (_substep_row(q, a, base, np.int64(0), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(1), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(2), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(3), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(4), x, v, e, w, i, u, force))  # fmt: skip
         d = e + offset
     return x, v, d, w, i
 
