@@ -50,9 +50,9 @@ output is held over ``[t_k, t_k+1)``):
    where the table's friction dominates its inertia). With a compliant
    screw the backlash is instead a dead zone of the screw's spring and
    damper: in contact (``|d| > h/2``) they act on ``d ∓ h/2``; with the gap
-   open motor side and table are each on their own, the table slowed by
-   the axis's `damping` (its guideways'), the motor side by none (the
-   force ``F`` stays on it); the plant is stepped in step 8 by `M` exact ZOH substeps,
+   open motor side and table are each on their own, each slowed by its
+   share ``damping·m_j/m`` of the damping (the force ``F`` stays on the
+   motor side); the plant is stepped in step 8 by `M` exact ZOH substeps,
    each in the mode of the gap at its start (``M`` from 32 substeps per
    cycle of the screw's mode: its contacts timed to a substep);
 2. the encoders (the servo's ``position_feedback``): the position loop reads
