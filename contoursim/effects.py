@@ -363,7 +363,9 @@ _register(EffectKind(
     (_p("lost_motion_um", 0.0, "µm", (0.0, 1000.0), (2.0, 20.0), doc="lost motion between motor/screw and table"),),
     options={"feedback": (None, "motor", "scale")},
     doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk); "
-        "the axis's position_feedback when not given, and the axis's when given",
+        "the axis's position_feedback when not given, and the axis's when given; on an axis with a compliant screw "
+        "a dead zone in the screw (the table, with its mass, crosses it when the force on it reverses), else a play "
+        "(the table stops when the motor reverses)",
 ))
 _register(EffectKind(
     "coulomb_friction", "loop",

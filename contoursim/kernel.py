@@ -46,7 +46,15 @@ Step k of one axis, from the state sampled at ``t_k`` (every controller
 output is held over ``[t_k, t_k+1)``):
 
 1. backlash: the table follows the motor/screw position ``x`` with a play of
-   width `backlash_mm` (play operator, state: the table position);
+   width `backlash_mm` (play operator, state: the table position: the limit
+   where the table's friction dominates its inertia). With a compliant
+   screw the backlash is instead a dead zone of the screw's spring and
+   damper: in contact (``|d| > h/2``) they act on ``d ∓ h/2``; with the gap
+   open motor side and table are each on their own, each slowed by its
+   share ``damping·m_j/m`` of the damping (the force ``F`` stays on the
+   motor side); the plant is stepped in step 8 by `M` exact ZOH substeps,
+   each in the mode of the gap at its start (``M`` from 32 substeps per
+   cycle of the screw's mode: its contacts timed to a substep);
 2. the encoders (the servo's ``position_feedback``): the position loop reads
    ``x`` (``"motor"``, semi-closed loop) or the table (``"scale"``, closed
    loop: behind the play, plus a compliant screw's ``d``), rounded to
@@ -77,7 +85,9 @@ output is held over ``[t_k, t_k+1)``):
    step k (the `force` argument of :func:`run` and :func:`run_batch`): the
    dry friction is the force that would stop the carriage at ``t_k+1``,
    within its static or kinetic bounds at the velocity sampled at ``t_k``; held;
-8. the exact ZOH plant update with the held voltage (or current) and force.
+8. the exact ZOH plant update with the held voltage (or current) and force
+   (a screw with a backlash: its substeps, step 1; the stick-slip's
+   prediction of step 7 takes the spring's stretch beyond the gap).
 
 The helpers take and return scalars (state goes in and comes back out) or
 read the parameter array without branching: an array passed into a helper
@@ -143,7 +153,14 @@ _CDELAY = 66  # computation delay [servo periods]
 _LAGGED = 67  # 1.0 when the current lags its command (AxisServo.current_bandwidth_hz): the plant's row 4 steps it
 _SCREW = 68  # 1.0 when the mode is a compliant screw (AxisServo.motor_mass): d is the table's, which a scale reads
 _DELAY_POSITION = 69  # 1.0 when the feedback delay is the position loop's only (LoopEffects.feedback_delay_on)
-NPAR = 70  #: length of one axis's parameter row from :func:`pack`
+_HALF_GAP = 70  # a compliant screw's backlash: half its dead zone [mm] (0: none; _HALF_PLAY is 0 then)
+_SUBSTEPS = 71  # the substeps M of a period that its plant takes (_gap_plant)
+_ENGAGED, _OPEN = 72, 107  # 35 entries each: Ad (5 x 5), Bu, BF over dt/M, the gap closed (spring offset) and open
+NPAR = 142  #: length of one axis's parameter row from :func:`pack`
+
+# Substeps per cycle of the screw's relative mode that a compliant screw with a backlash takes (pack; measured:
+# tests/test_kernel_gap.py)
+_GAP_SUBSTEPS_PER_CYCLE = 32
 
 # Per-axis state ----------------------------------------------------------------------------
 _ZV, _ZC = 5, 6  # velocity / current controller integrators [mm], [A·s]
@@ -183,7 +200,10 @@ class LoopEffects:
         stands still after a reversal until the screw has moved this far.
         Where the position loop reads (the motor, which does not see it, or
         the table, which does: hunting risk with integral action) is the
-        servo's ``position_feedback``.
+        servo's ``position_feedback``. On an axis with a compliant screw, a
+        dead zone of this width in the screw's spring and damper: the
+        table, with its mass, coasts across the gap when the force on it
+        reverses (step 1 of :mod:`contoursim.kernel`).
     coulomb_N : float, default 0
         Coulomb friction level [N].
     viscous_N_s_per_m : float, default 0
@@ -543,6 +563,45 @@ def _affine(c0, c1, c2, c3, c4, bu, bf, x, v, d, w, i, u, force):
     return c0 * x + c1 * v + c2 * d + c3 * w + c4 * i + bu * u + bf * force
 
 
+@njit(cache=True)
+def _gap_plant(q, a, x, v, d, w, i, u, force):
+    """A compliant screw with a backlash over one period: ``(x, v, d, ḋ, i)`` after `M` exact ZOH substeps.
+
+    Each substep takes the plant of the gap's state at its start: closed
+    (``|d| > h/2``: the screw's spring and damper on ``d ∓ h/2``) or open
+    (no coupling). `q` (n, NPAR): the rows of the axes (`a`: this one's);
+    `u` and `force` held over the period. Called alike by :func:`_variant`
+    and :func:`_lanes` (bit for bit the same).
+    """
+    half = q[a, _HALF_GAP]
+    for _ in range(int(q[a, _SUBSTEPS])):
+        offset = half if d > half else (-half if d < -half else 0.0)
+        base = _OPEN if offset == 0.0 else _ENGAGED
+        e = d - offset
+        # (rows as np.int64: one compiled _substep_row, not one per literal row number)
+        x, v, e, w, i = (_substep_row(q, a, base, np.int64(0), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(1), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(2), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(3), x, v, e, w, i, u, force),
+                         _substep_row(q, a, base, np.int64(4), x, v, e, w, i, u, force))  # fmt: skip
+        d = e + offset
+    return x, v, d, w, i
+
+
+@njit(cache=True)
+def _substep_row(q, a, base, r, x, v, d, w, i, u, force):
+    """Row `r` of the substep plant from entry `base` of `q`'s row `a` (Ad, then Bu, BF)."""
+    c = base + _NS * r
+    return _affine(q[a, c], q[a, c + 1], q[a, c + 2], q[a, c + 3], q[a, c + 4], q[a, base + 25 + r],
+                   q[a, base + 30 + r], x, v, d, w, i, u, force)  # fmt: skip
+
+
+@njit(cache=True)
+def _sprung(d, half):
+    """The screw's stretch beyond the backlash's dead zone ``±half`` [mm] (`d` itself without one)."""
+    return d - min(max(d, -half), half)
+
+
 @njit(cache=True, error_model="numpy")
 def _friction_level(fc, fs, vs, v):
     """Kinetic plus Stribeck friction level [N] at velocity `v` [mm/s]."""
@@ -732,13 +791,20 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
             # (a rigid axis has no d, ḋ; without electrical dynamics or a lag i is the held command u)
             # (rows as np.int64: one compiled _plant_row, not one per literal row number)
             friction = par[a, _FRICTION] != 0.0
+            gapped = par[a, _HALF_GAP] != 0.0
             force = (par[a, _F0] - par[a, _FV] * v if friction else 0.0) + (external[k, a] if pushed else 0.0)
-            v_next = _plant_row(par, a, np.int64(1), x, v, d, w, i, u, force)
+            # (a backlash in the screw: the stick-slip's prediction takes the spring's stretch beyond the gap)
+            v_next = _plant_row(par, a, np.int64(1), x, v, _sprung(d, par[a, _HALF_GAP]) if gapped else d, w, i, u,
+                                force)  # fmt: skip
             if friction:  # stick-slip: the force that stops the carriage at t_k+1, within the friction bounds
                 level = _friction_level(par[a, _FC], par[a, _FS], par[a, _VS], v)
                 dry = _dry_friction(level, par[a, _FA], -v_next / par[a, _BF + 1])
                 force += dry
                 v_next += par[a, _BF + 1] * dry
+            if gapped:
+                state[a, 0], state[a, 1], state[a, 2], state[a, 3], state[a, 4] = _gap_plant(par, a, x, v, d, w, i, u,
+                                                                                             force)  # fmt: skip
+                continue
             state[a, 0] = _plant_row(par, a, np.int64(0), x, v, d, w, i, u, force)
             state[a, 1] = v_next
             if par[a, _MODE] != 0.0:
@@ -775,9 +841,10 @@ _LDRIVE, _LCLAMPED, _LCLAMPS = NPAR + 10, NPAR + 11, NPAR + 12  # current comman
 # far (exact as a float up to 2**53)
 _LLOWER, _LUPPER = NPAR + 13, NPAR + 14  # the dry friction's range of the step (_friction_bounds)
 _LVEST, _LSENT = NPAR + 15, NPAR + 16  # as _variant's _VEST and (2 entries) _SENT
-_LROWS = NPAR + 18
+_LU, _LFORCE = NPAR + 18, NPAR + 19  # the plant's held input [V or A] and force [N] of the step (a non-rigid axis)
+_LROWS = NPAR + 20
 # Effects a block's axis has in any lane (the steps of the others are skipped for the whole block)
-_ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP, _ANY_DIFFERENCE = range(6)
+_ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP, _ANY_DIFFERENCE, _ANY_GAP = range(7)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -814,12 +881,12 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
     n_steps, pushed = ref_pos.shape[0], external.shape[0] > 0
     s = np.empty((n_axes, _LROWS, LANES))  # see _LROWS; `p` where parameters are read
     p = s
-    has = np.empty((n_axes, 6), np.bool_)
+    has = np.empty((n_axes, 7), np.bool_)
     for a in range(n_axes):
         for j in range(NPAR):
             for l in range(n_lanes):
                 p[a, j, l] = rows[l, a, j]
-        for e in range(6):
+        for e in range(7):
             has[a, e] = False
         for l in range(n_lanes):
             has[a, _ANY_QUANTUM] |= p[a, _QUANTUM, l] != 0.0
@@ -828,10 +895,12 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
             has[a, _ANY_STRIBECK] |= p[a, _FRICTION, l] != 0.0 and p[a, _FS, l] != 0.0
             has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, _MODE, l] != 0.0 or p[a, _ELEC, l] != 0.0 or p[a, _LAGGED, l] != 0.0
             has[a, _ANY_DIFFERENCE] |= p[a, _VDIFF, l] != 0.0
+            has[a, _ANY_GAP] |= p[a, _HALF_GAP, l] != 0.0
             for q in (_AD + 2, _AD + 3, _AD + 4, _AD + _NS + 2, _AD + _NS + 3, _AD + _NS + 4):
                 # x and v do not depend on d, ḋ, i (pack's +0.0; see _rigid_row)
                 has[a, _ANY_MODE_OR_CURRENT_LOOP] |= p[a, q, l] != 0.0 or math.copysign(1.0, p[a, q, l]) < 0.0
     buf_x = np.empty((n_axes, _NBUF, LANES))
+    before = np.empty((_NS, LANES))
     hist = np.empty((n_axes, _NHIST, LANES))
     buf_v = np.empty((n_axes, _NBUF, LANES))
     gauss = np.empty((n_axes, 2, LANES))
@@ -927,10 +996,22 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
                     s[a, _LLOWER, l], s[a, _LUPPER, l] = _friction_bounds(level, p[a, _FA, l])
             x_ref, v_ref, a_ref = ref_pos[k, a], ref_vel[k, a], ref_acc[k, a]
             pushing = external[k, a] if pushed else 0.0
+            if has[a, _ANY_GAP]:  # the state the gap's substeps start from (a loop of their own: they do not vectorise)
+                for q in range(_NS):
+                    for l in range(n_lanes):
+                        before[q, l] = s[a, _LX + q, l]
             if has[a, _ANY_MODE_OR_CURRENT_LOOP]:  # two versions of the step, compiled apart
                 _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, False)
             else:
                 _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, True)
+            if has[a, _ANY_GAP]:  # a backlash in a compliant screw: its plant, from the step's input and force
+                for l in range(n_lanes):
+                    if p[a, _HALF_GAP, l] != 0.0:
+                        x_next, v_next, s[a, _LD, l], s[a, _LW, l], s[a, _LI, l] = _gap_plant(
+                            rows[l], a, before[0, l], before[1, l], before[2, l], before[3, l], before[4, l],
+                            s[a, _LU, l], s[a, _LFORCE, l])  # fmt: skip
+                        s[a, _LX, l], s[a, _LV, l] = x_next, v_next
+                        _readings(s, a, l, x_next, v_next)
             if record and write_current:
                 for l in range(n_lanes):
                     kept_current[row, a, l] = s[a, _LDRIVE, l]
@@ -961,7 +1042,9 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
 
     Every lane computes every branch and a select keeps its own, so that the
     loop vectorises. ``rigid`` (a constant where this is inlined): no lane
-    has a structural mode or a current loop, whose rows are then skipped.
+    has a structural mode or a current loop, whose rows are then skipped;
+    else the plant's input and force are kept for a compliant screw's
+    backlash, whose plant :func:`_lanes` steps after this.
     `pushing`: the known external force of the step [N], the same for every lane.
     """
     p = s
@@ -986,7 +1069,10 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
             s[a, _LZC, l] = zc if electrical else s[a, _LZC, l]
         rubbing = p[a, _FRICTION, l] != 0.0
         force = (p[a, _F0, l] - p[a, _FV, l] * v if rubbing else 0.0) + pushing
-        v_next = _rigid_row(p, a, l, 1, x, v, u, force) if rigid else _lane_row(p, a, l, 1, x, v, d, w, i, u, force)
+        sprung = d
+        if not rigid:  # as in _variant
+            sprung = _sprung(d, p[a, _HALF_GAP, l]) if p[a, _HALF_GAP, l] != 0.0 else d
+        v_next = _rigid_row(p, a, l, 1, x, v, u, force) if rigid else _lane_row(p, a, l, 1, x, v, sprung, w, i, u, force)
         bf = p[a, _BF + 1, l]
         dry = min(max(-v_next / bf, s[a, _LLOWER, l]), s[a, _LUPPER, l])  # _dry_friction, its bounds found before
         force = force + dry if rubbing else force
@@ -1002,11 +1088,19 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
             s[a, _LW, l] = _lane_row(p, a, l, 3, x, v, d, w, i, u, force) if mode else w
             stepped = electrical or p[a, _LAGGED, l] != 0.0
             s[a, _LI, l] = _lane_row(p, a, l, 4, x, v, d, w, i, u, force) if stepped else u
-        table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])  # the next step's play and encoders
-        s[a, _LTABLE, l] = table
-        deflection = s[a, _LD, l] if p[a, _SCREW, l] != 0.0 else 0.0  # what a scale reads beyond the table
-        s[a, _LXFB, l] = table + deflection if p[a, _SCALE, l] != 0.0 else x_next
-        s[a, _LVFB, l] = x_next if p[a, _VDIFF, l] != 0.0 else v_next
+            s[a, _LU, l], s[a, _LFORCE, l] = u, force
+        _readings(s, a, l, x_next, v_next)
+
+
+@njit(cache=True)
+def _readings(s, a, l, x_next, v_next):
+    """Lane `l`'s next play and encoder readings from its next motor position and velocity (:func:`_advance`)."""
+    p = s
+    table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])
+    s[a, _LTABLE, l] = table
+    deflection = s[a, _LD, l] if p[a, _SCREW, l] != 0.0 else 0.0  # what a scale reads beyond the table
+    s[a, _LXFB, l] = table + deflection if p[a, _SCALE, l] != 0.0 else x_next
+    s[a, _LVFB, l] = x_next if p[a, _VDIFF, l] != 0.0 else v_next
 
 
 @njit(cache=True)
@@ -1049,10 +1143,11 @@ def _flush(kept, out, first, count):
 # Packing
 
 
-def _continuous_plant(servo, effects):
+def _continuous_plant(servo, effects, gap_open=False):
     """``(A, B, states)``: the plant's continuous matrices over its present states, inputs (u or i, F).
 
-    The servo's (:func:`contoursim.servo._plant_matrices`), with the structural mode of `effects` if any.
+    The servo's (:func:`contoursim.servo._plant_matrices`, with its `gap_open`), with the structural mode of
+    `effects` if any.
     """
     mode = None
     if effects.mode_freq_hz is not None:
@@ -1062,7 +1157,21 @@ def _continuous_plant(servo, effects):
         m2 = servo.mass * effects.mode_mass_ratio
         wn = 2.0 * np.pi * effects.mode_freq_hz
         mode = (m2, m2 * wn * wn, 2.0 * effects.mode_damping_ratio * m2 * wn)
-    return _plant_matrices(servo, mode)
+    return _plant_matrices(servo, mode, gap_open)
+
+
+def _padded_zoh(servo, effects, dt, gap_open=False):
+    """The plant's exact ZOH over `dt` on all five states: ``Ad`` (25, row-major), ``Bu`` (5), ``BF`` (5) in one array.
+
+    Without a current state the current holds the command of the period (its ``Bu`` entry 1).
+    """
+    A, B, states = _continuous_plant(servo, effects, gap_open)
+    Ad, Bd = zoh(A, B, dt)
+    full_Ad, full_Bd = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
+    full_Ad[np.ix_(states, states)], full_Bd[states] = Ad, Bd
+    if 4 not in states:
+        full_Bd[4, 0] = 1.0  # ideal current loop: the current state holds the command of the period
+    return np.concatenate([full_Ad.ravel(), full_Bd[:, 0], full_Bd[:, 1]])
 
 
 def _pi_row(gain, ti, dt):
@@ -1089,7 +1198,9 @@ def pack(servo, dt, effects=LoopEffects()):
         The exact ZOH plant (:func:`contoursim.servo.zoh`), the Tustin
         controllers of :func:`contoursim.servo.discretize`, gains, limit,
         the drive's velocity difference and computation delay, and the
-        effects' parameters.
+        effects' parameters (a backlash in a compliant screw: the ZOH
+        plants of its substeps, the gap closed and open, step 1 of the
+        module docstring).
 
     Raises
     ------
@@ -1119,18 +1230,10 @@ def pack(servo, dt, effects=LoopEffects()):
             f"feedback_delay_s = {effects.feedback_delay_s:g} s is {delay:.4g} servo periods of {dt:g} s; "
             f"the kernel holds at most {MAX_DELAY_SAMPLES} periods ({MAX_DELAY_SAMPLES * dt:g} s)"
         )
-    A, B, states = _continuous_plant(servo, effects)
     row = np.zeros(NPAR)
     row[_MODE] = float(effects.mode_freq_hz is not None or servo.compliant)
     row[_SCREW] = float(servo.compliant)
-    Ad, Bd = zoh(A, B, dt)
-    full_Ad, full_Bd = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
-    full_Ad[np.ix_(states, states)], full_Bd[states] = Ad, Bd
-    if 4 not in states:
-        full_Bd[4, 0] = 1.0  # ideal current loop: the current state holds the command of the period
-    row[_AD : _AD + _NS * _NS] = full_Ad.ravel()
-    row[_BU : _BU + _NS] = full_Bd[:, 0]
-    row[_BF : _BF + _NS] = full_Bd[:, 1]
+    row[_AD : _BF + _NS] = _padded_zoh(servo, effects, dt)
     row[_KP], row[_VFF], row[_AFF] = servo.kp, servo.vff, servo.aff / servo.force_gain
     row[_AMP] = 1.0 / servo.force_constant
     row[_VB : _VD + 1] = _pi_row(servo.kv_mm, servo.ti, dt)
@@ -1139,7 +1242,13 @@ def pack(servo, dt, effects=LoopEffects()):
         row[_ELEC] = 1.0
     row[_ILIM] = np.finfo(float).max if servo.current_limit is None else servo.current_limit
     e = effects
-    row[_HALF_PLAY] = e.backlash_mm / 2.0
+    if servo.compliant and e.backlash_mm > 0.0:  # the screw's dead zone, its contacts timed within substeps
+        substeps = math.ceil(_GAP_SUBSTEPS_PER_CYCLE * servo.screw_mode_hz * dt)
+        row[_HALF_GAP], row[_SUBSTEPS] = e.backlash_mm / 2.0, substeps
+        row[_ENGAGED : _ENGAGED + 35] = _padded_zoh(servo, effects, dt / substeps)
+        row[_OPEN : _OPEN + 35] = _padded_zoh(servo, effects, dt / substeps, gap_open=True)
+    else:
+        row[_HALF_PLAY] = e.backlash_mm / 2.0
     row[_SCALE] = float(servo.position_feedback == "scale")
     friction = (e.coulomb_N, e.viscous_N_s_per_m / 1000.0, e.stribeck_N, e.stribeck_velocity_mm_s, e.asymmetry_N,
                 e.offset_N)  # fmt: skip

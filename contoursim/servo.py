@@ -451,7 +451,7 @@ class DiscreteServo:
 # Blocks
 
 
-def _plant_matrices(servo, mode=None):
+def _plant_matrices(servo, mode=None, gap_open=False):
     """The continuous plant ``(A, B, states)``: ``dq/dt = A q + B [u, F]`` over the states present.
 
     ``states`` lists which of ``x`` [mm], ``v`` [mm/s], ``d`` [mm], ``ḋ``
@@ -467,6 +467,11 @@ def _plant_matrices(servo, mode=None):
         ``(m2, k, c)``: a mass [kg] of the axis's `mass` on a spring [N/m]
         and damper [N·s/m] against the rest (the kernel's structural mode);
         default: the servo's compliant screw, if any. Not both.
+    gap_open : bool, default False
+        A compliant screw's backlash gap open (the kernel's dead zone): no
+        spring or damper between the motor side and the table, each mass
+        slowed by its share of the `damping` (``damping·m_j/mass``: each
+        decelerates as the whole axis would).
     """
     if servo.compliant and mode is not None:
         raise ValueError("an axis with a compliant screw (motor_mass) has its one mode: no other structural mode")
@@ -475,6 +480,7 @@ def _plant_matrices(servo, mode=None):
         m1 = servo.motor_mass
         k = 1e6 * servo.screw_stiffness
         mode = (servo.mass - m1, k, 2.0 * servo.screw_damping_ratio * np.sqrt(k * m1 * (servo.mass - m1) / servo.mass))
+        mode = (mode[0], 0.0, 0.0) if gap_open else mode
     elif mode is not None:
         m1 = servo.mass - mode[0]
     lagged = servo.current_bandwidth_hz is not None
@@ -482,7 +488,7 @@ def _plant_matrices(servo, mode=None):
     A, B = np.zeros((5, 5)), np.zeros((5, 2))
     per_amp, per_newton = 1000.0 * servo.force_constant / m1, 1000.0 / m1
     carriage = np.zeros(5)  # dv/dt per state, without the current (an input without electrical dynamics)
-    carriage[1] = -servo.damping / m1
+    carriage[1] = -servo.damping / (servo.mass if gap_open else m1)
     A[0, 1] = 1.0
     B[1, 1] = per_newton
     if mode:
@@ -492,6 +498,9 @@ def _plant_matrices(servo, mode=None):
         A[3] = -carriage  # d²d/dt² = -dv/dt - (k·d + c·ḋ)/m2
         A[3, 2] -= k / m2
         A[3, 3] -= c / m2
+        if gap_open:  # the table's share of the damping on its velocity v + ḋ
+            A[3, 1] -= servo.damping / servo.mass
+            A[3, 3] -= servo.damping / servo.mass
         B[3, 1] = -per_newton
     A[1] += carriage
     if servo.electrical or lagged:

@@ -60,8 +60,8 @@ def continuous_plant(servo):
 def reference_loop(servo, quantum, delay, start, play=0.0, position_only=False):
     """The sampled loop as python-control systems: ZOH plant, and the drive as one discrete nlsys.
 
-    The drive at step k: the table behind a play of `play` [mm] around the motor position x (behind a
-    compliant screw, deflected by ``x2 - x`` from there); the position encoder on the table
+    The drive at step k: the table behind a play of `play` [mm] around the motor position x (a rigid axis), or
+    behind a compliant screw, deflected by ``x2 - x``; the position encoder on the table
     (``position_feedback="scale"``) or on x, ``enc = q·round(·/q)``, read `delay` periods late (``x_fb``);
     velocity from the motor encoder x, quantised and read as late (now with `position_only`: the delay is the
     position loop's alone), ``(m[k] - m[k-n])/(n·dt)`` low-passed
@@ -153,11 +153,7 @@ DRIVES = {
     "screw_scale_quantised_delayed_clamped": (dict(SCREW, position_feedback="scale", velocity_feedback="difference",
                                                    velocity_taps=2, velocity_filter_hz=2000.0, current_limit=0.6,
                                                    current_bandwidth_hz=1500.0), 2e-4, 1),
-    "screw_motor_backlash": (dict(SCREW, velocity_feedback="difference", computation_delay=1), 2e-4, 0,
-                             dict(backlash_mm=0.004)),
-    "screw_scale_backlash": (dict(SCREW, position_feedback="scale", velocity_feedback="difference"), 0.0, 1,
-                             dict(backlash_mm=0.004)),
-}
+}  # a backlash in a compliant screw is a dead zone in the screw, not a play: tests/test_kernel_gap.py
 
 
 @pytest.mark.parametrize("name", list(DRIVES))
