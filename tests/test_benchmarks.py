@@ -167,7 +167,8 @@ def test_a_delay_of_the_position_loop_alone_is_named_where_the_trace_tells_it_fr
     delay, kp = case.truth["parameters"]["delay_s"], load_model(case.machine_file).machine.axes["x"].kp
     assert [(e.name, e.axis) for e in result.effects] == [("gain_mismatch", "x")], result.report()
     assert result.effects[0]["kp_ratio"] == pytest.approx(1 / (1 - kp * delay), rel=0.01), result.report()
-    assert any("time_delay.x (kind = position)" in w and "the gain is named" in w for w in result.warnings), result.report()
+    assert any("time_delay.x (kind = position)" in w and "to separate them: a position step" in w
+               for w in result.warnings), result.report()  # said beside it, with the test that tells them apart
     case, result = diagnosed("rigid", "gain_mismatch", 810854937)
     assert [(e.name, e.axis) for e in result.effects] == [("gain_mismatch", "x")], result.report()
     assert result.effects[0]["kp_ratio"] == pytest.approx(case.truth["parameters"]["kp_ratio"], rel=0.01)
