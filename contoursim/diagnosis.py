@@ -1642,6 +1642,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         warnings.append("the nominal machine was identified from the trace with an assumed mass "
                         "(forces such as force_N are relative to that axis, not in real newtons)")
         warnings += identification_warnings(model.machine)
+        if not np.any(np.ptp(trace.reference, axis=0) > 0):
+            warnings.append("the trace's reference never moves: its servo loops cannot be identified from it (it is "
+                            "compared with axes standing still: hunting and drift show, loop effects cannot); give the "
+                            "nominal model (--model)")
     if identified and trace.force:
         warnings.append(f"the trace's force column(s) ({', '.join(f'{a}_force' for a in trace.force)}) are not used: "
                         "a force in newtons has no scale on an identified machine; give the nominal model (--model)")

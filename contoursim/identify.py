@@ -156,16 +156,9 @@ def identify_machine(trace, servo_period=None, progress=None):
         Axes named as the trace's, each an :class:`AxisServo` with
         ``mass = MASS``, ``force_constant = FORCE_CONSTANT``, the shared
         ``kp`` and ``vff`` and its own ``kv`` (and ``ti`` where a PI
-        velocity loop explains the trace significantly better).
-
-    Raises
-    ------
-    ValueError
-        The trace's reference never moves.
+        velocity loop explains the trace significantly better). A trace
+        whose reference never moves leaves them at their starting values.
     """
-    if not np.any(np.ptp(trace.reference, axis=0) > 0):
-        raise ValueError("the trace's reference never moves: the servo loops cannot be identified from it; "
-                         "give the nominal model (--model)")
     period = servo_period_for(trace.dt) if servo_period is None else float(servo_period)
     reference = measured_reference(trace, period)
     axes = trace.axes

@@ -1094,13 +1094,15 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
 
 @njit(cache=True)
 def _readings(s, a, l, x_next, v_next):
-    """Lane `l`'s next play and encoder readings from its next motor position and velocity (:func:`_advance`)."""
-    p = s
-    table = _play(x_next, s[a, _LTABLE, l], p[a, _HALF_PLAY, l])
+    """Lane `l`'s next play and encoder readings from its next motor position and velocity (:func:`_advance`).
+
+    `s` holds the lanes' parameter rows and states (:func:`_lanes`).
+    """
+    table = _play(x_next, s[a, _LTABLE, l], s[a, _HALF_PLAY, l])
     s[a, _LTABLE, l] = table
-    deflection = s[a, _LD, l] if p[a, _SCREW, l] != 0.0 else 0.0  # what a scale reads beyond the table
-    s[a, _LXFB, l] = table + deflection if p[a, _SCALE, l] != 0.0 else x_next
-    s[a, _LVFB, l] = x_next if p[a, _VDIFF, l] != 0.0 else v_next
+    deflection = s[a, _LD, l] if s[a, _SCREW, l] != 0.0 else 0.0  # what a scale reads beyond the table
+    s[a, _LXFB, l] = table + deflection if s[a, _SCALE, l] != 0.0 else x_next
+    s[a, _LVFB, l] = x_next if s[a, _VDIFF, l] != 0.0 else v_next
 
 
 @njit(cache=True)
