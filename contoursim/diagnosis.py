@@ -1421,15 +1421,15 @@ def turning(position, velocity):
 
 
 def _twin(problem, best, cands, both_ways):
-    """The candidate the trace cannot tell from `best`, and why: ``(candidate, reason)``, or ``(None, None)``.
+    """The candidates the trace cannot tell from `best`, and why: ``[(candidate, reason)]``, best ranked first.
 
-    Either a rival within :data:`SIGNIFICANT` of the best's ΔBIC, or one of a
+    Each either a rival within :data:`SIGNIFICANT` of the best's ΔBIC, or one of a
     pair whose difference lies in what a trace may not hold
     (:func:`_twins`) that closes at least :data:`_TWIN_SHARE` of what the
     best closes:
 
-    - a squareness and a position-gain mismatch (or a command delay, or a
-      delay of the position loop's reading) of one axis both draw an oval at
+    - a squareness and a position-gain mismatch (or a delay, of the command
+      or of the loop's reading) of one axis both draw an oval at
       45° on a circle (ballbar reasoning, ISO 230-4,
       Renishaw QC20): the squareness's keeps its orientation in both
       directions and its size at any feed, the servo effect's flips between
@@ -1440,16 +1440,16 @@ def _twin(problem, best, cands, both_ways):
       the travel a straightness is mostly a slope, the shear of a squareness;
       only its curvature, the sag over the path, tells it.
     """
-    rival = next((c for c in cands[1:] if c.delta_bic > best.delta_bic - SIGNIFICANT), None)
-    if rival is not None:
-        return rival, f"they explain the data almost equally (ΔBIC {best.delta_bic:.0f} vs {rival.delta_bic:.0f})"
     rss0 = float(problem.base_residual @ problem.base_residual)
     closed = rss0 - best.cost
-    for twin in cands[1:] if closed > 0 else ():
-        why = _twins(best.fit, twin.fit, both_ways)
-        if why is not None and rss0 - twin.cost >= _TWIN_SHARE * closed:
-            return twin, f"both explain the trace (one {100 * (rss0 - twin.cost) / closed:.0f} % of what the other does): {why}"
-    return None, None
+    found = []
+    for c in cands[1:]:
+        why = _twins(best.fit, c.fit, both_ways) if closed > 0 else None
+        if c.delta_bic > best.delta_bic - SIGNIFICANT:
+            found.append((c, f"they explain the data almost equally (ΔBIC {best.delta_bic:.0f} vs {c.delta_bic:.0f})"))
+        elif why is not None and rss0 - c.cost >= _TWIN_SHARE * closed:
+            found.append((c, f"both explain the trace (one {100 * (rss0 - c.cost) / closed:.0f} % of what the other does): {why}"))
+    return found
 
 
 def _choose(problem, cands, both_ways):
@@ -1458,10 +1458,10 @@ def _choose(problem, cands, both_ways):
     The best, unless it is a delay of an axis's position-loop reading that
     the trace does not tell from a gain mismatch of that axis
     (:func:`_first_order_twin`: the gain is named), or the trace cannot tell
-    it from a twin (:func:`_twin`) and only the twin's size lies within the
-    catalogue's typical range: what the trace cannot decide, the typical
-    sizes of machines may. Either way the pair is reported, with the test
-    that would separate them.
+    it from its twins (:func:`_twin`) and only a twin's size lies within the
+    catalogue's typical range (the best ranked such twin is named): what the
+    trace cannot decide, the typical sizes of machines may. Either way the
+    pair is reported, with the test that would separate them.
     """
     best = cands[0]
     gain = _first_order_twin(problem, best, cands)
@@ -1472,10 +1472,12 @@ def _choose(problem, cands, both_ways):
                       f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
                       f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
                       f"to separate them: {_separating_test(gain.fit, best.fit, both_ways)}")
-    twin, reason = _twin(problem, best, cands, both_ways)
-    if twin is None:
+    twins = _twin(problem, best, cands, both_ways)
+    if not twins:
         return best, None
-    swap = not _typical(best.fit) and _typical(twin.fit)
+    typical = [(c, why) for c, why in twins if _typical(c.fit)]
+    swap = not _typical(best.fit) and bool(typical)
+    twin, reason = typical[0] if swap else twins[0]
     if swap:
         best, twin = twin, best
     return best, (f"{best.fit.label}{_options(best.fit)} ({_size(best.fit)}) and {twin.fit.label}{_options(twin.fit)} "
@@ -1530,11 +1532,12 @@ def _twins(a, b, both_ways):
 
 
 def _oval_kind(effect):
-    """``"geometry"`` for a squareness, ``"servo"`` for a gain mismatch, a command delay or a position-loop delay (to
-    first order a gain, ``kp/(1 − kp·τ)``: all draw a 45° oval on a circle), else ``None``."""
+    """``"geometry"`` for a squareness, ``"servo"`` for a gain mismatch or a delay of any kind (a command delay lags
+    like a gain, a delay of the loop's reading is one to first order, ``kp/(1 − kp·τ)``: all draw a 45° oval on a
+    circle), else ``None``."""
     if effect.name == "squareness":
         return "geometry"
-    if effect.name == "gain_mismatch" or (effect.name == "time_delay" and effect.options["kind"] in ("command", "position")):
+    if effect.name in ("gain_mismatch", "time_delay"):
         return "servo"
     return None
 
