@@ -1420,7 +1420,7 @@ def turning(position, velocity):
     return float(np.mean(cross[moving] > 0)), float(np.mean(cross[moving] < 0))
 
 
-def _twin(problem, best, cands, both_ways):
+def _look_alikes(problem, best, cands, both_ways):
     """The candidates the trace cannot tell from `best`, and why: ``[(candidate, reason)]``, best ranked first.
 
     Each either a rival within :data:`SIGNIFICANT` of the best's ΔBIC, or one of a
@@ -1458,7 +1458,7 @@ def _choose(problem, cands, both_ways):
     The best, unless it is a delay of an axis's position-loop reading that
     the trace does not tell from a gain mismatch of that axis
     (:func:`_first_order_twin`: the gain is named), or the trace cannot tell
-    it from its twins (:func:`_twin`) and only a twin's size lies within the
+    it from its twins (:func:`_look_alikes`) and only a twin's size lies within the
     catalogue's typical range (the best ranked such twin is named): what the
     trace cannot decide, the typical sizes of machines may. Either way the
     pair is reported, with the test that would separate them.
@@ -1472,7 +1472,7 @@ def _choose(problem, cands, both_ways):
                       f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
                       f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
                       f"to separate them: {_separating_test(gain.fit, best.fit, both_ways)}")
-    twins = _twin(problem, best, cands, both_ways)
+    twins = _look_alikes(problem, best, cands, both_ways)
     if not twins:
         return best, None
     typical = [(c, why) for c, why in twins if _typical(c.fit)]
@@ -1521,7 +1521,7 @@ def _size(effect):
 
 
 def _twins(a, b, both_ways):
-    """Why effects `a` and `b` look alike on a trace (:func:`_twin`), or ``None``."""
+    """Why effects `a` and `b` look alike on a trace (:func:`_look_alikes`), or ``None``."""
     if {_oval_kind(a), _oval_kind(b)} == {"geometry", "servo"} and not both_ways:
         return "both draw an oval at 45° on a circle, and the trace runs its path one way only"
     if {a.name, b.name} == {"squareness", "straightness"}:

@@ -587,12 +587,16 @@ def test_model_without_the_traces_axis_is_refused(machine):
         diagnose(trace, Model(machine))
 
 
-def test_cli_prints_the_story_and_writes_the_contract_report(tmp_path, capsys):
+def write_mill_circle(file, effects=(), seed=3):
+    """The demo mill on the ISO circle R 10 mm, logged every 5 servo periods with noise, as a measured trace `file`."""
     mill = load_machine("demo_mill")
     path = paths.iso230_4_circle(10.0)
     reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), mill.servo_period)
-    trace = synthetic_trace(Model(mill, (Effect("backlash", "y", lost_motion_um=10.0),)), reference, every=5, seed=2)
-    write_trace(tmp_path / "measured.csv", trace)
+    write_trace(file, synthetic_trace(Model(mill, effects), reference, every=5, seed=seed))
+
+
+def test_cli_prints_the_story_and_writes_the_contract_report(tmp_path, capsys):
+    write_mill_circle(tmp_path / "measured.csv", (Effect("backlash", "y", lost_motion_um=10.0),), seed=2)
     report = tmp_path / "r.json"
     args = ["diagnose", str(tmp_path / "measured.csv"), "--model", "demo_mill", "--report", str(report), "--out", str(tmp_path / "out")]
     assert main(args) == 0
@@ -609,7 +613,7 @@ def test_cli_prints_the_story_and_writes_the_contract_report(tmp_path, capsys):
     corrected = load_model(tmp_path / "out" / "corrected_model.toml")
     assert [(e.name, e.axis) for e in corrected.effects] == [("backlash", "y")]
     assert corrected.effects[0]["lost_motion_um"] == pytest.approx(data["effects"][0]["parameters"]["lost_motion_um"])
-    assert corrected.machine.axes["x"].kp == mill.axes["x"].kp  # the controller as given
+    assert corrected.machine.axes["x"].kp == load_machine("demo_mill").axes["x"].kp  # the controller as given
     # a file at --report that is not a diagnosis report is never replaced
     report.write_text("my notes")
     assert main(args) == 2
@@ -619,10 +623,7 @@ def test_cli_prints_the_story_and_writes_the_contract_report(tmp_path, capsys):
 
 def test_cli_writes_report_and_plots_before_a_reader_can_go(tmp_path, monkeypatch):
     """``contoursim diagnose ... | head -1``: the report and the plots are written before the story is printed."""
-    mill = load_machine("demo_mill")
-    path = paths.iso230_4_circle(10.0)
-    reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), mill.servo_period)
-    write_trace(tmp_path / "measured.csv", synthetic_trace(Model(mill), reference, every=5, seed=3))
+    write_mill_circle(tmp_path / "measured.csv")
     report = tmp_path / "r.json"
     monkeypatch.setattr(sys, "stdout", reader_gone := ReaderGone())
     with pytest.raises(BrokenPipeError):
@@ -662,10 +663,7 @@ def test_a_refit_near_the_stability_edge_leaves_out_what_diverges_and_shortens_i
 
 def test_cli_diagnose_names_the_model_file_when_no_plant_in_its_prior_passes_the_check(tmp_path, capsys):
     """A position gain of 900/s fails the check for any plant within its prior: the check's message, naming the file."""
-    mill = load_machine("demo_mill")
-    path = paths.iso230_4_circle(10.0)
-    reference = sample(path, plan(path, feed=1500 / 60, accel=1000.0, jerk=5e4), mill.servo_period)
-    write_trace(tmp_path / "measured.csv", synthetic_trace(Model(mill), reference, every=5, seed=3))
+    write_mill_circle(tmp_path / "measured.csv")
     model = tmp_path / "edge.toml"
     model.write_text((ROOT / "contoursim" / "presets" / "demo_mill.toml").read_text().replace("kp_per_s = 40.0", "kp_per_s = 900.0", 1))
     assert main(["diagnose", str(tmp_path / "measured.csv"), "--model", str(model), "--out", str(tmp_path / "out")]) == 2
