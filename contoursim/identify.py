@@ -17,6 +17,9 @@ position loop around a P or PI velocity loop with velocity feedforward:
 - per axis, where the trace shows it, the velocity loop's integral time
   ``ti`` (as ``ti·ω_v``, between 1.5 and 50): most drives run PI velocity
   loops, which a P loop can only imitate with an unbounded ``ω_v``;
+- per axis, behind a PI loop and where the trace shows it, the viscous
+  damping, as the mechanical pole ``c/m`` (0.01–100 /s): the integrator
+  holds the steady speed against it, the pole shows in the transients;
 - ONE drive structure for all axes (:data:`STATE` or one of
   :data:`DRIVES`): the velocity loop closed on the motor velocity itself,
   or, as real drives do, on the backward difference of the encoder over 1
@@ -38,7 +41,11 @@ first without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
 transients tell them apart; then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
-integrator). These stages run on the state
+integrator), and where the feedforward was not kept, the PI loop is fitted
+again from the P fit with it and the feedforward kept when the BIC prefers
+it (a P loop's transients, not the drive's, may hide it: the steady lag
+then went to kp alone, five times the drive's); then with the damping,
+kept likewise. These stages run on the state
 structure; each drive structure of :data:`DRIVES` is then fitted from
 there with the same parameters free, and the best one replaces the state
 structure when it is significant (:func:`delta_bic`, the choice counted
@@ -83,6 +90,7 @@ _FD_STEP = 1e-3
 _DIVERGED = 1e6  # a residual entry beyond this many tracking errors (its RMS) is a loop that diverged
 _BANDWIDTH_FRACTION = 0.2  # highest identified velocity-loop bandwidth, a fraction of the Nyquist frequency
 _TI_RANGE = (1.5, 50.0)  # range of ti·ω_v of an identified PI velocity loop [-]
+_POLE_RANGE = (0.01, 100.0)  # range of the mechanical pole c/m of an identified viscous damping [1/s]
 
 
 def servo_period_for(dt):
@@ -102,16 +110,18 @@ def servo_period_for(dt):
 
 
 def _machine(axes, period, x, structure=STATE):
-    """The machine of ``x = (log kp, vff, log ω_v per axis[, log(ti·ω_v) per axis])`` (the last: a PI velocity loop)
-    with the drive `structure` on every axis."""
+    """The machine of ``x = (log kp, vff, log ω_v per axis[, log(ti·ω_v) per axis[, log(c/m) per axis]])`` (a PI
+    velocity loop; the viscous damping as the mechanical pole ``c/m`` [1/s]) with the drive `structure` on every axis."""
     kp, vff = float(np.exp(x[0])), float(x[1])
     d = len(axes)
     servos = {}
     for i, a in enumerate(axes):
         w = float(np.exp(x[2 + i]))
         ti = float(np.exp(x[2 + d + i])) / w if len(x) > 2 + d else None
+        damping = float(np.exp(x[2 + 2 * d + i])) * MASS if len(x) > 2 + 2 * d else 0.0
         servos[a] = AxisServo(mass=MASS, force_constant=FORCE_CONSTANT, kv=w * MASS / FORCE_CONSTANT, kp=kp, vff=vff, ti=ti,
-                              velocity_feedback=structure[0], velocity_taps=structure[1], computation_delay=structure[2])
+                              damping=damping, velocity_feedback=structure[0], velocity_taps=structure[1],
+                              computation_delay=structure[2])
     return Machine(servos, period, name="identified from the trace")
 
 
@@ -166,8 +176,9 @@ def identify_machine(trace, servo_period=None, progress=None):
     nyquist = np.pi / period
     d = len(axes)
     top = _BANDWIDTH_FRACTION * nyquist
-    lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d)
-    upper = np.array([np.log(0.5 * top), 1.0] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d)
+    lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d + [np.log(_POLE_RANGE[0])] * d)
+    upper = np.array([np.log(0.5 * top), 1.0] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d
+                     + [np.log(_POLE_RANGE[1])] * d)
     x0 = np.clip(x0, lower[: x0.size] + 1e-6, upper[: x0.size] - 1e-6)
     measured = trace.actual
     scale = max(float(np.std(trace.tracking_error)), 1e-6)
@@ -238,16 +249,32 @@ def identify_machine(trace, servo_period=None, progress=None):
     feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
     best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
     # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
-    x3 = np.concatenate([best, np.full(d, np.log(4.0))])
-    x3[2: 2 + d] = np.minimum(x3[2: 2 + d], np.log(0.5 * top))
-    free = np.ones(x3.size, bool)
+    def with_integrator(x):
+        x = np.concatenate([x, np.full(d, np.log(4.0))])
+        x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
+        return x
+
+    free = np.ones(x0.size + d, bool)
     free[1] = feedforward
-    x3 = fitted(x3, free, STATE)
+    x3 = fitted(with_integrator(best), free, STATE)
     rss3, tau = rss(x3, STATE)
+    added = d  # the parameters the PI loop adds to the fit kept so far
+    if not feedforward:  # the feedforward once more, behind the PI loop: a P loop's transients may hide it
+        x3f = fitted(with_integrator(x2), np.ones(free.size, bool), STATE)
+        rss3f, tau3f = rss(x3f, STATE)
+        if delta_bic(rss3, rss3f, measured.size, 1, tau3f) > 0:
+            x3, rss3, tau, added, free[1] = x3f, rss3f, tau3f, d + 1, True
     # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
     pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
-    if delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed and rss3 <= rss0):
-        best, rss0 = x3, rss3
+    if delta_bic(rss0, rss3, measured.size, added, tau) > SIGNIFICANT or (pressed and rss3 <= rss0):
+        best, rss0, added, feedforward = x3, rss3, 0, free[1]
+    # the viscous damping behind the PI loop (its integrator holds the steady speed, the mechanical pole c/m shows in
+    # the transients), started at a mechanical time constant of a second; kept likewise, counted with the PI loop
+    # where that alone was not kept
+    x4 = fitted(np.concatenate([x3, np.zeros(d)]), np.concatenate([free, np.ones(d, bool)]), STATE)
+    rss4, tau = rss(x4, STATE)
+    if delta_bic(rss0, rss4, measured.size, d + added, tau) > SIGNIFICANT:
+        best, rss0, feedforward = x4, rss4, free[1]
     # the sampled drive structures, each fitted from the state structure's fit with the same parameters free
     found = [(rss0, STATE, best)]
     free = np.ones(best.size, bool)
