@@ -45,8 +45,9 @@ The workflow (:func:`diagnose`):
    model error counts for less than white noise). The best is accepted when
    ``ΔBIC > SIGNIFICANT`` (very strong evidence on the Kass–Raftery scale)
    and it closes at least :data:`GAP_SHARE` of the residual's power above
-   the noise floor (where unmodelled dynamics dominate the residual, a
-   catalogue effect bent to them is significant yet closes a sliver);
+   the noise floor on the axes it acts on (where unmodelled dynamics
+   dominate the residual, a catalogue effect bent to them is significant
+   yet closes a sliver);
    the search repeats for a second and a third effect and stops when
    nothing is significant or the residual is at the noise floor
    (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
@@ -95,8 +96,9 @@ STRUCTURE_SHARE = 0.5
 #: The residual is at the noise floor when its RMS is within this factor of the noise estimated from the
 #: trace (the estimate itself is good to a few % on quantised, non-Gaussian noise): nothing more is named.
 NOISE_FLOOR = 1.1
-#: An effect is named only when it closes at least this share of the residual's power above the noise floor
-#: (RMS² − floor²): a significant fit that closes a sliver of a gap made by unmodelled dynamics is not the missing effect.
+#: An effect is named only when it closes at least this share of the residual's power above the noise floor on the
+#: axes it acts on (RMS² − floor²): a significant fit that closes a sliver of a gap made by unmodelled dynamics is
+#: not the missing effect.
 GAP_SHARE = 0.25
 #: How well a nominal servo parameter is known (1σ, relative): the prior of the nominal refit (for the moving
 #: mass of a given model, and for every servo parameter of an identified one).
@@ -114,6 +116,7 @@ _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (
 # the trace, the largest spread (the estimate grows with the segments' length until they outlast the residual's
 # correlations, and the fewer the segments the noisier it is: no one length is right for every trace)
 _JACKKNIFE_BLOCKS = (40, 20, 10)
+_PRIOR_REACH = 3.0  # a given model's plant refitted further than this many prior widths from its nominal is said
 _BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–Newton step tried, the first that helps kept
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _SLOWEST_LOG = 0.01  # a trace sampled slower than this [s] does not resolve servo dynamics (a position loop's 1/kp)
@@ -964,6 +967,8 @@ def _nuisance_changes(model, axes, identified):
     for a in axes:
         s = servos[a]
         changes.append(({a: {"kv": s.kv * h}}, NOMINAL_SPREAD))  # the velocity loop's gain over the mass: its bandwidth
+        if s.damping > 0:
+            changes.append(({a: {"damping": s.damping * h}}, DAMPING_SPREAD))
         if s.aff > 0:
             changes.append(({a: {"mass": s.mass * h}}, NOMINAL_SPREAD))
     return changes
@@ -1062,6 +1067,23 @@ def _refitted(model, changes, coef, fraction=1.0):
                 value = old + fraction * float(np.clip(c * (stepped - old), -reach, reach))
                 new.setdefault(axis, {})[field] = min(value, 1.0) if field == "vff" else value
     return _with_servos(model, new)
+
+
+def _far_from_prior(nominal, refitted, axes):
+    """A warning for each plant parameter the nominal refit moved more than :data:`_PRIOR_REACH` prior widths."""
+    said = []
+    for change, spread in _nuisance_changes(Model(nominal), axes, identified=False):
+        (axis, fields), = change.items()
+        (name, _), = fields.items()
+        centre, value = getattr(nominal.axes[axis], name), getattr(refitted.axes[axis], name)
+        if value is None:  # the axis's structure changed: a compliant screw taken as rigid for a vibration's mode
+            continue
+        widths = abs(value / centre - 1.0) / spread
+        if widths > _PRIOR_REACH:
+            said.append(f"{axis}.{name}: the nominal refit moved it {widths:.3g} prior widths ({value:.6g} against the "
+                        f"model's {centre:.6g}): more than a data sheet is off; the trace pulls it towards something "
+                        "the model lacks (see what the residual correlates with)")
+    return said
 
 
 @dataclass
@@ -1691,6 +1713,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             say("nothing significant left: stopping")
             break
         best, ambiguity = _choose(problem, cands, both_ways)
+        gap = (trace.actual - problem.fitted())[scored]  # what the base leaves, per axis [mm]
         try:
             _settle(problem, base, best, warnings)
         except _FIT_FAILURES as exc:
@@ -1704,12 +1727,15 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                 if np.isfinite(step.rms_um) else "the model with it in place does not follow the trace (its simulation diverged)"))
             problem.set_base(base)
             break
-        floor = float(np.linalg.norm(noise)) * 1e3
-        share = (steps[-1].rms_um**2 - step.rms_um**2) / max(steps[-1].rms_um**2 - floor**2, 1e-300)
+        # the gap on the axes the effect acts on: another axis's misfit is none of its business
+        on = [trace.axes.index(a) for a in best.fit.axis]
+        before_um, after_um = (_rms_um(r[:, on]) for r in (gap, (trace.actual - problem.fitted())[scored]))
+        floor = float(np.linalg.norm(noise[on])) * 1e3
+        share = (before_um**2 - after_um**2) / max(before_um**2 - floor**2, 1e-300)
         if share < GAP_SHARE:  # significant, but a sliver of the gap: model error the effect bends to, not the effect
             warnings.append(f"{best.fit.label}: not named, it closes {share:.0%} of the residual above the noise floor "
-                            f"({steps[-1].rms_um:.4g} -> {step.rms_um:.4g} µm RMS, floor {floor:.3g} µm; named from "
-                            f"{GAP_SHARE:.0%})")
+                            f"on {best.fit.axis} ({before_um:.4g} -> {after_um:.4g} µm RMS, floor {floor:.3g} µm; "
+                            f"named from {GAP_SHARE:.0%})")
             problem.set_base(base)
             break
         if ambiguity is not None:
@@ -1727,6 +1753,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                 warnings.append(f"{step.effect.label}: with one position gain identified for both axes only the ratio of "
                                 f"their gains is known; kp_ratio {step.effect['kp_ratio']:.4g} on "
                                 f"{step.effect.axis} is the same machine as {1.0 / step.effect['kp_ratio']:.4g} on {other}")
+    if not identified:
+        warnings += _far_from_prior(problem.nominal, problem.base.machine, trace.axes)
     after = problem.fitted()
     left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
     warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "

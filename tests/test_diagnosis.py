@@ -661,6 +661,45 @@ def test_a_refit_near_the_stability_edge_leaves_out_what_diverges_and_shortens_i
     assert np.isfinite(result.steps[-1].rms_um) and result.steps[1].rms_um < result.steps[0].rms_um
 
 
+def test_a_refit_pulled_far_beyond_its_prior_is_said(independent_truth, tmp_path):
+    """An independent two-mass axis with a 7.4 µm backlash its data sheet does not know: before any effect is tried
+    the trace pulls the refit's x mass from 486 to 246 kg (−49 %, ten prior widths of 5 %), taking the backlash's
+    signature at the reversals. The report says so, naming the parameter and how far, and says nothing of those
+    within three prior widths."""
+    from contoursim.diagnosis import NOMINAL_SPREAD
+
+    case = independent_truth.make_case("two_mass", "backlash", 549564284, tmp_path)
+    model = load_model(case.machine_file, check=False)
+    result = diagnose(read_trace(case.csv), model, max_effects=0)
+    mass = result.refitted.machine.axes["x"].mass / model.machine.axes["x"].mass - 1.0
+    assert mass < -3 * NOMINAL_SPREAD
+    said = [w for w in result.warnings if "prior widths" in w and "more than a data sheet is off" in w]
+    assert any(w.startswith(f"x.mass: the nominal refit moved it {abs(mass) / NOMINAL_SPREAD:.3g} prior widths")
+               for w in said), said
+    assert not any(w.startswith("y.mass") for w in said)
+    assert abs(result.refitted.machine.axes["y"].mass / model.machine.axes["y"].mass - 1.0) <= 3 * NOMINAL_SPREAD
+
+
+def test_a_vibration_named_on_a_compliant_axis_leaves_its_screw_out_of_the_refit_report(independent_truth, tmp_path):
+    """An independent two-mass pair with a tool-side mode on y: the vibration is tried and named with y's compliant
+    screw taken as rigid (one structural mode per axis), so the refitted machine has no screw on y to weigh against
+    its prior (its motor side's mass is None there: the run ended in a TypeError)."""
+    case = independent_truth.make_case("two_mass", "vibration", 933108754, tmp_path)
+    result = diagnose(read_trace(case.csv), load_model(case.machine_file, check=False))
+    assert [(e.name, e.axis) for e in result.effects] == [("vibration", "y")], result.report()
+    assert result.refitted.machine.axes["y"].motor_mass is None
+
+
+def test_an_effect_on_one_axis_is_weighed_against_that_axis_gap_only(independent_truth, tmp_path):
+    """An independent rigid pair with a −54 ppm scale error on x, diagnosed without a model: the identified loop
+    leaves 1.3 µm of misfit on y, which the scale error cannot touch. Against the whole residual it closed 17 % of
+    the gap (not named: GAP_SHARE); against x's own, most of it, and it is named with its sign."""
+    case = independent_truth.make_case("rigid", "scale_error", 154790205, tmp_path)
+    result = diagnose(read_trace(case.csv))
+    assert [(e.name, e.axis) for e in result.effects] == [("scale_error", "x")], result.report()
+    assert result.effects[0]["ppm"] == pytest.approx(case.truth["parameters"]["ppm"], rel=0.2)
+
+
 def test_cli_diagnose_names_the_model_file_when_no_plant_in_its_prior_passes_the_check(tmp_path, capsys):
     """A position gain of 900/s fails the check for any plant within its prior: the check's message, naming the file."""
     write_mill_circle(tmp_path / "measured.csv")
