@@ -1005,8 +1005,8 @@ def _stable_start(model, axes):
                 (name, _), = change[a].items()
                 value = getattr(model.machine.axes[a], name)
                 for moved in (value * (1.0 + widths * spread), value * (1.0 - widths * spread)):
-                    trial = _with_servos(model, {a: {name: moved}})
-                    try:
+                    try:  # a move past a parameter's own range (a damping ratio to 0) is no plant: skipped
+                        trial = _with_servos(model, {a: {name: moved}})
                         margin = min(m["gain_margin"] for m in trial.machine.axes[a].check(dt, a).values())
                     except (UnstableLoopError, ValueError):
                         continue
@@ -1149,8 +1149,9 @@ def _candidates(problem, model, warnings):
                 [{"amplitude_um": v, "phase_deg": ph} for v in (1.0, 3.0) for ph in (0.0, 90.0, 180.0, 270.0)])
         # the guideway's bow over the axis's travel (machine coordinates); without one, over the trace's own extent
         start, end = model.machine.travel.get(a, (float(q.min()), float(q.max())))
+        shortest = next(p.bounds[0] for p in effect_kind("straightness").parameters if p.name == "span_mm")
         for b in axes:
-            if b != a and end > start:
+            if b != a and end - start >= shortest:  # a bow over less travel than that is no guideway's
                 add(Effect("straightness", a, peak_um=1.0, span_mm=end - start, start_mm=start, error_direction=b),
                     ("peak_um",), [{"peak_um": v} for v in sizes("straightness")])
     for a, b in combinations(axes, 2):
