@@ -448,11 +448,12 @@ def diagnose_command(args):
     finally:
         if sys.stderr.isatty():
             sys.stderr.write("\n")
+    out = output_dir(args.out)  # before the report: a refused folder leaves no report of a run that ended in an error
     if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")
-    save_figures(result, args.out)
-    with output_dir(args.out).write("corrected_model.toml") as stream:
+    save_figures(result, out)
+    with out.write("corrected_model.toml") as stream:
         stream.write(result.corrected_model())
     print(result.report())
     if report is not None:

@@ -253,3 +253,40 @@ def test_path_numbers_far_out_of_range_end_in_one_line(tmp_path, capsys, old, ne
     assert old in helix
     (tmp_path / "h.toml").write_text(helix.replace(old, new, 1))
     _refused(capsys, ["simulate", str(tmp_path / "h.toml"), "--out", str(tmp_path / "out")], f"{tmp_path / 'h.toml'}, ", words)
+
+
+# -- found by fuzzing the command line (issue 18, item 8) ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("model", [[], ["--model", "demo_mill"]])
+def test_a_trace_over_less_than_a_mm_is_diagnosed_without_a_straightness_over_it(tmp_path, capsys, model):
+    """Five samples over 55 µm of travel: a guideway's bow over less than 1 mm (straightness's shortest span) is no
+    candidate; it was the end of the run ('straightness.x: span_mm must lie in [1, 100000] mm')."""
+    rows = [f"{k * 1e-3:.3f},{100 + 0.011 * k:.6f},{100 + 0.011 * k - 0.0003:.6f},20,20" for k in range(6)]
+    (tmp_path / "short.csv").write_text("t,x_ref,x,y_ref,y\n" + "\n".join(rows) + "\n")
+    assert main(["diagnose", str(tmp_path / "short.csv"), *model, "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "error" not in err and "Warning" not in err, err
+
+
+def test_a_report_is_not_written_when_the_output_folder_is_refused(tmp_path, capsys):
+    """The --out folder is checked before the report is written: a run that ends in exit 2 leaves no report."""
+    t = np.arange(50) * 1e-3
+    trace = _trace(tmp_path / "m.csv", t, np.zeros(50), np.zeros(50))
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine\n")
+    assert main(["diagnose", str(trace), "--report", str(tmp_path / "r.json"), "--out", str(tmp_path / "mine")]) == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    assert errors == [f"contoursim diagnose: error: {tmp_path / 'mine'} holds files that contoursim did not write; "
+                      "choose another output directory"]
+    assert not (tmp_path / "r.json").exists()
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["notes.txt"]
+
+
+def test_a_program_along_z_only_is_plotted_without_a_numpy_warning(tmp_path, capsys):
+    """A plunge and retract: nothing moves in XY, the plane the path plots draw (it divided by its zero extent)."""
+    (tmp_path / "plunge.nc").write_text("G21 G90\nG0 X0 Y0 Z0\nG1 Z-5 F300\nG1 Z0\nM30\n")
+    assert main(["simulate", str(tmp_path / "plunge.nc"), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "Warning" not in err, err
+    assert (tmp_path / "out" / "plunge_path.png").stat().st_size > 0
