@@ -290,3 +290,16 @@ def test_a_program_along_z_only_is_plotted_without_a_numpy_warning(tmp_path, cap
     err = capsys.readouterr().err
     assert "Warning" not in err, err
     assert (tmp_path / "out" / "plunge_path.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("start", [0.0, 5e5])
+def test_a_trace_stamped_by_a_clock_running_for_days_is_diagnosed(tmp_path, capsys, start):
+    """Time stamps since a controller's power-on (5e5 s: six days) step in multiples of their resolution (1e-10 s):
+    the reference made from them is at the servo period to that resolution, not to 1e-9 of it (it was refused: 'the
+    trajectory is sampled every 0.0002 s but the servo period is 0.0002 s')."""
+    t = np.arange(400) * 1e-3
+    x = 2.0 * (1.0 - np.cos(np.pi * t / t[-1]))
+    trace = _trace(tmp_path / "clock.csv", start + t, x, x, head="# units: t [s]\n")
+    assert main(["diagnose", str(trace), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "error" not in err and "Warning" not in err, err
