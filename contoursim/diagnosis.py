@@ -356,7 +356,8 @@ class Diagnosis:
                     for p in s.effect.parameters if p.name in s.uncertainty or p.value != default[p.name]
                 ) + "".join(f", {k} = {v}" for k, v in s.effect.options.items())
             bic = "" if np.isnan(s.delta_bic) else f"{s.delta_bic:.0f}"
-            lines.append(f"{s.label:<28}{text:<52}{s.rms_um:>10.3f}{s.max_um:>10.3f}{bic:>10}")
+            # a space before each column, however wide its value (a residual of metres on a trace in wrong units)
+            lines.append(f"{s.label:<27} {text:<51} {s.rms_um:>9.3f} {s.max_um:>9.3f} {bic:>9}")
         noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
         lines.append(f"noise floor [µm RMS]: {noise}")
         if self.current_before:

@@ -303,3 +303,15 @@ def test_a_trace_stamped_by_a_clock_running_for_days_is_diagnosed(tmp_path, caps
     assert main(["diagnose", str(trace), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
     assert "error" not in err and "Warning" not in err, err
+
+
+def test_the_diagnosis_table_keeps_its_columns_apart_for_a_residual_of_metres(tmp_path, capsys):
+    """A known force of 1e8 N pushes the simulated axis metres away: its RMS and max still read as two numbers."""
+    t = np.arange(300) * 1e-3
+    x = 2.0 * (1.0 - np.cos(np.pi * t / t[-1]))
+    rows = "\n".join(f"{a:.3f},{b:.6f},{b:.6f},1e8" for a, b in zip(t, x))
+    (tmp_path / "pushed.csv").write_text("t,x_ref,x,x_force\n" + rows + "\n")
+    assert main(["diagnose", str(tmp_path / "pushed.csv"), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 0
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("nominal model "))
+    label, rms, largest = line[:27], *line[27:].split()
+    assert label.strip() == "nominal model" and 1e6 < float(rms) <= float(largest), line
