@@ -113,7 +113,10 @@ def run_job(model, path_file, job=None, strategies=(), label=None, direction=Non
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
-        result = simulate(model, trajectory, strategies, settle=0.0)  # held already
+        try:
+            result = simulate(model, trajectory, strategies, settle=0.0)  # held already
+        except ValueError as exc:  # the path against the machine (its axes, their travel): naming the path's file
+            raise ConfigError(str(exc), str(path_file)) from None
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
     return name, path_file, result, program

@@ -315,3 +315,11 @@ def test_the_diagnosis_table_keeps_its_columns_apart_for_a_residual_of_metres(tm
     line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("nominal model "))
     label, rms, largest = line[:27], *line[27:].split()
     assert label.strip() == "nominal model" and 1e6 < float(rms) <= float(largest), line
+
+
+def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_file(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).split("[axes.y]")[0])  # x alone
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")],
+             f"{tmp_path / 'small.toml'}: the path moves in 2 coordinates but the machine has only 1 axis (x)")
