@@ -477,7 +477,9 @@ def locate(trace, reference, residual):
     spans = sorted(((energy[a:b].sum() / energy.sum(), a, b) for a, b in zip(edges[::2], edges[1::2])), reverse=True)
     covered = sum(b - a for _, a, b in spans) / n
     station = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(trace.reference, axis=0), axis=1))])
-    text = ", ".join(f"{t[a]:.3g}–{t[b - 1]:.3g} s" + (f" (path station {station[a]:.4g}–{station[b - 1]:.4g} mm)"
+    # 3 significant digits of the run's length: more on a clock that has run for days (t ~ 5e5 s), not '5e+05–5e+05 s'
+    digits = 3 + max(0, int(np.floor(np.log10(max(abs(t[0]), abs(t[-1])) / max(t[-1] - t[0], 1e-300) + 1e-300))))
+    text = ", ".join(f"{t[a]:.{digits}g}–{t[b - 1]:.{digits}g} s" + (f" (path station {station[a]:.4g}–{station[b - 1]:.4g} mm)"
                      if station[-1] > 0 else "") + f" ({100 * share:.0f} %)" for share, a, b in spans[:3])
     found.append(f"the residual energy concentrates in {text} ({100 * covered:.0f} % of the time)"
                  if covered < 0.5 else f"the residual is spread over the run (the largest part: {text})")
