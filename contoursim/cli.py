@@ -630,10 +630,10 @@ def main(argv=None, compile_notice=False):
 
     def show(message, category, filename, lineno, *details):
         if issubclass(category, ContoursimWarning):
-            print(f"contoursim {args.command}: warning: {message}", file=sys.stderr)
+            _stderr_line(f"contoursim {args.command}: warning: {message}")
         else:  # a backstop: one line, saying where (the sources of such warnings are guarded)
-            print(f"contoursim {args.command}: warning: {category.__name__}: {message} "
-                  f"({Path(filename).name}, line {lineno})", file=sys.stderr)
+            _stderr_line(f"contoursim {args.command}: warning: {category.__name__}: {message} "
+                         f"({Path(filename).name}, line {lineno})")
 
     try:
         with warnings.catch_warnings(), _compile_notice(args.command) if compile_notice else nullcontext():
@@ -667,14 +667,20 @@ def _compile_notice(command):
 
     from ._numba import CompileClock
 
-    clock = CompileClock(lambda: print(f"contoursim {command}: compiling the numba functions of the simulation, once "
-                                       "(later runs load them from the cache) ...", file=sys.stderr, flush=True))
+    clock = CompileClock(lambda: _stderr_line(f"contoursim {command}: compiling the numba functions of the simulation, "
+                                              "once (later runs load them from the cache) ..."))
     try:
         with install_listener("numba:compile", clock):
             yield
     finally:
         if clock.seconds:
-            print(f"contoursim {command}: compiled in {clock.seconds:.1f} s", file=sys.stderr, flush=True)
+            _stderr_line(f"contoursim {command}: compiled in {clock.seconds:.1f} s")
+
+
+def _stderr_line(text):
+    """Print `text` as a line of its own on stderr: on a terminal, over the progress line showing there
+    (:func:`_progress_line`), which the next progress line writes again below it."""
+    print(("\r\x1b[K" if sys.stderr.isatty() else "") + text, file=sys.stderr, flush=True)
 
 
 def run():
