@@ -216,12 +216,20 @@ def _job(args, extra_keys=()):
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
-            model = load_model(near(data["machine"]))
+            def named(key, find):
+                try:
+                    return find(near(data[key]))
+                except ConfigError as exc:
+                    if exc.source is None:  # a name that is no file and no preset: said where the job names it
+                        raise job.error(str(exc), key) from None
+                    raise
+
+            model = named("machine", load_model)
             machine = model.machine
             if "work_offset" in data:
                 machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
             model = with_file_effects(replace(model, machine=machine), job)
-            return model, library_file(near(data["path"])), job, geometric
+            return model, named("path", library_file), job, geometric
     return load_model(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
@@ -262,7 +270,8 @@ def simulate_command(args):
     if job is not None and "strategy" in job.data:
         raise job.error("[[strategy]] tables set the strategies of contoursim compare; simulate runs none", "strategy")
     if (geometric or args.geometric_compensation) and machine.chain is None:
-        raise ConfigError(f"{machine.name} has no geometric model to compensate with")
+        message = f"{machine.name} has no geometric model ([[body]] tables) to compensate with"
+        raise job.error(message, "geometric_compensation") if geometric else ConfigError(f"--geometric-compensation: {message}")
     ballbar = _ballbar(job)
     if ballbar is not None and load_path_file(path_file)[0].test_circle() is None:
         raise job.error(f"[ballbar] needs a circular test: {Path(path_file).name} has no test circle (use a path of "

@@ -325,3 +325,17 @@ def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_f
     _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
                       str(tmp_path / "out")],
              f"{tmp_path / 'small.toml'}: the path moves in 2 coordinates but the machine has only 1 axis (x)")
+
+
+@pytest.mark.parametrize("job, line, words", [
+    ('machine = "demo_mil"\npath = "small.toml"\n', 1, "no machine file 'demo_mil' and no preset of that name"),
+    ('machine = "demo_mill"\npath = "smal.toml"\n', 2, "no path file 'smal.toml' here nor in the trajectories library"),
+    ('machine = "demo_mill"\npath = "small.toml"\ngeometric_compensation = true\n', 3,
+     "demo mill (3 servo axes) has no geometric model ([[body]] tables) to compensate with"),
+])
+def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys, job, line, words):
+    """A misspelt machine or path, a compensation the machine cannot make: the job file's line (they named no file)."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "job.toml").write_text(job)
+    _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'job.toml'}, line {line}: {words}")
