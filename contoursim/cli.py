@@ -496,7 +496,7 @@ def sweep_command(args):
     table = run_sweep(sweep, args.scheduler, progress=Progress())
     out, chosen = write_results(sweep, table, args.out)
     diverged = int(table[:, FIGURES.index("diverged")].sum())
-    print(f"{diverged} of {len(table)} variants diverged or were refused by the coupled-loop check")
+    print(f"{diverged} of {len(table)} variants diverged or were refused by a loop check (the axes' or the coupled loop's)")
     if chosen is not None:
         for label, i in zip(("best", "worst"), chosen):
             values = ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
