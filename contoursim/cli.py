@@ -113,7 +113,10 @@ def run_job(model, path_file, job=None, strategies=(), label=None, direction=Non
     name = label or Path(path_file).stem
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ContoursimWarning)
-        result = simulate(model, trajectory, strategies, settle=0.0)  # held already
+        try:
+            result = simulate(model, trajectory, strategies, settle=0.0)  # held already
+        except ValueError as exc:  # the path against the machine (its axes, their travel): naming the path's file
+            raise ConfigError(str(exc), str(path_file)) from None
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
     return name, path_file, result, program
@@ -213,12 +216,20 @@ def _job(args, extra_keys=()):
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
-            model = load_model(near(data["machine"]))
+            def named(key, find):
+                try:
+                    return find(near(data[key]))
+                except ConfigError as exc:
+                    if exc.source is None:  # a name that is no file and no preset: said where the job names it
+                        raise job.error(str(exc), key) from None
+                    raise
+
+            model = named("machine", load_model)
             machine = model.machine
             if "work_offset" in data:
                 machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
             model = with_file_effects(replace(model, machine=machine), job)
-            return model, library_file(near(data["path"])), job, geometric
+            return model, named("path", library_file), job, geometric
     return load_model(args.machine or DEMO_MACHINE), library_file(args.file), None, False
 
 
@@ -259,7 +270,8 @@ def simulate_command(args):
     if job is not None and "strategy" in job.data:
         raise job.error("[[strategy]] tables set the strategies of contoursim compare; simulate runs none", "strategy")
     if (geometric or args.geometric_compensation) and machine.chain is None:
-        raise ConfigError(f"{machine.name} has no geometric model to compensate with")
+        message = f"{machine.name} has no geometric model ([[body]] tables) to compensate with"
+        raise job.error(message, "geometric_compensation") if geometric else ConfigError(f"--geometric-compensation: {message}")
     ballbar = _ballbar(job)
     if ballbar is not None and load_path_file(path_file)[0].test_circle() is None:
         raise job.error(f"[ballbar] needs a circular test: {Path(path_file).name} has no test circle (use a path of "
@@ -448,11 +460,12 @@ def diagnose_command(args):
     finally:
         if sys.stderr.isatty():
             sys.stderr.write("\n")
+    out = output_dir(args.out)  # before the report: a refused folder leaves no report of a run that ended in an error
     if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")
-    save_figures(result, args.out)
-    with output_dir(args.out).write("corrected_model.toml") as stream:
+    save_figures(result, out)
+    with out.write("corrected_model.toml") as stream:
         stream.write(result.corrected_model())
     print(result.report())
     if report is not None:
@@ -483,7 +496,7 @@ def sweep_command(args):
     table = run_sweep(sweep, args.scheduler, progress=Progress())
     out, chosen = write_results(sweep, table, args.out)
     diverged = int(table[:, FIGURES.index("diverged")].sum())
-    print(f"{diverged} of {len(table)} variants diverged or were refused by the coupled-loop check")
+    print(f"{diverged} of {len(table)} variants diverged or were refused by a loop check (the axes' or the coupled loop's)")
     if chosen is not None:
         for label, i in zip(("best", "worst"), chosen):
             values = ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
@@ -626,10 +639,10 @@ def main(argv=None, compile_notice=False):
 
     def show(message, category, filename, lineno, *details):
         if issubclass(category, ContoursimWarning):
-            print(f"contoursim {args.command}: warning: {message}", file=sys.stderr)
+            _stderr_line(f"contoursim {args.command}: warning: {message}")
         else:  # a backstop: one line, saying where (the sources of such warnings are guarded)
-            print(f"contoursim {args.command}: warning: {category.__name__}: {message} "
-                  f"({Path(filename).name}, line {lineno})", file=sys.stderr)
+            _stderr_line(f"contoursim {args.command}: warning: {category.__name__}: {message} "
+                         f"({Path(filename).name}, line {lineno})")
 
     try:
         with warnings.catch_warnings(), _compile_notice(args.command) if compile_notice else nullcontext():
@@ -663,14 +676,20 @@ def _compile_notice(command):
 
     from ._numba import CompileClock
 
-    clock = CompileClock(lambda: print(f"contoursim {command}: compiling the numba functions of the simulation, once "
-                                       "(later runs load them from the cache) ...", file=sys.stderr, flush=True))
+    clock = CompileClock(lambda: _stderr_line(f"contoursim {command}: compiling the numba functions of the simulation, "
+                                              "once (later runs load them from the cache) ..."))
     try:
         with install_listener("numba:compile", clock):
             yield
     finally:
         if clock.seconds:
-            print(f"contoursim {command}: compiled in {clock.seconds:.1f} s", file=sys.stderr, flush=True)
+            _stderr_line(f"contoursim {command}: compiled in {clock.seconds:.1f} s")
+
+
+def _stderr_line(text):
+    """Print `text` as a line of its own on stderr: on a terminal, over the progress line showing there
+    (:func:`_progress_line`), which the next progress line writes again below it."""
+    print(("\r\x1b[K" if sys.stderr.isatty() else "") + text, file=sys.stderr, flush=True)
 
 
 def run():

@@ -359,7 +359,8 @@ class Diagnosis:
                     for p in s.effect.parameters if p.name in s.uncertainty or p.value != default[p.name]
                 ) + "".join(f", {k} = {v}" for k, v in s.effect.options.items())
             bic = "" if np.isnan(s.delta_bic) else f"{s.delta_bic:.0f}"
-            lines.append(f"{s.label:<28}{text:<52}{s.rms_um:>10.3f}{s.max_um:>10.3f}{bic:>10}")
+            # a space before each column, however wide its value (a residual of metres on a trace in wrong units)
+            lines.append(f"{s.label:<27} {text:<51} {s.rms_um:>9.3f} {s.max_um:>9.3f} {bic:>9}")
         noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
         lines.append(f"noise floor [µm RMS]: {noise}")
         if self.current_before:
@@ -479,7 +480,9 @@ def locate(trace, reference, residual):
     spans = sorted(((energy[a:b].sum() / energy.sum(), a, b) for a, b in zip(edges[::2], edges[1::2])), reverse=True)
     covered = sum(b - a for _, a, b in spans) / n
     station = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(trace.reference, axis=0), axis=1))])
-    text = ", ".join(f"{t[a]:.3g}–{t[b - 1]:.3g} s" + (f" (path station {station[a]:.4g}–{station[b - 1]:.4g} mm)"
+    # 3 significant digits of the run's length: more on a clock that has run for days (t ~ 5e5 s), not '5e+05–5e+05 s'
+    digits = 3 + max(0, int(np.floor(np.log10(max(abs(t[0]), abs(t[-1])) / max(t[-1] - t[0], 1e-300) + 1e-300))))
+    text = ", ".join(f"{t[a]:.{digits}g}–{t[b - 1]:.{digits}g} s" + (f" (path station {station[a]:.4g}–{station[b - 1]:.4g} mm)"
                      if station[-1] > 0 else "") + f" ({100 * share:.0f} %)" for share, a, b in spans[:3])
     found.append(f"the residual energy concentrates in {text} ({100 * covered:.0f} % of the time)"
                  if covered < 0.5 else f"the residual is spread over the run (the largest part: {text})")
@@ -1010,8 +1013,8 @@ def _stable_start(model, axes):
                 (name, _), = change[a].items()
                 value = getattr(model.machine.axes[a], name)
                 for moved in (value * (1.0 + widths * spread), value * (1.0 - widths * spread)):
-                    trial = _with_servos(model, {a: {name: moved}})
-                    try:
+                    try:  # a move past a parameter's own range (a damping ratio to 0) is no plant: skipped
+                        trial = _with_servos(model, {a: {name: moved}})
                         margin = min(m["gain_margin"] for m in trial.machine.axes[a].check(dt, a).values())
                     except (UnstableLoopError, ValueError):
                         continue
@@ -1171,8 +1174,9 @@ def _candidates(problem, model, warnings):
                 [{"amplitude_um": v, "phase_deg": ph} for v in (1.0, 3.0) for ph in (0.0, 90.0, 180.0, 270.0)])
         # the guideway's bow over the axis's travel (machine coordinates); without one, over the trace's own extent
         start, end = model.machine.travel.get(a, (float(q.min()), float(q.max())))
+        shortest = next(p.bounds[0] for p in effect_kind("straightness").parameters if p.name == "span_mm")
         for b in axes:
-            if b != a and end > start:
+            if b != a and end - start >= shortest:  # a bow over less travel than that is no guideway's
                 add(Effect("straightness", a, peak_um=1.0, span_mm=end - start, start_mm=start, error_direction=b),
                     ("peak_um",), [{"peak_um": v} for v in sizes("straightness")])
     for a, b in combinations(axes, 2):

@@ -31,7 +31,8 @@ listed in :attr:`Program.ignored` and in one
 :class:`~contoursim.exceptions.ContoursimWarning`. Refused with a message
 naming file and line: inch units (``G20``), cutter radius compensation
 (``G41 G42``), feed per revolution or inverse time (``G93 G95``), subprogram
-calls (``M98 M99``), any other word.
+calls (``M98 M99``), two words of one modal group in a block (``G2 G3``, ``G17 G19``, ``G90 G91``:
+controllers differ on which wins), any other word.
 
 Rapid moves: G0 moves before the first feed move (G1/G2/G3) only position
 the tool: the path starts where the first feed move starts. G0 moves after
@@ -238,6 +239,11 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 ignored.setdefault(f"M{m:g}", None)
         if any(m in (2, 30) for m in mcodes):
             break
+        for group in ((0, 1, 2, 3), tuple(_PLANES), (90, 91)):  # a modal group twice: Fanuc takes the last, others refuse
+            twice = [f"G{g:g}" for g in gcodes if g in group]
+            if len(twice) > 1:
+                fail(f"{' and '.join(twice)} in one block belong to one modal group (controllers differ: Fanuc takes the "
+                     "last, LinuxCNC and GRBL refuse the block): keep the one meant")
         nonmodal = None  # G4, G28, G30, G53: this block moves no axis of the contour
         for g in gcodes:
             if g in (0, 1, 2, 3):

@@ -202,7 +202,8 @@ class Machine:
         if self.chain is None:
             n = len(self.axes)
             if np.abs(p[:, n:]).max(initial=0.0) > 0:
-                raise ValueError(f"the path moves in {trajectory.dim} coordinates but the machine has only {n} axes")
+                raise ValueError(f"the path moves in {trajectory.dim} coordinates but the machine has only {n} "
+                                 f"{'axis' if n == 1 else 'axes'} ({', '.join(self.axes)})")
             self._check_travel(p[:, :n])
             return p[:, :n], v[:, :n], a[:, :n]
         home = self.home()

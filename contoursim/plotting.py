@@ -234,9 +234,16 @@ def _has_test(trajectory):
     return trajectory.path is not None and "test" in trajectory.path.roles
 
 
+def _drawing_size(points):
+    """The extent [mm] of a drawing of `points` (N, 2) in their plane: their largest extent, or 1 mm for a path that
+    moves less than 1 µm in it (one along Z only), whose drawing is then a point at the centre of a 1 mm frame."""
+    size = float(np.ptp(points, axis=0).max())
+    return size if size >= 1e-3 else 1.0
+
+
 def _shared_magnification(results):
     """One magnification for `results` drawn side by side: from the largest contour error of all."""
-    size = max(float(np.ptp(r.trajectory.position[:, :2], axis=0).max()) for r in results)
+    size = max(_drawing_size(r.trajectory.position[:, :2]) for r in results)
     return magnification_for(size, max(float(r.contour.magnitude.max()) for r in results))
 
 
@@ -304,7 +311,7 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     ax = _axes(ax)
     traj, contour = result.trajectory, result.contour
     ref = traj.position[:, :2]
-    size = float(np.ptp(ref, axis=0).max())
+    size = _drawing_size(ref)
     k = magnification_for(size, float(contour.magnitude.max())) if magnification is None else \
         _validate.positive("magnification", magnification)
     if k < 1:
@@ -757,7 +764,7 @@ def plot_compared_paths(runs, fig=None, magnification=None):
     results = list(runs.values())
     first = results[0]
     ref = first.trajectory.position[:, :2]
-    size = float(np.ptp(ref, axis=0).max())
+    size = _drawing_size(ref)
     k = _shared_magnification(results) if magnification is None else _validate.positive("magnification", magnification)
     step = size / (2 * _COLUMNS)
     ir = _thin_curve(ref, step)

@@ -349,7 +349,9 @@ def _reference(machine, reference, settle, preview=0, force=None):
                 f"above the machine's max feed {60 * machine.max_feed:.6g} mm/min: plan the path with a lower feed "
                 "(plan(..., max_feed=machine.max_feed) checks it)"
             )
-    if abs(reference.dt - machine.servo_period) > 1e-9 * machine.servo_period:
+    # to the resolution of its time stamps too: a trace's clock since power-on (t ~ 1e6 s) steps in multiples of 1e-10 s
+    resolution = 4 * float(np.spacing(max(abs(reference.t[0]), abs(reference.t[-1]))))
+    if abs(reference.dt - machine.servo_period) > 1e-9 * machine.servo_period + resolution:
         raise ValueError(
             f"the trajectory is sampled every {reference.dt:g} s but the servo period is "
             f"{machine.servo_period:g} s: sample the path at the servo period"

@@ -57,7 +57,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .config import TomlFile
-from .exceptions import ConfigError
+from .exceptions import ConfigError, UnstableLoopError
 from .simulation import SUMMARY_KEYS
 
 __all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst",
@@ -203,7 +203,8 @@ def read_sweep(file):
 
 def _integer(toml, keys, value, least):
     if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        raise toml.error(f"{'.'.join(keys)} must be a whole number, at least {least}; got {value!r}", *keys)
+        name = ".".join(k for k in keys if isinstance(k, str))  # vary.count, not the table's index
+        raise toml.error(f"{name} must be a whole number, at least {least}; got {value!r}", *keys)
     return value
 
 
@@ -379,7 +380,10 @@ def run_variants(files, names, rows):
     -------
     list of list of float
         Per variant the :data:`FIGURES` (``diverged`` as 1.0 or 0.0; a
-        diverged variant's other figures NaN).
+        diverged variant's other figures NaN). A variant whose servo loops
+        the loop check refuses (:func:`contoursim.servo.check`: unstable, too
+        poorly damped, too fast for the servo period), which ``simulate``
+        would not run, counts as diverged too.
     """
     from .simulation import simulate_batch
 
@@ -393,8 +397,22 @@ def run_variants(files, names, rows):
     for group in groups:
         summary = simulate_batch([m for m, _ in group], job.trajectory, outputs=("summary",),
                                  strategies=[s for _, s in group], settle=0.0, check=False)["summary"]
-        out += np.column_stack([summary[key].astype(float) for key in FIGURES]).tolist()
+        figures = np.column_stack([summary[key].astype(float) for key in FIGURES])
+        refused = [i for i, (model, _) in enumerate(group) if _refused(model.machine)]
+        figures[refused] = np.nan
+        figures[refused, FIGURES.index("diverged")] = 1.0
+        out += figures.tolist()
     return out
+
+
+def _refused(machine):
+    """Whether the loop check refuses a servo loop of `machine` (analysed once per servo in a process)."""
+    try:
+        for axis, servo in machine.axes.items():
+            servo.check(machine.servo_period, axis)
+    except UnstableLoopError:
+        return True
+    return False
 
 
 # ---------------------------------------------------------------------------------------------

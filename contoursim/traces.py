@@ -392,6 +392,8 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     cells = np.array([text.count(",") + 1 for text in body])
     if np.any(cells != width):
         row = int(np.argmax(cells != width))
+        if not body[row].strip():
+            raise fail(f"a blank line among the data rows: expected {width} cells (as in the header)", row)
         raise fail(f"expected {width} cells (as in the header), found {cells[row]}", row)
     try:
         data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)
@@ -401,10 +403,13 @@ def _parse_rows(body, width, index, names, limits, units, fail):
         for row, text in enumerate(body):
             cells = text.split(",")
             for col in index:
-                try:
-                    float(cells[col])
+                cell = cells[col]
+                try:  # as numpy's parser reads numbers: no digit separators (1_000), no digits but ASCII ones
+                    if "_" in cell or not cell.isascii():
+                        raise ValueError(cell)
+                    float(cell)
                 except ValueError:
-                    raise fail(f"column '{names[col]}': {cells[col].strip()!r} is not a number", row) from None
+                    raise fail(f"column '{names[col]}': {cell.strip()!r} is not a number", row) from None
         raise fail("the data rows could not be parsed", 0)
     bad = ~np.isfinite(data)
     if bad.any():

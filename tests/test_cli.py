@@ -1,5 +1,6 @@
 """The command line: the demo, simulate on job and path files, and what bad input gives."""
 
+import io
 import os
 import re
 import subprocess
@@ -771,3 +772,31 @@ def test_a_bad_ballbar_table_names_file_and_line(tmp_path, capsys, text, message
     assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "o")]) == 2
     assert re.search(message, capsys.readouterr().err)
     assert not (tmp_path / "o").exists()
+
+
+class _Terminal(io.StringIO):
+    """A standard error that is a terminal: the progress of a diagnosis rewrites one line there."""
+
+    def isatty(self):
+        return True
+
+
+def test_a_warning_during_a_diagnosis_on_a_terminal_takes_a_line_of_its_own(tmp_path, monkeypatch):
+    """The progress line is cleared before a warning (or the compile notice) is printed: it was glued to its end."""
+    import warnings
+
+    import contoursim.diagnosis
+    from contoursim.exceptions import ContoursimWarning
+
+    def diagnose(trace, model, progress):
+        progress("identify: kp = 30.00 1/s")
+        warnings.warn("the current command hit its limit", ContoursimWarning)
+        raise ValueError("stopped here")
+
+    t = np.arange(50) * 1e-3
+    (tmp_path / "m.csv").write_text("t,x_ref,x\n" + "".join(f"{v:.3f},{v:.3f},{v:.3f}\n" for v in t))
+    monkeypatch.setattr(contoursim.diagnosis, "diagnose", diagnose)
+    monkeypatch.setattr(sys, "stderr", terminal := _Terminal())
+    assert main(["diagnose", str(tmp_path / "m.csv"), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 2
+    assert terminal.getvalue().split("\n")[0] == \
+        "\ridentify: kp = 30.00 1/s\x1b[K\r\x1b[Kcontoursim diagnose: warning: the current command hit its limit"

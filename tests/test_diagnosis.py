@@ -700,11 +700,15 @@ def test_an_effect_on_one_axis_is_weighed_against_that_axis_gap_only(independent
     assert result.effects[0]["ppm"] == pytest.approx(case.truth["parameters"]["ppm"], rel=0.2)
 
 
-def test_cli_diagnose_names_the_model_file_when_no_plant_in_its_prior_passes_the_check(tmp_path, capsys):
-    """A position gain of 900/s fails the check for any plant within its prior: the check's message, naming the file."""
+@pytest.mark.parametrize("screw", ["", "\nmotor_mass_kg = 90.0\nscrew_stiffness_N_per_um = 300.0"])
+def test_cli_diagnose_names_the_model_file_when_no_plant_in_its_prior_passes_the_check(tmp_path, capsys, screw):
+    """A position gain of 900/s fails the check for any plant within its prior: the check's message, naming the file.
+    With a compliant screw, whose damping ratio's prior (50 %) reaches 0 at 2 widths, that move is skipped (it was
+    the end of the run, 'screw_damping_ratio must be positive' said of the trace)."""
     write_mill_circle(tmp_path / "measured.csv")
     model = tmp_path / "edge.toml"
-    model.write_text((ROOT / "contoursim" / "presets" / "demo_mill.toml").read_text().replace("kp_per_s = 40.0", "kp_per_s = 900.0", 1))
+    model.write_text((ROOT / "contoursim" / "presets" / "demo_mill.toml").read_text().replace("kp_per_s = 40.0",
+                                                                                                f"kp_per_s = 900.0{screw}", 1))
     assert main(["diagnose", str(tmp_path / "measured.csv"), "--model", str(model), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert f"{model}: the position loop of axis 'x' is badly damped" in err and "No plant within 3 prior widths" in err

@@ -253,3 +253,89 @@ def test_path_numbers_far_out_of_range_end_in_one_line(tmp_path, capsys, old, ne
     assert old in helix
     (tmp_path / "h.toml").write_text(helix.replace(old, new, 1))
     _refused(capsys, ["simulate", str(tmp_path / "h.toml"), "--out", str(tmp_path / "out")], f"{tmp_path / 'h.toml'}, ", words)
+
+
+# -- found by fuzzing the command line (issue 18, item 8) ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("model", [[], ["--model", "demo_mill"]])
+def test_a_trace_over_less_than_a_mm_is_diagnosed_without_a_straightness_over_it(tmp_path, capsys, model):
+    """Five samples over 55 µm of travel: a guideway's bow over less than 1 mm (straightness's shortest span) is no
+    candidate; it was the end of the run ('straightness.x: span_mm must lie in [1, 100000] mm')."""
+    rows = [f"{k * 1e-3:.3f},{100 + 0.011 * k:.6f},{100 + 0.011 * k - 0.0003:.6f},20,20" for k in range(6)]
+    (tmp_path / "short.csv").write_text("t,x_ref,x,y_ref,y\n" + "\n".join(rows) + "\n")
+    assert main(["diagnose", str(tmp_path / "short.csv"), *model, "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "error" not in err and "Warning" not in err, err
+
+
+def test_a_report_is_not_written_when_the_output_folder_is_refused(tmp_path, capsys):
+    """The --out folder is checked before the report is written: a run that ends in exit 2 leaves no report."""
+    t = np.arange(50) * 1e-3
+    trace = _trace(tmp_path / "m.csv", t, np.zeros(50), np.zeros(50))
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine\n")
+    assert main(["diagnose", str(trace), "--report", str(tmp_path / "r.json"), "--out", str(tmp_path / "mine")]) == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    assert errors == [f"contoursim diagnose: error: {tmp_path / 'mine'} holds files that contoursim did not write; "
+                      "choose another output directory"]
+    assert not (tmp_path / "r.json").exists()
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["notes.txt"]
+
+
+def test_a_program_along_z_only_is_plotted_without_a_numpy_warning(tmp_path, capsys):
+    """A plunge and retract: nothing moves in XY, the plane the path plots draw (it divided by its zero extent)."""
+    (tmp_path / "plunge.nc").write_text("G21 G90\nG0 X0 Y0 Z0\nG1 Z-5 F300\nG1 Z0\nM30\n")
+    assert main(["simulate", str(tmp_path / "plunge.nc"), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "Warning" not in err, err
+    assert (tmp_path / "out" / "plunge_path.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("start", [0.0, 5e5])
+def test_a_trace_stamped_by_a_clock_running_for_days_is_diagnosed(tmp_path, capsys, start):
+    """Time stamps since a controller's power-on (5e5 s: six days) step in multiples of their resolution (1e-10 s):
+    the reference made from them is at the servo period to that resolution, not to 1e-9 of it (it was refused: 'the
+    trajectory is sampled every 0.0002 s but the servo period is 0.0002 s')."""
+    t = np.arange(400) * 1e-3
+    x = 2.0 * (1.0 - np.cos(np.pi * t / t[-1]))
+    trace = _trace(tmp_path / "clock.csv", start + t, x, x, head="# units: t [s]\n")
+    assert main(["diagnose", str(trace), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 0
+    out, err = capsys.readouterr()
+    assert "error" not in err and "Warning" not in err, err
+    spans = next(line for line in out.splitlines() if line.startswith("where: the residual"))
+    assert "e+05" not in spans and (start == 0 or "5000" in spans), spans  # its times to the ms, not '5e+05–5e+05 s'
+
+
+def test_the_diagnosis_table_keeps_its_columns_apart_for_a_residual_of_metres(tmp_path, capsys):
+    """A known force of 1e8 N pushes the simulated axis metres away: its RMS and max still read as two numbers."""
+    t = np.arange(300) * 1e-3
+    x = 2.0 * (1.0 - np.cos(np.pi * t / t[-1]))
+    rows = "\n".join(f"{a:.3f},{b:.6f},{b:.6f},1e8" for a, b in zip(t, x))
+    (tmp_path / "pushed.csv").write_text("t,x_ref,x,x_force\n" + rows + "\n")
+    assert main(["diagnose", str(tmp_path / "pushed.csv"), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 0
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("nominal model "))
+    label, rms, largest = line[:27], *line[27:].split()
+    assert label.strip() == "nominal model" and 1e6 < float(rms) <= float(largest), line
+
+
+def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_file(tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).split("[axes.y]")[0])  # x alone
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")],
+             f"{tmp_path / 'small.toml'}: the path moves in 2 coordinates but the machine has only 1 axis (x)")
+
+
+@pytest.mark.parametrize("job, line, words", [
+    ('machine = "demo_mil"\npath = "small.toml"\n', 1, "no machine file 'demo_mil' and no preset of that name"),
+    ('machine = "demo_mill"\npath = "smal.toml"\n', 2, "no path file 'smal.toml' here nor in the trajectories library"),
+    ('machine = "demo_mill"\npath = "small.toml"\ngeometric_compensation = true\n', 3,
+     "demo mill (3 servo axes) has no geometric model ([[body]] tables) to compensate with"),
+])
+def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys, job, line, words):
+    """A misspelt machine or path, a compensation the machine cannot make: the job file's line (they named no file)."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "job.toml").write_text(job)
+    _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'job.toml'}, line {line}: {words}")

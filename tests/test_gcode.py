@@ -89,6 +89,10 @@ def test_arc_centre_is_moved_onto_the_bisector():
     ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 3, "from a machine position is not supported: line 2 \\(G28/G30/G53\\) took Z there; "
                                          "position Z with G0 first"),
     ("G1 X1 F100\nG28\nG0 X0 Y0\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # G28 alone: all axes
+    # one modal group twice in a block: which wins depends on the controller (it was G3, silently)
+    ("G1 X1 F100\nG2 G3 X11 Y0 R5\n", 2, "G2 and G3 in one block belong to one modal group"),
+    ("G17 G19 G1 X1 F100\n", 1, "G17 and G19 in one block"),
+    ("G1 X1 F100\nG90 G91 X2\n", 2, "G90 and G91 in one block"),
     ("G1 X1 F100\nG28 G91 Z0\nG0 Z-5\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # still unknown
     ("G1 X1 F100\nG53 G0 Z0\nG1 X2\n", 3, "line 2 \\(G28/G30/G53\\) took Z there"),
     ("G0 X10 Y0\nG2 X20 Y0 F100\n", 2, "the arc centre is missing: give I/J \\(relative to the arc's start\\) or R"),

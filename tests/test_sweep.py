@@ -81,6 +81,8 @@ def test_a_latin_hypercube_puts_one_draw_in_each_stratum_of_each_parameter(count
     ({"name": '"effect.backlash.x.lost_motion_um"', "min": -5.0, "max": 2.0}, r"line 12: vary 'effect.backlash.x.lost_motion_um': "),
     ({"name": '"axes.x.kp_per_s"', "min": 50.0, "max": 2.0, "count": 2}, r"line 13: vary 'axes.x.kp_per_s': min must not exceed max"),
     ({"name": '"axes.x.kp_per_s"', "min": 5.0}, r"line 11: vary 'axes.x.kp_per_s' needs max = <number>"),
+    ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0, "count": 0}, r"line 15: vary.count must be a whole number, "
+                                                                         r"at least 1; got 0"),  # it was a TypeError's
 ])
 def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message):
     vary.setdefault("count", 2)
@@ -261,3 +263,15 @@ def test_a_tolerance_sweep_gives_the_volumetric_error_linear_in_the_squareness(t
     single = simulate(model, job.trajectory, strategies, settle=0.0).summary()
     assert table[1, FIGURES.index("volumetric_rms_um")] == single["volumetric_rms_um"]
     assert table[1, FIGURES.index("contour_max_um")] == single["contour_max_um"]
+
+
+def test_a_variant_the_loop_check_refuses_counts_as_diverged_and_is_not_rerun(tmp_path, capsys):
+    """kp = 2000/s: the batch ran it unchecked and the re-run of the worst variant (simulate, checked) ended the sweep
+    in an error after its table was written; it is refused like a coupled loop the check refuses."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0, 2000.0]"}], strategies="none")
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    table = run_sweep(read_sweep(spec))
+    np.testing.assert_array_equal(table[:, FIGURES.index("diverged")], [0, 0, 1])
+    assert np.isnan(table[2, FIGURES.index("contour_max_um")])
+    assert "1 of 3 variants diverged or were refused by a loop check" in out and "worst  variant 1:" in out

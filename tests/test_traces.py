@@ -98,6 +98,10 @@ def test_reads_metadata_and_ignores_extra_columns(tmp_path):
         ("t,y_ref,y\n0,0,0\n0.001,1,1\n", 1, "x, x+y or x+y+z"),
         ("t,x_ref,x\n0,0,0\n0.001,abc,1\n", 3, "column 'x_ref': 'abc' is not a number"),
         ("t,x_ref,x\n0,0,0\n0.001,1,nan\n", 3, "column 'x': value nan is not finite"),
+        # numbers Python reads and numpy does not: named, not 'the data rows could not be parsed' (found by fuzzing)
+        ("t,x_ref,x\n0,0,0\n0.001,1_0,1\n", 3, "column 'x_ref': '1_0' is not a number"),
+        ("t,x_ref,x\n0,0,0\n0.001,1,\uff11\n", 3, "column 'x': '\uff11' is not a number"),
+        ("t,x_ref,x\n0,0,0\n\n0.002,1,1\n", 3, "a blank line among the data rows: expected 3 cells"),
         ("t,x_ref,x\n0,0,0\n0.001,1\n", 3, "expected 3 cells (as in the header), found 2"),
         ("t,x_ref,x\n0,0,0\n0.001,1,1,7\n", 3, "expected 3 cells (as in the header), found 4"),
         ("t,x_ref,x\n0,0,0\n0.001,1e308,1\n", 3, "column 'x_ref': value 1e+308 is beyond ±1e+06 mm"),
