@@ -857,7 +857,10 @@ class _Problem:
         second-order terms; where the trace's dynamics lie beyond it (a plant
         the model lacks, a loop near its stability edge), a full step can
         overshoot: it is shortened by the fractions of :data:`_BACKTRACK`, and
-        where none helps the base stays where it was.
+        where none helps the base stays where it was. A step to loops the
+        loop check refuses (an identified velocity gain pushed past a quarter
+        of the Nyquist frequency) is shortened likewise: the corrected model
+        must be one ``simulate`` runs.
         """
         self._linearise(model)
         for _ in range(refit):
@@ -870,6 +873,8 @@ class _Problem:
             changes = [change for change, _ in self.changes]
             for fraction in _BACKTRACK:
                 trial = _refitted(model, changes, coef, fraction)
+                if not _passes_check(trial.machine, self.trace.axes):
+                    continue  # a loop simulate would refuse: the corrected model must run there too
                 self._linearise(trial)
                 with np.errstate(over="ignore"):  # a trial whose loop runs away: an infinite cost, refused
                     worse = not float(self.base_residual @ self.base_residual) <= (1.0 + _STEP_TOLERANCE) * cost
@@ -1054,6 +1059,16 @@ def _with_servos(model, change):
             fields = {**fields, "motor_mass": min(motor, 0.95 * mass)}
         servos[axis] = replace(s, **fields)
     return Model(replace(machine, axes=servos), model.effects)
+
+
+def _passes_check(machine, axes):
+    """Whether the loop check accepts the servo loops of `axes` of `machine`."""
+    try:
+        for a in axes:
+            machine.axes[a].check(machine.servo_period, a)
+    except (UnstableLoopError, ValueError):
+        return False
+    return True
 
 
 def _refitted(model, changes, coef, fraction=1.0):
