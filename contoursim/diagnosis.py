@@ -857,10 +857,12 @@ class _Problem:
         second-order terms; where the trace's dynamics lie beyond it (a plant
         the model lacks, a loop near its stability edge), a full step can
         overshoot: it is shortened by the fractions of :data:`_BACKTRACK`, and
-        where none helps the base stays where it was. A step to loops the
-        loop check refuses (an identified velocity gain pushed past a quarter
-        of the Nyquist frequency) is shortened likewise: the corrected model
-        must be one ``simulate`` runs.
+        where none helps the base stays where it was. On an identified
+        machine a step to loops the loop check refuses (a velocity gain
+        pushed past a quarter of the Nyquist frequency, beyond what the
+        identification allows) is shortened likewise. A given model's plant
+        follows the trace there (a machine may run with less margin than the
+        check asks): the report says so.
         """
         self._linearise(model)
         for _ in range(refit):
@@ -873,8 +875,8 @@ class _Problem:
             changes = [change for change, _ in self.changes]
             for fraction in _BACKTRACK:
                 trial = _refitted(model, changes, coef, fraction)
-                if not _passes_check(trial.machine, self.trace.axes):
-                    continue  # a loop simulate would refuse: the corrected model must run there too
+                if self.identified and _refusal(trial.machine, self.trace.axes):
+                    continue  # an identified loop beyond what identification allows, which simulate would refuse
                 self._linearise(trial)
                 with np.errstate(over="ignore"):  # a trial whose loop runs away: an infinite cost, refused
                     worse = not float(self.base_residual @ self.base_residual) <= (1.0 + _STEP_TOLERANCE) * cost
@@ -1010,7 +1012,7 @@ def _stable_start(model, axes):
         try:
             model.machine.axes[a].check(dt, a)
             continue
-        except UnstableLoopError as exc:
+        except ValueError as exc:  # unstable or badly damped (UnstableLoopError), or too fast for the servo period
             refused = exc
         start = None
         for widths in _STABILISING:
@@ -1029,7 +1031,7 @@ def _stable_start(model, axes):
                 break
         if start is None:
             raise UnstableLoopError(f"{refused} No plant within {_STABILISING[-1]:g} prior widths of the model's "
-                                    "(one parameter moved) makes it pass", refused.margins)
+                                    "(one parameter moved) makes it pass", getattr(refused, "margins", None))
         margin, model, name, value, moved, widths = start
         warnings.append(f"axis {a}: the model's loop fails the loop check ({refused}) while the trace shows the machine "
                         f"stable: the diagnosis starts from {name} = {moved:.6g} (the model's {value:.6g}, {widths:g} "
@@ -1061,14 +1063,14 @@ def _with_servos(model, change):
     return Model(replace(machine, axes=servos), model.effects)
 
 
-def _passes_check(machine, axes):
-    """Whether the loop check accepts the servo loops of `axes` of `machine`."""
+def _refusal(machine, axes):
+    """The loop check's message on the servo loops of `axes` of `machine`, or None where it accepts them all."""
     try:
         for a in axes:
             machine.axes[a].check(machine.servo_period, a)
-    except (UnstableLoopError, ValueError):
-        return False
-    return True
+    except (UnstableLoopError, ValueError) as exc:
+        return str(exc)
+    return None
 
 
 def _refitted(model, changes, coef, fraction=1.0):
@@ -1774,6 +1776,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                                 f"{step.effect.axis} is the same machine as {1.0 / step.effect['kp_ratio']:.4g} on {other}")
     if not identified:
         warnings += _far_from_prior(problem.nominal, problem.base.machine, trace.axes)
+        refused = _refusal(problem.base.machine, trace.axes)
+        if refused is not None:
+            warnings.append(f"the refitted plant's loops fail the loop check ({refused}): the corrected model is read "
+                            "by diagnose --model; simulate and compare refuse it")
     after = problem.fitted()
     left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
     warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "

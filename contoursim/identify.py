@@ -41,11 +41,7 @@ first without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
 transients tell them apart; then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
-integrator), and where the feedforward was not kept, the PI loop is fitted
-again from the P fit with it and the feedforward kept when the BIC prefers
-it (a P loop's transients, not the drive's, may hide it: the steady lag
-then went to kp alone, five times the drive's); then with the damping,
-kept likewise. These stages run on the state
+integrator); then with the damping, kept likewise. These stages run on the state
 structure; each drive structure of :data:`DRIVES` is then fitted from
 there with the same parameters free, and the best one replaces the state
 structure when it is significant (:func:`delta_bic`, the choice counted
@@ -249,32 +245,24 @@ def identify_machine(trace, servo_period=None, progress=None):
     feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
     best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
     # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
-    def with_integrator(x):
-        x = np.concatenate([x, np.full(d, np.log(4.0))])
-        x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
-        return x
-
-    free = np.ones(x0.size + d, bool)
+    x3 = np.concatenate([best, np.full(d, np.log(4.0))])
+    x3[2: 2 + d] = np.minimum(x3[2: 2 + d], np.log(0.5 * top))
+    free = np.ones(x3.size, bool)
     free[1] = feedforward
-    x3 = fitted(with_integrator(best), free, STATE)
+    x3 = fitted(x3, free, STATE)
     rss3, tau = rss(x3, STATE)
-    added = d  # the parameters the PI loop adds to the fit kept so far
-    if not feedforward:  # the feedforward once more, behind the PI loop: a P loop's transients may hide it
-        x3f = fitted(with_integrator(x2), np.ones(free.size, bool), STATE)
-        rss3f, tau3f = rss(x3f, STATE)
-        if delta_bic(rss3, rss3f, measured.size, 1, tau3f) > 0:
-            x3, rss3, tau, added, free[1] = x3f, rss3f, tau3f, d + 1, True
     # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
     pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
-    if delta_bic(rss0, rss3, measured.size, added, tau) > SIGNIFICANT or (pressed and rss3 <= rss0):
-        best, rss0, added, feedforward = x3, rss3, 0, free[1]
+    added = d  # the parameters the PI loop adds to the fit kept so far
+    if delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed and rss3 <= rss0):
+        best, rss0, added = x3, rss3, 0
     # the viscous damping behind the PI loop (its integrator holds the steady speed, the mechanical pole c/m shows in
     # the transients), started at a mechanical time constant of a second; kept likewise, counted with the PI loop
     # where that alone was not kept
     x4 = fitted(np.concatenate([x3, np.zeros(d)]), np.concatenate([free, np.ones(d, bool)]), STATE)
     rss4, tau = rss(x4, STATE)
     if delta_bic(rss0, rss4, measured.size, d + added, tau) > SIGNIFICANT:
-        best, rss0, feedforward = x4, rss4, free[1]
+        best, rss0 = x4, rss4
     # the sampled drive structures, each fitted from the state structure's fit with the same parameters free
     found = [(rss0, STATE, best)]
     free = np.ones(best.size, bool)

@@ -30,7 +30,7 @@ from contoursim.identify import identify_machine
 from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
 from contoursim.servo import AxisServo
-from contoursim.simulation import simulate
+from contoursim.simulation import simulate, simulate_batch
 from contoursim.traces import Trace, read_trace, write_trace
 
 DT = 5e-4  # servo period [s]; the traces are logged every 1 ms
@@ -659,6 +659,27 @@ def test_a_refit_near_the_stability_edge_leaves_out_what_diverges_and_shortens_i
         result = diagnose(read_trace(case.csv), model, max_effects=1)
     assert result.refitted.machine.axes["y"].damping > 1.1 * model.machine.axes["y"].damping  # taking the friction's share
     assert np.isfinite(result.steps[-1].rms_um) and result.steps[1].rms_um < result.steps[0].rms_um
+
+
+def test_a_velocity_loop_too_fast_for_its_period_is_judged_by_the_trace_and_the_refit_follows_it():
+    """A model whose x velocity loop crosses over at 136 Hz, above a quarter of the 1 ms loop's Nyquist frequency
+    (the check refuses it; the trace of that very machine shows it stable): the diagnosis starts from the nearest
+    plant the check accepts (the mass 2 prior widths up; the check's ValueError ended the run), the refit brings
+    the mass back to the truth's, and the report says the corrected model is one simulate refuses."""
+    servo = dict(mass=100.0, force_constant=100.0, kp=30.0, vff=0.0, ti=0.01)
+    truth = Machine({"x": AxisServo(kv=850.0, **servo), "y": AxisServo(kv=300.0, **servo)}, 1e-3)
+    with pytest.raises(ValueError, match="too long for the velocity loop of axis 'x'"):
+        truth.axes["x"].check(1e-3, "x")
+    path = paths.iso230_4_circle(10.0, direction="ccw")
+    reference = sample(path, plan(path, feed=2000 / 60, accel=1500.0, jerk=5e4), 1e-3)
+    tool = simulate_batch([truth], reference, settle=0.0, check=False)["tool_position"][0]
+    noise = np.random.default_rng(1).normal(0.0, 1e-4, tool.shape)
+    result = diagnose(Trace(reference.t, reference.position[:, :2], tool + noise, ("x", "y")), Model(truth))
+    assert result.effects == ()
+    assert any(w.startswith("axis x: the model's loop fails the loop check") and "starts from mass = 110" in w
+               for w in result.warnings), result.warnings
+    assert result.refitted.machine.axes["x"].mass == pytest.approx(100.0, rel=0.01)
+    assert any(w.startswith("the refitted plant's loops fail the loop check") for w in result.warnings)
 
 
 def test_a_refit_pulled_far_beyond_its_prior_is_said(independent_truth, tmp_path):
