@@ -162,7 +162,8 @@ def identify_machine(trace, servo_period=None, progress=None):
         Axes named as the trace's, each an :class:`AxisServo` with
         ``mass = MASS``, ``force_constant = FORCE_CONSTANT``, the shared
         ``kp`` and ``vff`` and its own ``kv`` (and ``ti`` where a PI
-        velocity loop explains the trace significantly better). A trace
+        velocity loop explains the trace significantly better, and behind
+        it the ``damping`` where that does too). A trace
         whose reference never moves leaves them at their starting values.
     """
     period = servo_period_for(trace.dt) if servo_period is None else float(servo_period)
