@@ -875,7 +875,7 @@ class _Problem:
             changes = [change for change, _ in self.changes]
             for fraction in _BACKTRACK:
                 trial = _refitted(model, changes, coef, fraction)
-                if self.identified and _refusal(trial.machine, self.trace.axes):
+                if self.identified and trial.machine.refusal(self.trace.axes):
                     continue  # an identified loop beyond what identification allows, which simulate would refuse
                 self._linearise(trial)
                 with np.errstate(over="ignore"):  # a trial whose loop runs away: an infinite cost, refused
@@ -1061,16 +1061,6 @@ def _with_servos(model, change):
             fields = {**fields, "motor_mass": min(motor, 0.95 * mass)}
         servos[axis] = replace(s, **fields)
     return Model(replace(machine, axes=servos), model.effects)
-
-
-def _refusal(machine, axes):
-    """The loop check's message on the servo loops of `axes` of `machine`, or None where it accepts them all."""
-    try:
-        for a in axes:
-            machine.axes[a].check(machine.servo_period, a)
-    except (UnstableLoopError, ValueError) as exc:
-        return str(exc)
-    return None
 
 
 def _refitted(model, changes, coef, fraction=1.0):
@@ -1776,7 +1766,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                                 f"{step.effect.axis} is the same machine as {1.0 / step.effect['kp_ratio']:.4g} on {other}")
     if not identified:
         warnings += _far_from_prior(problem.nominal, problem.base.machine, trace.axes)
-        refused = _refusal(problem.base.machine, trace.axes)
+        refused = problem.base.machine.refusal(trace.axes)
         if refused is not None:
             warnings.append(f"the refitted plant's loops fail the loop check ({refused}): the corrected model is read "
                             "by diagnose --model; simulate and compare refuse it")

@@ -231,6 +231,16 @@ class Machine:
             return np.zeros(3)
         return self.chain.tool_pose(self.home()[None], ideal=True)[0][0]
 
+    def refusal(self, axes=None):
+        """What the loop check (:func:`contoursim.servo.check`) says of the first servo loop of `axes` (default: all)
+        it refuses at this machine's servo period (unstable, badly damped, too fast for the period), or ``None``."""
+        try:
+            for axis in self.axes if axes is None else axes:
+                self.axes[axis].check(self.servo_period, axis)
+        except ValueError as exc:  # UnstableLoopError, or the period too long for a loop
+            return str(exc)
+        return None
+
     def _check_travel(self, q):
         """Refuse commands that leave an axis's travel."""
         for axis, (lo, hi) in self.travel.items():

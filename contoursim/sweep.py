@@ -57,7 +57,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .config import TomlFile
-from .exceptions import ConfigError, UnstableLoopError
+from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
 
 __all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst",
@@ -398,21 +398,11 @@ def run_variants(files, names, rows):
         summary = simulate_batch([m for m, _ in group], job.trajectory, outputs=("summary",),
                                  strategies=[s for _, s in group], settle=0.0, check=False)["summary"]
         figures = np.column_stack([summary[key].astype(float) for key in FIGURES])
-        refused = [i for i, (model, _) in enumerate(group) if _refused(model.machine)]
+        refused = [i for i, (model, _) in enumerate(group) if model.machine.refusal() is not None]
         figures[refused] = np.nan
         figures[refused, FIGURES.index("diverged")] = 1.0
         out += figures.tolist()
     return out
-
-
-def _refused(machine):
-    """Whether the loop check refuses a servo loop of `machine` (analysed once per servo in a process)."""
-    try:
-        for axis, servo in machine.axes.items():
-            servo.check(machine.servo_period, axis)
-    except UnstableLoopError:
-        return True
-    return False
 
 
 # ---------------------------------------------------------------------------------------------
