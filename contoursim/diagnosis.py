@@ -530,7 +530,7 @@ def locate(trace, reference, residual):
             target = np.abs(r) - np.abs(r).mean() if name.startswith("reversals") else r
             if np.ptp(f) > 0 and np.ptp(target) > 0:  # a constant (to its rounding) has none: corrcoef would divide by 0
                 scores.append((abs(float(np.corrcoef(target, f)[0, 1])), name))
-        period, share = _spatial_period(trace.actual[:, i], r)
+        period, share, _, _ = _spatial_period(trace.actual[:, i], r)
         if period is not None:
             scores.append((np.sqrt(share), f"a spatial period of {period:.3g} mm"))
         scores.sort(reverse=True)
@@ -752,24 +752,35 @@ def _time_since_reversal(t, v):
 
 
 def _spatial_period(q, r):
-    """The spatial period [mm] best explaining `r` over position `q`, and the share of the variance it explains.
+    """The spatial period [mm] best explaining `r` over position `q`, the share of the variance it explains, and
+    the sinusoid's amplitude [mm] and phase [deg] at that period (``amplitude·sin(2π·q/period + phase)``).
 
     The Lomb–Scargle periodogram of `r` over `q` (unevenly sampled: the axis
     moves back and forth, dwells and crosses its stroke at varying speed),
     from one period over the stroke to 200 (and none shorter than 0.5 mm),
-    four frequencies per resolution step ``1/stroke``: a peak then falls
-    within an eighth of a period's drift over the stroke of a grid line.
+    four frequencies per resolution step ``1/stroke``, the peak then refined
+    on a grid of a hundredth of a cycle over the stroke and between its lines
+    (a phase drift of a few degrees from one end to the other: the
+    sinusoid's amplitude and phase then mean what they say, a start the fit
+    need not walk from).
     """
     travel = float(np.ptp(q))
     if travel <= 1.0:
-        return None, 0.0
+        return None, 0.0, 0.0, 0.0
     cycles = np.arange(1.0, min(200.0, 2.0 * travel) + 1e-9, 0.25)  # periods over the stroke
     power = lombscargle(q, r, 2 * np.pi * cycles / travel, floating_mean=True)
-    period = travel / float(cycles[np.argmax(power)])
+    fine = cycles[np.argmax(power)] + np.linspace(-0.25, 0.25, 51)
+    fine = fine[fine >= 1.0]
+    power = lombscargle(q, r, 2 * np.pi * fine / travel, floating_mean=True)
+    k = int(np.clip(np.argmax(power), 1, fine.size - 2))
+    below, peak, above = power[k - 1 : k + 2]
+    bend = below - 2.0 * peak + above  # the peak's vertex between grid lines (a parabola through three)
+    period = travel / float(fine[k] + (0.5 * (below - above) / bend * (fine[1] - fine[0]) if bend < 0 else 0.0))
     w = 2 * np.pi * q / period
     basis = np.column_stack([np.sin(w), np.cos(w)])
-    coef = np.linalg.lstsq(basis, r, rcond=None)[0]
-    return period, float(np.sum((basis @ coef) ** 2)) / float(r @ r)
+    (s, c) = coef = np.linalg.lstsq(basis, r, rcond=None)[0]
+    share = float(np.sum((basis @ coef) ** 2)) / float(r @ r)
+    return period, share, float(np.hypot(s, c)), float(np.degrees(np.arctan2(c, s)))
 
 
 # -- the fit -----------------------------------------------------------------------------------
@@ -1175,10 +1186,11 @@ def _candidates(problem, model, warnings):
             [{"rate_um_per_min": v} for v in sizes("thermal_drift")])
         # over where the axis is, not where it was told to be: the following error shifts the reference by up to a
         # few mm, the other way on the way back, and smears a screw's period over the reference
-        period, _ = _spatial_period(trace.actual[:, i], residual[:, i] - residual[:, i].mean())
-        if period is not None and 0.1 <= period <= 1000.0:
+        period, _, amplitude, phase = _spatial_period(trace.actual[:, i], residual[:, i] - residual[:, i].mean())
+        if period is not None and 0.1 <= period <= 1000.0:  # the residual's own sinusoid starts it too (a narrow valley)
             add(Effect("cyclic_error", a, amplitude_um=1.0, period_mm=period), ("amplitude_um", "phase_deg", "period_mm"),
-                [{"amplitude_um": v, "phase_deg": ph} for v in (1.0, 3.0) for ph in (0.0, 90.0, 180.0, 270.0)])
+                [{"amplitude_um": amplitude / _UM, "phase_deg": phase}]
+                + [{"amplitude_um": v, "phase_deg": ph} for v in (1.0, 3.0) for ph in (0.0, 90.0, 180.0, 270.0)])
         # the guideway's bow over the axis's travel (machine coordinates); without one, over the trace's own extent
         start, end = model.machine.travel.get(a, (float(q.min()), float(q.max())))
         shortest = next(p.bounds[0] for p in effect_kind("straightness").parameters if p.name == "span_mm")
@@ -1309,8 +1321,7 @@ def _finite(r):
 def _refine(problem, cand, model):
     """Fit `cand`'s free parameters from its start through the simulator; fills the fit and its uncertainty."""
     lower, upper = _bounds(problem, cand)
-    params = {p.name: p for p in cand.effect.parameters}
-    scale = np.array([_scale(params[n]) for n in cand.free])
+    scale = _scales(problem, cand)
     cache = {}
 
     def residuals(xs):
@@ -1414,11 +1425,20 @@ def _jackknife(problem, j, r, blocks):
     return np.sqrt((blocks - 1) / blocks * np.sum((moves - moves.mean(axis=0)) ** 2, axis=0))
 
 
-def _scale(p):
-    if p.typical is not None:
-        return p.typical[1]
-    lo, hi = p.bounds
-    return (hi - lo) if np.isfinite(hi - lo) and hi - lo < 1e3 else 1.0
+def _scales(problem, cand):
+    """The size of a step in each of `cand`'s free parameters that matters (the fit's x_scale; its finite differences
+    step a thousandth of it, or of the value): the top of a typical range, else of the bounds; a cyclic error's
+    period by what drifts its phase a radian from one end of the stroke to the other (``period²/(2π·stroke)``)."""
+    out = []
+    for name in cand.free:
+        p = next(p for p in cand.effect.parameters if p.name == name)
+        lo, hi = p.bounds
+        scale = p.typical[1] if p.typical is not None else (hi - lo) if np.isfinite(hi - lo) and hi - lo < 1e3 else 1.0
+        if cand.effect.name == "cyclic_error" and name == "period_mm":
+            stroke = float(np.ptp(problem.trace.reference[:, problem.trace.axes.index(cand.effect.axis)]))
+            scale = min(scale, p.value**2 / (2 * np.pi * max(stroke, p.value)))
+        out.append(scale)
+    return np.array(out)
 
 
 def turning(position, velocity):
@@ -1490,24 +1510,20 @@ def _choose(problem, cands, both_ways):
 
     The best, unless it is a delay of an axis's position-loop reading that
     the trace does not tell from a gain mismatch of that axis
-    (:func:`_first_order_twin`: the gain is named), or the trace cannot tell
+    (:func:`_first_order_twin`: the gain is named; a best gain is named with
+    such a delay said beside it), or the trace cannot tell
     it from its twins (:func:`_look_alikes`) and only a twin's size lies within the
     catalogue's typical range (the best ranked such twin is named): what the
     trace cannot decide, the typical sizes of machines may. Either way the
     pair is reported, with the test that would separate them.
     """
     best = cands[0]
-    gain = _first_order_twin(problem, best, cands)
-    if gain is not None:
-        share = (gain.cost - best.cost) / max(gain.cost - problem.n, 1e-300)
-        return gain, (f"{gain.fit.label} ({_size(gain.fit)}) and {best.fit.label}{_options(best.fit)} ({_size(best.fit)}): "
-                      f"the trace does not tell the delay from the gain it is to first order (ΔBIC {best.delta_bic:.0f} "
-                      f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
-                      f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
-                      f"to separate them: {_separating_test(gain.fit, best.fit, both_ways)}")
+    pair = _first_order_twin(problem, best, cands)
+    if pair is not None and pair[1] is best:
+        return _first_order_said(problem, *pair, both_ways)
     twins = _look_alikes(problem, best, cands, both_ways)
     if not twins:
-        return best, None
+        return _first_order_said(problem, *pair, both_ways) if pair is not None else (best, None)
     typical = [(c, why) for c, why in twins if _typical(c.fit)]
     swap = not _typical(best.fit) and bool(typical)
     twin, reason = typical[0] if swap else twins[0]
@@ -1520,23 +1536,42 @@ def _choose(problem, cands, both_ways):
 
 
 def _first_order_twin(problem, best, cands):
-    """The gain-mismatch candidate the trace does not tell from `best`, a delay of its axis's position-loop reading;
-    ``None`` when `best` is not such a delay, or the trace tells it apart.
+    """``(gain, delay)``: `best` and the candidate the trace does not tell from it, when one is a gain mismatch and
+    the other a delay of the same axis's position-loop reading; ``None`` when `best` is neither, or the trace tells
+    them apart.
 
     At constant speed the loop drives what it reads to a lag v/kp, the axis v·τ further on: the lag of a gain
     kp/(1 − kp·τ). The delay's own mark, the phase ω·τ it takes beyond that gain's, is of second order, and a model
-    a little wrong elsewhere fits it as readily: it is told apart as an effect is named, when beyond the gain's fit
-    the delay's is significant (ΔBIC more than :data:`SIGNIFICANT` higher) and closes at least :data:`GAP_SHARE` of
-    what the gain's leaves above the noise floor.
+    a little wrong elsewhere fits it as readily. Either is told from the other as an effect is named: when its fit is
+    significant beyond the other's (ΔBIC more than :data:`SIGNIFICANT` higher) and closes at least :data:`GAP_SHARE`
+    of what the other's leaves above the noise floor.
     """
-    if best.fit.name != "time_delay" or best.fit.options["kind"] != "position":
+    def on_axis(name, kind=None):
+        return next((c for c in cands if c.fit.name == name and c.fit.axis == best.fit.axis
+                     and (kind is None or c.fit.options["kind"] == kind)), None)
+
+    if best.fit.name == "gain_mismatch":
+        gain, delay = best, on_axis("time_delay", "position")
+    elif best.fit.name == "time_delay" and best.fit.options["kind"] == "position":
+        gain, delay = on_axis("gain_mismatch"), best
+    else:
         return None
-    gain = next((c for c in cands if c.fit.name == "gain_mismatch" and c.fit.axis == best.fit.axis), None)
-    if gain is None:
+    if gain is None or delay is None:
         return None
-    above = gain.cost - problem.n  # what the gain's fit leaves above the noise floor (whitened: n entries of 1)
-    told = best.delta_bic > gain.delta_bic + SIGNIFICANT and above > 0 and gain.cost - best.cost >= GAP_SHARE * above
-    return None if told else gain
+    other = gain if best is delay else delay
+    above = other.cost - problem.n  # what the other's fit leaves above the noise floor (whitened: n entries of 1)
+    told = best.delta_bic > other.delta_bic + SIGNIFICANT and above > 0 and other.cost - best.cost >= GAP_SHARE * above
+    return None if told else (gain, delay)
+
+
+def _first_order_said(problem, gain, delay, both_ways):
+    """The gain named over the delay it is to first order (:func:`_first_order_twin`), and the pair said."""
+    share = (gain.cost - delay.cost) / max(gain.cost - problem.n, 1e-300)
+    return gain, (f"{gain.fit.label} ({_size(gain.fit)}) and {delay.fit.label}{_options(delay.fit)} ({_size(delay.fit)}): "
+                  f"the trace does not tell the delay from the gain it is to first order (ΔBIC {delay.delta_bic:.0f} "
+                  f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
+                  f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
+                  f"to separate them: {_separating_test(gain.fit, delay.fit, both_ways)}")
 
 
 def _typical(effect):
@@ -1738,6 +1773,11 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                 if np.isfinite(step.rms_um) else "the model with it in place does not follow the trace (its simulation diverged)"))
             problem.set_base(base)
             break
+        edge = _size_at_edge(problem, best)
+        if edge is not None:
+            warnings.append(f"{best.fit.label}: not named, {edge}")
+            problem.set_base(base)
+            break
         # the gap on the axes the effect acts on: another axis's misfit is none of its business
         on = [trace.axes.index(a) for a in best.fit.axis]
         before_um, after_um = (_rms_um(r[:, on]) for r in (gap, (trace.actual - problem.fitted())[scored]))
@@ -1751,6 +1791,9 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             break
         if ambiguity is not None:
             warnings.append(ambiguity)
+        undetermined = _size_undetermined(best, share)
+        if undetermined is not None:
+            warnings.append(undetermined)
         if best.fit.name == "straightness" and best.fit.axis not in base.machine.travel:
             warnings.append(f"{best.fit.label}: the machine gives no travel for axis {best.fit.axis} (travel_mm): the bow "
                             "is fitted over the trace's own extent, its curvature the guideway's, its slope there "
@@ -1773,10 +1816,40 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     after = problem.fitted()
     left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
     warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "
-                 f"{c['frequency']:.3g} Hz while the reference stands still (not noise)" for i, c in cycles.items()]
+                 f"{c['frequency']:.3g} Hz while the reference stands still (not noise); a loop with integral action "
+                 "hunts against a backlash or a stick-slip friction (more so closed on a linear scale), or a few "
+                 "encoder counts: no simulation matches its phase sample by sample, a named effect closes little of it"
+                 for i, c in cycles.items()]
     currents = [_currents(trace, m, reference, force) for m in (model, problem.base)]
     return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, after, scored,
                      problem.base, where, tuple(warnings), tuple(left), *currents)
+
+
+def _size_at_edge(problem, cand):
+    """Why `cand`'s fitted size does not stand for the effect, or ``None``: at an edge of the range the fit may take
+    (other than no effect), the trace asking for more than the effect can be: something else it is bent to."""
+    size = cand.fit.parameters[0]
+    if size.name not in cand.free:
+        return None
+    lower, upper = (b[cand.free.index(size.name)] for b in _bounds(problem, cand))
+    none = effect_kind(cand.fit.name).parameters[0].value
+    if any(b != none and np.isfinite(b) and abs(size.value - b) <= 1e-6 * max(abs(b), 1e-12) for b in (lower, upper)):
+        return f"its {size.name} = {size.value:.4g} is at the edge of the range the fit may take ({lower:.4g}–{upper:.4g})"
+    return None
+
+
+def _size_undetermined(cand, share):
+    """What to say of a named effect whose size lies within twice its uncertainty of no effect (it closes `share` of
+    the gap: the effect is there, its size is not pinned down), or ``None``. A vibration's first parameter is its
+    frequency, not a size: not judged."""
+    size = cand.fit.parameters[0]
+    sigma = cand.uncertainty.get(size.name)
+    none = effect_kind(cand.fit.name).parameters[0].value
+    if cand.fit.name == "vibration" or sigma is None or abs(size.value - none) >= 2.0 * sigma:
+        return None
+    return (f"{cand.fit.label}: named, it closes {share:.0%} of the residual above the noise floor on {cand.fit.axis}, "
+            f"but its {size.name} = {size.value:.4g} ± {sigma:.2g} (1σ) lies within 2σ of none ({none:g}): the trace "
+            "does not pin its size down (model error the uncertainty counts: see uncertainty_method)")
 
 
 def _currents(trace, model, reference, force):
