@@ -425,11 +425,9 @@ def _servo_run(model, composition, trajectory, force):
     force = None if force is None else np.pad(force, ((lead, 0), (0, 0)), mode="edge")
     response = kernel.run(servos, dt, *sent, coupling=coupling, effects=model.loop_effects(), force=force)
     if lead:
-        position = response.position[lead:]
-        encoder = position if response.encoder is response.position else response.encoder[lead:]
         estimate = None if response.contour_estimate is None else response.contour_estimate[lead:]
-        response = kernel.ServoResponse(dt, position, encoder, response.velocity[lead:], response.current[lead:],
-                                        response.saturated[lead:], estimate)  # fmt: skip
+        response = kernel.ServoResponse(dt, response.position[lead:], response.encoder[lead:], response.velocity[lead:],
+                                        response.current[lead:], response.saturated[lead:], estimate)  # fmt: skip
     return q, response, servos
 
 
