@@ -407,11 +407,16 @@ class MachineChain:
             value = getattr(self, label)
             if not isinstance(value, (int, np.integer)) or not (1 if label == "tool" else 0) <= value <= n:
                 raise ValueError(f"{label} must be a body index, got {value!r}")
+        if self.tool == self.workpiece:  # the tool relative to itself: no motion, no error, nothing to map
+            raise ValueError(f"tool and workpiece must be different bodies, got body {self.tool} for both")
         moving = [b.axis for b in bodies if b.axis is not None]
         axes = tuple(dict.fromkeys(moving)) if self.axes is None else tuple(self.axes)
         missing = set(moving) - set(axes)
         if missing or len(set(axes)) != len(axes):
             raise ValueError(f"axes {axes} must list each driven axis once; missing: {sorted(missing)}")
+        idle = [a for a in axes if a not in moving]
+        if idle:
+            raise ValueError(f"axes {axes} lists {', '.join(map(repr, idle))}, which no body's joint drives")
         object.__setattr__(self, "axes", axes)
         for b in bodies:
             if b.axis is not None:
@@ -1071,14 +1076,16 @@ def chain_from_toml(toml, *keys, extra=()):
     where = keys
     try:
         axes = top.get("axis_order")
-        tool_axis = top.get("tool_axis", [0.0, 0.0, 1.0])
+        tool_axis = np.asarray(top.get("tool_axis", [0.0, 0.0, 1.0]), float)
+        if tool_axis.shape == (3,) and not np.linalg.norm(tool_axis) > 0:
+            raise toml.error(f"tool_axis must be a non-zero vector, got {top['tool_axis']!r}", *keys, "tool_axis")
         tool_tip = np.asarray(top.get("tool_tip_mm", [0.0, 0.0, 0.0]), float)
         return MachineChain(
             tuple(bodies),
             tool=body_index(top["tool"], *keys, "tool"),
             workpiece=body_index(top["workpiece"], *keys, "workpiece"),
             axes=None if axes is None else tuple(axes),
-            tool_axis=np.asarray(tool_axis, float) / np.linalg.norm(tool_axis),
+            tool_axis=tool_axis / np.linalg.norm(tool_axis),
             tool_tip=tool_tip,
             name=str(top.get("name", Path(toml.source).stem)),
         )

@@ -2,6 +2,8 @@
 
 from dataclasses import replace
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -537,6 +539,30 @@ def test_toml_thermal_growth_reference_and_time_constant():
 def test_toml_errors_name_file_and_line(old, new, line, match):
     with pytest.raises(ConfigError, match=rf"^m.toml, line {line}: .*{match}"):
         chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
+
+
+@pytest.mark.parametrize(
+    "old, new, match",
+    [
+        ('workpiece = "bed"', 'workpiece = "tool"', r"^m.toml: tool and workpiece must be different bodies"),
+        # an axis no body drives: its kind was looked up with next() (a StopIteration out of Machine)
+        ('workpiece = "bed"', 'workpiece = "bed"\naxis_order = ["x", "y"]', r"^m.toml: axes \('x', 'y'\) lists 'y', which no "
+                                                                             r"body's joint drives"),
+        ('workpiece = "bed"', 'workpiece = "bed"\ntool_axis = [0, 0, 0]', r"^m.toml, line 4: tool_axis must be a non-zero"),
+    ],
+)
+def test_toml_chain_errors_name_the_file(old, new, match):
+    with pytest.raises(ConfigError, match=match):
+        chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
+
+
+def test_a_machine_file_whose_axis_no_body_drives_is_refused_by_its_file(tmp_path):
+    text = (Path(__file__).parents[1] / "contoursim" / "presets" / "vertical_mill_3axis.toml").read_text()
+    (tmp_path / "vertical_mill_x_laser.csv").write_text(
+        (Path(__file__).parents[1] / "contoursim" / "presets" / "vertical_mill_x_laser.csv").read_text())
+    (tmp_path / "m.toml").write_text(text.replace('axis = "z"', 'axis = "y"'))  # Y and Z both on y: z idle
+    with pytest.raises(ConfigError, match=r"m.toml: axes \('x', 'y', 'z'\) lists 'z', which no body's joint drives"):
+        load_preset(tmp_path / "m.toml")
 
 
 def _scaled_pinv(A, floor, rcond=1e-4):
