@@ -319,12 +319,24 @@ def test_the_diagnosis_table_keeps_its_columns_apart_for_a_residual_of_metres(tm
     assert label.strip() == "nominal model" and 1e6 < float(rms) <= float(largest), line
 
 
-def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_file(tmp_path, capsys):
+@pytest.mark.parametrize("command", [["simulate"], ["compare", "--strategies", "none,feedforward"]])
+def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_file(tmp_path, capsys, command):
     (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).split("[axes.y]")[0])  # x alone
     (tmp_path / "small.toml").write_text(SMALL_PATH)
-    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
-                      str(tmp_path / "out")],
+    _refused(capsys, [command[0], str(tmp_path / "small.toml"), *command[1:], "--machine", str(tmp_path / "m.toml"),
+                      "--out", str(tmp_path / "out")],
              f"{tmp_path / 'small.toml'}: the path moves in 2 coordinates but the machine has only 1 axis (x)")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_machine_whose_axis_has_no_travel_is_refused_by_volumetric_naming_its_file(tmp_path, capsys):
+    text = preset_file("vertical_mill_3axis").read_text().replace("travel_mm = [-300, 0]\n", "")  # Z's travel
+    (tmp_path / "m.toml").write_text(text)
+    (tmp_path / "vertical_mill_x_laser.csv").write_text(preset_file("vertical_mill_3axis").with_name(
+        "vertical_mill_x_laser.csv").read_text())
+    _refused(capsys, ["volumetric", str(tmp_path / "m.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'm.toml'}: axis 'z' has no travel: give its body travel_mm")
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("job, line, words", [
