@@ -1179,18 +1179,55 @@ def _check_small_errors(body, fail):
     if body.travel is None or not body.has_motion_error:
         return
     q = np.linspace(*body.travel, 201)
-    error = np.abs(body.motion_error(q))
-    span = body.travel[1] - body.travel[0]
+    beyond = _beyond_small_errors(body, np.abs(body.motion_error(q)))
+    if beyond is not None:
+        k, c, size, what = beyond
+        at = f"{np.rad2deg(q[k]):g}°" if body.joint == "rotary" else f"{q[k]:g} mm"
+        raise fail(f"its error motion {COMPONENTS[c]} reaches {size} at {at} of its travel: beyond the small errors a "
+                   f"machine's model is for ({SMALL_ERROR:g} {what}); check the coefficients' units and the travel")
+
+
+def check_drift(chain, duration):
+    """Refuse a chain whose thermal drift leaves the small errors its model is for (:data:`SMALL_ERROR`) in a run.
+
+    The error motions are checked so when a machine file is read; the drift
+    grows with time, so a run checks it over its length (at the ends of
+    each body's travel, where a thermal growth is largest).
+
+    Parameters
+    ----------
+    chain : MachineChain
+    duration : float
+        Length of the run [s].
+
+    Raises
+    ------
+    ValueError
+        Naming the body, the drift's component and its size after `duration`.
+    """
+    for body in chain.bodies:
+        if not body.drifts:
+            continue
+        q = np.zeros(1) if body.travel is None else np.asarray(body.travel, float)
+        beyond = _beyond_small_errors(body, np.abs(body.thermal_drift(np.full(q.size, float(duration)), q)))
+        if beyond is not None:
+            k, c, size, what = beyond
+            raise ValueError(f"the machine's body {body.name!r}: its thermal drift {COMPONENTS[c]} reaches {size} "
+                             f"after the run's {duration:.6g} s: beyond the small errors a machine's model is for "
+                             f"({SMALL_ERROR:g} {what}); check the drift rates' units (per minute)")
+
+
+def _beyond_small_errors(body, error):
+    """``(row, component, "size unit", limit's words)`` of the largest of `error` (N, 6) [mm, rad] beyond
+    :data:`SMALL_ERROR` (angles; translations of a linear joint with a travel, per its length), or None."""
     limits = [(3, 6, SMALL_ERROR, 1e6, "µrad", "an angle")]
-    if body.joint == "linear":
-        limits.append((0, 3, SMALL_ERROR * span, 1e3, "µm", "of the travel's length"))
+    if body.joint == "linear" and body.travel is not None:
+        limits.append((0, 3, SMALL_ERROR * (body.travel[1] - body.travel[0]), 1e3, "µm", "of the travel's length"))
     for first, last, limit, scale, unit, what in limits:
-        k, c = np.unravel_index(np.argmax(error[:, first:last]), (q.size, last - first))
+        k, c = np.unravel_index(np.argmax(error[:, first:last]), (error.shape[0], last - first))
         if error[k, first + c] > limit:
-            at = f"{np.rad2deg(q[k]):g}°" if body.joint == "rotary" else f"{q[k]:g} mm"
-            raise fail(f"its error motion {COMPONENTS[first + c]} reaches {scale * error[k, first + c]:.4g} {unit} at {at} "
-                       f"of its travel: beyond the small errors a machine's model is for ({SMALL_ERROR:g} {what}); "
-                       "check the coefficients' units and the travel")
+            return k, first + c, f"{scale * error[k, first + c]:.4g} {unit}", what
+    return None
 
 
 def _motion_from_toml(toml, base, where, item, rotary, fail):

@@ -29,6 +29,7 @@ from .contour import exact_contour_error
 from .exceptions import ContoursimWarning, UnstableLoopError
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
+from .multibody import check_drift
 from .model import as_model
 from .trajectory import Trajectory
 
@@ -583,6 +584,8 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     composition = Composition(strategies)
     preview = composition.preview(composition.drive(model.servos()), machine.servo_period)
     trajectory, pushing, pushed = _reference(machine, reference, settle, preview, force)
+    if machine.chain is not None:  # before the run: the machine file's drift over it within the chain's small errors
+        check_drift(machine.chain, trajectory.t[-1] - trajectory.t[0])
     q, response, servos = _servo_run(model, composition, trajectory, pushing)
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
@@ -728,6 +731,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory, pushing, _ = _reference(first, reference, settle, preview, force)
+    if first.chain is not None:  # one chain for all (simulate's check)
+        check_drift(first.chain, trajectory.t[-1] - trajectory.t[0])
     q, v, a = _target(models[0], trajectory, compositions[0])
     summary = "summary" in outputs
     traces = [name for name in outputs if name != "summary"]

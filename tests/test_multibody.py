@@ -565,6 +565,26 @@ def test_a_machine_file_whose_axis_no_body_drives_is_refused_by_its_file(tmp_pat
         load_preset(tmp_path / "m.toml")
 
 
+def test_a_thermal_drift_beyond_the_small_errors_within_a_run_is_refused():
+    # X travels 0..100 mm (MACHINE has no travel: given here); the small errors allow 1 mm of drift along it, 10 mrad.
+    text = MACHINE.replace('squareness = { y_urad = 10 }', 'squareness = { y_urad = 10 }\ntravel_mm = [0, 100]\n'
+                           'thermal = { dy_um_per_min = 600 }')  # 10 µm/s: 1 mm after 100 s
+    chain = chain_from_toml(TomlFile("m.toml", text))
+    multibody.check_drift(chain, 99.9)
+    with pytest.raises(ValueError, match=r"^the machine's body 'X': its thermal drift dy reaches 1001 µm after the "
+                                         r"run's 100.1 s: beyond the small errors .* \(0.01 of the travel's length\)"):
+        multibody.check_drift(chain, 100.1)
+    # a growth drifts most at the far end of the travel: 1000 ppm/min from 0 is 100 µm/min at 100 mm
+    grown = chain_from_toml(TomlFile("m.toml", text.replace("thermal = { dy_um_per_min = 600 }",
+                                                           "thermal_growth = { dx_ppm_per_min = 1000 }")))
+    multibody.check_drift(grown, 599.0)
+    with pytest.raises(ValueError, match=r"thermal drift dx reaches 1002 µm after the run's 601 s"):
+        multibody.check_drift(grown, 601.0)
+    tilted = chain_from_toml(TomlFile("m.toml", text.replace("dy_um_per_min = 600", "ez_urad_per_min = 6e5")))
+    with pytest.raises(ValueError, match=r"thermal drift ez reaches 1.1e\+04 µrad after the run's 1.1 s: .* \(0.01 an angle"):
+        multibody.check_drift(tilted, 1.1)
+
+
 def _scaled_pinv(A, floor, rcond=1e-4):
     """Least-squares operator of A x = b, columns scaled by max(norm, floor), by numpy's SVD; and the dropped directions.
 
