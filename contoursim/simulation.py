@@ -29,7 +29,7 @@ from .contour import exact_contour_error
 from .exceptions import ContoursimWarning, UnstableLoopError
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
-from .multibody import check_drift
+from .multibody import MAX_TRAVEL, check_drift
 from .model import as_model
 from .trajectory import Trajectory
 
@@ -482,6 +482,16 @@ def _elapsed(trajectory):
     return trajectory.t - trajectory.t[0]
 
 
+def _ran_away(position):
+    """Per column of `position` (N, n) [mm] the first row beyond ±:data:`MAX_TRAVEL` or not finite, -1 for none.
+
+    An unstable loop whose state is still finite (the kernel's divergence check) can be kilometres away already: its
+    positions mean nothing, and the geometric stage's polynomials overflow on them.
+    """
+    far = ~(np.abs(position) <= MAX_TRAVEL)
+    return np.where(far.any(axis=0), far.argmax(axis=0), -1)
+
+
 def _every_axis_servo(model):
     """Whether every axis of the machine is a servo axis, in order (the servo columns are all columns)."""
     columns = model.machine.servo_columns
@@ -587,6 +597,12 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     if machine.chain is not None:  # before the run: the machine file's drift over it within the chain's small errors
         check_drift(machine.chain, trajectory.t[-1] - trajectory.t[0])
     q, response, servos = _servo_run(model, composition, trajectory, pushing)
+    away = _ran_away(response.position)
+    if away.max() >= 0:
+        a = int(np.argmax(away >= 0))
+        raise UnstableLoopError(f"the simulation of axis {list(servos)[a]!r} ran away beyond ±{MAX_TRAVEL:g} mm by "
+                                f"t = {trajectory.t[away[a]]:.6g} s: its loop with these effects (or this coupling) is "
+                                "unstable")
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
@@ -690,9 +706,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     dict
         ``"t"`` (M,) [s], each output asked for, and ``"diverged_step"``
         (B, n_servo): per variant and servo axis the first step whose state
-        was not finite (an unstable variant; 0 on every axis for a variant
-        refused by the coupled-loop check), -1 for none; a diverged
-        variant's ``tool_position`` is NaN throughout.
+        was not finite, or whose position was beyond ±1e6 mm (an unstable
+        variant; 0 on every axis for a variant refused by the coupled-loop
+        check), -1 for none; a diverged variant's ``tool_position`` is NaN
+        throughout.
 
     Raises
     ------
@@ -793,6 +810,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                 run[name] = run[name][:, taken]
             for b, (_, _, same) in enumerate(part):
                 diverged = np.where(run["diverged_step"][b] >= 0, np.maximum(run["diverged_step"][b] - lead, 0), -1)
+                away = _ran_away(run["tool"][b])
+                away = np.where(away >= 0, away * (1 if summary else every), -1)  # the step of the sample kept
+                diverged = np.where((diverged < 0) | ((away >= 0) & (away < diverged)), away, diverged)
                 for i in same:
                     result["diverged_step"][i] = diverged
                     if (diverged >= 0).any():  # an unstable variant: no positions, no figures
