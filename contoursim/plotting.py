@@ -734,7 +734,6 @@ def _draw(drawings, out_dir):
 # Strategies compared (contoursim compare)
 
 
-
 def _grid(fig, n):
     """`n` axes of small multiples on `fig`, three to a row, and the unused cells hidden."""
     columns = min(3, n)
