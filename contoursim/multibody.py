@@ -1175,7 +1175,13 @@ def _body_from_toml(toml, base, where, item, body_index):
 
 
 def _check_small_errors(body, fail):
-    """Refuse error motions that leave the small errors the chain's model is for (:data:`SMALL_ERROR`) over the travel."""
+    """Refuse error motions that leave the small errors the chain's model is for (:data:`SMALL_ERROR`) over the travel,
+    and a static error's or a rotary axis's tilt's angles beyond it (the chain's rotations are first-order in them)."""
+    for key, angles, names in (("static", body.static[3:], COMPONENTS[3:]), ("tilt", body.tilt, ("x", "y", "z"))):
+        c = int(np.argmax(np.abs(angles)))
+        if abs(angles[c]) > SMALL_ERROR:
+            raise fail(f"its {key} angle {names[c]} is {1e6 * angles[c]:.4g} µrad: beyond the small errors a machine's "
+                       f"model is for ({SMALL_ERROR:g} an angle); check the units (µrad)", key)
     if body.travel is None or not body.has_motion_error:
         return
     q = np.linspace(*body.travel, 201)

@@ -527,6 +527,11 @@ def test_toml_thermal_growth_reference_and_time_constant():
         ("dx_um = { poly = [1, 0.01],", 'dx_um = { poly = [1, "a"],', 11, "expected a finite number"),
         ("dx_um = { poly", "dq_um = { poly", 11, "unknown key 'dq_um'"),
         ('squareness = { y_urad = 10 }', 'squareness = { x_urad = 10 }', 9, "squareness applies"),
+        # the chain's rotations are first-order: 1e8 µrad (100 rad) of tilt or static angle was taken as given
+        ('parent = "X"', 'parent = "X"\nstatic = { ez_urad = 2e4 }', 16, r"its static angle ez is 2e\+04 µrad: beyond the small "),
+        ('parent = "X"', 'parent = "X"\nstatic = { dx_um = 1, ex_urad = -1.5e4 }', 16, r"static angle ex is -1.5e\+04 µrad"),
+        ('[[body]]\nname = "tool"', '[[body]]\nname = "C"\nparent = "X"\njoint = "rotary z"\naxis = "c"\ntilt = { x_urad = 3e4 }\n\n'
+         '[[body]]\nname = "tool"', 18, r"body 'C': its tilt angle x is 3e\+04 µrad: beyond the small errors"),
         ("period_mm = 5", "period_deg = 5", 11, r"cyclic terms are \{ amplitude_um, period_mm, phase_deg \}"),
         ('axis = "x"', 'axis = "x"\ntravel_deg = [0, 1]', 9, "the travel of a linear joint is 'travel_mm'"),
         # keys without their unit (earlier versions) name the key that replaced them
