@@ -3,7 +3,7 @@
 A run's samples are the unit: :data:`RUN_BYTES_PER_SAMPLE` covers one run
 from its reference to its trace CSV and plots, :data:`COMPARED_RUN_BYTES_PER_SAMPLE`
 each further run a comparison keeps beside it, :data:`DIAGNOSIS_BYTES_PER_SAMPLE`
-a diagnosis.
+a diagnosis. A sweep's are its variants (:data:`SWEEP_BYTES_PER_VALUE`).
 """
 
 import os
@@ -22,6 +22,12 @@ COMPARED_RUN_BYTES_PER_SAMPLE = 250
 #: 2-D circle on the demo mill with backlash and noise, nominal model given, peaked at 3,739 bytes a sample on
 #: 78,551 samples and 3,932 on 224,404 (tracemalloc), 4,036 bytes per further sample.
 DIAGNOSIS_BYTES_PER_SAMPLE = 4500
+
+#: Peak memory of a sweep per variant and varied parameter, from the drawn values to the table, its CSV and the
+#: plots [bytes] (the variants' traces are never held: each batch keeps its figures only). Grid and Latin-hypercube
+#: sweeps of demo_mill with 1 to 3 parameters grew by 388-390 (1), 1,174-1,188 (2: the map of both) and 929-944 (3)
+#: bytes a variant from 20,000 to 80,000 variants (tracemalloc), at most 587 a variant and parameter.
+SWEEP_BYTES_PER_VALUE = 700
 
 
 def available():
@@ -69,9 +75,35 @@ def check(samples, what, advice, runs=1, per_sample=RUN_BYTES_PER_SAMPLE):
         More memory is needed than is available (nothing is checked where that is unknown).
     """
     samples = float(samples)  # a Python int of 1e300 samples would not convert in the message
-    needed = samples * (per_sample + (runs - 1) * COMPARED_RUN_BYTES_PER_SAMPLE)
+    held = "a run of them" if runs == 1 else f"{runs} runs of them"
+    _fits(samples * (per_sample + (runs - 1) * COMPARED_RUN_BYTES_PER_SAMPLE),
+          f"{what} that is {samples:.4g} samples, {held} needs", advice)
+
+
+def check_sweep(variants, parameters, what, advice):
+    """Refuse a sweep of `variants` variants of `parameters` parameters that would not fit in the memory available.
+
+    Parameters
+    ----------
+    variants : int
+    parameters : int
+    what : str
+        What the variants are, starting the message (e.g. ``"vary.count: a grid of 10000 x 10000 points"``).
+    advice : str
+        What to change, ending the message.
+
+    Raises
+    ------
+    ValueError
+        More memory is needed than is available (nothing is checked where that is unknown).
+    """
+    variants = float(variants)
+    _fits(variants * parameters * SWEEP_BYTES_PER_VALUE, f"{what}, {variants:.4g} variants, needs", advice)
+
+
+def _fits(needed, what, advice):
+    """Raise ValueError ``"<what> about N GB of memory and M GB are available; <advice>"`` when `needed` [bytes] does
+    not fit."""
     free = available()
     if free is not None and needed > free:
-        held = "a run of them" if runs == 1 else f"{runs} runs of them"
-        raise ValueError(f"{what} that is {samples:.4g} samples, {held} needs about {needed / 1e9:.3g} GB of memory "
-                         f"and {free / 1e9:.3g} GB are available; {advice}")
+        raise ValueError(f"{what} about {needed / 1e9:.3g} GB of memory and {free / 1e9:.3g} GB are available; {advice}")

@@ -400,6 +400,10 @@ def compare_command(args):
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
+    try:
+        model.machine.axis_commands(trajectory)  # the path against the machine, as simulate's run_job says it
+    except ValueError as exc:  # (more coordinates than its axes, beyond their travel): naming the path's file
+        raise ConfigError(str(exc), str(path_file)) from None
     comparison = compare(model, trajectory, names, settings=settings, tuned=args.tune)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)

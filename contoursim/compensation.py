@@ -469,7 +469,8 @@ class CrossCoupled(Strategy):
     def coupling(self, path, servos, dt):
         coupled = dict(list(servos.items())[:3])
         if len(coupled) < 2:
-            raise ValueError(f"cross-coupled control needs 2 or 3 servo axes, the machine has {len(servos)}")
+            raise ValueError(f"{self.name}: cross-coupled control needs 2 or 3 servo axes, the machine has "
+                             f"{len(servos)} ({', '.join(servos)})")
         path = path[:, : len(coupled)]
         m = self.margins(path, coupled, dt)  # the loops as simulated, not as modelled
         if m["spectral_radius"] >= 1.0:

@@ -416,8 +416,7 @@ class ServoResponse:
         measurement noise; the axis position without effects.
     encoder : ndarray, shape (N, n)
         The position the position loop closed on at ``t_k`` [mm]: motor
-        encoder or linear scale, quantised and delayed (:func:`run` returns
-        `position` itself when no axis has an effect between the two).
+        encoder or linear scale, quantised and delayed.
     velocity : ndarray, shape (N, n)
         Motor (carriage) velocities at ``t_k`` [mm/s] (the plant's, not a
         drive's estimate of it).
@@ -831,6 +830,8 @@ def _no_coupling():
 LANES = 32
 _CHUNK = 128  # kept samples a block holds before writing them to the outputs
 _MIN_LANES = 4  # narrower blocks step one variant at a time (faster below 4 lanes: 1 lane 0.6x, 2 lanes 0.9x, 4 lanes 2x)
+_LANE_COUNT = (f"_lanes steps 1 to {LANES} variants (its rows' first dimension), with as many rows of status and of "
+               "each output asked for")
 # A block's numbers per axis and lane, in one array (axis, row, lane) of LANES lanes: a compile-time distance
 # between any two rows, which lets LLVM see that the lanes' loads and stores do not overlap (and vectorise).
 # Rows 0 .. NPAR - 1: the parameter row of pack(); then the state and the values passed between loops:
@@ -862,7 +863,8 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
     not asked for; the kept samples go to them :data:`_CHUNK` at a time.
     `external` (N, n): the known external forces [N] every lane gets (no rows: none).
     `status` (L, n, 3) as for :func:`_variant` (the reference is checked
-    before).
+    before). A lane count ``L`` outside 1 .. LANES, or status and outputs
+    of another, raises ValueError (the lanes' arrays hold LANES lanes).
 
     Where a new per-lane effect goes: its parameters are entries of the
     packed row (copied into ``p`` whole); a state of its own is a row of
@@ -879,6 +881,13 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
     """
     n_lanes, n_axes = rows.shape[0], rows.shape[1]
     n_steps, pushed = ref_pos.shape[0], external.shape[0] > 0
+    if not 1 <= n_lanes <= LANES or status.shape[0] != n_lanes:  # the lanes' arrays hold LANES: no write beyond them
+        raise ValueError(_LANE_COUNT)
+    for signal in (tool, encoder, velocity, current):
+        if signal.shape[1] > 0 and signal.shape[0] != n_lanes:
+            raise ValueError(_LANE_COUNT)
+    if saturated.shape[1] > 0 and saturated.shape[0] != n_lanes:
+        raise ValueError(_LANE_COUNT)
     s = np.empty((n_axes, _LROWS, LANES))  # see _LROWS; `p` where parameters are read
     p = s
     has = np.empty((n_axes, 7), np.bool_)
@@ -1546,15 +1555,11 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None, forc
     n_steps = ref_pos.shape[0]
     external = _external(force, n_steps, n)
     state = _initial_state((n,), ref_pos[0])
-    # Without a sensor effect between them (a mode, noise, delay, quantisation, or backlash behind a motor
-    # encoder) the encoder reads the tool position exactly: one array holds both, written twice with the same values.
     noise = _encoder_noise([effects.get(name) or LoopEffects() for name in names], n_steps)
-    sensed = par[:, _MODE] + par[:, _NOISE] + par[:, _DELAY_N] + par[:, _DELAY_F] + par[:, _QUANTUM]
-    separate = bool(np.any(sensed != 0.0) or np.any((par[:, _HALF_PLAY] != 0.0) & (par[:, _SCALE] == 0.0))
-                    or noise.shape[0] > 0)
-    signals = np.empty((3 + separate, n_steps, n))  # one block, which malloc keeps for the next run
-    position, velocity, current = signals[:3]
-    encoder = signals[3] if separate else position
+    # An array each, also where the encoder reads the tool position exactly: it reads -0 where the tool stands at +0
+    # (the table plus a rigid axis's +0 deflection), as run_batch's are.
+    signals = np.empty((4, n_steps, n))  # one block, which malloc keeps for the next run
+    position, encoder, velocity, current = signals
     saturated = np.empty((n_steps, n), bool)
     status = np.empty((n, 3), np.int64)
     if coupling is None:

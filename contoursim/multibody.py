@@ -407,11 +407,16 @@ class MachineChain:
             value = getattr(self, label)
             if not isinstance(value, (int, np.integer)) or not (1 if label == "tool" else 0) <= value <= n:
                 raise ValueError(f"{label} must be a body index, got {value!r}")
+        if self.tool == self.workpiece:  # the tool relative to itself: no motion, no error, nothing to map
+            raise ValueError(f"tool and workpiece must be different bodies, got body {self.tool} for both")
         moving = [b.axis for b in bodies if b.axis is not None]
         axes = tuple(dict.fromkeys(moving)) if self.axes is None else tuple(self.axes)
         missing = set(moving) - set(axes)
         if missing or len(set(axes)) != len(axes):
             raise ValueError(f"axes {axes} must list each driven axis once; missing: {sorted(missing)}")
+        idle = [a for a in axes if a not in moving]
+        if idle:
+            raise ValueError(f"axes {axes} lists {', '.join(map(repr, idle))}, which no body's joint drives")
         object.__setattr__(self, "axes", axes)
         for b in bodies:
             if b.axis is not None:
@@ -1071,14 +1076,16 @@ def chain_from_toml(toml, *keys, extra=()):
     where = keys
     try:
         axes = top.get("axis_order")
-        tool_axis = top.get("tool_axis", [0.0, 0.0, 1.0])
+        tool_axis = np.asarray(top.get("tool_axis", [0.0, 0.0, 1.0]), float)
+        if tool_axis.shape == (3,) and not np.linalg.norm(tool_axis) > 0:
+            raise toml.error(f"tool_axis must be a non-zero vector, got {top['tool_axis']!r}", *keys, "tool_axis")
         tool_tip = np.asarray(top.get("tool_tip_mm", [0.0, 0.0, 0.0]), float)
         return MachineChain(
             tuple(bodies),
             tool=body_index(top["tool"], *keys, "tool"),
             workpiece=body_index(top["workpiece"], *keys, "workpiece"),
             axes=None if axes is None else tuple(axes),
-            tool_axis=np.asarray(tool_axis, float) / np.linalg.norm(tool_axis),
+            tool_axis=tool_axis / np.linalg.norm(tool_axis),
             tool_tip=tool_tip,
             name=str(top.get("name", Path(toml.source).stem)),
         )
@@ -1168,22 +1175,65 @@ def _body_from_toml(toml, base, where, item, body_index):
 
 
 def _check_small_errors(body, fail):
-    """Refuse error motions that leave the small errors the chain's model is for (:data:`SMALL_ERROR`) over the travel."""
+    """Refuse error motions that leave the small errors the chain's model is for (:data:`SMALL_ERROR`) over the travel,
+    and a static error's or a rotary axis's tilt's angles beyond it (the chain's rotations are first-order in them)."""
+    for key, angles, names in (("static", body.static[3:], COMPONENTS[3:]), ("tilt", body.tilt, ("x", "y", "z"))):
+        c = int(np.argmax(np.abs(angles)))
+        if abs(angles[c]) > SMALL_ERROR:
+            raise fail(f"its {key} angle {names[c]} is {1e6 * angles[c]:.4g} µrad: beyond the small errors a machine's "
+                       f"model is for ({SMALL_ERROR:g} an angle); check the units (µrad)", key)
     if body.travel is None or not body.has_motion_error:
         return
     q = np.linspace(*body.travel, 201)
-    error = np.abs(body.motion_error(q))
-    span = body.travel[1] - body.travel[0]
+    beyond = _beyond_small_errors(body, np.abs(body.motion_error(q)))
+    if beyond is not None:
+        k, c, size, what = beyond
+        at = f"{np.rad2deg(q[k]):g}°" if body.joint == "rotary" else f"{q[k]:g} mm"
+        raise fail(f"its error motion {COMPONENTS[c]} reaches {size} at {at} of its travel: beyond the small errors a "
+                   f"machine's model is for ({SMALL_ERROR:g} {what}); check the coefficients' units and the travel")
+
+
+def check_drift(chain, duration):
+    """Refuse a chain whose thermal drift leaves the small errors its model is for (:data:`SMALL_ERROR`) in a run.
+
+    The error motions are checked so when a machine file is read; the drift
+    grows with time, so a run checks it over its length (at the ends of
+    each body's travel, where a thermal growth is largest).
+
+    Parameters
+    ----------
+    chain : MachineChain
+    duration : float
+        Length of the run [s].
+
+    Raises
+    ------
+    ValueError
+        Naming the body, the drift's component and its size after `duration`.
+    """
+    for body in chain.bodies:
+        if not body.drifts:
+            continue
+        q = np.zeros(1) if body.travel is None else np.asarray(body.travel, float)
+        beyond = _beyond_small_errors(body, np.abs(body.thermal_drift(np.full(q.size, float(duration)), q)))
+        if beyond is not None:
+            k, c, size, what = beyond
+            raise ValueError(f"the machine's body {body.name!r}: its thermal drift {COMPONENTS[c]} reaches {size} "
+                             f"after the run's {duration:.6g} s: beyond the small errors a machine's model is for "
+                             f"({SMALL_ERROR:g} {what}); check the drift rates' units (per minute)")
+
+
+def _beyond_small_errors(body, error):
+    """``(row, component, "size unit", limit's words)`` of the largest of `error` (N, 6) [mm, rad] beyond
+    :data:`SMALL_ERROR` (angles; translations of a linear joint with a travel, per its length), or None."""
     limits = [(3, 6, SMALL_ERROR, 1e6, "µrad", "an angle")]
-    if body.joint == "linear":
-        limits.append((0, 3, SMALL_ERROR * span, 1e3, "µm", "of the travel's length"))
+    if body.joint == "linear" and body.travel is not None:
+        limits.append((0, 3, SMALL_ERROR * (body.travel[1] - body.travel[0]), 1e3, "µm", "of the travel's length"))
     for first, last, limit, scale, unit, what in limits:
-        k, c = np.unravel_index(np.argmax(error[:, first:last]), (q.size, last - first))
+        k, c = np.unravel_index(np.argmax(error[:, first:last]), (error.shape[0], last - first))
         if error[k, first + c] > limit:
-            at = f"{np.rad2deg(q[k]):g}°" if body.joint == "rotary" else f"{q[k]:g} mm"
-            raise fail(f"its error motion {COMPONENTS[first + c]} reaches {scale * error[k, first + c]:.4g} {unit} at {at} "
-                       f"of its travel: beyond the small errors a machine's model is for ({SMALL_ERROR:g} {what}); "
-                       "check the coefficients' units and the travel")
+            return k, first + c, f"{scale * error[k, first + c]:.4g} {unit}", what
+    return None
 
 
 def _motion_from_toml(toml, base, where, item, rotary, fail):

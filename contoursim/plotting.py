@@ -45,6 +45,11 @@ def _num(value, decimals=2):
     return f"{round(float(value), decimals) + 0.0:.{decimals}f}"
 
 
+#: The nm the trace CSV holds [µm]: the compare plots' floor (errors below it are drawn at it), and no error below
+#: it is magnified (:func:`magnification_for`).
+RESOLUTION_UM = 1e-3
+
+
 def magnification_for(size, error, fraction=0.08):
     """A round magnification that draws the largest error as about `fraction` of `size`.
 
@@ -61,7 +66,10 @@ def magnification_for(size, error, fraction=0.08):
     -------
     float
         1, 2 or 5 times a power of ten, never below 1: an error already
-        larger than `fraction` of `size` is drawn at true scale (1).
+        larger than `fraction` of `size` is drawn at true scale (1), and
+        so is one below :data:`RESOLUTION_UM`, which the traces do not
+        hold (the rounding of a path moving along Z only would otherwise
+        be drawn ×1e14).
 
     Examples
     --------
@@ -69,8 +77,10 @@ def magnification_for(size, error, fraction=0.08):
     500.0
     >>> magnification_for(100.0, 40.0)      # no shrinking "×0.2": true scale
     1.0
+    >>> magnification_for(1.0, 1e-16)       # rounding: nothing to magnify
+    1.0
     """
-    if error <= 0:
+    if not error >= 1e-3 * RESOLUTION_UM:
         return 1.0
     raw = fraction * size / error
     if raw < 1:
@@ -331,7 +341,10 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    title = f"contour error {f'×{k:g}' if k > 1 else 'at true scale'}: max {largest:.2f} µm"
+    if k == 1 and largest < RESOLUTION_UM:
+        title = f"contour error below the traces' {RESOLUTION_UM * 1e3:g} nm: nothing to magnify"
+    else:
+        title = f"contour error {f'×{k:g}' if k > 1 else 'at true scale'}: max {largest:.2f} µm"
     if _has_test(traj):
         title += " on the test proper"
     notes = []
@@ -719,10 +732,6 @@ def _draw(drawings, out_dir):
 
 # ---------------------------------------------------------------------------------------------
 # Strategies compared (contoursim compare)
-
-
-#: The compare plots' floor [µm]: the nm the trace CSV holds (errors below it are drawn at it).
-RESOLUTION_UM = 1e-3
 
 
 def _grid(fig, n):

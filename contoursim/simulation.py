@@ -29,6 +29,7 @@ from .contour import exact_contour_error
 from .exceptions import ContoursimWarning, UnstableLoopError
 from .traces import Trace, write_trace
 from .machine import CARTESIAN, Machine
+from .multibody import MAX_TRAVEL, check_drift
 from .model import as_model
 from .trajectory import Trajectory
 
@@ -425,11 +426,9 @@ def _servo_run(model, composition, trajectory, force):
     force = None if force is None else np.pad(force, ((lead, 0), (0, 0)), mode="edge")
     response = kernel.run(servos, dt, *sent, coupling=coupling, effects=model.loop_effects(), force=force)
     if lead:
-        position = response.position[lead:]
-        encoder = position if response.encoder is response.position else response.encoder[lead:]
         estimate = None if response.contour_estimate is None else response.contour_estimate[lead:]
-        response = kernel.ServoResponse(dt, position, encoder, response.velocity[lead:], response.current[lead:],
-                                        response.saturated[lead:], estimate)  # fmt: skip
+        response = kernel.ServoResponse(dt, response.position[lead:], response.encoder[lead:], response.velocity[lead:],
+                                        response.current[lead:], response.saturated[lead:], estimate)  # fmt: skip
     return q, response, servos
 
 
@@ -481,6 +480,16 @@ def _run_in(q, v, a, lead, dt):
 def _elapsed(trajectory):
     """Time since the reference's first sample [s], shape (N,): the clock of thermal drift and strategies."""
     return trajectory.t - trajectory.t[0]
+
+
+def _ran_away(position):
+    """Per column of `position` (N, n) [mm] the first row beyond ±:data:`MAX_TRAVEL` or not finite, -1 for none.
+
+    An unstable loop whose state is still finite (the kernel's divergence check) can be kilometres away already: its
+    positions mean nothing, and the geometric stage's polynomials overflow on them.
+    """
+    far = ~(np.abs(position) <= MAX_TRAVEL)
+    return np.where(far.any(axis=0), far.argmax(axis=0), -1)
 
 
 def _every_axis_servo(model):
@@ -585,7 +594,15 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     composition = Composition(strategies)
     preview = composition.preview(composition.drive(model.servos()), machine.servo_period)
     trajectory, pushing, pushed = _reference(machine, reference, settle, preview, force)
+    if machine.chain is not None:  # before the run: the machine file's drift over it within the chain's small errors
+        check_drift(machine.chain, trajectory.t[-1] - trajectory.t[0])
     q, response, servos = _servo_run(model, composition, trajectory, pushing)
+    away = _ran_away(response.position)
+    if away.max() >= 0:
+        a = int(np.argmax(away >= 0))
+        raise UnstableLoopError(f"the simulation of axis {list(servos)[a]!r} ran away beyond ±{MAX_TRAVEL:g} mm by "
+                                f"t = {trajectory.t[away[a]]:.6g} s: its loop with these effects (or this coupling) is "
+                                "unstable")
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
@@ -689,9 +706,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     dict
         ``"t"`` (M,) [s], each output asked for, and ``"diverged_step"``
         (B, n_servo): per variant and servo axis the first step whose state
-        was not finite (an unstable variant; 0 on every axis for a variant
-        refused by the coupled-loop check), -1 for none; a diverged
-        variant's ``tool_position`` is NaN throughout.
+        was not finite, or whose position was beyond ±1e6 mm (an unstable
+        variant; 0 on every axis for a variant refused by the coupled-loop
+        check), -1 for none; a diverged variant's ``tool_position`` is NaN
+        throughout.
 
     Raises
     ------
@@ -730,6 +748,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory, pushing, _ = _reference(first, reference, settle, preview, force)
+    if first.chain is not None:  # one chain for all (simulate's check)
+        check_drift(first.chain, trajectory.t[-1] - trajectory.t[0])
     q, v, a = _target(models[0], trajectory, compositions[0])
     summary = "summary" in outputs
     traces = [name for name in outputs if name != "summary"]
@@ -790,6 +810,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
                 run[name] = run[name][:, taken]
             for b, (_, _, same) in enumerate(part):
                 diverged = np.where(run["diverged_step"][b] >= 0, np.maximum(run["diverged_step"][b] - lead, 0), -1)
+                away = _ran_away(run["tool"][b])
+                away = np.where(away >= 0, away * (1 if summary else every), -1)  # the step of the sample kept
+                diverged = np.where((diverged < 0) | ((away >= 0) & (away < diverged)), away, diverged)
                 for i in same:
                     result["diverged_step"][i] = diverged
                     if (diverged >= 0).any():  # an unstable variant: no positions, no figures

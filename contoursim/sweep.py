@@ -232,14 +232,16 @@ def _draw(toml, tables, method, count, seed):
             raise toml.error(f"vary {t['name']!r}: min must not exceed max" + (" and both be positive (log)" if log else ""),
                              "vary", i, "min")
         if method == "grid":
-            n = _integer(toml, ("vary", i, "count"), t.get("count"), 1)
-            columns.append(np.geomspace(low, high, n) if log else np.linspace(low, high, n))
+            columns.append((low, high, log, _integer(toml, ("vary", i, "count"), t.get("count"), 1)))
         elif "count" in t:
             raise toml.error("a vary table's count gives a grid's points: with random or lhs set [sweep] count",
                              "vary", i, "count")
         else:
             columns.append((low, high, log))
+    _fits(toml, tables, method, count, columns)
     if method == "grid":
+        columns = [c if isinstance(c, np.ndarray) else np.geomspace(*c[:2], c[3]) if c[2] else np.linspace(*c[:2], c[3])
+                   for c in columns]
         return np.array(list(itertools.product(*columns)), float)
     rng = np.random.default_rng(seed)
     if method == "random":
@@ -250,6 +252,27 @@ def _draw(toml, tables, method, count, seed):
     for j, (low, high, log) in enumerate(columns):
         out[:, j] = np.exp(np.log(low) + u[:, j] * np.log(high / low)) if log else low + u[:, j] * (high - low)
     return out
+
+
+def _fits(toml, tables, method, count, columns):
+    """Refuse, before anything is drawn, a sweep whose variants' values, table and plots would not fit in memory.
+
+    Named by the option that sets the count: ``sweep.count``, or a grid's largest ``vary.count`` (or ``values``).
+    """
+    from . import _memory
+
+    if method != "grid":
+        key, what = ("sweep", "count"), f"sweep.count = {count}"
+    else:
+        points = [len(c) if isinstance(c, np.ndarray) else c[3] for c in columns]
+        i = int(np.argmax(points))
+        key = ("vary", i, "values" if isinstance(columns[i], np.ndarray) else "count")
+        what = f"vary.{key[2]} of {tables[i]['name']!r}: a grid of {' x '.join(map(str, points))} points"
+        count = math.prod(points)
+    try:
+        _memory.check_sweep(count, len(tables), what, "sweep fewer variants (or split the sweep into several)")
+    except ValueError as exc:
+        raise toml.error(str(exc), *key) from None
 
 
 def _number(value):

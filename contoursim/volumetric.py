@@ -125,6 +125,11 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
         chain = load_machine(machine).chain
         if chain is None:
             raise ConfigError("the machine has no geometric half ([[body]] tables): nothing to map", str(machine))
+        travel = {b.axis: b.travel for b in chain.bodies if b.axis is not None}
+        bare = [a for a in _swept(chain, sweep) if travel[a] is None and a not in (ranges or {})]
+        if bare:  # the file's, not an argument's
+            raise ConfigError(f"axis {bare[0]!r} has no travel: give its body travel_mm (or travel_deg) to map it",
+                              str(machine))
     q, values = volumetric_grid(chain, sweep, grid, ranges, fixed)
     sweep = _swept(chain, sweep)
     rotary = dict(zip(chain.axes, chain.rotary_axes))

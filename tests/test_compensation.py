@@ -272,7 +272,7 @@ def test_strategies_compose_and_refuse_two_of_a_kind():
 
 
 def test_cross_coupling_needs_two_axes():
-    with pytest.raises(ValueError, match="cross-coupled control needs 2 or 3 servo axes, the machine has 1"):
+    with pytest.raises(ValueError, match=r"^ccc_arc: cross-coupled control needs 2 or 3 servo axes, the machine has 1 \(x\)"):
         cp.CrossCoupled().coupling(np.zeros((10, 1)), {"x": AxisServo(kp=40.0, **AXIS)}, DT)
 
 

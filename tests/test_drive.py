@@ -324,7 +324,7 @@ def test_the_table_lags_the_motor_by_m2_a_over_k_under_constant_acceleration(kw)
     m2, k = MASS - SCREW["motor_mass"], SCREW["screw_stiffness"] * 1e6  # [kg], [N/m]
     assert lag == pytest.approx(m2 * accel / k, rel=1e-6)  # [mm]: 1.05 µm (the loop's slowest poles, 6 Hz, leave 1e-9)
     stiff = run([axis(vff=1.0, aff=1.0, **kw)], DT, pos[:, None], (accel * t)[:, None], np.full((t.size, 1), accel))
-    assert stiff.encoder is stiff.position  # a rigid axis's encoder reads the tool position itself
+    np.testing.assert_array_equal(stiff.encoder, stiff.position)  # a rigid axis's encoder reads the tool position
 
 
 def test_a_loop_the_screw_destabilises_is_refused_with_its_margins():

@@ -319,12 +319,40 @@ def test_the_diagnosis_table_keeps_its_columns_apart_for_a_residual_of_metres(tm
     assert label.strip() == "nominal model" and 1e6 < float(rms) <= float(largest), line
 
 
-def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_file(tmp_path, capsys):
+@pytest.mark.parametrize("command", [["simulate"], ["compare", "--strategies", "none,feedforward"]])
+def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_file(tmp_path, capsys, command):
     (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).split("[axes.y]")[0])  # x alone
     (tmp_path / "small.toml").write_text(SMALL_PATH)
-    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
-                      str(tmp_path / "out")],
+    _refused(capsys, [command[0], str(tmp_path / "small.toml"), *command[1:], "--machine", str(tmp_path / "m.toml"),
+                      "--out", str(tmp_path / "out")],
              f"{tmp_path / 'small.toml'}: the path moves in 2 coordinates but the machine has only 1 axis (x)")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_machine_drifting_metres_within_the_run_is_refused(tmp_path, capsys):
+    """A thermal drift rate of 1e9 µm/min (a unit slip) moved the tool 26 m within a 2-s run: figures of a model made
+    for small errors, printed as a result."""
+    text = preset_file("vertical_mill_3axis").read_text().replace(
+        "squareness = { x_urad = -30, y_urad = 15 }", "squareness = { x_urad = -30, y_urad = 15 }\nthermal = { dx_um_per_min = 1e9 }")
+    (tmp_path / "m.toml").write_text(text)
+    (tmp_path / "vertical_mill_x_laser.csv").write_text(preset_file("vertical_mill_3axis").with_name(
+        "vertical_mill_x_laser.csv").read_text())
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    for command in (["simulate"], ["compare", "--strategies", "none"]):
+        _refused(capsys, [command[0], str(tmp_path / "small.toml"), *command[1:], "--machine", str(tmp_path / "m.toml"),
+                          "--out", str(tmp_path / "out")],
+                 "the machine's body 'Z': its thermal drift dx reaches", "beyond the small errors")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_machine_whose_axis_has_no_travel_is_refused_by_volumetric_naming_its_file(tmp_path, capsys):
+    text = preset_file("vertical_mill_3axis").read_text().replace("travel_mm = [-300, 0]\n", "")  # Z's travel
+    (tmp_path / "m.toml").write_text(text)
+    (tmp_path / "vertical_mill_x_laser.csv").write_text(preset_file("vertical_mill_3axis").with_name(
+        "vertical_mill_x_laser.csv").read_text())
+    _refused(capsys, ["volumetric", str(tmp_path / "m.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'm.toml'}: axis 'z' has no travel: give its body travel_mm")
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("job, line, words", [

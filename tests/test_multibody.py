@@ -2,6 +2,8 @@
 
 from dataclasses import replace
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -525,6 +527,11 @@ def test_toml_thermal_growth_reference_and_time_constant():
         ("dx_um = { poly = [1, 0.01],", 'dx_um = { poly = [1, "a"],', 11, "expected a finite number"),
         ("dx_um = { poly", "dq_um = { poly", 11, "unknown key 'dq_um'"),
         ('squareness = { y_urad = 10 }', 'squareness = { x_urad = 10 }', 9, "squareness applies"),
+        # the chain's rotations are first-order: 1e8 µrad (100 rad) of tilt or static angle was taken as given
+        ('parent = "X"', 'parent = "X"\nstatic = { ez_urad = 2e4 }', 16, r"its static angle ez is 2e\+04 µrad: beyond the small "),
+        ('parent = "X"', 'parent = "X"\nstatic = { dx_um = 1, ex_urad = -1.5e4 }', 16, r"static angle ex is -1.5e\+04 µrad"),
+        ('[[body]]\nname = "tool"', '[[body]]\nname = "C"\nparent = "X"\njoint = "rotary z"\naxis = "c"\ntilt = { x_urad = 3e4 }\n\n'
+         '[[body]]\nname = "tool"', 18, r"body 'C': its tilt angle x is 3e\+04 µrad: beyond the small errors"),
         ("period_mm = 5", "period_deg = 5", 11, r"cyclic terms are \{ amplitude_um, period_mm, phase_deg \}"),
         ('axis = "x"', 'axis = "x"\ntravel_deg = [0, 1]', 9, "the travel of a linear joint is 'travel_mm'"),
         # keys without their unit (earlier versions) name the key that replaced them
@@ -537,6 +544,50 @@ def test_toml_thermal_growth_reference_and_time_constant():
 def test_toml_errors_name_file_and_line(old, new, line, match):
     with pytest.raises(ConfigError, match=rf"^m.toml, line {line}: .*{match}"):
         chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
+
+
+@pytest.mark.parametrize(
+    "old, new, match",
+    [
+        ('workpiece = "bed"', 'workpiece = "tool"', r"^m.toml: tool and workpiece must be different bodies"),
+        # an axis no body drives: its kind was looked up with next() (a StopIteration out of Machine)
+        ('workpiece = "bed"', 'workpiece = "bed"\naxis_order = ["x", "y"]', r"^m.toml: axes \('x', 'y'\) lists 'y', which no "
+                                                                             r"body's joint drives"),
+        ('workpiece = "bed"', 'workpiece = "bed"\ntool_axis = [0, 0, 0]', r"^m.toml, line 4: tool_axis must be a non-zero"),
+    ],
+)
+def test_toml_chain_errors_name_the_file(old, new, match):
+    with pytest.raises(ConfigError, match=match):
+        chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
+
+
+def test_a_machine_file_whose_axis_no_body_drives_is_refused_by_its_file(tmp_path):
+    text = (Path(__file__).parents[1] / "contoursim" / "presets" / "vertical_mill_3axis.toml").read_text()
+    (tmp_path / "vertical_mill_x_laser.csv").write_text(
+        (Path(__file__).parents[1] / "contoursim" / "presets" / "vertical_mill_x_laser.csv").read_text())
+    (tmp_path / "m.toml").write_text(text.replace('axis = "z"', 'axis = "y"'))  # Y and Z both on y: z idle
+    with pytest.raises(ConfigError, match=r"m.toml: axes \('x', 'y', 'z'\) lists 'z', which no body's joint drives"):
+        load_preset(tmp_path / "m.toml")
+
+
+def test_a_thermal_drift_beyond_the_small_errors_within_a_run_is_refused():
+    # X travels 0..100 mm (MACHINE has no travel: given here); the small errors allow 1 mm of drift along it, 10 mrad.
+    text = MACHINE.replace('squareness = { y_urad = 10 }', 'squareness = { y_urad = 10 }\ntravel_mm = [0, 100]\n'
+                           'thermal = { dy_um_per_min = 600 }')  # 10 µm/s: 1 mm after 100 s
+    chain = chain_from_toml(TomlFile("m.toml", text))
+    multibody.check_drift(chain, 99.9)
+    with pytest.raises(ValueError, match=r"^the machine's body 'X': its thermal drift dy reaches 1001 µm after the "
+                                         r"run's 100.1 s: beyond the small errors .* \(0.01 of the travel's length\)"):
+        multibody.check_drift(chain, 100.1)
+    # a growth drifts most at the far end of the travel: 1000 ppm/min from 0 is 100 µm/min at 100 mm
+    grown = chain_from_toml(TomlFile("m.toml", text.replace("thermal = { dy_um_per_min = 600 }",
+                                                           "thermal_growth = { dx_ppm_per_min = 1000 }")))
+    multibody.check_drift(grown, 599.0)
+    with pytest.raises(ValueError, match=r"thermal drift dx reaches 1002 µm after the run's 601 s"):
+        multibody.check_drift(grown, 601.0)
+    tilted = chain_from_toml(TomlFile("m.toml", text.replace("dy_um_per_min = 600", "ez_urad_per_min = 6e5")))
+    with pytest.raises(ValueError, match=r"thermal drift ez reaches 1.1e\+04 µrad after the run's 1.1 s: .* \(0.01 an angle"):
+        multibody.check_drift(tilted, 1.1)
 
 
 def _scaled_pinv(A, floor, rcond=1e-4):

@@ -21,6 +21,21 @@ def test_magnification_is_round_at_least_one_and_fits(size, error):
         assert 0.08 / 2.5 * size < k * error <= 0.08 * size * (1 + 1e-12)
 
 
+def test_a_path_along_z_only_has_nothing_to_magnify():
+    """A plunge: x and y stand still, so the in-plane contour error is the rounding of the foot points (~1e-16 mm),
+    which a magnification fitted to it drew ×1e14."""
+    machine = load_machine("demo_mill")
+    plunge = paths.polyline([[0, 0, 0], [0, 0, -5]])
+    result = simulate(machine, sample(plunge, plan(plunge, 5.0, 500.0, 50_000.0), machine.servo_period))
+    assert float(result.contour.magnitude.max()) < 1e-9  # [mm]: nothing in the plane
+    assert magnification_for(1.0, float(result.contour.magnitude.max())) == 1.0
+    assert magnification_for(1.0, 1e-16) == magnification_for(1.0, 0.9e-6) == 1.0  # below the traces' nm: true scale
+    assert magnification_for(1.0, 1e-6) == 50_000.0
+    ax = plot_path_error(result)
+    assert "nothing to magnify" in ax.get_title() and "×" not in ax.get_title()
+    ax.figure.clf()
+
+
 def test_envelope_keeps_the_extremes_of_every_pixel_column():
     rng = np.random.default_rng(3)
     n, columns = 100_003, 700

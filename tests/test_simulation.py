@@ -412,3 +412,31 @@ def test_a_trace_that_starts_at_constant_velocity_starts_in_the_steady_following
     started = simulate(machine, trace, contour=False)
     assert trace.reference[0, 0] - started.tool_position[0, 0] == pytest.approx(25.0 / 40.0, rel=0.01)
     assert len(started.trajectory) == len(trace.t)
+
+
+def test_a_loop_running_away_is_reported_diverged_not_as_figures_of_kilometres():
+    # A variant's loop that grows without bound but is still finite when the run ends (the kernel checks for
+    # non-finite states) was summarised as a contour error of 1e11 µm, or, a little faster, ended the batch in
+    # 'magnitude contains a non-finite value (inf)' (a sweep varying ti; a diagnosis's candidate: overflow warnings).
+    from dataclasses import replace
+
+    from contoursim.effects import Effect
+    from contoursim.exceptions import UnstableLoopError
+    from contoursim.machine import load_machine
+    from contoursim.model import Model
+
+    machine = load_machine("demo_mill")
+    line = paths.polyline([[0, 0], [2, 0]])
+    trajectory = sample(line, plan(line, 10.0, 500.0, 50_000.0), machine.servo_period)
+    variants = [replace(machine, axes={**machine.axes, "x": replace(machine.axes["x"], ti=machine.axes["x"].ti * f)})
+                for f in (1.0, 0.003, 0.001)]  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = simulate_batch(variants, trajectory, outputs=("summary", "tool_position"), check=False)
+    np.testing.assert_array_equal(out["summary"]["diverged"], [False, True, True])
+    assert np.isfinite(out["summary"]["contour_max_um"][0]) and np.isnan(out["summary"]["contour_max_um"][1:]).all()
+    assert np.isnan(out["tool_position"][1:]).all() and (out["diverged_step"][1:, 0] > 0).all()
+    assert (out["diverged_step"][:, 1:] == -1).all() and (out["diverged_step"][0] == -1).all()
+    # the single run: a feedback delay of 50 periods makes x's loop grow, still finite where the run ends
+    with pytest.raises(UnstableLoopError, match=r"the simulation of axis 'x' ran away beyond ±1e\+06 mm by t = "):
+        simulate(Model(machine, (Effect("time_delay", "x", delay_s=0.01, kind="feedback"),)), trajectory)

@@ -90,6 +90,36 @@ def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message
         read_sweep(_spec(tmp_path, [vary]))
 
 
+@pytest.mark.parametrize(("varies", "sweep", "message"), [
+    ([{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 10**30}], 'method = "grid"',
+     r"spec.toml, line 15: vary.count of 'axes.x.kp_per_s': a grid of 10{30} points, 1e\+30 variants, needs about "
+     r"7e\+23 GB of memory and .* GB are available; sweep fewer variants"),
+    ([{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 10**5},
+      {"name": '"axes.y.kp_per_s"', "values": "[30, 40]"},
+      {"name": '"axes.x.vff"', "min": 0.0, "max": 1.0, "count": 10**14}], 'method = "grid"',
+     r"spec.toml, line 25: vary.count of 'axes.x.vff': a grid of 100000 x 2 x 10{14} points, 2e\+19 variants"),
+    ([{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0}], 'method = "lhs"\ncount = 100000000000000\nseed = 1',
+     r"spec.toml, line 10: sweep.count = 10{14}, 1e\+14 variants, needs about 7e\+07 GB"),
+])  # fmt: skip
+def test_a_sweep_too_large_for_the_memory_is_refused_before_anything_is_drawn(tmp_path, varies, sweep, message):
+    # (count = 1e8 took the values' 800 MB and more before anything was said; 1e30 ended in numpy's own error)
+    with pytest.raises(ConfigError, match=message):
+        read_sweep(_spec(tmp_path, varies, sweep))
+
+
+def test_the_sweep_limit_is_the_memory_its_variants_take(tmp_path, monkeypatch):
+    from contoursim import _memory
+
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 2000},
+                            {"name": '"axes.y.kp_per_s"', "values": "[30, 40]"}])
+    monkeypatch.setattr(_memory, "available", lambda: 10**9)
+    monkeypatch.setattr(_memory, "SWEEP_BYTES_PER_VALUE", 10**9 / 8000)  # 4000 variants of 2 values fit, no more
+    assert read_sweep(spec).values.shape == (4000, 2)
+    monkeypatch.setattr(_memory, "SWEEP_BYTES_PER_VALUE", 10**9 / 8000 + 1)
+    with pytest.raises(ConfigError, match=r"line 15: vary.count of 'axes.x.kp_per_s': a grid of 2000 x 2 points"):
+        read_sweep(spec)
+
+
 def test_each_row_is_the_single_run_of_its_variant(tmp_path):
     spec = _spec(tmp_path, [{"name": '"strategy.ccc_linear.kp_per_s"', "values": "[30.0, 90.0]"},
                             {"name": '"axes.y.kp_per_s"', "values": "[30.0]"},
