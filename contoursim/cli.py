@@ -393,7 +393,7 @@ def compare_command(args):
     settings = {} if job is None else _strategy_settings(job)
     for text in args.set or ():
         _set_option(settings, text)
-    names = STRATEGY_NAMES if args.strategies is None else [n.strip() for n in args.strategies.split(",") if n.strip()]
+    names = STRATEGY_NAMES if args.strategies is None else args.strategies
     if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
         names = [*names, "geometric"]
     report = report_file(args.json, "runs", "comparison JSON")  # never a file the user keeps
@@ -568,6 +568,14 @@ def fleet_command(args):
     print(f"reports, fleet.json and fleet.png written to {out}/" + (f"; summary to {summary_file}" if summary_file else ""))
 
 
+def _names(text):
+    """``--strategies A,B``: the comma-separated names, at least one."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"names no strategy; got {text!r} (e.g. none,ccc_arc)")
+    return names
+
+
 def _every(text):
     """``--every N``: a whole number >= 1."""
     from . import _validate
@@ -606,7 +614,7 @@ def main(argv=None, compile_notice=False):
     p = sub.add_parser("compare", help="compensation strategies side by side on a job file or a path file")
     p.add_argument("file", help=FILE_HELP)
     p.add_argument("--machine", help="machine preset or file for a bare path file (default: demo_mill)")
-    p.add_argument("--strategies", metavar="A,B,...",
+    p.add_argument("--strategies", metavar="A,B,...", type=_names,
                    help="strategies to run, comma-separated (default: none,feedforward,zpetc,ccc_linear,ccc_arc,"
                         "feedforward+ccc_arc); parts joined by '+' compose, 'geometric' too")
     p.add_argument("--set", action="append", metavar="S.KEY=VALUE",
