@@ -44,6 +44,13 @@ Zero-length moves are skipped.
 Arcs whose start and end radii (about the programmed centre) differ by less
 than `arc_tolerance` are accepted, the centre moved onto the perpendicular
 bisector of the chord so that the arc passes through both points exactly.
+An arc over 180° whose radii differ is cut at its middle instead: the first
+half about the programmed centre, the second tangent to it through the end
+point. (The bisector lies |r_start² - r_end²| / (2 chord) from the programmed
+centre: near a full turn the chord is short and that circle strays far from
+the programmed one, 6.5 mm for a 359.99° arc of R 10 ending 1 µm off its
+radius; the two halves stay within the radii's difference of it, as the
+spiral a controller interpolates between the two radii does.)
 
 The dialect is that of Fanuc, LinuxCNC, GRBL and the posts written for
 them (Fusion 360, OpenBuilds ...): :data:`DIALECT` says it in a line, and
@@ -99,7 +106,8 @@ class Program:
     Parameters
     ----------
     path : contoursim.paths.Path
-        One primitive per kept move.
+        One primitive per kept move (two for an arc cut at its middle, see
+        :func:`read_gcode`).
     feeds : ndarray, shape (K,)
         Feed rate of each primitive [mm/s] (rapid feed for G0 segments).
     lines : ndarray of int, shape (K,)
@@ -300,13 +308,14 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 if np.linalg.norm(target - here) > 1e-9:
                     prims.append(Line(here, target, "rapid" if motion == 0 else "path"))
             else:
-                prims.append(_arc(here, target, values, plane, motion == 3, arc_tolerance, fail))
+                prims += _arc(here, target, values, plane, motion == 3, arc_tolerance, fail)
         except PathError as exc:
             fail(str(exc))
-        if len(prims) > len(feeds):
-            feeds.append(rapid_feed if motion == 0 else feed)
-            lines.append(number)
-            texts.append(raw.strip())
+        if len(prims) > len(feeds):  # one primitive a block, two for an arc cut at its middle
+            added = len(prims) - len(feeds)
+            feeds += [rapid_feed if motion == 0 else feed] * added
+            lines += [number] * added
+            texts += [raw.strip()] * added
             cutting = cutting or motion > 0
         here = target
 
@@ -411,16 +420,17 @@ def block_errors(program, result):
     if trajectory.path is not program.path or result.contour is None:
         raise ValueError("result must be a simulation of the program's path, with its contour error")
     keep = trajectory.measuring | trajectory.rapid
-    block = trajectory.primitive[keep]
+    lines, first, of_primitive = np.unique(program.lines, return_index=True, return_inverse=True)  # a block a line
+    block = of_primitive[trajectory.primitive[keep]]
     worst = {}
     for name, error in (("contour", result.contour.magnitude[keep]),
                         ("tracking", np.linalg.norm(result.tool_position[keep] - trajectory.position[keep], axis=1))):
-        worst[name] = np.full(len(program.lines), np.nan)
+        worst[name] = np.full(lines.size, np.nan)
         np.fmax.at(worst[name], block, error)
-    rapid = np.array(program.path.roles) == "rapid"
+    rapid = (np.array(program.path.roles) == "rapid")[first]
     order = np.lexsort((-np.nan_to_num(worst["tracking"], nan=-1.0), -np.nan_to_num(worst["contour"], nan=-1.0), rapid))
-    return BlockErrors(program.lines[order], tuple(program.texts[k] for k in order), rapid[order], program.feeds[order],
-                       worst["contour"][order], worst["tracking"][order])
+    return BlockErrors(lines[order], tuple(program.texts[first[k]] for k in order), rapid[order],
+                       program.feeds[first][order], worst["contour"][order], worst["tracking"][order])
 
 
 def _arc(start, end, values, normal_axis, ccw, tolerance, fail):
@@ -452,15 +462,30 @@ def _arc(start, end, values, normal_axis, ccw, tolerance, fail):
         if abs(r_start - r_end) > tolerance:
             fail(f"arc start radius {r_start:.6g} mm and end radius {r_end:.6g} mm differ by more than "
                  f"{tolerance:g} mm")
+        sweep = _sweep(start - center, end - center, axis, ccw)
+        if abs(sweep) > np.pi and r_start != r_end:  # half about the programmed centre, half tangent to the end
+            middle = _arc_from_point(center, start, axis, sweep / 2).end  # in the start's plane
+            radial = (center - middle) / r_start
+            across = (end - middle) * inplane  # the second centre: on `radial`, as far from `end` as from `middle`
+            r_second = (across @ across) / (2 * (across @ radial))
+            second = _sweep(middle - (middle + r_second * radial), end - (middle + r_second * radial), axis, ccw)
+            # one rise per mm along the plane (a helix's lead angle) on both halves: they join tangentially
+            lead = ((end - start) @ axis) / (r_start * abs(sweep) / 2 + r_second * abs(second))
+            first = _arc_from_point(center, start, axis, sweep / 2, lead * r_start)
+            return [first, _arc_from_point(middle + r_second * radial, first.end, axis, second, lead * r_second)]
         length = np.linalg.norm(chord)
         if length > 1e-9:  # centre onto the chord's bisector: the arc then ends exactly at `end`
             across = np.cross(axis, chord / length)
             center = start + chord / 2 + ((center - start - chord / 2) @ across) * across
-    a = (start - center) * inplane
-    b = (end - center) * inplane
+    sweep = _sweep(start - center, end - center, axis, ccw)
+    return [_arc_from_point(center, start, axis, sweep, ((end - start) @ axis) / abs(sweep))]
+
+
+def _sweep(a, b, axis, ccw):
+    """Turn [rad] from `a` to `b` about `axis`, in (0, 2π] counter-clockwise, [-2π, 0) clockwise (a full turn if they agree)."""
+    a, b = a - (a @ axis) * axis, b - (b @ axis) * axis
     turn = np.arctan2(np.cross(a, b) @ axis, a @ b)
     sweep = turn % (2 * np.pi) if ccw else -((-turn) % (2 * np.pi))
     if abs(sweep) < 1e-12:
         sweep = 2 * np.pi if ccw else -2 * np.pi
-    rise = ((end - start) @ axis) / abs(sweep)
-    return _arc_from_point(center, start, axis, sweep, rise)
+    return sweep

@@ -4,6 +4,8 @@ import io
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from contoursim.exceptions import ConfigError, ContoursimWarning
 from contoursim.gcode import block_errors, read_gcode
@@ -75,6 +77,52 @@ def test_arc_centre_is_moved_onto_the_bisector():
     np.testing.assert_allclose(arc.end, [0, 10.001, 0], atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(arc.start - arc.center), np.linalg.norm(arc.end - arc.center))
 
+
+
+_PLANE_WORDS = {17: ("X", "Y", "Z", "I", "J"), 18: ("Z", "X", "Y", "K", "I"), 19: ("Y", "Z", "X", "J", "K")}
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from([17, 18, 19]), st.sampled_from(["G2", "G3"]), st.floats(0.5, 200.0), st.floats(0.05, 2 * np.pi - 1e-4),
+       st.floats(-1.9e-3, 1.9e-3), st.floats(-5.0, 5.0).map(lambda rise: round(rise, 6)))
+def test_an_arc_whose_end_is_off_its_radius_stays_between_the_two_radii(plane, word, radius, sweep, off, rise):
+    """Any sweep, end point off the radius within the tolerance: the path keeps to the programmed centre's band.
+
+    A 359.99° arc of R 10 ending 1 µm off its radius was cut about a centre 5 mm away (the chord's bisector),
+    6.45 mm from the programmed circle.
+    """
+    a, b, n, i, j = _PLANE_WORDS[plane]
+    turn = -sweep if word == "G2" else sweep
+    end = (radius + off) * np.array([np.cos(turn), np.sin(turn)])
+    program = read_gcode(f"G{plane} G0 {a}{radius:.12f} {b}0 {n}0\n{word} {a}{end[0]:.12f} {b}{end[1]:.12f} "
+                         f"{n}{rise:.6f} {i}{-radius:.12f} {j}0 F600\n")
+    axes = ["XYZ".index(a), "XYZ".index(b)]
+    points = program.path.evaluate(np.linspace(0, program.path.length, 2001))[0]
+    distance = np.linalg.norm(points[:, axes], axis=1)  # from the programmed centre, the origin of the plane
+    r_end = np.hypot(*end)
+    assert min(radius, r_end) - 1e-9 <= distance.min() and distance.max() <= max(radius, r_end) + 1e-9
+    np.testing.assert_allclose(program.path.end[axes], end, atol=1e-9)
+    assert program.path.end["XYZ".index(n)] == pytest.approx(rise, abs=1e-9)
+    assert np.all(program.path.corner_angles() < 1e-6)  # the halves join tangentially
+    assert set(program.lines) == {2}
+
+
+def test_an_arc_cut_at_its_middle_is_one_block():
+    from contoursim.feed import FeedSettings, sample
+    from contoursim.machine import load_machine
+    from contoursim.simulation import simulate
+
+    program = read_gcode("G0 X10 Y0\nG3 X9.9885 Y-0.5 I-10 J0 F1200\nG1 X20\n")
+    assert len(program.path.primitives) == 3 and program.lines.tolist() == [2, 2, 3]
+    machine = load_machine("demo_mill")
+    trajectory = sample(program.path, FeedSettings(tuple(program.feeds)).plan(program.path), machine.servo_period)
+    result = simulate(machine, trajectory)
+    errors = block_errors(program, result)
+    assert sorted(errors.line.tolist()) == [2, 3]
+    k = errors.line.tolist().index(2)
+    assert errors.text[k] == "G3 X9.9885 Y-0.5 I-10 J0 F1200" and errors.feed[k] * 60 == pytest.approx(1200)
+    on_arc = (result.trajectory.primitive <= 1) & result.trajectory.measuring
+    assert errors.contour_max[k] == result.contour.magnitude[on_arc].max()
 
 @pytest.mark.parametrize("text, line, message", [
     ("G21\nG20 G1 X1 F100\n", 2, "inch programs are not supported"),
