@@ -160,16 +160,11 @@ def _closest(kind, row, p, u0, length, out):
             radius, sweep = row[12], abs(row[14])
             sgn = 1.0 if row[14] >= 0.0 else -1.0
             turned = (sgn * (math.atan2(y, x) - row[13])) % (2 * math.pi)
-            # among turned + 2πm inside [0, sweep], the one nearest the guess; else the nearer end
+            # downhill from the guess: the distance falls towards the angle of p's foot within half a turn, so
+            # the image of it nearest the guess, clamped to the arc (the end that way). Another image, or the
+            # other end, lies past the farthest point from p: a part of the arc the search's ball may not hold.
             m = math.floor((u0 / radius - turned) / (2 * math.pi) + 0.5)
-            best = -1.0
-            for cand in (turned + 2 * math.pi * (m - 1), turned + 2 * math.pi * m, turned + 2 * math.pi * (m + 1)):
-                if 0.0 <= cand <= sweep and (best < 0 or abs(cand - u0 / radius) < abs(best - u0 / radius)):
-                    best = cand
-            if best < 0:
-                over = (turned - sweep) % (2 * math.pi)
-                best = sweep if over < 2 * math.pi - sweep - over else 0.0
-            u = best * radius
+            u = min(max(turned + 2 * math.pi * m, 0.0), sweep) * radius
     elif kind == ARC:
         u = u0
         for _ in range(50):

@@ -136,6 +136,50 @@ def test_the_retract_that_broke_it():
     assert exact.magnitude[back].max() < 1e-9 < tracking[back].min()
 
 
+
+def test_a_loop_whose_start_passes_near_the_tool_is_not_taken():
+    """A 330° arc: the tool lags 0.55 mm behind its end, right beside the arc's start, 0.05 mm away.
+
+    The start is not connected to the commanded end inside the ball (the arc leaves it around 250°): the contour
+    error is the distance to the end, not the 0.05 mm to the start it was (the arc's foot, clamped, took the end
+    nearer in angle, across the point farthest from the tool).
+    """
+    program = read_gcode("G0 X1 Y0\nG3 X0.866025 Y-0.5 R-1 F600\n")
+    trajectory = sample(program.path, plan(program.path, 10.0, 1000.0), 1e-3)
+    tool = np.array([1.05, 0.02])
+    exact = exact_contour_error(trajectory, [tool], at=[len(trajectory) - 1])
+    np.testing.assert_allclose(exact.foot[0], [0.866025, -0.5], atol=1e-12)
+    assert exact.magnitude[0] == pytest.approx(np.linalg.norm(tool - [0.866025, -0.5]), abs=1e-12)
+
+
+_ENDS = st.one_of(st.floats(0.0, 0.1), st.floats(0.9, 1.0), st.floats(0.0, 1.0))  # a path's ends come near each other
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.sampled_from(["G2", "G3"]), st.floats(0.2, 2 * math.pi - 0.01), st.floats(-1.0, 1.0), _ENDS, _ENDS,
+       st.floats(0.0, 2 * math.pi), st.floats(0.0, 0.5))
+def test_the_foot_is_connected_to_the_commanded_point_inside_the_ball(word, sweep, rise, where, near, bearing, off):
+    """An arc or helix of R 1 (one primitive), the commanded point anywhere on it, the tool beside any other point of it.
+
+    The module's contract (contoursim.nearest): the foot lies on the part of the path connected to the commanded
+    point R inside the ball of radius 2|P - R| about R: the path between them never leaves that ball.
+    """
+    turn = -sweep if word == "G2" else sweep  # R, not I/J: read_gcode cuts an arc over 180° off its radius in two
+    program = read_gcode(f"G17 G0 X1 Y0 Z0\n{word} X{math.cos(turn):.12f} Y{math.sin(turn):.12f} Z{rise:.6f} "
+                         f"R{-1 if sweep > math.pi else 1} F600\n")
+    trajectory = sample(program.path, plan(program.path, 10.0, 1000.0), 1e-3)
+    commanded = int(where * (len(trajectory) - 1))
+    reference = trajectory.position[commanded]
+    beside = program.path.evaluate([near * program.path.length])[0][0, :trajectory.dim]
+    tool = beside + off * np.array([math.cos(bearing), math.sin(bearing), 0.3 * math.sin(3 * bearing)])[:trajectory.dim]
+    exact = exact_contour_error(trajectory, [tool], at=[commanded])
+    tracking = np.linalg.norm(tool - reference)
+    assert exact.magnitude[0] <= tracking + ROUNDING
+    between = np.linspace(exact.s[0], trajectory.s[commanded], 4001)
+    stray = np.linalg.norm(program.path.evaluate(between)[0][:, :trajectory.dim] - reference, axis=1).max()
+    assert stray <= 2 * tracking + 1e-6, f"the path between foot and commanded point leaves the ball by {stray - 2 * tracking:.3g} mm"
+
+
 LIBRARY = sorted(f.name for f in resources.files("contoursim.trajectories").iterdir() if f.name.endswith((".toml", ".nc")))
 
 
