@@ -286,7 +286,7 @@ def _feed_values(feed):
 
 
 def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_tolerance=1e-3, max_feed=None,
-         in_position=0.0):
+         in_position=0.0, stops=()):
     """Plan the motion along a path under feed, acceleration and jerk limits.
 
     Parameters
@@ -310,6 +310,9 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         ``"rapid"``, a G0 move) [s]: the motion always stops there, and waits
         for the axes to reach the position (a controller's in-position check)
         before the next block.
+    stops : sequence of int
+        Primitives at whose end the motion stops and waits `in_position` as
+        at the end of a rapid (a G-code dwell, G4).
 
     Returns
     -------
@@ -349,14 +352,19 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         curved = kappa > 0
         limits[curved] = np.minimum(limits[curved], np.sqrt(ac / kappa[curved]))
     in_position = _validate.nonnegative("in_position", in_position)
-    rapid_end = (np.array(path.roles) == "rapid")[:-1]
-    stop = (path.corner_angles() > tolerance) | rapid_end
+    stops = np.asarray(stops, dtype=float).ravel()
+    if not np.all((stops == np.round(stops)) & (stops >= 0) & (stops < k)):
+        raise ValueError(f"stops must be primitive indices in [0, {k - 1}], got {stops.tolist()}")
+    waits = np.array(path.roles) == "rapid"
+    waits[stops.astype(int)] = True
+    waits = waits[:-1]  # the path's end is a stop of its own
+    stop = (path.corner_angles() > tolerance) | waits
     split = stop | (limits[1:] != limits[:-1])
     first = np.concatenate([[0], np.flatnonzero(split) + 1])
     breaks = np.append(path.breaks[first], path.length)
     inner = np.where(stop[first[1:] - 1], 0.0, np.minimum(limits[first[1:] - 1], limits[first[1:]]))
     vjunction = np.concatenate([[0.0], inner, [0.0]])
-    dwell = np.append(np.where(rapid_end[first[1:] - 1], in_position, 0.0), 0.0)
+    dwell = np.append(np.where(waits[first[1:] - 1], in_position, 0.0), 0.0)
     return _plan_sections(breaks, limits[first], vjunction, accel, jerk, dwell)
 
 
@@ -376,6 +384,9 @@ class FeedSettings:
         Centripetal acceleration limit [mm/s^2]; None for none.
     corner_tolerance : float
         Exact-stop threshold on the tangent turn at joins [rad].
+    stops : tuple of int
+        Primitives at whose end the motion stops and waits in position (a
+        G-code program's dwells, see :func:`plan`).
     """
 
     feed: object
@@ -383,6 +394,7 @@ class FeedSettings:
     jerk: float = None
     centripetal_accel: float = None
     corner_tolerance: float = 1e-3
+    stops: tuple = ()
 
     def __post_init__(self):
         feed = _feed_values(self.feed)
@@ -392,6 +404,7 @@ class FeedSettings:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _validate.positive(name, getattr(self, name)))
         object.__setattr__(self, "corner_tolerance", _validate.nonnegative("corner_tolerance", self.corner_tolerance))
+        object.__setattr__(self, "stops", tuple(int(k) for k in self.stops))
         for name in ("feed", "accel", "jerk", "centripetal_accel"):  # 1e-300 or 1e308 overflow the planning
             values = np.atleast_1d(np.asarray(getattr(self, name) or 1.0, dtype=float))
             if not (SETTING_RANGE[0] <= values.min() and values.max() <= SETTING_RANGE[1]):
@@ -408,14 +421,15 @@ class FeedSettings:
         max_feed : float, optional
             Largest feed allowed [mm/s].
         in_position : float
-            Standstill at the end of each rapid [s] (see :func:`plan`).
+            Standstill at the end of each rapid and at each of `stops` [s] (see :func:`plan`).
 
         Returns
         -------
         FeedProfile
         """
         return plan(path, self.feed, self.accel, self.jerk, centripetal_accel=self.centripetal_accel,
-                    corner_tolerance=self.corner_tolerance, max_feed=max_feed, in_position=in_position)
+                    corner_tolerance=self.corner_tolerance, max_feed=max_feed, in_position=in_position,
+                    stops=self.stops)
 
 
 def sample(path, profile, dt):

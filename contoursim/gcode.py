@@ -18,9 +18,11 @@ comment) and ``; ...`` (to the end of the line), sequence numbers
 ``M7 M8 M9``, tool change ``M6``, stops ``M0 M1`` ...), ``G43`` (tool length
 compensation: the path is the tool tip's), work offsets ``G54``-``G59`` (the
 path's origin is the work offset), path modes ``G61 G64`` (with LinuxCNC's
-``G64 P`` tolerance; the planner's own corner rule applies), and the dwell
-``G4`` (with its ``P``/``X`` time, which is not a move; the path does not stop
-there). Home returns and machine-coordinate moves (``G28 G30 G53``, e.g. a
+``G64 P`` tolerance; the planner's own corner rule applies). The dwell ``G4``
+stops the motion at the end of the move before it, which waits there in
+position as at the end of a rapid (:attr:`Program.stops`); its ``P``/``X``
+time (milliseconds or seconds, by dialect) is not a move and is not
+simulated: once in position the axes hold it. Home returns and machine-coordinate moves (``G28 G30 G53``, e.g. a
 post's ``G28 G91 Z0`` before a tool change) take the axes they name (``G28``
 and ``G30`` without axis words: all) to a machine position contoursim does
 not know in work coordinates. Before the first feed move they are ignored;
@@ -79,7 +81,7 @@ _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _LARGEST = 1e9  # largest |number| in a word [mm, mm/min, s]: a km-long axis is 1e6 mm
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
 _MODEL_G = (21, 40, 49, 80, 91.1, 94)  # mm, no cutter/tool length compensation, no canned cycle, I/J/K relative, F/min
-_IGNORED_G = {4: "G4 dwell", 43: "G43", 54: "G54", 55: "G55", 56: "G56", 57: "G57", 58: "G58", 59: "G59",
+_IGNORED_G = {43: "G43", 54: "G54", 55: "G55", 56: "G56", 57: "G57", 58: "G58", 59: "G59",
               61: "G61", 64: "G64"}
 _MACHINE_MOVES = (28, 30, 53)  # home returns, machine coordinates: ignored outside the contour
 _REFUSED_G = {20: "inch programs are not supported (G20): convert to mm and use G21",
@@ -119,6 +121,9 @@ class Program:
     ignored : tuple of str
         The words that move no axis and were ignored (``"S12000"``, ``"M3"``,
         ``"G54"`` ...), each once, in the order they first appear.
+    stops : tuple of int
+        The primitives after which the program dwells (G4): the motion stops
+        at their end (:class:`contoursim.feed.FeedSettings`).
     """
 
     path: Path
@@ -127,6 +132,7 @@ class Program:
     texts: tuple
     source: str = "<gcode>"
     ignored: tuple = ()
+    stops: tuple = ()
 
     def __post_init__(self):
         k = len(self.path.primitives)
@@ -214,7 +220,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     arc_tolerance = _validate.positive("arc_tolerance", arc_tolerance)
     here = _validate.finite_array("start", start, shape=(3,))
     motion, plane, absolute, feed, cutting = None, 2, True, None, False
-    prims, feeds, lines, texts, ignored = [], [], [], [], {}
+    prims, feeds, lines, texts, ignored, stops = [], [], [], [], {}, {}
     away = {}  # axis -> line of the G28/G30/G53 that took it to a machine position, after the first feed move
 
     for number, raw in enumerate(text.splitlines(), 1):
@@ -264,13 +270,17 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 pass
             elif g in _REFUSED_G:
                 fail(_REFUSED_G[g])
+            elif g == 4:
+                nonmodal = g
             elif g in _IGNORED_G or g in _MACHINE_MOVES:
                 ignored.setdefault(_IGNORED_G.get(g, f"G{g:g}"), None)
-                nonmodal = g if g in (4, *_MACHINE_MOVES) else nonmodal
+                nonmodal = g if g in _MACHINE_MOVES else nonmodal
             else:
                 fail(f"unknown word G{g:g} (supported: {_SUPPORTED})")
         if nonmodal is not None:
-            if cutting and nonmodal != 4:
+            if cutting and nonmodal == 4:
+                stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
+            elif cutting:
                 moved = [a for a in "XYZ" if a in values] or (list("XYZ") if nonmodal in (28, 30) else [])
                 away.update(dict.fromkeys(moved, number))
             continue
@@ -323,9 +333,10 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         raise ConfigError("the program has no feed move (G1, G2 or G3)", source=source)
     while prims[-1].role == "rapid":
         prims.pop(), feeds.pop(), lines.pop(), texts.pop()
+    stops = tuple(k for k in stops if k < len(prims) - 1)  # the path's end is a stop of its own
     if ignored:
         warnings.warn(f"{source}: ignored (no contour motion): {' '.join(ignored)}", ContoursimWarning, stacklevel=2)
-    return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), tuple(texts), source, tuple(ignored))
+    return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), tuple(texts), source, tuple(ignored), stops)
 
 
 @dataclass(frozen=True)

@@ -142,7 +142,7 @@ def read_path_file(file, direction=None):
                           source=str(file))
     if file.suffix.lower() in SUFFIXES:
         program = read_gcode(file)
-        return PathFile(program.path, FeedSettings(tuple(program.feeds)), program)
+        return PathFile(program.path, FeedSettings(tuple(program.feeds), stops=tuple(program.stops)), program)
     if file.suffix.lower() != ".toml":
         raise ConfigError(f"unknown path file type {file.suffix!r}: use .toml, or G-code {' '.join(SUFFIXES)}",
                           source=str(file))

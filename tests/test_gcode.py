@@ -191,7 +191,7 @@ N150 M30
 
 
 def test_a_real_program_reads_and_lists_what_it_ignored():
-    words = "O1234 G28 T1 M6 G54 S12000 M3 H1 M8 G43".split() + ["G4 dwell", "M9", "M5"]
+    words = "O1234 G28 T1 M6 G54 S12000 M3 H1 M8 G43 M9 M5".split()
     with pytest.warns(ContoursimWarning) as record:
         program = read_gcode(REAL)
     assert [str(w.message) for w in record] == [f"<gcode>: ignored (no contour motion): {' '.join(words)}"]
@@ -200,6 +200,21 @@ def test_a_real_program_reads_and_lists_what_it_ignored():
     assert program.lines.tolist() == [9, 10, 13]
     np.testing.assert_allclose(program.path.start, [-30, 0, 50])
     np.testing.assert_allclose(program.path.end, [22, -20, 50])
+    assert program.stops == (1,)  # the two dwells after the arc
+
+
+def test_a_dwell_stops_the_motion_and_waits_in_position(tmp_path):
+    """G4 between two moves in line: the motion stops there (it ran on through at full feed) and waits in position."""
+    from contoursim.feed import FeedSettings, sample
+
+    (tmp_path / "dwell.nc").write_text("G0 X0 Y0\nG1 X10 F1200\nG4 P0.5\nG1 X20\nG4 P1\nG0 Y5\nG1 X30\nG4 P1\n")
+    read = read_path_file(tmp_path / "dwell.nc")
+    assert read.program.stops == read.feed.stops == (0, 1)  # not after the last move: the path ends at rest
+    trajectory = sample(read.path, read.feed.plan(read.path, in_position=0.1), 1e-3)
+    at = np.abs(trajectory.position[:, 0] - 10) < 1e-12
+    assert at.sum() >= 100 and np.abs(trajectory.velocity[at]).max() < 1e-9  # 0.1 s in position at X10
+    plain = sample(read.path, FeedSettings(read.feed.feed).plan(read.path, in_position=0.1), 1e-3)
+    assert np.abs(plain.velocity[np.abs(plain.position[:, 0] - 10) < 0.01, 0]).min() == pytest.approx(20.0)
 
 
 def test_a_program_that_ignores_nothing_warns_nothing(recwarn):
