@@ -22,7 +22,8 @@ path's origin is the work offset), path modes ``G61 G64`` (with LinuxCNC's
 stops the motion at the end of the move before it, which waits there in
 position as at the end of a rapid (:attr:`Program.stops`); its ``P``/``X``
 time (milliseconds or seconds, by dialect) is not a move and is not
-simulated: once in position the axes hold it. Home returns and machine-coordinate moves (``G28 G30 G53``, e.g. a
+simulated: once in position the axes hold it. Home returns and
+machine-coordinate moves (``G28 G30 G53``, e.g. a
 post's ``G28 G91 Z0`` before a tool change) take the axes they name (``G28``
 and ``G30`` without axis words: all) to a machine position contoursim does
 not know in work coordinates. Before the first feed move they are ignored;
