@@ -136,7 +136,6 @@ def test_the_retract_that_broke_it():
     assert exact.magnitude[back].max() < 1e-9 < tracking[back].min()
 
 
-
 def test_a_loop_whose_start_passes_near_the_tool_is_not_taken():
     """A 330° arc: the tool lags 0.55 mm behind its end, right beside the arc's start, 0.05 mm away.
 

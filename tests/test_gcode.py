@@ -78,7 +78,6 @@ def test_arc_centre_is_moved_onto_the_bisector():
     np.testing.assert_allclose(np.linalg.norm(arc.start - arc.center), np.linalg.norm(arc.end - arc.center))
 
 
-
 _PLANE_WORDS = {17: ("X", "Y", "Z", "I", "J"), 18: ("Z", "X", "Y", "K", "I"), 19: ("Y", "Z", "X", "J", "K")}
 
 
@@ -123,6 +122,7 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     assert errors.text[k] == "G3 X9.9885 Y-0.5 I-10 J0 F1200" and errors.feed[k] * 60 == pytest.approx(1200)
     on_arc = (result.trajectory.primitive <= 1) & result.trajectory.measuring
     assert errors.contour_max[k] == result.contour.magnitude[on_arc].max()
+
 
 @pytest.mark.parametrize("text, line, message", [
     ("G21\nG20 G1 X1 F100\n", 2, "inch programs are not supported"),
