@@ -53,7 +53,7 @@ import numpy as np
 
 import independent_truth
 from contoursim.diagnosis import diagnose, synthetic_trace
-from contoursim.effects import CATALOGUE, Effect
+from contoursim.effects import CATALOGUE, Effect, effect_kind
 from contoursim.feed import sample
 from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
@@ -218,6 +218,7 @@ def summary(results):
     hidden = [c for c in results if c["truth"] is not None]
     nulls = [c for c in results if c["truth"] is None]
     visible = [c for c in hidden if c["signal"] >= c["floor"] and c["error"] is None]
+    servo = [c for c in hidden if effect_kind(c["truth"]["name"]).stage != "geometry"]
     errors = [c["parameter_error"] for c in hidden if "parameter_error" in c]
     covered = [c["covered"] for c in hidden if "covered" in c]
     per_30 = [30.0 * c["seconds"] / c["duration"] for c in results]
@@ -227,6 +228,7 @@ def summary(results):
         "answered (no error)": fraction([c["error"] is None for c in results]),
         "named right": fraction([c["right"] for c in results]),
         "named right, effect above noise": fraction([c["right"] for c in visible]),
+        "named right, servo effects": fraction([c["right"] for c in servo]),
         "hidden effect among those named": fraction([c["found"] for c in hidden]),
         "cases with a false positive": fraction([c["false_positive"] for c in results]),
         "null cases clean": fraction([c["right"] for c in nulls]),
