@@ -128,6 +128,9 @@ _SCREW_DAMPING_SPREAD = 0.5  # prior spread of a compliant screw's damping ratio
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _STABILISING = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)  # moves of one plant parameter tried on a loop the check refuses [prior widths]
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
+_REIDENTIFY = 2  # most times an identified machine's loops are identified again with the effects named held in place
+_REIDENTIFY_GAP = 2.0  # ... when the diagnosis leaves more than this many noise levels (RMS) [-]
+_REIDENTIFY_SHARE = 0.5  # ... kept when it closes this share of what was left above the noise floor (RMS² − floor²)
 
 
 def noise_level(residual, measured=None):
@@ -1656,7 +1659,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         The measured trace (1–3 axes).
     model : Model or Machine, optional
         The nominal model; its servo axes must include the trace's axes.
-        ``None``: identified from the trace (:func:`contoursim.identify.identify_machine`).
+        ``None``: identified from the trace (:func:`contoursim.identify.identify_machine`); where
+        the effects named include one in the loops and leave more than twice the noise, the loops
+        are identified again with them held in place and the diagnosis starts over (said in a
+        warning when that closes the gap).
     max_effects : int
         Most effects to name.
     progress : callable, optional
@@ -1676,11 +1682,39 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         raise ValueError(f"a diagnosis needs at least 3 samples (its noise floor is estimated from second differences); "
                          f"the trace has {len(trace.t)}")
     say = progress or (lambda text: None)
-    identified = model is None
-    if identified:
-        say("no nominal model given: identifying the servo loops from the trace")
-        model = Model(identify_machine(trace, progress=say))
-    model = as_model(model)
+    if model is not None:
+        return _diagnose(trace, as_model(model), False, max_effects, say)
+    say("no nominal model given: identifying the servo loops from the trace")
+    result = _diagnose(trace, Model(identify_machine(trace, progress=say)), True, max_effects, say)
+    for _ in range(_REIDENTIFY):
+        # identified alone, the loops bend to an effect in them (one shared position gain to one axis's gain mismatch
+        # or delay): where the effects named include one in the loops and leave a clear misfit, they are held in place
+        # while the loops are identified again, and the diagnosis starts over from those loops; kept when, with as
+        # many effects named, it closes most of what the first left above the noise floor (less is the loops' own
+        # misfit moved about, for the next effect to be bent to)
+        left, floor = result.steps[-1].rms_um, float(np.linalg.norm(result.noise_um))
+        if all(e.stage == "geometry" for e in result.effects) or not left > _REIDENTIFY_GAP * floor:
+            break
+        say("identifying the servo loops again with the effects named held in place")
+        try:
+            again = _diagnose(trace, Model(identify_machine(trace, progress=say, effects=result.effects)), True,
+                              max_effects, say)
+        except _FIT_FAILURES as exc:
+            result = replace(result, warnings=result.warnings + (f"identifying the servo loops again with "
+                             f"{', '.join(e.label for e in result.effects)} in place failed ({exc})",))
+            break
+        level = again.steps[min(len(result.effects) + 1, len(again.steps) - 1)].rms_um
+        if not left**2 - level**2 >= _REIDENTIFY_SHARE * (left**2 - floor**2):
+            break
+        held = ", ".join(e.label for e in result.effects)
+        result = replace(again, warnings=again.warnings + (
+            f"the servo loops were identified again with {held} held in place (the loops identified before had bent "
+            f"to them: the diagnosis left {left:.4g} µm RMS, now {again.steps[-1].rms_um:.4g} µm)",))
+    return result
+
+
+def _diagnose(trace, model, identified, max_effects, say):
+    """One diagnosis of `trace` against the nominal `model` (`identified` from the trace or given): :func:`diagnose`."""
     missing = [a for a in trace.axes if a not in model.machine.axes]
     if missing:
         raise ValueError(f"the model has no servo axis {missing[0]!r} for the trace's column {missing[0]!r}; "

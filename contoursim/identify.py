@@ -59,6 +59,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .machine import Machine
+from .model import Model
 from .servo import AxisServo
 from .simulation import measured_reference, simulate_batch
 
@@ -143,7 +144,7 @@ def _start(trace, reference, period):
     return np.array(x)
 
 
-def identify_machine(trace, servo_period=None, progress=None):
+def identify_machine(trace, servo_period=None, progress=None, effects=()):
     """Identify the nominal servo loop of each axis of a trace (see the module docstring).
 
     Parameters
@@ -155,6 +156,10 @@ def identify_machine(trace, servo_period=None, progress=None):
         :func:`servo_period_for` the trace's sample period.
     progress : callable, optional
         Called with one line of text per fit iteration.
+    effects : sequence of Effect, optional
+        Effects held in place while the loops are fitted (what a diagnosis
+        named: a loop identified without them bends to them, one shared
+        position gain to one axis's gain mismatch or delay).
 
     Returns
     -------
@@ -183,8 +188,8 @@ def identify_machine(trace, servo_period=None, progress=None):
     reached = {}  # per structure, the last point a fit's Jacobian was taken at (where a diverging fit stops)
 
     def outputs(xs, structure):
-        tool = simulate_batch([_machine(axes, period, x, structure) for x in xs], reference, settle=0.0,
-                              check=False)["tool_position"]
+        tool = simulate_batch([Model(_machine(axes, period, x, structure), effects) for x in xs], reference,
+                              settle=0.0, check=False)["tool_position"]
         return [_on_trace(trace, reference.t, y) for y in tool]
 
     def fun(x, structure):
