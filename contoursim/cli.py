@@ -22,7 +22,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
-from .config import TomlFile
+from .config import TomlFile, read_text
 from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
 
@@ -532,8 +532,8 @@ def fleet_command(args):
     summary_file = Path(args.summary) if args.summary else None
     if summary_file is not None and summary_file.exists():  # replace only a fleet summary, never a file the user keeps
         try:
-            ours = {"effects", "failed"} <= set(json.loads(summary_file.read_text(encoding="utf-8")))
-        except (ValueError, UnicodeDecodeError, TypeError):
+            ours = {"effects", "failed"} <= set(json.loads(read_text(summary_file)))
+        except (ValueError, TypeError):  # not a regular file, not UTF-8, not JSON: not ours
             ours = False
         if not ours:
             raise FileExistsError(f"{summary_file} exists and is not a fleet summary; refusing to overwrite it")

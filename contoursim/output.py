@@ -20,6 +20,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
+from .config import read_text
 from .exceptions import ConfigError, OutputError
 
 __all__ = ["OutputDir", "atomic_write", "output_dir", "report_file", "writing"]
@@ -276,8 +277,8 @@ def report_file(file, key, what):
         raise ConfigError(f"{file} is a directory; name a file to write the {what} to")
     if file.exists() or file.is_symlink():
         try:
-            data = json.loads(file.read_text(encoding="utf-8"))
-        except (OSError, ValueError):  # unreadable, not UTF-8, not JSON
+            data = json.loads(read_text(file))
+        except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8, not JSON
             data = None
         ours = isinstance(data, dict) and key in data
         if not ours:

@@ -56,7 +56,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .config import TomlFile
+from .config import TomlFile, read_text
 from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
 
@@ -127,7 +127,7 @@ def _bundle(spec, toml):
         if not file.is_relative_to(folder):
             elsewhere.append(str(file))
             return None
-        files[file.relative_to(folder).as_posix()] = file.read_text(encoding="utf-8")
+        files[file.relative_to(folder).as_posix()] = read_text(file)
         return file
 
     machine = add(str(toml.data.get("machine", "")), spec.parent) if isinstance(toml.data.get("machine"), str) else None

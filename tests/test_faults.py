@@ -5,6 +5,10 @@ out of range) and checks the whole answer: the exit status, one line on stderr n
 no traceback or foreign warning, nothing written where it must not be.
 """
 
+import gzip
+import io
+import os
+import threading
 import tracemalloc
 
 import numpy as np
@@ -15,7 +19,11 @@ from contoursim import _memory
 from contoursim.cli import main
 from contoursim.comparison import compare
 from contoursim.compensation import STRATEGY_NAMES
+from contoursim.errormotion import read_error_table
+from contoursim.exceptions import ConfigError
 from contoursim.feed import plan, sample
+from contoursim.fleet import diagnose_fleet
+from contoursim.gcode import read_gcode
 from contoursim.machine import load_machine, preset_file
 from contoursim.output import output_dir
 from contoursim.pathfile import load_path_file
@@ -367,3 +375,92 @@ def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys,
     (tmp_path / "job.toml").write_text(job)
     _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
              f"{tmp_path / 'job.toml'}, line {line}: {words}")
+
+
+# -- the third pass (issue 18, item 8): files that are not files, the Python API ----------------------------------------
+
+
+def _pipe(file):
+    """A named pipe at `file`, and a function that lets a reader blocked on it go (EOF) if one is."""
+    os.mkfifo(file)
+
+    def release():
+        try:
+            os.close(os.open(file, os.O_WRONLY | os.O_NONBLOCK))  # a writer that closes: the reader sees the end
+        except OSError:  # no reader: nothing blocked
+            pass
+    return release
+
+
+def _within(seconds, call):
+    """`call()`'s outcome ("ok", value) or ("raised", exception); ("blocked", None) if it has not ended in `seconds`."""
+    outcome = []
+
+    def run():
+        try:
+            outcome.append(("ok", call()))
+        except Exception as exc:  # noqa: BLE001 -- the test judges it
+            outcome.append(("raised", exc))
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(seconds)
+    return outcome[0] if outcome else ("blocked", None)
+
+
+@pytest.mark.parametrize("reader", [read_trace, load_machine, read_gcode, read_error_table])
+def test_a_pipe_a_device_a_folder_or_a_packed_file_is_refused_before_it_is_read(tmp_path, reader):
+    """A pipe would block the read until some program writes, /dev/zero would fill the memory: refused by what they are."""
+    release = _pipe(tmp_path / "pipe.csv")
+    try:
+        kind, value = _within(10, lambda: reader(tmp_path / "pipe.csv"))
+    finally:
+        release()
+    assert kind == "raised" and isinstance(value, ConfigError), (kind, value)
+    assert str(value) == f"{tmp_path / 'pipe.csv'}: cannot read the file: it is a named pipe (FIFO), not a regular file"
+    (tmp_path / "device.csv").symlink_to("/dev/null")  # as /dev/zero, without its endless read on the old code
+    with pytest.raises(ConfigError, match=r"device.csv: cannot read the file: it is a device, not a regular file$"):
+        reader(tmp_path / "device.csv")
+    (tmp_path / "folder.csv").mkdir()
+    with pytest.raises(ConfigError, match=r"folder.csv: cannot read the file: it is a directory, not a regular file$"):
+        reader(tmp_path / "folder.csv")
+    (tmp_path / "packed.csv").write_bytes(gzip.compress(b"t,x_ref,x\n0,0,0\n0.001,0,0\n"))
+    with pytest.raises(ConfigError, match=r"packed.csv, line 1: the file is gzip-compressed, not text: unpack it first$"):
+        reader(tmp_path / "packed.csv")
+
+
+def test_the_command_line_refuses_a_pipe_as_input_and_leaves_a_pipe_named_as_report_alone(tmp_path, capsys):
+    release = _pipe(tmp_path / "trace.csv")
+    try:
+        kind, code = _within(60, lambda: main(["diagnose", str(tmp_path / "trace.csv"), "--model", "demo_mill", "--out",
+                                               str(tmp_path / "out")]))
+    finally:
+        release()
+    assert (kind, code) == ("ok", 2)
+    err = capsys.readouterr().err
+    assert err == f"contoursim diagnose: error: {tmp_path / 'trace.csv'}: cannot read the file: it is a named pipe (FIFO), " \
+                  "not a regular file\n"
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    release = _pipe(tmp_path / "r.json")
+    try:
+        kind, code = _within(60, lambda: main(["compare", str(tmp_path / "small.toml"), "--strategies", "none", "--out",
+                                               str(tmp_path / "out"), "--json", str(tmp_path / "r.json")]))
+    finally:
+        release()
+    assert (kind, code) == ("ok", 2)
+    assert "r.json exists and is not a comparison JSON; refusing to overwrite it" in capsys.readouterr().err
+    assert (tmp_path / "r.json").is_fifo()
+
+
+def test_a_fleets_trace_that_is_a_pipe_or_a_folder_is_that_traces_failure_named(tmp_path):
+    release = _pipe(tmp_path / "b.csv")
+    (tmp_path / "c.csv").mkdir()
+    (tmp_path / "d.csv").write_bytes(gzip.compress(b"t,x_ref,x\n"))
+    try:
+        kind, outcomes = _within(30, lambda: diagnose_fleet([tmp_path / "b.csv", tmp_path / "c.csv", tmp_path / "d.csv"]))
+    finally:
+        release()
+    assert kind == "ok", (kind, outcomes)
+    assert [o["error"] for o in outcomes] == [
+        f"{tmp_path / 'b.csv'}: cannot read the file: it is a named pipe (FIFO), not a regular file",
+        f"{tmp_path / 'c.csv'}: cannot read the file: it is a directory, not a regular file",
+        f"{tmp_path / 'd.csv'}, line 1: the file is gzip-compressed, not text: unpack it first"]
