@@ -10,6 +10,7 @@ import io
 import os
 import threading
 import tracemalloc
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,18 +20,22 @@ from contoursim import _memory
 from contoursim.cli import main
 from contoursim.comparison import compare
 from contoursim.compensation import STRATEGY_NAMES
+from contoursim.diagnosis import diagnose
+from contoursim.effects import Effect
 from contoursim.errormotion import read_error_table
 from contoursim.exceptions import ConfigError
 from contoursim.feed import plan, sample
 from contoursim.fleet import diagnose_fleet
 from contoursim.gcode import read_gcode
 from contoursim.machine import load_machine, preset_file
+from contoursim.model import Model
 from contoursim.output import output_dir
 from contoursim.pathfile import load_path_file
 from contoursim.paths import circle
 from contoursim.plotting import save_comparison_figures
-from contoursim.simulation import measured_reference
-from contoursim.traces import read_trace
+from contoursim.simulation import measured_reference, simulate
+from contoursim.traces import Trace, read_trace, write_trace
+from contoursim.trajectory import Trajectory
 from test_cli import SMALL_PATH
 
 
@@ -464,3 +469,54 @@ def test_a_fleets_trace_that_is_a_pipe_or_a_folder_is_that_traces_failure_named(
         f"{tmp_path / 'b.csv'}: cannot read the file: it is a named pipe (FIFO), not a regular file",
         f"{tmp_path / 'c.csv'}: cannot read the file: it is a directory, not a regular file",
         f"{tmp_path / 'd.csv'}, line 1: the file is gzip-compressed, not text: unpack it first"]
+
+
+@pytest.fixture(scope="module")
+def api():
+    """What a researcher holds in the API tour: the demo mill, a sampled circle, a trace of it."""
+    machine = load_machine("demo_mill")
+    path = circle((0, 0), 2.0)
+    profile = plan(path, 10.0, 500.0)
+    trajectory = sample(path, profile, machine.servo_period)
+    t = np.arange(50) * 1e-3
+    ref = np.column_stack([np.sin(t), np.cos(t)])
+    trace = Trace(t, ref, ref + 1e-4, ("x", "y"))
+    return SimpleNamespace(machine=machine, path=path, profile=profile, trajectory=trajectory, trace=trace)
+
+
+@pytest.mark.parametrize("call, error, words", [
+    (lambda a: read_trace(3), TypeError, "expected a file name (str or Path), got int"),
+    (lambda a: load_machine(None), TypeError, "a machine is a preset name or a machine file (str or Path), got NoneType"),
+    (lambda a: plan([[0, 0], [1, 1]], 10.0, 500.0), TypeError, "path must be a contoursim.paths.Path"),
+    (lambda a: sample([[0, 0], [1, 1]], a.profile, 1e-3), TypeError, "path must be a contoursim.paths.Path"),
+    (lambda a: sample(a.path, 10.0, 1e-3), TypeError, "profile must be a FeedProfile (from plan), got float"),
+    (lambda a: Trajectory(*(getattr(a.trajectory, k) for k in ("t", "position", "velocity", "acceleration", "s")),
+                          path="circle"), TypeError, "path must be a contoursim.paths.Path or None, got str"),
+    (lambda a: diagnose("trace.csv", a.machine), TypeError, "trace must be a Trace (contoursim.read_trace reads one"),
+    (lambda a: diagnose(a.trace, a.machine, max_effects=-1), ValueError, "max_effects must be zero or more, got -1"),
+    (lambda a: diagnose(a.trace, a.machine, max_effects=1.5), TypeError, "max_effects must be a whole number, got 1.5"),
+    (lambda a: Model(a.machine, Effect("backlash", "x", lost_motion_um=5.0)), TypeError,
+     "give (Effect('backlash', 'x', lost_motion_um=5.0, feedback=None),), not the effect alone"),
+    (lambda a: Model(a.machine, (Effect("backlash", "x", lost_motion_um=5.0),)).with_values([("backlash.x.lost_motion_um", 3)]),
+     TypeError, "values must be a mapping of flat parameter names to values, got list"),
+    (lambda a: Trace(a.trace.t, a.trace.reference, a.trace.actual, 2), ValueError, "axes must be one of"),
+    (lambda a: Trace(a.trace.t, a.trace.reference, a.trace.actual, ("x", "y"), force=np.ones(50)), TypeError,
+     "force must map axis names to arrays ({'x': ...}), got ndarray"),
+    (lambda a: simulate(a.machine, a.trajectory, force=np.ones(len(a.trajectory))), TypeError,
+     "force must map servo axis names to arrays ({'x': ...}), got ndarray"),
+    (lambda a: simulate(a.machine, a.trajectory, force={"x": np.full(len(a.trajectory), 1e15)}), ValueError,
+     "force['x'] holds 1e+15 at index (0,), beyond ±1e+09"),
+    (lambda a: simulate(a.machine, a.trajectory, settle=-1.0), ValueError, "settle must be zero or positive, got -1.0"),
+    (lambda a: simulate(a.machine, a.trajectory, settle=1e7), ValueError,
+     "settle = 1e+07 s: at the servo period of 0.0002 s that is 5e+10 samples, a run of them needs about"),
+    (lambda a: write_trace(io.StringIO(), a.trace, extra={"a,b": np.ones(50)}), ValueError,
+     "extra column 'a,b' is not a CSV column name"),
+    (lambda a: write_trace(io.StringIO(), Trace(a.trace.t, a.trace.reference, a.trace.actual, ("x", "y"),
+                                                 {"note": "one\nt,x_ref,x"})), ValueError,
+     "metadata 'note': 'one\\nt,x_ref,x' is not one '# key: value' line"),
+])
+def test_the_api_refuses_what_it_cannot_use_naming_the_argument(api, call, error, words):
+    """Wrong types, a bare effect, a settle of years, a column name with a comma: the argument named, not numpy's error."""
+    with pytest.raises(error) as info:
+        call(api)
+    assert words in str(info.value)
