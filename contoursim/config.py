@@ -93,14 +93,21 @@ def read_text(file, error=ConfigError):
     ------
     ConfigError
         The file cannot be read, is not a regular file or is compressed
-        (:func:`read_bytes`), or is not UTF-8 text (naming the line).
+        (:func:`read_bytes`), or is not UTF-8 text (UTF-16, a NUL byte:
+        naming the line).
     """
     raw = read_bytes(file, error)
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16's byte-order marks (and little-endian UTF-32's)
+        raise error("the file is UTF-16 text (by its byte-order mark): save it as UTF-8", str(file), 1)
     try:
-        return raw.decode("utf-8-sig")
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         line = raw.count(b"\n", 0, exc.start) + 1
         raise error(f"byte 0x{raw[exc.start]:02X} is not UTF-8 text: save the file as UTF-8", str(file), line) from None
+    if "\x00" in text:  # valid UTF-8, but no text file's: UTF-16 without its mark, or binary
+        line = text.count("\n", 0, text.index("\x00")) + 1
+        raise error("byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark?): save the file as UTF-8", str(file), line)
+    return text
 
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")

@@ -23,7 +23,7 @@ from contoursim.compensation import STRATEGY_NAMES
 from contoursim.diagnosis import diagnose
 from contoursim.effects import Effect
 from contoursim.errormotion import read_error_table
-from contoursim.exceptions import ConfigError
+from contoursim.exceptions import ConfigError, TraceFormatError
 from contoursim.feed import plan, sample
 from contoursim.fleet import diagnose_fleet
 from contoursim.gcode import read_gcode
@@ -431,6 +431,19 @@ def test_a_pipe_a_device_a_folder_or_a_packed_file_is_refused_before_it_is_read(
     (tmp_path / "packed.csv").write_bytes(gzip.compress(b"t,x_ref,x\n0,0,0\n0.001,0,0\n"))
     with pytest.raises(ConfigError, match=r"packed.csv, line 1: the file is gzip-compressed, not text: unpack it first$"):
         reader(tmp_path / "packed.csv")
+
+
+@pytest.mark.parametrize("encoding, words", [
+    ("utf-16", "line 1: the file is UTF-16 text (by its byte-order mark): save it as UTF-8"),
+    ("utf-16-le", "line 1: byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark?): save the file as UTF-8"),
+])
+def test_a_utf16_trace_is_named_so(tmp_path, encoding, words):
+    """Excel's 'Unicode text' and Windows loggers write UTF-16: said so, not 'missing column 't' in '\\x00t\\x00,...'."""
+    file = tmp_path / "log.csv"
+    file.write_bytes("t,x_ref,x\n0,0,0\n0.001,0,0\n".encode(encoding))
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(file)
+    assert str(info.value) == f"{file}, {words}"
 
 
 def test_the_command_line_refuses_a_pipe_as_input_and_leaves_a_pipe_named_as_report_alone(tmp_path, capsys):
