@@ -491,7 +491,7 @@ def _progress_line(stream):
 
 def sweep_command(args):
     """``contoursim sweep SPEC.toml [--scheduler ADDRESS|local:N]``: every variant of a spec, one table row each."""
-    from .sweep import FIGURES, Progress, read_sweep, run_sweep, write_results
+    from .sweep import FIGURES, Progress, diverged_why, read_sweep, run_sweep, write_results
 
     sweep = read_sweep(args.spec)
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
@@ -501,11 +501,17 @@ def sweep_command(args):
     out, chosen = write_results(sweep, table, args.out)
     diverged = int(table[:, FIGURES.index("diverged")].sum())
     print(f"{diverged} of {len(table)} variants diverged or were refused by a loop check (the axes' or the coupled loop's)")
+
+    def values(i):
+        return ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
+
+    if diverged:  # the first one's reason: the margins that say how far it is
+        first = next(i for i, row in enumerate(table) if row[FIGURES.index("diverged")])
+        print(f"the first, variant {first} ({values(first)}): {diverged_why(sweep, first)}")
     if chosen is not None:
         for label, i in zip(("best", "worst"), chosen):
-            values = ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
             figures = dict(zip(FIGURES, table[i]))
-            print(f"{label:<6} variant {i}: {values}: contour max {figures['contour_max_um']:.4g} µm, "
+            print(f"{label:<6} variant {i}: {values(i)}: contour max {figures['contour_max_um']:.4g} µm, "
                   f"RMS {figures['contour_rms_um']:.4g} µm, peak current {figures['peak_current_A']:.4g} A")
     print(f"table, plots and the best and worst runs written to {out}/")
 

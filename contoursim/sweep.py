@@ -60,7 +60,7 @@ from .config import TomlFile, read_text
 from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
 
-__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst",
+__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst", "diverged_why",
            "plot_sweep", "read_sweep", "run_sweep", "run_variants", "table_text", "write_results"]
 
 #: How the variants are drawn.
@@ -325,6 +325,15 @@ class _Job:
         model = model.with_values({n: v for n, v in effects.items() if n.rpartition(".")[0] in present})
         strategies = tuple(dataclasses.replace(s, **gains[s.name]) if s.name in gains else s for s in self.strategies)
         return model, strategies
+
+
+def diverged_why(sweep, i):
+    """Why variant `i` of `sweep` counts as diverged, in a sentence: its loop check's refusal with the loop's margins,
+    or, when its axes' loops pass it, the coupled loop's check or a run that ran away
+    (:data:`contoursim.multibody.MAX_TRAVEL`)."""
+    model, _ = _job(sweep).variant(dict(zip(sweep.names, sweep.values[i])))
+    return model.machine.refusal() or ("its axes' loops pass the loop check: a cross-coupled loop's check refused it, "
+                                       "or its run left ±1e6 mm")
 
 
 def _servo_field(machine, axis, key):
