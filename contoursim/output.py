@@ -49,8 +49,9 @@ class OutputDir:
     Raises
     ------
     ConfigError
-        `path` is a file or holds files and no marker; the marker is a
-        symbolic link or not contoursim's (not UTF-8 text).
+        `path` is a file, a symbolic link to nothing, or holds files and no
+        marker; the marker is a symbolic link or not contoursim's (not UTF-8
+        text).
     OutputError
         `path` cannot be created (e.g. no permission).
     """
@@ -63,6 +64,9 @@ class OutputDir:
         marker = out / _MARKER
         if out.exists() and not out.is_dir():
             raise ConfigError(f"{out} is a file, not a directory; choose another output directory")
+        if out.is_symlink() and not out.exists():  # mkdir would not make the folder it names
+            raise ConfigError(f"{out} is a symbolic link to {os.readlink(out)}, which does not exist; make that folder "
+                              "or choose another output directory")
         if marker.is_symlink():
             raise _linked(marker)
         if out.exists() and any(out.iterdir()) and not marker.is_file():

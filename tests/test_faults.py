@@ -78,9 +78,12 @@ def test_output_folder_faults_end_in_one_line_and_change_no_users_file(tmp_path,
     trace = _trace(tmp_path / "m.csv", np.arange(50) * 1e-3, np.zeros(50), np.zeros(50))
     _refused(capsys, ["diagnose", str(trace), "--report", str(tmp_path / "r.json"), "--out", str(tmp_path / "out")],
              f"{tmp_path / 'r.json'} is a directory")
+    (tmp_path / "gone").symlink_to(tmp_path / "unmounted" / "results")  # a link to a share not mounted
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "gone")],
+             f"{tmp_path / 'gone'} is a symbolic link to {tmp_path / 'unmounted' / 'results'}, which does not exist")
     assert notes.read_text() == "mine\n"
     assert sorted(p.name for p in (tmp_path / "linked").iterdir()) == [".contoursim-out"]
-    assert not (tmp_path / "out").exists()
+    assert not (tmp_path / "out").exists() and not (tmp_path / "unmounted").exists()
 
 
 # -- measured traces -----------------------------------------------------------------------------------------------
