@@ -217,6 +217,8 @@ def _job(args, extra_keys=()):
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
             def named(key, find):
+                if Path(near(data[key])).is_dir():  # '', '.', a folder beside the job: said where the job names it
+                    raise job.error(f"{key} = {data[key]!r} names the folder {near(data[key])}, not a {key} file", key)
                 try:
                     return find(near(data[key]))
                 except ConfigError as exc:

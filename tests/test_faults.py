@@ -376,6 +376,8 @@ def test_a_machine_whose_axis_has_no_travel_is_refused_by_volumetric_naming_its_
     ('machine = "demo_mill"\npath = "smal.toml"\n', 2, "no path file 'smal.toml' here nor in the trajectories library"),
     ('machine = "demo_mill"\npath = "small.toml"\ngeometric_compensation = true\n', 3,
      "demo mill (3 servo axes) has no geometric model ([[body]] tables) to compensate with"),
+    ('machine = "demo_mill"\npath = ""\n', 2, "path = '' names the folder"),  # the job's own folder: said so, by its line
+    ('machine = "."\npath = "small.toml"\n', 1, "machine = '.' names the folder"),
 ])
 def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys, job, line, words):
     """A misspelt machine or path, a compensation the machine cannot make: the job file's line (they named no file)."""
