@@ -59,6 +59,8 @@ class OutputDir:
     path: Path
 
     def __post_init__(self):
+        if not isinstance(self.path, (str, os.PathLike)):
+            raise TypeError(f"the output folder is a folder name (str or Path), got {type(self.path).__name__}")
         out = Path(self.path)
         object.__setattr__(self, "path", out)
         marker = out / _MARKER

@@ -32,7 +32,7 @@ from contoursim.model import Model
 from contoursim.output import output_dir
 from contoursim.pathfile import load_path_file
 from contoursim.paths import circle
-from contoursim.plotting import save_comparison_figures
+from contoursim.plotting import save_comparison_figures, save_figures
 from contoursim.simulation import measured_reference, simulate
 from contoursim.traces import Trace, read_trace, write_trace
 from contoursim.trajectory import Trajectory
@@ -532,6 +532,13 @@ def api():
     (lambda a: write_trace(io.StringIO(), Trace(a.trace.t, a.trace.reference, a.trace.actual, ("x", "y"),
                                                  {"note": "one\nt,x_ref,x"})), ValueError,
      "metadata 'note': 'one\\nt,x_ref,x' is not one '# key: value' line"),
+    (lambda a: compare(a.machine, a.trajectory, names="none,ccc_arc"), TypeError,
+     "names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string 'none,ccc_arc'"),
+    (lambda a: compare(a.machine, a.trajectory, names=("ccc_arc",), settings=[1]), TypeError,
+     "settings must map strategy names to their settings, got list"),
+    (lambda a: save_figures({}, io.StringIO(), "x"), TypeError, "runs must map run names to SimResults"),
+    (lambda a: output_dir(None), TypeError, "the output folder is a folder name (str or Path), got NoneType"),
+    (lambda a: load_path_file(3), TypeError, "a path file is a file or library name (str or Path), got int"),
 ])
 def test_the_api_refuses_what_it_cannot_use_naming_the_argument(api, call, error, words):
     """Wrong types, a bare effect, a settle of years, a column name with a comma: the argument named, not numpy's error."""
