@@ -32,7 +32,8 @@ def trace_files(paths):
     Raises
     ------
     ValueError
-        A path that does not exist, or a folder without ``.csv`` files.
+        A path that does not exist, a folder without ``.csv`` files, or a
+        trace given twice (itself and in its folder).
     """
     files = []
     for path in map(Path, paths):
@@ -45,6 +46,12 @@ def trace_files(paths):
             files.append(path)
         else:
             raise ValueError(f"no trace file {path}")
+    seen = {}
+    for f in files:  # a file named and its folder, or a file twice: one trace, not two with one report file
+        first = seen.setdefault(f.resolve(), f)
+        if first is not f:
+            also = "" if str(first) == str(f) else f" (also as {f})"
+            raise ValueError(f"{first} is given twice{also}: name each trace once")
     return files
 
 
