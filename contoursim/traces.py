@@ -104,7 +104,10 @@ class Trace:
 
     def __post_init__(self):
         t, dt = _validate.time_base("t", _validate.finite_array("t", self.t, ndim=1, limit=MAX_TIME))
-        axes = tuple(self.axes) if isinstance(self.axes, (str, tuple, list)) else self.axes
+        try:
+            axes = tuple(self.axes)
+        except TypeError:
+            raise TypeError(f"axes must be a sequence of axis names like ('x', 'y'), got {self.axes!r}") from None
         if axes not in AXIS_SETS:
             raise ValueError(f"axes must be one of {AXIS_SETS}, got {axes}")
         shape = (t.size, len(axes))
