@@ -132,7 +132,7 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
             tasks.append((str(f), read_text(f, TraceFormatError), machine))
             todo.append(i)
         except ConfigError as exc:  # a folder, a pipe, not UTF-8: that trace's failure, the others go on
-            outcomes[i] = {"trace": str(f), "error": str(exc)}
+            outcomes[i] = {"trace": str(f), "error": str(exc).replace(str(f), f.name, 1)}  # as diagnose_text names it
     report = progress or (lambda done, total: None)
     done = len(files) - len(todo)
     if scheduler is None:

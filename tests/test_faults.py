@@ -484,9 +484,9 @@ def test_a_fleets_trace_that_is_a_pipe_or_a_folder_is_that_traces_failure_named(
         release()
     assert kind == "ok", (kind, outcomes)
     assert [o["error"] for o in outcomes] == [
-        f"{tmp_path / 'b.csv'}: cannot read the file: it is a named pipe (FIFO), not a regular file",
-        f"{tmp_path / 'c.csv'}: cannot read the file: it is a directory, not a regular file",
-        f"{tmp_path / 'd.csv'}, line 1: the file is gzip-compressed, not text: unpack it first"]
+        "b.csv: cannot read the file: it is a named pipe (FIFO), not a regular file",
+        "c.csv: cannot read the file: it is a directory, not a regular file",
+        "d.csv, line 1: the file is gzip-compressed, not text: unpack it first"]
 
 
 @pytest.fixture(scope="module")
