@@ -565,11 +565,14 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
         damped at this servo period, or a cross-coupled controller
         destabilises it.
     TypeError
-        `model` is not a Model or a Machine, `reference` not a Trajectory or a Trace.
+        `model` is not a Model or a Machine, `reference` not a Trajectory or
+        a Trace, `force` not a mapping.
     ValueError
         The trajectory's sampling differs from the servo period, it is faster
         than the machine's max feed, the path does not fit the machine's
-        axes, or a reference to be held does not end at rest.
+        axes, or a reference to be held does not end at rest; `settle` is
+        negative or its run would not fit in memory; a force is beyond
+        ±:data:`contoursim.traces.MAX_FORCE`.
 
     Warns
     -----
