@@ -328,9 +328,20 @@ class _Job:
 
 
 def diverged_why(sweep, i):
-    """Why variant `i` of `sweep` counts as diverged, in a sentence: its loop check's refusal with the loop's margins,
-    or, when its axes' loops pass it, the coupled loop's check or a run that ran away
-    (:data:`contoursim.multibody.MAX_TRAVEL`)."""
+    """Why a variant counts as diverged, in a sentence: its loop check's refusal with the loop's margins, or, when
+    its axes' loops pass it, the coupled loop's check or a run that ran away (:data:`contoursim.multibody.MAX_TRAVEL`).
+
+    Parameters
+    ----------
+    sweep : Sweep
+        The sweep (:func:`read_sweep`).
+    i : int
+        The variant's row.
+
+    Returns
+    -------
+    str
+    """
     model, _ = _job(sweep).variant(dict(zip(sweep.names, sweep.values[i])))
     return model.machine.refusal() or ("its axes' loops pass the loop check: a cross-coupled loop's check refused it, "
                                        "or its run left ±1e6 mm")
