@@ -22,7 +22,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
-from .config import TomlFile
+from .config import TomlFile, read_text
 from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
 
@@ -217,6 +217,8 @@ def _job(args, extra_keys=()):
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
             def named(key, find):
+                if Path(near(data[key])).is_dir():  # '', '.', a folder beside the job: said where the job names it
+                    raise job.error(f"{key} = {data[key]!r} names the folder {near(data[key])}, not a {key} file", key)
                 try:
                     return find(near(data[key]))
                 except ConfigError as exc:
@@ -491,7 +493,7 @@ def _progress_line(stream):
 
 def sweep_command(args):
     """``contoursim sweep SPEC.toml [--scheduler ADDRESS|local:N]``: every variant of a spec, one table row each."""
-    from .sweep import FIGURES, Progress, read_sweep, run_sweep, write_results
+    from .sweep import FIGURES, Progress, diverged_why, read_sweep, run_sweep, write_results
 
     sweep = read_sweep(args.spec)
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
@@ -501,11 +503,17 @@ def sweep_command(args):
     out, chosen = write_results(sweep, table, args.out)
     diverged = int(table[:, FIGURES.index("diverged")].sum())
     print(f"{diverged} of {len(table)} variants diverged or were refused by a loop check (the axes' or the coupled loop's)")
+
+    def values(i):
+        return ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
+
+    if diverged:  # the first one's reason: the margins that say how far it is
+        first = next(i for i, row in enumerate(table) if row[FIGURES.index("diverged")])
+        print(f"the first, variant {first} ({values(first)}): {diverged_why(sweep, first)}")
     if chosen is not None:
         for label, i in zip(("best", "worst"), chosen):
-            values = ", ".join(f"{n} = {v:.6g}" for n, v in zip(sweep.names, sweep.values[i]))
             figures = dict(zip(FIGURES, table[i]))
-            print(f"{label:<6} variant {i}: {values}: contour max {figures['contour_max_um']:.4g} µm, "
+            print(f"{label:<6} variant {i}: {values(i)}: contour max {figures['contour_max_um']:.4g} µm, "
                   f"RMS {figures['contour_rms_um']:.4g} µm, peak current {figures['peak_current_A']:.4g} A")
     print(f"table, plots and the best and worst runs written to {out}/")
 
@@ -532,8 +540,8 @@ def fleet_command(args):
     summary_file = Path(args.summary) if args.summary else None
     if summary_file is not None and summary_file.exists():  # replace only a fleet summary, never a file the user keeps
         try:
-            ours = {"effects", "failed"} <= set(json.loads(summary_file.read_text(encoding="utf-8")))
-        except (ValueError, UnicodeDecodeError, TypeError):
+            ours = {"effects", "failed"} <= set(json.loads(read_text(summary_file)))
+        except (ValueError, TypeError):  # not a regular file, not UTF-8, not JSON: not ours
             ours = False
         if not ours:
             raise FileExistsError(f"{summary_file} exists and is not a fleet summary; refusing to overwrite it")

@@ -16,6 +16,7 @@ added fields).
 
 import json
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -322,6 +323,10 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
     ContoursimWarning
         A run's current command hit its limit (naming the strategy).
     """
+    if isinstance(names, str):  # its letters would be the names
+        raise TypeError(f"names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string {names!r}")
+    if settings is not None and not isinstance(settings, Mapping):
+        raise TypeError(f"settings must map strategy names to their settings, got {type(settings).__name__}")
     names = list(names)
     if not names:
         raise ValueError("compare needs at least one strategy name")

@@ -5,14 +5,16 @@ keeps the text so that a bad or unknown key can be reported as
 ``machine.toml, line 12: unknown key 'kpp' in [axes.x]; expected one of ...``.
 """
 
+import os
 import re
+import stat
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TomlFile", "read_text"]
+__all__ = ["FORMAT_DOC", "TomlFile", "read_bytes", "read_text"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
@@ -25,6 +27,56 @@ _KINDS = {
     "machine": "describes a machine: servo_period_ms and an [axes.<name>] table per servo axis, optionally "
                "[[body]] tables for its geometry (the presets in contoursim/presets/ are examples)",
 }
+
+
+# the leading bytes of compressed files a logger or an archive leaves under a .csv or .toml name
+_PACKED = {b"\x1f\x8b": "gzip-compressed", b"PK\x03\x04": "a ZIP archive",
+           b"\xfd7zXZ\x00": "xz-compressed", b"\x28\xb5\x2f\xfd": "zstd-compressed"}
+
+
+def read_bytes(file, error=ConfigError):
+    """The bytes of the text file `file`, with errors naming the file.
+
+    A named pipe, a device (``/dev/zero``, a link to one) or a socket is
+    refused before anything is read: reading one would block until another
+    program writes, or never end. So is a compressed file (gzip, ZIP, xz,
+    zstd: a logger's archive under a ``.csv`` name), by its first bytes.
+
+    Parameters
+    ----------
+    file : str or Path
+        The file.
+    error : type
+        The :class:`ConfigError` subclass to raise.
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read, is not a regular file or is compressed.
+    TypeError
+        `file` is not a file name.
+    """
+    if not isinstance(file, (str, os.PathLike)):
+        raise TypeError(f"expected a file name (str or Path), got {type(file).__name__}")
+    try:
+        fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a FIFO opens at once, without a writer
+    except OSError as exc:
+        raise error(f"cannot read the file: {exc.strerror}", str(file)) from None
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        kind = ("a directory" if stat.S_ISDIR(mode) else "a named pipe (FIFO)" if stat.S_ISFIFO(mode)
+                else "a socket" if stat.S_ISSOCK(mode) else "a device")
+        raise error(f"cannot read the file: it is {kind}, not a regular file", str(file))
+    with os.fdopen(fd, "rb") as stream:
+        try:
+            raw = stream.read()
+        except OSError as exc:
+            raise error(f"cannot read the file: {exc.strerror}", str(file)) from None
+    packed = next((name for magic, name in _PACKED.items() if raw.startswith(magic)), None)
+    if packed:
+        raise error(f"the file is {packed}, not text: unpack it first", str(file), 1)
+    return raw
 
 
 def read_text(file, error=ConfigError):
@@ -40,17 +92,23 @@ def read_text(file, error=ConfigError):
     Raises
     ------
     ConfigError
-        The file cannot be read, or is not UTF-8 text (naming the line).
+        The file cannot be read, is not a regular file or is compressed
+        (:func:`read_bytes`), or is not UTF-8 text (UTF-16, a NUL byte:
+        naming the line).
     """
+    raw = read_bytes(file, error)
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16's byte-order marks (and little-endian UTF-32's)
+        raise error("the file is UTF-16 text (by its byte-order mark): save it as UTF-8", str(file), 1)
     try:
-        raw = Path(file).read_bytes()
-    except OSError as exc:
-        raise error(f"cannot read the file: {exc.strerror}", str(file)) from None
-    try:
-        return raw.decode("utf-8-sig")
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         line = raw.count(b"\n", 0, exc.start) + 1
         raise error(f"byte 0x{raw[exc.start]:02X} is not UTF-8 text: save the file as UTF-8", str(file), line) from None
+    if "\x00" in text:  # valid UTF-8, but no text file's: UTF-16 without its mark, or binary
+        line = text.count("\n", 0, text.index("\x00")) + 1
+        raise error("byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark?): save the file as UTF-8", str(file), line)
+    return text
+
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
 _KEY = re.compile(r"""^\s*("[^"]*"|'[^']*'|[A-Za-z0-9_\-]+(?:\s*\.\s*[A-Za-z0-9_\-]+)*)\s*=""")

@@ -1674,10 +1674,23 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
 
     Raises
     ------
+    TypeError
+        `trace` is not a Trace, `model` not a Model or Machine, `max_effects`
+        not a whole number.
     ValueError
         The trace has fewer than 3 samples (the noise floor is estimated
-        from second differences), or the model lacks one of its axes.
+        from second differences), the model lacks one of its axes, or
+        `max_effects` is negative.
     """
+    from .traces import Trace
+
+    if not isinstance(trace, Trace):
+        raise TypeError(f"trace must be a Trace (contoursim.read_trace reads one from its CSV file), got "
+                        f"{type(trace).__name__}")
+    if isinstance(max_effects, (bool, np.bool_)) or not isinstance(max_effects, (int, np.integer)):
+        raise TypeError(f"max_effects must be a whole number, got {max_effects!r}")
+    if max_effects < 0:
+        raise ValueError(f"max_effects must be zero or more, got {max_effects}")
     if len(trace.t) < 3:
         raise ValueError(f"a diagnosis needs at least 3 samples (its noise floor is estimated from second differences); "
                          f"the trace has {len(trace.t)}")

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
+from .config import read_text
 from .exceptions import ConfigError
 
 __all__ = ["COMPONENTS", "ERROR_COLUMNS", "ERROR_UNITS", "Cyclic", "ErrorMotion", "read_error_table"]
@@ -245,10 +246,7 @@ def read_error_table(path, rotary=False):
     """
     path = Path(path)
     source = str(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        raise ConfigError(f"cannot read the error table: {exc.strerror}", source) from None
+    lines = read_text(path).splitlines()
     start = next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
     if start is None:
         raise ConfigError("the error table has no header row", source)

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _memory, _validate
+from .paths import Path
 from .trajectory import Trajectory
 
 __all__ = ["FeedProfile", "FeedSettings", "plan", "sample"]
@@ -328,7 +329,7 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     >>> round(plan(line((0, 0), (100, 0)), 20.0, 100.0).duration, 9)
     5.2
     """
-    k = len(path.primitives)
+    k = len(_path(path).primitives)
     feeds = _feed_values(feed)
     if np.ndim(feeds) == 0:
         feeds = np.full(k, feeds)
@@ -432,6 +433,14 @@ class FeedSettings:
                     stops=self.stops)
 
 
+def _path(path):
+    """`path`, refused unless it is a :class:`~contoursim.paths.Path`."""
+    if not isinstance(path, Path):
+        raise TypeError(f"path must be a contoursim.paths.Path (paths.polyline makes one from points), got "
+                        f"{type(path).__name__}")
+    return path
+
+
 def sample(path, profile, dt):
     """Sample the motion at the servo period.
 
@@ -463,7 +472,9 @@ def sample(path, profile, dt):
         a very long path or a very slow feed).
     """
     dt = _validate.positive("dt", dt)
-    if abs(profile.length - path.length) > 1e-9 * max(1.0, path.length):
+    if not isinstance(profile, FeedProfile):
+        raise TypeError(f"profile must be a FeedProfile (from plan), got {type(profile).__name__}")
+    if abs(profile.length - _path(path).length) > 1e-9 * max(1.0, path.length):
         raise ValueError(f"profile length {profile.length} mm differs from the path length {path.length} mm")
     n = max(int(math.ceil(profile.duration / dt)), 1)
     _memory.check(n + 1, f"the motion lasts {profile.duration:.6g} s: at dt = {dt:.6g} s",

@@ -32,7 +32,8 @@ def trace_files(paths):
     Raises
     ------
     ValueError
-        A path that does not exist, or a folder without ``.csv`` files.
+        A path that does not exist, a folder without ``.csv`` files, or a
+        trace given twice (itself and in its folder).
     """
     files = []
     for path in map(Path, paths):
@@ -45,6 +46,12 @@ def trace_files(paths):
             files.append(path)
         else:
             raise ValueError(f"no trace file {path}")
+    seen = {}
+    for f in files:  # a file named and its folder, or a file twice: one trace, not two with one report file
+        first = seen.setdefault(f.resolve(), f)
+        if first is not f:
+            also = "" if str(first) == str(f) else f" (also as {f})"
+            raise ValueError(f"{first} is given twice{also}: name each trace once")
     return files
 
 
@@ -111,19 +118,21 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
     list of dict
         :func:`diagnose_text` of each trace.
     """
+    from .config import read_text
+    from .exceptions import ConfigError, TraceFormatError
     from .machine import preset_file
 
     machine = None
     if model is not None:
         file = preset_file(model)  # a preset or a file: refused here, before any trace, when neither
-        machine = (str(model), None) if not Path(model).exists() else (file.name, file.read_text(encoding="utf-8"))
+        machine = (str(model), None) if not Path(model).exists() else (file.name, read_text(file))
     outcomes, tasks, todo = [None] * len(files), [], []
     for i, f in enumerate(map(Path, files)):
         try:
-            tasks.append((str(f), f.read_text(encoding="utf-8"), machine))
+            tasks.append((str(f), read_text(f, TraceFormatError), machine))
             todo.append(i)
-        except (OSError, UnicodeDecodeError) as exc:
-            outcomes[i] = {"trace": str(f), "error": f"cannot read the file: {exc}"}
+        except ConfigError as exc:  # a folder, a pipe, not UTF-8: that trace's failure, the others go on
+            outcomes[i] = {"trace": str(f), "error": str(exc).replace(str(f), f.name, 1)}  # as diagnose_text names it
     report = progress or (lambda done, total: None)
     done = len(files) - len(todo)
     if scheduler is None:

@@ -73,6 +73,7 @@ from pathlib import Path as _FilePath
 import numpy as np
 
 from . import _validate
+from .config import read_bytes
 from .exceptions import ConfigError, ContoursimWarning, PathError
 from .paths import Line, Path, _arc_from_point
 
@@ -152,10 +153,7 @@ class Program:
 def _text_and_source(file_or_text):
     if isinstance(file_or_text, os.PathLike) or (isinstance(file_or_text, str) and "\n" not in file_or_text):
         file = _FilePath(file_or_text)
-        try:
-            raw = file.read_bytes()
-        except OSError as exc:
-            raise ConfigError(f"cannot read the G-code file: {exc.strerror}", source=str(file)) from None
+        raw = read_bytes(file)
         try:
             return raw.decode("utf-8-sig"), str(file)
         except UnicodeDecodeError:

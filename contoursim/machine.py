@@ -22,6 +22,7 @@ x, y (, z). With bodies, axes without a ``[axes.*]`` table (rotary tables on
 a contouring test, say) follow their commands exactly.
 """
 
+import os
 import re
 from dataclasses import MISSING, dataclass
 from importlib import resources
@@ -325,6 +326,8 @@ def preset_names():
 
 def preset_file(name_or_file):
     """The file of a machine given as a preset name or a path."""
+    if not isinstance(name_or_file, (str, os.PathLike)):
+        raise TypeError(f"a machine is a preset name or a machine file (str or Path), got {type(name_or_file).__name__}")
     path = Path(name_or_file)
     if path.exists():
         return path

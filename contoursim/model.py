@@ -38,6 +38,7 @@ How each stage realises its effects (:data:`contoursim.effects.STAGES`):
   ============== ========================================================================
 """
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -84,6 +85,8 @@ class Model:
     def __post_init__(self):
         if not isinstance(self.machine, Machine):
             raise TypeError(f"machine must be a Machine, got {type(self.machine).__name__}")
+        if isinstance(self.effects, Effect):  # iterable by its __getitem__: it would fail as 'no parameter 0'
+            raise TypeError(f"effects must be a sequence of Effect objects: give ({self.effects!r},), not the effect alone")
         effects = tuple(self.effects)
         for e in effects:
             if not isinstance(e, Effect):
@@ -138,6 +141,8 @@ class Model:
         -------
         Model
         """
+        if not isinstance(values, Mapping):
+            raise TypeError(f"values must be a mapping of flat parameter names to values, got {type(values).__name__}")
         by_label = {e.label: i for i, e in enumerate(self.effects)}
         changes = {}
         for name, value in values.items():

@@ -20,6 +20,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
+from .config import read_text
 from .exceptions import ConfigError, OutputError
 
 __all__ = ["OutputDir", "atomic_write", "output_dir", "report_file", "writing"]
@@ -48,8 +49,9 @@ class OutputDir:
     Raises
     ------
     ConfigError
-        `path` is a file or holds files and no marker; the marker is a
-        symbolic link or not contoursim's (not UTF-8 text).
+        `path` is a file, a symbolic link to nothing, or holds files and no
+        marker; the marker is a symbolic link or not contoursim's (not UTF-8
+        text).
     OutputError
         `path` cannot be created (e.g. no permission).
     """
@@ -57,11 +59,16 @@ class OutputDir:
     path: Path
 
     def __post_init__(self):
+        if not isinstance(self.path, (str, os.PathLike)):
+            raise TypeError(f"the output folder is a folder name (str or Path), got {type(self.path).__name__}")
         out = Path(self.path)
         object.__setattr__(self, "path", out)
         marker = out / _MARKER
         if out.exists() and not out.is_dir():
             raise ConfigError(f"{out} is a file, not a directory; choose another output directory")
+        if out.is_symlink() and not out.exists():  # mkdir would not make the folder it names
+            raise ConfigError(f"{out} is a symbolic link to {os.readlink(out)}, which does not exist; make that folder "
+                              "or choose another output directory")
         if marker.is_symlink():
             raise _linked(marker)
         if out.exists() and any(out.iterdir()) and not marker.is_file():
@@ -276,8 +283,8 @@ def report_file(file, key, what):
         raise ConfigError(f"{file} is a directory; name a file to write the {what} to")
     if file.exists() or file.is_symlink():
         try:
-            data = json.loads(file.read_text(encoding="utf-8"))
-        except (OSError, ValueError):  # unreadable, not UTF-8, not JSON
+            data = json.loads(read_text(file))
+        except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8, not JSON
             data = None
         ours = isinstance(data, dict) and key in data
         if not ours:

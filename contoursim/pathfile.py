@@ -11,6 +11,7 @@ of the offending key, through :class:`contoursim.config.TomlFile`.
 """
 
 import math
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path as _FilePath
@@ -83,6 +84,8 @@ def library_file(name):
     -------
     pathlib.Path
     """
+    if not isinstance(name, (str, os.PathLike)):
+        raise TypeError(f"a path file is a file or library name (str or Path), got {type(name).__name__}")
     path = _FilePath(name)
     if path.exists():
         return path

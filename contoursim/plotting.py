@@ -9,6 +9,8 @@ itself, e.g. in the trace CSV, is untouched): :func:`envelope_indices` keeps
 the smallest and largest sample of every pixel column, so no spike is lost.
 """
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from . import _validate
@@ -693,6 +695,8 @@ def save_figures(runs, out_dir, name, nominal=None):
     FileExistsError
         A plot's file exists and contoursim did not write it.
     """
+    if not isinstance(runs, Mapping) or not runs:
+        raise TypeError(f"runs must map run names to SimResults ({{'circle': result}}), got {runs!r:.60}")
     results = list(runs.values())
     k = _shared_magnification(results)
     # (file, size [in], margins, drawing): fixed margins that leave room for the legends, no layout search

@@ -1202,13 +1202,19 @@ def check(servo, dt, axis="x"):
         else:
             continue
         gain = _GAIN_OF[loop]
-        crossing = (f"phase margin {m['phase_margin']:.3g} deg at {m['gain_crossover'] / (2 * np.pi):.4g} Hz"
-                    if np.isfinite(m["gain_crossover"]) else "no gain crossover (the loop gain never reaches 1)")
+        if np.isfinite(m["gain_crossover"]):
+            crossing = f"phase margin {m['phase_margin']:.3g} deg at {m['gain_crossover'] / (2 * np.pi):.4g} Hz"
+            remedy = _REMEDY[loop]
+        elif m["gain_margin"] < 1:  # above 1 at the phase crossover and crossing 1 nowhere: above 1 up to Nyquist
+            crossing = "no gain crossover (the loop gain stays above 1 up to the Nyquist frequency)"
+            remedy = f"lower {gain}, or check the mass ({servo.mass:.6g} kg)"
+        else:
+            crossing = "no gain crossover (the loop gain never reaches 1)"
+            remedy = f"raise {gain}, or check the mass ({servo.mass:.6g} kg)"
         raise UnstableLoopError(
             f"the {loop} loop of axis {axis!r} {problem} at dt = {dt:.6g} s: gain margin "
             f"{m['gain_margin']:.3g}, {crossing}, damping ratio {m['damping_ratio']:.3g} "
-            f"({gain} = {getattr(servo, gain):.6g}): "
-            f"{_REMEDY[loop] if np.isfinite(m['gain_crossover']) else f'raise {gain}, or check the mass ({servo.mass:.6g} kg)'}.",
+            f"({gain} = {getattr(servo, gain):.6g}): {remedy}.",
             margins=m,
         )
     return sampled

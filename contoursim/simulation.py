@@ -17,6 +17,7 @@ commanded positions (:class:`~contoursim.traces.Trace`,
 
 import os
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,7 +28,7 @@ from .compensation import Composition, Strategy
 from ._version import __version__
 from .contour import exact_contour_error
 from .exceptions import ContoursimWarning, UnstableLoopError
-from .traces import Trace, write_trace
+from .traces import MAX_FORCE, Trace, write_trace
 from .machine import CARTESIAN, Machine
 from .multibody import MAX_TRAVEL, check_drift
 from .model import as_model
@@ -335,6 +336,10 @@ def _reference(machine, reference, settle, preview=0, force=None):
     (`force`: by axis name, on the reference's samples; a trace's own by default), held over the dwell and the hold,
     and the names of the axes that have one.
     """
+    if settle is not None:  # the caller's: named, and held to the memory a run of it takes
+        settle = _validate.nonnegative("settle", settle)
+        _memory.check(settle / machine.servo_period, f"settle = {settle:.6g} s: at the servo period of "
+                      f"{machine.servo_period:.6g} s", "settle for less (a few time constants of the slowest loop)")
     if isinstance(reference, Trace):
         force = measured_force(reference, machine.servo_period) if force is None else force
         reference = measured_reference(reference, machine.servo_period)
@@ -364,6 +369,8 @@ def _reference(machine, reference, settle, preview=0, force=None):
 
 def _held_force(machine, force, n, before, after):
     """The forces `force` (axis -> (n,) [N]) as an array (before + n + after, n_servo), edges held; None for none."""
+    if force is not None and not isinstance(force, Mapping):
+        raise TypeError(f"force must map servo axis names to arrays ({{'x': ...}}), got {type(force).__name__}")
     if not force:
         return None
     unknown = [axis for axis in force if axis not in machine.axes]
@@ -373,7 +380,7 @@ def _held_force(machine, force, n, before, after):
     columns = np.zeros((n, len(machine.axes)))
     for i, axis in enumerate(machine.axes):
         if axis in force:
-            columns[:, i] = _validate.finite_array(f"force[{axis!r}]", force[axis], shape=(n,))
+            columns[:, i] = _validate.finite_array(f"force[{axis!r}]", force[axis], shape=(n,), limit=MAX_FORCE)
     return np.pad(columns, ((before, after), (0, 0)), mode="edge")
 
 
@@ -558,11 +565,14 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
         damped at this servo period, or a cross-coupled controller
         destabilises it.
     TypeError
-        `model` is not a Model or a Machine, `reference` not a Trajectory or a Trace.
+        `model` is not a Model or a Machine, `reference` not a Trajectory or
+        a Trace, `force` not a mapping.
     ValueError
         The trajectory's sampling differs from the servo period, it is faster
         than the machine's max feed, the path does not fit the machine's
-        axes, or a reference to be held does not end at rest.
+        axes, or a reference to be held does not end at rest; `settle` is
+        negative or its run would not fit in memory; a force is beyond
+        ±:data:`contoursim.traces.MAX_FORCE`.
 
     Warns
     -----

@@ -56,11 +56,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .config import TomlFile
+from .config import TomlFile, read_text
 from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
 
-__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst",
+__all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst", "diverged_why",
            "plot_sweep", "read_sweep", "run_sweep", "run_variants", "table_text", "write_results"]
 
 #: How the variants are drawn.
@@ -127,7 +127,7 @@ def _bundle(spec, toml):
         if not file.is_relative_to(folder):
             elsewhere.append(str(file))
             return None
-        files[file.relative_to(folder).as_posix()] = file.read_text(encoding="utf-8")
+        files[file.relative_to(folder).as_posix()] = read_text(file)
         return file
 
     machine = add(str(toml.data.get("machine", "")), spec.parent) if isinstance(toml.data.get("machine"), str) else None
@@ -325,6 +325,26 @@ class _Job:
         model = model.with_values({n: v for n, v in effects.items() if n.rpartition(".")[0] in present})
         strategies = tuple(dataclasses.replace(s, **gains[s.name]) if s.name in gains else s for s in self.strategies)
         return model, strategies
+
+
+def diverged_why(sweep, i):
+    """Why a variant counts as diverged, in a sentence: its loop check's refusal with the loop's margins, or, when
+    its axes' loops pass it, the coupled loop's check or a run that ran away (:data:`contoursim.multibody.MAX_TRAVEL`).
+
+    Parameters
+    ----------
+    sweep : Sweep
+        The sweep (:func:`read_sweep`).
+    i : int
+        The variant's row.
+
+    Returns
+    -------
+    str
+    """
+    model, _ = _job(sweep).variant(dict(zip(sweep.names, sweep.values[i])))
+    return model.machine.refusal() or ("its axes' loops pass the loop check: a cross-coupled loop's check refused it, "
+                                       "or its run left ±1e6 mm")
 
 
 def _servo_field(machine, axis, key):

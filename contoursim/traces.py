@@ -33,6 +33,7 @@ columns, a column in other units) is refused.
 import io
 import re
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -103,7 +104,10 @@ class Trace:
 
     def __post_init__(self):
         t, dt = _validate.time_base("t", _validate.finite_array("t", self.t, ndim=1, limit=MAX_TIME))
-        axes = tuple(self.axes)
+        try:
+            axes = tuple(self.axes)
+        except TypeError:
+            raise TypeError(f"axes must be a sequence of axis names like ('x', 'y'), got {self.axes!r}") from None
         if axes not in AXIS_SETS:
             raise ValueError(f"axes must be one of {AXIS_SETS}, got {axes}")
         shape = (t.size, len(axes))
@@ -118,6 +122,8 @@ class Trace:
         object.__setattr__(self, "dt", dt)
         for kind, (_, unit, limit) in INPUTS.items():
             columns = {}
+            if not isinstance(getattr(self, kind), Mapping):
+                raise TypeError(f"{kind} must map axis names to arrays ({{'x': ...}}), got {type(getattr(self, kind)).__name__}")
             for axis, values in dict(getattr(self, kind)).items():
                 if axis not in axes:
                     raise ValueError(f"{kind} names axis {axis!r}, which is not one of the trace's axes {', '.join(axes)}")
@@ -172,8 +178,10 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
     FileExistsError
         `file` exists and `overwrite` is false.
     ValueError
-        An extra column has the wrong shape, is not finite or clashes with a
-        trace column; a value is too large to write to its resolution.
+        An extra column has the wrong shape, is not finite, is not a CSV
+        column name or clashes with a trace column; a metadata entry is not
+        one ``# key: value`` line; a value is too large to write to its
+        resolution.
     """
     every = _validate.positive_int("every", every)
     columns = {"t": (trace.t, TIME_DECIMALS)}
@@ -182,9 +190,16 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
         columns[axis] = (trace.actual[:, i], POSITION_DECIMALS)
     for kind in INPUTS:
         columns.update((f"{axis}_{kind}", (values, POSITION_DECIMALS)) for axis, values in getattr(trace, kind).items())
+    for key, value in trace.metadata.items():  # one '# key: value' line each, read back as written
+        if not str(key).strip() or ":" in str(key) or re.search(r"[\r\n]", f"{key}{value}"):
+            raise ValueError(f"metadata {key!r}: {value!r} is not one '# key: value' line (a key without ':', "
+                             "no line breaks)")
     for name, values in (extra or {}).items():
         if name in columns:
             raise ValueError(f"extra column {name!r} clashes with a trace column")
+        if not isinstance(name, str) or name != name.strip() or not name or re.search(r'[,"#\r\n]', name):
+            raise ValueError(f"extra column {name!r} is not a CSV column name (one without commas, quotes, '#', line "
+                             "breaks or surrounding spaces)")
         values = np.asarray(values)
         whole = values.dtype.kind in "bui"
         if values.dtype.kind != "b":

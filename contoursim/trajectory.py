@@ -6,6 +6,7 @@ import numpy as np
 
 from . import _validate
 from ._blocks import blocks
+from .paths import Path
 
 __all__ = ["Trajectory"]
 
@@ -58,6 +59,8 @@ class Trajectory:
         if pos.shape[0] != n or pos.shape[1] not in (1, 2, 3):
             raise ValueError(f"position must have shape (N, d), d = 1, 2 or 3, with N = {n}, got {pos.shape}")
         d = pos.shape[1]
+        if self.path is not None and not isinstance(self.path, Path):
+            raise TypeError(f"path must be a contoursim.paths.Path or None, got {type(self.path).__name__}")
         vel = _validate.finite_array("velocity", self.velocity, shape=(n, d))
         acc = _validate.finite_array("acceleration", self.acceleration, shape=(n, d))
         s = _validate.finite_array("s", self.s, shape=(n,))

@@ -5,7 +5,12 @@ out of range) and checks the whole answer: the exit status, one line on stderr n
 no traceback or foreign warning, nothing written where it must not be.
 """
 
+import gzip
+import io
+import os
+import threading
 import tracemalloc
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -15,14 +20,22 @@ from contoursim import _memory
 from contoursim.cli import main
 from contoursim.comparison import compare
 from contoursim.compensation import STRATEGY_NAMES
+from contoursim.diagnosis import diagnose
+from contoursim.effects import Effect
+from contoursim.errormotion import read_error_table
+from contoursim.exceptions import ConfigError, TraceFormatError
 from contoursim.feed import plan, sample
+from contoursim.fleet import diagnose_fleet
+from contoursim.gcode import read_gcode
 from contoursim.machine import load_machine, preset_file
+from contoursim.model import Model
 from contoursim.output import output_dir
 from contoursim.pathfile import load_path_file
 from contoursim.paths import circle
-from contoursim.plotting import save_comparison_figures
-from contoursim.simulation import measured_reference
-from contoursim.traces import read_trace
+from contoursim.plotting import save_comparison_figures, save_figures
+from contoursim.simulation import measured_reference, simulate
+from contoursim.traces import Trace, read_trace, write_trace
+from contoursim.trajectory import Trajectory
 from test_cli import SMALL_PATH
 
 
@@ -65,9 +78,12 @@ def test_output_folder_faults_end_in_one_line_and_change_no_users_file(tmp_path,
     trace = _trace(tmp_path / "m.csv", np.arange(50) * 1e-3, np.zeros(50), np.zeros(50))
     _refused(capsys, ["diagnose", str(trace), "--report", str(tmp_path / "r.json"), "--out", str(tmp_path / "out")],
              f"{tmp_path / 'r.json'} is a directory")
+    (tmp_path / "gone").symlink_to(tmp_path / "unmounted" / "results")  # a link to a share not mounted
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--out", str(tmp_path / "gone")],
+             f"{tmp_path / 'gone'} is a symbolic link to {tmp_path / 'unmounted' / 'results'}, which does not exist")
     assert notes.read_text() == "mine\n"
     assert sorted(p.name for p in (tmp_path / "linked").iterdir()) == [".contoursim-out"]
-    assert not (tmp_path / "out").exists()
+    assert not (tmp_path / "out").exists() and not (tmp_path / "unmounted").exists()
 
 
 # -- measured traces -----------------------------------------------------------------------------------------------
@@ -360,6 +376,8 @@ def test_a_machine_whose_axis_has_no_travel_is_refused_by_volumetric_naming_its_
     ('machine = "demo_mill"\npath = "smal.toml"\n', 2, "no path file 'smal.toml' here nor in the trajectories library"),
     ('machine = "demo_mill"\npath = "small.toml"\ngeometric_compensation = true\n', 3,
      "demo mill (3 servo axes) has no geometric model ([[body]] tables) to compensate with"),
+    ('machine = "demo_mill"\npath = ""\n', 2, "path = '' names the folder"),  # the job's own folder: said so, by its line
+    ('machine = "."\npath = "small.toml"\n', 1, "machine = '.' names the folder"),
 ])
 def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys, job, line, words):
     """A misspelt machine or path, a compensation the machine cannot make: the job file's line (they named no file)."""
@@ -367,3 +385,164 @@ def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys,
     (tmp_path / "job.toml").write_text(job)
     _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
              f"{tmp_path / 'job.toml'}, line {line}: {words}")
+
+
+# -- the third pass (issue 18, item 8): files that are not files, the Python API ----------------------------------------
+
+
+def _pipe(file):
+    """A named pipe at `file`, and a function that lets a reader blocked on it go (EOF) if one is."""
+    os.mkfifo(file)
+
+    def release():
+        try:
+            os.close(os.open(file, os.O_WRONLY | os.O_NONBLOCK))  # a writer that closes: the reader sees the end
+        except OSError:  # no reader: nothing blocked
+            pass
+    return release
+
+
+def _within(seconds, call):
+    """`call()`'s outcome ("ok", value) or ("raised", exception); ("blocked", None) if it has not ended in `seconds`."""
+    outcome = []
+
+    def run():
+        try:
+            outcome.append(("ok", call()))
+        except Exception as exc:  # noqa: BLE001 -- the test judges it
+            outcome.append(("raised", exc))
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(seconds)
+    return outcome[0] if outcome else ("blocked", None)
+
+
+@pytest.mark.parametrize("reader", [read_trace, load_machine, read_gcode, read_error_table])
+def test_a_pipe_a_device_a_folder_or_a_packed_file_is_refused_before_it_is_read(tmp_path, reader):
+    """A pipe would block the read until some program writes, /dev/zero would fill the memory: refused by what they are."""
+    release = _pipe(tmp_path / "pipe.csv")
+    try:
+        kind, value = _within(10, lambda: reader(tmp_path / "pipe.csv"))
+    finally:
+        release()
+    assert kind == "raised" and isinstance(value, ConfigError), (kind, value)
+    assert str(value) == f"{tmp_path / 'pipe.csv'}: cannot read the file: it is a named pipe (FIFO), not a regular file"
+    (tmp_path / "device.csv").symlink_to("/dev/null")  # as /dev/zero, without its endless read on the old code
+    with pytest.raises(ConfigError, match=r"device.csv: cannot read the file: it is a device, not a regular file$"):
+        reader(tmp_path / "device.csv")
+    (tmp_path / "folder.csv").mkdir()
+    with pytest.raises(ConfigError, match=r"folder.csv: cannot read the file: it is a directory, not a regular file$"):
+        reader(tmp_path / "folder.csv")
+    (tmp_path / "packed.csv").write_bytes(gzip.compress(b"t,x_ref,x\n0,0,0\n0.001,0,0\n"))
+    with pytest.raises(ConfigError, match=r"packed.csv, line 1: the file is gzip-compressed, not text: unpack it first$"):
+        reader(tmp_path / "packed.csv")
+
+
+@pytest.mark.parametrize("encoding, words", [
+    ("utf-16", "line 1: the file is UTF-16 text (by its byte-order mark): save it as UTF-8"),
+    ("utf-16-le", "line 1: byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark?): save the file as UTF-8"),
+])
+def test_a_utf16_trace_is_named_so(tmp_path, encoding, words):
+    """Excel's 'Unicode text' and Windows loggers write UTF-16: said so, not 'missing column 't' in '\\x00t\\x00,...'."""
+    file = tmp_path / "log.csv"
+    file.write_bytes("t,x_ref,x\n0,0,0\n0.001,0,0\n".encode(encoding))
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(file)
+    assert str(info.value) == f"{file}, {words}"
+
+
+def test_the_command_line_refuses_a_pipe_as_input_and_leaves_a_pipe_named_as_report_alone(tmp_path, capsys):
+    release = _pipe(tmp_path / "trace.csv")
+    try:
+        kind, code = _within(60, lambda: main(["diagnose", str(tmp_path / "trace.csv"), "--model", "demo_mill", "--out",
+                                               str(tmp_path / "out")]))
+    finally:
+        release()
+    assert (kind, code) == ("ok", 2)
+    err = capsys.readouterr().err
+    assert err == f"contoursim diagnose: error: {tmp_path / 'trace.csv'}: cannot read the file: it is a named pipe (FIFO), " \
+                  "not a regular file\n"
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    release = _pipe(tmp_path / "r.json")
+    try:
+        kind, code = _within(60, lambda: main(["compare", str(tmp_path / "small.toml"), "--strategies", "none", "--out",
+                                               str(tmp_path / "out"), "--json", str(tmp_path / "r.json")]))
+    finally:
+        release()
+    assert (kind, code) == ("ok", 2)
+    assert "r.json exists and is not a comparison JSON; refusing to overwrite it" in capsys.readouterr().err
+    assert (tmp_path / "r.json").is_fifo()
+
+
+def test_a_fleets_trace_that_is_a_pipe_or_a_folder_is_that_traces_failure_named(tmp_path):
+    release = _pipe(tmp_path / "b.csv")
+    (tmp_path / "c.csv").mkdir()
+    (tmp_path / "d.csv").write_bytes(gzip.compress(b"t,x_ref,x\n"))
+    try:
+        kind, outcomes = _within(30, lambda: diagnose_fleet([tmp_path / "b.csv", tmp_path / "c.csv", tmp_path / "d.csv"]))
+    finally:
+        release()
+    assert kind == "ok", (kind, outcomes)
+    assert [o["error"] for o in outcomes] == [
+        "b.csv: cannot read the file: it is a named pipe (FIFO), not a regular file",
+        "c.csv: cannot read the file: it is a directory, not a regular file",
+        "d.csv, line 1: the file is gzip-compressed, not text: unpack it first"]
+
+
+@pytest.fixture(scope="module")
+def api():
+    """What a researcher holds in the API tour: the demo mill, a sampled circle, a trace of it."""
+    machine = load_machine("demo_mill")
+    path = circle((0, 0), 2.0)
+    profile = plan(path, 10.0, 500.0)
+    trajectory = sample(path, profile, machine.servo_period)
+    t = np.arange(50) * 1e-3
+    ref = np.column_stack([np.sin(t), np.cos(t)])
+    trace = Trace(t, ref, ref + 1e-4, ("x", "y"))
+    return SimpleNamespace(machine=machine, path=path, profile=profile, trajectory=trajectory, trace=trace)
+
+
+@pytest.mark.parametrize("call, error, words", [
+    (lambda a: read_trace(3), TypeError, "expected a file name (str or Path), got int"),
+    (lambda a: load_machine(None), TypeError, "a machine is a preset name or a machine file (str or Path), got NoneType"),
+    (lambda a: plan([[0, 0], [1, 1]], 10.0, 500.0), TypeError, "path must be a contoursim.paths.Path"),
+    (lambda a: sample([[0, 0], [1, 1]], a.profile, 1e-3), TypeError, "path must be a contoursim.paths.Path"),
+    (lambda a: sample(a.path, 10.0, 1e-3), TypeError, "profile must be a FeedProfile (from plan), got float"),
+    (lambda a: Trajectory(*(getattr(a.trajectory, k) for k in ("t", "position", "velocity", "acceleration", "s")),
+                          path="circle"), TypeError, "path must be a contoursim.paths.Path or None, got str"),
+    (lambda a: diagnose("trace.csv", a.machine), TypeError, "trace must be a Trace (contoursim.read_trace reads one"),
+    (lambda a: diagnose(a.trace, a.machine, max_effects=-1), ValueError, "max_effects must be zero or more, got -1"),
+    (lambda a: diagnose(a.trace, a.machine, max_effects=1.5), TypeError, "max_effects must be a whole number, got 1.5"),
+    (lambda a: Model(a.machine, Effect("backlash", "x", lost_motion_um=5.0)), TypeError,
+     "give (Effect('backlash', 'x', lost_motion_um=5.0, feedback=None),), not the effect alone"),
+    (lambda a: Model(a.machine, (Effect("backlash", "x", lost_motion_um=5.0),)).with_values([("backlash.x.lost_motion_um", 3)]),
+     TypeError, "values must be a mapping of flat parameter names to values, got list"),
+    (lambda a: Trace(a.trace.t, a.trace.reference, a.trace.actual, 2), TypeError,
+     "axes must be a sequence of axis names like ('x', 'y'), got 2"),
+    (lambda a: Trace(a.trace.t, a.trace.reference, a.trace.actual, ("x", "y"), force=np.ones(50)), TypeError,
+     "force must map axis names to arrays ({'x': ...}), got ndarray"),
+    (lambda a: simulate(a.machine, a.trajectory, force=np.ones(len(a.trajectory))), TypeError,
+     "force must map servo axis names to arrays ({'x': ...}), got ndarray"),
+    (lambda a: simulate(a.machine, a.trajectory, force={"x": np.full(len(a.trajectory), 1e15)}), ValueError,
+     "force['x'] holds 1e+15 at index (0,), beyond ±1e+09"),
+    (lambda a: simulate(a.machine, a.trajectory, settle=-1.0), ValueError, "settle must be zero or positive, got -1.0"),
+    (lambda a: simulate(a.machine, a.trajectory, settle=1e7), ValueError,
+     "settle = 1e+07 s: at the servo period of 0.0002 s that is 5e+10 samples, a run of them needs about"),
+    (lambda a: write_trace(io.StringIO(), a.trace, extra={"a,b": np.ones(50)}), ValueError,
+     "extra column 'a,b' is not a CSV column name"),
+    (lambda a: write_trace(io.StringIO(), Trace(a.trace.t, a.trace.reference, a.trace.actual, ("x", "y"),
+                                                 {"note": "one\nt,x_ref,x"})), ValueError,
+     "metadata 'note': 'one\\nt,x_ref,x' is not one '# key: value' line"),
+    (lambda a: compare(a.machine, a.trajectory, names="none,ccc_arc"), TypeError,
+     "names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string 'none,ccc_arc'"),
+    (lambda a: compare(a.machine, a.trajectory, names=("ccc_arc",), settings=[1]), TypeError,
+     "settings must map strategy names to their settings, got list"),
+    (lambda a: save_figures({}, io.StringIO(), "x"), TypeError, "runs must map run names to SimResults"),
+    (lambda a: output_dir(None), TypeError, "the output folder is a folder name (str or Path), got NoneType"),
+    (lambda a: load_path_file(3), TypeError, "a path file is a file or library name (str or Path), got int"),
+])
+def test_the_api_refuses_what_it_cannot_use_naming_the_argument(api, call, error, words):
+    """Wrong types, a bare effect, a settle of years, a column name with a comma: the argument named, not numpy's error."""
+    with pytest.raises(error) as info:
+        call(api)
+    assert words in str(info.value)

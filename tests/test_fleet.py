@@ -52,6 +52,11 @@ def test_one_trace_keeps_the_single_report_and_fleet_options_need_several(tmp_pa
         trace_files([tmp_path])
     with pytest.raises(ValueError, match="no trace file"):
         trace_files([tmp_path / "missing.csv"])
+    with pytest.raises(ValueError, match=f"^{trace} is given twice: name each trace once$"):  # it was 'rename one'
+        trace_files([trace, FLEET])
+    (tmp_path / "logs").symlink_to(FLEET)
+    with pytest.raises(ValueError, match=rf"^{trace} is given twice \(also as {tmp_path / 'logs' / trace.name}\)"):
+        trace_files([trace, tmp_path / "logs" / trace.name])
 
 
 def test_generated_traces_diagnose_the_same_on_a_local_cluster(tmp_path, monkeypatch):

@@ -243,6 +243,14 @@ def test_unstable_position_gain():
     assert not err.value.margins["stable"]
 
 
+def test_a_loop_gain_above_1_up_to_nyquist_is_told_to_come_down():
+    """kv 1000 times too high has no gain crossover below Nyquist, as a loop too weak has none: it was told to raise kv."""
+    message = (r"velocity loop of axis 'x' is unstable at dt = 0.0002 s: gain margin 0.0333, no gain crossover \(the loop "
+               r"gain stays above 1 up to the Nyquist frequency\), damping ratio -0.792 \(kv = 100000\): lower kv, or check")
+    with pytest.raises(UnstableLoopError, match=message):
+        axis(kv=1e5).check(2e-4)
+
+
 def test_sampled_instability_is_caught():
     # Continuous loops are fine (crossover 150 Hz < 1/4 Nyquist), but a PI integral time far
     # shorter than the velocity loop's time constant destabilises it.
