@@ -74,6 +74,7 @@ from .machine import CONTROLLER_FIELDS
 from .model import Model, as_model
 from .plotting import fit_circle_center
 from .simulation import measured_force, measured_reference, simulate_batch
+from .traces import Trace
 
 __all__ = [
     "DAMPING_SPREAD", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
@@ -1682,8 +1683,6 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         from second differences), the model lacks one of its axes, or
         `max_effects` is negative.
     """
-    from .traces import Trace
-
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace (contoursim.read_trace reads one from its CSV file), got "
                         f"{type(trace).__name__}")

@@ -398,6 +398,9 @@ def _header_problem(names):
     return f"missing column 't' in the header {found!r}; {expected}"
 
 
+_WHOLE = re.compile(r"\s*[-+]?\d+\s*")  # a cell a decimal comma leaves of a number: its whole or its fraction digits
+
+
 def _parse_rows(body, width, index, names, limits, units, fail):
     """Parse the numeric rows; on any problem, name the first bad cell.
 
@@ -409,6 +412,9 @@ def _parse_rows(body, width, index, names, limits, units, fail):
         row = int(np.argmax(cells != width))
         if not body[row].strip():
             raise fail(f"a blank line among the data rows: expected {width} cells (as in the header)", row)
+        if cells[row] > width and all(_WHOLE.fullmatch(cell) for cell in body[row].split(",")):
+            raise fail(f"expected {width} cells (as in the header), found {cells[row]}, all whole numbers: decimal "
+                       "commas? the decimal separator is a point ('0.25'), the cells are separated by commas", row)
         raise fail(f"expected {width} cells (as in the header), found {cells[row]}", row)
     try:
         data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)
