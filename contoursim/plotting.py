@@ -695,8 +695,10 @@ def save_figures(runs, out_dir, name, nominal=None):
     FileExistsError
         A plot's file exists and contoursim did not write it.
     """
-    if not isinstance(runs, Mapping) or not runs:
-        raise TypeError(f"runs must map run names to SimResults ({{'circle': result}}), got {runs!r:.60}")
+    if not isinstance(runs, Mapping):
+        raise TypeError(f"runs must map run names to SimResults ({{'circle': result}}), got {type(runs).__name__}")
+    if not runs:
+        raise ValueError("runs is empty: save_figures draws at least one run")
     results = list(runs.values())
     k = _shared_magnification(results)
     # (file, size [in], margins, drawing): fixed margins that leave room for the legends, no layout search

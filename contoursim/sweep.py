@@ -342,9 +342,11 @@ def diverged_why(sweep, i):
     -------
     str
     """
+    from .multibody import MAX_TRAVEL
+
     model, _ = _job(sweep).variant(dict(zip(sweep.names, sweep.values[i])))
     return model.machine.refusal() or ("its axes' loops pass the loop check: a cross-coupled loop's check refused it, "
-                                       "or its run left ±1e6 mm")
+                                       f"or its run left ±{MAX_TRAVEL:g} mm")
 
 
 def _servo_field(machine, axis, key):
