@@ -80,6 +80,7 @@ from .paths import Line, Path, _arc_from_point
 __all__ = ["DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "read_gcode"]
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
+_EXPONENT = re.compile(r"[eE][-+]?\d+")  # right after a number: its exponent
 _LARGEST = 1e9  # largest |number| in a word [mm, mm/min, s]: a km-long axis is 1e6 mm
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
 _MODEL_G = (21, 40, 49, 80, 91.1, 94)  # mm, no cutter/tool length compensation, no canned cycle, I/J/K relative, F/min
@@ -172,6 +173,10 @@ def _words(raw, fail):
     for match in _WORD.finditer(text):
         if text[pos:match.start()].strip():
             fail(f"cannot read {text[pos:match.start()].strip()!r}")
+        exponent = _EXPONENT.match(text, match.end())
+        if exponent:  # 1e-12 would read as the number 1 and a word E-12
+            fail(f"{match.group(0).strip()}{exponent.group(0)}: a number in exponent notation is not G-code; write it "
+                 "in decimals")
         value = float(match.group(2))
         if not abs(value) <= _LARGEST:  # 400 digits are inf, 300 overflow an arc's geometry
             fail(f"{match.group(1)}{match.group(2)[:10]}...: the number is beyond ±{_LARGEST:g}")

@@ -127,6 +127,7 @@ def test_an_arc_cut_at_its_middle_is_one_block():
 @pytest.mark.parametrize("text, line, message", [
     ("G21\nG20 G1 X1 F100\n", 2, "inch programs are not supported"),
     ("G1 X1 F100\nE5\n", 2, "unknown word E5"),
+    ("G1 X1 F100\nG1 X1e-3\n", 2, "X1e-3: a number in exponent notation is not G-code; write it in decimals"),
     ("G1 X1 F100\nG10 L2 P1 X0\n", 2, "unknown word L2"),
     ("G1 X1 F100\nG7\n", 2, "unknown word G7"),
     ("G1 X1 F100\nG41 D1 X2\n", 2, "cutter radius compensation \\(G41\\) is not supported"),
