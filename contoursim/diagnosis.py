@@ -1701,9 +1701,9 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     for _ in range(_REIDENTIFY):
         # identified alone, the loops bend to an effect in them (one shared position gain to one axis's gain mismatch
         # or delay): where the effects named include one in the loops and leave a clear misfit, they are held in place
-        # while the loops are identified again, and the diagnosis starts over from those loops; kept when, with as
-        # many effects named, it closes most of what the first left above the noise floor (less is the loops' own
-        # misfit moved about, for the next effect to be bent to)
+        # while the loops are identified again, and the diagnosis starts over from those loops; kept when it names as
+        # many effects and, with as many named, closes most of what the first left above the noise floor (less is the
+        # loops' own misfit moved about, for the next effect to be bent to)
         left, floor = result.steps[-1].rms_um, float(np.linalg.norm(result.noise_um))
         if all(e.stage == "geometry" for e in result.effects) or not left > _REIDENTIFY_GAP * floor:
             break
@@ -1715,9 +1715,9 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             result = replace(result, warnings=result.warnings + (f"identifying the servo loops again with "
                              f"{', '.join(e.label for e in result.effects)} in place failed ({exc})",))
             break
-        level = again.steps[min(len(result.effects) + 1, len(again.steps) - 1)].rms_um
-        if not left**2 - level**2 >= _REIDENTIFY_SHARE * (left**2 - floor**2):
-            break
+        k = len(result.effects)  # steps: the nominal model, its refit, then one per effect
+        if len(again.effects) < k or not left**2 - again.steps[k + 1].rms_um**2 >= _REIDENTIFY_SHARE * (left**2 - floor**2):
+            break  # loops that explain the trace only without the effects they were identified with: not the premise
         held = ", ".join(e.label for e in result.effects)
         result = replace(again, warnings=again.warnings + (
             f"the servo loops were identified again with {held} held in place (the loops identified before had bent "
