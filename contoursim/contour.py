@@ -255,6 +255,24 @@ def _least(kind, row, p, length, out):
 
 
 @njit(cache=True)
+def _stretch_bound(sample_pos, i, j, length, q):
+    """Least distance from q (3,) to the path between samples i and j, `length` apart along it [mm].
+
+    Every such point is within `length` of the two together, in the ellipsoid of foci the samples: within
+    half its minor axis, sqrt(length^2 - chord^2) / 2, of the chord. That far from the chord's nearest point.
+    """
+    chord2 = along = 0.0
+    for c in range(sample_pos.shape[1]):
+        chord2 += (sample_pos[j, c] - sample_pos[i, c]) ** 2
+        along += (q[c] - sample_pos[i, c]) * (sample_pos[j, c] - sample_pos[i, c])
+    t = min(max(along / chord2, 0.0), 1.0)
+    d2 = q[2] ** 2 if sample_pos.shape[1] == 2 else 0.0
+    for c in range(sample_pos.shape[1]):
+        d2 += (q[c] - sample_pos[i, c] - t * (sample_pos[j, c] - sample_pos[i, c])) ** 2
+    return math.sqrt(d2) - 0.5 * math.sqrt(max(length * length - chord2, 0.0))
+
+
+@njit(cache=True)
 def _squared(sample_pos, i, q):
     """Squared distance from sample i (d columns, z = 0 for d = 2) to the point q (3,) [mm^2]."""
     d2 = 0.0
@@ -264,42 +282,43 @@ def _squared(sample_pos, i, q):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, knot_s, sample_pos, first, anchors, idx, act, plane, magnitude, s_out,
-                 normal, out_of_plane, foot):  # fmt: skip
+def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, anchors, idx, act, plane, magnitude,
+                 s_out, normal, out_of_plane, foot):  # fmt: skip
     """Foot point of each actual point, its arc length and the contour error's parts, into the outputs.
 
-    knot_s : arc length of the knots (distinct reference samples); sample_pos : positions (N, d) of the
-    reference samples; first : the first sample of each knot; anchors : the knot commanded at each
-    actual point; idx : the knot nearest to each actual point (on the anchor's part of the ball); act :
-    the actual points (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has
-    none. Fills magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
+    sample_s, sample_pos : arc length and position (N, d) of the reference samples; first : the first
+    sample of each knot (distinct sample); anchors : the knot commanded at each actual point; idx : the
+    knot nearest to each actual point (on the anchor's part of the ball); act : the actual points
+    (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has none. Fills
+    magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
     """
     n, k_count, d = first.size, kinds.size, foot.shape[1]
     out, frame = np.empty(9), np.empty(9)  # frame: position, tangent, curvature vector at the foot
     r = np.zeros(3)  # the commanded point
     for i in range(act.shape[0]):
         p = act[i]
-        j = idx[i]
+        j = first[idx[i]]  # the nearest sample, the first of its knot
+        s_prev, s_next = sample_s[first[max(idx[i] - 1, 0)]], sample_s[first[min(idx[i] + 1, n - 1)]]
         # the sample itself is the first candidate: the refinement never ends farther from p than it
-        best_d = _squared(sample_pos, first[j], p)
-        best_d, best_k, best_u = _refine(kinds, rows, breaks, p, knot_s[max(j - 1, 0)], knot_s[min(j + 1, n - 1)],
-                                         knot_s[j], best_d, -1, 0.0, out, frame)  # fmt: skip
+        best_d = _squared(sample_pos, j, p)
+        best_d, best_k, best_u = _refine(kinds, rows, breaks, p, s_prev, s_next, sample_s[j], best_d, -1, 0.0, out,
+                                         frame)  # fmt: skip
         if best_k < 0:  # no primitive's refinement came nearer than the sample (a Newton step astray): the sample
-            best_k = _primitive_at(breaks, knot_s[j])
-            best_u = min(max(knot_s[j] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
+            best_k = _primitive_at(breaks, sample_s[j])
+            best_u = min(max(sample_s[j] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
             _eval_prim(kinds[best_k], rows[best_k], best_u, frame)
         # A nearer point elsewhere on the anchor's part of the ball (another branch at a corner, whose samples
-        # straddle its foot while one of this branch is nearer): walk that part's knots both ways from j. No
-        # path point within arc length |P - K| - best of a knot K is nearer than the best, nor leaves the ball
-        # within 2|P - R| - |K - R| of it; the knot stretches that leaves uncovered are refined.
+        # straddle its foot while one of this branch is nearer): walk that part's samples both ways from j. No
+        # path point within arc length |P - K| - best of a sample K is nearer than the best, nor leaves the ball
+        # within 2|P - R| - |K - R| of it; the stretches between two samples that leaves uncovered are refined.
         for c in range(d):
             r[c] = sample_pos[first[anchors[i]], c]
         radius = 2.0 * math.sqrt(_squared(sample_pos, first[anchors[i]], p))
         for step in (-1, 1):
-            a, dr, k_here, whole = j, math.sqrt(_squared(sample_pos, first[j], r)), -1, False
-            free = math.sqrt(_squared(sample_pos, first[j], p)) - math.sqrt(best_d)  # excluded arc length about a
+            a, dr, k_here, whole = j, math.sqrt(_squared(sample_pos, j, r)), -1, False
+            free = math.sqrt(_squared(sample_pos, j, p)) - math.sqrt(best_d)  # excluded arc length about a
             while True:
-                k = _primitive_at(breaks, knot_s[a])
+                k = _primitive_at(breaks, sample_s[a])
                 if k != k_here:  # a line or plain arc no nearer anywhere than the best: excluded up to its end
                     if k == best_k:  # the best foot is the nearest point of a line, of a plain arc if not at an end
                         end = breaks[k + 1] - breaks[k]
@@ -309,24 +328,27 @@ def _foot_points(kinds, rows, breaks, closed, knot_s, sample_pos, first, anchors
                     k_here = k
                 reach = radius - dr  # arc length within which the path stays in the ball
                 if whole:
-                    rest = breaks[k + 1] - knot_s[a] if step == 1 else knot_s[a] - breaks[k]  # to its end
+                    rest = breaks[k + 1] - sample_s[a] if step == 1 else sample_s[a] - breaks[k]  # to its end
                     free = max(free, rest)
                     if kinds[k] == LINE:  # in the ball up to its end if that end is (convex), else it ends there
                         _eval_prim(LINE, rows[k], breaks[k + 1] - breaks[k] if step == 1 else 0.0, out)
                         if (out[0] - r[0]) ** 2 + (out[1] - r[1]) ** 2 + (out[2] - r[2]) ** 2 > radius * radius:
                             break
                         reach = max(reach, rest)
-                b = _beyond(knot_s, a, step, min(reach, free))
-                if b < 0 or b >= n:
+                # past the repeats of a standstill (the same arc length) at least
+                b = _beyond(sample_s, a, step, max(min(reach, free), 1e-300))
+                if b < 0 or b >= sample_s.size:
                     break
-                dp = math.sqrt(_squared(sample_pos, first[b], p))
-                if free + dp - math.sqrt(best_d) < abs(knot_s[b] - knot_s[a]) and abs(b - j) + abs(b - step - j) > 1:
-                    lo, hi = min(b - step, b), max(b - step, b)  # (j - 1, j) and (j, j + 1): refined above
-                    nearer = dp * dp <= _squared(sample_pos, first[b - step], p)
-                    guess = knot_s[b] if nearer else knot_s[b - step]
-                    best_d, best_k, best_u = _refine(kinds, rows, breaks, p, knot_s[lo], knot_s[hi], guess, best_d,
+                dp = math.sqrt(_squared(sample_pos, b, p))
+                lo, hi = min(b - step, b), max(b - step, b)  # two distinct samples: b is the first of its run
+                if (free + dp - math.sqrt(best_d) < abs(sample_s[b] - sample_s[a])
+                        and not (s_prev <= sample_s[lo] and sample_s[hi] <= s_next)  # refined above
+                        and _stretch_bound(sample_pos, lo, hi, sample_s[hi] - sample_s[lo], p) < math.sqrt(best_d)):
+                    nearer = dp * dp <= _squared(sample_pos, b - step, p)
+                    guess = sample_s[b] if nearer else sample_s[b - step]
+                    best_d, best_k, best_u = _refine(kinds, rows, breaks, p, sample_s[lo], sample_s[hi], guess, best_d,
                                                      best_k, best_u, out, frame)  # fmt: skip
-                dr = math.sqrt(_squared(sample_pos, first[b], r))
+                dr = math.sqrt(_squared(sample_pos, b, r))
                 if dr > radius:  # b leaves the ball: the anchor's part of it ends before b
                     break
                 a, free = b, dp - math.sqrt(best_d)
@@ -437,13 +459,12 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
         hint = int(idx[part.start - 1]) if part.start else int(anchors[0])
         idx[part] = nearest_knots(knots, anchors, _xyz(act[part]), window, hint)
     del knots  # before the results are filled
-    knot_s = trajectory.s[first]  # the knots' arc length
     magnitude, s, normal = np.empty((3, n))
     foot = np.empty((n, d))
     out_of_plane = np.empty(n if d == 3 else 0)
     plane = np.zeros(3) if path.plane_normal is None else np.asarray(path.plane_normal, dtype=float)
     for part in blocks(n):  # the actual points as (block, 3) copies: one compiled signature, no (N, 3) copy
-        _foot_points(path.kinds, path.rows, path.breaks, path.closed, knot_s, position, first,
+        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first,
                      _anchors(first, at, part), idx[part], _xyz(act[part]), plane, magnitude[part], s[part],
                      normal[part], out_of_plane[part], foot[part])  # fmt: skip
     if d == 2:  # a 2-D path: (P_a - foot) . z = 0
