@@ -122,6 +122,8 @@ _BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–N
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _SLOWEST_LOG = 0.01  # a trace sampled slower than this [s] does not resolve servo dynamics (a position loop's 1/kp)
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
+_CONTENDERS = 3  # most candidates compared by their profile over the nominal parameters (:func:`_profiled`)
+_CONTENDER_SHARE = 0.5  # ... each closing at least this share of what the best closes
 _TWIN_SHARE = 0.8  # two candidates alike for a reason the trace cannot decide are twins when one closes this share of the other's gap
 _REFIT_FIELDS = ("mass", "damping", "motor_mass", "screw_stiffness", "screw_damping_ratio") + CONTROLLER_FIELDS  # servo
 # parameters the refit may move (the controller's if uncertain)
@@ -1123,6 +1125,7 @@ class _Candidate:
     uncertainty: dict = None
     delta_bic: float = -np.inf
     tau: float = 1.0
+    settled: tuple = None  # (the base with it named, the warnings that brings) once profiled (:func:`_profiled`)
 
 
 def _candidates(problem, model, warnings):
@@ -1550,22 +1553,25 @@ def _first_order_twin(problem, best, cands):
     significant beyond the other's (ΔBIC more than :data:`SIGNIFICANT` higher) and closes at least :data:`GAP_SHARE`
     of what the other's leaves above the noise floor.
     """
-    def on_axis(name, kind=None):
-        return next((c for c in cands if c.fit.name == name and c.fit.axis == best.fit.axis
-                     and (kind is None or c.fit.options["kind"] == kind)), None)
-
-    if best.fit.name == "gain_mismatch":
-        gain, delay = best, on_axis("time_delay", "position")
-    elif best.fit.name == "time_delay" and best.fit.options["kind"] == "position":
-        gain, delay = on_axis("gain_mismatch"), best
-    else:
+    other = _partner(best, cands)
+    if other is None:
         return None
-    if gain is None or delay is None:
-        return None
-    other = gain if best is delay else delay
+    gain, delay = (best, other) if best.fit.name == "gain_mismatch" else (other, best)
     above = other.cost - problem.n  # what the other's fit leaves above the noise floor (whitened: n entries of 1)
     told = best.delta_bic > other.delta_bic + SIGNIFICANT and above > 0 and other.cost - best.cost >= GAP_SHARE * above
     return None if told else (gain, delay)
+
+
+def _partner(cand, cands):
+    """The candidate among `cands` that `cand` is to first order (:func:`_first_order_twin`): a gain mismatch's delay
+    of the same axis's position-loop reading, or that delay's gain mismatch; ``None`` for any other or none there."""
+    if cand.fit.name == "gain_mismatch":
+        twin = lambda c: c.fit.name == "time_delay" and c.fit.options["kind"] == "position"  # noqa: E731
+    elif cand.fit.name == "time_delay" and cand.fit.options["kind"] == "position":
+        twin = lambda c: c.fit.name == "gain_mismatch"  # noqa: E731
+    else:
+        return None
+    return next((c for c in cands if c.fit.axis == cand.fit.axis and twin(c)), None)
 
 
 def _first_order_said(problem, gain, delay, both_ways):
@@ -1801,13 +1807,19 @@ def _diagnose(trace, model, identified, max_effects, say):
         cands = refined
         _rescore(problem, cands)
         cands.sort(key=lambda c: -c.delta_bic)
+        if cands and cands[0].delta_bic > SIGNIFICANT and not identified:
+            cands = _profiled(problem, base, cands, warnings, say)
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
             say("nothing significant left: stopping")
             break
         best, ambiguity = _choose(problem, cands, both_ways)
         gap = (trace.actual - problem.fitted())[scored]  # what the base leaves, per axis [mm]
         try:
-            _settle(problem, base, best, warnings)
+            if best.settled is None:
+                best.settled = _settle(problem, base, best)
+            else:
+                problem.set_base(best.settled[0])
+            warnings += best.settled[1]
         except _FIT_FAILURES as exc:
             warnings.append(f"{best.fit.label}: not named, the refit with it in place failed ({exc})")
             problem.set_base(base)
@@ -1908,20 +1920,66 @@ def _currents(trace, model, reference, force):
     return {a: _on_trace(trace, reference.t, run[:, [names.index(a)]])[:, 0] for a in trace.current}
 
 
-def _settle(problem, base, best, warnings):
+def _settle(problem, base, best):
     """Make `base` with `best`'s effect the problem's base: nominal parameters refitted with it in place, then the
-    effect refitted around them, then the nominal parameters again."""
+    effect refitted around them, then the nominal parameters again. Returns ``(the new base, warnings it brings)``."""
     problem.set_base(_with_effect(base, best.fit), refit=_REFIT_STEPS)
     problem.set_base(Model(problem.base.machine, base.effects))
     best.x = np.array([best.fit[name] for name in best.free])
     _refine(problem, best, problem.base)
     problem.set_base(_with_effect(problem.base, best.fit), refit=_REFIT_STEPS)
+    said = []
     if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
         best.fit = _constant_force(problem, best.fit)
         problem.set_base(_with_effect(problem.base, best.fit))
-        warnings.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
-                        "measurement's zero offset; without an integrator in the velocity loop the two "
-                        "cannot be told apart")
+        said.append(f"{best.fit.label}: offset_N is the constant force that shifts the axis as far as the "
+                    "measurement's zero offset; without an integrator in the velocity loop the two "
+                    "cannot be told apart")
+    return problem.base, said
+
+
+def _profiled(problem, base, cands, warnings, say):
+    """`cands` (sorted best first) with the contenders ranked by their profile over the nominal parameters.
+
+    A candidate is scored on the base's nominal parameters, refitted
+    linearly around them; where a large effect is missing, the refit before
+    any effect has bent them towards it (a plant several prior widths off),
+    and the candidate that best suits the bent plant need not be the one that
+    explains the trace. So the contenders, the first :data:`_CONTENDERS`
+    closing at least :data:`_CONTENDER_SHARE` of what the best closes, and
+    the first-order twin of each (:func:`_partner`), are each settled
+    (:func:`_settle`: the nominal parameters refitted with it in place, their
+    prior included) and scored again on what they then leave: a profile
+    likelihood over the nominal parameters. A contender whose settling fails
+    is left out, with a warning: it could not be named.
+
+    With a given model only: on an identified machine the nominal parameters
+    are the loops themselves, and their refit from a contender's start runs
+    along the valley of position gain against feedforward to wherever it
+    stops (a gain mismatch left at eight noise levels where its first-order
+    twin, a delay, reached the noise); the loops are identified again with
+    the effects in place instead (:func:`diagnose`).
+    """
+    rss0 = float(problem.base_residual @ problem.base_residual)
+    closed = rss0 - cands[0].cost
+    contenders = [c for c in cands[:_CONTENDERS] if rss0 - c.cost >= _CONTENDER_SHARE * closed]
+    contenders += [t for t in (_partner(c, cands) for c in contenders) if t is not None and t not in contenders]
+    if len(contenders) < 2:
+        return cands
+    say(f"{len(contenders)} contenders ({', '.join(c.fit.label for c in contenders)}): the nominal parameters refitted "
+        "around each")
+    settled = []
+    for cand in contenders:
+        try:
+            cand.settled = _settle(problem, base, cand)
+        except _FIT_FAILURES as exc:
+            warnings.append(f"{cand.fit.label}{_options(cand.fit)}: left out, the refit with it in place failed ({exc})")
+        else:
+            cand.residual = problem.base_residual
+            settled.append(cand)
+        problem.set_base(base)
+    _rescore(problem, settled)
+    return sorted(settled, key=lambda c: -c.delta_bic) + [c for c in cands if c not in contenders]
 
 
 def _settling_time(servo):
