@@ -297,12 +297,14 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, ancho
     r = np.zeros(3)  # the commanded point
     for i in range(act.shape[0]):
         p = act[i]
-        j = first[idx[i]]  # the nearest sample, the first of its knot
+        # sample indices as int64, as the walk's (`first` is int32 to save memory): one compiled _squared, _beyond
+        j, anchor = np.int64(first[idx[i]]), np.int64(first[anchors[i]])  # the nearest and the commanded sample
         s_prev, s_next = sample_s[first[max(idx[i] - 1, 0)]], sample_s[first[min(idx[i] + 1, n - 1)]]
         # the sample itself is the first candidate: the refinement never ends farther from p than it
         best_d = _squared(sample_pos, j, p)
-        best_d, best_k, best_u = _refine(kinds, rows, breaks, p, s_prev, s_next, sample_s[j], best_d, -1, 0.0, out,
-                                         frame)  # fmt: skip
+        # no primitive yet: an int64 -1, as the best primitive the walk passes (a literal -1 compiles _refine again)
+        best_d, best_k, best_u = _refine(kinds, rows, breaks, p, s_prev, s_next, sample_s[j], best_d, np.int64(-1),
+                                         0.0, out, frame)  # fmt: skip
         if best_k < 0:  # no primitive's refinement came nearer than the sample (a Newton step astray): the sample
             best_k = _primitive_at(breaks, sample_s[j])
             best_u = min(max(sample_s[j] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
@@ -312,8 +314,8 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, ancho
         # path point within arc length |P - K| - best of a sample K is nearer than the best, nor leaves the ball
         # within 2|P - R| - |K - R| of it; the stretches between two samples that leaves uncovered are refined.
         for c in range(d):
-            r[c] = sample_pos[first[anchors[i]], c]
-        radius = 2.0 * math.sqrt(_squared(sample_pos, first[anchors[i]], p))
+            r[c] = sample_pos[anchor, c]
+        radius = 2.0 * math.sqrt(_squared(sample_pos, anchor, p))
         for step in (-1, 1):
             a, dr, k_here, whole = j, math.sqrt(_squared(sample_pos, j, r)), -1, False
             free = math.sqrt(_squared(sample_pos, j, p)) - math.sqrt(best_d)  # excluded arc length about a
@@ -331,7 +333,8 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, ancho
                     rest = breaks[k + 1] - sample_s[a] if step == 1 else sample_s[a] - breaks[k]  # to its end
                     free = max(free, rest)
                     if kinds[k] == LINE:  # in the ball up to its end if that end is (convex), else it ends there
-                        _eval_prim(LINE, rows[k], breaks[k + 1] - breaks[k] if step == 1 else 0.0, out)
+                        # kinds[k], not LINE: a module constant is a literal to numba, typed apart (a second _eval_prim)
+                        _eval_prim(kinds[k], rows[k], breaks[k + 1] - breaks[k] if step == 1 else 0.0, out)
                         if (out[0] - r[0]) ** 2 + (out[1] - r[1]) ** 2 + (out[2] - r[2]) ** 2 > radius * radius:
                             break
                         reach = max(reach, rest)
