@@ -339,7 +339,8 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, ancho
                             break
                         reach = max(reach, rest)
                 # past the repeats of a standstill (the same arc length) at least
-                b = _beyond(sample_s, a, step, max(min(reach, free), 1e-300))
+                # sample_s[::1]: a strided view to numba, as the knots' chord column the search passes (one _beyond)
+                b = _beyond(sample_s[::1], a, step, max(min(reach, free), 1e-300))
                 if b < 0 or b >= sample_s.size:
                     break
                 dp = math.sqrt(_squared(sample_pos, b, p))
@@ -456,6 +457,7 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     for part in blocks(first.size):
         knots[part, :d] = position[first[part]]
     fill_chord(knots)
+    knots.flags.writeable = False  # as distinct()'s: one compiled signature of the search
     idx = np.empty(n, np.int32)  # the nearest knot to each actual point
     for part in blocks(n):  # as below: no (N, 3) copy of the actual points, no (N,) array of anchors
         anchors = _anchors(first, at, part)

@@ -54,7 +54,7 @@ def distinct(points):
     -------
     knots : ndarray, shape (M, 4)
         The distinct samples in order [mm] and, in the last column, the
-        cumulative chord length from the first [mm] (see the module docstring); C-contiguous.
+        cumulative chord length from the first [mm] (see the module docstring); C-contiguous, read-only.
     first_sample : ndarray of int, shape (M,)
         Index of the first sample of each knot.
     knot_of_sample : ndarray of int, shape (N,)
@@ -65,7 +65,7 @@ def distinct(points):
 
 
 def with_chord(knots):
-    """Knots (M, 3) with their cumulative chord length as a fourth column [mm], C-contiguous (M, 4).
+    """Knots (M, 3) with their cumulative chord length as a fourth column [mm], C-contiguous (M, 4), read-only.
 
     Parameters
     ----------
@@ -84,6 +84,7 @@ def with_chord(knots):
     out = np.empty((len(knots), 4))
     out[:, :3] = knots
     fill_chord(out)
+    out.flags.writeable = False  # every knots array the search takes is: one compiled signature (see _beyond)
     return out
 
 
@@ -183,9 +184,11 @@ def _beyond(length, j, step, slack):
     """The first knot past j (in direction step = ±1) whose cumulative `length` differs from j's by >= slack.
 
     `length` (M,) is non-decreasing [mm]: the knots' chord length (the last
-    column of :func:`distinct`'s knots) or their arc length. Returns an index
-    outside [0, M) when there is none. Galloping: doubling steps, then
-    bisection, O(log k) probes for a jump of k knots.
+    column of :func:`distinct`'s read-only knots, a strided view) or the
+    samples' arc length (:mod:`contoursim.contour` passes it as such a view:
+    one compiled version). Returns an index outside [0, M) when there is
+    none. Galloping: doubling steps, then bisection, O(log k) probes for a
+    jump of k knots.
     """
     m = length.shape[0]
     left = j if step == -1 else m - 1 - j  # knots that way
