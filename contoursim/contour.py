@@ -12,8 +12,12 @@ For each actual point P, taken when the reference was at sample R:
 2. refinement on the primitives spanned by that sample's two neighbours:
    closed form on lines and plain arcs, Newton's method on the arc length of
    helices and on the parameter of spline pieces, never farther than the
-   sample itself; when the foot point is clamped at a primitive end, the
-   neighbouring primitive (across the seam of a closed path, too) is tried.
+   sample itself; then on every stretch between two samples of R's part of
+   the ball that may hold a nearer point (another branch at a corner or a
+   zig-zag, whose samples straddle its foot while a sample of the first
+   branch is nearer: up to half a sample spacing nearer); when the foot
+   point is clamped at a primitive end, the neighbouring primitive (across
+   the seam of a closed path, too) is tried.
 
 The result is independent of the sample spacing (the samples only seed the
 search) and of the order of the points.
@@ -27,7 +31,7 @@ from ._numba import njit
 
 from . import _validate
 from ._blocks import blocks
-from .nearest import fill_chord, moved, nearest_knots
+from .nearest import _beyond, fill_chord, moved, nearest_knots
 from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
 
 __all__ = ["ContourError", "exact_contour_error"]
@@ -206,41 +210,152 @@ def _closest(kind, row, p, u0, length, out):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, idx, act, plane, magnitude, s_out, normal,
-                 out_of_plane, foot):  # fmt: skip
+def _refine(kinds, rows, breaks, p, s_lo, s_hi, s0, best_d, best_k, best_u, out, frame):
+    """Try the primitives spanning arc lengths [s_lo, s_hi] for a foot point nearer to p than the best one.
+
+    Each from the guess s0 (clamped to it) [mm]. ``best_d, best_k, best_u``:
+    the best foot so far (squared distance [mm^2], its primitive, -1 for
+    none, and its arc length on it [mm]); returned, updated, with `frame`
+    filled at it (`out`: scratch).
+    """
+    for k in range(_primitive_at(breaks, s_lo), _primitive_at(breaks, s_hi) + 1):
+        length = breaks[k + 1] - breaks[k]
+        u = _closest(kinds[k], rows[k], p, min(max(s0 - breaks[k], 0.0), length), length, out)
+        dist = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
+        if dist < best_d or (best_k < 0 and dist <= best_d):
+            best_d, best_k, best_u = dist, k, u
+            for c in range(9):  # not frame[:] = out: numba compiles its shape-mismatch error (~2 s)
+                frame[c] = out[c]
+    return best_d, best_k, best_u
+
+
+@njit(cache=True)
+def _least(kind, row, p, length, out):
+    """Squared distance from p to the nearest point of a line or a plain arc, anywhere on it [mm^2]; -1 for others."""
+    if kind == LINE:
+        u = _closest(kind, row, p, 0.0, length, out)
+    elif kind == ARC and row[15] == 0.0:
+        x = y = 0.0
+        for i in range(3):
+            x += (p[i] - row[i]) * row[3 + i]
+            y += (p[i] - row[i]) * row[6 + i]
+        turned = 0.0
+        if x * x + y * y > 1e-24:  # else every point of the arc is as near
+            turned = ((1.0 if row[14] >= 0.0 else -1.0) * (math.atan2(y, x) - row[13])) % (2 * math.pi)
+        # the distance grows with the angle from p's foot either way, up to half a turn
+        sweep = abs(row[14])
+        if turned <= sweep:
+            u = turned * row[12]
+        else:
+            u = 0.0 if 2 * math.pi - turned < turned - sweep else length
+        _eval_prim(kind, row, u, out)
+    else:
+        return -1.0
+    return (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
+
+
+@njit(cache=True)
+def _stretch_bound(sample_pos, i, j, length, q):
+    """Least distance from q (3,) to the path between samples i and j, `length` apart along it [mm].
+
+    Every such point is within `length` of the two together, in the ellipsoid of foci the samples: within
+    half its minor axis, sqrt(length^2 - chord^2) / 2, of the chord. That far from the chord's nearest point.
+    """
+    chord2 = along = 0.0
+    for c in range(sample_pos.shape[1]):
+        chord2 += (sample_pos[j, c] - sample_pos[i, c]) ** 2
+        along += (q[c] - sample_pos[i, c]) * (sample_pos[j, c] - sample_pos[i, c])
+    t = min(max(along / chord2, 0.0), 1.0)
+    d2 = q[2] ** 2 if sample_pos.shape[1] == 2 else 0.0
+    for c in range(sample_pos.shape[1]):
+        d2 += (q[c] - sample_pos[i, c] - t * (sample_pos[j, c] - sample_pos[i, c])) ** 2
+    return math.sqrt(d2) - 0.5 * math.sqrt(max(length * length - chord2, 0.0))
+
+
+@njit(cache=True)
+def _squared(sample_pos, i, q):
+    """Squared distance from sample i (d columns, z = 0 for d = 2) to the point q (3,) [mm^2]."""
+    d2 = 0.0
+    for c in range(sample_pos.shape[1]):
+        d2 += (sample_pos[i, c] - q[c]) ** 2
+    return d2 + q[2] ** 2 if sample_pos.shape[1] == 2 else d2
+
+
+@njit(cache=True)
+def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, anchors, idx, act, plane, magnitude,
+                 s_out, normal, out_of_plane, foot):  # fmt: skip
     """Foot point of each actual point, its arc length and the contour error's parts, into the outputs.
 
     sample_s, sample_pos : arc length and position (N, d) of the reference samples; first : the first
-    sample of each knot (distinct sample); idx : the knot nearest to each actual point; act : the
-    actual points (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has
-    none. Fills magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
+    sample of each knot (distinct sample); anchors : the knot commanded at each actual point; idx : the
+    knot nearest to each actual point (on the anchor's part of the ball); act : the actual points
+    (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has none. Fills
+    magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
     """
     n, k_count, d = first.size, kinds.size, foot.shape[1]
     out, frame = np.empty(9), np.empty(9)  # frame: position, tangent, curvature vector at the foot
+    r = np.zeros(3)  # the commanded point
     for i in range(act.shape[0]):
         p = act[i]
-        j = idx[i]
-        k_lo = _primitive_at(breaks, sample_s[first[max(j - 1, 0)]])
-        k_hi = _primitive_at(breaks, sample_s[first[min(j + 1, n - 1)]])
+        # sample indices as int64, as the walk's (`first` is int32 to save memory): one compiled _squared, _beyond
+        j, anchor = np.int64(first[idx[i]]), np.int64(first[anchors[i]])  # the nearest and the commanded sample
+        s_prev, s_next = sample_s[first[max(idx[i] - 1, 0)]], sample_s[first[min(idx[i] + 1, n - 1)]]
         # the sample itself is the first candidate: the refinement never ends farther from p than it
-        best_d, best_k, best_u = 0.0, -1, 0.0
-        for c in range(d):
-            best_d += (sample_pos[first[j], c] - p[c]) ** 2
-        if d == 2:
-            best_d += p[2] ** 2
-        for k in range(k_lo, k_hi + 1):
-            length = breaks[k + 1] - breaks[k]
-            u0 = min(max(sample_s[first[j]] - breaks[k], 0.0), length)
-            u = _closest(kinds[k], rows[k], p, u0, length, out)
-            dist = (out[0] - p[0]) ** 2 + (out[1] - p[1]) ** 2 + (out[2] - p[2]) ** 2
-            if dist < best_d or (best_k < 0 and dist <= best_d):
-                best_d, best_k, best_u = dist, k, u
-                for c in range(9):  # not frame[:] = out: numba compiles its shape-mismatch error (~2 s)
-                    frame[c] = out[c]
+        best_d = _squared(sample_pos, j, p)
+        # no primitive yet: an int64 -1, as the best primitive the walk passes (a literal -1 compiles _refine again)
+        best_d, best_k, best_u = _refine(kinds, rows, breaks, p, s_prev, s_next, sample_s[j], best_d, np.int64(-1),
+                                         0.0, out, frame)  # fmt: skip
         if best_k < 0:  # no primitive's refinement came nearer than the sample (a Newton step astray): the sample
-            best_k = _primitive_at(breaks, sample_s[first[j]])
-            best_u = min(max(sample_s[first[j]] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
+            best_k = _primitive_at(breaks, sample_s[j])
+            best_u = min(max(sample_s[j] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
             _eval_prim(kinds[best_k], rows[best_k], best_u, frame)
+        # A nearer point elsewhere on the anchor's part of the ball (another branch at a corner, whose samples
+        # straddle its foot while one of this branch is nearer): walk that part's samples both ways from j. No
+        # path point within arc length |P - K| - best of a sample K is nearer than the best, nor leaves the ball
+        # within 2|P - R| - |K - R| of it; the stretches between two samples that leaves uncovered are refined.
+        for c in range(d):
+            r[c] = sample_pos[anchor, c]
+        radius = 2.0 * math.sqrt(_squared(sample_pos, anchor, p))
+        for step in (-1, 1):
+            a, dr, k_here, whole = j, math.sqrt(_squared(sample_pos, j, r)), -1, False
+            free = math.sqrt(_squared(sample_pos, j, p)) - math.sqrt(best_d)  # excluded arc length about a
+            while True:
+                k = _primitive_at(breaks, sample_s[a])
+                if k != k_here:  # a line or plain arc no nearer anywhere than the best: excluded up to its end
+                    if k == best_k:  # the best foot is the nearest point of a line, of a plain arc if not at an end
+                        end = breaks[k + 1] - breaks[k]
+                        whole = kinds[k] == LINE or (kinds[k] == ARC and rows[k, 15] == 0.0 and 0.0 < best_u < end)
+                    else:
+                        whole = _least(kinds[k], rows[k], p, breaks[k + 1] - breaks[k], out) >= best_d
+                    k_here = k
+                reach = radius - dr  # arc length within which the path stays in the ball
+                if whole:
+                    rest = breaks[k + 1] - sample_s[a] if step == 1 else sample_s[a] - breaks[k]  # to its end
+                    free = max(free, rest)
+                    if kinds[k] == LINE:  # in the ball up to its end if that end is (convex), else it ends there
+                        # kinds[k], not LINE: a module constant is a literal to numba, typed apart (a second _eval_prim)
+                        _eval_prim(kinds[k], rows[k], breaks[k + 1] - breaks[k] if step == 1 else 0.0, out)
+                        if (out[0] - r[0]) ** 2 + (out[1] - r[1]) ** 2 + (out[2] - r[2]) ** 2 > radius * radius:
+                            break
+                        reach = max(reach, rest)
+                # past the repeats of a standstill (the same arc length) at least
+                # sample_s[::1]: a strided view to numba, as the knots' chord column the search passes (one _beyond)
+                b = _beyond(sample_s[::1], a, step, max(min(reach, free), 1e-300))
+                if b < 0 or b >= sample_s.size:
+                    break
+                dp = math.sqrt(_squared(sample_pos, b, p))
+                lo, hi = min(b - step, b), max(b - step, b)  # two distinct samples: b is the first of its run
+                if (free + dp - math.sqrt(best_d) < abs(sample_s[b] - sample_s[a])
+                        and not (s_prev <= sample_s[lo] and sample_s[hi] <= s_next)  # refined above
+                        and _stretch_bound(sample_pos, lo, hi, sample_s[hi] - sample_s[lo], p) < math.sqrt(best_d)):
+                    nearer = dp * dp <= _squared(sample_pos, b - step, p)
+                    guess = sample_s[b] if nearer else sample_s[b - step]
+                    best_d, best_k, best_u = _refine(kinds, rows, breaks, p, sample_s[lo], sample_s[hi], guess, best_d,
+                                                     best_k, best_u, out, frame)  # fmt: skip
+                dr = math.sqrt(_squared(sample_pos, b, r))
+                if dr > radius:  # b leaves the ball: the anchor's part of it ends before b
+                    break
+                a, free = b, dp - math.sqrt(best_d)
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
             for _ in range(k_count):
@@ -342,11 +457,10 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     for part in blocks(first.size):
         knots[part, :d] = position[first[part]]
     fill_chord(knots)
+    knots.flags.writeable = False  # as distinct()'s: one compiled signature of the search
     idx = np.empty(n, np.int32)  # the nearest knot to each actual point
     for part in blocks(n):  # as below: no (N, 3) copy of the actual points, no (N,) array of anchors
-        commanded = np.arange(part.start, part.stop, dtype=np.int32) if at is None else at[part].astype(np.int32)
-        anchors = np.searchsorted(first, commanded, side="right") - 1  # the knot holding each commanded sample
-        # (both int32: searchsorted would otherwise convert all of `first` for each block)
+        anchors = _anchors(first, at, part)
         hint = int(idx[part.start - 1]) if part.start else int(anchors[0])
         idx[part] = nearest_knots(knots, anchors, _xyz(act[part]), window, hint)
     del knots  # before the results are filled
@@ -355,15 +469,22 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     out_of_plane = np.empty(n if d == 3 else 0)
     plane = np.zeros(3) if path.plane_normal is None else np.asarray(path.plane_normal, dtype=float)
     for part in blocks(n):  # the actual points as (block, 3) copies: one compiled signature, no (N, 3) copy
-        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first, idx[part],
-                     _xyz(act[part]), plane, magnitude[part], s[part], normal[part], out_of_plane[part],
-                     foot[part])  # fmt: skip
+        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first,
+                     _anchors(first, at, part), idx[part], _xyz(act[part]), plane, magnitude[part], s[part],
+                     normal[part], out_of_plane[part], foot[part])  # fmt: skip
     if d == 2:  # a 2-D path: (P_a - foot) . z = 0
         out_of_plane = np.broadcast_to(0.0, (n,))
     if act.flags.writeable:  # the caller's array: a copy, so that it stays writeable
         act = act.copy()
     return ContourError(magnitude=magnitude, vector=None, foot=foot, s=s, normal=normal, out_of_plane=out_of_plane,
                         actual=act)
+
+
+def _anchors(first, at, part):
+    """The knot holding the sample commanded at each actual point of the block `part` (int32, as `first`)."""
+    commanded = np.arange(part.start, part.stop, dtype=np.int32) if at is None else at[part].astype(np.int32)
+    # both int32: searchsorted would otherwise convert all of `first` for each block
+    return np.searchsorted(first, commanded, side="right") - 1
 
 
 def _xyz(points):

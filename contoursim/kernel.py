@@ -818,8 +818,10 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
 
 
 def _no_coupling():
-    """Coupling arguments of :func:`_variant` that switch it off (kind 0)."""
-    return np.zeros(_C_NPAR), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(_C_NSTATE)
+    """Coupling arguments of :func:`_variant` that switch it off (kind 0); the knots read-only, as a coupling's."""
+    knots = np.zeros((1, 3))
+    knots.flags.writeable = False
+    return np.zeros(_C_NPAR), knots, np.zeros(1, np.int64), np.zeros(_C_NSTATE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1566,8 +1568,9 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None, forc
         cpar, knots, knot_of_sample, cstate = _no_coupling()
         estimate = np.empty((0, 3))
     else:
-        # writeable copies: the kernel compiles for one array type (a read-only array is another)
-        cpar, knots, knot_of_sample = coupling.params.copy(), coupling.knots.copy(), coupling.knot_of_sample.copy()
+        # the kernel compiles for one array type (a read-only array is another): writeable copies, but the knots
+        # read-only as all knots are (nearest.distinct's: one compiled search with the exact contour error's)
+        cpar, knots, knot_of_sample = coupling.params.copy(), coupling.knots, coupling.knot_of_sample.copy()
         cpar[_C_DT], cstate = dt, np.zeros(_C_NSTATE)
         estimate = np.empty((n_steps, 3))
     outputs = (position, encoder, velocity, current, saturated, estimate, status)
@@ -1685,7 +1688,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
             raise ValueError(f"the couplings must share one path of shape ({n_steps}, {min(n, 3)})")
         cpars = np.array([c.params for c in couplings])
         cpars[:, _C_DT] = dt
-        knots, knot_of_sample = first.knots.copy(), first.knot_of_sample.copy()  # writeable: one compiled type
+        knots, knot_of_sample = first.knots, first.knot_of_sample.copy()  # one compiled type: as run()'s
     threads = get_num_threads()
     blocks = threads * max(1, -(-n_variants // (threads * LANES)))  # as few as fill the lanes, as many for every thread
     lanes = max(1, -(-n_variants // blocks))

@@ -54,7 +54,7 @@ def distinct(points):
     -------
     knots : ndarray, shape (M, 4)
         The distinct samples in order [mm] and, in the last column, the
-        cumulative chord length from the first [mm] (see the module docstring); C-contiguous.
+        cumulative chord length from the first [mm] (see the module docstring); C-contiguous, read-only.
     first_sample : ndarray of int, shape (M,)
         Index of the first sample of each knot.
     knot_of_sample : ndarray of int, shape (N,)
@@ -65,7 +65,7 @@ def distinct(points):
 
 
 def with_chord(knots):
-    """Knots (M, 3) with their cumulative chord length as a fourth column [mm], C-contiguous (M, 4).
+    """Knots (M, 3) with their cumulative chord length as a fourth column [mm], C-contiguous (M, 4), read-only.
 
     Parameters
     ----------
@@ -84,6 +84,7 @@ def with_chord(knots):
     out = np.empty((len(knots), 4))
     out[:, :3] = knots
     fill_chord(out)
+    out.flags.writeable = False  # every knots array the search takes is: one compiled signature (see _beyond)
     return out
 
 
@@ -179,23 +180,27 @@ def _descend(knots, hint, p, window):
 
 
 @njit(cache=True)
-def _beyond(knots, j, step, slack):
-    """The first knot past j (in direction step = ±1) whose chord length differs from j's by >= slack.
+def _beyond(length, j, step, slack):
+    """The first knot past j (in direction step = ±1) whose cumulative `length` differs from j's by >= slack.
 
-    Returns an index outside [0, M) when there is none. Galloping: doubling
-    steps, then bisection, O(log k) probes for a jump of k knots.
+    `length` (M,) is non-decreasing [mm]: the knots' chord length (the last
+    column of :func:`distinct`'s read-only knots, a strided view) or the
+    samples' arc length (:mod:`contoursim.contour` passes it as such a view:
+    one compiled version). Returns an index outside [0, M) when there is
+    none. Galloping: doubling steps, then bisection, O(log k) probes for a
+    jump of k knots.
     """
-    m = knots.shape[0]
+    m = length.shape[0]
     left = j if step == -1 else m - 1 - j  # knots that way
-    c0 = knots[j, 3]
+    c0 = length[j]
     good, k = 0, 1  # gap < slack up to good; k: the probe
-    while k <= left and step * (knots[j + step * k, 3] - c0) < slack:
+    while k <= left and step * (length[j + step * k] - c0) < slack:
         good = k
         k *= 2
     bad = min(k, left + 1)  # gap >= slack there, or past the end
     while bad - good > 1:
         mid = (good + bad) // 2
-        if step * (knots[j + step * mid, 3] - c0) < slack:
+        if step * (length[j + step * mid] - c0) < slack:
             good = mid
         else:
             bad = mid
@@ -214,6 +219,7 @@ def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
     """
     m = knots.shape[0]
     r = (knots[a, 0], knots[a, 1], knots[a, 2])
+    chord = knots[:, 3]
     lo, hi = 0, m - 1
     for step in (-1, 1):
         j = a
@@ -230,10 +236,10 @@ def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
                 best, dbest = j, dp
             if seen_lo <= j <= seen_hi:  # no nearer knot up to the end of the seen range: the ball decides alone
                 past = seen_hi + 1 if step == 1 else seen_lo - 1
-                ball = _beyond(knots, j, step, radius - dr)
+                ball = _beyond(chord, j, step, radius - dr)
                 j = past if step * (ball - past) >= 0 else ball
             else:  # every knot within this much chord length of j is inside the ball and no nearer to p than dbest
-                j = _beyond(knots, j, step, min(radius - dr, dp - dbest))
+                j = _beyond(chord, j, step, min(radius - dr, dp - dbest))
             if j < 0 or j >= m:
                 break
     return best, dbest, lo, hi

@@ -18,17 +18,19 @@ from importlib import resources
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy.signal import lfilter
 
-from contoursim import estimators
+from contoursim import estimators, paths
 from contoursim.contour import exact_contour_error
+from contoursim.exceptions import PathError
 from contoursim.feed import plan, sample
 from contoursim.gcode import read_gcode
 from contoursim.machine import load_machine
 from contoursim.pathfile import load_path_file
 from contoursim.simulation import simulate
+from contoursim.trajectory import Trajectory
 
 ROUNDING = 1e-9  # [mm]: the foot point and the sample are the same path point evaluated two ways
 
@@ -177,6 +179,87 @@ def test_the_foot_is_connected_to_the_commanded_point_inside_the_ball(word, swee
     between = np.linspace(exact.s[0], trajectory.s[commanded], 4001)
     stray = np.linalg.norm(program.path.evaluate(between)[0][:, :trajectory.dim] - reference, axis=1).max()
     assert stray <= 2 * tracking + 1e-6, f"the path between foot and commanded point leaves the ball by {stray - 2 * tracking:.3g} mm"
+
+
+def _hand_sampled(path, s):
+    """A reference of the samples at arc lengths `s` [mm] of `path`, one per servo period of 1 ms."""
+    position = path.evaluate(s)[0][:, : path.dim]
+    n = len(s)
+    return Trajectory(np.arange(n) * 1e-3, position, np.zeros_like(position), np.zeros_like(position), s, path=path)
+
+
+def test_a_branch_nearer_than_the_nearest_sample_is_found():
+    """A narrow V sampled every 1 mm: the tool 0.1 mm from the way back, between two of its samples (0.51 mm away).
+
+    The nearest sample is one of the way out, 0.30 mm below the tool, and the foot on the way out is as far: the
+    refinement around that sample alone missed the way back (0.30 mm reported for 0.1 mm). The commanded point,
+    2 mm before the corner, is 2.01 mm from the tool: both branches are connected to it inside the ball.
+    """
+    path = paths.polyline([(0.0, 0.0), (10.0, 0.0), (0.0, 1.0)])
+    back = np.array([-10.0, 1.0]) / math.hypot(10.0, 1.0)  # direction of the way back
+    s = np.concatenate([np.arange(0.0, 10.0, 1.0), 10.0 + np.arange(0.5, path.length - 10.0, 1.0), [path.length]])
+    trajectory = _hand_sampled(path, s)
+    tool = np.array([10.0, 0.0]) + 4.0 * back + 0.1 * np.array([-back[1], back[0]])  # 4 mm back, 0.1 mm inside
+    samples = np.linalg.norm(trajectory.position - tool, axis=1)
+    assert trajectory.position[np.argmin(samples), 1] == 0.0 and samples.min() < 0.3  # the premise
+    exact = exact_contour_error(trajectory, [tool], at=[8])  # the sample at (8, 0)
+    assert exact.magnitude[0] == pytest.approx(0.1, abs=1e-12)
+    np.testing.assert_allclose(exact.foot[0], [10.0, 0.0] + 4.0 * back, atol=1e-12)
+
+
+def _connected_distance(path, dim, tool, commanded_s, radius, step):
+    """Brute force: the smallest distance from the tool to the path sampled every `step` mm, over the run of those
+    points around the commanded one (at arc length `commanded_s`) that stays inside the ball of `radius` about it [mm].
+    """
+    s = np.union1d(np.append(np.arange(0.0, path.length, step), path.length), [commanded_s])
+    points = path.evaluate(s)[0][:, :dim]
+    k = int(np.searchsorted(s, commanded_s))
+    outside = np.linalg.norm(points - points[k], axis=1) > radius
+    lo = k - int(np.argmax(outside[k::-1])) + 1 if outside[: k + 1].any() else 0
+    hi = k + int(np.argmax(outside[k:])) if outside[k:].any() else len(s)
+    return np.linalg.norm(points[lo:hi] - tool, axis=1).min()
+
+
+_CORNER = st.tuples(*[st.floats(-3.0, 3.0)] * 3)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.lists(_CORNER, min_size=3, max_size=6), st.sampled_from([2, 3]), st.sampled_from([0.0, 0.0, 0.2]),
+       st.floats(0.05, 1.0), st.integers(0, 2**32 - 1), st.floats(0.0, 1.0), st.tuples(*[st.floats(-1.0, 1.0)] * 3),
+       st.integers(-10, 10))
+def test_the_contour_error_is_the_distance_to_the_connected_part_of_the_ball(corners, dim, blend, spacing, seed,
+                                                                            where, offset, lag):  # fmt: skip
+    """Zig-zags of 2-5 segments (2-D or 3-D, sharp or blended corners) sampled by hand every ~`spacing` mm (spacing
+    jittered by up to 30 %), the tool anywhere near the path, the commanded sample up to 10 samples from it.
+
+    Against the brute force on the path sampled every spacing/200: the part of the path the search may take ends
+    within a sample spacing h of the ball's surface, so the contour error lies between the brute force over the
+    balls of radius 2|P - R| + h and 2|P - R| - h (the same distance wherever the nearest point is not at the
+    surface), within the brute force's own sampling error.
+    """
+    corners = np.array(corners)[:, :dim]
+    try:
+        path = paths.polyline(corners, blend_radius=blend)
+    except PathError:  # points too close, a reversal, a blend that does not fit
+        assume(False)
+    assume(not path.closed)  # the search does not cross a closed path's seam; the brute force would
+    dim = path.dim  # 2 for 3-D corners in the xy plane
+    assume(np.linalg.norm(np.diff(corners, axis=0), axis=1).min() > 0.2)
+    rng = np.random.default_rng(seed)
+    n = max(2, math.ceil(path.length / spacing))
+    s = np.linspace(0.0, path.length, n + 1)
+    s[1:-1] += rng.uniform(-0.3, 0.3, n - 1) * (path.length / n)
+    trajectory = _hand_sampled(path, s)
+    h = np.diff(s).max()
+    foot = path.evaluate([where * path.length])[0][0, :dim]
+    tool = foot + np.array(offset)[:dim]
+    commanded = int(np.clip(np.searchsorted(s, where * path.length) + lag, 0, n))
+    tracking = np.linalg.norm(tool - trajectory.position[commanded])
+    exact = exact_contour_error(trajectory, [tool], at=[commanded]).magnitude[0]
+    step = spacing / 200
+    inner = _connected_distance(path, dim, tool, s[commanded], max(2 * tracking - h, 0.0), step)
+    outer = _connected_distance(path, dim, tool, s[commanded], 2 * tracking + h, step)
+    assert outer - step / 2 - ROUNDING <= exact <= inner + ROUNDING, (exact, outer, inner)
 
 
 LIBRARY = sorted(f.name for f in resources.files("contoursim.trajectories").iterdir() if f.name.endswith((".toml", ".nc")))
