@@ -1837,13 +1837,13 @@ def _diagnose(trace, model, identified, max_effects, say):
             problem.set_base(base)
             break
         # the gap on the axes the effect acts on: another axis's misfit is none of its business
-        on = [trace.axes.index(a) for a in best.fit.axis]
+        on = [trace.axes.index(a) for a in _acts_on(best.fit)]
         before_um, after_um = (_rms_um(r[:, on]) for r in (gap, (trace.actual - problem.fitted())[scored]))
         floor = float(np.linalg.norm(noise[on])) * 1e3
         share = (before_um**2 - after_um**2) / max(before_um**2 - floor**2, 1e-300)
         if share < GAP_SHARE:  # significant, but a sliver of the gap: model error the effect bends to, not the effect
             warnings.append(f"{best.fit.label}: not named, it closes {share:.0%} of the residual above the noise floor "
-                            f"on {best.fit.axis} ({before_um:.4g} -> {after_um:.4g} µm RMS, floor {floor:.3g} µm; "
+                            f"on {_acts_on(best.fit)} ({before_um:.4g} -> {after_um:.4g} µm RMS, floor {floor:.3g} µm; "
                             f"named from {GAP_SHARE:.0%})")
             problem.set_base(base)
             break
@@ -1883,6 +1883,11 @@ def _diagnose(trace, model, identified, max_effects, say):
                      problem.base, where, tuple(warnings), tuple(left), *currents)
 
 
+def _acts_on(effect):
+    """The axes whose positions `effect` moves: a straightness's error direction, else the axes it is named on."""
+    return effect.options["error_direction"] if effect.name == "straightness" else effect.axis
+
+
 def _size_at_edge(problem, cand):
     """Why `cand`'s fitted size does not stand for the effect, or ``None``: at an edge of the range the fit may take
     (other than no effect), the trace asking for more than the effect can be: something else it is bent to."""
@@ -1905,7 +1910,7 @@ def _size_undetermined(cand, share):
     none = effect_kind(cand.fit.name).parameters[0].value
     if cand.fit.name == "vibration" or sigma is None or abs(size.value - none) >= 2.0 * sigma:
         return None
-    return (f"{cand.fit.label}: named, it closes {share:.0%} of the residual above the noise floor on {cand.fit.axis}, "
+    return (f"{cand.fit.label}: named, it closes {share:.0%} of the residual above the noise floor on {_acts_on(cand.fit)}, "
             f"but its {size.name} = {size.value:.4g} ± {sigma:.2g} (1σ) lies within 2σ of none ({none:g}): the trace "
             "does not pin its size down (model error the uncertainty counts: see uncertainty_method)")
 
