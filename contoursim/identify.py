@@ -39,10 +39,7 @@ commanded velocity and acceleration (a P/P cascade lags by
 simulator, each finite-difference Jacobian one :func:`simulate_batch` call:
 first without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
-transients tell them apart (where it is not, it is judged again once the
-PI loop is in place: a P loop's misfit correlates the residual over so
-many samples that the feedforward's mark may count for nothing); then with
-a PI velocity loop, kept likewise
+transients tell them apart; then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
 integrator); then with the damping, kept likewise. These stages run on the state
 structure; each drive structure of :data:`DRIVES` is then fitted from
@@ -253,25 +250,13 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     (rss1, _), (rss2, tau) = rss(x1, STATE), rss(x2, STATE)
     feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
     best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
-
-    def with_pi(x, feedforward):
-        """A PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)."""
-        x = np.concatenate([x, np.full(d, np.log(4.0))])
-        x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
-        free = np.ones(x.size, bool)
-        free[1] = feedforward
-        return fitted(x, free, STATE), free
-
-    x3, free = with_pi(best, feedforward)
+    # a PI velocity loop, started where its integrator can act (ti·ω_v = 4, ω_v within reach of the P fit's)
+    x3 = np.concatenate([best, np.full(d, np.log(4.0))])
+    x3[2: 2 + d] = np.minimum(x3[2: 2 + d], np.log(0.5 * top))
+    free = np.ones(x3.size, bool)
+    free[1] = feedforward
+    x3 = fitted(x3, free, STATE)
     rss3, tau = rss(x3, STATE)
-    if not feedforward:
-        # what a P loop cannot follow (an integrator's transients) correlates its residual over so many samples that a
-        # feedforward's mark may count for nothing: judged again with the PI loop in place, from the P fit's valley
-        # point (a rigid pair at kp 35.7 1/s, vff 0.8: identified at kp 185 1/s without feedforward, 8.8 µm RMS left)
-        y3, other = with_pi(x2, True)
-        rss_y, tau_y = rss(y3, STATE)
-        if delta_bic(rss3, rss_y, measured.size, 1, tau_y) > SIGNIFICANT:
-            feedforward, best, rss0, x3, free, rss3, tau = True, x2, rss2, y3, other, rss_y, tau_y
     # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
     pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
     added = d  # the parameters the PI loop adds to the fit kept so far

@@ -66,19 +66,6 @@ def test_independent_drive_gains_are_identified(independent_truth, tmp_path):
     assert not any("weakly determined" in w for w in identification_warnings(machine))
 
 
-def test_a_feedforward_the_p_loops_misfit_hides_is_found_with_the_pi_loop_in_place(independent_truth, tmp_path):
-    """An independent rigid pair at kp 35.7 1/s with feedforward 0.8 and y's gain 6.8 % high, on a CW circle: a P
-    velocity loop leaves its residual correlated over so many samples that the feedforward's fit (9.7 -> 8.1 µm RMS)
-    was not significant, and the loops were identified at kp 185 1/s without it, 8.8 µm RMS left. Judged again with
-    the PI loop in place the feedforward is kept: vff within 0.03 and the steady lag within 5 % of the data sheet's."""
-    case = independent_truth.make_case("rigid", "gain_mismatch", 1020552622, tmp_path)
-    sheet = load_model(case.machine_file).machine.axes["x"]
-    assert (sheet.vff, case.path) == (0.8, "circle_cw")
-    identified = identify_machine(read_trace(case.csv)).axes["x"]
-    assert identified.vff == pytest.approx(0.8, abs=0.03)
-    assert (1 - identified.vff) / identified.kp == pytest.approx((1 - sheet.vff) / sheet.kp, rel=0.05)
-
-
 def test_full_feedforward_leaves_kp_weakly_determined_and_the_diagnosis_says_so(independent_truth, tmp_path):
     """Velocity feedforward 1 (independent truth): the identified vff reaches WEAK_KP_VFF and the diagnosis without a
     model warns that kp is weakly determined, beside the drive structure it identified."""
