@@ -36,8 +36,10 @@ The fit: starting values from a regression of the tracking error on the
 commanded velocity and acceleration (a P/P cascade lags by
 ``e ≈ (1 − vff)·v/kp + (1/(kp·ω_v) − (1 − vff)²/kp²)·a``), then
 :func:`scipy.optimize.least_squares` on the tracking error through the
-simulator, each finite-difference Jacobian one :func:`simulate_batch` call:
-first without feedforward, then with it, kept only when it is significant
+simulator (each axis's mean taken out: a trace's zero is not its loop's,
+and an offset left in would correlate the residual over the whole run),
+each finite-difference Jacobian one :func:`simulate_batch` call: first
+without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
 transients tell them apart; then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
@@ -200,9 +202,11 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
         return cache[key]
 
     def residual(y):
-        """The whitened residual of simulated positions `y`; NaN where the loop diverged (or all but: beyond
-        :data:`_DIVERGED` tracking errors, a residual whose square overflows)."""
-        r = ((measured - y) / scale).ravel()
+        """The whitened residual of simulated positions `y`, each axis's mean taken out (the trace's zero is not the
+        loop's: an instrument's zero or a geometric error at the path's place offsets it); NaN where the loop
+        diverged (or all but: beyond :data:`_DIVERGED` tracking errors, a residual whose square overflows)."""
+        r = measured - y
+        r = ((r - r.mean(axis=0)) / scale).ravel()
         return r if np.all(np.abs(r) < _DIVERGED) else np.full(r.size, np.nan)
 
     def jac(x, free, structure):
