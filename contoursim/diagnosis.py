@@ -89,7 +89,9 @@ UNCERTAINTY_METHOD = ("the larger of the Gauss-Newton standard deviation (noise,
                       "autocorrelation time) and linearised block jackknives over 40, 20 and 10 consecutive segments "
                       "of the trace (model error that pulls the parameter differently along the trace; the largest "
                       "spread over the segment lengths), the mass, damping and instrument refit profiled out; added in "
-                      "quadrature, how far the fit moves when each of the effect's parameters held at a default "
+                      "quadrature, how far the fit moved when the nominal parameters were refitted with the effect in "
+                      "place (how much it hangs on a plant known only to its prior) and how far it moves when each "
+                      "of the effect's parameters held at a default "
                       "(a vibration's mass ratio, a friction's Stribeck and viscous parts) lies elsewhere in its "
                       "typical range (by its RMS distance over that range)")
 #: A residual share of at least this fraction of the noise level [-] is listed as unexplained structure.
@@ -1932,6 +1934,10 @@ def _settle(problem, base, best):
     problem.set_base(Model(problem.base.machine, base.effects))
     best.x = np.array([best.fit[name] for name in best.free])
     _refine(problem, best, problem.base)
+    # how far the fit moved with the nominal parameters refitted around it: how much it hangs on a plant known
+    # only to its prior, model error the residual of either fit cannot show
+    best.uncertainty = {name: float(np.hypot(e, best.fit[name] - x))
+                        for (name, e), x in zip(best.uncertainty.items(), best.x)}
     problem.set_base(_with_effect(problem.base, best.fit), refit=_REFIT_STEPS)
     said = []
     if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
