@@ -202,10 +202,8 @@ def _job(args, extra_keys=()):
             if "machine" not in job.data:
                 raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
                                 '(e.g. "demo_mill"), or give a path file')
-            data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"))
-            for key in ("machine", "path"):
-                if not isinstance(data[key], str):
-                    raise job.error(f"{key} must be a name or a file name in quotes, got {data[key]!r}", key)
+            data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"),
+                             text=dict.fromkeys(("machine", "path"), "a name or a file name"))
             if args.machine is not None:
                 raise job.error(f"--machine {args.machine} is not used with a job file, which names its machine "
                                 f"({data['machine']!r}); drop one of them", "machine")

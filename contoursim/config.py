@@ -11,13 +11,16 @@ import stat
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TomlFile", "read_bytes", "read_text"]
+__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "read_bytes", "read_text"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
+#: The keys of a file's free text and what each is (:meth:`TomlFile.table`'s `text`).
+TEXT_KEYS = MappingProxyType({"name": "text", "description": "text"})
 
 # what each kind of file looks like, for a message when one is given where another is expected
 _KINDS = {
@@ -222,8 +225,8 @@ class TomlFile:
         """A :class:`ConfigError` for `message` located at key path `keys`."""
         return ConfigError(message, self.source, self.line_of(*keys) if keys else None)
 
-    def table(self, *keys, allowed=None, required=(), renamed=None):
-        """The table at `keys`, checked for unknown, renamed and missing keys.
+    def table(self, *keys, allowed=None, required=(), renamed=None, text=None):
+        """The table at `keys`, checked for unknown, renamed and missing keys and for text that is not text.
 
         Parameters
         ----------
@@ -236,6 +239,10 @@ class TomlFile:
         renamed : mapping str -> str, optional
             Old key -> the key that replaced it; an old key is reported with
             its line and the name to use instead.
+        text : mapping str -> str, optional
+            Keys whose values must be strings -> what the value is (``"a
+            name"``); a number, boolean, list or table there is reported with
+            its line (TOML would read ``name = 3`` as a number).
         """
         value = self.data
         for i, key in enumerate(keys):
@@ -261,6 +268,10 @@ class TomlFile:
         for key in required:
             if key not in value:
                 raise self.error(f"missing key '{key}' in [{_dotted(keys)}]", *keys)
+        for key, what in (text or {}).items():
+            if key in value and not isinstance(value[key], str):
+                where = f" in [{_dotted(keys)}]" if keys else ""
+                raise self.error(f"{key}{where} must be {what} in quotes, got {value[key]!r}", *keys, key)
         return value
 
 

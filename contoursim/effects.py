@@ -492,6 +492,7 @@ def read_effects(toml, *keys):
         for key in ("name", "axis"):
             if key not in item:
                 raise toml.error(f"[[effect]] needs '{key}'", *where)
+        toml.table(*where, text={"name": "an effect's name", "axis": "axis letters"})
         try:
             kind = effect_kind(item["name"])
         except ValueError as exc:

@@ -32,7 +32,7 @@ from types import MappingProxyType
 import numpy as np
 
 from . import _validate
-from .config import TomlFile
+from .config import TEXT_KEYS, TomlFile
 from .exceptions import ConfigError, UnstableLoopError
 from .multibody import MAX_TRAVEL
 from .servo import AxisServo
@@ -382,7 +382,7 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
     if "body" in data:
         chain = chain_from_toml(toml, extra=_SERVO_KEYS)
     else:
-        toml.table(allowed=_SERVO_KEYS)
+        toml.table(allowed=_SERVO_KEYS, text=TEXT_KEYS)
     if "axes" not in data:
         raise toml.error("missing [axes.<name>] tables: the servo parameters of each axis")
     if "servo_period_ms" not in data:

@@ -50,7 +50,7 @@ import numpy as np
 from . import _chainkernels, _validate
 from ._blocks import blocks
 from ._numba import njit
-from .config import FORMAT_DOC
+from .config import FORMAT_DOC, TEXT_KEYS
 from .errormotion import _RAD_PER_URAD, COMPONENTS, ERROR_COLUMNS, ERROR_UNITS, Cyclic, ErrorMotion, read_error_table
 from .exceptions import ConfigError
 
@@ -1053,14 +1053,16 @@ def chain_from_toml(toml, *keys, extra=()):
         Naming the file and line of an unknown key or a bad value; a key of
         an earlier version is named with the key that replaced it.
     """
-    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"), renamed=_RENAMED)
+    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"), renamed=_RENAMED,
+                     text={**TEXT_KEYS, "tool": "a body's name", "workpiece": "a body's name"})
     raw = top["body"]
     if not isinstance(raw, list) or not raw:
         raise toml.error("body must be an array of tables ([[body]])", *keys, "body")
     names = []
     for i in range(len(raw)):
         travel = "travel_deg" if str(raw[i].get("joint", "")).strip().startswith("rotary") else "travel_mm"
-        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",), renamed={**_RENAMED, "travel": travel})
+        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",), renamed={**_RENAMED, "travel": travel},
+                          text={**TEXT_KEYS, "parent": "a body's name", "joint": "a joint", "axis": "an axis name"})
         if not isinstance(item["name"], str) or item["name"] in names or item["name"] == "bed":
             raise toml.error(f"body name must be a unique string other than 'bed', got {item['name']!r}", *keys, "body", i, "name")
         names.append(item["name"])

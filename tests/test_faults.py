@@ -547,3 +547,39 @@ def test_the_api_refuses_what_it_cannot_use_naming_the_argument(api, call, error
     with pytest.raises(error) as info:
         call(api)
     assert words in str(info.value)
+
+
+# -- faults4: wrong TOML types, '-' for a file, flags given text, numbers too large, strategy keys -----------------
+
+
+@pytest.mark.parametrize("preset, old, new, line, words", [
+    ("demo_mill", 'name = "demo mill (3 servo axes)"', "name = 3", 9, "name must be text in quotes, got 3"),
+    ("demo_mill", "servo_period_ms = 0.2", "description = true\nservo_period_ms = 0.2", 10,
+     "description must be text in quotes, got True"),
+    ("table_tilting_5axis", 'name = "5-axis table-tilting A/C"', "name = 3.5", 13, "name must be text in quotes, got 3.5"),
+    ("table_tilting_5axis", 'tool = "tool"', "tool = 1", 15, "tool must be a body's name in quotes, got 1"),
+    ("table_tilting_5axis", 'name = "X"', 'name = ["X"]', 51, "name in [body.0] must be text in quotes, got ['X']"),
+    ("table_tilting_5axis", 'parent = "X"', "parent = 1", 65, "parent in [body.1] must be a body's name in quotes, got 1"),
+    ("table_tilting_5axis", 'axis = "x"', "axis = 0", 54, "axis in [body.0] must be an axis name in quotes, got 0"),
+    ("table_tilting_5axis", 'joint = "linear x"', "joint = 1", 53, "joint in [body.0] must be a joint in quotes, got 1"),
+    ("demo_mill", None, '[[effect]]\nname = 3\naxis = "x"', 38, "name in [effect.0] must be an effect's name in quotes, got 3"),
+    ("demo_mill", None, '[[effect]]\nname = "backlash"\naxis = 1', 39, "axis in [effect.0] must be axis letters in quotes, got 1"),
+])
+def test_a_number_where_a_machine_file_wants_text_is_refused_naming_its_line_and_key(tmp_path, preset, old, new, line,
+                                                                                   words):
+    """TOML reads ``name = 3`` as a number: a machine's name, a body's, an effect's axis are text, said where."""
+    from contoursim.model import load_model
+
+    text = preset_file(preset).read_text()
+    assert old is None or old in text
+    (tmp_path / "m.toml").write_text(text + "\n" + new if old is None else text.replace(old, new, 1))
+    with pytest.raises(ConfigError) as info:
+        load_model(tmp_path / "m.toml")
+    assert str(info.value) == f"{tmp_path / 'm.toml'}, line {line}: {words}"
+
+
+def test_a_number_where_a_path_file_wants_text_is_refused_naming_its_line(tmp_path, capsys):
+    (tmp_path / "p.toml").write_text("description = 4\n" + SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'p.toml'}, line 1: description must be text in quotes, got 4")
+    assert not (tmp_path / "out").exists()
