@@ -582,6 +582,19 @@ def _names(text):
     return names
 
 
+def _written(what, example):
+    """The type of an option naming where contoursim writes `what` (into a folder, to a file): any name but ``-``,
+    which a command-line user means as standard output, where contoursim prints its table (`example`: a name)."""
+
+    def name(text):
+        if text.strip() == "-":
+            raise argparse.ArgumentTypeError(f"contoursim writes {what}, not to standard output ('-'): name one, "
+                                             f"e.g. {example}")
+        return text
+
+    return name
+
+
 def _every(text):
     """``--every N``: a whole number >= 1."""
     from . import _validate
@@ -628,7 +641,8 @@ def main(argv=None, compile_notice=False):
                         "repeat for more")
     p.add_argument("--tune", action="store_true",
                    help="tune each cross-coupled strategy's kp, ki on this path under the coupled-loop check")
-    p.add_argument("--json", metavar="R.json", help="write the comparison (JSON) to this file")
+    p.add_argument("--json", metavar="R.json", type=_written("the comparison JSON to a file", "--json r.json"),
+                   help="write the comparison (JSON) to this file")
     p.set_defaults(run=compare_command)
     p = sub.add_parser("volumetric", help="volumetric error map of a machine preset or file")
     p.add_argument("machine", help="machine preset name or file")
@@ -637,8 +651,10 @@ def main(argv=None, compile_notice=False):
     p.add_argument("file", nargs="+",
                    help="measured trace CSV (t, x_ref, x[, y_ref, y[, z_ref, z]]); several, or a folder: a fleet")
     p.add_argument("--model", help="nominal machine file or preset (default: identified from the trace)")
-    p.add_argument("--report", help="write the diagnosis report (JSON) to this file")
-    p.add_argument("--summary", metavar="FLEET.json", help="several traces: write the fleet summary (JSON) to this file")
+    p.add_argument("--report", type=_written("the diagnosis report to a file", "--report report.json"),
+                   help="write the diagnosis report (JSON) to this file")
+    p.add_argument("--summary", metavar="FLEET.json", type=_written("the fleet summary to a file", "--summary fleet.json"),
+                   help="several traces: write the fleet summary (JSON) to this file")
     p.add_argument("--scheduler", metavar="ADDRESS|local:N",
                    help='several traces: diagnose them on a dask cluster (needs pip install "contoursim[distributed]")')
     p.set_defaults(run=diagnose_command)
@@ -649,7 +665,8 @@ def main(argv=None, compile_notice=False):
                         '(needs pip install "contoursim[distributed]")')
     p.set_defaults(run=sweep_command)
     for p in sub.choices.values():
-        p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
+        p.add_argument("--out", default="contoursim-out", type=_written("its plots and files into a folder", "--out results"),
+                       help="output directory (default: ./contoursim-out)")
     for command in ("demo", "simulate"):
         sub.choices[command].add_argument("--every", type=_every, default=1, metavar="N",
                                           help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")

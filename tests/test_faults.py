@@ -583,3 +583,22 @@ def test_a_number_where_a_path_file_wants_text_is_refused_naming_its_line(tmp_pa
     _refused(capsys, ["simulate", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")],
              f"{tmp_path / 'p.toml'}, line 1: description must be text in quotes, got 4")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["simulate", "{path}", "--out", "-"], "argument --out: contoursim writes its plots and files into a folder, not to "
+                                            "standard output ('-'): name one, e.g. --out results"),
+    (["compare", "{path}", "--json", "-"], "argument --json: contoursim writes the comparison JSON to a file, not to"),
+    (["diagnose", "{path}", "--report", " -"], "argument --report: contoursim writes the diagnosis report to a file"),
+    (["diagnose", "{path}", "{path}", "--summary", "-"], "argument --summary: contoursim writes the fleet summary"),
+])
+def test_a_dash_for_where_contoursim_writes_is_refused_not_made_a_folder_or_file(tmp_path, monkeypatch, capsys, argv,
+                                                                                  words):
+    """``--out -`` made a folder named '-' (a command-line user means standard output), ``--json -`` a file '-'."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as info:  # argparse's refusal of the option itself
+        main([arg.format(path="small.toml") for arg in argv])
+    assert info.value.code == 2
+    assert words in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
