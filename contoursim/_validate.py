@@ -11,8 +11,8 @@ inside numpy. Readers of files turn both into a
 
 import numpy as np
 
-__all__ = ["as_xyz", "finite", "positive", "positive_int", "nonnegative", "float_array", "finite_array", "time_base",
-           "TimeStepError"]
+__all__ = ["as_xyz", "finite", "flag", "positive", "positive_int", "nonnegative", "float_array", "finite_array",
+           "time_base", "TimeStepError"]
 
 
 class TimeStepError(ValueError):
@@ -180,6 +180,22 @@ def as_xyz(points):
     """Planar points (N, 2) with z = 0 appended, shape (N, 3); (N, 3) points unchanged."""
     points = np.asarray(points, dtype=float)
     return points if points.shape[1] == 3 else np.column_stack([points, np.zeros((len(points), 3 - points.shape[1]))])
+
+
+def flag(name, value):
+    """Return `value` after checking it is a boolean (``True``, ``False`` or numpy's).
+
+    Python would take any value as one (``"no"`` and ``[0]`` as true, ``0.0``
+    as false): a flag given something else is refused rather than read so.
+
+    Raises
+    ------
+    TypeError
+        `value` is not a boolean.
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
 
 
 def positive_int(name, value):

@@ -327,6 +327,8 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
         raise TypeError(f"names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string {names!r}")
     if settings is not None and not isinstance(settings, Mapping):
         raise TypeError(f"settings must map strategy names to their settings, got {type(settings).__name__}")
+    if not isinstance(tuned, (bool, np.bool_, Mapping)):
+        raise TypeError(f"tuned must be True, False or a mapping of strategy names to tuned settings, got {tuned!r}")
     names = list(names)
     if not names:
         raise ValueError("compare needs at least one strategy name")

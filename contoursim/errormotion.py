@@ -245,7 +245,7 @@ def read_error_table(path, rotary=False):
         earlier version (``position``, ``dx``) with the name that replaced it.
     """
     path = Path(path)
-    source = str(path)
+    source, rotary = str(path), _validate.flag("rotary", rotary)
     lines = read_text(path).splitlines()
     start = next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
     if start is None:

@@ -373,6 +373,8 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
     """
     from .multibody import chain_from_toml
 
+    geometry, effects, check = (_validate.flag(name, value) for name, value in
+                                (("geometry", geometry), ("effects", effects), ("check", check)))
     toml = TomlFile.read(preset_file(name_or_file))
     toml.expect("machine")
     data = toml.data

@@ -529,7 +529,7 @@ class MachineChain:
             Tool axis V_w (unit vector).
         """
         q, t = self._check(q, t)
-        steps, err, times = self._program(q, t, ideal)
+        steps, err, times = self._program(q, t, _validate.flag("ideal", ideal))
         kind, inverse, column, vector = (np.array(x, dtype) for x, dtype in zip(zip(*steps), (np.int64, bool, np.int64, float)))
         pose = _chainkernels.tool_pose(q, times, err, self.tool_tip, self.tool_axis, kind, inverse, column, vector.reshape(-1, 6))
         return pose[:, :3], pose[:, 3:]
@@ -1243,7 +1243,8 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
     if not errors:
         return (ErrorMotion(),) * 6
     keys = {column: comp for column, (comp, _) in ERROR_COLUMNS.items()}  # the same names as an error table's columns
-    toml.table(*where, "errors", allowed=(*keys, "table"), renamed={comp: key for key, comp in keys.items()})
+    toml.table(*where, "errors", allowed=(*keys, "table"), renamed={comp: key for key, comp in keys.items()},
+               text={"table": "a file name"})
     tables = {}
     if "table" in errors:
         path = base / str(errors["table"])

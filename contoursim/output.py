@@ -20,6 +20,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import _validate
 from .config import read_text
 from .exceptions import ConfigError, OutputError
 
@@ -320,7 +321,7 @@ def atomic_write(file, binary=False, before_replace=None):
     OutputError
         The folder is not writable, the disk is full, ... (naming `file`).
     """
-    file = Path(file)
+    file, binary = Path(file), _validate.flag("binary", binary)
     _remove_stale_parts(file.parent, file.name)
     temporary = file.with_name(f".{file.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
     try:
@@ -363,6 +364,7 @@ def writing(file, overwrite=False, binary=False):
     FileExistsError
         `file` names an existing file and `overwrite` is false.
     """
+    overwrite, binary = _validate.flag("overwrite", overwrite), _validate.flag("binary", binary)
     if hasattr(file, "write"):
         return nullcontext(file)
     file = Path(file)

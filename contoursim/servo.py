@@ -862,7 +862,7 @@ def closed_loop(servo, feedforward=True):
         position, velocity and acceleration commands.
     """
     blocks = _blocks(servo, 0)
-    if not feedforward:
+    if not _validate.flag("feedforward", feedforward):
         blocks["vff"] = _gain(0.0, "v_ref", "v_ff", 0)
         blocks["aff"] = _gain(0.0, "a_ref", "i_ff", 0)
     return _derivative_inputs(_cascade(blocks)[0, :])

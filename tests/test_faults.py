@@ -21,7 +21,7 @@ from contoursim.cli import main
 from contoursim.comparison import compare
 from contoursim.compensation import STRATEGY_NAMES
 from contoursim.diagnosis import diagnose
-from contoursim.effects import Effect
+from contoursim.effects import Effect, Parameter
 from contoursim.errormotion import read_error_table
 from contoursim.exceptions import ConfigError, TraceFormatError
 from contoursim.feed import plan, sample
@@ -31,8 +31,9 @@ from contoursim.machine import load_machine, preset_file
 from contoursim.model import Model
 from contoursim.output import output_dir
 from contoursim.pathfile import load_path_file
-from contoursim.paths import circle
+from contoursim.paths import circle, spline
 from contoursim.plotting import save_comparison_figures, save_figures
+from contoursim.servo import closed_loop
 from contoursim.simulation import measured_reference, simulate
 from contoursim.traces import Trace, read_trace, write_trace
 from contoursim.trajectory import Trajectory
@@ -602,3 +603,28 @@ def test_a_dash_for_where_contoursim_writes_is_refused_not_made_a_folder_or_file
     assert info.value.code == 2
     assert words in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda a: simulate(a.machine, a.trajectory).summary(measuring_only="no"), "measuring_only must be True or False, got 'no'"),
+    (lambda a: simulate(a.machine, a.trajectory, contour="no"), "contour must be True or False, got 'no'"),
+    (lambda a: write_trace(a.mine, a.trace, overwrite="no"), "overwrite must be True or False, got 'no'"),
+    (lambda a: write_trace(a.mine, a.trace, overwrite=1), "overwrite must be True or False, got 1"),
+    (lambda a: load_machine("demo_mill", geometry="no"), "geometry must be True or False, got 'no'"),
+    (lambda a: load_machine("demo_mill", check=None), "check must be True or False, got None"),
+    (lambda a: spline([[0, 0], [1, 1], [2, 0]], closed="no"), "closed must be True or False, got 'no'"),
+    (lambda a: closed_loop(a.machine.axes["x"], feedforward="no"), "feedforward must be True or False, got 'no'"),
+    (lambda a: Parameter("p", 1.0, "um", vary="no"), "p: vary must be True or False, got 'no'"),
+    (lambda a: compare(a.machine, a.trajectory, names=("none",), tuned="yes"),
+     "tuned must be True, False or a mapping of strategy names to tuned settings, got 'yes'"),
+    (lambda a: load_machine("vertical_mill_3axis").chain.tool_pose(np.zeros((1, 3)), ideal="no"),
+     "ideal must be True or False, got 'no'"),
+])
+def test_a_flag_given_text_or_a_number_is_refused_naming_it(api, tmp_path, call, words):
+    """``summary(measuring_only="no")`` was read as true, ``write_trace(..., overwrite="no")`` replaced the user's file."""
+    mine = tmp_path / "mine.csv"
+    mine.write_text("mine\n")
+    with pytest.raises(TypeError) as info:
+        call(SimpleNamespace(**vars(api), mine=mine))
+    assert str(info.value) == words
+    assert mine.read_text() == "mine\n"
