@@ -22,6 +22,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
+from . import _validate
 from .config import TomlFile, read_text
 from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
@@ -368,8 +369,14 @@ def _set_option(settings, text):
         raise ValueError(f"--set {text}: write STRATEGY.KEY=VALUE, e.g. ccc_arc.kp_per_s=120")
     try:
         number = int(value) if value.strip().lstrip("+-").isdigit() else float(value)
+        if math.isinf(float(number)) and "inf" not in value.lower():
+            raise OverflowError(value)
+    except OverflowError:  # 1e400, or a whole number beyond a float's range
+        raise ValueError(f"--set {where}={_validate.shown(value.strip())}: too large a number, beyond "
+                         f"±{_validate.FLOAT_MAX:.4g}") from None
     except ValueError:
-        raise ValueError(f"--set {text}: {value.strip()!r} is not a number") from None
+        raise ValueError(f"--set {where}={_validate.shown(value.strip())}: {_validate.shown(repr(value.strip()))} "
+                         "is not a number") from None
     try:
         parameter, number = strategy_setting(name, key.strip(), number)
     except ValueError as exc:
@@ -597,8 +604,6 @@ def _written(what, example):
 
 def _every(text):
     """``--every N``: a whole number >= 1."""
-    from . import _validate
-
     try:
         return _validate.positive_int("--every", int(text))
     except ValueError:

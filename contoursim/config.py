@@ -5,6 +5,7 @@ keeps the text so that a bad or unknown key can be reported as
 ``machine.toml, line 12: unknown key 'kpp' in [axes.x]; expected one of ...``.
 """
 
+import math
 import os
 import re
 import stat
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
+from ._validate import FLOAT_MAX, shown
 from .exceptions import ConfigError
 
 __all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "read_bytes", "read_text"]
@@ -138,11 +140,20 @@ class TomlFile:
 
     def __post_init__(self):
         try:
-            data = tomllib.loads(self.text)
+            data = tomllib.loads(self.text, parse_float=_float)
         except tomllib.TOMLDecodeError as exc:
             line = re.search(r"line (\d+)", str(exc))
             raise ConfigError(f"not valid TOML: {exc}", self.source, int(line.group(1)) if line else None) from None
+        except ValueError:  # tomllib's int() of more than 4300 digits
+            digits = re.search(r"\d[\d_]{4300,}", self.text)
+            line = self.text.count("\n", 0, digits.start()) + 1 if digits else None
+            raise ConfigError("a whole number of more than 4300 digits is too large a number", self.source, line) from None
         object.__setattr__(self, "data", data)
+        found = _too_large(data)
+        if found:
+            keys, value = found
+            raise self.error(f"{_dotted(keys)} = {shown(getattr(value, 'text', value))} is too large a number: "
+                             f"beyond ±{FLOAT_MAX:.4g}", *keys)
 
     @classmethod
     def read(cls, path):
@@ -273,6 +284,33 @@ class TomlFile:
                 where = f" in [{_dotted(keys)}]" if keys else ""
                 raise self.error(f"{key}{where} must be {what} in quotes, got {value[key]!r}", *keys, key)
         return value
+
+
+class _Overflowed(float):
+    """A float the file writes beyond a float's range (``1e400``): infinite, with the text as written."""
+
+    def __new__(cls, text):
+        value = super().__new__(cls, text)
+        value.text = text
+        return value
+
+
+def _float(text):
+    """A TOML float: ``inf`` is infinite as written, a finite number too large for a float is :class:`_Overflowed`."""
+    value = float(text)
+    return _Overflowed(text) if math.isinf(value) and "inf" not in text else value
+
+
+def _too_large(value, keys=()):
+    """``(key path, value)`` of the first number in `value` (a TOML document) beyond a float's range, or None."""
+    if isinstance(value, (dict, list)):
+        for key, item in value.items() if isinstance(value, dict) else enumerate(value):
+            found = _too_large(item, (*keys, key))
+            if found:
+                return found
+        return None
+    overflowed = isinstance(value, _Overflowed) or (isinstance(value, int) and abs(value) > FLOAT_MAX)
+    return (keys, value) if overflowed else None
 
 
 def _dotted(keys):

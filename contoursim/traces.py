@@ -407,6 +407,12 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     `limits` are the largest magnitudes allowed in the columns `index`, in
     their `units` (the names of the file's units, for the messages).
     """
+    def beyond(row, col, value):
+        hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
+        what = next((kind for kind, (known, _, _) in INPUTS.items() if units[col] in known), "position or time")
+        raise fail(f"column '{names[index[col]]}': value {value} is beyond ±{limits[col]:g} {units[col]}, "
+                   f"not a {what} a trace can hold{hint}", row)
+
     cells = np.array([text.count(",") + 1 for text in body])
     if np.any(cells != width):
         row = int(np.argmax(cells != width))
@@ -435,12 +441,12 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     bad = ~np.isfinite(data)
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
-        raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
+        cell = body[row].split(",")[index[col]].strip()
+        if re.search("inf|nan", cell, re.IGNORECASE):
+            raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
+        beyond(row, col, _validate.shown(cell))  # a number written too large for a float (1e400): infinite once read
     bad = np.abs(data) > limits
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
-        hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
-        what = next((kind for kind, (known, _, _) in INPUTS.items() if units[col] in known), "position or time")
-        raise fail(f"column '{names[index[col]]}': value {data[row, col]:g} is beyond ±{limits[col]:g} {units[col]}, "
-                   f"not a {what} a trace can hold{hint}", row)
+        beyond(row, col, f"{data[row, col]:g}")
     return data

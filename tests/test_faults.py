@@ -628,3 +628,50 @@ def test_a_flag_given_text_or_a_number_is_refused_naming_it(api, tmp_path, call,
         call(SimpleNamespace(**vars(api), mine=mine))
     assert str(info.value) == words
     assert mine.read_text() == "mine\n"
+
+
+@pytest.mark.parametrize("cell, words", [
+    ("9" * 5000, "line 4: column 'x_ref': value 999999999999… (5000 characters) is beyond ±1e+06 mm"),
+    ("-1e400", "line 4: column 'x_ref': value -1e400 is beyond ±1e+06 mm"),
+    ("inf", "line 4: column 'x_ref': value inf is not finite"),
+])
+def test_a_trace_cell_too_large_for_a_float_is_said_to_be_so_not_infinite(tmp_path, cell, words):
+    """A cell of 5000 digits was read as inf and said to be "not finite": it is a number beyond the trace's range."""
+    t = np.arange(50) * 1e-3
+    lines = _trace(tmp_path / "m.csv", t, np.sin(t), np.sin(t)).read_text().splitlines()
+    lines[3] = f"{t[2]:.9g},{cell},{np.sin(t[2]):.9g}"
+    (tmp_path / "m.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(tmp_path / "m.csv")
+    assert str(info.value).startswith(f"{tmp_path / 'm.csv'}, {words}")
+
+
+@pytest.mark.parametrize("value, words", [
+    ("1e400", "line 11: axes.x.kp_per_s = 1e400 is too large a number: beyond ±1.798e+308"),
+    ("1" + "0" * 400, "line 11: axes.x.kp_per_s = 100000000000… (401 characters) is too large a number"),
+    ("1" + "0" * 5000, "line 11: a whole number of more than 4300 digits is too large a number"),
+    ("[1, -1e999]", "line 11: axes.x.kp_per_s.1 = -1e999 is too large a number"),
+])
+def test_a_toml_number_too_large_for_a_float_is_refused_by_its_line(tmp_path, capsys, value, words):
+    """TOML reads 1e400 as inf ("must be finite, got inf"); a whole number of 400 digits ended in an OverflowError."""
+    text = MACHINE.format(mass=300.0).replace("kp_per_s = 40.0", f"kp_per_s = {value}", 1)
+    (tmp_path / "m.toml").write_text(text)
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, {words}")
+
+
+def test_other_numbers_too_large_for_a_float_are_refused_naming_them(tmp_path, capsys):
+    from contoursim import _validate
+
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--strategies", "none,ccc_arc", "--set",
+                      "ccc_arc.kp_per_s=1e400", "--out", str(tmp_path / "out")],
+             "--set ccc_arc.kp_per_s=1e400: too large a number, beyond ±1.798e+308")
+    (tmp_path / "x.csv").write_text("position_mm,dx_um\n0,0\n50,1e400\n100,1\n")
+    with pytest.raises(ConfigError, match=r"x.csv, line 3: column 'dx_um': 1e400 is too large a number"):
+        read_error_table(tmp_path / "x.csv")
+    with pytest.raises(ValueError, match=r"kp must be finite, got 100000000000… \(401 characters\): beyond"):
+        _validate.positive("kp", 10**400)
+    with pytest.raises(ValueError, match="position holds a number beyond"):
+        _validate.finite_array("position", [1.0, 10**400])
