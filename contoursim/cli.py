@@ -352,10 +352,9 @@ def _strategy_settings(job):
         for key, value in item.items():
             if key != "name":
                 try:
-                    parameter, value = strategy_setting(name, key, value)
+                    settings[name][key] = strategy_setting(name, key, value)
                 except ValueError as exc:
                     raise job.error(f"[[strategy]] {name}: {exc}", "strategy", i, key) from None
-                settings[name][parameter] = value
     return settings
 
 
@@ -378,10 +377,9 @@ def _set_option(settings, text):
         raise ValueError(f"--set {where}={_validate.shown(value.strip())}: {_validate.shown(repr(value.strip()))} "
                          "is not a number") from None
     try:
-        parameter, number = strategy_setting(name, key.strip(), number)
+        settings.setdefault(name, {})[key.strip()] = strategy_setting(name, key.strip(), number)
     except ValueError as exc:
         raise ValueError(f"--set {text}: {exc}") from None
-    settings.setdefault(name, {})[parameter] = number
 
 
 def compare_command(args):

@@ -675,3 +675,24 @@ def test_other_numbers_too_large_for_a_float_are_refused_naming_them(tmp_path, c
         _validate.positive("kp", 10**400)
     with pytest.raises(ValueError, match="position holds a number beyond"):
         _validate.finite_array("position", [1.0, 10**400])
+
+
+def test_strategy_settings_have_one_set_of_keys_in_the_api_the_files_and_the_json(api):
+    """compare(settings=...) took {"ccc_arc": {"kp": ...}} where the job file, --set and the JSON say kp_per_s."""
+    from contoursim.compensation import strategies_named
+
+    comparison = compare(api.machine, api.trajectory, names=("ccc_arc",), settings={"ccc_arc": {"kp_per_s": 30.0}})
+    assert comparison.settings["ccc_arc"]["ccc_arc"]["kp_per_s"] == 30.0
+    assert comparison.gains["ccc_arc"] == "kp_per_s set, ki_per_s2 designed"
+    assert strategies_named("ccc_arc", settings={"ccc_arc": {"kp_per_s": 30.0, "ki_per_s2": 0.0}})[0].kp == 30.0
+    for settings, words in [
+        ({"ccc_arc": {"kp": 30.0}}, "unknown setting 'kp' of ccc_arc; expected one of kp_per_s, ki_per_s2, kd"),
+        ({"ccc_arcc": {"kp_per_s": 30.0}}, "no settings for strategy 'ccc_arcc': strategies with settings are feedforward"),
+        ({"ccc_arc": {"kp_per_s": -3.0}}, "kp_per_s must be"),
+        ({"ccc_arc": {"kp_per_s": "30"}}, "kp_per_s must be a number, got '30'"),
+    ]:
+        with pytest.raises(ValueError) as info:
+            compare(api.machine, api.trajectory, names=("none", "ccc_arc"), settings=settings)
+        assert str(info.value).startswith(words), str(info.value)
+    with pytest.raises(ValueError, match="tuning sets the coupling's kp_per_s and ki_per_s2: ccc_arc.ki_per_s2 is set"):
+        compare(api.machine, api.trajectory, names=("ccc_arc",), settings={"ccc_arc": {"ki_per_s2": 3.0}}, tuned=True)
