@@ -187,7 +187,8 @@ def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'm.toml'}, line 6: the position loop of axis 'x'" in err
-    assert "phase margin 16.6 deg" in err and "(kp_per_s = 900): lower kp_per_s" in err
+    assert "phase margin 16.6 deg" in err and "(kp_per_s = 900): the velocity loop is too slow for it" in err
+    assert "none may cross over above 250 Hz: lower kp_per_s, to " in err  # raising kv cannot help at 0.5 ms
 
 
 def test_servo_period_too_long_names_the_key(tmp_path, capsys):
