@@ -401,7 +401,7 @@ def compare_command(args):
     names = STRATEGY_NAMES if args.strategies is None else args.strategies
     if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
         names = [*names, "geometric"]
-    report = report_file(args.json, "runs", "comparison JSON")  # never a file the user keeps
+    report = report_file(args.json, "runs", "comparison JSON", args.out)  # never a file the user keeps
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
@@ -455,7 +455,7 @@ def diagnose_command(args):
     check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
           "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
           per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
-    report = report_file(args.report, "residual_rms_before_um", "diagnosis report")  # never a file the user keeps
+    report = report_file(args.report, "residual_rms_before_um", "diagnosis report", args.out)  # never a file the user keeps
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
     try:
@@ -592,6 +592,8 @@ def _written(what, example):
     which a command-line user means as standard output, where contoursim prints its table (`example`: a name)."""
 
     def name(text):
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"names nothing; contoursim writes {what}: name one, e.g. {example}")
         if text.strip() == "-":
             raise argparse.ArgumentTypeError(f"contoursim writes {what}, not to standard output ('-'): name one, "
                                              f"e.g. {example}")

@@ -254,7 +254,7 @@ def _remove_stale_parts(folder, name=None):
                 pass  # e.g. removed by another run meanwhile
 
 
-def report_file(file, key, what):
+def report_file(file, key, what, out=None):
     """Check that a JSON report may be written to `file`: a new name, or a report contoursim wrote there before.
 
     Parameters
@@ -265,6 +265,8 @@ def report_file(file, key, what):
         A key every such report has at its top level (e.g. ``"runs"``).
     what : str
         What the report is, for the messages (e.g. ``"comparison JSON"``).
+    out : str or Path, optional
+        The output folder of the same run, not made yet: the report may not be it.
 
     Returns
     -------
@@ -273,13 +275,15 @@ def report_file(file, key, what):
     Raises
     ------
     ConfigError
-        `file` is a directory.
+        `file` is a directory, or the output folder `out`.
     FileExistsError
         `file` exists and is not such a report: it is the user's, never overwritten.
     """
     if file is None:
         return None
     file = Path(file)
+    if out is not None and file.resolve() == Path(out).resolve():  # the folder made first, the report refused after it
+        raise ConfigError(f"{file} is the output directory (--out); name a file to write the {what} to")
     if file.is_dir():
         raise ConfigError(f"{file} is a directory; name a file to write the {what} to")
     if file.exists() or file.is_symlink():

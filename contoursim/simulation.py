@@ -745,9 +745,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
     if unknown or not outputs:
         raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
-    every = int(every)
-    if every < 1:
-        raise ValueError(f"every must be a positive integer, got {every!r}")
+    every = _validate.positive_int("every", every)
     first = models[0].machine
     for i, m in enumerate(models):
         machine = m.machine

@@ -696,3 +696,42 @@ def test_strategy_settings_have_one_set_of_keys_in_the_api_the_files_and_the_jso
         assert str(info.value).startswith(words), str(info.value)
     with pytest.raises(ValueError, match="tuning sets the coupling's kp_per_s and ki_per_s2: ccc_arc.ki_per_s2 is set"):
         compare(api.machine, api.trajectory, names=("ccc_arc",), settings={"ccc_arc": {"ki_per_s2": 3.0}}, tuned=True)
+
+
+def test_a_batchs_every_is_a_whole_number(api):
+    """simulate_batch took every = "2" and every = 2.5 (as 2) where its other counts are checked."""
+    from contoursim.simulation import simulate_batch
+
+    for every, error in (("2", TypeError), (2.5, TypeError), (0, ValueError)):
+        with pytest.raises(error, match="every must be"):
+            simulate_batch([api.machine], api.trajectory, every=every)
+
+
+def test_where_a_run_writes_is_refused_before_anything_is_written(tmp_path, monkeypatch, capsys):
+    """--out '' named the working folder ('. holds files ...'); --json naming --out's folder failed after the plots."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit):
+        main(["simulate", str(tmp_path / "small.toml"), "--out", " "])
+    assert "argument --out: names nothing; contoursim writes its plots and files into a folder" in capsys.readouterr().err
+    _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--strategies", "none", "--json", str(tmp_path / "o"),
+                      "--out", str(tmp_path / "o")], f"{tmp_path / 'o'} is the output directory (--out); name a file")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+def test_a_negative_dwell_is_refused_by_its_line(tmp_path, capsys):
+    (tmp_path / "p.nc").write_text("G21 G90\nG0 X0 Y0\nG1 X10 F600\nG4 P-1\nG1 Y10\nM30\n")
+    _refused(capsys, ["simulate", str(tmp_path / "p.nc"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'p.nc'}, line 4: a dwell's time (G4 P or X) must be zero or positive, got -1")
+
+
+def test_a_sweep_whose_variants_are_all_unstable_says_why_in_the_specs_names(tmp_path, capsys):
+    (tmp_path / "s.toml").write_text(SMALL_PATH)
+    (tmp_path / "w.toml").write_text('machine = "demo_mill"\npath = "s.toml"\n[sweep]\nmethod = "grid"\n[[vary]]\n'
+                                     'name = "axes.x.kp_per_s"\nvalues = [3000, 5000]\n')
+    assert main(["sweep", str(tmp_path / "w.toml"), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "2 of 2 variants diverged or were refused by a loop check" in out
+    assert "(kp_per_s = 3000): the velocity loop is too slow for it" in out and "lower kp_per_s, to " in out
+    rows = (tmp_path / "out" / "sweep.csv").read_text().splitlines()[1:]
+    assert [row.split(",")[-3] for row in rows] == ["True", "True"] and all("nan,nan" in row for row in rows)
