@@ -200,9 +200,11 @@ class TomlFile:
         `keys` walks tables by name and arrays of tables by index, e.g.
         ``line_of("body", 2, "joint")`` is the ``joint =`` line of the third
         ``[[body]]``. When the last key is not written on a line of its own
-        (inline tables), the line of the closest enclosing key is returned.
+        (inline tables), the line of the closest enclosing key is returned; a
+        table that only its sub-tables' headers define (``[axes]`` by
+        ``[axes.x]``), the line of the first of them.
         """
-        best = None
+        best = inside = None
         table = ()
         counts = {}
         for number, line in enumerate(self.text.splitlines(), start=1):
@@ -214,13 +216,15 @@ class TomlFile:
                 table = self._indexed(path, counts)
                 if table == keys[: len(table)] and (best is None or len(table) > best[0]):
                     best = (len(table), number)
+                elif inside is None and keys and table[: len(keys)] == keys:
+                    inside = number
                 continue
             key = _KEY.match(line)
             if key:
                 full = table + _split_key(key.group(1))
                 if full == keys[: len(full)] and (best is None or len(full) > best[0]):
                     best = (len(full), number)
-        return None if best is None else best[1]
+        return inside if best is None else best[1]
 
     @staticmethod
     def _indexed(path, counts):
