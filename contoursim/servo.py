@@ -1236,6 +1236,7 @@ def check(servo, dt, axis="x"):
                 f"dt <= {MAX_CROSSOVER_FRACTION / (2 * f_c):.3g} s, or lower {gain} = {getattr(servo, gain):.6g}."
             )
     sampled = margins(servo, dt)
+    inner = None  # the margins of the loop inside the one checked (innermost first)
     for loop, m in sampled.items():
         if not m["stable"]:
             problem = "is unstable"
@@ -1245,6 +1246,7 @@ def check(servo, dt, axis="x"):
                 f"closed-loop damping ratio >= {MIN_DAMPING_RATIO:g})"
             )
         else:
+            inner = m
             continue
         gain = _GAIN_OF[loop]
         if np.isfinite(m["gain_crossover"]):
@@ -1253,7 +1255,6 @@ def check(servo, dt, axis="x"):
             crossing = "no gain crossover (the loop gain stays above 1 up to the Nyquist frequency)"
         else:
             crossing = "no gain crossover (the loop gain never reaches 1)"
-        inner = list(sampled.values())[list(sampled).index(loop) - 1] if list(sampled).index(loop) else None
         raise UnstableLoopError(
             f"the {loop} loop of axis {axis!r} {problem} at dt = {dt:.6g} s: gain margin "
             f"{m['gain_margin']:.3g}, {crossing}, damping ratio {m['damping_ratio']:.3g} "
