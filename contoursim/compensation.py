@@ -642,6 +642,8 @@ def strategies_named(name, model=None, chain=None, settings=None):
     """
     from .geocomp import GeometricCompensation
 
+    if not isinstance(name, str):
+        raise TypeError(f"a strategy name is text such as 'ccc_arc' or 'feedforward+ccc_arc', got {name!r}")
     settings = {} if settings is None else settings
     if not isinstance(settings, Mapping):
         raise TypeError(f"settings must map strategy names to their settings, got {type(settings).__name__}")

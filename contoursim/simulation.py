@@ -742,6 +742,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
              if e.noise_at == "encoder" and e.noise_mm > 0.0]
     if noisy:
         raise ValueError(f"simulate_batch runs no noise on the encoder ({noisy[0]}): use simulate")
+    if isinstance(outputs, str):  # its letters would be the names
+        raise TypeError(f"outputs must be a sequence of output names, e.g. ('summary',), got the string {outputs!r}")
     unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
     if unknown or not outputs:
         raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")

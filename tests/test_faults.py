@@ -34,7 +34,7 @@ from contoursim.pathfile import load_path_file
 from contoursim.paths import circle, spline
 from contoursim.plotting import save_comparison_figures, save_figures
 from contoursim.servo import closed_loop
-from contoursim.simulation import measured_reference, simulate
+from contoursim.simulation import measured_reference, simulate, simulate_batch
 from contoursim.traces import Trace, read_trace, write_trace
 from contoursim.trajectory import Trajectory
 from test_cli import SMALL_PATH
@@ -700,8 +700,6 @@ def test_strategy_settings_have_one_set_of_keys_in_the_api_the_files_and_the_jso
 
 def test_a_batchs_every_is_a_whole_number(api):
     """simulate_batch took every = "2" and every = 2.5 (as 2) where its other counts are checked."""
-    from contoursim.simulation import simulate_batch
-
     for every, error in (("2", TypeError), (2.5, TypeError), (0, ValueError)):
         with pytest.raises(error, match="every must be"):
             simulate_batch([api.machine], api.trajectory, every=every)
@@ -735,3 +733,15 @@ def test_a_sweep_whose_variants_are_all_unstable_says_why_in_the_specs_names(tmp
     assert "(kp_per_s = 3000): the velocity loop is too slow for it" in out and "lower kp_per_s, to " in out
     rows = (tmp_path / "out" / "sweep.csv").read_text().splitlines()[1:]
     assert [row.split(",")[-3] for row in rows] == ["True", "True"] and all("nan,nan" in row for row in rows)
+
+
+@pytest.mark.parametrize("call, error, words", [
+    (lambda a: compare(a.machine, a.trajectory, names=["none", 3]), TypeError,
+     "a strategy name is text such as 'ccc_arc' or 'feedforward+ccc_arc', got 3"),  # an AttributeError from inside
+    (lambda a: simulate_batch([a.machine], a.trajectory, outputs="summary"), TypeError,
+     "outputs must be a sequence of output names, e.g. ('summary',), got the string 'summary'"),  # its letters, refused
+])
+def test_a_name_where_names_are_wanted_and_a_number_where_a_name_is_are_refused(api, call, error, words):
+    with pytest.raises(error) as info:
+        call(api)
+    assert str(info.value) == words
