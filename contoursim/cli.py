@@ -518,7 +518,7 @@ def sweep_command(args):
             figures = dict(zip(FIGURES, table[i]))
             print(f"{label:<6} variant {i}: {values(i)}: contour max {figures['contour_max_um']:.4g} µm, "
                   f"RMS {figures['contour_rms_um']:.4g} µm, peak current {figures['peak_current_A']:.4g} A")
-    print(f"table, plots and the best and worst runs written to {out}/")
+    print(f"table, plots{' and the best and worst runs' if chosen is not None else ''} written to {out}/")
 
 
 def fleet_command(args):

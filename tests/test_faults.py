@@ -731,6 +731,7 @@ def test_a_sweep_whose_variants_are_all_unstable_says_why_in_the_specs_names(tmp
     out = capsys.readouterr().out
     assert "2 of 2 variants diverged or were refused by a loop check" in out
     assert "(kp_per_s = 3000): the velocity loop is too slow for it" in out and "lower kp_per_s, to " in out
+    assert f"table, plots written to {tmp_path / 'out'}/" in out  # no best and worst run said written: there is none
     rows = (tmp_path / "out" / "sweep.csv").read_text().splitlines()[1:]
     assert [row.split(",")[-3] for row in rows] == ["True", "True"] and all("nan,nan" in row for row in rows)
 
