@@ -224,20 +224,20 @@ def flag(name, value):
     return bool(value)
 
 
-def positive_int(name, value):
-    """Return `value` as an int after checking it is a whole number >= 1.
+def positive_int(name, value, least=1):
+    """Return `value` as an int after checking it is a whole number >= `least` (1 unless given).
 
     Raises
     ------
     TypeError
-        `value` is not an integer (booleans are not).
+        `value` is not an integer (booleans are not; nor is 2.0 or "2").
     ValueError
-        `value` is below 1.
+        `value` is below `least`.
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be a whole number, got {value!r}")
-    if value < 1:
-        raise ValueError(f"{name} must be at least 1, got {value}")
+    if value < least:
+        raise ValueError(f"{name} must be at least {least}, got {value}")
     return int(value)
 
 

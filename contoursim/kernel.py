@@ -1694,7 +1694,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     blocks = threads * max(1, -(-n_variants // (threads * LANES)))  # as few as fill the lanes, as many for every thread
     lanes = max(1, -(-n_variants // blocks))
     signals = list(arrays.values())
-    every = int(every)
+    every = _validate.positive_int("every", every)
 
     def block(lo):
         # Blocks narrower than _MIN_LANES, and cross-coupled variants (the lanes run no coupling), step one variant at
