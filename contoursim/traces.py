@@ -22,7 +22,8 @@ writes it: ``# units: t [s]; x_ref, x, y_ref, y [mm]`` (groups separated by
 m``, is that of all the position columns). The reader converts ``t`` from
 :data:`TIME_UNITS` to s, positions from :data:`LENGTH_UNITS` to mm, forces
 from :data:`FORCE_UNITS` to N and currents from :data:`CURRENT_UNITS` to A,
-and refuses any other unit of a column it reads (others' units are not read).
+and refuses any other unit of a column it reads (others' units are not read), and a second ``# units:``
+line (one of the two would be ignored).
 Without a declared time unit, a sample period outside
 :data:`PLAUSIBLE_SAMPLE_PERIOD` is refused as no servo trace's (a time column
 in ms, µs or ns read as seconds): declaring ``t [s]`` accepts it. A measured
@@ -254,6 +255,9 @@ def read_trace(file):
     first = 0
     while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
         key, colon, value = lines[first][1:].partition(":")
+        if colon and key.strip() == "units" and units_line is not None:  # one of them would be ignored
+            raise TraceFormatError(f"a second '# units:' line (the first is line {units_line}): declare the units once",
+                                   source, first + 1)
         if colon and key.strip():
             metadata[key.strip()] = value.strip()
             units_line = first + 1 if key.strip() == "units" else units_line

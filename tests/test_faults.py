@@ -761,3 +761,12 @@ def test_a_count_given_as_a_fraction_or_text_is_refused_not_truncated(api):
     ]:
         with pytest.raises(TypeError, match=words):
             call()
+
+
+def test_a_second_units_line_is_refused_not_one_of_them_ignored(tmp_path):
+    """Two '# units:' lines: the second was honoured and the first ignored (positions in mm read as µm, silently)."""
+    t = np.arange(50) * 1e-3
+    trace = _trace(tmp_path / "m.csv", t, np.sin(t), np.sin(t), head="# units: t [s]; x_ref, x [mm]\n# units: x_ref, x [um]\n")
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(trace)
+    assert str(info.value) == f"{trace}, line 2: a second '# units:' line (the first is line 1): declare the units once"
