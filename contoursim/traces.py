@@ -412,10 +412,11 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     their `units` (the names of the file's units, for the messages).
     """
     def beyond(row, col, value):
+        """The error of the cell (`row`, `col`) whose `value` (as the message shows it) is beyond its column's limit."""
         hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
         what = next((kind for kind, (known, _, _) in INPUTS.items() if units[col] in known), "position or time")
-        raise fail(f"column '{names[index[col]]}': value {value} is beyond ±{limits[col]:g} {units[col]}, "
-                   f"not a {what} a trace can hold{hint}", row)
+        return fail(f"column '{names[index[col]]}': value {value} is beyond ±{limits[col]:g} {units[col]}, "
+                    f"not a {what} a trace can hold{hint}", row)
 
     cells = np.array([text.count(",") + 1 for text in body])
     if np.any(cells != width):
@@ -448,9 +449,9 @@ def _parse_rows(body, width, index, names, limits, units, fail):
         cell = body[row].split(",")[index[col]].strip()
         if re.search("inf|nan", cell, re.IGNORECASE):
             raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
-        beyond(row, col, _validate.shown(cell))  # a number written too large for a float (1e400): infinite once read
+        raise beyond(row, col, _validate.shown(cell))  # a number written too large for a float (1e400): infinite once read
     bad = np.abs(data) > limits
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
-        beyond(row, col, f"{data[row, col]:g}")
+        raise beyond(row, col, f"{data[row, col]:g}")
     return data
