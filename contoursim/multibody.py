@@ -850,7 +850,7 @@ class MachineChain:
         rows = 6 if tool_axis is not None else 3
         columns = np.flatnonzero(mask)
         target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
-        max_iter = int(_validate.positive("max_iter", max_iter))
+        max_iter = _validate.positive_int("max_iter", max_iter)
         for part in blocks(n):
             self._newton(q[part], position[part], target_axis[part], None if t is None else t[part], columns, rows, ideal,
                          tol, max_iter, part.start)

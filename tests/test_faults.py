@@ -749,7 +749,8 @@ def test_a_name_where_names_are_wanted_and_a_number_where_a_name_is_are_refused(
 
 
 def test_a_count_given_as_a_fraction_or_text_is_refused_not_truncated(api):
-    """volumetric_grid(points=2.9) ran 2 points, exact_contour_error(window="8") 8: a count is a whole number."""
+    """volumetric_grid(points=2.9) ran 2 points, exact_contour_error(window="8") 8, inverse(max_iter=2.5) 2: a count is a
+    whole number."""
     from contoursim.contour import exact_contour_error
     from contoursim.volumetric import volumetric_grid, volumetric_report
 
@@ -758,6 +759,7 @@ def test_a_count_given_as_a_fraction_or_text_is_refused_not_truncated(api):
         (lambda: volumetric_grid(chain, points=2.9), "points must be a whole number, got 2.9"),
         (lambda: volumetric_report("polishing_platform_4axis", grid=3, rotary_grid=2.5), "rotary_grid must be a whole number"),
         (lambda: exact_contour_error(api.trajectory, api.trajectory.position, window="8"), "window must be a whole number"),
+        (lambda: chain.inverse(np.zeros((1, 3)), max_iter=2.5), "max_iter must be a whole number, got 2.5"),
     ]:
         with pytest.raises(TypeError, match=words):
             call()
