@@ -11,8 +11,11 @@ inside numpy. Readers of files turn both into a
 
 import numpy as np
 
-__all__ = ["as_xyz", "finite", "positive", "positive_int", "nonnegative", "float_array", "finite_array", "time_base",
-           "TimeStepError"]
+__all__ = ["as_xyz", "finite", "flag", "positive", "positive_int", "nonnegative", "float_array", "finite_array",
+           "shown", "time_base", "TimeStepError"]
+
+#: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
+FLOAT_MAX = float(np.finfo(float).max)
 
 
 class TimeStepError(ValueError):
@@ -68,11 +71,32 @@ def finite(name, value):
     return _finite_scalar(name, value)
 
 
+def shown(value):
+    """`value` for a message, a long one cut short: ``'100000000000… (401 characters)'``.
+
+    Parameters
+    ----------
+    value : object
+        A number, or the text of one as a file wrote it.
+
+    Returns
+    -------
+    str
+    """
+    try:
+        text = value if isinstance(value, str) else repr(value)
+    except ValueError:  # an int of more digits than Python turns into text (4300)
+        return "a whole number of more than 4300 digits"
+    return text if len(text) <= 24 else f"{text[:12]}… ({len(text)} characters)"
+
+
 def _finite_scalar(name, value):
     if isinstance(value, (str, bytes, bool, np.bool_)):  # float() would take "40" and True
         raise TypeError(f"{name} must be a number, got {value!r}")
     try:
         value = float(value)
+    except OverflowError:  # an int beyond a float's range
+        raise ValueError(f"{name} must be finite, got {shown(value)}: beyond ±{FLOAT_MAX:.4g}") from None
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be a number, got {value!r}") from None
     if not np.isfinite(value):
@@ -132,6 +156,8 @@ def float_array(name, value, ndim=None, shape=None):
         if kind == "O":  # e.g. a list mixing numbers and text
             kind = "U" if any(isinstance(v, (str, bytes, bool, np.bool_)) for v in np.asarray(value, object).flat) else "f"
         arr = np.asarray(value, dtype=float) if kind in "iuf" else None
+    except OverflowError:  # an int beyond a float's range
+        raise ValueError(f"{name} holds a number beyond ±{FLOAT_MAX:.4g}") from None
     except (TypeError, ValueError):
         arr = None
     if arr is None:
@@ -182,20 +208,36 @@ def as_xyz(points):
     return points if points.shape[1] == 3 else np.column_stack([points, np.zeros((len(points), 3 - points.shape[1]))])
 
 
-def positive_int(name, value):
-    """Return `value` as an int after checking it is a whole number >= 1.
+def flag(name, value):
+    """Return `value` after checking it is a boolean (``True``, ``False`` or numpy's).
+
+    Python would take any value as one (``"no"`` and ``[0]`` as true, ``0.0``
+    as false): a flag given something else is refused rather than read so.
 
     Raises
     ------
     TypeError
-        `value` is not an integer (booleans are not).
+        `value` is not a boolean.
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def positive_int(name, value, least=1):
+    """Return `value` as an int after checking it is a whole number >= `least` (1 unless given).
+
+    Raises
+    ------
+    TypeError
+        `value` is not an integer (booleans are not; nor is 2.0 or "2").
     ValueError
-        `value` is below 1.
+        `value` is below `least`.
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be a whole number, got {value!r}")
-    if value < 1:
-        raise ValueError(f"{name} must be at least 1, got {value}")
+    if value < least:
+        raise ValueError(f"{name} must be at least {least}, got {value}")
     return int(value)
 
 

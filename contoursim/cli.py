@@ -22,6 +22,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
+from . import _validate
 from .config import TomlFile, read_text
 from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
@@ -202,10 +203,8 @@ def _job(args, extra_keys=()):
             if "machine" not in job.data:
                 raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
                                 '(e.g. "demo_mill"), or give a path file')
-            data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"))
-            for key in ("machine", "path"):
-                if not isinstance(data[key], str):
-                    raise job.error(f"{key} must be a name or a file name in quotes, got {data[key]!r}", key)
+            data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"),
+                             text=dict.fromkeys(("machine", "path"), "a name or a file name"))
             if args.machine is not None:
                 raise job.error(f"--machine {args.machine} is not used with a job file, which names its machine "
                                 f"({data['machine']!r}); drop one of them", "machine")
@@ -353,10 +352,9 @@ def _strategy_settings(job):
         for key, value in item.items():
             if key != "name":
                 try:
-                    parameter, value = strategy_setting(name, key, value)
+                    settings[name][key] = strategy_setting(name, key, value)
                 except ValueError as exc:
                     raise job.error(f"[[strategy]] {name}: {exc}", "strategy", i, key) from None
-                settings[name][parameter] = value
     return settings
 
 
@@ -370,13 +368,18 @@ def _set_option(settings, text):
         raise ValueError(f"--set {text}: write STRATEGY.KEY=VALUE, e.g. ccc_arc.kp_per_s=120")
     try:
         number = int(value) if value.strip().lstrip("+-").isdigit() else float(value)
+        if math.isinf(float(number)) and "inf" not in value.lower():
+            raise OverflowError(value)
+    except OverflowError:  # 1e400, or a whole number beyond a float's range
+        raise ValueError(f"--set {where}={_validate.shown(value.strip())}: too large a number, beyond "
+                         f"±{_validate.FLOAT_MAX:.4g}") from None
     except ValueError:
-        raise ValueError(f"--set {text}: {value.strip()!r} is not a number") from None
+        raise ValueError(f"--set {where}={_validate.shown(value.strip())}: {_validate.shown(repr(value.strip()))} "
+                         "is not a number") from None
     try:
-        parameter, number = strategy_setting(name, key.strip(), number)
+        settings.setdefault(name, {})[key.strip()] = strategy_setting(name, key.strip(), number)
     except ValueError as exc:
         raise ValueError(f"--set {text}: {exc}") from None
-    settings.setdefault(name, {})[parameter] = number
 
 
 def compare_command(args):
@@ -398,7 +401,7 @@ def compare_command(args):
     names = STRATEGY_NAMES if args.strategies is None else args.strategies
     if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
         names = [*names, "geometric"]
-    report = report_file(args.json, "runs", "comparison JSON")  # never a file the user keeps
+    report = report_file(args.json, "runs", "comparison JSON", args.out)  # never a file the user keeps
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
@@ -452,7 +455,7 @@ def diagnose_command(args):
     check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
           "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
           per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
-    report = report_file(args.report, "residual_rms_before_um", "diagnosis report")  # never a file the user keeps
+    report = report_file(args.report, "residual_rms_before_um", "diagnosis report", args.out)  # never a file the user keeps
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
     try:
@@ -515,7 +518,7 @@ def sweep_command(args):
             figures = dict(zip(FIGURES, table[i]))
             print(f"{label:<6} variant {i}: {values(i)}: contour max {figures['contour_max_um']:.4g} µm, "
                   f"RMS {figures['contour_rms_um']:.4g} µm, peak current {figures['peak_current_A']:.4g} A")
-    print(f"table, plots and the best and worst runs written to {out}/")
+    print(f"table, plots{' and the best and worst runs' if chosen is not None else ''} written to {out}/")
 
 
 def fleet_command(args):
@@ -584,10 +587,23 @@ def _names(text):
     return names
 
 
+def _written(what, example):
+    """The type of an option naming where contoursim writes `what` (into a folder, to a file): any name but ``-``,
+    which a command-line user means as standard output, where contoursim prints its table (`example`: a name)."""
+
+    def name(text):
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"names nothing; contoursim writes {what}: name one, e.g. {example}")
+        if text.strip() == "-":
+            raise argparse.ArgumentTypeError(f"contoursim writes {what}, not to standard output ('-'): name one, "
+                                             f"e.g. {example}")
+        return text
+
+    return name
+
+
 def _every(text):
     """``--every N``: a whole number >= 1."""
-    from . import _validate
-
     try:
         return _validate.positive_int("--every", int(text))
     except ValueError:
@@ -630,7 +646,8 @@ def main(argv=None, compile_notice=False):
                         "repeat for more")
     p.add_argument("--tune", action="store_true",
                    help="tune each cross-coupled strategy's kp, ki on this path under the coupled-loop check")
-    p.add_argument("--json", metavar="R.json", help="write the comparison (JSON) to this file")
+    p.add_argument("--json", metavar="R.json", type=_written("the comparison JSON to a file", "--json r.json"),
+                   help="write the comparison (JSON) to this file")
     p.set_defaults(run=compare_command)
     p = sub.add_parser("volumetric", help="volumetric error map of a machine preset or file")
     p.add_argument("machine", help="machine preset name or file")
@@ -639,8 +656,10 @@ def main(argv=None, compile_notice=False):
     p.add_argument("file", nargs="+",
                    help="measured trace CSV (t, x_ref, x[, y_ref, y[, z_ref, z]]); several, or a folder: a fleet")
     p.add_argument("--model", help="nominal machine file or preset (default: identified from the trace)")
-    p.add_argument("--report", help="write the diagnosis report (JSON) to this file")
-    p.add_argument("--summary", metavar="FLEET.json", help="several traces: write the fleet summary (JSON) to this file")
+    p.add_argument("--report", type=_written("the diagnosis report to a file", "--report report.json"),
+                   help="write the diagnosis report (JSON) to this file")
+    p.add_argument("--summary", metavar="FLEET.json", type=_written("the fleet summary to a file", "--summary fleet.json"),
+                   help="several traces: write the fleet summary (JSON) to this file")
     p.add_argument("--scheduler", metavar="ADDRESS|local:N",
                    help='several traces: diagnose them on a dask cluster (needs pip install "contoursim[distributed]")')
     p.set_defaults(run=diagnose_command)
@@ -651,7 +670,8 @@ def main(argv=None, compile_notice=False):
                         '(needs pip install "contoursim[distributed]")')
     p.set_defaults(run=sweep_command)
     for p in sub.choices.values():
-        p.add_argument("--out", default="contoursim-out", help="output directory (default: ./contoursim-out)")
+        p.add_argument("--out", default="contoursim-out", type=_written("its plots and files into a folder", "--out results"),
+                       help="output directory (default: ./contoursim-out)")
     for command in ("demo", "simulate"):
         sub.choices[command].add_argument("--every", type=_every, default=1, metavar="N",
                                           help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")

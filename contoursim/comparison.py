@@ -228,9 +228,11 @@ def tune(model, trajectory, name, design=None, settings=None):
     Returns
     -------
     dict
-        ``settings`` (`settings` with the tuned ``kp``, ``ki`` of the
-        coupled part), ``max_contour_um`` at them, and ``tried``: a list of
-        ``(kp, ki, contour max [µm] or None where refused)``.
+        ``settings`` (`settings` with the tuned ``kp_per_s``, ``ki_per_s2``
+        of the coupled part, by the keys of
+        :data:`contoursim.compensation.STRATEGY_KEYS`), ``max_contour_um`` at
+        them, and ``tried``: a list of ``(kp [1/s], ki [1/s^2], contour max
+        [µm] or None where refused)``.
 
     Raises
     ------
@@ -253,7 +255,7 @@ def tune(model, trajectory, name, design=None, settings=None):
         ki = ki_factor * (position_gain + kp) ** 2
         if any(kp == k and ki == i for k, i, _ in tried):
             return True
-        chosen = {**settings, part: {**settings.get(part, {}), "kp": kp, "ki": ki}}
+        chosen = {**settings, part: {**settings.get(part, {}), "kp_per_s": kp, "ki_per_s2": ki}}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ContoursimWarning)
             try:
@@ -278,7 +280,7 @@ def tune(model, trajectory, name, design=None, settings=None):
     for step in (TUNE_KP_STEP**-0.5, TUNE_KP_STEP**0.5):
         attempt(kp * step, ki_factor)
     error, kp, ki = best[:3]
-    settings[part] = {**settings.get(part, {}), "kp": kp, "ki": ki}
+    settings[part] = {**settings.get(part, {}), "kp_per_s": kp, "ki_per_s2": ki}
     return {"settings": settings, "max_contour_um": error, "tried": tried}
 
 
@@ -298,9 +300,10 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
         The servo model the strategies design from (default: the simulated
         servos themselves, a perfect model).
     settings : mapping str -> mapping, optional
-        Each strategy part's keyword arguments (as for
-        :func:`~contoursim.compensation.strategies_named`), common to every
-        run it is part of.
+        Each strategy part's settings by the keys of a job file's
+        ``[[strategy]]`` table (as for
+        :func:`~contoursim.compensation.strategies_named`, e.g.
+        ``{"ccc_arc": {"kp_per_s": 120.0}}``), common to every run it is part of.
     tuned : bool or mapping str -> mapping
         ``True``: each strategy with a coupling gets its own gains tuned on
         `trajectory` first (:func:`tune`); a mapping: strategy name ->
@@ -327,6 +330,8 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
         raise TypeError(f"names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string {names!r}")
     if settings is not None and not isinstance(settings, Mapping):
         raise TypeError(f"settings must map strategy names to their settings, got {type(settings).__name__}")
+    if not isinstance(tuned, (bool, np.bool_, Mapping)):
+        raise TypeError(f"tuned must be True, False or a mapping of strategy names to tuned settings, got {tuned!r}")
     names = list(names)
     if not names:
         raise ValueError("compare needs at least one strategy name")
@@ -336,10 +341,11 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
     chain = as_model(model).machine.chain  # the geometric compensation's model: the machine file's errors
     settings = dict(settings or {})
     if tuned is True:
-        fixed = [f"{part}.{key}" for part, values in settings.items() if part.startswith("ccc_") for key in ("kp", "ki")
-                 if key in values]
+        fixed = [f"{part}.{key}" for part, values in settings.items() if part.startswith("ccc_")
+                 for key in ("kp_per_s", "ki_per_s2") if key in values]
         if fixed:
-            raise ValueError(f"tuning sets the coupling's kp and ki: {fixed[0]} is set as well; drop one of them")
+            raise ValueError(f"tuning sets the coupling's kp_per_s and ki_per_s2: {fixed[0]} is set as well; drop one "
+                             "of them")
     chosen = {name: settings for name in names}
     strategies = {name: strategies_named(name, design, chain, settings) for name in names}  # all checked first
     gains = {}

@@ -424,10 +424,11 @@ class CrossCoupled(Strategy):
 
     @property
     def gains_origin(self):
-        """How its gains were chosen: ``"set"``, ``"designed"`` (:func:`designed_gains`) or ``"kp set, ki designed"``."""
+        """How its gains were chosen: ``"set"``, ``"designed"`` (:func:`designed_gains`) or
+        ``"kp_per_s set, ki_per_s2 designed"`` (by the keys of :meth:`settings`)."""
         if self.kp is not None and self.ki is not None:
             return "set"
-        return "designed" if self.kp is None else "kp set, ki designed"
+        return "designed" if self.kp is None else "kp_per_s set, ki_per_s2 designed"
 
     def settings(self, servos, dt):
         kp, ki, kd = self.gains(dict(list(servos.items())[:3]), dt)
@@ -573,7 +574,7 @@ STRATEGY_KEYS = MappingProxyType({
 
 
 def strategy_setting(name, key, value):
-    """A strategy's parameter and value from a file key (:data:`STRATEGY_KEYS`), checked as the strategy checks it.
+    """A strategy's setting by its file key (:data:`STRATEGY_KEYS`), checked as the strategy checks it.
 
     Parameters
     ----------
@@ -585,8 +586,8 @@ def strategy_setting(name, key, value):
 
     Returns
     -------
-    tuple
-        ``(parameter, value)``.
+    float or int
+        `value`.
 
     Raises
     ------
@@ -595,17 +596,21 @@ def strategy_setting(name, key, value):
     """
     if name not in STRATEGY_KEYS:
         raise ValueError(f"no settings for strategy {name!r}: strategies with settings are {', '.join(STRATEGY_KEYS)}")
-    keys = STRATEGY_KEYS[name]
-    if key not in keys:
-        raise ValueError(f"unknown setting {key!r} of {name}; expected one of {', '.join(keys)}")
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{key} must be a number, got {value!r}")
-    try:
-        strategies_named(name, settings={name: {keys[key]: value}})  # the strategy checks it
-    except ValueError as exc:
-        message = str(exc)
-        raise ValueError(key + message[len(keys[key]) :] if message.startswith(keys[key]) else message) from None
-    return keys[key], value
+    strategies_named(name, settings={name: {key: value}})  # the strategy checks it
+    return value
+
+
+def _arguments(part, values):
+    """The keyword arguments of strategy `part` from its settings by file key (:data:`STRATEGY_KEYS`), checked."""
+    keys = STRATEGY_KEYS[part]
+    if not isinstance(values, Mapping):
+        raise TypeError(f"the settings of {part} must map its keys ({', '.join(keys)}) to values, got {values!r}")
+    for key, value in values.items():
+        if key not in keys:
+            raise ValueError(f"unknown setting {key!r} of {part}; expected one of {', '.join(keys)}")
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ValueError(f"{key} must be a number, got {value!r}")
+    return {keys[key]: value for key, value in values.items()}
 
 
 def strategies_named(name, model=None, chain=None, settings=None):
@@ -621,29 +626,51 @@ def strategies_named(name, model=None, chain=None, settings=None):
     chain : MachineChain, optional
         The geometric error model, needed by ``geometric``.
     settings : mapping str -> mapping, optional
-        Keyword arguments of each part by its name (e.g. ``{"ccc_arc": {"kp": 120.0}}``;
-        :func:`strategy_setting` gives them from the file keys); parts not named keep their defaults.
+        The settings of each part by its name, by the keys of a job file's ``[[strategy]]`` table and of
+        :meth:`Strategy.settings` (:data:`STRATEGY_KEYS`, e.g. ``{"ccc_arc": {"kp_per_s": 120.0}}``); parts not
+        named keep their defaults.
 
     Returns
     -------
     tuple of Strategy
+
+    Raises
+    ------
+    ValueError
+        An unknown strategy, or settings of one that has none; an unknown key (listing the known ones) or a
+        value the strategy refuses (naming the key).
     """
     from .geocomp import GeometricCompensation
 
+    if not isinstance(name, str):
+        raise TypeError(f"a strategy name is text such as 'ccc_arc' or 'feedforward+ccc_arc', got {name!r}")
     settings = {} if settings is None else settings
+    if not isinstance(settings, Mapping):
+        raise TypeError(f"settings must map strategy names to their settings, got {type(settings).__name__}")
+    for part in settings:
+        if part not in STRATEGY_KEYS:
+            raise ValueError(f"no settings for strategy {part!r}: strategies with settings are {', '.join(STRATEGY_KEYS)}")
+    arguments = {part: _arguments(part, values) for part, values in settings.items()}
     makers = {
         "none": lambda: None,
-        "feedforward": lambda: Feedforward(model=model, **settings.get("feedforward", {})),
-        "zpetc": lambda: ZPETC(model=model, **settings.get("zpetc", {})),
-        "ccc_linear": lambda: CrossCoupled("linear", model=model, **settings.get("ccc_linear", {})),
-        "ccc_arc": lambda: CrossCoupled("arc", model=model, **settings.get("ccc_arc", {})),
+        "feedforward": lambda: Feedforward(model=model, **arguments.get("feedforward", {})),
+        "zpetc": lambda: ZPETC(model=model, **arguments.get("zpetc", {})),
+        "ccc_linear": lambda: CrossCoupled("linear", model=model, **arguments.get("ccc_linear", {})),
+        "ccc_arc": lambda: CrossCoupled("arc", model=model, **arguments.get("ccc_arc", {})),
         "geometric": lambda: None if chain is None else GeometricCompensation(chain),
     }
     strategies = []
     for part in name.split("+"):
         if part not in makers:
             raise ValueError(f"unknown strategy {part!r} in {name!r}: use {', '.join(makers)}, joined by '+'")
-        made = makers[part]()
+        try:
+            made = makers[part]()
+        except ValueError as exc:  # a value the strategy refuses: said by its file key ("kp_per_s must be ...")
+            keys = {parameter: key for key, parameter in STRATEGY_KEYS.get(part, {}).items()}
+            parameter = next((p for p in keys if str(exc).startswith(p)), None)
+            if parameter is None:
+                raise
+            raise ValueError(keys[parameter] + str(exc)[len(parameter) :]) from None
         if part == "geometric" and made is None:
             raise ValueError("the geometric strategy needs a machine with a geometric error model (bodies)")
         if made is not None:

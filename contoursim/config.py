@@ -5,19 +5,24 @@ keeps the text so that a bad or unknown key can be reported as
 ``machine.toml, line 12: unknown key 'kpp' in [axes.x]; expected one of ...``.
 """
 
+import math
 import os
 import re
 import stat
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 
+from ._validate import FLOAT_MAX, shown
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TomlFile", "read_bytes", "read_text"]
+__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "read_bytes", "read_text"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
+#: The keys of a file's free text and what each is (:meth:`TomlFile.table`'s `text`).
+TEXT_KEYS = MappingProxyType({"name": "text", "description": "text"})
 
 # what each kind of file looks like, for a message when one is given where another is expected
 _KINDS = {
@@ -135,11 +140,20 @@ class TomlFile:
 
     def __post_init__(self):
         try:
-            data = tomllib.loads(self.text)
+            data = tomllib.loads(self.text, parse_float=_float)
         except tomllib.TOMLDecodeError as exc:
             line = re.search(r"line (\d+)", str(exc))
             raise ConfigError(f"not valid TOML: {exc}", self.source, int(line.group(1)) if line else None) from None
+        except ValueError:  # tomllib's int() of more than 4300 digits
+            digits = re.search(r"\d[\d_]{4300,}", self.text)
+            line = self.text.count("\n", 0, digits.start()) + 1 if digits else None
+            raise ConfigError("a whole number of more than 4300 digits is too large a number", self.source, line) from None
         object.__setattr__(self, "data", data)
+        found = _too_large(data)
+        if found:
+            keys, value = found
+            raise self.error(f"{_dotted(keys)} = {shown(getattr(value, 'text', value))} is too large a number: "
+                             f"beyond ±{FLOAT_MAX:.4g}", *keys)
 
     @classmethod
     def read(cls, path):
@@ -186,9 +200,11 @@ class TomlFile:
         `keys` walks tables by name and arrays of tables by index, e.g.
         ``line_of("body", 2, "joint")`` is the ``joint =`` line of the third
         ``[[body]]``. When the last key is not written on a line of its own
-        (inline tables), the line of the closest enclosing key is returned.
+        (inline tables), the line of the closest enclosing key is returned; a
+        table that only its sub-tables' headers define (``[axes]`` by
+        ``[axes.x]``), the line of the first of them.
         """
-        best = None
+        best = inside = None
         table = ()
         counts = {}
         for number, line in enumerate(self.text.splitlines(), start=1):
@@ -200,13 +216,15 @@ class TomlFile:
                 table = self._indexed(path, counts)
                 if table == keys[: len(table)] and (best is None or len(table) > best[0]):
                     best = (len(table), number)
+                elif inside is None and keys and table[: len(keys)] == keys:
+                    inside = number
                 continue
             key = _KEY.match(line)
             if key:
                 full = table + _split_key(key.group(1))
                 if full == keys[: len(full)] and (best is None or len(full) > best[0]):
                     best = (len(full), number)
-        return None if best is None else best[1]
+        return inside if best is None else best[1]
 
     @staticmethod
     def _indexed(path, counts):
@@ -222,8 +240,8 @@ class TomlFile:
         """A :class:`ConfigError` for `message` located at key path `keys`."""
         return ConfigError(message, self.source, self.line_of(*keys) if keys else None)
 
-    def table(self, *keys, allowed=None, required=(), renamed=None):
-        """The table at `keys`, checked for unknown, renamed and missing keys.
+    def table(self, *keys, allowed=None, required=(), renamed=None, text=None):
+        """The table at `keys`, checked for unknown, renamed and missing keys and for text that is not text.
 
         Parameters
         ----------
@@ -236,6 +254,10 @@ class TomlFile:
         renamed : mapping str -> str, optional
             Old key -> the key that replaced it; an old key is reported with
             its line and the name to use instead.
+        text : mapping str -> str, optional
+            Keys whose values must be strings -> what the value is (``"a
+            name"``); a number, boolean, list or table there is reported with
+            its line (TOML would read ``name = 3`` as a number).
         """
         value = self.data
         for i, key in enumerate(keys):
@@ -261,7 +283,38 @@ class TomlFile:
         for key in required:
             if key not in value:
                 raise self.error(f"missing key '{key}' in [{_dotted(keys)}]", *keys)
+        for key, what in (text or {}).items():
+            if key in value and not isinstance(value[key], str):
+                where = f" in [{_dotted(keys)}]" if keys else ""
+                raise self.error(f"{key}{where} must be {what} in quotes, got {value[key]!r}", *keys, key)
         return value
+
+
+class _Overflowed(float):
+    """A float the file writes beyond a float's range (``1e400``): infinite, with the text as written."""
+
+    def __new__(cls, text):
+        value = super().__new__(cls, text)
+        value.text = text
+        return value
+
+
+def _float(text):
+    """A TOML float: ``inf`` is infinite as written, a finite number too large for a float is :class:`_Overflowed`."""
+    value = float(text)
+    return _Overflowed(text) if math.isinf(value) and "inf" not in text else value
+
+
+def _too_large(value, keys=()):
+    """``(key path, value)`` of the first number in `value` (a TOML document) beyond a float's range, or None."""
+    if isinstance(value, (dict, list)):
+        for key, item in value.items() if isinstance(value, dict) else enumerate(value):
+            found = _too_large(item, (*keys, key))
+            if found:
+                return found
+        return None
+    overflowed = isinstance(value, _Overflowed) or (isinstance(value, int) and abs(value) > FLOAT_MAX)
+    return (keys, value) if overflowed else None
 
 
 def _dotted(keys):

@@ -447,9 +447,7 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     act = _validate.finite_array("actual", actual, ndim=2)
     if act.shape[1] != d:
         raise ValueError(f"actual must have shape (N, {d}) like the trajectory's positions, got {act.shape}")
-    if int(window) < 1:
-        raise ValueError(f"window must be at least 1, got {window!r}")
-    position, window, n = trajectory.position, int(window), act.shape[0]
+    position, window, n = trajectory.position, _validate.positive_int("window", window), act.shape[0]
     at = _validate.commanded(at, n, len(position))  # None: no (N,) array of sample indices
     # the knots, the distinct reference samples: their first samples and, while the search needs them, positions
     first = np.flatnonzero(moved(position)).astype(np.int32)  # int32 (as idx): 2**31 samples would need ~1 TB

@@ -115,7 +115,7 @@ class Parameter:
         object.__setattr__(self, "value", value)
         if self.typical is not None:
             object.__setattr__(self, "typical", tuple(float(v) for v in self.typical))
-        object.__setattr__(self, "vary", bool(self.vary))
+        object.__setattr__(self, "vary", _validate.flag(f"{self.name}: vary", self.vary))
 
     @property
     def signed(self):
@@ -492,6 +492,7 @@ def read_effects(toml, *keys):
         for key in ("name", "axis"):
             if key not in item:
                 raise toml.error(f"[[effect]] needs '{key}'", *where)
+        toml.table(*where, text={"name": "an effect's name", "axis": "axis letters"})
         try:
             kind = effect_kind(item["name"])
         except ValueError as exc:

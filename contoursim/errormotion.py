@@ -245,7 +245,7 @@ def read_error_table(path, rotary=False):
         earlier version (``position``, ``dx``) with the name that replaced it.
     """
     path = Path(path)
-    source = str(path)
+    source, rotary = str(path), _validate.flag("rotary", rotary)
     lines = read_text(path).splitlines()
     start = next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
     if start is None:
@@ -274,9 +274,13 @@ def read_error_table(path, rotary=False):
         except ValueError:
             col = next(h for h, cell in zip(header, row) if not _is_number(cell))
             raise ConfigError(f"column '{col}' is not a number", source, number) from None
-        bad = [h for h, v in zip(header, values) if not np.isfinite(v)]
+        bad = [(h, cell) for h, cell, v in zip(header, row, values) if not np.isfinite(v)]
         if bad:
-            raise ConfigError(f"column '{bad[0]}' is not finite", source, number)
+            column, cell = bad[0]
+            spelled = any(word in cell.lower() for word in ("inf", "nan"))  # else written too large for a float (1e400)
+            raise ConfigError(f"column '{column}' is not finite" if spelled else
+                              f"column '{column}': {_validate.shown(cell.strip())} is too large a number: beyond "
+                              f"±{_validate.FLOAT_MAX:.4g}", source, number)
         rows.append((number, values))
     if len(rows) < 2:
         raise ConfigError("the error table needs at least 2 rows", source)

@@ -282,6 +282,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             else:
                 fail(f"unknown word G{g:g} (supported: {_SUPPORTED})")
         if nonmodal is not None:
+            if nonmodal == 4 and any(values.get(letter, 0.0) < 0 for letter in "PX"):
+                fail(f"a dwell's time (G4 P or X) must be zero or positive, got {values.get('P', values.get('X')):g}")
             if cutting and nonmodal == 4:
                 stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
             elif cutting:

@@ -68,7 +68,7 @@ class GeometricCompensation(Strategy):
         if not isinstance(self.chain, MachineChain):
             raise TypeError(f"chain must be a MachineChain, got {type(self.chain).__name__}")
         object.__setattr__(self, "tol", _validate.positive("tol", self.tol))
-        object.__setattr__(self, "max_iter", int(_validate.positive("max_iter", self.max_iter)))
+        object.__setattr__(self, "max_iter", _validate.positive_int("max_iter", self.max_iter))
 
     def commands(self, q, t=None):
         """Pre-corrected axis commands.

@@ -685,7 +685,8 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
     """Step all axes of one variant over the reference, advancing `state` and `cstate` in place.
 
     ``par`` (n, NPAR) and ``state`` (n, _NSTATE) follow the layouts above;
-    ``cpar`` (_C_NPAR,), ``knots`` (M, 3), ``knot_of_sample`` (N,) and
+    ``cpar`` (_C_NPAR,), ``knots`` (M, 4) (the path's distinct samples [mm] and their cumulative chord
+    length [mm], :func:`contoursim.nearest.distinct_samples`), ``knot_of_sample`` (N,) and
     ``cstate`` (_C_NSTATE,) are the coupling's (kind 0: none);
     ``encoder_noise`` (N, n) is added to the encoder readings and
     ``external`` (N, n) to the disturbance forces [N] (no rows: none). Samples
@@ -819,7 +820,7 @@ def _variant(par, state, ref_pos, ref_vel, ref_acc, cpar, knots, knot_of_sample,
 
 def _no_coupling():
     """Coupling arguments of :func:`_variant` that switch it off (kind 0); the knots read-only, as a coupling's."""
-    knots = np.zeros((1, 3))
+    knots = np.zeros((1, 4))  # the shape of a coupling's knots (M, 4)
     knots.flags.writeable = False
     return np.zeros(_C_NPAR), knots, np.zeros(1, np.int64), np.zeros(_C_NSTATE)
 
@@ -1693,7 +1694,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
     blocks = threads * max(1, -(-n_variants // (threads * LANES)))  # as few as fill the lanes, as many for every thread
     lanes = max(1, -(-n_variants // blocks))
     signals = list(arrays.values())
-    every = int(every)
+    every = _validate.positive_int("every", every)
 
     def block(lo):
         # Blocks narrower than _MIN_LANES, and cross-coupled variants (the lanes run no coupling), step one variant at

@@ -32,7 +32,7 @@ from types import MappingProxyType
 import numpy as np
 
 from . import _validate
-from .config import TomlFile
+from .config import TEXT_KEYS, TomlFile
 from .exceptions import ConfigError, UnstableLoopError
 from .multibody import MAX_TRAVEL
 from .servo import AxisServo
@@ -373,6 +373,8 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
     """
     from .multibody import chain_from_toml
 
+    geometry, effects, check = (_validate.flag(name, value) for name, value in
+                                (("geometry", geometry), ("effects", effects), ("check", check)))
     toml = TomlFile.read(preset_file(name_or_file))
     toml.expect("machine")
     data = toml.data
@@ -382,7 +384,7 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
     if "body" in data:
         chain = chain_from_toml(toml, extra=_SERVO_KEYS)
     else:
-        toml.table(allowed=_SERVO_KEYS)
+        toml.table(allowed=_SERVO_KEYS, text=TEXT_KEYS)
     if "axes" not in data:
         raise toml.error("missing [axes.<name>] tables: the servo parameters of each axis")
     if "servo_period_ms" not in data:

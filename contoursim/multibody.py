@@ -50,7 +50,7 @@ import numpy as np
 from . import _chainkernels, _validate
 from ._blocks import blocks
 from ._numba import njit
-from .config import FORMAT_DOC
+from .config import FORMAT_DOC, TEXT_KEYS
 from .errormotion import _RAD_PER_URAD, COMPONENTS, ERROR_COLUMNS, ERROR_UNITS, Cyclic, ErrorMotion, read_error_table
 from .exceptions import ConfigError
 
@@ -529,7 +529,7 @@ class MachineChain:
             Tool axis V_w (unit vector).
         """
         q, t = self._check(q, t)
-        steps, err, times = self._program(q, t, ideal)
+        steps, err, times = self._program(q, t, _validate.flag("ideal", ideal))
         kind, inverse, column, vector = (np.array(x, dtype) for x, dtype in zip(zip(*steps), (np.int64, bool, np.int64, float)))
         pose = _chainkernels.tool_pose(q, times, err, self.tool_tip, self.tool_axis, kind, inverse, column, vector.reshape(-1, 6))
         return pose[:, :3], pose[:, 3:]
@@ -850,7 +850,7 @@ class MachineChain:
         rows = 6 if tool_axis is not None else 3
         columns = np.flatnonzero(mask)
         target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
-        max_iter = int(_validate.positive("max_iter", max_iter))
+        max_iter = _validate.positive_int("max_iter", max_iter)
         for part in blocks(n):
             self._newton(q[part], position[part], target_axis[part], None if t is None else t[part], columns, rows, ideal,
                          tol, max_iter, part.start)
@@ -1053,14 +1053,16 @@ def chain_from_toml(toml, *keys, extra=()):
         Naming the file and line of an unknown key or a bad value; a key of
         an earlier version is named with the key that replaced it.
     """
-    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"), renamed=_RENAMED)
+    top = toml.table(*keys, allowed=_MACHINE_KEYS + tuple(extra), required=("tool", "workpiece", "body"), renamed=_RENAMED,
+                     text={**TEXT_KEYS, "tool": "a body's name", "workpiece": "a body's name"})
     raw = top["body"]
     if not isinstance(raw, list) or not raw:
         raise toml.error("body must be an array of tables ([[body]])", *keys, "body")
     names = []
     for i in range(len(raw)):
         travel = "travel_deg" if str(raw[i].get("joint", "")).strip().startswith("rotary") else "travel_mm"
-        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",), renamed={**_RENAMED, "travel": travel})
+        item = toml.table(*keys, "body", i, allowed=_BODY_KEYS, required=("name",), renamed={**_RENAMED, "travel": travel},
+                          text={**TEXT_KEYS, "parent": "a body's name", "joint": "a joint", "axis": "an axis name"})
         if not isinstance(item["name"], str) or item["name"] in names or item["name"] == "bed":
             raise toml.error(f"body name must be a unique string other than 'bed', got {item['name']!r}", *keys, "body", i, "name")
         names.append(item["name"])
@@ -1241,7 +1243,8 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
     if not errors:
         return (ErrorMotion(),) * 6
     keys = {column: comp for column, (comp, _) in ERROR_COLUMNS.items()}  # the same names as an error table's columns
-    toml.table(*where, "errors", allowed=(*keys, "table"), renamed={comp: key for key, comp in keys.items()})
+    toml.table(*where, "errors", allowed=(*keys, "table"), renamed={comp: key for key, comp in keys.items()},
+               text={"table": "a file name"})
     tables = {}
     if "table" in errors:
         path = base / str(errors["table"])

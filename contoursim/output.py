@@ -20,6 +20,7 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import _validate
 from .config import read_text
 from .exceptions import ConfigError, OutputError
 
@@ -253,7 +254,7 @@ def _remove_stale_parts(folder, name=None):
                 pass  # e.g. removed by another run meanwhile
 
 
-def report_file(file, key, what):
+def report_file(file, key, what, out=None):
     """Check that a JSON report may be written to `file`: a new name, or a report contoursim wrote there before.
 
     Parameters
@@ -264,6 +265,8 @@ def report_file(file, key, what):
         A key every such report has at its top level (e.g. ``"runs"``).
     what : str
         What the report is, for the messages (e.g. ``"comparison JSON"``).
+    out : str or Path, optional
+        The output folder of the same run, not made yet: the report may not be it.
 
     Returns
     -------
@@ -272,13 +275,15 @@ def report_file(file, key, what):
     Raises
     ------
     ConfigError
-        `file` is a directory.
+        `file` is a directory, or the output folder `out`.
     FileExistsError
         `file` exists and is not such a report: it is the user's, never overwritten.
     """
     if file is None:
         return None
     file = Path(file)
+    if out is not None and file.resolve() == Path(out).resolve():  # the folder made first, the report refused after it
+        raise ConfigError(f"{file} is the output directory (--out); name a file to write the {what} to")
     if file.is_dir():
         raise ConfigError(f"{file} is a directory; name a file to write the {what} to")
     if file.exists() or file.is_symlink():
@@ -320,7 +325,7 @@ def atomic_write(file, binary=False, before_replace=None):
     OutputError
         The folder is not writable, the disk is full, ... (naming `file`).
     """
-    file = Path(file)
+    file, binary = Path(file), _validate.flag("binary", binary)
     _remove_stale_parts(file.parent, file.name)
     temporary = file.with_name(f".{file.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
     try:
@@ -363,6 +368,7 @@ def writing(file, overwrite=False, binary=False):
     FileExistsError
         `file` names an existing file and `overwrite` is false.
     """
+    overwrite, binary = _validate.flag("overwrite", overwrite), _validate.flag("binary", binary)
     if hasattr(file, "write"):
         return nullcontext(file)
     file = Path(file)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path as _FilePath
 
 from . import _validate
-from .config import TomlFile
+from .config import TEXT_KEYS, TomlFile
 from .exceptions import ConfigError
 from .feed import FeedSettings
 from .gcode import SUFFIXES, read_gcode
@@ -151,10 +151,7 @@ def read_path_file(file, direction=None):
                           source=str(file))
     toml = TomlFile.read(file)
     toml.expect("path")
-    top = toml.table(allowed=("name", "description", "path", "feed"))
-    for key in ("name", "description"):
-        if not isinstance(top.get(key, ""), str):
-            raise toml.error(f"{key} must be a string", key)
+    toml.table(allowed=("name", "description", "path", "feed"), text=TEXT_KEYS)
     return PathFile(_path(toml, direction), read_feed_table(toml))
 
 

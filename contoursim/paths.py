@@ -1076,6 +1076,7 @@ def spline(points, closed=False, role="path"):
     Path
         One :class:`SplinePiece` per interval.
     """
+    closed = _validate.flag("closed", closed)
     pts, _ = _point_rows("points", points, 3 if closed else 2)
     if closed:
         if np.linalg.norm(pts[-1] - pts[0]) > CONTINUITY_TOL:

@@ -862,7 +862,7 @@ def closed_loop(servo, feedforward=True):
         position, velocity and acceleration commands.
     """
     blocks = _blocks(servo, 0)
-    if not feedforward:
+    if not _validate.flag("feedforward", feedforward):
         blocks["vff"] = _gain(0.0, "v_ref", "v_ff", 0)
         blocks["aff"] = _gain(0.0, "a_ref", "i_ff", 0)
     return _derivative_inputs(_cascade(blocks)[0, :])
@@ -1135,11 +1135,56 @@ def margins(servo, dt=None):
 
 
 _GAIN_OF = {"current": "kc", "velocity": "kv", "position": "kp"}
-_REMEDY = {
-    "current": "lower kc or lengthen ti_current",
-    "velocity": "lower kv or lengthen ti",
-    "position": "lower kp (or make the velocity loop faster)",
-}
+_INTEGRAL_OF = {"current": "ti_current", "velocity": "ti"}
+#: How many times its position gain kp [1/s] a velocity loop's crossover [rad/s] should be at least (the cascade's rule
+#: of thumb: an inner loop 3 to 5 times faster than the loop around it); :func:`check` tells a position loop that
+#: fails for a slower one to raise kv, not kp.
+CASCADE_RATIO = 4.0
+
+
+def _remedy(loop, servo, dt, m, inner):
+    """What to change in a loop that fails :func:`check`, read from its margins `m` and those of the loop inside it.
+
+    Parameters
+    ----------
+    loop : {"current", "velocity", "position"}
+    servo : AxisServo
+    dt : float
+        Servo period [s].
+    m : dict
+        The loop's sampled margins (:func:`margins`).
+    inner : dict or None
+        The sampled margins of the loop inside it (none for the innermost).
+
+    Returns
+    -------
+    str
+        A sentence naming the settings to change, and which way.
+    """
+    gain, crossover = _GAIN_OF[loop], m["gain_crossover"]
+    if loop == "position":  # its phase is the velocity loop's: too slow a one is the cause, whatever kp's size
+        inner_crossover = inner["gain_crossover"]
+        if not inner_crossover >= CASCADE_RATIO * servo.kp:  # NaN: a velocity loop whose gain never reaches 1
+            speed = (f"crossover {inner_crossover / (2 * np.pi):.4g} Hz, {inner_crossover / servo.kp:.3g} times"
+                     if np.isfinite(inner_crossover) else "its gain never reaches 1, against")
+            slow = (f"the velocity loop is too slow for it ({speed} kp = {servo.kp:.6g} 1/s; a position loop needs one "
+                    f"at least {CASCADE_RATIO:g} times faster)")
+            if not np.isfinite(inner_crossover):
+                return f"{slow}: raise kv"
+            lower = f"lower kp, to {inner_crossover / CASCADE_RATIO:.3g} 1/s or less"
+            ceiling = np.pi * MAX_CROSSOVER_FRACTION / dt  # the fastest velocity loop the check lets run at dt [rad/s]
+            if CASCADE_RATIO * servo.kp > ceiling:
+                return f"{slow}, and at dt = {dt:.6g} s none may cross over above {ceiling / (2 * np.pi):.4g} Hz: {lower}"
+            return f"{slow}: raise kv, or {lower}"
+    integral = getattr(servo, _INTEGRAL_OF.get(loop, ""), None)
+    if np.isfinite(crossover):
+        if integral and crossover * integral < 1.0:  # the PI's phase lag at the crossover is over 45°
+            return (f"its crossover lies below the integral action's corner 1/(2π·{_INTEGRAL_OF[loop]}) = "
+                    f"{1 / (2 * np.pi * integral):.4g} Hz: raise {gain}, or lengthen {_INTEGRAL_OF[loop]}")
+        return f"lower {gain}" + (f", or lengthen {_INTEGRAL_OF[loop]}" if integral else "")
+    if m["gain_margin"] < 1:  # above 1 at the phase crossover and crossing 1 nowhere: above 1 up to Nyquist
+        return f"lower {gain}, or check the mass ({servo.mass:.6g} kg)"
+    return f"raise {gain}, or check the mass ({servo.mass:.6g} kg)"
 
 
 def check(servo, dt, axis="x"):
@@ -1191,6 +1236,7 @@ def check(servo, dt, axis="x"):
                 f"dt <= {MAX_CROSSOVER_FRACTION / (2 * f_c):.3g} s, or lower {gain} = {getattr(servo, gain):.6g}."
             )
     sampled = margins(servo, dt)
+    inner = None  # the margins of the loop inside the one checked (innermost first)
     for loop, m in sampled.items():
         if not m["stable"]:
             problem = "is unstable"
@@ -1200,21 +1246,19 @@ def check(servo, dt, axis="x"):
                 f"closed-loop damping ratio >= {MIN_DAMPING_RATIO:g})"
             )
         else:
+            inner = m
             continue
         gain = _GAIN_OF[loop]
         if np.isfinite(m["gain_crossover"]):
             crossing = f"phase margin {m['phase_margin']:.3g} deg at {m['gain_crossover'] / (2 * np.pi):.4g} Hz"
-            remedy = _REMEDY[loop]
-        elif m["gain_margin"] < 1:  # above 1 at the phase crossover and crossing 1 nowhere: above 1 up to Nyquist
+        elif m["gain_margin"] < 1:
             crossing = "no gain crossover (the loop gain stays above 1 up to the Nyquist frequency)"
-            remedy = f"lower {gain}, or check the mass ({servo.mass:.6g} kg)"
         else:
             crossing = "no gain crossover (the loop gain never reaches 1)"
-            remedy = f"raise {gain}, or check the mass ({servo.mass:.6g} kg)"
         raise UnstableLoopError(
             f"the {loop} loop of axis {axis!r} {problem} at dt = {dt:.6g} s: gain margin "
             f"{m['gain_margin']:.3g}, {crossing}, damping ratio {m['damping_ratio']:.3g} "
-            f"({gain} = {getattr(servo, gain):.6g}): {remedy}.",
+            f"({gain} = {getattr(servo, gain):.6g}): {_remedy(loop, servo, dt, m, inner)}.",
             margins=m,
         )
     return sampled

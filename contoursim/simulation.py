@@ -128,6 +128,7 @@ class SimResult:
             ``contour_rms_um`` (without a contour error: not there),
             ``volumetric_max_um``, ``volumetric_rms_um``.
         """
+        measuring_only = _validate.flag("measuring_only", measuring_only)
         return _error_figures(self.trajectory, self.tool_position, self.contour, self.static_tool_position, measuring_only)
 
     def to_trace(self, metadata=None):
@@ -600,6 +601,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     its times before the reference's first).
     """
     model = as_model(model)
+    contour = _validate.flag("contour", contour)
     machine = model.machine
     composition = Composition(strategies)
     preview = composition.preview(composition.drive(model.servos()), machine.servo_period)
@@ -732,6 +734,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         `check`) a variant's cross-coupled controller fails its check.
     """
     models = [as_model(m) for m in models]
+    check = _validate.flag("check", check)
     if not models:
         raise ValueError("simulate_batch needs at least one model")
     compositions = _compositions(strategies, len(models))
@@ -739,12 +742,12 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
              if e.noise_at == "encoder" and e.noise_mm > 0.0]
     if noisy:
         raise ValueError(f"simulate_batch runs no noise on the encoder ({noisy[0]}): use simulate")
+    if isinstance(outputs, str):  # its letters would be the names
+        raise TypeError(f"outputs must be a sequence of output names, e.g. ('summary',), got the string {outputs!r}")
     unknown = [o for o in outputs if o not in _BATCH_OUTPUTS]
     if unknown or not outputs:
         raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
-    every = int(every)
-    if every < 1:
-        raise ValueError(f"every must be a positive integer, got {every!r}")
+    every = _validate.positive_int("every", every)
     first = models[0].machine
     for i, m in enumerate(models):
         machine = m.machine

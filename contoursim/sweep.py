@@ -342,11 +342,13 @@ def diverged_why(sweep, i):
     -------
     str
     """
+    from .machine import _file_names
     from .multibody import MAX_TRAVEL
 
     model, _ = _job(sweep).variant(dict(zip(sweep.names, sweep.values[i])))
-    return model.machine.refusal() or ("its axes' loops pass the loop check: a cross-coupled loop's check refused it, "
-                                       f"or its run left ±{MAX_TRAVEL:g} mm")
+    refusal = model.machine.refusal()  # in the names the spec varies (kp_per_s, not kp)
+    return _file_names(refusal) if refusal else ("its axes' loops pass the loop check: a cross-coupled loop's check "
+                                                 f"refused it, or its run left ±{MAX_TRAVEL:g} mm")
 
 
 def _servo_field(machine, axis, key):

@@ -22,7 +22,8 @@ writes it: ``# units: t [s]; x_ref, x, y_ref, y [mm]`` (groups separated by
 m``, is that of all the position columns). The reader converts ``t`` from
 :data:`TIME_UNITS` to s, positions from :data:`LENGTH_UNITS` to mm, forces
 from :data:`FORCE_UNITS` to N and currents from :data:`CURRENT_UNITS` to A,
-and refuses any other unit of a column it reads (others' units are not read).
+and refuses any other unit of a column it reads (others' units are not read), and a second ``# units:``
+line (one of the two would be ignored).
 Without a declared time unit, a sample period outside
 :data:`PLAUSIBLE_SAMPLE_PERIOD` is refused as no servo trace's (a time column
 in ms, µs or ns read as seconds): declaring ``t [s]`` accepts it. A measured
@@ -254,6 +255,9 @@ def read_trace(file):
     first = 0
     while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
         key, colon, value = lines[first][1:].partition(":")
+        if colon and key.strip() == "units" and units_line is not None:  # one of them would be ignored
+            raise TraceFormatError(f"a second '# units:' line (the first is line {units_line}): declare the units once",
+                                   source, first + 1)
         if colon and key.strip():
             metadata[key.strip()] = value.strip()
             units_line = first + 1 if key.strip() == "units" else units_line
@@ -407,6 +411,13 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     `limits` are the largest magnitudes allowed in the columns `index`, in
     their `units` (the names of the file's units, for the messages).
     """
+    def beyond(row, col, value):
+        """The error of the cell (`row`, `col`) whose `value` (as the message shows it) is beyond its column's limit."""
+        hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
+        what = next((kind for kind, (known, _, _) in INPUTS.items() if units[col] in known), "position or time")
+        return fail(f"column '{names[index[col]]}': value {value} is beyond ±{limits[col]:g} {units[col]}, "
+                    f"not a {what} a trace can hold{hint}", row)
+
     cells = np.array([text.count(",") + 1 for text in body])
     if np.any(cells != width):
         row = int(np.argmax(cells != width))
@@ -435,12 +446,12 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     bad = ~np.isfinite(data)
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
-        raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
+        cell = body[row].split(",")[index[col]].strip()
+        if re.search("inf|nan", cell, re.IGNORECASE):
+            raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
+        raise beyond(row, col, _validate.shown(cell))  # a number written too large for a float (1e400): infinite once read
     bad = np.abs(data) > limits
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
-        hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
-        what = next((kind for kind, (known, _, _) in INPUTS.items() if units[col] in known), "position or time")
-        raise fail(f"column '{names[index[col]]}': value {data[row, col]:g} is beyond ±{limits[col]:g} {units[col]}, "
-                   f"not a {what} a trace can hold{hint}", row)
+        raise beyond(row, col, f"{data[row, col]:g}")
     return data

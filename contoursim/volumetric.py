@@ -11,6 +11,7 @@ from itertools import combinations, product
 
 import numpy as np
 
+from . import _validate
 from .exceptions import ConfigError
 from .output import output_dir
 from .machine import load_machine
@@ -47,9 +48,7 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
     unknown = set(sweep) - set(chain.axes)
     if unknown or not sweep:
         raise ValueError(f"sweep must name some of the axes {list(chain.axes)}, got {sweep}")
-    points = int(points)
-    if points < 2:
-        raise ValueError(f"points must be at least 2, got {points}")
+    points = _validate.positive_int("points", points, least=2)
     travel = {b.axis: b.travel for b in chain.bodies if b.axis is not None}
     ranges = dict(ranges or {})
     values = []
@@ -135,8 +134,8 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     rotary = dict(zip(chain.axes, chain.rotary_axes))
     travel = {b.axis: b.travel for b in chain.bodies if b.axis is not None}
     turned = [a for a in chain.axes if rotary[a] and a not in sweep and a not in (fixed or {})]
-    rotary_grid = int(rotary_grid)
-    if rotary_grid == 1 or rotary_grid < 0:
+    rotary_grid = _validate.positive_int("rotary_grid", rotary_grid, least=0)
+    if rotary_grid == 1:
         raise ValueError(f"rotary_grid must be 0 (hold the rotary axes at 0) or at least 2, got {rotary_grid}")
     turned = [a for a in turned if travel.get(a) is not None] if rotary_grid else []
     angles = [np.linspace(*travel[a], rotary_grid) for a in turned]

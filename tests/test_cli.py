@@ -187,7 +187,8 @@ def test_unstable_gains_are_reported_with_margins(tmp_path, capsys):
     assert main(["simulate", "rounded_square", "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'm.toml'}, line 6: the position loop of axis 'x'" in err
-    assert "phase margin 16.6 deg" in err and "(kp_per_s = 900): lower kp_per_s" in err
+    assert "phase margin 16.6 deg" in err and "(kp_per_s = 900): the velocity loop is too slow for it" in err
+    assert "none may cross over above 250 Hz: lower kp_per_s, to " in err  # raising kv cannot help at 0.5 ms
 
 
 def test_servo_period_too_long_names_the_key(tmp_path, capsys):
@@ -483,7 +484,7 @@ def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(
     ("", ["--set", "ccc_arc.kp=3"], "--set ccc_arc.kp=3: unknown setting 'kp' of ccc_arc; expected one of kp_per_s"),
     ("", ["--set", "ccc_arc.kp_per_s=fast"], "--set ccc_arc.kp_per_s=fast: 'fast' is not a number"),
     ("", ["--set", "zpetc.negative_zero_radius=2"], "negative_zero_radius must be between 0 and 1"),
-    ("", ["--set", "ccc_arc.kp_per_s=3", "--tune"], "tuning sets the coupling's kp and ki: ccc_arc.kp is set"),
+    ("", ["--set", "ccc_arc.kp_per_s=3", "--tune"], "tuning sets the coupling's kp_per_s and ki_per_s2: ccc_arc.kp_per_s is set"),
     ("", ["--set", "ccc_arc.kp_per_s=3000"], "the coupled loop of axes x, y, z is unstable"),
 ])
 def test_compare_refuses_bad_strategy_settings_naming_the_place(tmp_path, capsys, tables, options, message):

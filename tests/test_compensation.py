@@ -337,8 +337,8 @@ def test_tune_keeps_the_best_candidate_the_check_lets_run():
     assert tuned["tried"][-6][2] is None  # the kp search ran up to the first gain the check refuses ...
     refused_kp = tuned["tried"][-6][0]
     assert tuned["tried"][-7][0] == pytest.approx(refused_kp / TUNE_KP_STEP)  # ... one step above the last it let run
-    gains = tuned["settings"]["ccc_arc"]
-    again = simulate(machine, trajectory, [cp.CrossCoupled("arc", **gains)]).summary()["contour_max_um"]
+    assert set(tuned["settings"]["ccc_arc"]) == {"kp_per_s", "ki_per_s2"}  # the keys of the job file and the JSON
+    again = simulate(machine, trajectory, cp.strategies_named("ccc_arc", settings=tuned["settings"])).summary()["contour_max_um"]
     assert again == tuned["max_contour_um"]  # the tuned gains run, and give what the search saw
     designed = simulate(machine, trajectory, [cp.CrossCoupled("arc")]).summary()["contour_max_um"]
     assert tuned["max_contour_um"] <= designed

@@ -53,3 +53,10 @@ def test_syntax_error_names_the_line(tmp_path):
 def test_unreadable_file(tmp_path):
     with pytest.raises(ConfigError, match="cannot read the file"):
         TomlFile.read(tmp_path / "absent.toml")
+
+
+def test_a_table_its_sub_tables_define_is_placed_at_the_first_of_them():
+    """An error about [axes] as a whole (axes named X, c) named no line: [axes] has no header of its own."""
+    toml = TomlFile("m.toml", 'name = "m"\n\n[axes.X]\nkp = 1\n\n[[axes.y]]\nkp = 2\n')
+    assert toml.line_of("axes") == 3 and toml.error("bad axes", "axes").line == 3
+    assert toml.line_of("axes", "y") == 6 and toml.line_of("feed") is None

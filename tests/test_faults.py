@@ -21,7 +21,7 @@ from contoursim.cli import main
 from contoursim.comparison import compare
 from contoursim.compensation import STRATEGY_NAMES
 from contoursim.diagnosis import diagnose
-from contoursim.effects import Effect
+from contoursim.effects import Effect, Parameter
 from contoursim.errormotion import read_error_table
 from contoursim.exceptions import ConfigError, TraceFormatError
 from contoursim.feed import plan, sample
@@ -31,9 +31,10 @@ from contoursim.machine import load_machine, preset_file
 from contoursim.model import Model
 from contoursim.output import output_dir
 from contoursim.pathfile import load_path_file
-from contoursim.paths import circle
+from contoursim.paths import circle, spline
 from contoursim.plotting import save_comparison_figures, save_figures
-from contoursim.simulation import measured_reference, simulate
+from contoursim.servo import closed_loop
+from contoursim.simulation import measured_reference, simulate, simulate_batch
 from contoursim.traces import Trace, read_trace, write_trace
 from contoursim.trajectory import Trajectory
 from test_cli import SMALL_PATH
@@ -547,3 +548,227 @@ def test_the_api_refuses_what_it_cannot_use_naming_the_argument(api, call, error
     with pytest.raises(error) as info:
         call(api)
     assert words in str(info.value)
+
+
+# -- faults4: wrong TOML types, '-' for a file, flags given text, numbers too large, strategy keys -----------------
+
+
+@pytest.mark.parametrize("preset, old, new, line, words", [
+    ("demo_mill", 'name = "demo mill (3 servo axes)"', "name = 3", 9, "name must be text in quotes, got 3"),
+    ("demo_mill", "servo_period_ms = 0.2", "description = true\nservo_period_ms = 0.2", 10,
+     "description must be text in quotes, got True"),
+    ("table_tilting_5axis", 'name = "5-axis table-tilting A/C"', "name = 3.5", 13, "name must be text in quotes, got 3.5"),
+    ("table_tilting_5axis", 'tool = "tool"', "tool = 1", 15, "tool must be a body's name in quotes, got 1"),
+    ("table_tilting_5axis", 'name = "X"', 'name = ["X"]', 51, "name in [body.0] must be text in quotes, got ['X']"),
+    ("table_tilting_5axis", 'parent = "X"', "parent = 1", 65, "parent in [body.1] must be a body's name in quotes, got 1"),
+    ("table_tilting_5axis", 'axis = "x"', "axis = 0", 54, "axis in [body.0] must be an axis name in quotes, got 0"),
+    ("table_tilting_5axis", 'joint = "linear x"', "joint = 1", 53, "joint in [body.0] must be a joint in quotes, got 1"),
+    ("demo_mill", None, '[[effect]]\nname = 3\naxis = "x"', 38, "name in [effect.0] must be an effect's name in quotes, got 3"),
+    ("demo_mill", None, '[[effect]]\nname = "backlash"\naxis = 1', 39, "axis in [effect.0] must be axis letters in quotes, got 1"),
+])
+def test_a_number_where_a_machine_file_wants_text_is_refused_naming_its_line_and_key(tmp_path, preset, old, new, line,
+                                                                                   words):
+    """TOML reads ``name = 3`` as a number: a machine's name, a body's, an effect's axis are text, said where."""
+    from contoursim.model import load_model
+
+    text = preset_file(preset).read_text()
+    assert old is None or old in text
+    (tmp_path / "m.toml").write_text(text + "\n" + new if old is None else text.replace(old, new, 1))
+    with pytest.raises(ConfigError) as info:
+        load_model(tmp_path / "m.toml")
+    assert str(info.value) == f"{tmp_path / 'm.toml'}, line {line}: {words}"
+
+
+def test_a_number_where_a_path_file_wants_text_is_refused_naming_its_line(tmp_path, capsys):
+    (tmp_path / "p.toml").write_text("description = 4\n" + SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'p.toml'}, line 1: description must be text in quotes, got 4")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["simulate", "{path}", "--out", "-"], "argument --out: contoursim writes its plots and files into a folder, not to "
+                                            "standard output ('-'): name one, e.g. --out results"),
+    (["compare", "{path}", "--json", "-"], "argument --json: contoursim writes the comparison JSON to a file, not to"),
+    (["diagnose", "{path}", "--report", " -"], "argument --report: contoursim writes the diagnosis report to a file"),
+    (["diagnose", "{path}", "{path}", "--summary", "-"], "argument --summary: contoursim writes the fleet summary"),
+])
+def test_a_dash_for_where_contoursim_writes_is_refused_not_made_a_folder_or_file(tmp_path, monkeypatch, capsys, argv,
+                                                                                  words):
+    """``--out -`` made a folder named '-' (a command-line user means standard output), ``--json -`` a file '-'."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as info:  # argparse's refusal of the option itself
+        main([arg.format(path="small.toml") for arg in argv])
+    assert info.value.code == 2
+    assert words in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda a: simulate(a.machine, a.trajectory).summary(measuring_only="no"), "measuring_only must be True or False, got 'no'"),
+    (lambda a: simulate(a.machine, a.trajectory, contour="no"), "contour must be True or False, got 'no'"),
+    (lambda a: write_trace(a.mine, a.trace, overwrite="no"), "overwrite must be True or False, got 'no'"),
+    (lambda a: write_trace(a.mine, a.trace, overwrite=1), "overwrite must be True or False, got 1"),
+    (lambda a: load_machine("demo_mill", geometry="no"), "geometry must be True or False, got 'no'"),
+    (lambda a: load_machine("demo_mill", check=None), "check must be True or False, got None"),
+    (lambda a: spline([[0, 0], [1, 1], [2, 0]], closed="no"), "closed must be True or False, got 'no'"),
+    (lambda a: closed_loop(a.machine.axes["x"], feedforward="no"), "feedforward must be True or False, got 'no'"),
+    (lambda a: Parameter("p", 1.0, "um", vary="no"), "p: vary must be True or False, got 'no'"),
+    (lambda a: compare(a.machine, a.trajectory, names=("none",), tuned="yes"),
+     "tuned must be True, False or a mapping of strategy names to tuned settings, got 'yes'"),
+    (lambda a: load_machine("vertical_mill_3axis").chain.tool_pose(np.zeros((1, 3)), ideal="no"),
+     "ideal must be True or False, got 'no'"),
+])
+def test_a_flag_given_text_or_a_number_is_refused_naming_it(api, tmp_path, call, words):
+    """``summary(measuring_only="no")`` was read as true, ``write_trace(..., overwrite="no")`` replaced the user's file."""
+    mine = tmp_path / "mine.csv"
+    mine.write_text("mine\n")
+    with pytest.raises(TypeError) as info:
+        call(SimpleNamespace(**vars(api), mine=mine))
+    assert str(info.value) == words
+    assert mine.read_text() == "mine\n"
+
+
+@pytest.mark.parametrize("cell, words", [
+    ("9" * 5000, "line 4: column 'x_ref': value 999999999999… (5000 characters) is beyond ±1e+06 mm"),
+    ("-1e400", "line 4: column 'x_ref': value -1e400 is beyond ±1e+06 mm"),
+    ("inf", "line 4: column 'x_ref': value inf is not finite"),
+])
+def test_a_trace_cell_too_large_for_a_float_is_said_to_be_so_not_infinite(tmp_path, cell, words):
+    """A cell of 5000 digits was read as inf and said to be "not finite": it is a number beyond the trace's range."""
+    t = np.arange(50) * 1e-3
+    lines = _trace(tmp_path / "m.csv", t, np.sin(t), np.sin(t)).read_text().splitlines()
+    lines[3] = f"{t[2]:.9g},{cell},{np.sin(t[2]):.9g}"
+    (tmp_path / "m.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(tmp_path / "m.csv")
+    assert str(info.value).startswith(f"{tmp_path / 'm.csv'}, {words}")
+
+
+@pytest.mark.parametrize("value, words", [
+    ("1e400", "line 11: axes.x.kp_per_s = 1e400 is too large a number: beyond ±1.798e+308"),
+    ("1" + "0" * 400, "line 11: axes.x.kp_per_s = 100000000000… (401 characters) is too large a number"),
+    ("1" + "0" * 5000, "line 11: a whole number of more than 4300 digits is too large a number"),
+    ("[1, -1e999]", "line 11: axes.x.kp_per_s.1 = -1e999 is too large a number"),
+])
+def test_a_toml_number_too_large_for_a_float_is_refused_by_its_line(tmp_path, capsys, value, words):
+    """TOML reads 1e400 as inf ("must be finite, got inf"); a whole number of 400 digits ended in an OverflowError."""
+    text = MACHINE.format(mass=300.0).replace("kp_per_s = 40.0", f"kp_per_s = {value}", 1)
+    (tmp_path / "m.toml").write_text(text)
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, {words}")
+
+
+def test_other_numbers_too_large_for_a_float_are_refused_naming_them(tmp_path, capsys):
+    from contoursim import _validate
+
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--strategies", "none,ccc_arc", "--set",
+                      "ccc_arc.kp_per_s=1e400", "--out", str(tmp_path / "out")],
+             "--set ccc_arc.kp_per_s=1e400: too large a number, beyond ±1.798e+308")
+    (tmp_path / "x.csv").write_text("position_mm,dx_um\n0,0\n50,1e400\n100,1\n")
+    with pytest.raises(ConfigError, match=r"x.csv, line 3: column 'dx_um': 1e400 is too large a number"):
+        read_error_table(tmp_path / "x.csv")
+    with pytest.raises(ValueError, match=r"kp must be finite, got 100000000000… \(401 characters\): beyond"):
+        _validate.positive("kp", 10**400)
+    with pytest.raises(ValueError, match="position holds a number beyond"):
+        _validate.finite_array("position", [1.0, 10**400])
+
+
+def test_strategy_settings_have_one_set_of_keys_in_the_api_the_files_and_the_json(api):
+    """compare(settings=...) took {"ccc_arc": {"kp": ...}} where the job file, --set and the JSON say kp_per_s."""
+    from contoursim.compensation import strategies_named
+
+    comparison = compare(api.machine, api.trajectory, names=("ccc_arc",), settings={"ccc_arc": {"kp_per_s": 30.0}})
+    assert comparison.settings["ccc_arc"]["ccc_arc"]["kp_per_s"] == 30.0
+    assert comparison.gains["ccc_arc"] == "kp_per_s set, ki_per_s2 designed"
+    assert strategies_named("ccc_arc", settings={"ccc_arc": {"kp_per_s": 30.0, "ki_per_s2": 0.0}})[0].kp == 30.0
+    for settings, words in [
+        ({"ccc_arc": {"kp": 30.0}}, "unknown setting 'kp' of ccc_arc; expected one of kp_per_s, ki_per_s2, kd"),
+        ({"ccc_arcc": {"kp_per_s": 30.0}}, "no settings for strategy 'ccc_arcc': strategies with settings are feedforward"),
+        ({"ccc_arc": {"kp_per_s": -3.0}}, "kp_per_s must be"),
+        ({"ccc_arc": {"kp_per_s": "30"}}, "kp_per_s must be a number, got '30'"),
+    ]:
+        with pytest.raises(ValueError) as info:
+            compare(api.machine, api.trajectory, names=("none", "ccc_arc"), settings=settings)
+        assert str(info.value).startswith(words), str(info.value)
+    with pytest.raises(ValueError, match="tuning sets the coupling's kp_per_s and ki_per_s2: ccc_arc.ki_per_s2 is set"):
+        compare(api.machine, api.trajectory, names=("ccc_arc",), settings={"ccc_arc": {"ki_per_s2": 3.0}}, tuned=True)
+
+
+def test_a_batchs_every_is_a_whole_number(api):
+    """simulate_batch took every = "2" and every = 2.5 (as 2) where its other counts are checked."""
+    for every, error in (("2", TypeError), (2.5, TypeError), (0, ValueError)):
+        with pytest.raises(error, match="every must be"):
+            simulate_batch([api.machine], api.trajectory, every=every)
+
+
+def test_where_a_run_writes_is_refused_before_anything_is_written(tmp_path, monkeypatch, capsys):
+    """--out '' named the working folder ('. holds files ...'); --json naming --out's folder failed after the plots."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit):
+        main(["simulate", str(tmp_path / "small.toml"), "--out", " "])
+    assert "argument --out: names nothing; contoursim writes its plots and files into a folder" in capsys.readouterr().err
+    _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--strategies", "none", "--json", str(tmp_path / "o"),
+                      "--out", str(tmp_path / "o")], f"{tmp_path / 'o'} is the output directory (--out); name a file")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+def test_a_negative_dwell_is_refused_by_its_line(tmp_path, capsys):
+    (tmp_path / "p.nc").write_text("G21 G90\nG0 X0 Y0\nG1 X10 F600\nG4 P-1\nG1 Y10\nM30\n")
+    _refused(capsys, ["simulate", str(tmp_path / "p.nc"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'p.nc'}, line 4: a dwell's time (G4 P or X) must be zero or positive, got -1")
+
+
+def test_a_sweep_whose_variants_are_all_unstable_says_why_in_the_specs_names(tmp_path, capsys):
+    (tmp_path / "s.toml").write_text(SMALL_PATH)
+    (tmp_path / "w.toml").write_text('machine = "demo_mill"\npath = "s.toml"\n[sweep]\nmethod = "grid"\n[[vary]]\n'
+                                     'name = "axes.x.kp_per_s"\nvalues = [3000, 5000]\n')
+    assert main(["sweep", str(tmp_path / "w.toml"), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "2 of 2 variants diverged or were refused by a loop check" in out
+    assert "(kp_per_s = 3000): the velocity loop is too slow for it" in out and "lower kp_per_s, to " in out
+    assert f"table, plots written to {tmp_path / 'out'}/" in out  # no best and worst run said written: there is none
+    rows = (tmp_path / "out" / "sweep.csv").read_text().splitlines()[1:]
+    assert [row.split(",")[-3] for row in rows] == ["True", "True"] and all("nan,nan" in row for row in rows)
+
+
+@pytest.mark.parametrize("call, error, words", [
+    (lambda a: compare(a.machine, a.trajectory, names=["none", 3]), TypeError,
+     "a strategy name is text such as 'ccc_arc' or 'feedforward+ccc_arc', got 3"),  # an AttributeError from inside
+    (lambda a: simulate_batch([a.machine], a.trajectory, outputs="summary"), TypeError,
+     "outputs must be a sequence of output names, e.g. ('summary',), got the string 'summary'"),  # its letters, refused
+])
+def test_a_name_where_names_are_wanted_and_a_number_where_a_name_is_are_refused(api, call, error, words):
+    with pytest.raises(error) as info:
+        call(api)
+    assert str(info.value) == words
+
+
+def test_a_count_given_as_a_fraction_or_text_is_refused_not_truncated(api):
+    """volumetric_grid(points=2.9) ran 2 points, exact_contour_error(window="8") 8, inverse(max_iter=2.5) 2: a count is a
+    whole number."""
+    from contoursim.contour import exact_contour_error
+    from contoursim.volumetric import volumetric_grid, volumetric_report
+
+    chain = load_machine("polishing_platform_4axis").chain
+    for call, words in [
+        (lambda: volumetric_grid(chain, points=2.9), "points must be a whole number, got 2.9"),
+        (lambda: volumetric_report("polishing_platform_4axis", grid=3, rotary_grid=2.5), "rotary_grid must be a whole number"),
+        (lambda: exact_contour_error(api.trajectory, api.trajectory.position, window="8"), "window must be a whole number"),
+        (lambda: chain.inverse(np.zeros((1, 3)), max_iter=2.5), "max_iter must be a whole number, got 2.5"),
+    ]:
+        with pytest.raises(TypeError, match=words):
+            call()
+
+
+def test_a_second_units_line_is_refused_not_one_of_them_ignored(tmp_path):
+    """Two '# units:' lines: the second was honoured and the first ignored (positions in mm read as µm, silently)."""
+    t = np.arange(50) * 1e-3
+    trace = _trace(tmp_path / "m.csv", t, np.sin(t), np.sin(t), head="# units: t [s]; x_ref, x [mm]\n# units: x_ref, x [um]\n")
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(trace)
+    assert str(info.value) == f"{trace}, line 2: a second '# units:' line (the first is line 1): declare the units once"

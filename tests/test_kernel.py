@@ -253,3 +253,12 @@ def test_loop_problems_name_the_axis():
         run({"x": axis(), "c": axis(kp=2000.0)}, 2e-4, pos, pos, pos)
     with pytest.raises(ValueError, match="dt = 0.005 s is too long for the velocity loop of axis 'x'"):
         run([axis(), axis()], 5e-3, pos, pos, pos)
+
+
+def test_the_knots_the_kernel_is_given_are_a_couplings_shape_as_its_docstring_says():
+    from contoursim import kernel
+
+    circle = np.column_stack([np.cos(np.linspace(0.0, 6.0, 50)), np.sin(np.linspace(0.0, 6.0, 50))])
+    knots = kernel.Coupling("arc", circle, kp=10.0).knots
+    assert knots.shape == (50, 4) and kernel._no_coupling()[1].shape[1] == 4
+    assert f"``knots`` (M, {knots.shape[1]})" in kernel._variant.__doc__

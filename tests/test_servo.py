@@ -313,3 +313,39 @@ def test_an_analysis_is_stored_and_a_later_process_reads_it_back_without_python_
         stored_file.write_text("{")
     servo_module._margins.cache_clear()
     assert servo_module.margins(servo, dt) == analysed
+
+
+@pytest.mark.parametrize("weak, old", [
+    (dict(kv=1e-6, ti=0.016, damping=500.0), "raise kp"),  # a PI velocity loop of no strength: kp was to be raised
+    (dict(kv=1.0), "lower kp (or make the velocity loop faster)"),
+])
+def test_a_position_loop_failing_for_a_slow_velocity_loop_is_told_to_raise_kv_or_lower_kp_and_either_helps(weak, old):
+    """The advice follows from the margins: a velocity loop crossing over below 4 kp is the position loop's trouble."""
+    import re
+
+    from contoursim.servo import CASCADE_RATIO
+
+    servo = AxisServo(mass=300.0, force_constant=942.0, kp=40.0, **weak)
+    with pytest.raises(UnstableLoopError, match=r"the position loop of axis 'x' is") as err:
+        servo.check(2e-4)
+    message = str(err.value)
+    assert old not in message and "the velocity loop is too slow for it" in message and "raise kv" in message
+    velocity = servo.margins(2e-4)["velocity"]["gain_crossover"]
+    assert not velocity >= CASCADE_RATIO * servo.kp  # the margins say so: the velocity loop is below 4 kp (or never 1)
+    dataclasses.replace(servo, kv=80.0).check(2e-4)  # raising kv to a velocity loop of 40 Hz, or ...
+    lower = re.search(r"lower kp, to ([0-9.e+-]+) 1/s or less", message)
+    if lower:  # ... lowering kp as far as said, each passes the check
+        dataclasses.replace(servo, kp=float(lower.group(1))).check(2e-4)
+
+
+def test_a_pi_velocity_loop_crossing_below_its_integral_corner_is_told_to_raise_kv_not_lower_it():
+    """At kv = 1 the PI loop crosses over at 2.3 Hz, below its corner 1/(2π ti) = 9.9 Hz: lowering kv made it worse."""
+    servo = AxisServo(mass=300.0, force_constant=942.0, kv=1.0, ti=0.016, kp=1.0)
+    with pytest.raises(UnstableLoopError, match=r"the velocity loop of axis 'x' is badly damped") as err:
+        servo.check(2e-4)
+    assert "below the integral action's corner 1/(2π·ti) = 9.947 Hz: raise kv, or lengthen ti." in str(err.value)
+    assert servo.margins(2e-4)["velocity"]["gain_crossover"] * servo.ti < 1.0
+    dataclasses.replace(servo, kv=30.0).check(2e-4)  # raising kv helps, ...
+    dataclasses.replace(servo, ti=0.2).check(2e-4)  # ... and so does a longer ti
+    with pytest.raises(UnstableLoopError):
+        dataclasses.replace(servo, kv=0.5).check(2e-4)  # lowering it, the old advice, does not
