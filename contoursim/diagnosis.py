@@ -1515,7 +1515,7 @@ def _look_alikes(problem, best, cands, both_ways):
 
 
 def _choose(problem, cands, both_ways):
-    """The candidate to name among `cands` (sorted best first), and the ambiguity to report (or ``None``).
+    """The candidate to name among `cands` (sorted best first), and the ambiguities to report (a list of sentences).
 
     The best, unless it is a delay of an axis's position-loop reading that
     the trace does not tell from a gain mismatch of that axis
@@ -1524,7 +1524,9 @@ def _choose(problem, cands, both_ways):
     it from its twins (:func:`_look_alikes`) and only a twin's size lies within the
     catalogue's typical range (the best ranked such twin is named): what the
     trace cannot decide, the typical sizes of machines may. Either way the
-    pair is reported, with the test that would separate them.
+    pair is reported, with the test that would separate them; so is every
+    other twin of the best (a gain of one axis, the opposite gain of the
+    other and a squareness may all fit a one-way circle alike).
     """
     best = cands[0]
     pair = _first_order_twin(problem, best, cands)
@@ -1532,16 +1534,16 @@ def _choose(problem, cands, both_ways):
         return _first_order_said(problem, *pair, both_ways)
     twins = _look_alikes(problem, best, cands, both_ways)
     if not twins:
-        return _first_order_said(problem, *pair, both_ways) if pair is not None else (best, None)
+        return _first_order_said(problem, *pair, both_ways) if pair is not None else (best, [])
     typical = [(c, why) for c, why in twins if _typical(c.fit)]
     swap = not _typical(best.fit) and bool(typical)
     twin, reason = typical[0] if swap else twins[0]
-    if swap:
-        best, twin = twin, best
-    return best, (f"{best.fit.label}{_options(best.fit)} ({_size(best.fit)}) and {twin.fit.label}{_options(twin.fit)} "
-                  f"({_size(twin.fit)}): {reason}; "
-                  + ("the first is named, its size typical and the second's not; " if swap else "")
-                  + f"to separate them: {_separating_test(best.fit, twin.fit, both_ways)}")
+    named = twin if swap else best
+    pairs = [(named, best if swap else twin, reason, swap)] + [(best, c, why, False) for c, why in twins if c is not twin]
+    return named, [
+        f"{a.fit.label}{_options(a.fit)} ({_size(a.fit)}) and {b.fit.label}{_options(b.fit)} ({_size(b.fit)}): {why}; "
+        + ("the first is named, its size typical and the second's not; " if swapped else "")
+        + f"to separate them: {_separating_test(a.fit, b.fit, both_ways)}" for a, b, why, swapped in pairs]
 
 
 def _first_order_twin(problem, best, cands):
@@ -1577,13 +1579,14 @@ def _partner(cand, cands):
 
 
 def _first_order_said(problem, gain, delay, both_ways):
-    """The gain named over the delay it is to first order (:func:`_first_order_twin`), and the pair said."""
+    """The gain named over the delay it is to first order (:func:`_first_order_twin`), and the pair said (one sentence
+    in a list, as :func:`_choose` gives them)."""
     share = (gain.cost - delay.cost) / max(gain.cost - problem.n, 1e-300)
-    return gain, (f"{gain.fit.label} ({_size(gain.fit)}) and {delay.fit.label}{_options(delay.fit)} ({_size(delay.fit)}): "
+    return gain, [(f"{gain.fit.label} ({_size(gain.fit)}) and {delay.fit.label}{_options(delay.fit)} ({_size(delay.fit)}): "
                   f"the trace does not tell the delay from the gain it is to first order (ΔBIC {delay.delta_bic:.0f} "
                   f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
                   f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
-                  f"to separate them: {_separating_test(gain.fit, delay.fit, both_ways)}")
+                  f"to separate them: {_separating_test(gain.fit, delay.fit, both_ways)}")]
 
 
 def _typical(effect):
@@ -1814,7 +1817,7 @@ def _diagnose(trace, model, identified, max_effects, say):
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
             say("nothing significant left: stopping")
             break
-        best, ambiguity = _choose(problem, cands, both_ways)
+        best, ambiguities = _choose(problem, cands, both_ways)
         gap = (trace.actual - problem.fitted())[scored]  # what the base leaves, per axis [mm]
         try:
             if best.settled is None:
@@ -1849,8 +1852,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                             f"named from {GAP_SHARE:.0%})")
             problem.set_base(base)
             break
-        if ambiguity is not None:
-            warnings.append(ambiguity)
+        warnings += ambiguities
         undetermined = _size_undetermined(best, share)
         if undetermined is not None:
             warnings.append(undetermined)

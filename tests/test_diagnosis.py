@@ -232,19 +232,29 @@ def test_twins_the_trace_cannot_tell_apart_are_said_and_the_one_of_typical_size_
     square = Effect("squareness", "xy", angle_urad=-198.0)
     bow = Effect("straightness", "y", peak_um=-37.7, span_mm=400.0, error_direction="x")  # 2.5 times the typical 15 µm
     gain = Effect("gain_mismatch", "x", kp_ratio=1.04)
-    named, said = _choose(problem, [fitted(bow, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=True)
-    assert named.fit is square and "the first is named, its size typical" in said and "placed elsewhere in the travel" in said
-    named, said = _choose(problem, [fitted(bow.with_values(peak_um=-10.0), 10.0, 500.0), fitted(square, 12.0, 480.0)], True)
-    assert named.fit.name == "straightness" and "the first is named" not in said  # both typical: the better fit
-    named, said = _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=False)
-    assert named.fit is square and "one way only" in said and "run the circle in the other direction" in said
-    assert _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=True) == (named, None)
-    assert _choose(problem, [fitted(square, 10.0, 500.0), fitted(gain, 40.0, 400.0)], both_ways=False)[1] is None
-    late = Effect("time_delay", "x", delay_s=6e-4, kind="position")  # to first order a gain: the same oval
-    named, said = _choose(problem, [fitted(late, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=False)
-    assert named.fit is late and "one way only" in said and "squareness.xy" in said
-    assert _choose(problem, [fitted(late, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=True) == (named, None)
 
+    def choose(cands, both_ways):
+        named, said = _choose(problem, cands, both_ways)
+        return named, " | ".join(said)
+
+    named, said = choose([fitted(bow, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=True)
+    assert named.fit is square and "the first is named, its size typical" in said and "placed elsewhere in the travel" in said
+    named, said = choose([fitted(bow.with_values(peak_um=-10.0), 10.0, 500.0), fitted(square, 12.0, 480.0)], True)
+    assert named.fit.name == "straightness" and "the first is named" not in said  # both typical: the better fit
+    named, said = choose([fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=False)
+    assert named.fit is square and "one way only" in said and "run the circle in the other direction" in said
+    assert choose([fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=True) == (named, "")
+    assert choose([fitted(square, 10.0, 500.0), fitted(gain, 40.0, 400.0)], both_ways=False)[1] == ""
+    late = Effect("time_delay", "x", delay_s=6e-4, kind="position")  # to first order a gain: the same oval
+    named, said = choose([fitted(late, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=False)
+    assert named.fit is late and "one way only" in said and "squareness.xy" in said
+    assert choose([fitted(late, 10.0, 500.0), fitted(square, 12.0, 480.0)], both_ways=True) == (named, "")
+    # every twin is said, not only the first: a gain of Y, the opposite one of X and a squareness on a one-way circle
+    opposite = Effect("gain_mismatch", "y", kp_ratio=1 / 1.04)
+    named, said = _choose(problem, [fitted(gain, 10.0, 500.0), fitted(opposite, 10.1, 499.0), fitted(square, 11.0, 480.0)],
+                          both_ways=False)
+    assert named.fit is gain and len(said) == 2
+    assert "gain_mismatch.y" in said[0] and "squareness.xy" in said[1] and "one way only" in said[1]
 
 
 @pytest.mark.parametrize("hidden", [Effect("gain_mismatch", "y", kp_ratio=0.976), Effect("time_delay", "y", delay_s=6e-4)],
@@ -278,18 +288,18 @@ def test_a_gain_mismatch_and_a_delay_the_trace_cannot_tell_apart_are_said_with_t
     problem = SimpleNamespace(base_residual=np.ones(100), n=100)
     gain, delay = Effect("gain_mismatch", "y", kp_ratio=1.016), Effect("time_delay", "y", delay_s=5e-4, kind=kind)
     cands = [_Candidate(e, (), [], cost=c, fit=e, delta_bic=b) for e, c, b in ((gain, 3.0, 900.0), (delay, 3.1, 895.0))]
-    named, said = _choose(problem, cands, both_ways=False)
+    named, (said,) = _choose(problem, cands, both_ways=False)
     assert named.fit is gain and "time_delay.y" in said and "almost equally" in said
     assert test in said
     # the delay a hair ahead: a command or feedback delay is named; a position-loop delay yields to the gain it is to
     # first order (its own mark, of second order, the trace did not resolve)
-    named, said = _choose(problem, cands[::-1], both_ways=False)
+    named, (said,) = _choose(problem, cands[::-1], both_ways=False)
     assert (named.fit is gain) == (kind == "position") and test in said
     assert ("the gain is named" in said) == (kind == "position")
     cands[1].delta_bic = 900.0 - 2 * SIGNIFICANT  # told apart by the trace: nothing to say; but a position-loop
     # delay that leaves no more above the noise floor than the gain is the gain's first-order twin still
     named, said = _choose(problem, cands, both_ways=False)
-    assert named is cands[0] and (said is None) == (kind != "position")
+    assert named is cands[0] and (said == []) == (kind != "position")
 
 
 def test_a_position_loop_delay_is_named_only_where_the_trace_tells_it_from_the_gain_it_is_to_first_order():
@@ -308,15 +318,15 @@ def test_a_position_loop_delay_is_named_only_where_the_trace_tells_it_from_the_g
         return _choose(problem, sorted(cands, key=lambda c: -c.delta_bic), both_ways=True)
 
     named, said = choose(300.0, 800.0)  # the gain leaves 200 above the floor, the delay closes 190 of it
-    assert named.fit is delay and said is None
-    named, said = choose(112.0, 1000.0 - 3 * SIGNIFICANT)  # significant, but 2 of the 12 the gain leaves
+    assert named.fit is delay and said == []
+    named, (said,) = choose(112.0, 1000.0 - 3 * SIGNIFICANT)  # significant, but 2 of the 12 the gain leaves
     assert named.fit is gain and "the delay closing 17% of what the gain leaves" in said and f"from {GAP_SHARE:.0%}" in said
     assert "time_delay.x (kind = position) (delay_s = 0.0008)" in said and "a position step" in said
     assert choose(300.0, 1000.0 - SIGNIFICANT / 2)[0].fit is gain  # not significant
     assert choose(90.0, 800.0, delay_cost=80.0)[0].fit is gain  # the gain at the noise floor already
     command = delay.with_values(kind="command")  # a command delay is no gain to first order: the ΔBIC decides
     cands = [_Candidate(e, (), [], cost=c, fit=e, delta_bic=b) for e, c, b in ((command, 110.0, 1000.0), (gain, 112.0, 900.0))]
-    assert _choose(problem, cands, both_ways=True) == (cands[0], None)
+    assert _choose(problem, cands, both_ways=True) == (cands[0], [])
 
 
 def test_a_gain_named_over_a_position_loop_delay_that_fits_as_well_says_the_delay():
@@ -338,12 +348,12 @@ def test_a_gain_named_over_a_position_loop_delay_that_fits_as_well_says_the_dela
         return _choose(problem, cands, both_ways=False)
 
     late = Effect("time_delay", "x", delay_s=7.6e-4, kind="position")
-    named, said = choose(late, 160.0)  # the gain closes 10 of the 60 the delay leaves
+    named, (said,) = choose(late, 160.0)  # the gain closes 10 of the 60 the delay leaves
     assert named.fit is gain and said.startswith("gain_mismatch.x (kp_ratio = 1.024) and time_delay.x (kind = position)")
     assert "the trace does not tell the delay from the gain it is to first order" in said and "a position step" in said
-    assert choose(late, 400.0)[1] is None  # 250 of 300: told apart
-    assert choose(late.with_values(kind="command"), 160.0)[1] is None
-    assert choose(Effect("time_delay", "y", delay_s=7.6e-4, kind="position"), 160.0)[1] is None
+    assert choose(late, 400.0)[1] == []  # 250 of 300: told apart
+    assert choose(late.with_values(kind="command"), 160.0)[1] == []
+    assert choose(Effect("time_delay", "y", delay_s=7.6e-4, kind="position"), 160.0)[1] == []
 
 
 def test_a_delay_of_the_position_loop_alone_is_a_gain_to_first_order_and_said_to_be(machine):
