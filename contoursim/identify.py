@@ -205,9 +205,8 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
         """The whitened residual of simulated positions `y`, each axis's mean taken out (the trace's zero is not the
         loop's: an instrument's zero or a geometric error at the path's place offsets it); NaN where the loop
         diverged (or all but: beyond :data:`_DIVERGED` tracking errors, a residual whose square overflows)."""
-        r = measured - y
-        r = ((r - r.mean(axis=0)) / scale).ravel()
-        return r if np.all(np.abs(r) < _DIVERGED) else np.full(r.size, np.nan)
+        r = (measured - y) / scale
+        return (r - r.mean(axis=0)).ravel() if np.all(np.abs(r) < _DIVERGED) else np.full(r.size, np.nan)
 
     def jac(x, free, structure):
         steps = {j: _FD_STEP * (1 if x[j] + _FD_STEP <= upper[j] else -1) for j in np.flatnonzero(free)}
