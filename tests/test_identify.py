@@ -74,8 +74,8 @@ def test_an_offset_of_the_measured_positions_changes_nothing_identified():
     trace = own_trace(vff=0.6)
     offset = replace(trace, actual=trace.actual + np.array([0.05, -0.12]))
     moved, identified = identify_machine(offset), identify_machine(trace)
+    assert structure(moved) == structure(identified)
     for axis, servo in identified.axes.items():
-        assert structure(moved) == structure(identified)
         for name in ("kp", "vff", "kv", "ti", "damping"):
             assert getattr(moved.axes[axis], name) == pytest.approx(getattr(servo, name), rel=1e-6), (axis, name)
 
