@@ -771,7 +771,10 @@ def _spatial_period(q, r):
     The Lomb–Scargle periodogram of `r` over `q` (unevenly sampled: the axis
     moves back and forth, dwells and crosses its stroke at varying speed),
     from one period over the stroke to 200 (and none shorter than 0.5 mm),
-    four frequencies per resolution step ``1/stroke``, the peak then refined
+    four frequencies per resolution step ``1/stroke``, scanned on the
+    samples' means over bins of a sixteenth of the shortest period, weighted
+    by their counts (a peak attenuated by under 1 %, at a seventh of the
+    samples' cost on a 30 s trace), the peak then refined on the samples
     on a grid of a hundredth of a cycle over the stroke and between its lines
     (a phase drift of a few degrees from one end to the other: the
     sinusoid's amplitude and phase then mean what they say, a start the fit
@@ -781,7 +784,11 @@ def _spatial_period(q, r):
     if travel <= 1.0:
         return None, 0.0, 0.0, 0.0
     cycles = np.arange(1.0, min(200.0, 2.0 * travel) + 1e-9, 0.25)  # periods over the stroke
-    power = lombscargle(q, r, 2 * np.pi * cycles / travel, floating_mean=True)
+    bins = np.minimum(((q - q.min()) * (16.0 * cycles[-1] / travel)).astype(int), int(16.0 * cycles[-1]) - 1)
+    counts = np.bincount(bins)
+    held = counts > 0
+    means = [np.bincount(bins, v)[held] / counts[held] for v in (q, r)]
+    power = lombscargle(*means, 2 * np.pi * cycles / travel, floating_mean=True, weights=counts[held].astype(float))
     fine = cycles[np.argmax(power)] + np.linspace(-0.25, 0.25, 51)
     fine = fine[fine >= 1.0]
     power = lombscargle(q, r, 2 * np.pi * fine / travel, floating_mean=True)
