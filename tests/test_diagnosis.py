@@ -987,6 +987,24 @@ def test_the_spatial_period_and_its_sinusoid_are_found_over_a_stroke_run_back_an
     assert share > 0.9
 
 
+@settings(max_examples=60, deadline=None)
+@given(stroke=st.floats(2.0, 400.0), seed=st.integers(0, 2**16), drift=st.floats(0.0, 1.0))
+def test_the_spatial_period_lies_within_the_search_s_reach_whatever_the_residual(stroke, seed, drift):
+    """White noise, with or without a drift, over positions run back and forth: no sinusoid is there, and the period
+    found (any) lies within the search's reach, one to 200 periods over the stroke (a fine scan's peak at its grid's
+    edge was interpolated with a parabola it did not top: a period of −1288 mm on an independent trace)."""
+    from contoursim.diagnosis import _spatial_period
+
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, 1.0, 4000)
+    q = stroke * (0.5 - 0.5 * np.cos(2 * np.pi * (2 * s + 0.2 * s**2)))
+    r = rng.normal(0.0, 1.0, q.size) + drift * s
+    found, share, _, _ = _spatial_period(q, r)
+    travel = np.ptp(q)
+    assert travel / 200.3 <= found <= travel * 1.005, found
+    assert 0.0 <= share <= 1.0
+
+
 def test_a_cyclic_error_is_fitted_from_the_sinusoid_the_residual_shows(independent_truth, tmp_path):
     """An independent two-mass pair with a 4.79 µm cyclic error of 5 mm period on x: the period found from the
     residual was 0.5 % short (a quarter of a cycle over the stroke), the fit's finite differences stepped the period
