@@ -2217,7 +2217,7 @@ def plot_magnified(diagnosis, ax=None):
     """
     import matplotlib.pyplot as plt
 
-    from .plotting import _drawn_curve, envelope_indices, magnification_for
+    from .plotting import _drawing_size, _drawn_curve, envelope_indices, magnification_for
 
     trace, keep = diagnosis.trace, diagnosis.scored
     ax = ax or plt.figure(figsize=(7.0, 7.0), layout="constrained").add_subplot()
@@ -2240,7 +2240,7 @@ def plot_magnified(diagnosis, ax=None):
         runs = (("before: nominal model", _BEFORE, before - before.mean(axis=0)),
                 (after, _AFTER, diagnosis.residual_after[keep, :2]))
         normals = [(label, style, path_normal(ref, r)) for label, style, r in runs]
-        size = float(np.max(np.ptp(ref, axis=0)))
+        size = _drawing_size(ref)  # 1 mm for a reference that stands still (its drawing a point)
         k = magnification_for(size, max(float(np.percentile(np.abs(n), 99)) for *_, n in normals))
         tangent = np.gradient(ref, axis=0)
         tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)

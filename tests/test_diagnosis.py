@@ -602,6 +602,23 @@ def test_a_trace_that_never_moves_is_diagnosed_for_hunting_with_a_model_and_with
                for w in result.warnings)
 
 
+def test_the_magnified_residual_of_a_trace_that_never_moves_is_drawn_without_a_warning(machine):
+    """A reference that stands still has no extent: the drawing is a point in a 1 mm frame, as the simulation's
+    plots draw it (the magnification was computed from an extent of 0: 'invalid value encountered in divide')."""
+    import matplotlib.pyplot as plt
+
+    from contoursim.diagnosis import plot_magnified
+
+    t = np.arange(1500) * 1e-3
+    measured = np.random.default_rng(2).normal(0.0, 2e-4, (t.size, 2))
+    result = diagnose(Trace(t, np.zeros((t.size, 2)), measured, ("x", "y")), Model(machine), max_effects=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ax = plot_magnified(result)
+    assert np.all(np.isfinite(ax.get_lines()[1].get_xydata()))
+    plt.close(ax.figure)
+
+
 def test_a_trace_whose_time_column_is_in_milliseconds_is_said_to_be_too_slow_for_servo_dynamics(machine):
     """The first samples of a trace logged every 2.5 ms with t in ms read as seconds (no units line): sampled every
     2.5 "s", which no servo loop's dynamics survive; the report says so and points at the time unit."""
