@@ -773,8 +773,8 @@ def _spatial_period(q, r):
     from one period over the stroke to 200 (and none shorter than 0.5 mm),
     four frequencies per resolution step ``1/stroke``, scanned on the
     samples' means over bins of a sixteenth of the shortest period, weighted
-    by their counts (a peak attenuated by under 1 %, at a seventh of the
-    samples' cost on a 30 s trace), the peak then refined on the samples
+    by their counts (a peak attenuated by under 1 %; 2–3 times faster on
+    7,000–8,000 samples, 7 times on 30,000), the peak then refined on the samples
     on a grid of a hundredth of a cycle over the stroke and between its lines
     (a phase drift of a few degrees from one end to the other: the
     sinusoid's amplitude and phase then mean what they say, a start the fit
@@ -792,10 +792,13 @@ def _spatial_period(q, r):
     fine = cycles[np.argmax(power)] + np.linspace(-0.25, 0.25, 51)
     fine = fine[fine >= 1.0]
     power = lombscargle(q, r, 2 * np.pi * fine / travel, floating_mean=True)
-    k = int(np.clip(np.argmax(power), 1, fine.size - 2))
-    below, peak, above = power[k - 1 : k + 2]
-    bend = below - 2.0 * peak + above  # the peak's vertex between grid lines (a parabola through three)
-    period = travel / float(fine[k] + (0.5 * (below - above) / bend * (fine[1] - fine[0]) if bend < 0 else 0.0))
+    k = int(np.argmax(power))
+    vertex = 0.0  # the peak's vertex between grid lines (a parabola through three), where the peak has both
+    if 0 < k < fine.size - 1:
+        below, peak, above = power[k - 1 : k + 2]
+        bend = below - 2.0 * peak + above
+        vertex = 0.5 * (below - above) / bend if bend < 0 else 0.0
+    period = travel / float(fine[k] + vertex * (fine[1] - fine[0]))
     w = 2 * np.pi * q / period
     basis = np.column_stack([np.sin(w), np.cos(w)])
     (s, c) = coef = np.linalg.lstsq(basis, r, rcond=None)[0]
@@ -1409,7 +1412,8 @@ def _smoothed(x, jac, residuals, scale, lower, upper):
     wide = _WIDE_STEP * scale
     ends = [np.clip(x + sign * w * np.eye(x.size)[i], lower, upper) for i, w in enumerate(wide) for sign in (-1, 1)]
     values = residuals(ends)
-    secants = [(hi - lo) / (b[i] - a[i]) for i, (a, b, lo, hi) in enumerate(zip(ends[::2], ends[1::2], values[::2], values[1::2]))]
+    secants = [(hi - lo) / (b[i] - a[i])
+               for i, (a, b, lo, hi) in enumerate(zip(ends[::2], ends[1::2], values[::2], values[1::2]))]
     index = np.flatnonzero([np.linalg.norm(j[:, i] - c) > 2.0 * np.linalg.norm(c) for i, c in enumerate(secants)])
     if not index.size:
         return x, j, r
@@ -2213,7 +2217,7 @@ def plot_magnified(diagnosis, ax=None):
     """
     import matplotlib.pyplot as plt
 
-    from .plotting import _drawn_curve, envelope_indices, magnification_for
+    from .plotting import _drawing_size, _drawn_curve, envelope_indices, magnification_for
 
     trace, keep = diagnosis.trace, diagnosis.scored
     ax = ax or plt.figure(figsize=(7.0, 7.0), layout="constrained").add_subplot()
@@ -2236,7 +2240,7 @@ def plot_magnified(diagnosis, ax=None):
         runs = (("before: nominal model", _BEFORE, before - before.mean(axis=0)),
                 (after, _AFTER, diagnosis.residual_after[keep, :2]))
         normals = [(label, style, path_normal(ref, r)) for label, style, r in runs]
-        size = float(np.max(np.ptp(ref, axis=0)))
+        size = _drawing_size(ref)  # 1 mm for a reference that stands still (its drawing a point)
         k = magnification_for(size, max(float(np.percentile(np.abs(n), 99)) for *_, n in normals))
         tangent = np.gradient(ref, axis=0)
         tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)

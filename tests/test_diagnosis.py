@@ -602,6 +602,23 @@ def test_a_trace_that_never_moves_is_diagnosed_for_hunting_with_a_model_and_with
                for w in result.warnings)
 
 
+def test_the_magnified_residual_of_a_trace_that_never_moves_is_drawn_without_a_warning(machine):
+    """A reference that stands still has no extent: the drawing is a point in a 1 mm frame, as the simulation's
+    plots draw it (the magnification was computed from an extent of 0: 'invalid value encountered in divide')."""
+    import matplotlib.pyplot as plt
+
+    from contoursim.diagnosis import plot_magnified
+
+    t = np.arange(1500) * 1e-3
+    measured = np.random.default_rng(2).normal(0.0, 2e-4, (t.size, 2))
+    result = diagnose(Trace(t, np.zeros((t.size, 2)), measured, ("x", "y")), Model(machine), max_effects=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ax = plot_magnified(result)
+    assert np.all(np.isfinite(ax.get_lines()[1].get_xydata()))
+    plt.close(ax.figure)
+
+
 def test_a_trace_whose_time_column_is_in_milliseconds_is_said_to_be_too_slow_for_servo_dynamics(machine):
     """The first samples of a trace logged every 2.5 ms with t in ms read as seconds (no units line): sampled every
     2.5 "s", which no servo loop's dynamics survive; the report says so and points at the time unit."""
@@ -985,6 +1002,24 @@ def test_the_spatial_period_and_its_sinusoid_are_found_over_a_stroke_run_back_an
     middle = q.min() + np.ptp(q) / 2  # the phase where the stroke is (at q = 0 the period's error is levered)
     assert abs((ph + 360.0 * middle / found - phase - 360.0 * middle / period + 180.0) % 360.0 - 180.0) < 4.0
     assert share > 0.9
+
+
+@settings(max_examples=60, deadline=None)
+@given(stroke=st.floats(2.0, 400.0), seed=st.integers(0, 2**16), drift=st.floats(0.0, 1.0))
+def test_the_spatial_period_lies_within_the_search_s_reach_whatever_the_residual(stroke, seed, drift):
+    """White noise, with or without a drift, over positions run back and forth: no sinusoid is there, and the period
+    found (any) lies within the search's reach, one to 200 periods over the stroke (a fine scan's peak at its grid's
+    edge was interpolated with a parabola it did not top: a period of −1288 mm on an independent trace)."""
+    from contoursim.diagnosis import _spatial_period
+
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, 1.0, 4000)
+    q = stroke * (0.5 - 0.5 * np.cos(2 * np.pi * (2 * s + 0.2 * s**2)))
+    r = rng.normal(0.0, 1.0, q.size) + drift * s
+    found, share, _, _ = _spatial_period(q, r)
+    travel = np.ptp(q)
+    assert travel / 200.3 <= found <= travel * 1.005, found
+    assert 0.0 <= share <= 1.0
 
 
 def test_a_cyclic_error_is_fitted_from_the_sinusoid_the_residual_shows(independent_truth, tmp_path):
