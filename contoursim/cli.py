@@ -61,14 +61,14 @@ def _trajectory(model, path_file, job=None, direction=None):
     """
     from .feed import sample
     from .model import as_model
-    from .pathfile import library_file, read_feed_table, read_path_file
+    from .pathfile import library_file, override_feed, read_path_file
     from .simulation import default_settle
 
-    read = read_path_file(path_file, direction)
-    settings, source = read.feed, library_file(path_file)
+    read, source = read_path_file(path_file, direction), library_file(path_file)
     if job is not None and "feed" in job.data:
-        settings = read_feed_table(job, base=read.feed)
+        read = override_feed(read, job)
         source = job.source if "feed_mm_min" in job.data["feed"] else source
+    settings = read.feed
     machine = as_model(model).machine
     try:
         # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
@@ -78,6 +78,17 @@ def _trajectory(model, path_file, job=None, direction=None):
         raise
     except ValueError as exc:  # a feed above the machine's max feed, a run too large for the memory: naming the file
         raise ConfigError(str(exc), str(source)) from None
+
+
+def _feed_override(job, path_file):
+    """The line saying that a job's feed overrides a G-code program's F words; None where it does not apply."""
+    from .gcode import SUFFIXES
+    from .pathfile import library_file
+
+    if job is None or "feed_mm_min" not in job.data.get("feed", {}) or library_file(path_file).suffix.lower() not in SUFFIXES:
+        return None
+    return (f"feed: {job.data['feed']['feed_mm_min']:g} mm/min from {Path(job.source).name}'s [feed], overriding the "
+            "program's F words on every cutting block (G1/G2/G3); the rapids (G0) keep the rapid feed.")
 
 
 def _check_memory(samples, dt, path_file, runs, advice):
@@ -295,6 +306,8 @@ def simulate_command(args):
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     if blocks:
         print(f"G-code: {DIALECT}.")
+        if _feed_override(job, path_file):
+            print(_feed_override(job, path_file))
         print("Errors over the cutting moves (G1/G2/G3: the CSV's measuring = 1 rows); the rapids (G0, rapid = 1) "
               "are not scored.")
     print(_table(rows))
@@ -417,6 +430,8 @@ def compare_command(args):
             stream.write(comparison.to_json() + "\n")
     machine = comparison.runs[names[0]].machine
     print(f"contoursim compare — machine: {machine.name}, path: {Path(path_file).name}; errors over the test proper")
+    if _feed_override(job, path_file):
+        print(_feed_override(job, path_file))
     print(comparison.table())
     if report is not None:
         print(f"\ncomparison written to {report}")

@@ -725,6 +725,24 @@ def test_post_processor_programs_score_their_cutting_moves(tmp_path, capsys, nam
     assert tracking[data["rapid"] == 1].max(initial=0.0) > 2.0 if rapids else tracking.max() < 1.0
 
 
+def test_a_jobs_feed_overrides_the_programs_f_words_and_every_output_says_the_feed_that_ran(tmp_path, capsys):
+    """A job's feed_mm_min on a G-code program is a feed override of its cutting blocks: the rapids keep the rapid feed,
+    the block listing gives the feed that ran (it gave the F words while the job's feed ran), the table says so."""
+    (tmp_path / "p.nc").write_text("G21 G90 G17\nG1 X10 F600\nG0 X70\nG1 Y10 F1200\nG2 X60 Y10 I-5 J0\nM30\n")
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "p.nc"\n[feed]\nfeed_mm_min = 300\n')
+    for command in ("simulate", "compare"):
+        assert main([command, str(tmp_path / "job.toml"), "--out", str(tmp_path / command)]) == 0
+        assert ("feed: 300 mm/min from job.toml's [feed], overriding the program's F words on every cutting block"
+                in capsys.readouterr().out)
+    blocks = _blocks_csv(tmp_path / "simulate" / "p_blocks.csv")
+    assert {(b["rapid"], b["feed_mm_min"]) for b in blocks} == {("0", "300"), ("1", "10000")}
+    lines = [line for line in (tmp_path / "simulate" / "p.csv").read_text().splitlines() if not line.startswith("#")]
+    data = np.genfromtxt(lines, delimiter=",", names=True)
+    speed = np.r_[0.0, np.hypot(np.diff(data["x_ref"]), np.diff(data["y_ref"])) / np.diff(data["t"])]
+    assert speed[data["measuring"] == 1].max() == pytest.approx(300 / 60, abs=0.02)  # positions to the nm, dt 0.2 ms
+    assert speed[data["rapid"] == 1].max() == pytest.approx(10000 / 60, rel=1e-3)
+
+
 def test_compare_runs_a_job_with_geometric_compensation(tmp_path, capsys):
     """The README's own job (examples/iso_circle_on_mill.toml): its geometric compensation is one more strategy."""
     import json
