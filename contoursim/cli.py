@@ -763,10 +763,17 @@ def run():
       process instead (as mypy does). When the reader of its output has
       gone (``contoursim demo | head``), it ends there with status 1
       and no traceback; the files completed by then are kept.
+    - A terminal or pipe whose encoding cannot show a character the
+      program prints (µ, —, ζ under ``PYTHONIOENCODING=ascii`` or a C
+      locale without UTF-8 mode) shows its escape (``\\xb5``) instead
+      of failing once the work is done.
 
     :func:`main` itself leaves the process as it is, for callers in Python.
     """
     gc.set_threshold(10_000, 10, 10)
+    for stream in (sys.stdout, sys.stderr):
+        if stream is not None:
+            stream.reconfigure(errors="backslashreplace")
     try:
         code = main(compile_notice=True)
         for stream in (sys.stdout, sys.stderr):

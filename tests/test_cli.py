@@ -379,6 +379,12 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
                              str(tmp_path / "out4")], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             preexec_fn=lambda: os.close(1), timeout=300)  # started without a stdout
     assert closed.returncode == 0 and closed.stderr == b"" and (tmp_path / "out4" / "small.csv").exists()
+    # a terminal that cannot show µ or — (an ASCII or C locale): their escapes, not an error after the work
+    ascii_env = {**env, "PYTHONIOENCODING": "ascii"}
+    plain = subprocess.run([sys.executable, "-m", "contoursim", "simulate", str(tmp_path / "small.toml"), "--out",
+                            str(tmp_path / "out5")], cwd=cwd, env=ascii_env, capture_output=True, timeout=300)
+    assert plain.returncode == 0 and not _but_compiling(plain.stderr.decode("ascii"))
+    assert plain.stdout.decode("ascii").startswith("contoursim simulate \\u2014 machine: ")
     assert read_trace(tmp_path / "out" / "small.csv").axes == ("x", "y")
     imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
                               capture_output=True, text=True, timeout=60)
