@@ -9,8 +9,11 @@ import dataclasses
 import gzip
 import io
 import os
+import subprocess
+import sys
 import threading
 import tracemalloc
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -807,3 +810,17 @@ def test_references_and_parameters_of_any_numeric_type_run_in_float64(api, cast)
     for batch in (False, True):
         ran = run(one, cast, batch)
         assert ran.dtype == np.float64 and np.array_equal(ran, expected[: len(ran)])
+
+
+def test_a_file_name_of_bytes_that_are_not_utf8_runs_and_runs_again_into_its_folder(tmp_path):
+    """A program named in Latin-1 (p\\xff.nc, from a Windows share): simulate failed on the trace CSV's '# path:' line
+    ('utf-8' codec can't encode character '\\udcff'), the marker's record of p\\xff.csv and the plots' titles."""
+    program = os.fsdecode(os.fsencode(tmp_path) + b"/p\xff.nc")
+    Path(program).write_text("G21 G90 G17\nG1 X10 F600\nG1 Y10\nM30\n")
+    for _ in range(2):  # the second run reads the folder's record of the first; printed as the program prints it
+        done = subprocess.run([sys.executable, "-m", "contoursim", "simulate", os.fsencode(program), "--out",
+                               str(tmp_path / "out")], cwd=ROOT, capture_output=True, timeout=300)
+        assert done.returncode == 0 and b"path: p\\udcff.nc" in done.stdout, done.stderr
+    assert {b"p\xff.csv", b"p\xff_blocks.csv", b"p\xff_path.png"} <= set(os.listdir(os.fsencode(tmp_path / "out")))
+    trace = read_trace(os.fsdecode(os.fsencode(tmp_path) + b"/out/p\xff.csv"))
+    assert trace.metadata["path"] == "p\\udcff.nc" and trace.axes == ("x", "y")
