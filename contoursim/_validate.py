@@ -11,7 +11,7 @@ inside numpy. Readers of files turn both into a
 
 import numpy as np
 
-__all__ = ["as_xyz", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative", "float_array",
+__all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative", "float_array",
            "finite_array", "shown", "time_base", "TimeStepError"]
 
 #: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
@@ -222,6 +222,31 @@ def flag(name, value):
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be True or False, got {value!r}")
     return bool(value)
+
+
+def closest(word, known):
+    """``" (did you mean 'kp_per_s'?)"`` for a misspelt `word` among the names `known`; ``""`` when none is close.
+
+    Parameters
+    ----------
+    word : object
+        The name given (text; anything else matches nothing).
+    known : iterable of str
+        The names there are.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> closest("kp_per_sec", ["kv_A_s_per_m", "kp_per_s", "ti_s"])
+    " (did you mean 'kp_per_s'?)"
+    """
+    import difflib
+
+    match = difflib.get_close_matches(word, list(known), n=1, cutoff=0.75) if isinstance(word, str) else []
+    return f" (did you mean {match[0]!r}?)" if match else ""
 
 
 def float_dtype(name, value):

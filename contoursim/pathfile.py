@@ -96,7 +96,9 @@ def library_file(name):
         if library.joinpath(candidate).is_file():
             return library / candidate
     known = sorted(p.name for p in library.iterdir() if p.suffix.lower() in (".toml", *SUFFIXES))
-    raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library ({', '.join(known)})")
+    meant = _validate.closest(str(name), [*known, *(_FilePath(k).stem for k in known)])
+    raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library{meant}; the library: "
+                      f"{', '.join(known)}")
 
 
 @dataclass(frozen=True)

@@ -824,3 +824,22 @@ def test_a_file_name_of_bytes_that_are_not_utf8_runs_and_runs_again_into_its_fol
     assert {b"p\xff.csv", b"p\xff_blocks.csv", b"p\xff_path.png"} <= set(os.listdir(os.fsencode(tmp_path / "out")))
     trace = read_trace(os.fsdecode(os.fsencode(tmp_path) + b"/out/p\xff.csv"))
     assert trace.metadata["path"] == "p\\udcff.nc" and trace.axes == ("x", "y")
+
+
+@pytest.mark.parametrize("files, argv, meant", [
+    ({"m.toml": MACHINE.format(mass=300.0).replace("kp_per_s", "kp_per_sec", 1)}, ["rounded_square", "--machine", "{d}/m.toml"],
+     "(did you mean 'kp_per_s'?)"),
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[feed]\nfeed_mm_minute = 300\n'}, ["{d}/j.toml"],
+     "(did you mean 'feed_mm_min'?)"),
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlsh"\naxis = "x"\n'},
+     ["{d}/j.toml"], "(did you mean 'backlash'?)"),
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlash"\naxis = "x"\n'
+                "lost_motion = 3\n"}, ["{d}/j.toml"], "(did you mean 'lost_motion_um'?)"),
+    ({}, ["rounded_square", "--machine", "demo_mil"], "(did you mean 'demo_mill'?)"),
+    ({}, ["rounded_sqare"], "(did you mean 'rounded_square'?)"),
+])
+def test_a_misspelt_name_is_refused_suggesting_the_name_meant(tmp_path, capsys, files, argv, meant):
+    """A typo among 24 axis keys, 12 effects or the presets was refused listing them all, the one meant not said."""
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    _refused(capsys, ["simulate", *(a.format(d=tmp_path) for a in argv), "--out", str(tmp_path / "out")], meant)
