@@ -183,7 +183,8 @@ def _path(toml, direction=None):
     """The :class:`~contoursim.paths.Path` described by the ``[path]`` table (in `direction` when given)."""
     kind = toml.table("path", required=("type",))["type"]
     if not isinstance(kind, str) or kind not in _PATHS:
-        raise toml.error(f"[path] type must be one of {', '.join(sorted(_PATHS))}, got {kind!r}", "path", "type")
+        raise toml.error(f"[path] type must be one of {', '.join(sorted(_PATHS))}, got {kind!r}"
+                         f"{_validate.closest(kind, _PATHS)}", "path", "type")
     build, arguments, required = _PATHS[kind]
     spec = toml.table("path", allowed=("type", *arguments), required=required)
     if direction is not None:

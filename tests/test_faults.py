@@ -827,19 +827,24 @@ def test_a_file_name_of_bytes_that_are_not_utf8_runs_and_runs_again_into_its_fol
 
 
 @pytest.mark.parametrize("files, argv, meant", [
-    ({"m.toml": MACHINE.format(mass=300.0).replace("kp_per_s", "kp_per_sec", 1)}, ["rounded_square", "--machine", "{d}/m.toml"],
+    ({"m.toml": MACHINE.format(mass=300.0).replace("kp_per_s", "kp_per_sec", 1)}, ["simulate", "rounded_square", "--machine", "{d}/m.toml"],
      "(did you mean 'kp_per_s'?)"),
-    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[feed]\nfeed_mm_minute = 300\n'}, ["{d}/j.toml"],
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[feed]\nfeed_mm_minute = 300\n'}, ["simulate", "{d}/j.toml"],
      "(did you mean 'feed_mm_min'?)"),
     ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlsh"\naxis = "x"\n'},
-     ["{d}/j.toml"], "(did you mean 'backlash'?)"),
+     ["simulate", "{d}/j.toml"], "(did you mean 'backlash'?)"),
     ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlash"\naxis = "x"\n'
-                "lost_motion = 3\n"}, ["{d}/j.toml"], "(did you mean 'lost_motion_um'?)"),
-    ({}, ["rounded_square", "--machine", "demo_mil"], "(did you mean 'demo_mill'?)"),
-    ({}, ["rounded_sqare"], "(did you mean 'rounded_square'?)"),
+                "lost_motion = 3\n"}, ["simulate", "{d}/j.toml"], "(did you mean 'lost_motion_um'?)"),
+    ({}, ["simulate", "rounded_square", "--machine", "demo_mil"], "(did you mean 'demo_mill'?)"),
+    ({}, ["simulate", "rounded_sqare"], "(did you mean 'rounded_square'?)"),
+    ({"s.toml": SMALL_PATH.replace('"iso230_4_circle"', '"iso230_4_circl"')}, ["simulate", "{d}/s.toml"],
+     "(did you mean 'iso230_4_circle'?)"),
+    ({"w.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[sweep]\nmethod = "grid"\n[[vary]]\n'
+                'name = "axes.x.kp_per_sec"\nvalues = [30, 40]\n'}, ["sweep", "{d}/w.toml"], "(did you mean 'kp_per_s'?)"),
+    ({}, ["compare", "rounded_square", "--strategies", "none,ccc_arcc"], "(did you mean 'ccc_arc'?)"),
 ])
 def test_a_misspelt_name_is_refused_suggesting_the_name_meant(tmp_path, capsys, files, argv, meant):
     """A typo among 24 axis keys, 12 effects or the presets was refused listing them all, the one meant not said."""
     for name, text in files.items():
         (tmp_path / name).write_text(text)
-    _refused(capsys, ["simulate", *(a.format(d=tmp_path) for a in argv), "--out", str(tmp_path / "out")], meant)
+    _refused(capsys, [*(a.format(d=tmp_path) for a in argv), "--out", str(tmp_path / "out")], meant)
