@@ -762,7 +762,9 @@ def run():
       ``contoursim demo``. The program flushes its output and ends the
       process instead (as mypy does). When the reader of its output has
       gone (``contoursim demo | head``), it ends there with status 1
-      and no traceback; the files completed by then are kept.
+      and no traceback; the files completed by then are kept. When
+      its output cannot be written (to a file on a full disk), it says
+      so in a line and ends with status 2.
     - A terminal or pipe whose encoding cannot show a character the
       program prints (µ, —, ζ under ``PYTHONIOENCODING=ascii`` or a C
       locale without UTF-8 mode) shows its escape (``\\xb5``) instead
@@ -781,6 +783,10 @@ def run():
                 stream.flush()
     except BrokenPipeError:  # the reader of the output is gone (contoursim demo | head): no traceback
         code = 1
+    except OSError as exc:  # the table to a file on a full disk (contoursim demo > log.txt): said, not a traceback
+        print(f"contoursim: error: cannot write to standard output: {exc.strerror}; the files written are complete",
+              file=sys.stderr, flush=True)
+        code = 2
     os._exit(code)
 
 

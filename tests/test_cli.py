@@ -379,6 +379,14 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
                              str(tmp_path / "out4")], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             preexec_fn=lambda: os.close(1), timeout=300)  # started without a stdout
     assert closed.returncode == 0 and closed.stderr == b"" and (tmp_path / "out4" / "small.csv").exists()
+    if os.path.exists("/dev/full"):  # the table to a file on a full disk, buffered as a user's is: said, no traceback
+        with open("/dev/full", "w") as full:
+            lost = subprocess.run([sys.executable, "-m", "contoursim", "simulate", str(tmp_path / "small.toml"), "--out",
+                                   str(tmp_path / "out6")], cwd=cwd, env=env, stdout=full, stderr=subprocess.PIPE,
+                                  timeout=300)  # fmt: skip
+        assert lost.returncode == 2 and (tmp_path / "out6" / "small.csv").exists()
+        assert _but_compiling(lost.stderr.decode()) == ["contoursim: error: cannot write to standard output: No space "
+                                                        "left on device; the files written are complete"]
     # a terminal that cannot show µ or — (an ASCII or C locale): their escapes, not an error after the work
     ascii_env = {**env, "PYTHONIOENCODING": "ascii"}
     plain = subprocess.run([sys.executable, "-m", "contoursim", "simulate", str(tmp_path / "small.toml"), "--out",
