@@ -784,8 +784,9 @@ def run():
     except BrokenPipeError:  # the reader of the output is gone (contoursim demo | head): no traceback
         code = 1
     except OSError as exc:  # the table to a file on a full disk (contoursim demo > log.txt): said, not a traceback
-        print(f"contoursim: error: cannot write to standard output: {exc.strerror}; the files written are complete",
-              file=sys.stderr, flush=True)
+        if code == 0:  # else the command has said its error (the same one, from a write on the way)
+            print(f"contoursim: error: cannot write to standard output: {exc.strerror}; the files written are "
+                  "complete", file=sys.stderr, flush=True)
         code = 2
     os._exit(code)
 
