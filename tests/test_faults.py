@@ -848,3 +848,13 @@ def test_a_misspelt_name_is_refused_suggesting_the_name_meant(tmp_path, capsys, 
     for name, text in files.items():
         (tmp_path / name).write_text(text)
     _refused(capsys, [*(a.format(d=tmp_path) for a in argv), "--out", str(tmp_path / "out")], meant)
+
+
+@pytest.mark.parametrize("where", [3, 6])  # mid-way, last
+def test_a_comment_among_a_traces_rows_is_said_to_be_one(tmp_path, where):
+    """A log closed by '# end of log' (or a remark mid-way) was refused as 'expected 3 cells (as in the header), found 1'."""
+    rows = [f"{k * 1e-3:.3f},{k * 0.01:.3f},{k * 0.01:.3f}" for k in range(4)]
+    rows.insert(where - 2, "# end of log")
+    (tmp_path / "t.csv").write_text("t,x_ref,x\n" + "\n".join(rows) + "\n")
+    with pytest.raises(TraceFormatError, match=rf"t.csv, line {where}: a comment among the data rows: comment lines "):
+        read_trace(tmp_path / "t.csv")
