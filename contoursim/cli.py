@@ -212,6 +212,7 @@ def _job(args, extra_keys=()):
         job = TomlFile.read(file)
         if job.kind() == "job":
             if "machine" not in job.data:
+                job.table(allowed=_JOB_KEYS + tuple(extra_keys))  # a misspelt machine key said as such
                 raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
                                 '(e.g. "demo_mill"), or give a path file')
             data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"),

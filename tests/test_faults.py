@@ -842,6 +842,8 @@ def test_a_file_name_of_bytes_that_are_not_utf8_runs_and_runs_again_into_its_fol
     ({"w.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[sweep]\nmethod = "grid"\n[[vary]]\n'
                 'name = "axes.x.kp_per_sec"\nvalues = [30, 40]\n'}, ["sweep", "{d}/w.toml"], "(did you mean 'kp_per_s'?)"),
     ({}, ["compare", "rounded_square", "--strategies", "none,ccc_arcc"], "(did you mean 'ccc_arc'?)"),
+    ({"j.toml": 'machin = "demo_mill"\npath = "rounded_square"\n'}, ["simulate", "{d}/j.toml"],
+     "line 1: unknown key 'machin' in [top level] (did you mean 'machine'?)"),
 ])
 def test_a_misspelt_name_is_refused_suggesting_the_name_meant(tmp_path, capsys, files, argv, meant):
     """A typo among 24 axis keys, 12 effects or the presets was refused listing them all, the one meant not said."""
