@@ -472,6 +472,10 @@ def diagnose_command(args):
           "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
           per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
     report = report_file(args.report, "residual_rms_before_um", "diagnosis report", args.out)  # never a file the user keeps
+    corrected = Path(args.out) / "corrected_model.toml"
+    if args.model and corrected.is_file() and Path(args.model).is_file() and os.path.samefile(corrected, args.model):
+        raise ConfigError(f"--out {args.out} would replace {args.model}, the model this run reads, with this trace's "
+                          "corrected model: give another --out")
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
     try:

@@ -860,3 +860,17 @@ def test_a_comment_among_a_traces_rows_is_said_to_be_one(tmp_path, where):
     (tmp_path / "t.csv").write_text("t,x_ref,x\n" + "\n".join(rows) + "\n")
     with pytest.raises(TraceFormatError, match=rf"t.csv, line {where}: a comment among the data rows: comment lines "):
         read_trace(tmp_path / "t.csv")
+
+
+def test_a_diagnosis_does_not_replace_the_model_it_reads(tmp_path, capsys):
+    """Identified on one experiment into out/, validated on another with --model out/corrected_model.toml --out out: the
+    model validated against was replaced by the second trace's corrected model without a word."""
+    with output_dir(tmp_path / "out").write("corrected_model.toml") as stream:  # as a first diagnosis leaves it
+        stream.write(preset_file("demo_mill").read_text())
+    model = tmp_path / "out" / "corrected_model.toml"
+    before = model.read_bytes()
+    t = np.arange(400) * 1e-3
+    trace = _trace(tmp_path / "t.csv", t, np.sin(t), np.sin(t) + 1e-4)
+    _refused(capsys, ["diagnose", str(trace), "--model", str(model), "--out", str(tmp_path / "out")],
+             f"--out {tmp_path / 'out'} would replace {model}, the model this run reads")
+    assert model.read_bytes() == before
