@@ -779,7 +779,7 @@ def run():
     """
     gc.set_threshold(10_000, 10, 10)
     for stream in (sys.stdout, sys.stderr):
-        if stream is not None:
+        if hasattr(stream, "reconfigure"):  # a text stream of the process (None when closed; a caller's StringIO)
             stream.reconfigure(errors="backslashreplace")
     try:
         code = main(compile_notice=True)
