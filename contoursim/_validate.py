@@ -11,8 +11,8 @@ inside numpy. Readers of files turn both into a
 
 import numpy as np
 
-__all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative", "float_array",
-           "finite_array", "shown", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative",
+           "float_array", "finite_array", "shown", "time_base", "TimeStepError"]
 
 #: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
 FLOAT_MAX = float(np.finfo(float).max)

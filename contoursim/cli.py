@@ -85,7 +85,8 @@ def _feed_override(job, path_file):
     from .gcode import SUFFIXES
     from .pathfile import library_file
 
-    if job is None or "feed_mm_min" not in job.data.get("feed", {}) or library_file(path_file).suffix.lower() not in SUFFIXES:
+    if (job is None or "feed_mm_min" not in job.data.get("feed", {})
+            or library_file(path_file).suffix.lower() not in SUFFIXES):
         return None
     return (f"feed: {job.data['feed']['feed_mm_min']:g} mm/min from {Path(job.source).name}'s [feed], overriding the "
             "program's F words on every cutting block (G1/G2/G3); the rapids (G0) keep the rapid feed.")

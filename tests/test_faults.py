@@ -827,10 +827,10 @@ def test_a_file_name_of_bytes_that_are_not_utf8_runs_and_runs_again_into_its_fol
 
 
 @pytest.mark.parametrize("files, argv, meant", [
-    ({"m.toml": MACHINE.format(mass=300.0).replace("kp_per_s", "kp_per_sec", 1)}, ["simulate", "rounded_square", "--machine", "{d}/m.toml"],
-     "(did you mean 'kp_per_s'?)"),
-    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[feed]\nfeed_mm_minute = 300\n'}, ["simulate", "{d}/j.toml"],
-     "(did you mean 'feed_mm_min'?)"),
+    ({"m.toml": MACHINE.format(mass=300.0).replace("kp_per_s", "kp_per_sec", 1)},
+     ["simulate", "rounded_square", "--machine", "{d}/m.toml"], "(did you mean 'kp_per_s'?)"),
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[feed]\nfeed_mm_minute = 300\n'},
+     ["simulate", "{d}/j.toml"], "(did you mean 'feed_mm_min'?)"),
     ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlsh"\naxis = "x"\n'},
      ["simulate", "{d}/j.toml"], "(did you mean 'backlash'?)"),
     ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlash"\naxis = "x"\n'
@@ -854,7 +854,8 @@ def test_a_misspelt_name_is_refused_suggesting_the_name_meant(tmp_path, capsys, 
 
 @pytest.mark.parametrize("where", [3, 6])  # mid-way, last
 def test_a_comment_among_a_traces_rows_is_said_to_be_one(tmp_path, where):
-    """A log closed by '# end of log' (or a remark mid-way) was refused as 'expected 3 cells (as in the header), found 1'."""
+    """A log closed by '# end of log' (or a remark mid-way) was refused as 'expected 3 cells (as in the header),
+    found 1'."""
     rows = [f"{k * 1e-3:.3f},{k * 0.01:.3f},{k * 0.01:.3f}" for k in range(4)]
     rows.insert(where - 2, "# end of log")
     (tmp_path / "t.csv").write_text("t,x_ref,x\n" + "\n".join(rows) + "\n")
