@@ -11,8 +11,8 @@ inside numpy. Readers of files turn both into a
 
 import numpy as np
 
-__all__ = ["as_xyz", "finite", "flag", "positive", "positive_int", "nonnegative", "float_array", "finite_array",
-           "shown", "time_base", "TimeStepError"]
+__all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative",
+           "float_array", "finite_array", "shown", "time_base", "TimeStepError"]
 
 #: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
 FLOAT_MAX = float(np.finfo(float).max)
@@ -222,6 +222,53 @@ def flag(name, value):
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be True or False, got {value!r}")
     return bool(value)
+
+
+def closest(word, known):
+    """``" (did you mean 'kp_per_s'?)"`` for a misspelt `word` among the names `known`; ``""`` when none is close.
+
+    Parameters
+    ----------
+    word : object
+        The name given (text; anything else matches nothing).
+    known : iterable of str
+        The names there are.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> closest("kp_per_sec", ["kv_A_s_per_m", "kp_per_s", "ti_s"])
+    " (did you mean 'kp_per_s'?)"
+    """
+    import difflib
+
+    match = difflib.get_close_matches(word, list(known), n=1, cutoff=0.75) if isinstance(word, str) else []
+    return f" (did you mean {match[0]!r}?)" if match else ""
+
+
+def float_dtype(name, value):
+    """Return `value` as a numpy dtype after checking it is float64 or float32, the precisions results are kept in.
+
+    float16 keeps 11 significant bits (a position of 500 mm to 0.25 mm), an
+    integer type whole millimetres, and object or complex arrays hold no
+    positions: each would return a wrong answer without a word.
+
+    Raises
+    ------
+    ValueError
+        `value` is not a dtype, or is another one.
+    """
+    try:
+        dtype = np.dtype(value)
+    except TypeError:
+        dtype = None
+    if dtype not in (np.float64, np.float32):
+        raise ValueError(f"{name} must be float64 or float32, got {shown(value) if dtype is None else dtype}"
+                         + (" (11 significant bits: a position of 500 mm to 0.25 mm)" if dtype == np.float16 else ""))
+    return dtype
 
 
 def positive_int(name, value, least=1):

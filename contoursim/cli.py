@@ -61,14 +61,14 @@ def _trajectory(model, path_file, job=None, direction=None):
     """
     from .feed import sample
     from .model import as_model
-    from .pathfile import library_file, read_feed_table, read_path_file
+    from .pathfile import library_file, override_feed, read_path_file
     from .simulation import default_settle
 
-    read = read_path_file(path_file, direction)
-    settings, source = read.feed, library_file(path_file)
+    read, source = read_path_file(path_file, direction), library_file(path_file)
     if job is not None and "feed" in job.data:
-        settings = read_feed_table(job, base=read.feed)
+        read = override_feed(read, job)
         source = job.source if "feed_mm_min" in job.data["feed"] else source
+    settings = read.feed
     machine = as_model(model).machine
     try:
         # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
@@ -78,6 +78,18 @@ def _trajectory(model, path_file, job=None, direction=None):
         raise
     except ValueError as exc:  # a feed above the machine's max feed, a run too large for the memory: naming the file
         raise ConfigError(str(exc), str(source)) from None
+
+
+def _feed_override(job, path_file):
+    """The line saying that a job's feed overrides a G-code program's F words; None where it does not apply."""
+    from .gcode import SUFFIXES
+    from .pathfile import library_file
+
+    if (job is None or "feed_mm_min" not in job.data.get("feed", {})
+            or library_file(path_file).suffix.lower() not in SUFFIXES):
+        return None
+    return (f"feed: {job.data['feed']['feed_mm_min']:g} mm/min from {Path(job.source).name}'s [feed], overriding the "
+            "program's F words on every cutting block (G1/G2/G3); the rapids (G0) keep the rapid feed.")
 
 
 def _check_memory(samples, dt, path_file, runs, advice):
@@ -201,6 +213,7 @@ def _job(args, extra_keys=()):
         job = TomlFile.read(file)
         if job.kind() == "job":
             if "machine" not in job.data:
+                job.table(allowed=_JOB_KEYS + tuple(extra_keys))  # a misspelt machine key said as such
                 raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '
                                 '(e.g. "demo_mill"), or give a path file')
             data = job.table(allowed=_JOB_KEYS + tuple(extra_keys), required=("machine", "path"),
@@ -295,6 +308,8 @@ def simulate_command(args):
     print(f"contoursim simulate — machine: {machine.name}, path: {Path(path_file).name}, effects: {effects}")
     if blocks:
         print(f"G-code: {DIALECT}.")
+        if _feed_override(job, path_file):
+            print(_feed_override(job, path_file))
         print("Errors over the cutting moves (G1/G2/G3: the CSV's measuring = 1 rows); the rapids (G0, rapid = 1) "
               "are not scored.")
     print(_table(rows))
@@ -417,6 +432,8 @@ def compare_command(args):
             stream.write(comparison.to_json() + "\n")
     machine = comparison.runs[names[0]].machine
     print(f"contoursim compare — machine: {machine.name}, path: {Path(path_file).name}; errors over the test proper")
+    if _feed_override(job, path_file):
+        print(_feed_override(job, path_file))
     print(comparison.table())
     if report is not None:
         print(f"\ncomparison written to {report}")
@@ -456,6 +473,10 @@ def diagnose_command(args):
           "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
           per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
     report = report_file(args.report, "residual_rms_before_um", "diagnosis report", args.out)  # never a file the user keeps
+    corrected = Path(args.out) / "corrected_model.toml"
+    if args.model and corrected.is_file() and Path(args.model).is_file() and os.path.samefile(corrected, args.model):
+        raise ConfigError(f"--out {args.out} would replace {args.model}, the model this run reads, with this trace's "
+                          "corrected model: give another --out")
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
     try:
@@ -747,11 +768,20 @@ def run():
       ``contoursim demo``. The program flushes its output and ends the
       process instead (as mypy does). When the reader of its output has
       gone (``contoursim demo | head``), it ends there with status 1
-      and no traceback; the files completed by then are kept.
+      and no traceback; the files completed by then are kept. When
+      its output cannot be written (to a file on a full disk), it says
+      so in a line and ends with status 2.
+    - A terminal or pipe whose encoding cannot show a character the
+      program prints (µ, —, ζ under ``PYTHONIOENCODING=ascii`` or a C
+      locale without UTF-8 mode) shows its escape (``\\xb5``) instead
+      of failing once the work is done.
 
     :func:`main` itself leaves the process as it is, for callers in Python.
     """
     gc.set_threshold(10_000, 10, 10)
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):  # a text stream of the process (None when closed; a caller's StringIO)
+            stream.reconfigure(errors="backslashreplace")
     try:
         code = main(compile_notice=True)
         for stream in (sys.stdout, sys.stderr):
@@ -759,6 +789,11 @@ def run():
                 stream.flush()
     except BrokenPipeError:  # the reader of the output is gone (contoursim demo | head): no traceback
         code = 1
+    except OSError as exc:  # the table to a file on a full disk (contoursim demo > log.txt): said, not a traceback
+        if code == 0:  # else the command has said its error (the same one, from a write on the way)
+            print(f"contoursim: error: cannot write to standard output: {exc.strerror}; the files written are "
+                  "complete", file=sys.stderr, flush=True)
+        code = 2
     os._exit(code)
 
 

@@ -607,7 +607,8 @@ def _arguments(part, values):
         raise TypeError(f"the settings of {part} must map its keys ({', '.join(keys)}) to values, got {values!r}")
     for key, value in values.items():
         if key not in keys:
-            raise ValueError(f"unknown setting {key!r} of {part}; expected one of {', '.join(keys)}")
+            raise ValueError(f"unknown setting {key!r} of {part}{_validate.closest(key, keys)}; expected one of "
+                             f"{', '.join(keys)}")
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
             raise ValueError(f"{key} must be a number, got {value!r}")
     return {keys[key]: value for key, value in values.items()}
@@ -662,7 +663,8 @@ def strategies_named(name, model=None, chain=None, settings=None):
     strategies = []
     for part in name.split("+"):
         if part not in makers:
-            raise ValueError(f"unknown strategy {part!r} in {name!r}: use {', '.join(makers)}, joined by '+'")
+            raise ValueError(f"unknown strategy {part!r} in {name!r}{_validate.closest(part, makers)}: use "
+                             f"{', '.join(makers)}, joined by '+'")
         try:
             made = makers[part]()
         except ValueError as exc:  # a value the strategy refuses: said by its file key ("kp_per_s must be ...")

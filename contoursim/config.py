@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
-from ._validate import FLOAT_MAX, shown
+from ._validate import FLOAT_MAX, closest, shown
 from .exceptions import ConfigError
 
 __all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "read_bytes", "read_text"]
@@ -275,7 +275,8 @@ class TomlFile:
                                      f"rename it; every key is listed in {FORMAT_DOC}", *keys, key)
                 if key not in allowed:
                     raise self.error(
-                        f"unknown key '{key}' in [{_dotted(keys)}]; expected one of: {', '.join(sorted(allowed))} "
+                        f"unknown key '{key}' in [{_dotted(keys)}]{closest(key, allowed)}; expected one of: "
+                        f"{', '.join(sorted(allowed))} "
                         f"(see {FORMAT_DOC})",
                         *keys,
                         key,

@@ -202,7 +202,8 @@ def effect_kind(name):
     try:
         return _REGISTRY[name]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown effect {name!r}; the effects are: {', '.join(effect_names())}") from None
+        raise ValueError(f"unknown effect {name!r}{_validate.closest(name, effect_names())}; the effects are: "
+                         f"{', '.join(effect_names())}") from None
 
 
 @dataclass(frozen=True, init=False)
@@ -256,7 +257,8 @@ class Effect:
         unknown = [k for k in values if k not in kind.parameter_names and k not in kind.options]
         if unknown:
             raise ValueError(
-                f"{name}: unknown parameter {unknown[0]!r}; its parameters are "
+                f"{name}: unknown parameter {unknown[0]!r}"
+                f"{_validate.closest(unknown[0], kind.parameter_names + tuple(kind.options))}; its parameters are "
                 f"{', '.join(kind.parameter_names + tuple(kind.options))}"
             )
         size = kind.parameters[0].name

@@ -1661,9 +1661,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
         raise TypeError(f"every must be an integer, got {every!r}")
     if every < 1:
         raise ValueError(f"every must be positive, got {every!r}")
-    dtype = np.dtype(dtype)
-    if dtype not in (np.float64, np.float32):
-        raise ValueError(f"dtype must be float64 or float32, got {dtype}")
+    dtype = _validate.float_dtype("dtype", dtype)
     n_steps = ref_pos.shape[0]
     kept = -(-n_steps // every)
     external = _external(force, n_steps, n)

@@ -333,7 +333,8 @@ def preset_file(name_or_file):
         return path
     if str(name_or_file) in preset_names():
         return Path(str(resources.files("contoursim").joinpath(_PRESETS, f"{name_or_file}.toml")))
-    raise ConfigError(f"no machine file {str(name_or_file)!r} and no preset of that name; presets: {', '.join(preset_names())}")
+    raise ConfigError(f"no machine file {str(name_or_file)!r} and no preset of that name"
+                      f"{_validate.closest(str(name_or_file), preset_names())}; presets: {', '.join(preset_names())}")
 
 
 def load_machine(name_or_file, geometry=True, effects=False, check=True):

@@ -103,7 +103,9 @@ class OutputDir:
         marker = self.path / _MARKER
         try:
             with os.fdopen(os.open(marker, os.O_RDONLY | _NOFOLLOW), "rb") as stream:
-                lines = stream.read().decode("utf-8").splitlines()
+                data = stream.read()
+            ours = data.startswith(_MARKER_HEADER.encode())  # its names are the files' names, bytes not UTF-8 escaped
+            lines = data.decode("utf-8", "surrogateescape" if ours else "strict").splitlines()
         except UnicodeDecodeError as exc:
             raise ConfigError(f"{marker} is not contoursim's record of the files it wrote (byte {exc.start} is not "
                               "UTF-8 text): choose another output directory, or delete it if it is yours") from None
@@ -178,7 +180,8 @@ class OutputDir:
             return
         marker = self.path / _MARKER
         try:
-            with os.fdopen(os.open(marker, os.O_WRONLY | os.O_APPEND | _NOFOLLOW), "w", encoding="utf-8") as stream:
+            with os.fdopen(os.open(marker, os.O_WRONLY | os.O_APPEND | _NOFOLLOW), "w", encoding="utf-8",
+                           errors="surrogateescape") as stream:  # a name of bytes not UTF-8 (os.fsdecode), as they are
                 stream.write(name + "\n")
         except OSError as exc:
             raise _marker_error(marker, f"record {self.path / name} in", exc) from None
@@ -311,7 +314,9 @@ def atomic_write(file, binary=False, before_replace=None):
     file : str or Path
         The file to create or replace.
     binary : bool
-        Open in binary mode; text is UTF-8 with the newlines written as given.
+        Open in binary mode; text is UTF-8 with the newlines written as given
+        (a file name of bytes that are not UTF-8, as :func:`os.fsdecode` gives
+        it, has them escaped: ``\\xff``).
     before_replace : callable, optional
         Called without arguments once the content is complete, just before
         it replaces `file`; if it raises, `file` is left as it was.
@@ -329,7 +334,8 @@ def atomic_write(file, binary=False, before_replace=None):
     _remove_stale_parts(file.parent, file.name)
     temporary = file.with_name(f".{file.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
     try:
-        stream = open(temporary, "xb") if binary else open(temporary, "x", encoding="utf-8", newline="")
+        stream = (open(temporary, "xb") if binary  # a file name of bytes not UTF-8 in the text: escaped (\\xff)
+                  else open(temporary, "x", encoding="utf-8", errors="backslashreplace", newline=""))
     except OSError as exc:
         raise OutputError(f"cannot write {file}: {exc.strerror}") from None
     try:

@@ -13,8 +13,10 @@ of the offending key, through :class:`contoursim.config.TomlFile`.
 import math
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path as _FilePath
+
+import numpy as np
 
 from . import _validate
 from .config import TEXT_KEYS, TomlFile
@@ -23,7 +25,7 @@ from .feed import FeedSettings
 from .gcode import SUFFIXES, read_gcode
 from .paths import circle, helix, iso230_4_circle, polyline, spline
 
-__all__ = ["PathFile", "library_file", "load_path_file", "read_feed_table", "read_path_file"]
+__all__ = ["PathFile", "library_file", "load_path_file", "override_feed", "read_feed_table", "read_path_file"]
 
 
 def _angle(name, value):
@@ -94,7 +96,9 @@ def library_file(name):
         if library.joinpath(candidate).is_file():
             return library / candidate
     known = sorted(p.name for p in library.iterdir() if p.suffix.lower() in (".toml", *SUFFIXES))
-    raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library ({', '.join(known)})")
+    meant = _validate.closest(str(name), [*known, *(_FilePath(k).stem for k in known)])
+    raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library{meant}; the library: "
+                      f"{', '.join(known)}")
 
 
 @dataclass(frozen=True)
@@ -179,7 +183,8 @@ def _path(toml, direction=None):
     """The :class:`~contoursim.paths.Path` described by the ``[path]`` table (in `direction` when given)."""
     kind = toml.table("path", required=("type",))["type"]
     if not isinstance(kind, str) or kind not in _PATHS:
-        raise toml.error(f"[path] type must be one of {', '.join(sorted(_PATHS))}, got {kind!r}", "path", "type")
+        raise toml.error(f"[path] type must be one of {', '.join(sorted(_PATHS))}, got {kind!r}"
+                         f"{_validate.closest(kind, _PATHS)}", "path", "type")
     build, arguments, required = _PATHS[kind]
     spec = toml.table("path", allowed=("type", *arguments), required=required)
     if direction is not None:
@@ -206,6 +211,33 @@ def _blamed(message, arguments, spec):
     found = {key: re.search(rf"\b{arg}\b", message) for key, arg in arguments.items() if key in spec}
     found = {key: match.start() for key, match in found.items() if match}
     return (min(found, key=found.get),) if found else ()
+
+
+def override_feed(read, job):
+    """A path file as a job runs it: the job's ``[feed]`` table overrides the file's key by key.
+
+    A G-code program's F words are its programmed feeds; a job's
+    ``feed_mm_min`` overrides them on every cutting block (G1/G2/G3), as a
+    controller's feed override does, and the rapids (G0) keep the rapid feed.
+    The program's feeds become those that run, so that every output reading
+    them (the block listing, ``NAME_blocks.csv``) says what ran.
+
+    Parameters
+    ----------
+    read : PathFile
+        The path file as read (:func:`read_path_file`).
+    job : contoursim.config.TomlFile
+        The job file, with a ``[feed]`` table.
+
+    Returns
+    -------
+    PathFile
+    """
+    settings = read_feed_table(job, base=read.feed)
+    if read.program is None or "feed_mm_min" not in job.data["feed"]:
+        return replace(read, feed=settings)
+    feeds = np.where(np.array(read.path.roles) == "rapid", read.program.feeds, settings.feed)
+    return replace(read, feed=replace(settings, feed=tuple(feeds.tolist())), program=replace(read.program, feeds=feeds))
 
 
 def read_feed_table(toml, base=None):

@@ -9,6 +9,7 @@ itself, e.g. in the trace CSV, is untouched): :func:`envelope_indices` keeps
 the smallest and largest sample of every pixel column, so no spike is lost.
 """
 
+import os
 from collections.abc import Mapping
 
 import numpy as np
@@ -278,10 +279,15 @@ def _direction(result):
     return None if circle is None else "CCW" if circle.sweep > 0 else "CW"
 
 
+def _drawable(name):
+    """A run's name as text a figure can draw: the bytes of a file name that are not UTF-8 escaped (``p\\xff``)."""
+    return os.fsencode(name).decode("utf-8", "backslashreplace")
+
+
 def _run_title(result, name=None):
     """Two lines naming a run: ``name (CW) on machine``, then the effects and compensation switched on."""
     direction = _direction(result)
-    head = (name or "run") + (f" ({direction})" if direction else "")
+    head = _drawable(name or "run") + (f" ({direction})" if direction else "")
     return f"{head} on {result.machine.name or 'the machine'}\n{_effects_text(result)}"
 
 
@@ -587,7 +593,7 @@ def plot_polar_deviation(runs, ax=None, nominal=None):
     first = results[0]
     feeds = sorted({f"{60 * r.trajectory.feed:.4g}" for r in results})
     radii = sorted({f"{test['radius']:g}" for test in tests})
-    names = ", ".join(n for n in runs if n) or "circular test"
+    names = ", ".join(_drawable(n) for n in runs if n) or "circular test"
     if len(names) > 60:  # long: named in the legend
         names = f"{len(runs)} runs"
     lines = [f"{names} on {first.machine.name or 'the machine'}"]

@@ -699,7 +699,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         to bound memory; the summary is taken over every sample all the same.
         For a trace logged every k-th servo period, ``every = k`` gives the
         trace's own instants.
-    dtype : numpy dtype
+    dtype : {numpy.float64, numpy.float32}
         Of the returned arrays (``np.float32`` halves their memory; the
         simulation and the geometric stage run in float64).
     check : bool
@@ -726,7 +726,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     Raises
     ------
     ValueError
-        The variants do not share one structure; an unknown output; per-variant
+        The variants do not share one structure; an unknown output; a `dtype`
+        other than float64 or float32; per-variant
         strategies that are not B sequences; noise on an encoder (``noise``
         with ``at = "encoder"``).
     UnstableLoopError
@@ -748,6 +749,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     if unknown or not outputs:
         raise ValueError(f"outputs must be some of {', '.join(_BATCH_OUTPUTS)}, got {tuple(outputs)!r}")
     every = _validate.positive_int("every", every)
+    dtype = _validate.float_dtype("dtype", dtype)
     first = models[0].machine
     for i, m in enumerate(models):
         machine = m.machine

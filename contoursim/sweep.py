@@ -56,6 +56,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from . import _validate
 from .config import TomlFile, read_text
 from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
@@ -357,7 +358,7 @@ def _servo_field(machine, axis, key):
     if axis not in machine.axes:
         raise ValueError(f"the machine has no servo axis {axis!r}; its axes: {', '.join(machine.axes)}")
     if key not in SERVO_KEYS:
-        raise ValueError(f"no axis key {key!r}; the keys: {', '.join(SERVO_KEYS)}")
+        raise ValueError(f"no axis key {key!r}{_validate.closest(key, SERVO_KEYS)}; the keys: {', '.join(SERVO_KEYS)}")
     return SERVO_KEYS[key]
 
 

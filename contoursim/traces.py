@@ -423,6 +423,8 @@ def _parse_rows(body, width, index, names, limits, units, fail):
         row = int(np.argmax(cells != width))
         if not body[row].strip():
             raise fail(f"a blank line among the data rows: expected {width} cells (as in the header)", row)
+        if body[row].lstrip().startswith("#"):  # a log's closing "# end of log"
+            raise fail("a comment among the data rows: comment lines ('# ...') come before the header", row)
         if cells[row] > width and all(_WHOLE.fullmatch(cell) for cell in body[row].split(",")):
             raise fail(f"expected {width} cells (as in the header), found {cells[row]}, all whole numbers: decimal "
                        "commas? the decimal separator is a point ('0.25'), the cells are separated by commas", row)

@@ -379,6 +379,20 @@ def test_the_command_as_a_user_runs_it(where, tmp_path):
                              str(tmp_path / "out4")], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             preexec_fn=lambda: os.close(1), timeout=300)  # started without a stdout
     assert closed.returncode == 0 and closed.stderr == b"" and (tmp_path / "out4" / "small.csv").exists()
+    if os.path.exists("/dev/full"):  # the table to a file on a full disk, buffered as a user's is: said, no traceback
+        with open("/dev/full", "w") as full:
+            lost = subprocess.run([sys.executable, "-m", "contoursim", "simulate", str(tmp_path / "small.toml"), "--out",
+                                   str(tmp_path / "out6")], cwd=cwd, env=env, stdout=full, stderr=subprocess.PIPE,
+                                  timeout=300)  # fmt: skip
+        assert lost.returncode == 2 and (tmp_path / "out6" / "small.csv").exists()
+        assert _but_compiling(lost.stderr.decode()) == ["contoursim: error: cannot write to standard output: No space "
+                                                        "left on device; the files written are complete"]
+    # a terminal that cannot show µ or — (an ASCII or C locale): their escapes, not an error after the work
+    ascii_env = {**env, "PYTHONIOENCODING": "ascii"}
+    plain = subprocess.run([sys.executable, "-m", "contoursim", "simulate", str(tmp_path / "small.toml"), "--out",
+                            str(tmp_path / "out5")], cwd=cwd, env=ascii_env, capture_output=True, timeout=300)
+    assert plain.returncode == 0 and not _but_compiling(plain.stderr.decode("ascii"))
+    assert plain.stdout.decode("ascii").startswith("contoursim simulate \\u2014 machine: ")
     assert read_trace(tmp_path / "out" / "small.csv").axes == ("x", "y")
     imported = subprocess.run([sys.executable, "-c", "import contoursim; print(contoursim.__file__)"], cwd=cwd, env=env,
                               capture_output=True, text=True, timeout=60)
@@ -723,6 +737,24 @@ def test_post_processor_programs_score_their_cutting_moves(tmp_path, capsys, nam
     tracking = np.hypot(np.hypot(data["x"] - data["x_ref"], data["y"] - data["y_ref"]), data["z"] - data["z_ref"])
     assert tracking[data["measuring"] == 1].max() == pytest.approx(tracking_um, abs=2e-6)
     assert tracking[data["rapid"] == 1].max(initial=0.0) > 2.0 if rapids else tracking.max() < 1.0
+
+
+def test_a_jobs_feed_overrides_the_programs_f_words_and_every_output_says_the_feed_that_ran(tmp_path, capsys):
+    """A job's feed_mm_min on a G-code program is a feed override of its cutting blocks: the rapids keep the rapid feed,
+    the block listing gives the feed that ran (it gave the F words while the job's feed ran), the table says so."""
+    (tmp_path / "p.nc").write_text("G21 G90 G17\nG1 X10 F600\nG0 X70\nG1 Y10 F1200\nG2 X60 Y10 I-5 J0\nM30\n")
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "p.nc"\n[feed]\nfeed_mm_min = 300\n')
+    for command in ("simulate", "compare"):
+        assert main([command, str(tmp_path / "job.toml"), "--out", str(tmp_path / command)]) == 0
+        assert ("feed: 300 mm/min from job.toml's [feed], overriding the program's F words on every cutting block"
+                in capsys.readouterr().out)
+    blocks = _blocks_csv(tmp_path / "simulate" / "p_blocks.csv")
+    assert {(b["rapid"], b["feed_mm_min"]) for b in blocks} == {("0", "300"), ("1", "10000")}
+    lines = [line for line in (tmp_path / "simulate" / "p.csv").read_text().splitlines() if not line.startswith("#")]
+    data = np.genfromtxt(lines, delimiter=",", names=True)
+    speed = np.r_[0.0, np.hypot(np.diff(data["x_ref"]), np.diff(data["y_ref"])) / np.diff(data["t"])]
+    assert speed[data["measuring"] == 1].max() == pytest.approx(300 / 60, abs=0.02)  # positions to the nm, dt 0.2 ms
+    assert speed[data["rapid"] == 1].max() == pytest.approx(10000 / 60, rel=1e-3)
 
 
 def test_compare_runs_a_job_with_geometric_compensation(tmp_path, capsys):

@@ -31,7 +31,7 @@ def test_line_of_walks_tables_and_arrays_of_tables():
 
 
 def test_unknown_key_is_reported_with_its_line():
-    with pytest.raises(ConfigError, match=r"^m.toml, line 7: unknown key 'kvv' in \[axes.x\]; expected one of: kp, kv \(see docs/machines-and-files.md, section 'File format'\)$"):
+    with pytest.raises(ConfigError, match=r"^m.toml, line 7: unknown key 'kvv' in \[axes.x\] \(did you mean 'kv'\?\); expected one of: kp, kv \(see docs/machines-and-files.md, section 'File format'\)$"):
         TomlFile("m.toml", TEXT).table("axes", "x", allowed=["kp", "kv"])
 
 

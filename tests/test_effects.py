@@ -59,7 +59,8 @@ def test_an_effect_knows_its_parameters_stage_and_label():
 
 @pytest.mark.parametrize("args, kwargs, message", [
     (("ballscrew", "x"), {}, "unknown effect 'ballscrew'; the effects are: backlash, coulomb_friction"),
-    (("backlash", "x"), {"lost_motion": 8.0}, "unknown parameter 'lost_motion'; its parameters are lost_motion_um, feedback"),
+    (("backlash", "x"), {"lost_motion": 8.0},
+     r"unknown parameter 'lost_motion' \(did you mean 'lost_motion_um'\?\); its parameters are lost_motion_um, feedback"),
     (("backlash", "x"), {}, r"missing 'lost_motion_um' \[µm\]"),
     (("backlash", "x"), {"lost_motion_um": -1.0}, r"lost_motion_um must lie in \[0, 1000\] µm, got -1"),
     (("backlash", "x"), {"lost_motion_um": 8.0, "feedback": "encoder"}, "feedback must be one of 'motor', 'scale'"),
@@ -377,7 +378,8 @@ angle_urad = -40
 
 @pytest.mark.parametrize("body, message", [
     ('name = "ballscrew"\naxis = "x"', "line 3: unknown effect 'ballscrew'; the effects are: backlash,"),
-    ('name = "backlash"\naxis = "x"\nlost_motion = 8', "line 5: .*unknown parameter 'lost_motion'; its parameters are lost_motion_um, feedback"),
+    ('name = "backlash"\naxis = "x"\nlost_motion = 8',
+     r"line 5: .*unknown parameter 'lost_motion' \(did you mean 'lost_motion_um'\?\); its parameters are lost_motion_um, feedback"),
     ('name = "backlash"\naxis = "x"\nlost_motion_um = -8', r"line 5: .*lost_motion_um must lie in \[0, 1000\] µm"),
     ('name = "backlash"\nlost_motion_um = 8', r"line 2: \[\[effect\]\] needs 'axis'"),
     ('name = "time_delay"\naxis = "x"\ndelay_s = 1e-3\nkind = "velocity"',

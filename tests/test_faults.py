@@ -5,11 +5,15 @@ out of range) and checks the whole answer: the exit status, one line on stderr n
 no traceback or foreign warning, nothing written where it must not be.
 """
 
+import dataclasses
 import gzip
 import io
 import os
+import subprocess
+import sys
 import threading
 import tracemalloc
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -772,3 +776,102 @@ def test_a_second_units_line_is_refused_not_one_of_them_ignored(tmp_path):
     with pytest.raises(TraceFormatError) as info:
         read_trace(trace)
     assert str(info.value) == f"{trace}, line 2: a second '# units:' line (the first is line 1): declare the units once"
+
+
+@pytest.mark.parametrize("dtype", [np.float16, "float16", np.int32, int, object, np.complex128, "no such type"])
+def test_a_batchs_results_are_kept_in_float64_or_float32_only(api, dtype):
+    """dtype = float16 returned positions to 0.49 µm on a 2 mm circle (0.25 mm at 500 mm), int32 to whole millimetres,
+    object and complex as they came: each a wrong answer without a word, where run_batch refused them."""
+    with pytest.raises(ValueError, match="dtype must be float64 or float32, got"):
+        simulate_batch([api.machine], api.trajectory, dtype=dtype)
+
+
+@pytest.mark.parametrize("cast", [lambda a: a.astype(np.float16), lambda a: a.astype(np.float32), lambda a: a.astype(int),
+                                  lambda a: a.astype(object), lambda a: a.tolist()])
+def test_references_and_parameters_of_any_numeric_type_run_in_float64(api, cast):
+    """A reference, a force and parameters given as float16, float32, int, object arrays or lists run in float64: the
+    same positions, bit for bit, as the same values turned into float64 first (float16 arithmetic would differ)."""
+    exact = lambda a: np.asarray(cast(np.asarray(a)), dtype=float)  # noqa: E731
+    one = lambda value: cast(np.array([value]))[0]  # noqa: E731
+    trajectory, machine = api.trajectory, api.machine
+    fields = dict(position=trajectory.position * 40.0, velocity=trajectory.velocity * 40.0,
+                  acceleration=trajectory.acceleration * 40.0, s=trajectory.s * 40.0)  # 80 mm: float16 to 0.06 mm
+    force = np.linspace(0.0, 30.0, len(trajectory))
+
+    def run(value, array, batch=False):
+        reference = Trajectory(trajectory.t, **{k: array(v) for k, v in fields.items()}, measuring=trajectory.measuring)
+        axes = {**machine.axes, "x": dataclasses.replace(machine.axes["x"], kp=value(machine.axes["x"].kp * 1.01))}
+        model = Model(dataclasses.replace(machine, axes=axes), (Effect("backlash", "x", lost_motion_um=value(7.3)),))
+        if batch:
+            return simulate_batch([model], reference, force={"x": array(force)})["tool_position"][0]
+        return simulate(model, reference, force={"x": array(force)}).tool_position
+
+    expected = run(lambda v: float(exact([v])[0]), exact)
+    for batch in (False, True):
+        ran = run(one, cast, batch)
+        assert ran.dtype == np.float64 and np.array_equal(ran, expected[: len(ran)])
+
+
+def test_a_file_name_of_bytes_that_are_not_utf8_runs_and_runs_again_into_its_folder(tmp_path):
+    """A program named in Latin-1 (p\\xff.nc, from a Windows share): simulate failed on the trace CSV's '# path:' line
+    ('utf-8' codec can't encode character '\\udcff'), the marker's record of p\\xff.csv and the plots' titles."""
+    program = os.fsdecode(os.fsencode(tmp_path) + b"/p\xff.nc")
+    Path(program).write_text("G21 G90 G17\nG1 X10 F600\nG1 Y10\nM30\n")
+    for _ in range(2):  # the second run reads the folder's record of the first; printed as the program prints it
+        done = subprocess.run([sys.executable, "-m", "contoursim", "simulate", os.fsencode(program), "--out",
+                               str(tmp_path / "out")], cwd=ROOT, capture_output=True, timeout=300)
+        assert done.returncode == 0 and b"path: p\\udcff.nc" in done.stdout, done.stderr
+    assert {b"p\xff.csv", b"p\xff_blocks.csv", b"p\xff_path.png"} <= set(os.listdir(os.fsencode(tmp_path / "out")))
+    trace = read_trace(os.fsdecode(os.fsencode(tmp_path) + b"/out/p\xff.csv"))
+    assert trace.metadata["path"] == "p\\udcff.nc" and trace.axes == ("x", "y")
+
+
+@pytest.mark.parametrize("files, argv, meant", [
+    ({"m.toml": MACHINE.format(mass=300.0).replace("kp_per_s", "kp_per_sec", 1)},
+     ["simulate", "rounded_square", "--machine", "{d}/m.toml"], "(did you mean 'kp_per_s'?)"),
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[feed]\nfeed_mm_minute = 300\n'},
+     ["simulate", "{d}/j.toml"], "(did you mean 'feed_mm_min'?)"),
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlsh"\naxis = "x"\n'},
+     ["simulate", "{d}/j.toml"], "(did you mean 'backlash'?)"),
+    ({"j.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[[effect]]\nname = "backlash"\naxis = "x"\n'
+                "lost_motion = 3\n"}, ["simulate", "{d}/j.toml"], "(did you mean 'lost_motion_um'?)"),
+    ({}, ["simulate", "rounded_square", "--machine", "demo_mil"], "(did you mean 'demo_mill'?)"),
+    ({}, ["simulate", "rounded_sqare"], "(did you mean 'rounded_square'?)"),
+    ({"s.toml": SMALL_PATH.replace('"iso230_4_circle"', '"iso230_4_circl"')}, ["simulate", "{d}/s.toml"],
+     "(did you mean 'iso230_4_circle'?)"),
+    ({"w.toml": 'machine = "demo_mill"\npath = "rounded_square"\n[sweep]\nmethod = "grid"\n[[vary]]\n'
+                'name = "axes.x.kp_per_sec"\nvalues = [30, 40]\n'}, ["sweep", "{d}/w.toml"], "(did you mean 'kp_per_s'?)"),
+    ({}, ["compare", "rounded_square", "--strategies", "none,ccc_arcc"], "(did you mean 'ccc_arc'?)"),
+    ({"j.toml": 'machin = "demo_mill"\npath = "rounded_square"\n'}, ["simulate", "{d}/j.toml"],
+     "line 1: unknown key 'machin' in [top level] (did you mean 'machine'?)"),
+])
+def test_a_misspelt_name_is_refused_suggesting_the_name_meant(tmp_path, capsys, files, argv, meant):
+    """A typo among 24 axis keys, 12 effects or the presets was refused listing them all, the one meant not said."""
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    _refused(capsys, [*(a.format(d=tmp_path) for a in argv), "--out", str(tmp_path / "out")], meant)
+
+
+@pytest.mark.parametrize("where", [3, 6])  # mid-way, last
+def test_a_comment_among_a_traces_rows_is_said_to_be_one(tmp_path, where):
+    """A log closed by '# end of log' (or a remark mid-way) was refused as 'expected 3 cells (as in the header),
+    found 1'."""
+    rows = [f"{k * 1e-3:.3f},{k * 0.01:.3f},{k * 0.01:.3f}" for k in range(4)]
+    rows.insert(where - 2, "# end of log")
+    (tmp_path / "t.csv").write_text("t,x_ref,x\n" + "\n".join(rows) + "\n")
+    with pytest.raises(TraceFormatError, match=rf"t.csv, line {where}: a comment among the data rows: comment lines "):
+        read_trace(tmp_path / "t.csv")
+
+
+def test_a_diagnosis_does_not_replace_the_model_it_reads(tmp_path, capsys):
+    """Identified on one experiment into out/, validated on another with --model out/corrected_model.toml --out out: the
+    model validated against was replaced by the second trace's corrected model without a word."""
+    with output_dir(tmp_path / "out").write("corrected_model.toml") as stream:  # as a first diagnosis leaves it
+        stream.write(preset_file("demo_mill").read_text())
+    model = tmp_path / "out" / "corrected_model.toml"
+    before = model.read_bytes()
+    t = np.arange(400) * 1e-3
+    trace = _trace(tmp_path / "t.csv", t, np.sin(t), np.sin(t) + 1e-4)
+    _refused(capsys, ["diagnose", str(trace), "--model", str(model), "--out", str(tmp_path / "out")],
+             f"--out {tmp_path / 'out'} would replace {model}, the model this run reads")
+    assert model.read_bytes() == before
