@@ -396,18 +396,30 @@ def test_a_friction_fitted_without_its_stribeck_hump_is_covered_by_its_uncertain
     assert sigma < 0.25 * 40.0, result.report()  # covered by a bound, not by a shrug
     assert "typical range" in UNCERTAINTY_METHOD and result.to_dict()["uncertainty_method"] == UNCERTAINTY_METHOD
 
-def test_a_gain_that_hangs_on_the_refitted_plant_is_covered_by_its_uncertainty(independent_truth, tmp_path):
-    """An independent rigid pair whose y runs at 1.174 times its data sheet's position gain, the plant 3 % off: the
-    gain comes out 0.6 % low, where the Gauss-Newton and jackknife spread gave ±0.031 % (the truth at 18σ). Refitting
-    the nominal parameters with the gain in place moved the fit by as much as it is off: that counts too, and the
-    truth lies within 2σ."""
-    case = independent_truth.make_case("rigid", "gain_mismatch", 320502424, tmp_path)
+
+@pytest.mark.parametrize("effect, seed, key, within, bound", [
+    ("gain_mismatch", 320502424, "kp_ratio", 2, 0.02),
+    ("backlash", 549564284, "lost_motion_um", 3, 0.05),
+], ids=["gain_hanging_on_the_refitted_plant", "backlash_of_a_jagged_profile"])
+def test_an_independent_effect_is_covered_by_its_uncertainty(independent_truth, tmp_path, effect, seed, key, within,
+                                                             bound):
+    """Independent rigid pairs, the plant 3 % off, the effect on y.
+
+    - y at 1.174 times its data sheet's position gain: the gain comes out 0.6 % low, where the Gauss-Newton and
+      jackknife spread gave ±0.031 % (the truth at 18σ). Refitting the nominal parameters with the gain in place
+      moved the fit by as much as it is off: that counts too, and the truth lies within 2σ.
+    - 19.8 µm of lost motion behind y's scale: the residual is jagged in the lost motion at the scale of a
+      finite-difference step (the contacts timed within servo periods), and the fit stayed at its grid start,
+      20.0 µm, with ±0.016 µm (the truth at 12σ). Judged on the profile's trend: within 3σ.
+
+    Each uncertainty is a bound, not a shrug (a few % of the value)."""
+    case = independent_truth.make_case("rigid", effect, seed, tmp_path)
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
     (named,) = result.effects
-    assert (named.name, named.axis) == ("gain_mismatch", "y"), result.report()
-    sigma = result.steps[-1].uncertainty["kp_ratio"]
-    assert abs(named["kp_ratio"] - case.truth["parameters"]["kp_ratio"]) <= 2 * sigma, result.report()
-    assert sigma < 0.02 * named["kp_ratio"], result.report()  # a bound, not a shrug
+    assert (named.name, named.axis) == (effect, "y"), result.report()
+    sigma = result.steps[-1].uncertainty[key]
+    assert abs(named[key] - case.truth["parameters"][key]) <= within * sigma, result.report()
+    assert sigma < bound * named[key], result.report()
 
 
 @pytest.mark.parametrize("notch", [0.025, 0.037, 0.11])
@@ -443,19 +455,6 @@ def test_a_residual_jagged_at_the_finite_difference_step_is_fitted_and_judged_on
 
     x, j, r = _smoothed(start, smooth_jac, smooth, np.array([20.0]), *bounds)
     assert x[0] == start[0] and np.array_equal(j, smooth_jac(start)) and np.array_equal(r, smooth([start])[0])
-
-
-def test_a_backlash_whose_profile_is_jagged_is_not_left_in_a_notch(independent_truth, tmp_path):
-    """An independent rigid pair with 19.8 µm of lost motion behind y's scale: the residual is jagged in the lost
-    motion at the scale of a finite-difference step (the contacts timed within servo periods), and the fit stayed at
-    its grid start, 20.0 µm, with ±0.016 µm (the truth at 12σ). Judged on the profile's trend: within 3σ."""
-    case = independent_truth.make_case("rigid", "backlash", 549564284, tmp_path)
-    result = diagnose(read_trace(case.csv), load_model(case.machine_file))
-    (named,) = result.effects
-    assert (named.name, named.axis) == ("backlash", "y"), result.report()
-    sigma = result.steps[-1].uncertainty["lost_motion_um"]
-    assert abs(named["lost_motion_um"] - case.truth["parameters"]["lost_motion_um"]) <= 3 * sigma, result.report()
-    assert sigma < 0.05 * named["lost_motion_um"], result.report()  # a bound, not a shrug
 
 
 def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine, tmp_path):
