@@ -1431,7 +1431,8 @@ def _smoothed(x, jac, residuals, scale, lower, upper):
         x[index] = moved
         if np.all(np.abs(step) < span):
             break
-    j = jac(x)
+    if index.size < x.size:  # the smooth parameters' columns where the fit moved
+        j = jac(x)
     j[:, index] = slopes
     return x, j, r
 
