@@ -83,6 +83,7 @@ _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _EXPONENT = re.compile(r"[eE][-+]?\d+")  # right after a number: its exponent
 _LARGEST = 1e9  # largest |number| in a word [mm, mm/min, s]: a km-long axis is 1e6 mm
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
+_PLANE_NAMES = {2: "G17 (XY)", 1: "G18 (ZX)", 0: "G19 (YZ)"}  # normal axis -> the plane's code and name
 _MODEL_G = (21, 40, 49, 80, 91.1, 94)  # mm, no cutter/tool length compensation, no canned cycle, I/J/K relative, F/min
 _IGNORED_G = {43: "G43", 54: "G54", 55: "G55", 56: "G56", 57: "G57", 58: "G58", 59: "G59",
               61: "G61", 64: "G64"}
@@ -470,6 +471,10 @@ def _arc(start, end, values, normal_axis, ccw, tolerance, fail):
         center = start + chord / 2 + (1 if ccw else -1) * np.sign(r) * height * left
     else:
         centre = [a for a, i in zip("IJK", inplane) if i]
+        offplane = "IJK"[normal_axis]
+        if offplane in values:  # LinuxCNC refuses it too; read as 0 the arc would not be the one meant
+            fail(f"{offplane} is not a centre word of the {_PLANE_NAMES[normal_axis]} arc: give {'/'.join(centre)} "
+                 "(a helix's rise is the end point's move along the plane's normal)")
         if not any(a in values for a in centre):
             fail(f"the arc centre is missing: give {'/'.join(centre)} (relative to the arc's start) or R")
         offset = np.array([values.get(a, 0.0) for a in "IJK"]) * inplane

@@ -145,7 +145,11 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G1 X1 F100\nG28 G91 Z0\nG0 Z-5\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # still unknown
     ("G1 X1 F100\nG53 G0 Z0\nG1 X2\n", 3, "line 2 \\(G28/G30/G53\\) took Z there"),
     ("G0 X10 Y0\nG2 X20 Y0 F100\n", 2, "the arc centre is missing: give I/J \\(relative to the arc's start\\) or R"),
-    ("G18 G0 X10 Y0\nG2 X20 Y0 J5 F100\n", 2, "the arc centre is missing: give I/K"),
+    # a centre word off the arc's plane (it was read as 0: another arc, silently)
+    ("G18 G0 X10 Y0\nG2 X20 Y0 J5 F100\n", 2, "J is not a centre word of the G18 \\(ZX\\) arc: give I/K"),
+    ("G18 G0 X10 Z0\nG2 X20 Z0 I5 J3 F100\n", 2, "J is not a centre word of the G18"),
+    ("G0 X10 Y0\nG2 X20 Y0 I5 K2 F100\n", 2, "K is not a centre word of the G17 \\(XY\\) arc: give I/J"),
+    ("G19 G0 Y10 Z0\nG3 Y20 Z0 I1 J5 F100\n", 2, "I is not a centre word of the G19 \\(YZ\\) arc"),
     ("G0 X1\n\nG1 X2\n", 3, "missing F before the first feed move"),
     ("G0 X10\nG2 X0 Y10.1 I-10 F100\n", 2, "start radius 10 mm and end radius 10.1 mm differ"),
     ("G1 X1 F100\nG1 X2 I3\n", 2, "only belong to arc moves"),
