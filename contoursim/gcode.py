@@ -34,7 +34,8 @@ listed in :attr:`Program.ignored` and in one
 :class:`~contoursim.exceptions.ContoursimWarning`. Refused with a message
 naming file and line: inch units (``G20``), cutter radius compensation
 (``G41 G42``), feed per revolution or inverse time (``G93 G95``), subprogram
-calls (``M98 M99``), two words of one modal group in a block (``G2 G3``, ``G17 G19``, ``G90 G91``:
+calls (``M98 M99``), a centre word off the arc's plane (``K`` in ``G17``, ``J`` in
+``G18``, ``I`` in ``G19``), two words of one modal group in a block (``G2 G3``, ``G17 G19``, ``G90 G91``:
 controllers differ on which wins), any other word.
 
 Rapid moves: G0 moves before the first feed move (G1/G2/G3) only position
