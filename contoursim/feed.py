@@ -337,7 +337,7 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         raise ValueError(f"feed must be one value or one per primitive ({k}), got {feeds.size} values")
     accel = _validate.positive("accel", accel)
     jerk = None if jerk is None else _validate.positive("jerk", jerk)
-    tolerance = _validate.nonnegative("corner_tolerance", corner_tolerance)
+    tolerance = _corner_tolerance(corner_tolerance)
     if max_feed is not None:
         max_feed = _validate.positive("max_feed", max_feed)
         if feeds.max() > max_feed:
@@ -404,7 +404,7 @@ class FeedSettings:
         for name in ("jerk", "centripetal_accel"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _validate.positive(name, getattr(self, name)))
-        object.__setattr__(self, "corner_tolerance", _validate.nonnegative("corner_tolerance", self.corner_tolerance))
+        object.__setattr__(self, "corner_tolerance", _corner_tolerance(self.corner_tolerance))
         object.__setattr__(self, "stops", tuple(int(k) for k in self.stops))
         for name in ("feed", "accel", "jerk", "centripetal_accel"):  # 1e-300 or 1e308 overflow the planning
             values = np.atleast_1d(np.asarray(getattr(self, name) or 1.0, dtype=float))
@@ -431,6 +431,15 @@ class FeedSettings:
         return plan(path, self.feed, self.accel, self.jerk, centripetal_accel=self.centripetal_accel,
                     corner_tolerance=self.corner_tolerance, max_feed=max_feed, in_position=in_position,
                     stops=self.stops)
+
+
+def _corner_tolerance(value):
+    """`value` [rad] after checking it is a turn a join can make, in [0, π] (above π no join would ever stop)."""
+    value = _validate.nonnegative("corner_tolerance", value)
+    if value > np.pi:
+        raise ValueError(f"corner_tolerance must be at most π rad (180°, a reversal), got {value:g} rad "
+                         f"({np.degrees(value):g}°)")
+    return value
 
 
 def _path(path):

@@ -34,8 +34,11 @@ def _angle(name, value):
 
 
 def _tolerance(name, value):
-    """A non-negative angle [deg] in [rad]."""
-    return math.radians(_validate.nonnegative(name, value))
+    """A join's turn in [0, 180] [deg] in [rad]."""
+    value = _validate.nonnegative(name, value)
+    if value > 180:
+        raise ValueError(f"{name} must be at most 180 (a reversal), got {value:g}")
+    return math.radians(value)
 
 
 def _per_minute(name, value):

@@ -132,6 +132,11 @@ def test_bad_values_name_the_parameter():
         plan(path + paths.line((10, 0), (20, 0)), [10.0, 0.0], 100.0)
     with pytest.raises(ValueError, match="jerk must be positive"):
         FeedSettings(10.0, jerk=0.0)
+    for tolerance in (4.0, 720.0):  # no join turns more than π: a reversal
+        with pytest.raises(ValueError, match=r"corner_tolerance must be at most π rad \(180°, a reversal\)"):
+            FeedSettings(10.0, corner_tolerance=tolerance)
+        with pytest.raises(ValueError, match="corner_tolerance must be at most π rad"):
+            plan(path, 10.0, 100.0, corner_tolerance=tolerance)
     with pytest.raises(ValueError, match="dt must be positive"):
         sample(path, plan(path, 10.0, 100.0), 0.0)
 
