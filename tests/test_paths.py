@@ -252,6 +252,12 @@ def test_library_contents():
     ('name = "x"\nnotes = "y"\n[feed]\nfeed_mm_min = 100\n', 2, "unknown key 'notes'"),
     ('[feed]\nfeed_mm_min = 100\ncorner_tolerance_deg = -1\n[path]\ntype = "spline"\npoints_mm = [[0, 0], [1, 1]]\n',
      3, "corner_tolerance_deg must be zero or positive"),
+    # above 180° no join stops: read as 180° it was another planner than the one written
+    ('[feed]\nfeed_mm_min = 100\ncorner_tolerance_deg = 720\n[path]\ntype = "spline"\npoints_mm = [[0, 0], [1, 1]]\n',
+     3, "corner_tolerance_deg must be at most 180 \\(a reversal\\), got 720"),
+    # a normal of 2 coordinates was taken as lying in XY: the circle stood upright
+    ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\nnormal = [0, 1]\n',
+     7, "normal must have 3 coordinates \\(a direction: \\[0, 0, 1\\] is normal to XY\\), got 2"),
     ('[path]\ntype = "circle"\ncenter_mm = [0, 0]\nstart_angle_deg = "north"\nradius_mm = 5\n[feed]\n',
      4, "start_angle_deg must be numeric"),
 ])
