@@ -90,6 +90,16 @@ def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message
         read_sweep(_spec(tmp_path, [vary]))
 
 
+@pytest.mark.parametrize("key", ["count = 7", "seed = 3"])
+def test_a_grids_count_or_seed_in_the_sweep_table_is_refused_by_its_line(tmp_path, key):
+    """A grid's points are its vary tables' (it ran 2 variants, the 7 asked for ignored)."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 2}],
+                 sweep=f'method = "grid"\n{key}')
+    with pytest.raises(ConfigError, match=rf"spec.toml, line 10: sweep.{key.split()[0]} is for random and lhs draws: a grid's "
+                                          r"points are each \[\[vary\]\] table's count or values"):
+        read_sweep(spec)
+
+
 @pytest.mark.parametrize(("varies", "sweep", "message"), [
     ([{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 10**30}], 'method = "grid"',
      r"spec.toml, line 15: vary.count of 'axes.x.kp_per_s': a grid of 10{30} points, 1e\+30 variants, needs about "
