@@ -23,7 +23,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from . import _validate
-from .config import TomlFile, read_text
+from .config import TomlFile
 from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
 
@@ -549,7 +549,7 @@ def fleet_command(args):
     import matplotlib.pyplot as plt
 
     from .fleet import diagnose_fleet, fleet_summary, plot_fleet, trace_files
-    from .output import writing
+    from .output import report_file, writing
     from .sweep import Progress
 
     if args.report:
@@ -561,14 +561,8 @@ def fleet_command(args):
     if twice:  # each trace's report is <stem>.json beside fleet.json
         raise ValueError(f"two traces named {twice[0]}.csv (or one named fleet.csv): their reports would share a "
                          "file name; rename one")
-    summary_file = Path(args.summary) if args.summary else None
-    if summary_file is not None and summary_file.exists():  # replace only a fleet summary, never a file the user keeps
-        try:
-            ours = {"effects", "failed"} <= set(json.loads(read_text(summary_file)))
-        except (ValueError, TypeError):  # not a regular file, not UTF-8, not JSON: not ours
-            ours = False
-        if not ours:
-            raise FileExistsError(f"{summary_file} exists and is not a fleet summary; refusing to overwrite it")
+    summary_file = report_file(args.summary, "failed", "fleet summary", args.out,  # never a file the user keeps
+                               written=[f"{stem}.json" for stem in stems] + ["fleet.png"])  # nor a trace's report
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "
           f"on {where}", flush=True)

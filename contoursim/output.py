@@ -257,7 +257,7 @@ def _remove_stale_parts(folder, name=None):
                 pass  # e.g. removed by another run meanwhile
 
 
-def report_file(file, key, what, out=None):
+def report_file(file, key, what, out=None, written=()):
     """Check that a JSON report may be written to `file`: a new name, or a report contoursim wrote there before.
 
     Parameters
@@ -270,6 +270,8 @@ def report_file(file, key, what, out=None):
         What the report is, for the messages (e.g. ``"comparison JSON"``).
     out : str or Path, optional
         The output folder of the same run, not made yet: the report may not be it.
+    written : collection of str
+        Names of the files the run writes into `out`: the report may not be one of them.
 
     Returns
     -------
@@ -278,7 +280,7 @@ def report_file(file, key, what, out=None):
     Raises
     ------
     ConfigError
-        `file` is a directory, or the output folder `out`.
+        `file` is a directory, the output folder `out`, or a file the run writes there.
     FileExistsError
         `file` exists and is not such a report: it is the user's, never overwritten.
     """
@@ -287,6 +289,9 @@ def report_file(file, key, what, out=None):
     file = Path(file)
     if out is not None and file.resolve() == Path(out).resolve():  # the folder made first, the report refused after it
         raise ConfigError(f"{file} is the output directory (--out); name a file to write the {what} to")
+    if out is not None and file.name in written and file.resolve().parent == Path(out).resolve():
+        raise ConfigError(f"{file} is a file this run writes into its output directory (--out); name another file to "
+                          f"write the {what} to")
     if file.is_dir():
         raise ConfigError(f"{file} is a directory; name a file to write the {what} to")
     if file.exists() or file.is_symlink():

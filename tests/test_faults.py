@@ -290,6 +290,17 @@ def test_a_trace_over_less_than_a_mm_is_diagnosed_without_a_straightness_over_it
     assert "error" not in err and "Warning" not in err, err
 
 
+@pytest.mark.parametrize("name", ["a.json", "fleet.png"])
+def test_a_fleet_summary_on_a_file_the_fleet_writes_into_its_folder_is_refused_before_it_runs(tmp_path, capsys, name):
+    """The summary replaced trace a's report (out/a.json) after the run said the reports were written to out/."""
+    t = np.arange(50) * 1e-3
+    traces = [str(_trace(tmp_path / f"{stem}.csv", t, np.zeros(50), np.zeros(50))) for stem in "ab"]
+    summary = tmp_path / "out" / name
+    _refused(capsys, ["diagnose", *traces, "--summary", str(summary), "--out", str(tmp_path / "out")],
+             f"{summary} is a file this run writes into its output directory (--out); name another file")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_report_is_not_written_when_the_output_folder_is_refused(tmp_path, capsys):
     """The --out folder is checked before the report is written: a run that ends in exit 2 leaves no report."""
     t = np.arange(50) * 1e-3
