@@ -23,7 +23,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from . import _validate
-from .config import TomlFile
+from .config import TomlFile, local_file
 from .exceptions import ConfigError, ContoursimWarning, OutputError, UnstableLoopError
 from .output import output_dir
 
@@ -172,11 +172,11 @@ def demo(args):
     """The README's main job: ISO 230-4 circles (CCW and CW, plotted together) and a free-form path on the demo machine."""
     from .comparison import Comparison
     from .compensation import strategies_named
-    from .machine import load_machine
+    from .machine import load_machine, preset_file
     from .pathfile import library_file
     from .simulation import simulate
 
-    machine = load_machine(DEMO_MACHINE)
+    machine = load_machine(preset_file(DEMO_MACHINE, here=False))
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
     (_, free_form, plain, _), = groups["butterfly"]
     compared = {"none": plain}
@@ -204,7 +204,7 @@ def _job(args, extra_keys=()):
     machine, so ``--machine`` with a job file is an error. `extra_keys`: the
     further top-level keys a file built on a job file has (a sweep spec's).
     """
-    from .machine import read_work_offset
+    from .machine import preset_file, read_work_offset
     from .model import load_model, with_file_effects
     from .pathfile import library_file
 
@@ -221,30 +221,30 @@ def _job(args, extra_keys=()):
             if args.machine is not None:
                 raise job.error(f"--machine {args.machine} is not used with a job file, which names its machine "
                                 f"({data['machine']!r}); drop one of them", "machine")
-            near = lambda name: file.parent / name if (file.parent / name).exists() else name  # noqa: E731
             if "ballbar" in data and args.command != "simulate":
                 raise job.error(f"[ballbar] is for contoursim simulate; {args.command} runs the path as the file gives it",
                                 "ballbar")
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
-            def named(key, find):
-                if Path(near(data[key])).is_dir():  # '', '.', a folder beside the job: said where the job names it
-                    raise job.error(f"{key} = {data[key]!r} names the folder {near(data[key])}, not a {key} file", key)
+            def named(key, find, suffixes):
+                near = local_file(data[key], file.parent, suffixes) or data[key]  # beside the job, else a preset's name
+                if Path(near).is_dir():  # '', '.', a folder beside the job: said where the job names it
+                    raise job.error(f"{key} = {data[key]!r} names the folder {near}, not a {key} file", key)
                 try:
-                    return find(near(data[key]))
+                    return find(near)
                 except ConfigError as exc:
                     if exc.source is None:  # a name that is no file and no preset: said where the job names it
                         raise job.error(str(exc), key) from None
                     raise
 
-            model = named("machine", load_model)
+            model = named("machine", load_model, (".toml",))
             machine = model.machine
             if "work_offset" in data:
                 machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
             model = with_file_effects(replace(model, machine=machine), job)
-            return model, named("path", library_file), job, geometric
-    return load_model(args.machine or DEMO_MACHINE), library_file(args.file), None, False
+            return model, named("path", library_file, (".toml", ".nc")), job, geometric
+    return load_model(args.machine or preset_file(DEMO_MACHINE, here=False)), library_file(args.file), None, False
 
 
 def _ballbar(job):

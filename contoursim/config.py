@@ -17,7 +17,7 @@ from types import MappingProxyType
 from ._validate import FLOAT_MAX, closest, shown
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "read_bytes", "read_text"]
+__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
@@ -37,6 +37,32 @@ _KINDS = {
 # the leading bytes of compressed files a logger or an archive leaves under a .csv or .toml name
 _PACKED = {b"\x1f\x8b": "gzip-compressed", b"PK\x03\x04": "a ZIP archive",
            b"\xfd7zXZ\x00": "xz-compressed", b"\x28\xb5\x2f\xfd": "zstd-compressed"}
+
+
+def local_file(name, folder=".", suffixes=()):
+    """The file `name` in `folder`, or `name` with one of `suffixes` added there; None when there is none.
+
+    A name of a preset or library entry (``"demo_mill"``, ``"rounded_square"``) is looked for here first, so a
+    user's own copy of it (``rounded_square.toml``, edited) is the one read, not the one shipped.
+
+    Parameters
+    ----------
+    name : str or os.PathLike
+        A file name, with or without its suffix.
+    folder : str or os.PathLike
+        Where to look (a relative `name` is relative to it).
+    suffixes : sequence of str
+        Suffixes tried in turn after `name` itself (``(".toml", ".nc")``).
+
+    Returns
+    -------
+    pathlib.Path or None
+    """
+    for candidate in (str(name), *(f"{name}{suffix}" for suffix in suffixes)):
+        file = Path(folder) / candidate
+        if file.exists():
+            return file
+    return None
 
 
 def read_bytes(file, error=ConfigError):

@@ -32,7 +32,7 @@ from types import MappingProxyType
 import numpy as np
 
 from . import _validate
-from .config import TEXT_KEYS, TomlFile
+from .config import TEXT_KEYS, TomlFile, local_file
 from .exceptions import ConfigError, UnstableLoopError
 from .multibody import MAX_TRAVEL
 from .servo import AxisServo
@@ -324,12 +324,15 @@ def preset_names():
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
-def preset_file(name_or_file):
-    """The file of a machine given as a preset name or a path."""
+def preset_file(name_or_file, here=True):
+    """The file of a machine given as a preset name or a path (``demo_mill.toml`` here before the preset ``demo_mill``).
+
+    With ``here=False``, the shipped preset of that name only (a default the user did not name).
+    """
     if not isinstance(name_or_file, (str, os.PathLike)):
         raise TypeError(f"a machine is a preset name or a machine file (str or Path), got {type(name_or_file).__name__}")
-    path = Path(name_or_file)
-    if path.exists():
+    path = local_file(name_or_file, suffixes=(".toml",)) if here else None  # a user's copy of a preset is the one meant
+    if path is not None:
         return path
     if str(name_or_file) in preset_names():
         return Path(str(resources.files("contoursim").joinpath(_PRESETS, f"{name_or_file}.toml")))

@@ -19,7 +19,7 @@ from pathlib import Path as _FilePath
 import numpy as np
 
 from . import _validate
-from .config import TEXT_KEYS, TomlFile
+from .config import TEXT_KEYS, TomlFile, local_file
 from .exceptions import ConfigError
 from .feed import FeedSettings
 from .gcode import SUFFIXES, read_gcode
@@ -76,14 +76,17 @@ def _library():
     return next(f for f in (package / "trajectories", package.parent / "trajectories") if f.is_dir())
 
 
-def library_file(name):
+def library_file(name, folder="."):
     """The path file `name`: an existing file, else an entry of the trajectories library.
 
     Parameters
     ----------
     name : str or os.PathLike
         A file name, or a library entry with or without its suffix
-        (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then ``.nc`` is tried).
+        (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then ``.nc`` is tried, in `folder`
+        first: a file there is read rather than the library's of that name).
+    folder : str or os.PathLike
+        Where the file is looked for before the library (a job file's folder; default: here).
 
     Returns
     -------
@@ -91,9 +94,9 @@ def library_file(name):
     """
     if not isinstance(name, (str, os.PathLike)):
         raise TypeError(f"a path file is a file or library name (str or Path), got {type(name).__name__}")
-    path = _FilePath(name)
-    if path.exists():
-        return path
+    here = local_file(name, folder, (".toml", ".nc"))  # a user's copy of a library entry is the one meant
+    if here is not None:
+        return here
     library = _library()
     for candidate in (str(name), f"{name}.toml", f"{name}.nc"):
         if library.joinpath(candidate).is_file():

@@ -886,3 +886,28 @@ def test_a_diagnosis_does_not_replace_the_model_it_reads(tmp_path, capsys):
     _refused(capsys, ["diagnose", str(trace), "--model", str(model), "--out", str(tmp_path / "out")],
              f"--out {tmp_path / 'out'} would replace {model}, the model this run reads")
     assert model.read_bytes() == before
+
+
+@pytest.mark.parametrize("named", ["command line", "job file"])
+def test_a_users_copy_of_a_library_path_or_a_preset_named_without_its_suffix_is_the_one_read(tmp_path, monkeypatch,
+                                                                                            named):
+    """``rounded_square`` ran the library's square while the user's edited rounded_square.toml lay beside the job (and
+    ``demo_mill`` the preset for a demo_mill.toml): the table said 'path: rounded_square.toml' all the same."""
+    from contoursim.cli import _job
+
+    folder = tmp_path / "job"
+    folder.mkdir()
+    (folder / "rounded_square.toml").write_text(SMALL_PATH)
+    mill = preset_file("demo_mill").read_text()
+    (folder / "demo_mill.toml").write_text(mill.replace("kp_per_s = 40.0", "kp_per_s = 30.0"))
+    (folder / "j.toml").write_text('machine = "demo_mill"\npath = "rounded_square"\n')
+    monkeypatch.chdir(folder if named == "command line" else tmp_path)
+    args = (SimpleNamespace(file="rounded_square", machine="demo_mill", command="simulate") if named == "command line"
+            else SimpleNamespace(file=str(folder / "j.toml"), machine=None, command="simulate"))
+    model, path_file, _, _ = _job(args)
+    assert path_file.resolve() == (folder / "rounded_square.toml").resolve()
+    assert model.machine.axes["x"].kp == 30.0
+    # a machine the user did not name is the shipped demo mill, whatever lies here
+    monkeypatch.chdir(folder)
+    model, _, _, _ = _job(SimpleNamespace(file="rounded_square", machine=None, command="simulate"))
+    assert model.machine.axes["x"].kp == 40.0
