@@ -374,7 +374,7 @@ def _strategy_settings(job):
 
 
 def _set_option(settings, text):
-    """``--set NAME.KEY=VALUE`` into `settings` (strategy name -> keyword arguments), as a ``[[strategy]]`` key."""
+    """``--set NAME.KEY=VALUE`` into `settings` (strategy name -> keyword arguments), as a ``[[strategy]]`` key; NAME."""
     from .compensation import strategy_setting
 
     where, equals, value = text.partition("=")
@@ -395,6 +395,7 @@ def _set_option(settings, text):
         settings.setdefault(name, {})[key.strip()] = strategy_setting(name, key.strip(), number)
     except ValueError as exc:
         raise ValueError(f"--set {text}: {exc}") from None
+    return name
 
 
 def compare_command(args):
@@ -411,11 +412,16 @@ def compare_command(args):
 
     model, path_file, job, geometric = _job(args)
     settings = {} if job is None else _strategy_settings(job)
-    for text in args.set or ():
-        _set_option(settings, text)
     names = STRATEGY_NAMES if args.strategies is None else args.strategies
     if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
         names = [*names, "geometric"]
+    parts = {part for name in names for part in name.split("+")}
+    for text in args.set or ():  # a setting of a strategy that does not run would be dropped without a word
+        if _set_option(settings, text) not in parts:
+            raise ValueError(f"--set {text}: no strategy run here has {text.partition('.')[0].strip()!r} "
+                             f"(--strategies {','.join(names)}): run it, or drop the setting")
+    if args.tune and not any(part.startswith("ccc_") for part in parts):
+        raise ValueError(f"--tune tunes a cross-coupled strategy's gains; none runs here (--strategies {','.join(names)})")
     report = report_file(args.json, "runs", "comparison JSON", args.out)  # never a file the user keeps
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
