@@ -257,7 +257,8 @@ def _unit(name, value):
     """A direction in space as a unit (3,) vector: 3 coordinates, as its z is not to be guessed."""
     v = _vector(name, value)
     if np.size(value) != 3:
-        raise PathError(f"{name} must have 3 coordinates (a direction: [0, 0, 1] is normal to XY), got {np.size(value)}")
+        raise PathError(f"{name} must have 3 coordinates (a direction: [0, 0, 1] is normal to XY), got "
+                        f"{np.size(value)}")
     n = np.linalg.norm(v)
     if n < 1e-12:
         raise PathError(f"{name} must be a non-zero vector")

@@ -187,8 +187,8 @@ def read_sweep(file):
         seed = _integer(toml, ("sweep", "seed"), sweep.get("seed", 0), 0)
     for key in ("count", "seed") if method == "grid" else ():  # a grid draws nothing: its points are the vary tables'
         if key in sweep:
-            raise toml.error(f"sweep.{key} is for random and lhs draws: a grid's points are each [[vary]] table's count "
-                             "or values", "sweep", key)
+            raise toml.error(f"sweep.{key} is for random and lhs draws: a grid's points are each [[vary]] table's "
+                             "count or values", "sweep", key)
     task_size = None if "task_size" not in sweep else _integer(toml, ("sweep", "task_size"), sweep["task_size"], 1)
     values = _draw(toml, tables, method, count, seed)
     strategies = toml.data.get("strategies", "none")

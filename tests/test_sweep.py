@@ -95,8 +95,8 @@ def test_a_grids_count_or_seed_in_the_sweep_table_is_refused_by_its_line(tmp_pat
     """A grid's points are its vary tables' (it ran 2 variants, the 7 asked for ignored)."""
     spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 2}],
                  sweep=f'method = "grid"\n{key}')
-    with pytest.raises(ConfigError, match=rf"spec.toml, line 10: sweep.{key.split()[0]} is for random and lhs draws: a grid's "
-                                          r"points are each \[\[vary\]\] table's count or values"):
+    with pytest.raises(ConfigError, match=rf"spec.toml, line 10: sweep.{key.split()[0]} is for random and lhs draws: "
+                                          r"a grid's points are each \[\[vary\]\] table's count or values"):
         read_sweep(spec)
 
 
