@@ -22,7 +22,7 @@ __all__ = ["diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "tr
 
 
 def trace_files(paths):
-    """The trace files of the command line: the files given, and each folder's ``*.csv`` sorted by name.
+    """The trace files of the command line: the files given, and each folder's ``*.csv`` (any case) sorted by name.
 
     Parameters
     ----------
@@ -38,7 +38,7 @@ def trace_files(paths):
     files = []
     for path in map(Path, paths):
         if path.is_dir():
-            found = sorted(path.glob("*.csv"))
+            found = sorted(p for p in path.iterdir() if p.suffix.lower() == ".csv")  # NIGHT_1.CSV too
             if not found:
                 raise ValueError(f"{path} holds no .csv trace")
             files += found

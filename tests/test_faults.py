@@ -29,7 +29,7 @@ from contoursim.effects import Effect, Parameter
 from contoursim.errormotion import read_error_table
 from contoursim.exceptions import ConfigError, TraceFormatError
 from contoursim.feed import plan, sample
-from contoursim.fleet import diagnose_fleet
+from contoursim.fleet import diagnose_fleet, trace_files
 from contoursim.gcode import read_gcode
 from contoursim.machine import load_machine, preset_file
 from contoursim.model import Model
@@ -911,3 +911,11 @@ def test_a_users_copy_of_a_library_path_or_a_preset_named_without_its_suffix_is_
     monkeypatch.chdir(folder)
     model, _, _, _ = _job(SimpleNamespace(file="rounded_square", machine=None, command="simulate"))
     assert model.machine.axes["x"].kp == 40.0
+
+
+def test_a_folders_traces_whose_suffix_is_upper_case_are_in_the_fleet(tmp_path):
+    """NIGHT_2.CSV (as a Windows controller names it) was left out of the fleet without a word; alone, the folder was
+    said to hold no .csv trace."""
+    for name in ("night_1.csv", "NIGHT_2.CSV", "night_3.Csv", "notes.txt"):
+        (tmp_path / name).write_text("t,x_ref,x\n")
+    assert [f.name for f in trace_files([tmp_path])] == ["NIGHT_2.CSV", "night_1.csv", "night_3.Csv"]
