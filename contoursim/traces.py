@@ -32,6 +32,7 @@ columns, a column in other units) is refused.
 """
 
 import io
+import math
 import re
 from collections import Counter
 from collections.abc import Mapping
@@ -179,12 +180,20 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
     FileExistsError
         `file` exists and `overwrite` is false.
     ValueError
-        An extra column has the wrong shape, is not finite, is not a CSV
+        `every` leaves fewer than 2 samples, or samples further apart than
+        :data:`PLAUSIBLE_SAMPLE_PERIOD` allows; an extra column has the
+        wrong shape, is not finite, is not a CSV
         column name or clashes with a trace column; a metadata entry is not
         one ``# key: value`` line; a value is too large to write to its
         resolution.
     """
     every = _validate.positive_int("every", every)
+    kept = -(-trace.t.size // every)  # `every` makes no trace read_trace refuses: of 1 row, or of too slow a clock
+    if kept < 2 or (every > 1 and every * trace.dt >= PLAUSIBLE_SAMPLE_PERIOD[1]):
+        below = min(trace.t.size, math.ceil(PLAUSIBLE_SAMPLE_PERIOD[1] / trace.dt))
+        raise ValueError(f"every = {every} keeps {kept} of the {trace.t.size} samples, one every "
+                         f"{every * trace.dt:.6g} s: a trace holds 2 or more, less than {PLAUSIBLE_SAMPLE_PERIOD[1]:g} "
+                         f"s apart (read_trace refuses others); give every below {below}")
     columns = {"t": (trace.t, TIME_DECIMALS)}
     for i, axis in enumerate(trace.axes):
         columns[f"{axis}_ref"] = (trace.reference[:, i], POSITION_DECIMALS)

@@ -60,6 +60,16 @@ def test_every_nth_sample(tmp_path):
     assert back.dt == pytest.approx(7e-3)
     with pytest.raises(ValueError, match="every must be at least 1"):
         write_trace(tmp_path / "z.csv", trace, every=0)
+    # a trace read_trace refuses is not written (it was: 1 row, or a sample every 1.2 s)
+    for every, message in ((50, "every = 50 keeps 1 of the 50 samples, one every 0.05 s: a trace holds 2 or more.*"
+                                "give every below 50"), (1200, "keeps 1 of the 50 samples")):
+        with pytest.raises(ValueError, match=message):
+            write_trace(tmp_path / "z.csv", trace, every=every)
+    slow = _trace(n=3000)
+    with pytest.raises(ValueError, match=r"every = 1000 keeps 3 of the 3000 samples, one every 1 s: a trace holds 2 "
+                                         r"or more, less than 1 s apart \(read_trace refuses others\); give every "
+                                         r"below 1000"):
+        write_trace(tmp_path / "z.csv", slow, every=1000)
     assert not (tmp_path / "z.csv").exists()
 
 
