@@ -76,17 +76,15 @@ def _library():
     return next(f for f in (package / "trajectories", package.parent / "trajectories") if f.is_dir())
 
 
-def library_file(name, folder="."):
+def library_file(name):
     """The path file `name`: an existing file, else an entry of the trajectories library.
 
     Parameters
     ----------
     name : str or os.PathLike
         A file name, or a library entry with or without its suffix
-        (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then ``.nc`` is tried, in `folder`
-        first: a file there is read rather than the library's of that name).
-    folder : str or os.PathLike
-        Where the file is looked for before the library (a job file's folder; default: here).
+        (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then ``.nc`` is tried, here
+        first: a file here is read rather than the library's of that name).
 
     Returns
     -------
@@ -94,7 +92,7 @@ def library_file(name, folder="."):
     """
     if not isinstance(name, (str, os.PathLike)):
         raise TypeError(f"a path file is a file or library name (str or Path), got {type(name).__name__}")
-    here = local_file(name, folder, (".toml", ".nc"))  # a user's copy of a library entry is the one meant
+    here = local_file(name, suffixes=(".toml", ".nc"))  # a user's copy of a library entry is the one meant
     if here is not None:
         return here
     library = _library()
