@@ -212,6 +212,9 @@ def _job(args, extra_keys=()):
     if file.suffix == ".toml" and file.exists():
         job = TomlFile.read(file)
         if job.kind() == "job":
+            spec = next((key for key in ("sweep", "vary") if key in job.data and key not in extra_keys), None)
+            if spec is not None:  # said so, not an unknown key 'strategies' (did you mean 'strategy'?)
+                raise job.error("this is a sweep spec ([sweep] and [[vary]] tables): run it with contoursim sweep", spec)
             if "machine" not in job.data:
                 job.table(allowed=_JOB_KEYS + tuple(extra_keys))  # a misspelt machine key said as such
                 raise job.error('a job file names its machine: add machine = "<preset name or machine file>" '

@@ -324,6 +324,10 @@ def test_each_kind_of_file_where_another_is_expected_says_what_was_expected(tmp_
     assert f"{machine}: this is a machine file, not a path file; a path file describes a path: " in capsys.readouterr().err
     assert main(["simulate", "rounded_square", "--machine", str(job), *out]) == 2
     assert f"{job}: this is a job file, not a machine file" in capsys.readouterr().err
+    spec = ROOT / "examples" / "tune_ccc.toml"  # it was: unknown key 'strategies' (did you mean 'strategy'?)
+    assert main(["compare", str(spec), *out]) == 2
+    assert f"{spec}, line 14: this is a sweep spec ([sweep] and [[vary]] tables): run it with contoursim sweep" in (
+        capsys.readouterr().err)
     job.write_text("")
     assert main(["simulate", "rounded_square", "--machine", str(job), *out]) == 2
     assert f"{job}: the file is empty; a machine file describes a machine" in capsys.readouterr().err
