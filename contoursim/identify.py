@@ -6,7 +6,8 @@ position loop around a P or PI velocity loop with velocity feedforward:
 
 - ONE position gain ``kp`` [1/s] shared by all axes (NC position gains are
   normally set equal; a gain identified per axis would silently absorb a
-  ``gain_mismatch``, which the diagnosis must be able to name);
+  ``gain_mismatch``, which the diagnosis must be able to name), at least
+  5 1/s (an NC's is 10–100);
 - ONE velocity-feedforward fraction ``vff`` [-] shared by all axes (set in
   the NC, like the gain);
 - per axis, the velocity-loop bandwidth ``ω_v`` [rad/s]: with the plant's
@@ -41,7 +42,12 @@ and an offset left in would correlate the residual over the whole run),
 each finite-difference Jacobian one :func:`simulate_batch` call: first
 without feedforward, then with it, kept only when it is significant
 (:func:`delta_bic`): kp and vff set the steady lag together, and only the
-transients tell them apart; then with a PI velocity loop, kept likewise
+transients tell them apart. The fit with it starts from both ends of that
+valley, the fit without it and a feedforward of 0.9 at the same lag (a
+start at one end can stop there), and keeps the better, unless its kp ran
+to the lower bound: a position loop all but open leaves each axis's lag to
+its own velocity loop, which then absorbs a difference of the axes'
+position gains or delays. Then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
 integrator); then with the damping, kept likewise. These stages run on the state
 structure; each drive structure of :data:`DRIVES` is then fitted from
@@ -86,6 +92,9 @@ STATE = ("state", 1, 0)
 DRIVES = tuple(("difference", n, k) for n in (1, 2) for k in (0, 1))
 
 _FD_STEP = 1e-3
+_KP_RANGE = (5.0, np.inf)  # range of an identified position gain [1/s]: an NC's is 10-100 (1-6 m/min/mm)
+_VALLEY_VFF = 0.9  # the feedforward the second search of the (kp, vff) valley starts from [-]
+_AT_BOUND = 0.01  # a fitted log-parameter this close to its bound ran to it
 _DIVERGED = 1e6  # a residual entry beyond this many tracking errors (its RMS) is a loop that diverged
 _BANDWIDTH_FRACTION = 0.2  # highest identified velocity-loop bandwidth, a fraction of the Nyquist frequency
 _TI_RANGE = (1.5, 50.0)  # range of ti·ω_v of an identified PI velocity loop [-]
@@ -180,8 +189,8 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     nyquist = np.pi / period
     d = len(axes)
     top = _BANDWIDTH_FRACTION * nyquist
-    lower = np.array([np.log(0.5), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d + [np.log(_POLE_RANGE[0])] * d)
-    upper = np.array([np.log(0.5 * top), 1.0] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d
+    lower = np.array([np.log(_KP_RANGE[0]), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d + [np.log(_POLE_RANGE[0])] * d)
+    upper = np.array([np.log(min(_KP_RANGE[1], 0.5 * top)), 1.0] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d
                      + [np.log(_POLE_RANGE[1])] * d)
     x0 = np.clip(x0, lower[: x0.size] + 1e-6, upper[: x0.size] - 1e-6)
     measured = trace.actual
@@ -249,7 +258,14 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     start = x0.copy()
     start[1] = 0.0
     x1 = fitted(start, np.array([j != 1 for j in range(x0.size)]), STATE)
-    x2 = fitted(x1, np.ones(x0.size, bool), STATE)
+    # the valley is searched from both its ends: from the fit without feedforward, and from a feedforward of
+    # _VALLEY_VFF with the same steady lag (a fit started at vff = 0 stops short of a feedforward near 1); a fit
+    # whose kp ran to its lower bound is not one: a position loop all but open leaves each axis's lag to its
+    # velocity loop, whose bandwidth per axis absorbs any difference of the axes' position gains
+    valley = x1.copy()
+    valley[0], valley[1] = max(x1[0] + np.log(1.0 - _VALLEY_VFF), lower[0] + 1e-6), _VALLEY_VFF
+    fits = [fitted(x, np.ones(x0.size, bool), STATE) for x in (x1, valley)]
+    x2 = min((x for x in fits if x[0] > lower[0] + _AT_BOUND), key=lambda x: rss(x, STATE)[0], default=x1)
     (rss1, _), (rss2, tau) = rss(x1, STATE), rss(x2, STATE)
     feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
     best, rss0 = (x2, rss2) if feedforward else (x1, rss1)
@@ -261,7 +277,7 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     x3 = fitted(x3, free, STATE)
     rss3, tau = rss(x3, STATE)
     # a P loop pressed against the bandwidth bound is imitating an integrator: the PI loop is kept then too
-    pressed = bool(np.any(best[2: 2 + d] > np.log(top) - 0.01))
+    pressed = bool(np.any(best[2: 2 + d] > np.log(top) - _AT_BOUND))
     added = d  # the parameters the PI loop adds to the fit kept so far
     if delta_bic(rss0, rss3, measured.size, d, tau) > SIGNIFICANT or (pressed and rss3 <= rss0):
         best, rss0, added = x3, rss3, 0

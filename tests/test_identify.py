@@ -68,6 +68,18 @@ def test_independent_drive_gains_are_identified(independent_truth, tmp_path):
     assert not any("weakly determined" in w for w in identification_warnings(machine))
 
 
+def test_a_feedforward_beyond_the_reach_of_a_fit_started_without_one_is_found(independent_truth, tmp_path):
+    """An independent two-mass pair with velocity feedforward 0.8 whose steady lag a position gain of 172 1/s without
+    feedforward imitates well enough that a fit started there stays (the (kp, vff) valley's other end): searched from
+    both ends, kp within 10 % and vff within 0.03 of the data sheet's."""
+    case = independent_truth.make_case("two_mass", None, 1048233697, tmp_path)
+    sheet = load_model(case.machine_file).machine.axes["x"]
+    assert sheet.vff == 0.8
+    identified = identify_machine(read_trace(case.csv)).axes["x"]
+    assert identified.kp == pytest.approx(sheet.kp, rel=0.1)
+    assert identified.vff == pytest.approx(0.8, abs=0.03)
+
+
 def test_an_offset_of_the_measured_positions_changes_nothing_identified():
     """The trace's zero is not the loop's: the same trace with each axis's measured positions offset (an instrument's
     zero, a squareness at the path's place) identifies the same machine, whatever the offsets."""
