@@ -127,6 +127,7 @@ _JACKKNIFE_BLOCKS = (40, 20, 10)
 _PRIOR_REACH = 3.0  # a given model's plant refitted further than this many prior widths from its nominal is said
 _BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–Newton step tried, the first that helps kept
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
+_FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
 _SLOWEST_LOG = 0.01  # a trace sampled slower than this [s] does not resolve servo dynamics (a position loop's 1/kp)
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
 _CONTENDERS = 3  # most candidates compared by their profile over the nominal parameters (:func:`_profiled`)
@@ -587,6 +588,27 @@ def _not_following(trace, simulated, scored):
             found.append(f"the measured {axis} does not follow {axis}_ref (the residual, {1e3 * miss:.4g} µm RMS, is "
                          f"as large as the commanded motion, {1e3 * motion:.4g} µm RMS): columns swapped or units "
                          "wrong? No effect is named")
+    return found
+
+
+def _leading(trace, simulated, scored, noise):
+    """Sentences for the axes whose measured positions lead their reference by about the lag the model has them behind.
+
+    A servo axis lags its command; measured minus commanded positions that are
+    the model's lag with the sign turned (a regression of one on the other
+    below −0.5, the lag clear of the noise) are a trace whose columns are
+    swapped.
+    """
+    found = []
+    for i, axis in enumerate(trace.axes):
+        lag = simulated[scored, i] - trace.reference[scored, i]
+        seen = trace.actual[scored, i] - trace.reference[scored, i]
+        lag, seen = lag - lag.mean(), seen - seen.mean()
+        size = float(lag @ lag)
+        if size > 0 and np.sqrt(size / lag.size) > 3 * noise[i] and float(seen @ lag) / size < -0.5:
+            found.append(f"the measured {axis} leads {axis}_ref by {-float(seen @ lag) / size:.2g} times the lag the "
+                         f"model has it behind (a servo axis follows its command, it does not anticipate it): are "
+                         f"{axis} and {axis}_ref swapped? No effect is named")
     return found
 
 
@@ -1825,7 +1847,7 @@ def _diagnose(trace, model, identified, max_effects, say):
     noise = noise_level(trace.actual - before, trace.actual)
     for i, cycle in cycles.items():  # the noise is what is white: a limit cycle is left out of its estimate
         quiet = ~cycle["samples"]
-        if quiet.sum() >= 16:
+        if quiet.sum() >= _FEWEST_SAMPLES:
             noise[i] = noise_level((trace.actual - before)[quiet, i:i + 1], trace.actual[quiet, i:i + 1])[0]
     scored = np.ones(len(trace.t), bool)
     speed = np.linalg.norm(reference.velocity, axis=1)
@@ -1854,7 +1876,11 @@ def _diagnose(trace, model, identified, max_effects, say):
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
     where = locate(trace, problem.reference, np.where(scored[:, None], trace.actual - before - raw.mean(axis=0), 0.0))
     both_ways = min(turning(problem.reference.position, problem.reference.velocity)) >= _BOTH_WAYS
-    lost = _not_following(trace, before, scored)
+    lost = _not_following(trace, before, scored) + _leading(trace, before, scored, noise)
+    if scored.sum() < _FEWEST_SAMPLES:
+        lost.append(f"the trace has {scored.sum()} samples scored: too few to tell its noise floor (from second "
+                    f"differences) or to refit the nominal parameters, which then fit them by construction; at least "
+                    f"{_FEWEST_SAMPLES} are needed. No effect is named")
     warnings += lost
     for round_ in range(0 if lost else max_effects):
         base = problem.base

@@ -477,6 +477,23 @@ def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine, 
     assert corrected.machine.travel == placed.travel and corrected.effects == (named,)
 
 
+@pytest.mark.parametrize("fault, words", [
+    ("swapped", "the measured x leads x_ref by 0.99 times the lag the model has it behind"),
+    ("short", "the trace has 12 samples scored: too few to tell its noise floor"),
+])
+def test_a_trace_with_its_columns_swapped_or_too_short_to_judge_names_nothing_and_says_why(machine, fault, words):
+    """Measured and commanded columns swapped (the axis then leads its command by the model's lag), or 12 samples (a
+    noise floor from their second differences, a nominal refit fitting them by construction): nothing named, why said."""
+    trace = synthetic_trace(Model(machine), circle("ccw"), mismatch=0.03, noise_um=0.1, every=2, seed=3)
+    if fault == "swapped":
+        trace = replace(trace, reference=trace.actual, actual=trace.reference)
+    else:
+        trace = replace(trace, t=trace.t[:12], reference=trace.reference[:12], actual=trace.actual[:12])
+    result = diagnose(trace, Model(machine))
+    assert result.effects == ()
+    assert any(w.startswith(words) and w.endswith("No effect is named") for w in result.warnings), result.warnings
+
+
 def test_noise_level_from_the_second_differences():
     """White noise of known level on a smooth signal with a few steps: σ comes back within a few %."""
     rng = np.random.default_rng(1)
