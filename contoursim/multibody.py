@@ -42,6 +42,7 @@ Units inside: mm, rad, s. Axis positions q are (N, n_axes), time first.
 """
 
 import re
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -52,7 +53,7 @@ from ._blocks import blocks
 from ._numba import njit
 from .config import FORMAT_DOC, TEXT_KEYS
 from .errormotion import _RAD_PER_URAD, COMPONENTS, ERROR_COLUMNS, ERROR_UNITS, Cyclic, ErrorMotion, read_error_table
-from .exceptions import ConfigError
+from .exceptions import ConfigError, ContoursimWarning
 
 __all__ = [
     "Body",
@@ -1148,7 +1149,7 @@ def _body_from_toml(toml, base, where, item, body_index):
             raise fail(f"{travel_key} must be [min, max]", travel_key)
         travel = [_number(v, fail, travel_key) for v in travel]
         travel = tuple(np.deg2rad(travel)) if rotary else tuple(travel)
-    motion = _motion_from_toml(toml, base, where, item, rotary, fail)
+    motion = _motion_from_toml(toml, base, where, item, rotary, travel, fail)
     try:
         body = Body(
             name=item["name"],
@@ -1238,7 +1239,7 @@ def _beyond_small_errors(body, error):
     return None
 
 
-def _motion_from_toml(toml, base, where, item, rotary, fail):
+def _motion_from_toml(toml, base, where, item, rotary, travel, fail):
     errors = item.get("errors", {})
     if not errors:
         return (ErrorMotion(),) * 6
@@ -1254,6 +1255,7 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
             if not path.exists():
                 raise fail(f"error table {str(errors['table'])!r} not found (relative to {base})", "errors", "table") from None
             raise exc
+        _warn_short_table(str(errors["table"]), tables, travel, rotary, fail)
     to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
     period_key = "period_deg" if rotary else "period_mm"
     motion = []
@@ -1285,6 +1287,25 @@ def _motion_from_toml(toml, base, where, item, rotary, fail):
                                                period * to_q, np.deg2rad(_number(term.get("phase_deg", 0.0), fail, "errors", key))))
         motion.append(ErrorMotion(tuple(poly), tuple(terms), tables.get(comp)))
     return tuple(motion)
+
+
+def _warn_short_table(name, tables, travel, rotary, fail):
+    """Warn when the error table `name` (`tables`, read by :func:`read_error_table`) does not cover the axis's travel.
+
+    Beyond its ends the table's first and last values are held (``np.interp``): an error the table
+    does not give, which the user is told of rather than left to find in the results.
+    """
+    if travel is None or not tables:
+        return
+    positions = next(iter(tables.values()))[0]  # every column shares the table's positions
+    if positions[0] <= travel[0] and positions[-1] >= travel[1]:
+        return
+    unit, shown = ("°", np.rad2deg) if rotary else (" mm", np.asarray)
+    lo, hi = shown([positions[0], positions[-1]])
+    start, end = shown(travel)
+    message = (f"error table {name!r} covers {lo:g} .. {hi:g}{unit} of the travel {start:g} .. {end:g}{unit}: its first and "
+               "last values are held beyond its ends (add rows at the travel's ends to give the errors there)")
+    warnings.warn(str(fail(message, "errors", "table")), ContoursimWarning, stacklevel=2)
 
 
 def _number(value, fail, *key):

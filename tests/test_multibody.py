@@ -1,5 +1,6 @@
 """Multibody chain: topology, exact HTM products, first-order model, seed formulas."""
 
+import warnings
 from dataclasses import replace
 
 from pathlib import Path
@@ -12,7 +13,7 @@ from contoursim import multibody
 from contoursim._blocks import BLOCK
 from contoursim.config import TomlFile
 from contoursim.errormotion import Cyclic, ErrorMotion
-from contoursim.exceptions import ConfigError
+from contoursim.exceptions import ConfigError, ContoursimWarning
 from contoursim.machine import load_machine as load_preset
 from contoursim.machine import preset_names
 from contoursim.multibody import Body, MachineChain, chain_from_toml, lower_body_array, tilted_axis
@@ -568,6 +569,30 @@ def test_a_machine_file_whose_axis_no_body_drives_is_refused_by_its_file(tmp_pat
     (tmp_path / "m.toml").write_text(text.replace('axis = "z"', 'axis = "y"'))  # Y and Z both on y: z idle
     with pytest.raises(ConfigError, match=r"m.toml: axes \('x', 'y', 'z'\) lists 'z', which no body's joint drives"):
         load_preset(tmp_path / "m.toml")
+
+
+@pytest.mark.parametrize(
+    "rows, warned",
+    [
+        ("0,0\n100,3\n", ""),  # the whole travel
+        ("-10,0\n50,1\n110,3\n", ""),  # beyond it
+        ("20,0\n100,3\n", "covers 20 .. 100 mm of the travel 0 .. 100 mm"),  # short at the start
+        ("0,0\n60,3\n", "covers 0 .. 60 mm of the travel 0 .. 100 mm"),  # and at the end
+    ],
+)
+def test_an_error_table_shorter_than_the_travel_is_warned_of_naming_the_table_and_line(tmp_path, rows, warned):
+    # beyond its ends a table's end values are held (np.interp): an error a laser run did not give, taken without a word
+    (tmp_path / "x.csv").write_text("position_mm,dx_um\n" + rows)
+    (tmp_path / "m.toml").write_text(MACHINE.replace("[body.errors]\n", 'travel_mm = [0, 100]\n[body.errors]\ntable = "x.csv"\n'))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        chain_from_toml(TomlFile.read(tmp_path / "m.toml"))
+    messages = [str(w.message) for w in caught if issubclass(w.category, ContoursimWarning)]
+    if not warned:
+        assert messages == []
+        return
+    assert messages == [f"{tmp_path / 'm.toml'}, line 12: body 'X': error table 'x.csv' {warned}: its first and last values "
+                        "are held beyond its ends (add rows at the travel's ends to give the errors there)"]
 
 
 def test_a_thermal_drift_beyond_the_small_errors_within_a_run_is_refused():
