@@ -978,7 +978,9 @@ def polyline(points, blend_radius=0.0, role="path"):
     pts, lengths = _point_rows("points", points, 2)
     r = _scalar(_validate.nonnegative, "blend_radius", blend_radius)
     d = np.diff(pts, axis=0) / lengths[:, None]
-    turn = np.arccos(np.clip(np.sum(d[:-1] * d[1:], axis=1), -1.0, 1.0))
+    # atan2(|sin|, cos), not arccos(cos): exact near 0, where arccos made a straight-through point (1 - cos ~ 1e-16)
+    # a corner of 2e-8 rad, whose fillet had no inward direction (a NaN centre)
+    turn = np.arctan2(np.linalg.norm(np.cross(d[:-1], d[1:]), axis=1), np.sum(d[:-1] * d[1:], axis=1))
     if np.any(turn > np.pi - 1e-9):
         i = int(np.argmax(turn > np.pi - 1e-9)) + 1
         raise PathError(f"polyline reverses direction at points[{i}]: no corner blend is possible")

@@ -101,6 +101,15 @@ def test_polyline_blends_are_tangent_fillets():
     assert path.length == pytest.approx(50 + 100 + 100 - 4 * r + 2 * (np.pi / 2) * r, rel=1e-14)
 
 
+@pytest.mark.parametrize("points", [[[20, -20], [10, -10], [0, 0], [-10, 10]], [[0, 0], [0.1, 0.3], [0.2, 0.6], [0.3, 0.9]]])
+def test_a_polyline_going_straight_through_its_points_has_no_fillet_at_them(points):
+    # arccos of a cosine rounded to 1 - 1e-16 made a 2e-8 rad corner there, whose fillet had no inward direction:
+    # 'center contains a non-finite value (nan)' for points the user put on a straight line
+    path = paths.polyline(points, blend_radius=0.05)
+    assert {type(p).__name__ for p in path.primitives} == {"Line"}
+    assert path.length == pytest.approx(np.linalg.norm(np.subtract(points[-1], points[0])), rel=1e-14)
+
+
 def test_polyline_errors_name_the_problem():
     with pytest.raises(PathError, match="does not fit segment 1"):
         paths.polyline([[0, 0], [10, 0], [10, 5], [20, 5]], blend_radius=3.0)
