@@ -16,6 +16,7 @@ import numpy as np
 
 from . import _validate
 from ._blocks import BLOCK, blocks
+from .machine import CARTESIAN
 from .output import output_dir
 
 __all__ = [
@@ -230,16 +231,34 @@ def _drawn_curve(points, step):
 
 
 def _magnified(result, k):
-    """The path with its contour error magnified, ``foot + k·(actual − foot)`` in XY [mm], as :class:`_Rows`."""
+    """The path with its contour error magnified, ``foot + k·(actual − foot)`` in its drawing plane
+    (:func:`_drawn_axes`) [mm], as :class:`_Rows`."""
     tool, foot = result.tool_position, result.contour.foot
+    drawn = list(_drawn_axes(result.trajectory))
 
     def rows(index):
-        shown = tool[index, :2] - foot[index, :2]
+        shown = tool[index][:, drawn] - foot[index][:, drawn]
         shown *= k
-        shown += foot[index, :2]
+        shown += foot[index][:, drawn]
         return shown
 
     return _Rows(len(tool), rows)
+
+
+def _drawn_axes(trajectory):
+    """The two coordinates a path is drawn in: x and y, or x and z (y and z) for a path in a plane y = c (x = c),
+    as a G18 (G19) program's; a 3-D path that leaves every such plane is drawn in XY."""
+    position = trajectory.position
+    if position.shape[1] < 3 or np.ptp(position[:, 2]) == 0:
+        return 0, 1
+    flat = [i for i in (1, 0) if np.ptp(position[:, i]) == 0]
+    return (0, 1) if not flat else tuple(i for i in range(3) if i != flat[0])
+
+
+def _drawn_labels(ax, drawn):
+    """Label the axes of a drawing in the coordinates `drawn` (:func:`_drawn_axes`)."""
+    ax.set_xlabel(f"{CARTESIAN[drawn[0]]} [mm]")
+    ax.set_ylabel(f"{CARTESIAN[drawn[1]]} [mm]")
 
 
 def _has_test(trajectory):
@@ -256,7 +275,7 @@ def _drawing_size(points):
 
 def _shared_magnification(results):
     """One magnification for `results` drawn side by side: from the largest contour error of all."""
-    size = max(_drawing_size(r.trajectory.position[:, :2]) for r in results)
+    size = max(_drawing_size(r.trajectory.position[:, list(_drawn_axes(r.trajectory))]) for r in results)
     return magnification_for(size, max(float(r.contour.magnitude.max()) for r in results))
 
 
@@ -312,9 +331,10 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     curvature on the inside of a bend (tight lobes), the drawn curve loops:
     the title says so, as such loops are not overshoot. The start is marked,
     an arrow gives the direction of travel and a triangle the largest contour
-    error of the test proper; a 3-D path is drawn in XY. The title names the
-    run, its direction on a circular test (CW or CCW), the machine and the
-    effects and compensation switched on. The lines hold what the pixels can
+    error of the test proper; a path in a plane y = c or x = c (G18, G19) is
+    drawn in that plane, another 3-D path in XY. The title names the run, its
+    direction on a circular test (CW or CCW), the machine and the effects and
+    compensation switched on. The lines hold what the pixels can
     show (:func:`_drawn_curve`): a path retraced many times is drawn once.
 
     Parameters
@@ -328,7 +348,8 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     """
     ax = _axes(ax)
     traj, contour = result.trajectory, result.contour
-    ref = traj.position[:, :2]
+    drawn = _drawn_axes(traj)
+    ref = traj.position[:, list(drawn)]
     size = _drawing_size(ref)
     k = magnification_for(size, float(contour.magnitude.max())) if magnification is None else \
         _validate.positive("magnification", magnification)
@@ -347,8 +368,7 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     if 0 < ahead < len(ref):
         ax.annotate("", xy=ref[ahead], xytext=ref[0], arrowprops=dict(arrowstyle="-|>", color="k", lw=1.0))
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
+    _drawn_labels(ax, drawn)
     if k == 1 and largest < RESOLUTION_UM:
         title = f"contour error below the traces' {RESOLUTION_UM * 1e3:g} nm: nothing to magnify"
     else:
@@ -356,7 +376,7 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     if _has_test(traj):
         title += " on the test proper"
     notes = []
-    if traj.dim == 3 and np.ptp(traj.position[:, 2]) > 0:
+    if drawn == (0, 1) and traj.dim == 3 and np.ptp(traj.position[:, 2]) > 0:
         notes.append("3-D path shown in XY (z not drawn)")
     if k > 1 and traj.path is not None:
         loops, fans = _loops_and_fans(result, k)
@@ -784,7 +804,8 @@ def plot_compared_paths(runs, fig=None, magnification=None):
         fig = plt.figure(figsize=(10.0, 7.0), layout="constrained")
     results = list(runs.values())
     first = results[0]
-    ref = first.trajectory.position[:, :2]
+    drawn = _drawn_axes(first.trajectory)
+    ref = first.trajectory.position[:, list(drawn)]
     size = _drawing_size(ref)
     k = _shared_magnification(results) if magnification is None else _validate.positive("magnification", magnification)
     step = size / (2 * _COLUMNS)
@@ -800,7 +821,8 @@ def plot_compared_paths(runs, fig=None, magnification=None):
         ax.set_title(f"{name}: max {_um(largest)}", fontsize="small")
         ax.tick_params(labelsize="x-small")
     scale = f"×{k:g} along the path normal" if k > 1 else "at true scale"
-    fig.suptitle(f"Contour error of each strategy, {scale} (one factor for all; grey: the reference; x, y [mm])",
+    fig.suptitle(f"Contour error of each strategy, {scale} (one factor for all; grey: the reference; "
+                 f"{', '.join(CARTESIAN[i] for i in drawn)} [mm])",
                  fontsize="medium")
     return axes
 

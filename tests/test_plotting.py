@@ -36,6 +36,28 @@ def test_a_path_along_z_only_has_nothing_to_magnify():
     ax.figure.clf()
 
 
+@pytest.mark.parametrize("program, labels, note", [
+    ("G18\nG1 X10 F2000\nG2 X30 Z0 I10 K0\nG1 X40", ("x [mm]", "z [mm]"), False),  # an arc in XZ: drawn there
+    ("G19\nG1 Y10 F2000\nG3 Y30 Z0 J10 K0\nG1 Y40", ("y [mm]", "z [mm]"), False),  # an arc in YZ
+    ("G17\nG1 X10 F2000\nG3 X10 Y0 Z-4 I-10 J0", ("x [mm]", "y [mm]"), True),  # a helix: in XY, z not drawn
+])
+def test_a_path_in_the_xz_or_yz_plane_is_drawn_in_its_plane(program, labels, note):
+    """An XZ (G18) arc was drawn in XY, a straight line on which no error showed, under a title giving its max."""
+    from contoursim.gcode import read_gcode
+    from contoursim.simulation import default_settle
+
+    machine = load_machine("demo_mill")
+    read = read_gcode("G21 G90\nG0 X0 Y0 Z0\n" + program + "\nM30\n")
+    profile = plan(read.path, read.feeds, 1000.0, 50_000.0)
+    result = simulate(machine, sample(read.path, profile, machine.servo_period))
+    ax = plot_path_error(result)
+    assert (ax.get_xlabel(), ax.get_ylabel()) == labels
+    assert ("z not drawn" in ax.get_title()) == note
+    reference = ax.get_lines()[0].get_xydata()
+    assert np.nanmax(reference[:, 1]) - np.nanmin(reference[:, 1]) >= 8  # the arc's 10 mm bulge, the helix's circle
+    ax.figure.clf()
+
+
 def test_envelope_keeps_the_extremes_of_every_pixel_column():
     rng = np.random.default_rng(3)
     n, columns = 100_003, 700
