@@ -19,7 +19,7 @@ positions stay exact to the nm and never overflow; forces within ±1e9 N
 Units: a ``# units:`` line declares them column by column, as contoursim
 writes it: ``# units: t [s]; x_ref, x, y_ref, y [mm]`` (groups separated by
 ``;``, each a list of columns and a unit in brackets; a bare unit, ``# units:
-m``, is that of all the position columns). The reader converts ``t`` from
+m``, is that of all the position columns; ``# Units:`` and ``# unit:`` too). The reader converts ``t`` from
 :data:`TIME_UNITS` to s, positions from :data:`LENGTH_UNITS` to mm, forces
 from :data:`FORCE_UNITS` to N and currents from :data:`CURRENT_UNITS` to A,
 and refuses any other unit of a column it reads (others' units are not read), and a second ``# units:``
@@ -264,12 +264,14 @@ def read_trace(file):
     first = 0
     while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
         key, colon, value = lines[first][1:].partition(":")
-        if colon and key.strip() == "units" and units_line is not None:  # one of them would be ignored
+        key = key.strip()
+        is_units = key.lower() in ("units", "unit")  # '# Units:', '# unit:' declare units too: honoured, never ignored
+        if colon and is_units and units_line is not None:  # one of them would be ignored
             raise TraceFormatError(f"a second '# units:' line (the first is line {units_line}): declare the units once",
                                    source, first + 1)
-        if colon and key.strip():
-            metadata[key.strip()] = value.strip()
-            units_line = first + 1 if key.strip() == "units" else units_line
+        if colon and key:
+            metadata["units" if is_units else key] = value.strip()
+            units_line = first + 1 if is_units else units_line
         first += 1
     if first == len(lines):
         raise TraceFormatError("no header row", source)

@@ -197,17 +197,21 @@ def test_read_only_arrays_are_shared_not_copied(tmp_path):
 SINE = "\n".join(f"{k * 1e-3:.3f},{np.sin(k / 5):.6f},{np.sin((k - 1) / 5):.6f}" for k in range(40))
 
 
-@pytest.mark.parametrize("units, t_scale, x_scale", [
-    ("t [s]; x_ref, x [mm]", 1.0, 1.0),
-    ("t [ms]; x_ref, x [m]", 1e-3, 1e3),
-    ("t [µs]; x_ref, x [um]", 1e-6, 1e-3),
-    ("t [ns]; x_ref, x [in]", 1e-9, 25.4),
-    ("m", 1.0, 1e3),  # a bare unit: the positions'
-    ("t [s]; x_ref, x [nm]; contour [mm]; measuring [1 = test proper, 0 = not]", 1.0, 1e-6),  # others' units not read
+@pytest.mark.parametrize("key, units, t_scale, x_scale", [
+    ("units", "t [s]; x_ref, x [mm]", 1.0, 1.0),
+    ("units", "t [ms]; x_ref, x [m]", 1e-3, 1e3),
+    ("units", "t [µs]; x_ref, x [um]", 1e-6, 1e-3),
+    ("units", "t [ns]; x_ref, x [in]", 1e-9, 25.4),
+    ("units", "m", 1.0, 1e3),  # a bare unit: the positions'
+    ("units", "t [s]; x_ref, x [nm]; contour [mm]; measuring [1 = test proper, 0 = not]", 1.0, 1e-6),  # others' not read
+    # the key as people write it: these were metadata, the ms read as s and the µm as mm without a word
+    ("Units", "t [ms]; x_ref, x [um]", 1e-3, 1e-3),
+    ("UNITS", "t [ms]; x_ref, x [um]", 1e-3, 1e-3),
+    ("unit", "t [ms]; x_ref, x [um]", 1e-3, 1e-3),
 ])
-def test_declared_units_are_honoured(tmp_path, units, t_scale, x_scale):
+def test_declared_units_are_honoured(tmp_path, key, units, t_scale, x_scale):
     rows = SINE.splitlines()
-    (tmp_path / "u.csv").write_text(f"# units: {units}\nt,x_ref,x\n" + "\n".join(
+    (tmp_path / "u.csv").write_text(f"# {key}: {units}\nt,x_ref,x\n" + "\n".join(
         ",".join(f"{float(v) / scale:.12g}" for v, scale in zip(row.split(","), (t_scale, x_scale, x_scale))) for row in rows))
     (tmp_path / "mm.csv").write_text("t,x_ref,x\n" + SINE)
     trace, plain = read_trace(tmp_path / "u.csv"), read_trace(tmp_path / "mm.csv")
@@ -229,6 +233,7 @@ def test_declared_units_are_honoured(tmp_path, units, t_scale, x_scale):
     ("# units: t [min]\n", 1, "column 't' is declared in 'min'; column 't' is read in s, ms"),
     ("# c\n# units: metric\n", 2, "the units 'metric' cannot be read: write them as contoursim does, "
                                   "'# units: t [s]; x_ref, x [mm]'"),
+    ("# units: t [ms]\n# Units: t [s]\n", 2, "a second '# units:' line (the first is line 1): declare the units once"),
 ])
 def test_units_that_cannot_be_honoured_are_refused(tmp_path, head, line, words):
     (tmp_path / "u.csv").write_text(head + "t,x_ref,x\n" + SINE)
