@@ -10,6 +10,8 @@ from .paths import Path
 
 __all__ = ["Trajectory"]
 
+_AT_REST = 1e-9  # an end velocity (acceleration) within this share of the largest is rest, to rounding
+
 
 
 @dataclass(frozen=True)
@@ -95,8 +97,11 @@ class Trajectory:
         n = int(np.ceil(duration / self.dt - 1e-9))
         if n == 0:
             return self
-        if np.abs(self.velocity[-1]).max() > 0 or np.abs(self.acceleration[-1]).max() > 0:
-            raise ValueError("only a reference that ends at rest can be held")
+        # at rest to rounding: a spline through measured positions ends at 1e-41 mm/s, not 0
+        moving = [np.abs(x[-1]).max() > _AT_REST * np.abs(x).max() for x in (self.velocity, self.acceleration)]
+        if any(moving):
+            raise ValueError(f"only a reference that ends at rest can be held; this one ends at "
+                             f"{np.abs(self.velocity[-1]).max():.3g} mm/s, {np.abs(self.acceleration[-1]).max():.3g} mm/s²")
         tail = np.zeros((n, self.dim))
         return Trajectory(
             np.concatenate([self.t, self.t[-1] + self.dt * np.arange(1, n + 1)]),

@@ -378,6 +378,20 @@ def test_a_force_on_an_axis_the_machine_lacks_is_refused():
         simulate_batch([machine], reference, force={"x": np.zeros(5)})
 
 
+def test_a_measured_reference_that_ends_at_rest_is_held_by_the_default_settle_and_one_in_motion_is_refused():
+    """The spline through a trace's commanded positions ends at rest to rounding (1e-41 mm/s, not 0): simulate holds
+    it for its settle as it holds a planned reference; a reference that ends moving is refused, saying how fast."""
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS)}, DT)
+    t = np.arange(1500) * DT
+    position = (1 - np.cos(np.pi * np.clip(t / 0.28, 0.0, 1.0)))[:, None]  # at rest from 0.28 s
+    reference = measured_reference(Trace(t, position, position, ("x",)), DT)
+    assert 0 < np.abs(reference.velocity[-1]).max() < 1e-12
+    assert len(simulate(machine, reference, contour=False).tool_position) > len(reference)
+    moving = Trajectory(t, t[:, None], np.ones((t.size, 1)), np.zeros((t.size, 1)), t)
+    with pytest.raises(ValueError, match=r"only a reference that ends at rest can be held; this one ends at 1 mm/s"):
+        simulate(machine, moving, contour=False)
+
+
 # --- a measured reference that starts in motion --------------------------------------------------
 
 
