@@ -28,6 +28,7 @@ __all__ = [
 
 _COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
 _RUN_COLOURS = ("C3", "C0", "C2", "C4")  # runs overlaid: red first, as a single run is drawn
+_XY = slice(0, 2)  # the columns of a path's positions most paths are drawn in: x and y
 
 
 def _axes(ax, **subplot):
@@ -234,31 +235,33 @@ def _magnified(result, k):
     """The path with its contour error magnified, ``foot + k·(actual − foot)`` in its drawing plane
     (:func:`_drawn_axes`) [mm], as :class:`_Rows`."""
     tool, foot = result.tool_position, result.contour.foot
-    drawn = list(_drawn_axes(result.trajectory))
+    drawn = _drawn_axes(result.trajectory)
 
     def rows(index):
-        shown = tool[index][:, drawn] - foot[index][:, drawn]
+        shown = tool[index, drawn] - foot[index, drawn]
         shown *= k
-        shown += foot[index][:, drawn]
+        shown += foot[index, drawn]
         return shown
 
     return _Rows(len(tool), rows)
 
 
 def _drawn_axes(trajectory):
-    """The two coordinates a path is drawn in: x and y, or x and z (y and z) for a path in a plane y = c (x = c),
-    as a G18 (G19) program's; a 3-D path that leaves every such plane is drawn in XY."""
+    """The two coordinates a path is drawn in, as a slice of its positions' columns (a view, never a copy of a
+    run's length): x and y, or x and z (y and z) for a path in a plane y = c (x = c), as a G18 (G19) program's; a
+    3-D path that leaves every such plane is drawn in XY."""
     position = trajectory.position
     if position.shape[1] < 3 or np.ptp(position[:, 2]) == 0:
-        return 0, 1
+        return _XY
     flat = [i for i in (1, 0) if np.ptp(position[:, i]) == 0]
-    return (0, 1) if not flat else tuple(i for i in range(3) if i != flat[0])
+    return _XY if not flat else slice(0, 3, 2) if flat[0] == 1 else slice(1, 3)
 
 
 def _drawn_labels(ax, drawn):
     """Label the axes of a drawing in the coordinates `drawn` (:func:`_drawn_axes`)."""
-    ax.set_xlabel(f"{CARTESIAN[drawn[0]]} [mm]")
-    ax.set_ylabel(f"{CARTESIAN[drawn[1]]} [mm]")
+    first, second = range(3)[drawn]
+    ax.set_xlabel(f"{CARTESIAN[first]} [mm]")
+    ax.set_ylabel(f"{CARTESIAN[second]} [mm]")
 
 
 def _has_test(trajectory):
@@ -275,7 +278,7 @@ def _drawing_size(points):
 
 def _shared_magnification(results):
     """One magnification for `results` drawn side by side: from the largest contour error of all."""
-    size = max(_drawing_size(r.trajectory.position[:, list(_drawn_axes(r.trajectory))]) for r in results)
+    size = max(_drawing_size(r.trajectory.position[:, _drawn_axes(r.trajectory)]) for r in results)
     return magnification_for(size, max(float(r.contour.magnitude.max()) for r in results))
 
 
@@ -349,7 +352,7 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     ax = _axes(ax)
     traj, contour = result.trajectory, result.contour
     drawn = _drawn_axes(traj)
-    ref = traj.position[:, list(drawn)]
+    ref = traj.position[:, drawn]
     size = _drawing_size(ref)
     k = magnification_for(size, float(contour.magnitude.max())) if magnification is None else \
         _validate.positive("magnification", magnification)
@@ -376,7 +379,7 @@ def plot_path_error(result, ax=None, magnification=None, name=None):
     if _has_test(traj):
         title += " on the test proper"
     notes = []
-    if drawn == (0, 1) and traj.dim == 3 and np.ptp(traj.position[:, 2]) > 0:
+    if drawn == _XY and traj.dim == 3 and np.ptp(traj.position[:, 2]) > 0:
         notes.append("3-D path shown in XY (z not drawn)")
     if k > 1 and traj.path is not None:
         loops, fans = _loops_and_fans(result, k)
@@ -805,7 +808,7 @@ def plot_compared_paths(runs, fig=None, magnification=None):
     results = list(runs.values())
     first = results[0]
     drawn = _drawn_axes(first.trajectory)
-    ref = first.trajectory.position[:, list(drawn)]
+    ref = first.trajectory.position[:, drawn]
     size = _drawing_size(ref)
     k = _shared_magnification(results) if magnification is None else _validate.positive("magnification", magnification)
     step = size / (2 * _COLUMNS)
@@ -822,7 +825,7 @@ def plot_compared_paths(runs, fig=None, magnification=None):
         ax.tick_params(labelsize="x-small")
     scale = f"×{k:g} along the path normal" if k > 1 else "at true scale"
     fig.suptitle(f"Contour error of each strategy, {scale} (one factor for all; grey: the reference; "
-                 f"{', '.join(CARTESIAN[i] for i in drawn)} [mm])",
+                 f"{', '.join(CARTESIAN[i] for i in range(3)[drawn])} [mm])",
                  fontsize="medium")
     return axes
 
