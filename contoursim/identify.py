@@ -92,7 +92,7 @@ STATE = ("state", 1, 0)
 DRIVES = tuple(("difference", n, k) for n in (1, 2) for k in (0, 1))
 
 _FD_STEP = 1e-3
-_KP_RANGE = (5.0, np.inf)  # range of an identified position gain [1/s]: an NC's is 10-100 (1-6 m/min/mm)
+_KP_MIN = 5.0  # lowest identified position gain [1/s]: an NC's is 10-100 (1-6 m/min/mm)
 _VALLEY_VFF = 0.9  # the feedforward the second search of the (kp, vff) valley starts from [-]
 _AT_BOUND = 0.01  # a fitted log-parameter this close to its bound ran to it
 _DIVERGED = 1e6  # a residual entry beyond this many tracking errors (its RMS) is a loop that diverged
@@ -189,8 +189,9 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     nyquist = np.pi / period
     d = len(axes)
     top = _BANDWIDTH_FRACTION * nyquist
-    lower = np.array([np.log(_KP_RANGE[0]), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d + [np.log(_POLE_RANGE[0])] * d)
-    upper = np.array([np.log(min(_KP_RANGE[1], 0.5 * top)), 1.0] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d
+    lower = np.array([np.log(_KP_MIN), 0.0] + [np.log(1.0)] * d + [np.log(_TI_RANGE[0])] * d
+                     + [np.log(_POLE_RANGE[0])] * d)
+    upper = np.array([np.log(0.5 * top), 1.0] + [np.log(top)] * d + [np.log(_TI_RANGE[1])] * d
                      + [np.log(_POLE_RANGE[1])] * d)
     x0 = np.clip(x0, lower[: x0.size] + 1e-6, upper[: x0.size] - 1e-6)
     measured = trace.actual
