@@ -605,8 +605,9 @@ def _leading(trace, simulated, scored, noise):
         seen = trace.actual[scored, i] - trace.reference[scored, i]
         lag, seen = lag - lag.mean(), seen - seen.mean()
         size = float(lag @ lag)
-        if size > 0 and np.sqrt(size / lag.size) > 3 * noise[i] and float(seen @ lag) / size < -0.5:
-            found.append(f"the measured {axis} leads {axis}_ref by {-float(seen @ lag) / size:.2g} times the lag the "
+        slope = float(seen @ lag) / size if size > 0 else 0.0  # the measured lag per unit of the model's
+        if size > 0 and np.sqrt(size / lag.size) > 3 * noise[i] and slope < -0.5:
+            found.append(f"the measured {axis} leads {axis}_ref by {-slope:.2g} times the lag the "
                          f"model has it behind (a servo axis follows its command, it does not anticipate it): are "
                          f"{axis} and {axis}_ref swapped? No effect is named")
     return found

@@ -44,7 +44,6 @@ def test_a_path_along_z_only_has_nothing_to_magnify():
 def test_a_path_in_the_xz_or_yz_plane_is_drawn_in_its_plane(program, labels, note):
     """An XZ (G18) arc was drawn in XY, a straight line on which no error showed, under a title giving its max."""
     from contoursim.gcode import read_gcode
-    from contoursim.simulation import default_settle
 
     machine = load_machine("demo_mill")
     read = read_gcode("G21 G90\nG0 X0 Y0 Z0\n" + program + "\nM30\n")
