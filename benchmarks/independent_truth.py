@@ -212,7 +212,7 @@ def _rounded_square(side, corner):
         if k == 0:
             line = line[line[:, 0] >= 0]
         phi = np.linspace(-np.pi / 2, 0.0, 400)
-        arc = np.column_stack([half + corner * np.cos(phi), half + corner * np.sin(phi)])
+        arc = np.column_stack([half + corner * np.cos(phi), -half + corner * np.sin(phi)])  # the edge's far corner
         parts += [line @ rot.T, arc @ rot.T]
     first = np.column_stack([np.linspace(-half, 0.0, int(half / 0.005)), np.full(int(half / 0.005), -side / 2)])
     points = np.vstack(parts + [first])

@@ -37,6 +37,22 @@ def test_independent_truth_lags_its_ramp_by_the_closed_form(independent_truth, v
     assert np.ptp(lag) < 1e-7  # steady: within 0.1 µm
 
 
+@pytest.mark.parametrize("path", ["circle_ccw", "trefoil", "square"])
+def test_independent_truths_closed_paths_turn_once_one_way_and_never_back(independent_truth, path):
+    """A closed path run one way round a convex-ish figure turns through ±2π in all, its heading never stepping
+    back on itself: a rounded square whose corner arcs sat at the wrong corners ran its edges back and forth,
+    reversing at full feed."""
+    it = independent_truth
+    points = {"circle_ccw": lambda: it._circle(30.0, "ccw"), "trefoil": lambda: it._trefoil(30.0),
+              "square": lambda: it._rounded_square(60.0, 3.0)}[path]()
+    step = np.diff(points, axis=0)
+    step = step[np.linalg.norm(step, axis=1) > 1e-9]  # the joints' repeated points, rotated to rounding
+    heading = np.unwrap(np.arctan2(step[:, 1], step[:, 0]))
+    assert abs(heading[-1] - heading[0]) == pytest.approx(2 * np.pi, abs=0.01)
+    assert np.max(np.abs(np.diff(heading))) < np.radians(5)
+    assert np.ptp(points, axis=0) == pytest.approx([60.0, 60.0] if path == "square" else np.ptp(points, axis=0))
+
+
 def test_independent_truth_writes_a_contract_trace_and_a_data_sheet(independent_truth, tmp_path):
     from contoursim.model import load_model
     from contoursim.traces import read_trace
@@ -105,14 +121,14 @@ def test_a_screws_cyclic_error_longer_than_half_the_stroke_is_found_where_the_ax
 
 def test_no_effect_is_named_for_a_sliver_of_a_gap_the_models_dynamics_leave(independent_truth, tmp_path):
     """An independent trace with no hidden effect, its data sheet stripped of the current loop's bandwidth and the
-    screw (the motor's share of the mass and the screw's stiffness): the residual stays above the noise floor, a
-    backlash fitted to the corners is significant but closes a sliver of that gap, and is not named (GAP_SHARE);
+    screw (the motor's share of the mass and the screw's stiffness), on a square: the residual stays above the noise
+    floor, a gain mismatch fitted to it is significant but closes a sliver of that gap, and is not named (GAP_SHARE);
     the report says why."""
     from contoursim.diagnosis import GAP_SHARE, diagnose
     from contoursim.model import load_model
     from contoursim.traces import read_trace
 
-    case = independent_truth.make_case("rigid", None, 508082495, tmp_path)
+    case = independent_truth.make_case("rigid", None, 57907650, tmp_path)
     sheet = case.machine_file.read_text(encoding="utf-8")
     stripped = re.sub(r"(current_bandwidth_hz|motor_mass_kg|screw_stiffness_N_per_um|screw_damping_ratio) = .*\n", "",
                       sheet)
