@@ -674,8 +674,9 @@ class Path:
         -------
         ndarray, shape (K - 1,)
         """
-        cos = np.clip(np.sum(self._ends[:-1, 1, 3:6] * self._ends[1:, 0, 3:6], axis=1), -1.0, 1.0)
-        return np.arccos(cos)
+        a, b = self._ends[:-1, 1, 3:6], self._ends[1:, 0, 3:6]
+        # atan2 of |a×b| and a·b: arccos of the dot product reads tangent joints 1e-8 rad off (its slope is infinite at 1)
+        return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
 
     def max_curvature(self):
         """Largest curvature of each primitive [1/mm] (sampled at w = 0, 1/64, ..., 1 on spline pieces).

@@ -289,6 +289,9 @@ def test_corner_angles_at_every_junction():
                         paths.arc(center=(10, 5), radius=5, start_angle=-np.pi / 2, sweep=np.pi / 2),
                         paths.line((15, 5), (15, 0)))
     np.testing.assert_allclose(joined.corner_angles(), [0.0, np.pi], atol=1e-9)
+    # straight on along a slope whose unit tangents' dot product rounds to 1 - 1 ulp (arccos read 1.5e-8 rad there)
+    for a, b in ((3, 7), (1, 3), (5, 11)):
+        assert paths.join(paths.line((0, 0), (a, b)), paths.line((a, b), (2 * a, 2 * b))).corner_angles() == [0.0]
 
 
 def test_a_sample_at_rest_at_a_junction_belongs_to_the_primitive_ending_there():
