@@ -12,7 +12,7 @@ inside numpy. Readers of files turn both into a
 import numpy as np
 
 __all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative",
-           "float_array", "finite_array", "shown", "time_base", "TimeStepError"]
+           "float_array", "finite_array", "mask", "read_only", "shown", "time_base", "TimeStepError"]
 
 #: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
 FLOAT_MAX = float(np.finfo(float).max)
@@ -170,6 +170,61 @@ def float_array(name, value, ndim=None, shape=None):
         ):
             want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    return arr
+
+
+def read_only(array, given):
+    """`array`, the checked form of the caller's `given`, made read-only for an object that keeps it.
+
+    The caller's own array is never changed: one `array` shares memory with
+    is copied first (setting its flag would make the caller's array read-only,
+    and its values could later change under the object); one made from
+    `given` (a list, another dtype) is frozen as it is; a read-only one is kept.
+
+    Parameters
+    ----------
+    array : ndarray
+        From :func:`float_array`, :func:`finite_array`, :func:`mask`, ...
+    given : object
+        What the caller passed.
+
+    Returns
+    -------
+    ndarray
+    """
+    if array.flags.writeable:
+        if isinstance(given, np.ndarray) and np.may_share_memory(array, given):
+            array = array.copy()
+        array.flags.writeable = False
+    return array
+
+
+def mask(name, value, shape):
+    """Return `value` as a boolean ndarray of `shape` after checking it holds booleans, or only the numbers 0 and 1.
+
+    ``np.asarray(value, bool)`` would take any value as one (``"no"`` and NaN
+    as true): a mask given something else is refused rather than read so.
+
+    Raises
+    ------
+    TypeError
+        `value` holds text or other objects.
+    ValueError
+        Wrong shape, or a number other than 0 and 1.
+    """
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name} must be booleans (or 0 and 1), got {value!r}")
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be booleans (or 0 and 1), got {arr.dtype} values")
+    if arr.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)}, got {arr.shape}")
+    if arr.dtype.kind != "b":
+        other = (arr != 0) & (arr != 1)  # NaN too
+        if other.any():
+            first = tuple(map(int, np.unravel_index(np.argmax(other), arr.shape)))
+            raise ValueError(f"{name} must be booleans (or 0 and 1), got {arr[first]} at index {first}")
+        arr = arr.astype(bool)
     return arr
 
 

@@ -512,6 +512,9 @@ class Composition:
     """
 
     def __init__(self, strategies=()):
+        if isinstance(strategies, (Strategy, str)) or not hasattr(strategies, "__iter__"):
+            raise TypeError(f"strategies must be a sequence of compensation Strategy objects, e.g. (Feedforward(),), "
+                            f"or strategies_named('ccc_arc'); got {strategies!r}")
         strategies = tuple(strategies)
         for i, strategy in enumerate(strategies):
             if not isinstance(strategy, Strategy):

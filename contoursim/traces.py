@@ -116,10 +116,7 @@ class Trace:
         reference = _validate.finite_array("reference", self.reference, shape=shape, limit=MAX_POSITION)
         actual = _validate.finite_array("actual", self.actual, shape=shape, limit=MAX_POSITION)
         for name, value in dict(t=t, reference=reference, actual=actual).items():
-            if value.flags.writeable:  # a copy: the caller's arrays stay writeable (read-only ones are shared)
-                value = value.copy()
-                value.flags.writeable = False
-            object.__setattr__(self, name, value)
+            object.__setattr__(self, name, _validate.read_only(value, getattr(self, name)))
         object.__setattr__(self, "axes", axes)
         object.__setattr__(self, "dt", dt)
         for kind, (_, unit, limit) in INPUTS.items():
@@ -129,11 +126,8 @@ class Trace:
             for axis, values in dict(getattr(self, kind)).items():
                 if axis not in axes:
                     raise ValueError(f"{kind} names axis {axis!r}, which is not one of the trace's axes {', '.join(axes)}")
-                values = _validate.finite_array(f"{axis}_{kind}", values, shape=(t.size,), limit=limit)
-                if values.flags.writeable:  # as above
-                    values = values.copy()
-                    values.flags.writeable = False
-                columns[axis] = values
+                checked = _validate.finite_array(f"{axis}_{kind}", values, shape=(t.size,), limit=limit)
+                columns[axis] = _validate.read_only(checked, values)
             object.__setattr__(self, kind, columns)
 
     @property
@@ -187,6 +181,9 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
         one ``# key: value`` line; a value is too large to write to its
         resolution.
     """
+    if not isinstance(trace, Trace):
+        raise TypeError(f"trace must be a Trace (read_trace reads one; SimResult.save_csv writes a run), got "
+                        f"{type(trace).__name__}")
     every = _validate.positive_int("every", every)
     kept = -(-trace.t.size // every)  # `every` makes no trace read_trace refuses: of 1 row, or of too slow a clock
     if kept < 2 or (every > 1 and every * trace.dt >= PLAUSIBLE_SAMPLE_PERIOD[1]):

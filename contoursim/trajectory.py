@@ -66,13 +66,11 @@ class Trajectory:
         vel = _validate.finite_array("velocity", self.velocity, shape=(n, d))
         acc = _validate.finite_array("acceleration", self.acceleration, shape=(n, d))
         s = _validate.finite_array("s", self.s, shape=(n,))
-        measuring = np.ones(n, bool) if self.measuring is None else np.asarray(self.measuring, bool)
-        if measuring.shape != (n,) or not measuring.any():
-            raise ValueError(f"measuring must have shape ({n},) and mark at least one sample, got {measuring.sum()} "
-                             f"of shape {measuring.shape}")
+        measuring = np.ones(n, bool) if self.measuring is None else _validate.mask("measuring", self.measuring, (n,))
+        if not measuring.any():
+            raise ValueError(f"measuring must mark at least one of the {n} samples, got none")
         for name, value in dict(t=t, position=pos, velocity=vel, acceleration=acc, s=s, measuring=measuring).items():
-            value.flags.writeable = False
-            object.__setattr__(self, name, value)
+            object.__setattr__(self, name, _validate.read_only(value, getattr(self, name)))
         object.__setattr__(self, "dt", dt)
 
     def __len__(self):

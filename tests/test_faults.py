@@ -23,7 +23,7 @@ from conftest import ROOT
 from contoursim import _memory
 from contoursim.cli import main
 from contoursim.comparison import compare
-from contoursim.compensation import STRATEGY_NAMES
+from contoursim.compensation import STRATEGY_NAMES, Feedforward
 from contoursim.diagnosis import diagnose
 from contoursim.effects import Effect, Parameter
 from contoursim.errormotion import read_error_table
@@ -505,6 +505,38 @@ def test_a_fleets_trace_that_is_a_pipe_or_a_folder_is_that_traces_failure_named(
         "d.csv, line 1: the file is gzip-compressed, not text: unpack it first"]
 
 
+def _trajectory_with(trajectory, **arrays):
+    """A Trajectory of `trajectory`'s arrays (copies: writeable, as a user's), some replaced by `arrays`."""
+    keys = ("t", "position", "velocity", "acceleration", "s", "measuring")
+    given = {k: np.array(getattr(trajectory, k)) for k in keys} | arrays
+    return Trajectory(**given)
+
+
+@pytest.mark.parametrize("make, given", [
+    (lambda a, arrays: _trajectory_with(a.trajectory, **arrays), ("t", "position", "velocity", "acceleration", "s",
+                                                                  "measuring")),
+    (lambda a, arrays: Trace(arrays["t"], arrays["reference"], arrays["actual"], ("x", "y"),
+                             force={"x": arrays["force"]}), ("t", "reference", "actual", "force")),
+])
+def test_the_callers_arrays_stay_as_they_were_and_the_objects_arrays_do_not_change_with_them(api, make, given):
+    """Trajectory(t, position, ...) made the caller's own arrays read-only (a user's next ``position[0] = ...`` raised
+    'assignment destination is read-only'); the object keeps read-only arrays of its own."""
+    source = {"t": api.trajectory.t, "position": api.trajectory.position, "velocity": api.trajectory.velocity,
+              "acceleration": api.trajectory.acceleration, "s": api.trajectory.s, "measuring": api.trajectory.measuring,
+              "reference": api.trace.reference, "actual": api.trace.actual, "force": api.trace.t}
+    if "reference" in given:
+        source["t"] = api.trace.t
+    arrays = {k: np.array(source[k]) for k in given}
+    made = make(api, arrays)
+    for name, array in arrays.items():
+        assert array.flags.writeable, name
+        kept = getattr(made, name) if name != "force" else made.force["x"]
+        assert not kept.flags.writeable, name
+        before = kept.copy()
+        array[...] = array[::-1]
+        np.testing.assert_array_equal(kept, before)
+
+
 @pytest.fixture(scope="module")
 def api():
     """What a researcher holds in the API tour: the demo mill, a sampled circle, a trace of it."""
@@ -557,6 +589,15 @@ def api():
     (lambda a: save_figures({}, io.StringIO(), "x"), ValueError, "runs is empty: save_figures draws at least one run"),
     (lambda a: output_dir(None), TypeError, "the output folder is a folder name (str or Path), got NoneType"),
     (lambda a: load_path_file(3), TypeError, "a path file is a file or library name (str or Path), got int"),
+    (lambda a: write_trace(io.StringIO(), a.trajectory), TypeError, "trace must be a Trace (read_trace reads one"),
+    (lambda a: simulate(a.machine, a.trajectory, Feedforward()), TypeError,
+     "strategies must be a sequence of compensation Strategy objects, e.g. (Feedforward(),)"),
+    (lambda a: _trajectory_with(a.trajectory, measuring=np.where(np.arange(len(a.trajectory)) == 3, np.nan, 1.0)),
+     ValueError, "measuring must be booleans (or 0 and 1), got nan at index (3,)"),
+    (lambda a: _trajectory_with(a.trajectory, measuring=np.arange(len(a.trajectory)) % 3), ValueError,
+     "measuring must be booleans (or 0 and 1), got 2 at index (2,)"),
+    (lambda a: _trajectory_with(a.trajectory, measuring=["no"] * len(a.trajectory)), TypeError,
+     "measuring must be booleans (or 0 and 1), got <U2 values"),
 ])
 def test_the_api_refuses_what_it_cannot_use_naming_the_argument(api, call, error, words):
     """Wrong types, a bare effect, a settle of years, a column name with a comma: the argument named, not numpy's error."""
