@@ -280,7 +280,8 @@ def report_file(file, key, what, out=None, written=()):
     Raises
     ------
     ConfigError
-        `file` is a directory, the output folder `out`, or a file the run writes there.
+        `file` is a directory, the output folder `out`, or a file the run writes there; its folder does not
+        exist (and is not `out`, which the run makes).
     FileExistsError
         `file` exists and is not such a report: it is the user's, never overwritten.
     """
@@ -294,6 +295,9 @@ def report_file(file, key, what, out=None, written=()):
                           f"write the {what} to")
     if file.is_dir():
         raise ConfigError(f"{file} is a directory; name a file to write the {what} to")
+    if not file.parent.is_dir() and (out is None or file.parent.resolve() != Path(out).resolve()):
+        raise ConfigError(f"{file}: there is no folder {file.parent} to write the {what} into; make it, or name a "
+                          "file in a folder that exists (or in --out)")
     if file.exists() or file.is_symlink():
         try:
             data = json.loads(read_text(file))

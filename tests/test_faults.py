@@ -773,6 +773,25 @@ def test_where_a_run_writes_is_refused_before_anything_is_written(tmp_path, monk
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
 
 
+@pytest.mark.parametrize("command, option", [("compare", "--json"), ("diagnose", "--report"), ("fleet", "--summary")])
+def test_a_report_into_a_folder_that_does_not_exist_is_refused_before_the_run(tmp_path, capsys, command, option):
+    """compare --json nodir/r.json ran every strategy and wrote its plots, then ended in 'cannot write nodir/r.json'
+    (a fleet's summary after every trace's diagnosis); a report in --out, which the run makes, is written there."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    t = np.arange(400) * 1e-3
+    for name in ("a.csv", "b.csv"):
+        _trace(tmp_path / name, t, np.sin(t), np.sin(t) + 1e-4)
+    inputs = {"compare": [str(tmp_path / "small.toml"), "--strategies", "none"], "diagnose": [str(tmp_path / "a.csv")],
+              "fleet": [str(tmp_path / "a.csv"), str(tmp_path / "b.csv")]}[command]
+    argv = ["compare" if command == "compare" else "diagnose", *inputs, "--out", str(tmp_path / "out")]
+    _refused(capsys, [*argv, option, str(tmp_path / "nodir" / "r.json")],
+             f"{tmp_path / 'nodir' / 'r.json'}: there is no folder {tmp_path / 'nodir'} to write the")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.csv", "small.toml"]
+    if command == "compare":
+        assert main([*argv, option, str(tmp_path / "out" / "r.json")]) == 0
+        assert (tmp_path / "out" / "r.json").is_file()
+
+
 def test_a_negative_dwell_is_refused_by_its_line(tmp_path, capsys):
     (tmp_path / "p.nc").write_text("G21 G90\nG0 X0 Y0\nG1 X10 F600\nG4 P-1\nG1 Y10\nM30\n")
     _refused(capsys, ["simulate", str(tmp_path / "p.nc"), "--out", str(tmp_path / "out")],
