@@ -8,12 +8,18 @@ objects: the worker rebuilds its models from the data.
 
 import os
 import secrets
+import signal
+import threading
 from contextlib import contextmanager
 
-__all__ = ["DISTRIBUTED_MISSING", "connected", "numba_threads", "run_tasks", "task_threads"]
+__all__ = ["CONNECT_TIMEOUT_S", "DISTRIBUTED_MISSING", "connected", "numba_threads", "run_tasks", "task_threads"]
 
 #: The message when dask.distributed is not installed.
 DISTRIBUTED_MISSING = 'dask.distributed is not installed: pip install "contoursim[distributed]"'
+
+#: How long a scheduler's address has to answer, as a dask scheduler, before it is said not to [s].
+CONNECT_TIMEOUT_S = 10.0
+_ADDRESS = "give its address as tcp://host:8786, or local:N for N worker processes on this machine"
 
 _THREADS = [0]  # numba threads of each task in this process (set on a worker by numba_threads; 0: numba's default)
 
@@ -45,11 +51,11 @@ def connected(scheduler):
         return
     text = str(scheduler)
     if not text.startswith("local:"):
+        _answers(text)
         try:
-            client = Client(text, timeout="20s")
+            client = Client(text, timeout=f"{CONNECT_TIMEOUT_S}s")
         except (OSError, TimeoutError, ValueError) as exc:
-            raise ValueError(f"cannot reach a dask scheduler at {text!r} ({exc}); give its address as "
-                             "tcp://host:8786, or local:N for N worker processes on this machine") from None
+            raise ValueError(f"cannot reach a dask scheduler at {text!r} ({exc}); {_ADDRESS}") from None
         with client:
             yield client
         return
@@ -60,9 +66,55 @@ def connected(scheduler):
     if n < 1:
         raise ValueError(f"--scheduler local:N needs a whole number of workers, at least 1; got {text!r}")
     threads = max(1, (os.cpu_count() or 1) // n)
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None,
-                      env={"NUMBA_NUM_THREADS": str(threads)}) as cluster, Client(cluster) as client:
+    with _uninterrupted_children():
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, env={"NUMBA_NUM_THREADS": str(threads)})
+    with cluster, Client(cluster) as client:
         yield client
+
+
+@contextmanager
+def _uninterrupted_children():
+    """Start processes that ignore SIGINT: a Ctrl-C in a terminal, sent to every process of the command, is the
+    command's to handle (it closes the cluster); a worker that took it too ended in a traceback of its own.
+
+    SIGINT is ignored in this process meanwhile (the main thread's disposition, which the children inherit and
+    Python keeps); elsewhere than in the main thread it cannot be set, and the children are started as they are.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _answers(address):
+    """Refuse, within :data:`CONNECT_TIMEOUT_S`, an address that does not answer as a dask scheduler does.
+
+    ``Client`` bounds the connection's making, not the greeting that
+    follows: a server that takes the connection and does not greet in dask's
+    protocol (a dashboard's port, 8787, a web server) would keep it waiting
+    forever, or answer with bytes it reads as a length of exabytes.
+    """
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def greet():
+        comm = await connect(address, timeout=CONNECT_TIMEOUT_S)
+        await comm.close()
+
+    try:
+        asyncio.run(asyncio.wait_for(greet(), CONNECT_TIMEOUT_S))
+    except (OSError, asyncio.TimeoutError, ValueError) as exc:
+        why = f"no dask scheduler answered in {CONNECT_TIMEOUT_S:g} s" if isinstance(exc, asyncio.TimeoutError) else exc
+        raise ValueError(f"cannot reach a dask scheduler at {address!r} ({why}); {_ADDRESS}") from None
+    except Exception as exc:  # noqa: BLE001 -- whatever the other end's bytes made of dask's greeting
+        raise ValueError(f"{address!r} answers, but not as a dask scheduler ({type(exc).__name__}); is it the "
+                         f"dashboard's port (8787)? {_ADDRESS}") from None
 
 
 def numba_threads(client):

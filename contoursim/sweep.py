@@ -333,8 +333,8 @@ class _Job:
 
 
 def diverged_why(sweep, i):
-    """Why a variant counts as diverged, in a sentence: its loop check's refusal with the loop's margins, or, when
-    its axes' loops pass it, the coupled loop's check or a run that ran away (:data:`contoursim.multibody.MAX_TRAVEL`).
+    """Why a variant counts as diverged, in a sentence with the margins that say how far it is: its axes' loop
+    check's refusal, else the coupled loop's check or the run's running away, as :func:`simulate` says them.
 
     Parameters
     ----------
@@ -347,13 +347,20 @@ def diverged_why(sweep, i):
     -------
     str
     """
+    from .exceptions import UnstableLoopError
     from .machine import _file_names
-    from .multibody import MAX_TRAVEL
+    from .simulation import simulate
 
-    model, _ = _job(sweep).variant(dict(zip(sweep.names, sweep.values[i])))
+    job = _job(sweep)
+    model, strategies = job.variant(dict(zip(sweep.names, sweep.values[i])))
     refusal = model.machine.refusal()  # in the names the spec varies (kp_per_s, not kp)
-    return _file_names(refusal) if refusal else ("its axes' loops pass the loop check: a cross-coupled loop's check "
-                                                 f"refused it, or its run left ±{MAX_TRAVEL:g} mm")
+    if refusal:
+        return _file_names(refusal)
+    try:  # the variant's single run: the coupled loop's check (its margins) or the axis that ran away
+        simulate(model, job.trajectory, strategies, settle=0.0)
+    except UnstableLoopError as exc:
+        return str(exc)
+    return "its loops pass their checks and its single run does not diverge; its row in the batch did"
 
 
 def _servo_field(machine, axis, key):

@@ -268,6 +268,53 @@ def test_a_local_cluster_listens_on_the_loopback_only_and_a_bad_address_is_one_l
             pass
 
 
+@pytest.mark.parametrize("answer", [None, b"HTTP/1.0 400 Bad Request\r\nContent-Length: 0\r\n\r\n"],
+                         ids=["silent", "a web server"])
+def test_an_address_that_does_not_answer_as_a_dask_scheduler_is_refused_within_seconds(monkeypatch, answer):
+    """A port that takes the connection and says nothing kept contoursim waiting forever (dask bounds the connecting,
+    not the greeting); a web server's answer (the dashboard's port) was read as a frame of 3 EiB: 'out of memory'."""
+    pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
+    import socket
+    import threading
+    import time
+
+    from contoursim import cluster
+
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT_S", 2.0)
+    server = socket.create_server(("127.0.0.1", 0))
+    held = []
+
+    def serve():
+        connection, _ = server.accept()
+        held.append(connection)
+        if answer is not None:
+            connection.recv(1 << 16)
+            connection.sendall(answer)
+
+    threading.Thread(target=serve, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    start = time.monotonic()
+    words = "no dask scheduler answered in 2 s" if answer is None else "answers, but not as a dask scheduler"
+    with pytest.raises(ValueError, match=words):
+        with cluster.connected(address):
+            pass
+    assert time.monotonic() - start < 8.0
+    server.close()
+    for connection in held:
+        connection.close()
+
+
+def test_a_local_clusters_workers_leave_a_ctrl_c_to_the_command():
+    """A Ctrl-C in a terminal reaches every process of the command: each worker of local:N ended in a traceback of
+    its own (KeyboardInterrupt, and the nanny's errors) under the command's one line."""
+    pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
+    from contoursim.cluster import connected
+
+    with connected("local:1") as client:
+        assert list(client.run(signal.getsignal, signal.SIGINT).values()) == [signal.SIG_IGN]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_results_csv_parquet_plots_and_the_best_and_worst_runs(tmp_path, capsys):
     spec = _spec(tmp_path, [{"name": '"strategy.ccc_linear.kp_per_s"', "values": "[20.0, 80.0]"},
                             {"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}])
@@ -303,6 +350,16 @@ def test_a_tolerance_sweep_gives_the_volumetric_error_linear_in_the_squareness(t
     single = simulate(model, job.trajectory, strategies, settle=0.0).summary()
     assert table[1, FIGURES.index("volumetric_rms_um")] == single["volumetric_rms_um"]
     assert table[1, FIGURES.index("contour_max_um")] == single["contour_max_um"]
+
+
+def test_a_variant_the_coupled_loops_check_refuses_is_said_so_with_its_margins(tmp_path, capsys):
+    """kp = 1e5/s of a CCC among good gains: 'a cross-coupled loop's check refused it, or its run left ±1e+06 mm',
+    neither which nor how far."""
+    spec = _spec(tmp_path, [{"name": '"strategy.ccc_arc.kp_per_s"', "values": "[60.0, 100000.0]"}], strategies="ccc_arc")
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert ("the first, variant 1 (strategy.ccc_arc.kp_per_s = 100000): cross-coupled control with kp = 100000 1/s"
+            in out and "is unstable (spectral radius" in out and "phase margin" in out), out
 
 
 def test_a_variant_the_loop_check_refuses_counts_as_diverged_and_is_not_rerun(tmp_path, capsys):
