@@ -349,8 +349,12 @@ def _set_values(effect):
     return ", ".join(values)
 
 
-def _strategy_settings(job):
-    """A job file's ``[[strategy]]`` tables: strategy name -> keyword arguments (see ``STRATEGY_KEYS``)."""
+def _strategy_settings(job, names):
+    """A job file's ``[[strategy]]`` tables: strategy name -> keyword arguments (see ``STRATEGY_KEYS``).
+
+    `names`: the strategies the command runs (comparison names, parts joined by '+'); a table of a strategy none
+    of them has is refused by its line (its settings would be dropped without a word).
+    """
     from .compensation import STRATEGY_KEYS, strategy_setting
 
     raw = job.data.get("strategy", [])
@@ -365,6 +369,9 @@ def _strategy_settings(job):
         if name in settings:
             raise job.error(f"strategy {name!r} has a [[strategy]] table already: one per strategy",
                             "strategy", i, "name")
+        if name not in {part for text in names for part in text.split("+")}:
+            raise job.error(f"[[strategy]] {name}: no strategy run here has it (strategies {','.join(names)}): run it, "
+                            "or drop the table", "strategy", i, "name")
         job.table("strategy", i, allowed=("name", *STRATEGY_KEYS[name]))
         settings[name] = {}
         for key, value in item.items():
@@ -414,10 +421,10 @@ def compare_command(args):
     from .simulation import default_settle
 
     model, path_file, job, geometric = _job(args)
-    settings = {} if job is None else _strategy_settings(job)
     names = STRATEGY_NAMES if args.strategies is None else args.strategies
     if geometric and not any("geometric" in name.split("+") for name in names):  # the job's second run, as simulate's
         names = [*names, "geometric"]
+    settings = {} if job is None else _strategy_settings(job, names)
     parts = {part for name in names for part in name.split("+")}
     for text in args.set or ():  # a setting of a strategy that does not run would be dropped without a word
         if _set_option(settings, text) not in parts:

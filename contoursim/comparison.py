@@ -317,7 +317,7 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
     Raises
     ------
     ValueError
-        An unknown name or combination, or the same name twice.
+        An unknown name or combination, the same name twice, or settings of a strategy none of `names` has.
     UnstableLoopError
         A strategy destabilises the loop (the message names it).
 
@@ -348,6 +348,10 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
                              "of them")
     chosen = {name: settings for name in names}
     strategies = {name: strategies_named(name, design, chain, settings) for name in names}  # all checked first
+    unused = [part for part in settings if part not in {p for name in names for p in name.split("+")}]
+    if unused:  # its settings would be dropped without a word
+        raise ValueError(f"settings of {unused[0]!r}, which none of the strategies {', '.join(names)} has: run it, or "
+                         "drop its settings")
     gains = {}
     for name, made in strategies.items():
         coupling = [s for s in made if s.kind == "coupling"]

@@ -414,7 +414,7 @@ def _build(spec):
     from .simulation import default_settle
 
     model, path_file, job, _ = cli._job(SimpleNamespace(file=str(spec), machine=None), extra_keys=SPEC_KEYS)
-    settings = cli._strategy_settings(job)  # the job's [[strategy]] tables, as compare reads them
+    settings = cli._strategy_settings(job, [job.data.get("strategies", "none")])  # its tables, as compare reads them
     try:
         strategies = strategies_named(job.data.get("strategies", "none"), chain=model.machine.chain, settings=settings)
     except ValueError as exc:

@@ -509,6 +509,8 @@ def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(
                                                          "has 'feedforward' (--strategies none,ccc_arc): run it, or drop"),
     ("", ["--strategies", "none,feedforward", "--tune"], "--tune tunes a cross-coupled strategy's gains; none runs here "
                                                          "(--strategies none,feedforward)"),
+    ('[[strategy]]\nname = "feedforward"\nvelocity_fraction = 0.5\n', [],
+     "job.toml, line 5: [[strategy]] feedforward: no strategy run here has it (strategies none,ccc_arc): run it, or drop"),
 ])
 def test_compare_refuses_bad_strategy_settings_naming_the_place(tmp_path, capsys, tables, options, message):
     (tmp_path / "small.toml").write_text(SMALL_PATH)

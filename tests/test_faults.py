@@ -585,6 +585,8 @@ def api():
      "names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string 'none,ccc_arc'"),
     (lambda a: compare(a.machine, a.trajectory, names=("ccc_arc",), settings=[1]), TypeError,
      "settings must map strategy names to their settings, got list"),
+    (lambda a: compare(a.machine, a.trajectory, names=("none", "feedforward"), settings={"ccc_arc": {"kp_per_s": 9.0}}),
+     ValueError, "settings of 'ccc_arc', which none of the strategies none, feedforward has: run it, or drop"),
     (lambda a: save_figures([a.trace], io.StringIO(), "x"), TypeError, "runs must map run names to SimResults"),
     (lambda a: save_figures({}, io.StringIO(), "x"), ValueError, "runs is empty: save_figures draws at least one run"),
     (lambda a: output_dir(None), TypeError, "the output folder is a folder name (str or Path), got NoneType"),

@@ -90,6 +90,16 @@ def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message
         read_sweep(_spec(tmp_path, [vary]))
 
 
+def test_a_strategy_table_of_a_strategy_the_sweep_does_not_run_is_refused_by_its_line(tmp_path):
+    """A spec's [[strategy]] table for feedforward beside strategies = "ccc_linear" was dropped without a word."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}])
+    spec.write_text(spec.read_text() + '\n[[strategy]]\nname = "feedforward"\nvelocity_fraction = 0.5\n')
+    line = spec.read_text().splitlines().index('name = "feedforward"') + 1
+    with pytest.raises(ConfigError, match=rf"spec.toml, line {line}: \[\[strategy\]\] feedforward: no strategy run "
+                                          r"here has it \(strategies ccc_linear\)"):
+        read_sweep(spec)
+
+
 @pytest.mark.parametrize("key", ["count = 7", "seed = 3"])
 def test_a_grids_count_or_seed_in_the_sweep_table_is_refused_by_its_line(tmp_path, key):
     """A grid's points are its vary tables' (it ran 2 variants, the 7 asked for ignored)."""
