@@ -313,7 +313,7 @@ class _Job:
             elif kind == "effect" and len(parts) == 3:
                 effects[name[len("effect.") :]] = value
             elif kind == "strategy" and len(parts) == 2:
-                gains.setdefault(parts[0], {})[_gain_field(self.strategies, *parts)] = value
+                gains.setdefault(parts[0], {})[_gain_field(self.strategies, *parts, value)] = value
             else:
                 raise ValueError(f"a parameter name is axes.<axis>.<key>, effect.<effect>.<axis>.<parameter> or "
                                  f"strategy.<strategy>.<gain>, got {name!r}")
@@ -373,8 +373,9 @@ def _servo_field(machine, axis, key):
     return SERVO_KEYS[key]
 
 
-def _gain_field(strategies, name, gain):
-    from .compensation import STRATEGY_KEYS
+def _gain_field(strategies, name, gain, value):
+    """The strategy's parameter a varied setting sets, after checking `value` as a [[strategy]] table's (by its key)."""
+    from .compensation import STRATEGY_KEYS, strategy_setting
 
     if name not in [s.name for s in strategies]:
         raise ValueError(f"the sweep runs no strategy {name!r} (strategies = "
@@ -382,6 +383,7 @@ def _gain_field(strategies, name, gain):
     if gain not in STRATEGY_KEYS.get(name, {}):
         known = ", ".join(STRATEGY_KEYS.get(name, {})) or "none"
         raise ValueError(f"strategy {name} has no setting {gain!r}; its settings: {known}")
+    strategy_setting(name, gain, value)  # "velocity_fraction must be ...", not the API's "velocity must be ..."
     return STRATEGY_KEYS[name][gain]
 
 

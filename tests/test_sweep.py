@@ -78,6 +78,8 @@ def test_a_latin_hypercube_puts_one_draw_in_each_stratum_of_each_parameter(count
     ({"name": '"axes.x.kp"', "min": 1.0, "max": 2.0}, r"line 12: vary 'axes.x.kp': no axis key 'kp'; the keys: mass_kg"),
     ({"name": '"strategy.ccc_arc.kp_per_s"', "min": 1.0, "max": 2.0}, r"runs no strategy 'ccc_arc' \(strategies = \"ccc_linear\"\)"),
     ({"name": '"strategy.ccc_linear.gain"', "min": 1.0, "max": 2.0}, r"no setting 'gain'; its settings: kp_per_s, ki_per_s2, kd"),
+    ({"name": '"strategy.ccc_linear.kp_per_s"', "min": -1.0, "max": 2.0},  # was the API's name: "kp must be ..."
+     r"line 12: vary 'strategy.ccc_linear.kp_per_s': kp_per_s must be zero or positive, got -1.0"),
     ({"name": '"effect.backlash.x.lost_motion_um"', "min": -5.0, "max": 2.0}, r"line 12: vary 'effect.backlash.x.lost_motion_um': "),
     ({"name": '"axes.x.kp_per_s"', "min": 50.0, "max": 2.0, "count": 2}, r"line 13: vary 'axes.x.kp_per_s': min must not exceed max"),
     ({"name": '"axes.x.kp_per_s"', "min": 5.0}, r"line 11: vary 'axes.x.kp_per_s' needs max = <number>"),
