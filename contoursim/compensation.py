@@ -62,6 +62,7 @@ __all__ = [
     "zpetc_commands",
     "CrossCoupled",
     "Composition",
+    "strategy_sequence",
     "STRATEGY_NAMES",
     "strategies_named",
     "coupled_spectral_radius",
@@ -494,6 +495,25 @@ class CrossCoupled(Strategy):
 # Composition
 
 
+def strategy_sequence(strategies):
+    """`strategies` as a tuple, after checking it is a sequence, not one strategy alone or a strategy's name.
+
+    Parameters
+    ----------
+    strategies : sequence of Strategy
+        As :func:`contoursim.simulation.simulate` and :class:`Composition` take them.
+
+    Raises
+    ------
+    TypeError
+        `strategies` is a :class:`Strategy`, a string or not iterable.
+    """
+    if isinstance(strategies, (Strategy, str)) or not hasattr(strategies, "__iter__"):
+        raise TypeError(f"strategies must be a sequence of compensation Strategy objects, e.g. (Feedforward(),), "
+                        f"or strategies_named('ccc_arc'); got {strategies!r}")
+    return tuple(strategies)
+
+
 class Composition:
     """Several strategies acting together, each stage in the order given (see the module docstring).
 
@@ -512,10 +532,7 @@ class Composition:
     """
 
     def __init__(self, strategies=()):
-        if isinstance(strategies, (Strategy, str)) or not hasattr(strategies, "__iter__"):
-            raise TypeError(f"strategies must be a sequence of compensation Strategy objects, e.g. (Feedforward(),), "
-                            f"or strategies_named('ccc_arc'); got {strategies!r}")
-        strategies = tuple(strategies)
+        strategies = strategy_sequence(strategies)
         for i, strategy in enumerate(strategies):
             if not isinstance(strategy, Strategy):
                 raise TypeError(f"strategies[{i}] must be a compensation Strategy, got {type(strategy).__name__}")

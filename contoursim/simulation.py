@@ -24,7 +24,7 @@ import numpy as np
 
 from . import _memory, _validate, estimators, kernel
 from ._blocks import blocks
-from .compensation import Composition, Strategy
+from .compensation import Composition, Strategy, strategy_sequence
 from ._version import __version__
 from .contour import exact_contour_error
 from .exceptions import ContoursimWarning, UnstableLoopError
@@ -861,7 +861,7 @@ _REFUSED = object()  # a variant whose cross-coupled controller fails the couple
 
 def _compositions(strategies, n):
     """One :class:`Composition` per variant: `strategies` shared, or one sequence per variant."""
-    strategies = list(strategies)
+    strategies = strategy_sequence(strategies)
     if not strategies or isinstance(strategies[0], Strategy):
         return [Composition(strategies)] * n
     if len(strategies) != n:

@@ -119,6 +119,9 @@ class Trace:
             object.__setattr__(self, name, _validate.read_only(value, getattr(self, name)))
         object.__setattr__(self, "axes", axes)
         object.__setattr__(self, "dt", dt)
+        if not isinstance(self.metadata, Mapping):  # written as '# key: value' lines
+            raise TypeError(f"metadata must map keys to values ({{'machine': 'mill 3'}}), got "
+                            f"{type(self.metadata).__name__}")
         for kind, (_, unit, limit) in INPUTS.items():
             columns = {}
             if not isinstance(getattr(self, kind), Mapping):
