@@ -174,6 +174,30 @@ class OutputDir:
         with atomic_write(file, binary=binary, before_replace=lambda: self._record(name)) as stream:
             yield stream
 
+    def remove(self, name):
+        """Remove the file `name` that contoursim wrote into the folder (a name on its record), if it is there.
+
+        For a run that replaces an earlier run's set of files with fewer: the
+        earlier ones it does not write again would be taken for its own.
+
+        Parameters
+        ----------
+        name : str
+            A file name, without folder.
+
+        Raises
+        ------
+        FileExistsError
+            A file `name` exists in the folder and contoursim did not write it (it is left as it is).
+        OutputError
+            The file cannot be removed.
+        """
+        file = self.file(name)
+        try:
+            file.unlink(missing_ok=True)  # a link contoursim wrote over a file: the link, never what it names
+        except OSError as exc:
+            raise OutputError(f"cannot remove {file}: {exc.strerror}") from None
+
     def _record(self, name):
         """List `name` in the marker (once), appending to it as a plain file, never through a link."""
         if name in self.written():

@@ -615,6 +615,12 @@ def plot_sweep(sweep, table):
     return figures
 
 
+#: The files a sweep writes besides its plots of each parameter (``sweep_<name>.png``): those an earlier sweep in the
+#: folder wrote and this one does not (its best and worst runs when every variant diverged) are removed.
+_RESULTS = ("sweep.csv", "sweep.parquet", "best.csv", "worst.csv", "best_path.png", "worst_path.png", "best_errors.png",
+            "worst_errors.png", "best_worst_polar.png")
+
+
 def write_results(sweep, table, out):
     """Write a sweep's table, plots and the best and worst variants re-run with full traces into `out`.
 
@@ -622,6 +628,9 @@ def write_results(sweep, table, out):
     installed, the plots of :func:`plot_sweep`, and ``best.csv``,
     ``worst.csv`` with the usual plots of both
     (:func:`contoursim.plotting.save_figures`, polar plot ``best_worst_polar.png``).
+    An earlier sweep's such files in `out` that this one does not write (the
+    plots of other parameters, its best and worst runs when every variant
+    here diverged) are removed: what the folder holds is this sweep's.
 
     Parameters
     ----------
@@ -642,6 +651,7 @@ def write_results(sweep, table, out):
     from .simulation import simulate
 
     out = output_dir(out)
+    written = ["sweep.csv"]
     with out.write("sweep.csv") as stream:
         stream.write(table_text(sweep, table))
     try:
@@ -655,10 +665,12 @@ def write_results(sweep, table, out):
         columns.update((key, table[:, j].astype(bool) if key == "diverged" else table[:, j]) for j, key in enumerate(FIGURES))
         with out.write("sweep.parquet", binary=True) as stream:
             pq.write_table(pa.table(columns), stream)
+        written.append("sweep.parquet")
     for name, fig in plot_sweep(sweep, table).items():
         with out.write(f"{name}.png", binary=True) as stream:
             fig.savefig(stream, format="png", dpi=100)
         plt.close(fig)
+        written.append(f"{name}.png")
     chosen = best_and_worst(table)
     if chosen is not None:
         job = _job(sweep)
@@ -669,7 +681,11 @@ def write_results(sweep, table, out):
             values = "; ".join(f"{n} = {v!r}" for n, v in zip(sweep.names, sweep.values[i].tolist()))
             with out.write(f"{label}.csv") as stream:
                 runs[label].save_csv(stream, metadata={"sweep": Path(sweep.source).name, "variant": i, "values": values})
-        save_figures(runs, out, "best_worst")
+            written.append(f"{label}.csv")
+        written += [file.name for file in save_figures(runs, out, "best_worst")]
+    for name in out.written() - set(written):  # an earlier sweep's files this one did not write again
+        if name in _RESULTS or (name.startswith("sweep_") and name.endswith(".png")):
+            out.remove(name)
     return out, chosen
 
 

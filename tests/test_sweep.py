@@ -364,6 +364,21 @@ def test_a_tolerance_sweep_gives_the_volumetric_error_linear_in_the_squareness(t
     assert table[1, FIGURES.index("contour_max_um")] == single["contour_max_um"]
 
 
+def test_a_sweep_into_an_earlier_sweeps_folder_leaves_none_of_the_earlier_sweeps_files(tmp_path):
+    """Every variant of the second sweep diverged: best.csv and worst.csv of the first one stayed beside its table (and
+    the plots of a parameter it did not vary), taken for its own; a user's file there is left."""
+    two = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"},
+                           {"name": '"axes.y.kp_per_s"', "values": "[35.0]"}], strategies="none")
+    assert main(["sweep", str(two), "--out", str(tmp_path / "out")]) == 0
+    assert {"best.csv", "worst_errors.png", "sweep_axes.y.kp_per_s.png", "sweep_map.png"} <= set(
+        os.listdir(tmp_path / "out"))
+    (tmp_path / "out" / "notes.txt").write_text("mine\n")
+    one = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[9000.0]"}], strategies="none", name="one.toml")
+    assert main(["sweep", str(one), "--out", str(tmp_path / "out")]) == 0
+    kept = sorted(name for name in os.listdir(tmp_path / "out") if name != "sweep.parquet")  # with pyarrow
+    assert kept == [".contoursim-out", "notes.txt", "sweep.csv", "sweep_axes.x.kp_per_s.png"]
+
+
 def test_a_variant_the_coupled_loops_check_refuses_is_said_so_with_its_margins(tmp_path, capsys):
     """kp = 1e5/s of a CCC among good gains: 'a cross-coupled loop's check refused it, or its run left ±1e+06 mm',
     neither which nor how far."""
