@@ -246,8 +246,15 @@ def _job(args, extra_keys=()):
             if "work_offset" in data:
                 machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
             model = with_file_effects(replace(model, machine=machine), job)
+            if geometric and machine.chain is None:  # simulate's, compare's and a sweep's, said where the job asks
+                raise job.error(_no_chain(machine), "geometric_compensation")
             return model, named("path", library_file, (".toml", ".nc")), job, geometric
     return load_model(args.machine or preset_file(DEMO_MACHINE, here=False)), library_file(args.file), None, False
+
+
+def _no_chain(machine):
+    """Why geometric compensation cannot run on `machine`, which has no geometric model."""
+    return f"{machine.name} has no geometric model ([[body]] tables) to compensate with"
 
 
 def _ballbar(job):
@@ -286,9 +293,8 @@ def simulate_command(args):
     machine = model.machine
     if job is not None and "strategy" in job.data:
         raise job.error("[[strategy]] tables set the strategies of contoursim compare; simulate runs none", "strategy")
-    if (geometric or args.geometric_compensation) and machine.chain is None:
-        message = f"{machine.name} has no geometric model ([[body]] tables) to compensate with"
-        raise job.error(message, "geometric_compensation") if geometric else ConfigError(f"--geometric-compensation: {message}")
+    if args.geometric_compensation and machine.chain is None:
+        raise ConfigError(f"--geometric-compensation: {_no_chain(machine)}")
     ballbar = _ballbar(job)
     if ballbar is not None and load_path_file(path_file)[0].test_circle() is None:
         raise job.error(f"[ballbar] needs a circular test: {Path(path_file).name} has no test circle (use a path of "

@@ -395,11 +395,13 @@ def test_a_machine_whose_axis_has_no_travel_is_refused_by_volumetric_naming_its_
     ('machine = "demo_mill"\npath = ""\n', 2, "path = '' names the folder"),  # the job's own folder: said so, by its line
     ('machine = "."\npath = "small.toml"\n', 1, "machine = '.' names the folder"),
 ])
-def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys, job, line, words):
-    """A misspelt machine or path, a compensation the machine cannot make: the job file's line (they named no file)."""
+@pytest.mark.parametrize("command", [["simulate"], ["compare", "--strategies", "none"]])
+def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys, job, line, words, command):
+    """A misspelt machine or path, a compensation the machine cannot make: the job file's line (they named no file;
+    compare said 'the geometric strategy needs a machine with a geometric error model', naming no file)."""
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     (tmp_path / "job.toml").write_text(job)
-    _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+    _refused(capsys, [command[0], str(tmp_path / "job.toml"), *command[1:], "--out", str(tmp_path / "out")],
              f"{tmp_path / 'job.toml'}, line {line}: {words}")
 
 
