@@ -237,7 +237,11 @@ def _draw(toml, tables, method, count, seed):
             raise toml.error(f"vary {t['name']!r}: min must not exceed max" + (" and both be positive (log)" if log else ""),
                              "vary", i, "min")
         if method == "grid":
-            columns.append((low, high, log, _integer(toml, ("vary", i, "count"), t.get("count"), 1)))
+            points = _integer(toml, ("vary", i, "count"), t.get("count"), 1)
+            if points == 1 and high > low:  # linspace's one point is min: max would never run
+                raise toml.error(f"vary {t['name']!r}: count = 1 is min = {low:g} alone, max = {high:g} never runs: "
+                                 "give count = 2 or more, or values = [...]", "vary", i, "count")
+            columns.append((low, high, log, points))
         elif "count" in t:
             raise toml.error("a vary table's count gives a grid's points: with random or lhs set [sweep] count",
                              "vary", i, "count")
