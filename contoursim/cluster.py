@@ -102,19 +102,19 @@ def _answers(address):
     import asyncio
 
     from distributed.comm import connect
+    from distributed.security import Security
 
-    async def greet():
-        comm = await connect(address, timeout=CONNECT_TIMEOUT_S)
+    async def greet():  # as Client connects: tls:// with the dask configuration's certificates
+        comm = await connect(address, timeout=CONNECT_TIMEOUT_S, **Security().get_connection_args("client"))
         await comm.close()
 
     try:
         asyncio.run(asyncio.wait_for(greet(), CONNECT_TIMEOUT_S))
-    except (OSError, asyncio.TimeoutError, ValueError) as exc:
-        why = f"no dask scheduler answered in {CONNECT_TIMEOUT_S:g} s" if isinstance(exc, asyncio.TimeoutError) else exc
-        raise ValueError(f"cannot reach a dask scheduler at {address!r} ({why}); {_ADDRESS}") from None
-    except Exception as exc:  # noqa: BLE001 -- whatever the other end's bytes made of dask's greeting
-        raise ValueError(f"{address!r} answers, but not as a dask scheduler ({type(exc).__name__}); is it the "
-                         f"dashboard's port (8787)? {_ADDRESS}") from None
+    except Exception as exc:  # noqa: BLE001 -- refused, unknown, silent, or bytes that are not dask's greeting
+        why = (f"no dask scheduler answered in {CONNECT_TIMEOUT_S:g} s" if isinstance(exc, asyncio.TimeoutError)
+               else (str(exc).splitlines() or [type(exc).__name__])[0][:200])
+        raise ValueError(f"cannot reach a dask scheduler at {address!r} ({why}); {_ADDRESS} (the scheduler's port, "
+                         "8786 by default, not its dashboard's, 8787)") from None
 
 
 def numba_threads(client):
