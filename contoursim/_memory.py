@@ -3,7 +3,8 @@
 A run's samples are the unit: :data:`RUN_BYTES_PER_SAMPLE` covers one run
 from its reference to its trace CSV and plots, :data:`COMPARED_RUN_BYTES_PER_SAMPLE`
 each further run a comparison keeps beside it, :data:`DIAGNOSIS_BYTES_PER_SAMPLE`
-a diagnosis. A sweep's are its variants (:data:`SWEEP_BYTES_PER_VALUE`).
+a diagnosis. A sweep's are its variants (:data:`SWEEP_BYTES_PER_VALUE`); a local cluster's, its worker processes
+(:data:`WORKER_BYTES`).
 """
 
 import os
@@ -28,6 +29,10 @@ DIAGNOSIS_BYTES_PER_SAMPLE = 4500
 #: sweeps of demo_mill with 1 to 3 parameters grew by 388-390 (1), 1,174-1,188 (2: the map of both) and 929-944 (3)
 #: bytes a variant from 20,000 to 80,000 variants (tracemalloc), at most 587 a variant and parameter.
 SWEEP_BYTES_PER_VALUE = 700
+
+#: Memory a worker process of ``--scheduler local:N`` takes [bytes]: contoursim, numba and a sweep's job loaded, a
+#: worker of local:2 held 330-334 MB (resident) after 4,000 variants of a demo_mill sweep.
+WORKER_BYTES = 400_000_000
 
 
 def available():
@@ -99,6 +104,23 @@ def check_sweep(variants, parameters, what, advice):
     """
     variants = float(variants)
     _fits(variants * parameters * SWEEP_BYTES_PER_VALUE, f"{what}, {variants:.4g} variants, needs", advice)
+
+
+def check_workers(workers):
+    """Refuse a local cluster of `workers` worker processes (:data:`WORKER_BYTES` each) that would not fit in memory.
+
+    Parameters
+    ----------
+    workers : int
+
+    Raises
+    ------
+    ValueError
+        More memory is needed than is available (nothing is checked where that is unknown).
+    """
+    _fits(workers * WORKER_BYTES, f"--scheduler local:{workers}: {workers} worker processes need",
+          f"start fewer (this machine has {os.cpu_count() or 'an unknown number of'} cores; more workers than cores "
+          "run no faster)")
 
 
 def _fits(needed, what, advice):

@@ -12,6 +12,8 @@ import signal
 import threading
 from contextlib import contextmanager
 
+from . import _memory
+
 __all__ = ["CONNECT_TIMEOUT_S", "DISTRIBUTED_MISSING", "connected", "numba_threads", "run_tasks", "task_threads"]
 
 #: The message when dask.distributed is not installed.
@@ -65,6 +67,7 @@ def connected(scheduler):
         n = 0
     if n < 1:
         raise ValueError(f"--scheduler local:N needs a whole number of workers, at least 1; got {text!r}")
+    _memory.check_workers(n)  # before a process starts: local:1000 would take the machine's memory, then hang
     threads = max(1, (os.cpu_count() or 1) // n)
     with _uninterrupted_children():
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",

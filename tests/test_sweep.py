@@ -207,6 +207,22 @@ def test_bad_local_scheduler_is_refused(tmp_path, capsys):
     assert "local:N needs a whole number of workers, at least 1; got 'local:zero'" in capsys.readouterr().err
 
 
+def test_a_local_cluster_too_large_for_the_memory_is_refused_before_a_process_starts(tmp_path, monkeypatch, capsys):
+    """local:1000 (a typo for local:10) started worker after worker until the machine's memory ran out."""
+    pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
+    import psutil  # a dependency of distributed
+
+    from contoursim import _memory
+
+    monkeypatch.setattr(_memory, "available", lambda: 3 * _memory.WORKER_BYTES)
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}])
+    before = len(psutil.Process().children(recursive=True))
+    assert main(["sweep", str(spec), "--scheduler", "local:4", "--out", str(tmp_path / "o")]) == 2
+    assert "--scheduler local:4: 4 worker processes need about 1.6 GB of memory and 1.2 GB are available; start " \
+           "fewer" in capsys.readouterr().err
+    assert len(psutil.Process().children(recursive=True)) == before and not (tmp_path / "o").exists()
+
+
 def test_local_local1_local2_and_a_killed_worker_give_the_same_table_bit_for_bit(tmp_path):
     distributed = pytest.importorskip("distributed", reason="dask.distributed not installed "
                                                             "(pip install \"contoursim[distributed]\")")
