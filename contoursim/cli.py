@@ -545,7 +545,8 @@ def sweep_command(args):
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim sweep — {Path(args.spec).name}: {len(sweep.values)} variants of {', '.join(sweep.names)}; "
           f"strategies {sweep.strategies}; on {where}", flush=True)
-    table = run_sweep(sweep, args.scheduler, progress=Progress())
+    with Progress() as progress:
+        table = run_sweep(sweep, args.scheduler, progress=progress)
     out, chosen = write_results(sweep, table, args.out)
     diverged = int(table[:, FIGURES.index("diverged")].sum())
     print(f"{diverged} of {len(table)} variants diverged or were refused by a loop check (the axes' or the coupled loop's)")
@@ -588,7 +589,8 @@ def fleet_command(args):
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "
           f"on {where}", flush=True)
-    outcomes = diagnose_fleet(files, args.model, args.scheduler, progress=Progress("diagnose", "traces"))
+    with Progress("diagnose", "traces") as progress:
+        outcomes = diagnose_fleet(files, args.model, args.scheduler, progress=progress)
     summary = fleet_summary(outcomes)
     out = output_dir(args.out)
     for outcome in outcomes:

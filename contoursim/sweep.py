@@ -696,7 +696,9 @@ def write_results(sweep, table, out):
 class Progress:
     """A one-line progress bar on stderr: ``sweep: [#####.....] 412/1000 variants, 8.1/s, 1.2 min left``.
 
-    Called as ``progress(done, total)``; the rate counts from the call with ``done = 0``.
+    Called as ``progress(done, total)``; the rate counts from the call with ``done = 0``. Used as a context
+    manager, it ends a line left open (a run interrupted or failed), so that what is said next has a line of
+    its own.
 
     Parameters
     ----------
@@ -711,6 +713,15 @@ class Progress:
     def __init__(self, label="sweep", what="variants", stream=None):
         self.label, self.what, self.stream = label, what, stream or sys.stderr
         self.start, self.last = time.monotonic(), -1.0
+        self.open = False  # a line written without its end
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.open:
+            print(file=self.stream, flush=True)
+            self.open = False
 
     def __call__(self, done, total):
         now = time.monotonic()
@@ -726,3 +737,4 @@ class Progress:
         end = "\n" if done >= total else ""
         print(f"\r{self.label}: [{bar}] {done}/{total} {self.what}, {rate:.3g}/s, {eta}   ", end=end, file=self.stream,
               flush=True)
+        self.open = not end

@@ -336,6 +336,22 @@ def test_an_address_that_does_not_answer_as_a_dask_scheduler_is_refused_within_s
         connection.close()
 
 
+def test_a_sweep_interrupted_says_so_on_a_line_of_its_own(tmp_path, monkeypatch, capsys):
+    """Ctrl-C mid-sweep: 'contoursim sweep: interrupted' was written on the end of the progress bar's line."""
+    import contoursim.sweep
+
+    def interrupted(files, names, rows):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(contoursim.sweep, "run_variants", interrupted)
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}])
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 130
+    lines = capsys.readouterr().err.split("\n")  # the bar's line: "\r"s, each drawing it again
+    assert lines[0].startswith("\rsweep: [....................] 0/2 variants") and lines[1].startswith(
+        "contoursim sweep: interrupted; files already complete are kept"), lines
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_local_clusters_workers_leave_a_ctrl_c_to_the_command():
     """A Ctrl-C in a terminal reaches every process of the command: each worker of local:N ended in a traceback of
     its own (KeyboardInterrupt, and the nanny's errors) under the command's one line."""
