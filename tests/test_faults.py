@@ -514,29 +514,25 @@ def _trajectory_with(trajectory, **arrays):
     return Trajectory(**given)
 
 
-@pytest.mark.parametrize("make, given", [
-    (lambda a, arrays: _trajectory_with(a.trajectory, **arrays), ("t", "position", "velocity", "acceleration", "s",
-                                                                  "measuring")),
-    (lambda a, arrays: Trace(arrays["t"], arrays["reference"], arrays["actual"], ("x", "y"),
-                             force={"x": arrays["force"]}), ("t", "reference", "actual", "force")),
-])
-def test_the_callers_arrays_stay_as_they_were_and_the_objects_arrays_do_not_change_with_them(api, make, given):
+@pytest.mark.parametrize("kind", ["Trajectory", "Trace"])
+def test_the_callers_arrays_stay_as_they_were_and_the_objects_arrays_do_not_change_with_them(api, kind):
     """Trajectory(t, position, ...) made the caller's own arrays read-only (a user's next ``position[0] = ...`` raised
     'assignment destination is read-only'); the object keeps read-only arrays of its own."""
-    source = {"t": api.trajectory.t, "position": api.trajectory.position, "velocity": api.trajectory.velocity,
-              "acceleration": api.trajectory.acceleration, "s": api.trajectory.s, "measuring": api.trajectory.measuring,
-              "reference": api.trace.reference, "actual": api.trace.actual, "force": api.trace.t}
-    if "reference" in given:
-        source["t"] = api.trace.t
-    arrays = {k: np.array(source[k]) for k in given}
-    made = make(api, arrays)
+    if kind == "Trajectory":
+        arrays = {k: np.array(getattr(api.trajectory, k)) for k in ("t", "position", "velocity", "acceleration", "s",
+                                                                    "measuring")}
+        made = Trajectory(**arrays)
+        kept = {k: getattr(made, k) for k in arrays}
+    else:
+        arrays = {"t": np.array(api.trace.t), "reference": np.array(api.trace.reference),
+                  "actual": np.array(api.trace.actual), "force": np.linspace(0.0, 1.0, len(api.trace.t))}
+        made = Trace(arrays["t"], arrays["reference"], arrays["actual"], ("x", "y"), force={"x": arrays["force"]})
+        kept = {"t": made.t, "reference": made.reference, "actual": made.actual, "force": made.force["x"]}
     for name, array in arrays.items():
-        assert array.flags.writeable, name
-        kept = getattr(made, name) if name != "force" else made.force["x"]
-        assert not kept.flags.writeable, name
-        before = kept.copy()
+        assert array.flags.writeable and not kept[name].flags.writeable, name
+        before = kept[name].copy()
         array[...] = array[::-1]
-        np.testing.assert_array_equal(kept, before)
+        np.testing.assert_array_equal(kept[name], before)
 
 
 @pytest.fixture(scope="module")
