@@ -18,6 +18,9 @@ _AT_REST = 1e-9  # an end velocity (acceleration) within this share of the large
 class Trajectory:
     """A reference path sampled at the servo period.
 
+    Its arrays are read-only; an array the caller passes is copied
+    (:func:`contoursim._validate.read_only`), so it stays the caller's, writeable.
+
     Parameters
     ----------
     t : ndarray, shape (N,)
