@@ -1372,6 +1372,50 @@ def _rescore(problem, cands):
         _score(problem, cand, cand.residual, tau)
 
 
+def _acceleration_twins(problem, cands, warnings):
+    """`cands` less, on an identified machine, each scale error that a misfit of its axis's loop in proportion to
+    that axis's acceleration explains as well (its ΔBIC no longer significant with that misfit taken out of both
+    residuals); each significant one left out is said.
+
+    On a circle at one feed an axis's acceleration is in proportion to its
+    position about the centre (−ω²·(q − c)): a scale error, in proportion to
+    the position about its mean, draws what loops that answer acceleration a
+    little differently than identified do (the velocity loop's bandwidth,
+    an acceleration feedforward) and fits it from the same trace. With a
+    given model the mass's refit, within its prior, answers that misfit.
+    """
+    if not problem.identified:
+        return cands
+    n, d = problem.trace.actual.shape
+    acc = _on_trace(problem.trace, problem.reference.t, problem.reference.acceleration)
+    kept = []
+    for cand in cands:
+        if cand.effect.name != "scale_error":
+            kept.append(cand)
+            continue
+        i = problem.trace.axes.index(cand.effect.axis)
+        column = np.zeros((n, d))
+        column[:, i] = acc[:, i] - acc[problem.scored, i].mean()  # the instrument's zero is free: about the mean
+        a = (column * problem.weight).ravel()
+        if not a @ a > 0:
+            kept.append(cand)
+            continue
+
+        def rss(r):
+            return float(r @ r) - float(a @ r[: n * d]) ** 2 / float(a @ a)
+
+        without = float(delta_bic(rss(problem.base_residual), rss(cand.residual), problem.n, len(cand.free), cand.tau))
+        if without > SIGNIFICANT:
+            kept.append(cand)
+        elif cand.delta_bic > SIGNIFICANT:
+            warnings.append(f"{cand.effect.label}: not named, on this path a misfit of the loop identified for "
+                            f"{cand.effect.axis} in proportion to its acceleration explains it as well (ΔBIC "
+                            f"{cand.delta_bic:.3g} -> {without:.3g} with that taken out): a path whose acceleration is "
+                            "not in proportion to the position (a square; the circle at a second feed) tells them "
+                            "apart, or give the nominal model (--model)")
+    return kept
+
+
 def _finite(r):
     """`r` with what a variant that went unstable left (non-finite or absurd entries) held at ±1e6 noise levels."""
     return np.clip(np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6), -1e6, 1e6)
@@ -1919,6 +1963,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                 f"{_options(cand.effect):<26} RMS {_rms_um(problem.unwhiten(cand.residual)):8.3f} µm")
         cands = refined
         _rescore(problem, cands)
+        cands = _acceleration_twins(problem, cands, warnings)
         cands.sort(key=lambda c: -c.delta_bic)
         if cands and cands[0].delta_bic > SIGNIFICANT and not identified:
             cands = _profiled(problem, base, cands, warnings, say)

@@ -156,6 +156,30 @@ def test_a_backlash_the_first_refit_would_bend_the_plant_around_is_named(indepen
     assert result.steps[-1].rms_um < 0.8 * result.steps[1].rms_um
 
 
+@pytest.mark.parametrize("family, effect, seed, path", [("two_mass", "thermal_drift", 644353033, "circle_cw"),
+                                                        ("rigid", "scale_error", 154790205, "square")])
+def test_without_a_model_a_scale_error_is_named_only_where_acceleration_does_not_draw_it(independent_truth, tmp_path,
+                                                                                        family, effect, seed, path):
+    """Without a model, on a circle at one feed, the loop identified for x misfits its acceleration, which there is in
+    proportion to x about the centre: a scale error of x (−20 ppm, 6σ) was named for it beside a thermal drift. It is
+    not named, and the report says why and what tells them apart. On a square the acceleration is not in proportion
+    to the position: a true scale error is named there, of its size."""
+    from contoursim.diagnosis import diagnose
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case(family, effect, seed, tmp_path)
+    assert case.path == path
+    result = diagnose(read_trace(case.csv))
+    named = [(e.name, e.axis) for e in result.effects]
+    if effect == "scale_error":
+        assert named == [("scale_error", case.truth["axis"])], result.report()
+        assert result.effects[0]["ppm"] == pytest.approx(case.truth["parameters"]["ppm"], rel=0.2), result.report()
+    else:
+        assert ("scale_error", "x") not in named, result.report()
+        assert any(w.startswith("scale_error.x: not named, on this path a misfit of the loop identified for x in "
+                                "proportion to its acceleration") for w in result.warnings), result.warnings
+
+
 def test_a_friction_fitted_to_an_independent_dahl_law_is_within_its_uncertainty(independent_truth, tmp_path):
     """Dahl friction (a presliding spring, no Coulomb step) on the independent rigid axis, its data sheet without the
     screw, the current loop or the motor's share of the mass: the Coulomb force fitted comes out 4 % high, 10
