@@ -124,7 +124,7 @@ _MODE_DAMPING_MAX = 0.35  # largest damping ratio of a vibration candidate [-] (
 # the trace, the largest spread (the estimate grows with the segments' length until they outlast the residual's
 # correlations, and the fewer the segments the noisier it is: no one length is right for every trace)
 _JACKKNIFE_BLOCKS = (40, 20, 10)
-_PRIOR_REACH = 3.0  # a given model's plant refitted further than this many prior widths from its nominal is said
+_PRIOR_REACH = 3.0  # prior widths a given model's plant moves at most before any effect is tried; moved further, it is said
 _BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–Newton step tried, the first that helps kept
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
