@@ -476,7 +476,7 @@ def diagnose_command(args):
     Several traces, or a folder of them: :func:`fleet_command`.
     """
     from ._memory import DIAGNOSIS_BYTES_PER_SAMPLE, check
-    from .diagnosis import diagnose, save_figures
+    from .diagnosis import FIGURE_FILES, diagnose, save_figures
     from .identify import servo_period_for
     from .model import load_model
     from .output import report_file, writing
@@ -494,7 +494,8 @@ def diagnose_command(args):
     check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
           "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
           per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
-    report = report_file(args.report, "residual_rms_before_um", "diagnosis report", args.out)  # never a file the user keeps
+    report = report_file(args.report, "residual_rms_before_um", "diagnosis report", args.out,  # never a user's file,
+                         written=(*FIGURE_FILES, "corrected_model.toml"))  # nor one the run writes
     corrected = Path(args.out) / "corrected_model.toml"
     if args.model and corrected.is_file() and Path(args.model).is_file() and os.path.samefile(corrected, args.model):
         raise ConfigError(f"--out {args.out} would replace {args.model}, the model this run reads, with this trace's "

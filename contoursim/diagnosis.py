@@ -77,7 +77,7 @@ from .simulation import measured_force, measured_reference, simulate_batch
 from .traces import Trace
 
 __all__ = [
-    "DAMPING_SPREAD", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
+    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
     "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
@@ -2400,8 +2400,12 @@ def plot_polar(diagnosis, ax=None):
     return ax
 
 
+#: The files :func:`save_figures` writes (the polar plot for a circle test only).
+FIGURE_FILES = ("diagnosis_residual.png", "diagnosis_trace.png", "diagnosis_polar.png")
+
+
 def save_figures(diagnosis, out):
-    """Write the diagnosis figures as PNG files into the output folder `out`.
+    """Write the diagnosis figures as PNG files into the output folder `out` (:data:`FIGURE_FILES`).
 
     ``diagnosis_residual.png`` (:func:`plot_residuals`),
     ``diagnosis_trace.png`` (:func:`plot_magnified`) and, for a circle
@@ -2425,10 +2429,11 @@ def save_figures(diagnosis, out):
     from .output import output_dir
 
     out = output_dir(out)
-    figures = [("diagnosis_residual.png", plot_residuals(diagnosis)), ("diagnosis_trace.png", plot_magnified(diagnosis).figure)]
-    polar = plot_polar(diagnosis)
-    if polar is not None:
-        figures.append(("diagnosis_polar.png", polar.figure))
+    residual, trace, polar = FIGURE_FILES
+    figures = [(residual, plot_residuals(diagnosis)), (trace, plot_magnified(diagnosis).figure)]
+    drawn = plot_polar(diagnosis)
+    if drawn is not None:
+        figures.append((polar, drawn.figure))
     for name, fig in figures:
         with out.write(name, binary=True) as stream:
             fig.savefig(stream, format="png", dpi=110)

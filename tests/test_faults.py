@@ -952,6 +952,18 @@ def test_a_diagnosis_does_not_replace_the_model_it_reads(tmp_path, capsys):
     assert model.read_bytes() == before
 
 
+@pytest.mark.parametrize("name", ["diagnosis_trace.png", "corrected_model.toml"])
+def test_a_diagnosis_report_onto_a_file_the_run_writes_is_refused_before_it_runs(tmp_path, capsys, name):
+    """--report out/diagnosis_trace.png --out out: the report was written, then the plot replaced it (or the report
+    replaced the corrected model): refused before the diagnosis, nothing written."""
+    t = np.arange(400) * 1e-3
+    trace = _trace(tmp_path / "t.csv", t, np.sin(t), np.sin(t) + 1e-4)
+    out = tmp_path / "out"
+    _refused(capsys, ["diagnose", str(trace), "--out", str(out), "--report", str(out / name)],
+             f"{out / name} is a file this run writes into its output directory")
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("named", ["command line", "job file"])
 def test_a_users_copy_of_a_library_path_or_a_preset_named_without_its_suffix_is_the_one_read(tmp_path, monkeypatch,
                                                                                             named):
