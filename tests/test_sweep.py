@@ -358,9 +358,14 @@ def test_a_local_clusters_workers_leave_a_ctrl_c_to_the_command():
     pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
     from contoursim.cluster import connected
 
-    with connected("local:1") as client:
-        assert list(client.run(signal.getsignal, signal.SIGINT).values()) == [signal.SIG_IGN]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # as in a terminal, whatever started the tests (a shell's background job ignores SIGINT from its start)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with connected("local:1") as client:
+            assert list(client.run(signal.getsignal, signal.SIGINT).values()) == [signal.SIG_IGN]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the command's own, back
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_results_csv_parquet_plots_and_the_best_and_worst_runs(tmp_path, capsys):
