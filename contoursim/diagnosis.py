@@ -51,7 +51,9 @@ The workflow (:func:`diagnose`):
    the search repeats for a second and a third effect and stops when
    nothing is significant or the residual is at the noise floor
    (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
-   reported as ambiguous, with the test that would separate them; so is a
+   reported as ambiguous, with the test that would separate them, the more
+   plausible named (a typical size; with a model, its controller as given:
+   :func:`_choose`); so is a
    delay of an axis's position-loop reading (to first order a gain) that does
    not beat the gain mismatch of its axis as an effect is named (by
    ``SIGNIFICANT`` and :data:`GAP_SHARE` of what the gain leaves), and the
@@ -594,22 +596,28 @@ def _not_following(trace, simulated, scored):
 def _leading(trace, simulated, scored, noise):
     """Sentences for the axes whose measured positions lead their reference by about the lag the model has them behind.
 
-    A servo axis lags its command; measured minus commanded positions that are
-    the model's lag with the sign turned (a regression of one on the other
-    below −0.5, the lag clear of the noise) are a trace whose columns are
-    swapped.
+    A servo axis lags its command by a time, its position behind by that time
+    of travel (v/kp without feedforward). Measured minus commanded positions
+    that lead by more than half of the lag the model has the axis behind
+    (each regressed on the commanded velocity: a time, negative behind; the
+    model's lag clear of the noise) are a trace whose columns are swapped.
+    Where the model does not have the axis behind (velocity feedforward
+    leaves a lag of either sign, little of it in proportion to the speed), a
+    measured lag tells nothing of the columns: an axis behind its command by
+    a delay the model lacks is no swap.
     """
     found = []
     for i, axis in enumerate(trace.axes):
-        lag = simulated[scored, i] - trace.reference[scored, i]
-        seen = trace.actual[scored, i] - trace.reference[scored, i]
-        lag, seen = lag - lag.mean(), seen - seen.mean()
-        size = float(lag @ lag)
-        slope = float(seen @ lag) / size if size > 0 else 0.0  # the measured lag per unit of the model's
-        if size > 0 and np.sqrt(size / lag.size) > 3 * noise[i] and slope < -0.5:
-            found.append(f"the measured {axis} leads {axis}_ref by {-slope:.2g} times the lag the "
-                         f"model has it behind (a servo axis follows its command, it does not anticipate it): are "
-                         f"{axis} and {axis}_ref swapped? No effect is named")
+        v = np.gradient(trace.reference[:, i], trace.t)[scored]
+        v = v - v.mean()
+        speed = float(v @ v)
+        if speed == 0.0:
+            continue
+        behind, seen = ((y[scored, i] - trace.reference[scored, i]) @ v / speed for y in (simulated, trace.actual))  # [s]
+        if -behind * np.sqrt(speed / v.size) > 3 * noise[i] and seen > -0.5 * behind:
+            found.append(f"the measured {axis} leads {axis}_ref by {seen / -behind:.2f} times the lag the model has it "
+                         f"behind ({-1e3 * behind:.3g} ms of travel; a servo axis follows its command, it does not "
+                         f"anticipate it): are {axis} and {axis}_ref swapped? No effect is named")
     return found
 
 
@@ -1668,13 +1676,16 @@ def _choose(problem, cands, both_ways):
     The best, unless it is a delay of an axis's position-loop reading that
     the trace does not tell from a gain mismatch of that axis
     (:func:`_first_order_twin`: the gain is named; a best gain is named with
-    such a delay said beside it), or the trace cannot tell
-    it from its twins (:func:`_look_alikes`) and only a twin's size lies within the
-    catalogue's typical range (the best ranked such twin is named): what the
-    trace cannot decide, the typical sizes of machines may. Either way the
-    pair is reported, with the test that would separate them; so is every
-    other twin of the best (a gain of one axis, the opposite gain of the
-    other and a squareness may all fit a one-way circle alike).
+    such a delay said beside it), or the trace cannot tell it from its twins
+    (:func:`_look_alikes`) and a twin is more plausible (:func:`_plausible`:
+    its size lies within the catalogue's typical range and the best's does
+    not; or, their sizes alike typical or not, it leaves as given a
+    controller the model gives exactly and the best does not): what the trace cannot decide, the
+    typical sizes of machines and the data sheet may; the best ranked such
+    twin is named. Either way the pair is reported, with the test that would
+    separate them; so is every other twin of the best (a gain of one axis,
+    the opposite gain of the other and a squareness may all fit a one-way
+    circle alike).
     """
     best = cands[0]
     pair = _first_order_twin(problem, best, cands)
@@ -1683,15 +1694,41 @@ def _choose(problem, cands, both_ways):
     twins = _look_alikes(problem, best, cands, both_ways)
     if not twins:
         return _first_order_said(problem, *pair, both_ways) if pair is not None else (best, [])
-    typical = [(c, why) for c, why in twins if _typical(c.fit)]
-    swap = not _typical(best.fit) and bool(typical)
-    twin, reason = typical[0] if swap else twins[0]
-    named = twin if swap else best
-    pairs = [(named, best if swap else twin, reason, swap)] + [(best, c, why, False) for c, why in twins if c is not twin]
+    rank = lambda c: _plausible(problem, c.fit)  # noqa: E731
+    named, reason = max([(best, None)] + twins, key=lambda option: rank(option[0]))  # the first of the most plausible
+    swap = named is not best
+    twin, reason = (named, reason) if swap else twins[0]
+    why_named = ""
+    if swap:
+        why_named = ("the first is named, its size typical and the second's not; " if rank(named)[0] > rank(best)[0] else
+                     f"the first is named: the model gives {_departs_from(problem, best.fit)} exactly, the second "
+                     "departs from it and the trace cannot tell; ")
+    pairs = [(named, best if swap else twin, reason, why_named)] + [(best, c, why, "") for c, why in twins if c is not twin]
     return named, [
         f"{a.fit.label}{_options(a.fit)} ({_size(a.fit)}) and {b.fit.label}{_options(b.fit)} ({_size(b.fit)}): {why}; "
-        + ("the first is named, its size typical and the second's not; " if swapped else "")
-        + f"to separate them: {_separating_test(a.fit, b.fit, both_ways)}" for a, b, why, swapped in pairs]
+        + said + f"to separate them: {_separating_test(a.fit, b.fit, both_ways)}" for a, b, why, said in pairs]
+
+
+def _plausible(problem, effect):
+    """How plausible `effect` is before the trace speaks, a sort key (:func:`_choose`): its size typical, then no
+    departure from a controller setting the model gives exactly (:func:`_departs_from`)."""
+    return _typical(effect), _departs_from(problem, effect) is None
+
+
+def _departs_from(problem, effect):
+    """The controller setting the model gives exactly that `effect` says is otherwise (its name), or ``None``.
+
+    A given model's controller is trusted (its settings are software constants; the plant carries the prior): a gain
+    mismatch departs from the axis's position gain unless the machine lists ``kp`` as ``uncertain``, a delay from
+    its loop's timing. Identified loops give nothing exactly.
+    """
+    if problem.identified:
+        return None
+    if effect.name == "gain_mismatch" and "kp" not in problem.nominal.uncertain.get(effect.axis, ()):
+        return f"{effect.axis}'s position gain"
+    if effect.name == "time_delay":
+        return f"{effect.axis}'s loop timing"
+    return None
 
 
 def _first_order_twin(problem, best, cands):
