@@ -434,7 +434,9 @@ def test_compare_prints_the_table_and_writes_the_json_and_plots(tmp_path, capsys
         assert contract <= set(figures)  # the contract's keys stay; fields are only added
         assert isinstance(figures["saturated"], bool) and figures["peak_current_A"] > 0
         row = next(line for line in table.splitlines() if line.split()[:1] == [name])
-        assert float(row.split()[1]) == pytest.approx(figures["contour_max_um"], abs=5e-4)  # to the nm
+        shown = row.split()[1]  # to the nm; below half a nm the table says so (zpetc's 0.49999 nm on this circle)
+        assert (figures["contour_max_um"] < 5e-4 if shown == "<0.001"
+                else float(shown) == pytest.approx(figures["contour_max_um"], abs=5e-4))
         assert figures["clamped_pct"] == 0.0  # the demo mill has no current limit
     assert runs["feedforward+ccc_arc"]["contour_max_um"] < 0.1 * runs["none"]["contour_max_um"]
     # the settings each strategy ran with, and the coupled loop's margins beside the axes'
