@@ -29,7 +29,10 @@ and ``G30`` without axis words: all) to a machine position contoursim does
 not know in work coordinates. Before the first feed move they are ignored;
 after it the tool is taken to stay where it was, and the G0 moves that
 follow position it from there (rapids, not scored); a feed move while an
-axis is still at such a position is refused. What was ignored (all but ``N``) is
+axis is still at such a position is refused. A block that starts with the
+block-delete mark ``/`` (Fanuc's ``/1``–``/9`` too) runs, as with the
+controller's block-delete switch off: the program as written, all of it
+(the lines are named in a warning). What was ignored (all but ``N``) is
 listed in :attr:`Program.ignored` and in one
 :class:`~contoursim.exceptions.ContoursimWarning`. Refused with a message
 naming file and line: inch units (``G20``), cutter radius compensation
@@ -100,7 +103,9 @@ _IGNORED_LETTERS = "ONSTDH"  # program and sequence numbers, spindle, tool and i
 SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".eia")
 #: The assumptions :func:`read_gcode` makes, in one line (the command line prints it with a G-code file's table).
 DIALECT = ("Fanuc/LinuxCNC/GRBL mill dialect: mm (G21), feed per minute (G94), absolute unless G91, arc centres "
-           "I/J/K relative to the arc's start, comments ( ) and ;, G28/G30/G53 positioning outside the contour")
+           "I/J/K relative to the arc's start, comments ( ) and ;, G28/G30/G53 positioning outside the contour, "
+           "block delete / off (its blocks run)")
+_BLOCK_DELETE = re.compile(r"^\s*/[1-9]?")  # optional-block skip, with Fanuc's level
 _COMMENT = re.compile(r"\([^)]*\)|;.*")  # the leftmost first: a ( ) comment may hold a ;, a ; comment a ( or )
 _SUPPORTED = ("G0-G3, G4, G17-G19, G21, G28, G30, G40, G43, G49, G53-G59, G61, G64, G80, G90, G91, G91.1, G94, "
               "X Y Z I J K R F, O N S T D H, M codes but M98/M99")
@@ -171,10 +176,18 @@ def _words(raw, fail):
     text = _COMMENT.sub(" ", raw)
     if "(" in text or ")" in text:
         fail("unbalanced parenthesis in a comment")
+
+    def unread(rest):
+        rest = rest.strip()
+        hint = (": a decimal comma? write the number with a point" if rest.startswith(",") else
+                ": macro variables and expressions (# [ ]) are not supported: write the numbers out"
+                if any(c in rest for c in "#[") else "")
+        fail(f"cannot read {rest!r}{hint}")
+
     words, pos = [], 0
     for match in _WORD.finditer(text):
         if text[pos:match.start()].strip():
-            fail(f"cannot read {text[pos:match.start()].strip()!r}")
+            unread(text[pos:match.start()])
         exponent = _EXPONENT.match(text, match.end())
         if exponent:  # 1e-12 would read as the number 1 and a word E-12
             fail(f"{match.group(0).strip()}{exponent.group(0)}: a number in exponent notation is not G-code; write it "
@@ -185,7 +198,7 @@ def _words(raw, fail):
         words.append((match.group(1).upper(), value))
         pos = match.end()
     if text[pos:].strip():
-        fail(f"cannot read {text[pos:].strip()!r}")
+        unread(text[pos:])
     return words
 
 
@@ -219,14 +232,15 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     Warns
     -----
     ContoursimWarning
-        Listing, in one line, the words that move no axis and were ignored.
+        Listing, in one line, the words that move no axis and were ignored;
+        and, in another, the lines marked for block delete (``/``), which run.
     """
     text, source = _text_and_source(file_or_text)
     rapid_feed = _validate.positive("rapid_feed", rapid_feed)
     arc_tolerance = _validate.positive("arc_tolerance", arc_tolerance)
     here = _validate.finite_array("start", start, shape=(3,))
     motion, plane, absolute, feed, cutting = None, 2, True, None, False
-    prims, feeds, lines, texts, ignored, stops = [], [], [], [], {}, {}
+    prims, feeds, lines, texts, ignored, stops, optional = [], [], [], [], {}, {}, []
     away = {}  # axis -> line of the G28/G30/G53 that took it to a machine position, after the first feed move
 
     for number, raw in enumerate(text.splitlines(), 1):
@@ -235,7 +249,10 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
 
         if raw.strip().startswith("%"):
             continue
-        words = _words(raw, fail)
+        mark = _BLOCK_DELETE.match(raw)
+        if mark:
+            optional.append(number)
+        words = _words(raw[mark.end():] if mark else raw, fail)
         values, gcodes, mcodes = {}, [], []
         for letter, value in words:
             if letter == "G":
@@ -344,6 +361,10 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     stops = tuple(k for k in stops if k < len(prims) - 1)  # the path's end is a stop of its own
     if ignored:
         warnings.warn(f"{source}: ignored (no contour motion): {' '.join(ignored)}", ContoursimWarning, stacklevel=2)
+    if optional:
+        shown = ", ".join(map(str, optional[:10])) + (f" … ({len(optional)} in all)" if len(optional) > 10 else "")
+        warnings.warn(f"{source}: block delete (/) on line{'s' if len(optional) > 1 else ''} {shown}: run, as with the "
+                      "switch off", ContoursimWarning, stacklevel=2)
     return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), tuple(texts), source, tuple(ignored), stops)
 
 

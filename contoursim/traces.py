@@ -275,7 +275,8 @@ def read_trace(file):
         first += 1
     if first == len(lines):
         raise TraceFormatError("no header row", source)
-    names = [name.strip() for name in lines[first].split(",")]
+    # a name in double quotes is that name (R's write.csv quotes the header, not the numbers)
+    names = [re.sub(r'^"(.*)"$', r"\1", name.strip()) for name in lines[first].split(",")]
     header_line = first + 1
 
     def fail(message, line=header_line):

@@ -159,6 +159,9 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G1 X1 F100\n(open ; comment\n", 2, "unbalanced parenthesis"),  # the ; is inside the open comment
     ("G1 X1 F100 (nested (comment) here)\n", 1, "unbalanced parenthesis"),
     ("G0 X1\nG0 X2\n", None, "no feed move"),
+    ("G1 X10,5 F100\n", 1, "cannot read ',5': a decimal comma\\? write the number with a point"),
+    ("#100=5\nG1 X#100 F100\n", 1, "cannot read '#100=5': macro variables and expressions"),
+    ("G1 X[1+2] F100\n", 1, r"cannot read 'X\[1\+2\]': macro variables"),
 ])
 def test_errors_name_the_line(text, line, message):
     with pytest.raises(ConfigError, match=message) as info:
@@ -225,6 +228,18 @@ def test_a_dwell_stops_the_motion_and_waits_in_position(tmp_path):
 def test_a_program_that_ignores_nothing_warns_nothing(recwarn):
     read_gcode("G0 X0 Y0\nG1 X10 F600\n")
     assert not recwarn.list
+
+
+def test_a_block_marked_for_block_delete_runs_and_its_line_is_named():
+    """'/' (Fanuc's '/1'-'/9' too) is the controller's optional-block skip: the program as written runs, switch off."""
+    with pytest.warns(ContoursimWarning, match=r"<gcode>: block delete \(/\) on lines 3, 4: run, as with the switch off"):
+        program = read_gcode("G0 X0 Y0\nG1 X10 F600\n/G1 Y10\n  /2 G1 X0 (level 2)\nG1 Y0\n")
+    assert program.lines.tolist() == [2, 3, 4, 5]
+    np.testing.assert_allclose(program.path.end, [0, 0, 0])
+    with pytest.warns(ContoursimWarning, match=r"on lines 2, 3, 4, 5, 6, 7, 8, 9, 10, 11 … \(12 in all\): run"):
+        read_gcode("G1 X0 F600\n" + "/G1 X1\n/G1 X0\n" * 6)
+    with pytest.raises(ConfigError, match="line 2: cannot read '/'"):  # the mark starts a block, it is no word
+        read_gcode("G0 X0 Y0\nG1 X10 / Y10 F600\n")
 
 
 def test_latin1_comment_and_byte_order_mark_are_read(tmp_path):

@@ -168,6 +168,14 @@ def test_byte_order_mark_before_the_header_is_accepted(tmp_path):
     np.testing.assert_array_equal(trace.t, [0.0, 0.001])
 
 
+def test_a_header_whose_names_are_in_double_quotes_is_read_as_those_names(tmp_path):
+    """R's write.csv quotes the header's names, not the numbers."""
+    (tmp_path / "r.csv").write_text('"t","x_ref","x","y_ref","y"\n0,0,0,0,0\n0.001,1,0.9,2,1.9\n')
+    trace = read_trace(tmp_path / "r.csv")
+    assert trace.axes == ("x", "y")
+    np.testing.assert_array_equal(trace.actual, [[0, 0], [0.9, 1.9]])
+
+
 def test_trace_arrays_are_read_only_and_the_callers_are_not():
     t = np.arange(5) * 1e-3
     ref = np.zeros((5, 1))
