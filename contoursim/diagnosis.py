@@ -79,18 +79,25 @@ from .simulation import measured_force, measured_reference, simulate_batch
 from .traces import Trace
 
 __all__ = [
-    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT", "STRUCTURE_SHARE", "UNCERTAINTY_METHOD",
+    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT",
+    "STRUCTURE_SHARE", "TIMING_SPREAD", "UNCERTAINTY_METHOD",
     "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
 
 #: Most effects named in one diagnosis.
 MAX_EFFECTS = 3
+#: How well the model times each axis's measured position (1σ, a fraction of the servo period): a simulation sampled
+#: at the servo period and a continuous drive (its current loop, filters, the instant the logger reads the encoder)
+#: differ by about that much, a few µs, too little to show in the residual, enough to move what a timing difference
+#: of the axes fits as well (a one-way circle's squareness, a delay, a gain): the uncertainties are marginal over it.
+TIMING_SPREAD = 0.01
 #: How the reported uncertainties are obtained (the report's ``uncertainty_method``).
 UNCERTAINTY_METHOD = ("the larger of the Gauss-Newton standard deviation (noise, scaled by the residual's "
-                      "autocorrelation time) and linearised block jackknives over 40, 20 and 10 consecutive segments "
-                      "of the trace (model error that pulls the parameter differently along the trace; the largest "
-                      "spread over the segment lengths), the mass, damping and instrument refit profiled out; for a "
+                      "autocorrelation time; marginal over a time shift of each axis's measured position, known to "
+                      f"{100 * TIMING_SPREAD:g} % of the servo period) and linearised block jackknives over 40, 20 "
+                      "and 10 consecutive segments of the trace (model error that pulls the parameter differently "
+                      "along the trace; the largest spread over the segment lengths), the mass, damping and instrument refit profiled out; for a "
                       "parameter the residual is jagged in at the finite-difference step (a backlash's lost motion "
                       "read on a scale), the fit, the residual and its derivative regressed over ±4 % of the "
                       "parameter's scale around it; added in "
@@ -1461,7 +1468,7 @@ def _refine(problem, cand, model):
     n, k = problem.n, len(cand.free)
     try:
         inverse = np.linalg.inv(j.T @ j)
-        cov = inverse * (cand.cost / max(n - k, 1) * cand.tau)
+        cov = _marginal(problem, j, cand.cost / max(n - k, 1) * cand.tau)
         spread = [_jackknife(problem, j, r, blocks) for blocks in _JACKKNIFE_BLOCKS]
         err = np.max([np.sqrt(np.clip(np.diag(cov), 0, None))] + spread, axis=0)
         err = np.sqrt(err**2 + np.sum(_held(problem, cand, model, inverse @ j.T) ** 2, axis=0))
@@ -1522,6 +1529,30 @@ def _smoothed(x, jac, residuals, scale, lower, upper):
         j = jac(x)
     j[:, index] = slopes
     return x, j, r
+
+
+def _marginal(problem, j, variance):
+    """The Gauss–Newton covariance of a fit's parameters, marginal over a time shift of each axis's measured position.
+
+    The residual's sensitivity to axis a's positions read τ late is its
+    sensitivity to ``τ·v_a`` (the base's velocity on that axis), through the
+    nominal refit like any misfit; each τ carries the prior
+    :data:`TIMING_SPREAD` of the servo period. `j` is the Jacobian of
+    :meth:`_Problem.residual` in the fit's parameters, `variance` the
+    residual's per entry (its autocorrelation counted). Returns (k, k).
+    """
+    y = problem.base_prediction
+    r0 = problem.residual(y)
+    velocity = np.gradient(y, problem.trace.t, axis=0)
+    columns = []
+    for i in range(y.shape[1]):
+        shifted = y.copy()
+        shifted[:, i] += velocity[:, i]  # a shift of 1 s, linearised: the residual is linear in the prediction
+        columns.append(problem.residual(shifted) - r0)
+    k, d = j.shape[1], len(columns)
+    both = np.hstack([j] + [c[:, None] for c in columns])
+    prior = np.concatenate([np.zeros(k), np.full(d, (TIMING_SPREAD * problem.base.machine.servo_period) ** -2)])
+    return np.linalg.inv(both.T @ both / variance + np.diag(prior))[:k, :k]
 
 
 def _held(problem, cand, model, pseudo):
