@@ -12,7 +12,7 @@ inside numpy. Readers of files turn both into a
 import numpy as np
 
 __all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative",
-           "float_array", "finite_array", "mask", "read_only", "shown", "time_base", "TimeStepError"]
+           "float_array", "finite_array", "mask", "read_only", "shown", "time_base", "within", "TimeStepError"]
 
 #: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
 FLOAT_MAX = float(np.finfo(float).max)
@@ -71,6 +71,36 @@ def finite(name, value):
     return _finite_scalar(name, value)
 
 
+def within(name, value, low, high, scale=1.0):
+    """Return `value` times `scale` after checking it is a finite number and the product lies in [`low`, `high`].
+
+    For a value a file gives in the unit of its key (``start_angle_deg``) that the program takes in
+    another (rad, `scale` of the key's unit) within a range of its own (±1e6 rad): the range is checked
+    on the value as the program takes it and said in the key's unit, with the value as given.
+
+    Raises
+    ------
+    TypeError
+        `value` is not a real number.
+    ValueError
+        `value` is not finite, or out of the range.
+
+    Examples
+    --------
+    >>> within("run_angle_deg", 90, 1e-6, 2 * np.pi, scale=np.pi / 180) == np.pi / 2
+    True
+    >>> within("run_angle_deg", 400, 1e-6, 2 * np.pi, scale=np.pi / 180)
+    Traceback (most recent call last):
+    ValueError: run_angle_deg must lie within [5.72958e-05, 360], got 400
+    """
+    number = _finite_scalar(name, value)
+    if not low <= number * scale <= high:
+        limits = f"±{high / scale:g}" if low == -high else f"[{low / scale:g}, {high / scale:g}]"
+        given = f"{number:g}" if float(f"{number:g}") == number else f"{number:.15g}"  # 4e+09, 360.0000001
+        raise ValueError(f"{name} must lie within {limits}, got {given}")
+    return number * scale
+
+
 def shown(value):
     """`value` for a message, a long one cut short: ``'100000000000… (401 characters)'``.
 
@@ -121,9 +151,13 @@ def finite_array(name, value, ndim=None, shape=None, limit=None):
     arr = float_array(name, value, ndim, shape)
     if not np.isfinite(arr).all():
         first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
+        if arr.ndim == 0:  # a number: no index to name
+            raise ValueError(f"{name} must be finite, got {arr[()]}")
         raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
     if limit is not None and arr.size and max(arr.max(), -arr.min()) > limit:  # |arr| > limit, no (N, d) temporary
         first = np.unravel_index(np.argmax(np.abs(arr) > limit), arr.shape)
+        if arr.ndim == 0:
+            raise ValueError(f"{name} must lie within ±{limit:g}, got {arr[()]:g}")
         raise ValueError(f"{name} holds {arr[first]:g} at index {tuple(map(int, first))}, beyond ±{limit:g}")
     return arr
 

@@ -411,6 +411,10 @@ class MachineChain:
         if self.tool == self.workpiece:  # the tool relative to itself: no motion, no error, nothing to map
             raise ValueError(f"tool and workpiece must be different bodies, got body {self.tool} for both")
         moving = [b.axis for b in bodies if b.axis is not None]
+        shared = next((a for a in moving if moving.count(a) > 1), None)  # one servo axis moving two carriages
+        if shared is not None:
+            first, second = [b.name for b in bodies if b.axis == shared][:2]
+            raise ValueError(f"axis {shared!r} drives two bodies, {first!r} and {second!r}: each axis drives one body")
         axes = tuple(dict.fromkeys(moving)) if self.axes is None else tuple(self.axes)
         missing = set(moving) - set(axes)
         if missing or len(set(axes)) != len(axes):
@@ -419,11 +423,6 @@ class MachineChain:
         if idle:
             raise ValueError(f"axes {axes} lists {', '.join(map(repr, idle))}, which no body's joint drives")
         object.__setattr__(self, "axes", axes)
-        for b in bodies:
-            if b.axis is not None:
-                kinds = {c.joint for c in bodies if c.axis == b.axis}
-                if len(kinds) > 1:
-                    raise ValueError(f"axis {b.axis!r} drives both linear and rotary joints")
         v = _validate.finite_array("tool_axis", self.tool_axis, shape=(3,))
         if abs(np.linalg.norm(v) - 1) > 1e-9:
             raise ValueError(f"tool_axis must be a unit vector, got {v}")
@@ -1076,6 +1075,7 @@ def chain_from_toml(toml, *keys, extra=()):
 
     base = Path(toml.source).parent
     bodies = [_body_from_toml(toml, base, keys + ("body", i), raw[i], body_index) for i in range(len(raw))]
+    _check_tree_and_axes(toml, keys, bodies, top.get("axis_order"))
     where = keys
     try:
         axes = top.get("axis_order")
@@ -1096,6 +1096,45 @@ def chain_from_toml(toml, *keys, extra=()):
         if isinstance(exc, ConfigError):
             raise
         raise toml.error(str(exc), *where) from None
+
+
+def _check_tree_and_axes(toml, keys, bodies, order):
+    """Refuse, at the line of the key and naming the bodies, parents that go round, an axis driving two bodies and an
+    `order` (``axis_order``) that does not list each driven axis once (:class:`MachineChain` says them by index)."""
+    names = ["bed", *(body.name for body in bodies)]
+    for i, body in enumerate(bodies, start=1):
+        path, j = [i], body.parent
+        while j and j not in path:  # up the parents to the bed, or round
+            path.append(j)
+            j = bodies[j - 1].parent
+        if j == i:  # round through this body (one leading into a cycle is left to the cycle's first body)
+            cycle = " → ".join(names[k] for k in [*path, i])
+            raise toml.error(f"body {body.name!r}: parent = \"{names[body.parent]}\" makes a cycle, {cycle} (each "
+                             "body's parent after it): the bodies must form a tree on 'bed'",
+                             *keys, "body", i - 1, "parent")
+    driven = {}  # axis -> the body it drives
+    for i, body in enumerate(bodies):
+        if body.axis in driven:
+            raise toml.error(f"axis {body.axis!r} drives two bodies, {driven[body.axis]!r} and {body.name!r}: each "
+                             "axis drives one body", *keys, "body", i, "axis")
+        if body.axis is not None:
+            driven[body.axis] = body.name
+    if order is None:
+        return
+    if not isinstance(order, list) or not all(isinstance(axis, str) for axis in order):
+        raise toml.error(f"axis_order must be a list of axis names in quotes ([\"x\", \"y\", \"z\"]), got {order!r}",
+                         *keys, "axis_order")
+    repeated = [axis for k, axis in enumerate(order) if axis in order[:k]]
+    missing = [axis for axis in driven if axis not in order]
+    idle = [axis for axis in order if axis not in driven]
+    if repeated or missing:
+        what = (f"lists {repeated[0]!r} more than once" if repeated else
+                f"lacks {', '.join(f'{axis!r} (driven by body {driven[axis]!r})' for axis in missing)}")
+        raise toml.error(f"axis_order {what}: it lists each axis a body drives, once ({', '.join(driven)})",
+                         *keys, "axis_order")
+    if idle:
+        raise toml.error(f"axis_order lists {', '.join(map(repr, idle))}, which no body drives (the bodies drive "
+                         f"{', '.join(driven)})", *keys, "axis_order")
 
 
 def _body_from_toml(toml, base, where, item, body_index):
@@ -1148,7 +1187,13 @@ def _body_from_toml(toml, base, where, item, body_index):
         if not isinstance(travel, list) or len(travel) != 2:
             raise fail(f"{travel_key} must be [min, max]", travel_key)
         travel = [_number(v, fail, travel_key) for v in travel]
-        travel = tuple(np.deg2rad(travel)) if rotary else tuple(travel)
+        try:  # within the chain's ±MAX_TRAVEL [mm or rad], said in the key's unit
+            travel = tuple(_validate.within(travel_key, v, -MAX_TRAVEL, MAX_TRAVEL, np.pi / 180 if rotary else 1.0)
+                           for v in travel)
+        except ValueError as exc:
+            raise fail(str(exc), travel_key) from None
+        if not travel[0] < travel[1]:
+            raise fail(f"{travel_key} must be [min, max] with min < max, got {item[travel_key]}", travel_key)
     motion = _motion_from_toml(toml, base, where, item, rotary, travel, fail)
     try:
         body = Body(
@@ -1309,8 +1354,9 @@ def _warn_short_table(name, tables, travel, rotary, fail):
 
 
 def _number(value, fail, *key):
+    name = ".".join(key)  # as the file writes it: offset_mm, errors.dx_um
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise fail(f"expected a finite number, got {value!r}", *key)
+        raise fail(f"{name}: expected a finite number, got {value!r}", *key)
     if abs(value) > _LARGEST_NUMBER:  # 1e308 overflows the error motions and the chain's products
-        raise fail(f"{value:g} is beyond ±{_LARGEST_NUMBER:g}, not a value a machine has", *key)
+        raise fail(f"{name}: {value:g} is beyond ±{_LARGEST_NUMBER:g}, not a value a machine has", *key)
     return float(value)

@@ -21,16 +21,18 @@ import numpy as np
 from . import _validate
 from .config import TEXT_KEYS, TomlFile, local_file
 from .exceptions import ConfigError
-from .feed import FeedSettings
+from .feed import SETTING_RANGE, FeedSettings
 from .gcode import SUFFIXES, read_gcode
-from .paths import circle, helix, iso230_4_circle, polyline, spline
+from .paths import MAX_COORDINATE, circle, helix, iso230_4_circle, polyline, spline
 
 __all__ = ["PathFile", "library_file", "load_path_file", "override_feed", "read_feed_table", "read_path_file"]
 
 
-def _angle(name, value):
-    """An angle of any sign [deg] in [rad]."""
-    return math.radians(float(_validate.finite_array(name, value, ndim=0)))
+def _converted(scale, low, high, check=None):
+    """A converter of a key's value to its argument's unit (`scale` of the key's unit), within the argument's range
+    [`low`, `high`]: the value checked by `check` (e.g. :func:`contoursim._validate.positive`), then the range, both
+    said in the key's unit (:func:`contoursim._validate.within`)."""
+    return lambda name, value: _validate.within(name, value if check is None else check(name, value), low, high, scale)
 
 
 def _tolerance(name, value):
@@ -39,11 +41,6 @@ def _tolerance(name, value):
     if value > 180:
         raise ValueError(f"{name} must be at most 180 (a reversal), got {value:g}")
     return math.radians(value)
-
-
-def _per_minute(name, value):
-    """A positive rate [mm/min] in [mm/s]."""
-    return _validate.positive(name, value) / 60.0
 
 
 # path type -> (builder, {file key: builder argument}, required file keys)
@@ -59,9 +56,17 @@ _PATHS = {
                           direction="direction", normal="normal", start_angle_deg="start_angle"),
               ("center_mm", "radius_mm", "pitch_mm", "turns")),
 }
-# [feed] key -> (FeedSettings argument, converter raising ValueError on a bad value)
-_FEED = dict(feed_mm_min=("feed", _per_minute), accel_mm_s2=("accel", _validate.positive),
-             jerk_mm_s3=("jerk", _validate.positive), centripetal_accel_mm_s2=("centripetal_accel", _validate.positive),
+_RAD_PER_DEG = math.pi / 180.0
+# [path] keys in another unit than their builder argument's -> converter raising ValueError on a bad value, in the
+# key's unit: the builder's own checks would say it in the argument's ("start_angle holds 1.74533e+298", in rad)
+_CONVERTED = dict(start_angle_deg=_converted(_RAD_PER_DEG, -MAX_COORDINATE, MAX_COORDINATE),
+                  run_angle_deg=_converted(_RAD_PER_DEG, 1.0 / MAX_COORDINATE, 2 * math.pi, _validate.positive))
+# [feed] key -> (FeedSettings argument, converter raising ValueError on a bad value, in the key's unit: within the
+# planner's SETTING_RANGE [mm/s, mm/s², mm/s³])
+_FEED = dict(feed_mm_min=("feed", _converted(1 / 60.0, *SETTING_RANGE, _validate.positive)),
+             accel_mm_s2=("accel", _converted(1.0, *SETTING_RANGE, _validate.positive)),
+             jerk_mm_s3=("jerk", _converted(1.0, *SETTING_RANGE, _validate.positive)),
+             centripetal_accel_mm_s2=("centripetal_accel", _converted(1.0, *SETTING_RANGE, _validate.positive)),
              corner_tolerance_deg=("corner_tolerance", _tolerance))
 
 
@@ -201,20 +206,26 @@ def _path(toml, direction=None):
         if key == "type":
             continue
         try:
-            kwargs[arguments[key]] = _angle(key, value) if key.endswith("_deg") else value
+            kwargs[arguments[key]] = _CONVERTED[key](key, value) if key in _CONVERTED else value
         except (TypeError, ValueError) as exc:
             raise toml.error(str(exc), "path", key) from None
     try:
         return build(**kwargs)
     except (ValueError, TypeError) as exc:
-        raise toml.error(f"bad {kind} [path]: {exc}", "path", *_blamed(str(exc), arguments, spec)) from None
+        message, blamed = _file_names(str(exc), arguments, spec)
+        raise toml.error(f"bad {kind} [path]: {message}", "path", *blamed) from None
 
 
-def _blamed(message, arguments, spec):
-    """The file key whose builder argument `message` names first, as a 0- or 1-tuple."""
-    found = {key: re.search(rf"\b{arg}\b", message) for key, arg in arguments.items() if key in spec}
-    found = {key: match.start() for key, match in found.items() if match}
-    return (min(found, key=found.get),) if found else ()
+def _file_names(message, arguments, spec):
+    """A builder's `message` with the names of its arguments given in `spec` replaced by their file keys (``points``
+    -> ``points_mm``; where used as a name, not in prose: "3 distinct points"), and the key it names first as a 0- or
+    1-tuple (the error's line)."""
+    keys = {arg: key for key, arg in arguments.items() if key in spec}
+    if not keys:
+        return message, ()
+    named = re.compile(rf"\b({'|'.join(keys)})\b(?=\[| must| =| holds| contains| \(| \d)")
+    first = named.search(message)
+    return named.sub(lambda match: keys[match.group(0)], message), (keys[first.group(0)],) if first else ()
 
 
 def override_feed(read, job):

@@ -936,7 +936,28 @@ def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi 
     ))
 
 
+def _ragged(name, points):
+    """What makes the list `points` no (n, d) table (``"points[1] has 3 coordinates, the others 2"``), or None."""
+    if not isinstance(points, (list, tuple)):
+        return None
+    sizes = [len(p) if isinstance(p, (list, tuple)) or np.ndim(p) == 1 else None for p in points]
+    odd = next((i for i, size in enumerate(sizes) if size is None), None)
+    if odd is not None:  # a number, a name: no point
+        value = points[odd]
+        shown = _validate.shown(repr(value) if isinstance(value, str) else str(value))
+        return f"{name}[{odd}] is {shown}, not a point [x, y] or [x, y, z]"
+    usual = max(sizes, key=sizes.count, default=None)  # the most points' (the first's among as many)
+    odd = [i for i, size in enumerate(sizes) if size != usual]
+    if not odd:
+        return None
+    others = "the others" if len(odd) == 1 else f"{name}[{sizes.index(usual)}]"
+    return f"{name}[{odd[0]}] has {sizes[odd[0]]} coordinate{'s' * (sizes[odd[0]] != 1)}, {others} {usual}"
+
+
 def _point_rows(name, points, minimum):
+    ragged = _ragged(name, points)
+    if ragged:
+        raise PathError(ragged)
     try:
         pts = _validate.finite_array(name, points, ndim=2, limit=MAX_COORDINATE)
     except ValueError as exc:

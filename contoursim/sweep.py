@@ -207,8 +207,10 @@ def read_sweep(file):
 
 
 def _integer(toml, keys, value, least):
+    name = ".".join(k for k in keys if isinstance(k, str))  # vary.count, not the table's index
+    if value is None:  # not given (None is no TOML value)
+        raise toml.error(f"{name} is missing: give {keys[-1]} = <a whole number, at least {least}>", *keys)
     if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        name = ".".join(k for k in keys if isinstance(k, str))  # vary.count, not the table's index
         raise toml.error(f"{name} must be a whole number, at least {least}; got {value!r}", *keys)
     return value
 

@@ -22,8 +22,9 @@ writes it: ``# units: t [s]; x_ref, x, y_ref, y [mm]`` (groups separated by
 m``, is that of all the position columns; ``# Units:`` and ``# unit:`` too). The reader converts ``t`` from
 :data:`TIME_UNITS` to s, positions from :data:`LENGTH_UNITS` to mm, forces
 from :data:`FORCE_UNITS` to N and currents from :data:`CURRENT_UNITS` to A,
-and refuses any other unit of a column it reads (others' units are not read), and a second ``# units:``
-line (one of the two would be ignored).
+and refuses any other unit of a column it reads (the units of the header's other columns are not read), a
+column the header does not have (a typo, a line of another trace) and a second ``# units:`` line (one of the
+two would be ignored).
 Without a declared time unit, a sample period outside
 :data:`PLAUSIBLE_SAMPLE_PERIOD` is refused as no servo trace's (a time column
 in ms, µs or ns read as seconds): declaring ``t [s]`` accepts it. A measured
@@ -221,7 +222,10 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
         largest = max(float(values.max()), -float(values.min()))  # |values|.max() without an (N,) temporary
         if largest * 10.0**decimals >= 2.0**53:
             raise ValueError(f"column {name!r}: {largest:g} is too large to write to 1e-{decimals}")
-    header = "".join(f"# {key}: {value}\n" for key, value in trace.metadata.items()) + ",".join(columns) + "\n"
+    metadata = dict(trace.metadata)
+    if "units" in metadata:  # a trace read from a file with more columns: the units of those written (read_trace
+        metadata["units"] = _units_written(str(metadata["units"]), columns)  # refuses a column the header lacks)
+    header = "".join(f"# {key}: {value}\n" for key, value in metadata.items()) + ",".join(columns) + "\n"
     values = [v[::every] for v, _ in columns.values()]
     decimals = [d for _, d in columns.values()]
     from ._fixedpoint import csv_rows  # numba, only when a trace is written
@@ -251,8 +255,9 @@ def read_trace(file):
         column (saying what the header holds), a non-numeric, non-finite or
         out-of-range cell (see :data:`MAX_POSITION`, :data:`MAX_TIME`), a row
         with more or fewer cells than the header, non-monotonic or non-uniform
-        time, text that is not UTF-8, a ``# units:`` line that cannot be read
-        or declares a unit the reader does not convert, a sample period
+        time, text that is not UTF-8, a ``# units:`` line that cannot be read,
+        names a column the header does not have or declares a unit the
+        reader does not convert, a sample period
         outside :data:`PLAUSIBLE_SAMPLE_PERIOD` without a declared time unit,
         a measured column that does not follow its reference (:data:`FOLLOWING_GAIN`).
     """
@@ -260,7 +265,7 @@ def read_trace(file):
     lines = read_text(file, TraceFormatError).splitlines()  # a leading BOM (Excel) is dropped
 
     metadata = {}
-    units_line = None
+    units_line = units_key = None
     first = 0
     while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
         key, colon, value = lines[first][1:].partition(":")
@@ -271,7 +276,7 @@ def read_trace(file):
                                    source, first + 1)
         if colon and key:
             metadata["units" if is_units else key] = value.strip()
-            units_line = first + 1 if is_units else units_line
+            units_line, units_key = (first + 1, key) if is_units else (units_line, units_key)
         first += 1
     if first == len(lines):
         raise TraceFormatError("no header row", source)
@@ -303,7 +308,8 @@ def read_trace(file):
     inputs = {f"{axis}_{kind}": kind for kind in INPUTS for axis in axes if f"{axis}_{kind}" in names}
     wanted = ["t"] + positions + list(inputs)
     index = [names.index(name) for name in wanted]
-    units = {} if units_line is None else _declared_units(metadata["units"], wanted, inputs, lambda msg: fail(msg, units_line))
+    units = {} if units_line is None else _declared_units(metadata["units"], units_key, names, wanted, inputs,
+                                                          lambda msg: fail(msg, units_line))
     if units_line is not None:  # the trace holds s, mm, N, A: its metadata says so, and a trace written back reads the same
         metadata["units"] = _units_as_read(metadata["units"], positions, inputs)
     default = {"t": "s", **dict.fromkeys(positions, "mm"), **{name: INPUTS[kind][1] for name, kind in inputs.items()}}
@@ -354,26 +360,29 @@ def _following_gain(reference, actual):
 _GROUP = re.compile(r"(?P<columns>[^\[\]]*?)\s*\[(?P<unit>[^\[\]]*)\]")  # one group of a units line: "x_ref, x [mm]"
 
 
-def _declared_units(text, wanted, inputs, fail):
+def _declared_units(text, key, names, wanted, inputs, fail):
     """The units a ``# units:`` line declares for the columns `wanted` (a dict: column -> unit; others left out).
 
-    `inputs` maps the measured-input columns among `wanted` to their kind (a key of :data:`INPUTS`); a bare
-    unit is the positions'. `fail` makes the error of a line that cannot be read or declares a unit the
-    reader does not convert.
+    `key` is the line's key as written (``units``, ``Units``), `names` the header's columns, `wanted` those
+    read; `inputs` maps the measured-input columns among `wanted` to their kind (a key of :data:`INPUTS`); a
+    bare unit is the positions'. `fail` makes the error of a line that cannot be read, names a column the
+    header does not have or declares a unit the reader does not convert.
     """
-    units = {}
+    units, lacking = {}, []
     for group in filter(None, (g.strip() for g in text.split(";"))):
         match = _GROUP.fullmatch(group)
+        columns = [] if match is None else [c.strip() for c in match["columns"].split(",")]
         if match is None and group in LENGTH_UNITS:  # a bare unit: all the positions'
             units.update((name, group) for name in wanted[1:] if name not in inputs)
-        elif match is None:
+        elif match is None or not all(columns):  # "[mm]", "x_ref,, x [mm]": a unit of no column
             raise fail(f"the units {group!r} cannot be read: write them as contoursim does, "
                        "'# units: t [s]; x_ref, x [mm]' (columns, then the unit in brackets)")
         else:
-            unit = match["unit"].strip()
-            for name in (c.strip() for c in match["columns"].split(",")):
-                if name in wanted:
-                    units[name] = unit
+            units.update((name, match["unit"].strip()) for name in columns if name in wanted)
+            lacking += [name for name in columns if name not in names]  # a typo ('yy'), another trace's line
+    if lacking:
+        raise fail(f"'# {key}:' names column{'s' * (len(lacking) > 1)} {', '.join(map(repr, lacking))}, which the "
+                   f"trace does not have (its columns: {', '.join(names)})")
     for name, unit in units.items():
         if name in inputs:
             known, read = INPUTS[inputs[name]][0], f"the {inputs[name]} columns are"
@@ -398,6 +407,20 @@ def _units_as_read(text, positions, inputs):
         others = [] if match is None else [c.strip() for c in match["columns"].split(",") if c.strip() not in read]
         if others:
             groups.append(f"{', '.join(others)} [{match['unit'].strip()}]")
+    return "; ".join(groups)
+
+
+def _units_written(text, columns):
+    """The ``# units:`` line `text` for a file of `columns`: its groups' other columns left out (and groups left
+    empty)."""
+    groups = []
+    for group in filter(None, (g.strip() for g in text.split(";"))):
+        match = _GROUP.fullmatch(group)
+        kept = None if match is None else [c.strip() for c in match["columns"].split(",") if c.strip() in columns]
+        if kept is None:  # a bare unit, or what the reader refuses as it is
+            groups.append(group)
+        elif kept:
+            groups.append(f"{', '.join(kept)} [{match['unit'].strip()}]")
     return "; ".join(groups)
 
 

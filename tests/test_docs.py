@@ -50,3 +50,18 @@ def test_every_docs_page_is_linked_from_the_readme_and_its_links_resolve():
     for page in PAGES:
         for target in re.findall(r"\]\((?!https?:|#|mailto:)([^)#]+)", page.read_text(encoding="utf-8")):
             assert (page.parent / target).exists(), f"{page.relative_to(ROOT)} links to {target}, which is not there"
+
+
+def test_the_sweep_page_names_the_strategy_settings_a_sweep_takes():
+    """The page listed `feedforward`: `velocity`, `acceleration`, which a sweep refuses ("its settings:
+    velocity_fraction, acceleration_fraction")."""
+    from contoursim.compensation import STRATEGY_KEYS
+
+    page = (ROOT / "docs" / "sweeps-and-fleets.md").read_text(encoding="utf-8")
+    listed = re.search(r"`strategy\.<strategy>\.<gain>` \((.*?)\)", page, re.S).group(1)
+    named = {}
+    for group in listed.split(";"):  # "`ccc_arc`/`ccc_linear`: `kp_per_s`, `ki_per_s2`, `kd`"
+        strategies, _, keys = group.partition(":")
+        for strategy in re.findall(r"`(\w+)`", strategies):
+            named[strategy] = re.findall(r"`(\w+)`", keys)
+    assert named == {name: list(keys) for name, keys in STRATEGY_KEYS.items()}

@@ -215,12 +215,12 @@ def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
     (tmp_path / table.name).write_text(table.read_text())
     body = preset.splitlines().index("[[body]]") + 1  # the first [[body]], Y's (1-based)
     for old, new, line, words in (
-        ("travel_mm = [0, 400]", "travel_mm = [0, 4e9]", body, "Y.travel holds 4e+09 at index (1,), beyond ±1e+06"),
-        ("travel_mm = [0, 400]", "travel_mm = [0, 4e13]", body + 5, "4e+13 is beyond ±1e+12, not a value a machine has"),
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e9]", body + 5, "travel_mm must lie within ±1e+06, got 4e+09"),
+        ("travel_mm = [0, 400]", "travel_mm = [0, 4e13]", body + 5, "travel_mm: 4e+13 is beyond ±1e+12, not a value a machine has"),
         ("travel_mm = [0, 400]", "travel_mm = [0, 4e5]", body, "its error motion dx reaches 7.992e+06 µm at 400000 mm of "
                                                                "its travel: beyond the small errors a machine's model is "
                                                                "for (0.01 of the travel's length)"),
-        ("dx_um = { poly = [0, 0.02, -5e-5] }", "dx_um = { poly = [0, 1e308] }", body + 7, "1e+308 is beyond ±1e+12"),
+        ("dx_um = { poly = [0, 0.02, -5e-5] }", "dx_um = { poly = [0, 1e308] }", body + 7, "errors.dx_um: 1e+308 is beyond ±1e+12"),
     ):
         (tmp_path / "big.toml").write_text(preset.replace(old, new, 1))
         _refused(capsys, ["volumetric", str(tmp_path / "big.toml"), "--out", str(tmp_path / "out")],
@@ -264,10 +264,11 @@ def test_a_trace_that_stands_still_is_diagnosed_without_a_numpy_warning(tmp_path
 
 
 @pytest.mark.parametrize("old, new, words", [
-    ("center_mm = [0, 0, 0]", "center_mm = [1e308, 0, 0]", "line 12: bad helix [path]: center holds 1e+308"),  # hung
-    ("radius_mm = 20", "radius_mm = 1e-300", "line 13: bad helix [path]: radius = 1e-300 is outside [1e-06, 1e+06]"),
-    ("feed_mm_min = 1000", "feed_mm_min = 1e-300", "feed must lie within [1e-06, 1e+12]"),
-    ("accel_mm_s2 = 1000", "accel_mm_s2 = 1e308", "accel must lie within [1e-06, 1e+12]"),
+    ("center_mm = [0, 0, 0]", "center_mm = [1e308, 0, 0]", "line 12: bad helix [path]: center_mm holds 1e+308"),  # hung
+    ("radius_mm = 20", "radius_mm = 1e-300", "line 13: bad helix [path]: radius_mm = 1e-300 is outside [1e-06, 1e+06]"),
+    # in the key's unit at its line (it was the planner's: "feed must lie within [1e-06, 1e+12] (mm/s, ...)", at [feed])
+    ("feed_mm_min = 1000", "feed_mm_min = 1e-300", "feed_mm_min must lie within [6e-05, 6e+13], got 1e-300"),
+    ("accel_mm_s2 = 1000", "accel_mm_s2 = 1e308", "accel_mm_s2 must lie within [1e-06, 1e+12], got 1e+308"),
 ])
 def test_path_numbers_far_out_of_range_end_in_one_line(tmp_path, capsys, old, new, words):
     helix = (ROOT / "trajectories" / "helix.toml").read_text()

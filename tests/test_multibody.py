@@ -534,6 +534,12 @@ def test_toml_thermal_growth_reference_and_time_constant():
         ('[[body]]\nname = "tool"', '[[body]]\nname = "C"\nparent = "X"\njoint = "rotary z"\naxis = "c"\ntilt = { x_urad = 3e4 }\n\n'
          '[[body]]\nname = "tool"', 18, r"body 'C': its tilt angle x is 3e\+04 µrad: beyond the small errors"),
         ("period_mm = 5", "period_deg = 5", 11, r"cyclic terms are \{ amplitude_um, period_mm, phase_deg \}"),
+        # a travel beyond the chain's ±1e6 (mm or rad): said by the key and in its unit, not "C.travel holds 1.74533e+06
+        # at index (1,), beyond ±1e+06" (rad) at the body's line
+        ('axis = "x"', 'axis = "x"\ntravel_mm = [0, 4e9]', 9, r"body 'X': travel_mm must lie within ±1e\+06, got 4e\+09"),
+        ('[[body]]\nname = "tool"', '[[body]]\nname = "C"\nparent = "X"\njoint = "rotary z"\naxis = "c"\ntravel_deg = [0, 1e8]\n\n'
+         '[[body]]\nname = "tool"', 18, r"body 'C': travel_deg must lie within ±5.72958e\+07, got 1e\+08"),
+        ('axis = "x"', 'axis = "x"\ntravel_mm = [10, 0]', 9, r"body 'X': travel_mm must be \[min, max\] with min < max, got \[10, 0\]"),
         ('axis = "x"', 'axis = "x"\ntravel_deg = [0, 1]', 9, "the travel of a linear joint is 'travel_mm'"),
         # keys without their unit (earlier versions) name the key that replaced them
         ('axis = "x"', 'axis = "x"\ntravel = [0, 1]', 9, r"key 'travel' in \[body.0\] is now 'travel_mm'"),
@@ -552,8 +558,8 @@ def test_toml_errors_name_file_and_line(old, new, line, match):
     [
         ('workpiece = "bed"', 'workpiece = "tool"', r"^m.toml: tool and workpiece must be different bodies"),
         # an axis no body drives: its kind was looked up with next() (a StopIteration out of Machine)
-        ('workpiece = "bed"', 'workpiece = "bed"\naxis_order = ["x", "y"]', r"^m.toml: axes \('x', 'y'\) lists 'y', which no "
-                                                                             r"body's joint drives"),
+        ('workpiece = "bed"', 'workpiece = "bed"\naxis_order = ["x", "y"]', r"^m.toml, line 4: axis_order lists 'y', which "
+                                                                             r"no body drives \(the bodies drive x\)"),
         ('workpiece = "bed"', 'workpiece = "bed"\ntool_axis = [0, 0, 0]', r"^m.toml, line 4: tool_axis must be a non-zero"),
     ],
 )
@@ -562,13 +568,40 @@ def test_toml_chain_errors_name_the_file(old, new, match):
         chain_from_toml(TomlFile("m.toml", MACHINE.replace(old, new)))
 
 
-def test_a_machine_file_whose_axis_no_body_drives_is_refused_by_its_file(tmp_path):
+@pytest.mark.parametrize("old, new, words", [
+    # was "m.toml: parents: body 4 is its own ancestor (the bodies do not form a tree)": no line, no name
+    ('name = "column"\nparent = "bed"', 'name = "column"\nparent = "tool"',
+     "body 'column': parent = \"tool\" makes a cycle, column → tool → Z → column (each body's parent after it)"),
+    ('name = "column"\nparent = "bed"', 'name = "column"\nparent = "column"', "body 'column': parent = \"column\" makes a "
+                                                                             "cycle, column → column"),
+    # was "m.toml: axes ('x', 'y') must list each driven axis once; missing: ['z']": the API's name, no line
+    ('axis_order = ["x", "y", "z"]', 'axis_order = ["x", "y"]', "axis_order lacks 'z' (driven by body 'Z'): it lists each "
+                                                                "axis a body drives, once"),
+    ('axis_order = ["x", "y", "z"]', 'axis_order = ["x", "y", "z", "x"]', "axis_order lists 'x' more than once"),
+    ('axis_order = ["x", "y", "z"]', 'axis_order = ["x", "y", "z", "w"]', "axis_order lists 'w', which no body drives "
+                                                                          "(the bodies drive y, x, z)"),
+    ('axis_order = ["x", "y", "z"]', 'axis_order = "xyz"', "axis_order must be a list of axis names in quotes"),
+    # was "m.toml: axes ('x', 'y', 'z') lists 'z', which no body's joint drives": Y and Z both on y, z idle
+    ('joint = "linear z"\naxis = "z"', 'joint = "linear z"\naxis = "y"', "axis 'y' drives two bodies, 'Y' and 'Z': each "
+                                                                         "axis drives one body"),
+])
+def test_a_machine_files_tree_and_axes_are_refused_at_the_line_of_the_key_naming_the_bodies(tmp_path, old, new, words):
     text = (Path(__file__).parents[1] / "contoursim" / "presets" / "vertical_mill_3axis.toml").read_text()
     (tmp_path / "vertical_mill_x_laser.csv").write_text(
         (Path(__file__).parents[1] / "contoursim" / "presets" / "vertical_mill_x_laser.csv").read_text())
-    (tmp_path / "m.toml").write_text(text.replace('axis = "z"', 'axis = "y"'))  # Y and Z both on y: z idle
-    with pytest.raises(ConfigError, match=r"m.toml: axes \('x', 'y', 'z'\) lists 'z', which no body's joint drives"):
+    assert text.count(old) == 1
+    text = text.replace(old, new)
+    (tmp_path / "m.toml").write_text(text)
+    line = text[: text.index(new)].count("\n") + new.count("\n") + 1  # the key changed: new's last line
+    with pytest.raises(ConfigError) as info:
         load_preset(tmp_path / "m.toml")
+    assert str(info.value).startswith(f"{tmp_path / 'm.toml'}, line {line}: {words}"), str(info.value)
+
+
+def test_a_chain_with_an_axis_driving_two_bodies_is_refused_naming_them():
+    bodies = (Body("Y", 0, "linear", 1, axis="y"), Body("Z", 1, "linear", 2, axis="y"), Body("tool", 2))
+    with pytest.raises(ValueError, match="axis 'y' drives two bodies, 'Y' and 'Z': each axis drives one body"):
+        MachineChain(bodies, tool=3, workpiece=0)
 
 
 @pytest.mark.parametrize(

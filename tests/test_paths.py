@@ -249,7 +249,7 @@ def test_library_contents():
     ('[feed]\nfeed_mm_min = 100\nspeed = 3\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\n',
      3, "unknown key 'speed' in \\[feed\\]"),
     ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = -5\n',
-     6, "radius must be positive"),
+     6, "radius_mm must be positive"),  # the key, not the builder's argument (radius)
     ('[feed]\nfeed_mm_min = 0\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\n',
      2, "feed_mm_min must be positive"),
     ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "polyline"\npoints_mm = [[0, 0], [1, 0], [1, 1]]\n'
@@ -268,7 +268,19 @@ def test_library_contents():
     ('[feed]\nfeed_mm_min = 100\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\nnormal = [0, 1]\n',
      7, "normal must have 3 coordinates \\(a direction: \\[0, 0, 1\\] is normal to XY\\), got 2"),
     ('[path]\ntype = "circle"\ncenter_mm = [0, 0]\nstart_angle_deg = "north"\nradius_mm = 5\n[feed]\n',
-     4, "start_angle_deg must be numeric"),
+     4, "start_angle_deg must be a number"),
+    # a point of 3 coordinates among points of 2 was "points must be numeric (not text, booleans or complex numbers)"
+    ('[path]\ntype = "polyline"\npoints_mm = [[0, 0], [5, 0, 1], [5, 5]]\n[feed]\nfeed_mm_min = 1000\n',
+     3, r"bad polyline \[path\]: points_mm\[1\] has 3 coordinates, the others 2"),
+    ('[path]\ntype = "spline"\npoints_mm = [[0, 0, 0], [5, 0], [5, 5, 1], [0, 5, 1]]\n[feed]\nfeed_mm_min = 1000\n',
+     3, r"points_mm\[1\] has 2 coordinates, the others 3"),
+    ('[path]\ntype = "polyline"\npoints_mm = [[0, 0], 5, [5, 5]]\n[feed]\nfeed_mm_min = 1000\n',
+     3, r"points_mm\[1\] is 5, not a point \[x, y\] or \[x, y, z\]"),
+    # the builder's names were the message's ("radius", "points[1] and points[2]"): the file's keys are
+    ('[path]\ntype = "polyline"\npoints_mm = [[0, 0], [5, 0], [5, 0]]\n[feed]\nfeed_mm_min = 1000\n',
+     3, r"points_mm\[1\] and points_mm\[2\] coincide"),
+    ('[path]\ntype = "iso230_4_circle"\nradius_mm = 50\nrun_radius_mm = 60\n[feed]\nfeed_mm_min = 1000\n',
+     4, r"run_radius_mm \(60.0 mm\) must be below the test radius_mm \(50.0 mm\)"),
 ])
 def test_path_file_errors_name_file_and_line(tmp_path, text, line, message):
     file = tmp_path / "bad.toml"
@@ -276,6 +288,39 @@ def test_path_file_errors_name_file_and_line(tmp_path, text, line, message):
     with pytest.raises(ConfigError, match=message) as info:
         load_path_file(file)
     assert info.value.source == str(file) and info.value.line == line
+
+
+_SHAPES = {"circle": "center_mm = [0, 0]\nradius_mm = 10", "iso230_4_circle": "radius_mm = 50",
+           "helix": "center_mm = [0, 0]\nradius_mm = 10\npitch_mm = 1\nturns = 2"}
+
+
+@pytest.mark.parametrize("shape, key, value, words", [
+    # was "bad circle [path]: start_angle holds 1.74533e+298 at index (), beyond ±1e+06": the builder's name, rad
+    ("circle", "start_angle_deg", "1e300", "start_angle_deg must lie within ±5.72958e+07, got 1e+300"),
+    ("helix", "start_angle_deg", "-1e20", "start_angle_deg must lie within ±5.72958e+07, got -1e+20"),
+    ("iso230_4_circle", "start_angle_deg", "1e300", "start_angle_deg must lie within ±5.72958e+07, got 1e+300"),
+    # was "run_angle must be at most 2π rad, got 6.981317007977318"
+    ("iso230_4_circle", "run_angle_deg", "400", "run_angle_deg must lie within [5.72958e-05, 360], got 400"),
+    ("iso230_4_circle", "run_angle_deg", "-5", "run_angle_deg must be positive, got -5"),
+    # was "feed must lie within [1e-06, 1e+12] (mm/s, mm/s^2, mm/s^3), got 1.66667e+298", at the [feed] line
+    ("circle", "feed_mm_min", "1e300", "feed_mm_min must lie within [6e-05, 6e+13], got 1e+300"),
+    ("circle", "feed_mm_min", "1e-20", "feed_mm_min must lie within [6e-05, 6e+13], got 1e-20"),
+    ("circle", "accel_mm_s2", "1e300", "accel_mm_s2 must lie within [1e-06, 1e+12], got 1e+300"),  # was "accel must ..."
+    ("circle", "jerk_mm_s3", "1e-20", "jerk_mm_s3 must lie within [1e-06, 1e+12], got 1e-20"),
+    ("circle", "centripetal_accel_mm_s2", "1e300", "centripetal_accel_mm_s2 must lie within [1e-06, 1e+12], got 1e+300"),
+])
+def test_a_value_out_of_range_is_said_in_its_keys_unit_at_its_line(tmp_path, shape, key, value, words):
+    keys = {"feed_mm_min": "1000", key: value}
+    feed = "".join(f"{k} = {v}\n" for k, v in keys.items() if not k.endswith("_deg"))
+    path = "".join(f"{k} = {v}\n" for k, v in keys.items() if k.endswith("_deg"))
+    text = f'[feed]\n{feed}[path]\ntype = "{shape}"\n{_SHAPES[shape]}\n{path}'
+    file = tmp_path / "bad.toml"
+    file.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_path_file(file)
+    line = text.splitlines().index(f"{key} = {value}") + 1
+    assert str(info.value).startswith(f"{file}, line {line}: {words}"), str(info.value)
+    assert "index" not in str(info.value) and "rad" not in str(info.value)
 
 
 def test_corner_angles_at_every_junction():

@@ -95,6 +95,19 @@ def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message
         read_sweep(_spec(tmp_path, [vary]))
 
 
+@pytest.mark.parametrize(("vary", "sweep", "message"), [
+    # was "vary.count must be a whole number, at least 1; got None"
+    ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0}, 'method = "grid"', r"spec.toml, line 11: vary.count is "
+                                                                              r"missing: give count = "),
+    ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0}, 'method = "lhs"', r"spec.toml, line 8: sweep.count is missing: "
+                                                                             r"give count = "),
+])
+def test_a_missing_count_is_said_missing_by_its_key_and_line(tmp_path, vary, sweep, message):
+    with pytest.raises(ConfigError, match=message) as info:
+        read_sweep(_spec(tmp_path, [vary], sweep))
+    assert "None" not in str(info.value)
+
+
 def test_a_strategy_table_of_a_strategy_the_sweep_does_not_run_is_refused_by_its_line(tmp_path):
     """A spec's [[strategy]] table for feedforward beside strategies = "ccc_linear" was dropped without a word."""
     spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}])

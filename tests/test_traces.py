@@ -219,8 +219,10 @@ SINE = "\n".join(f"{k * 1e-3:.3f},{np.sin(k / 5):.6f},{np.sin((k - 1) / 5):.6f}"
 ])
 def test_declared_units_are_honoured(tmp_path, key, units, t_scale, x_scale):
     rows = SINE.splitlines()
-    (tmp_path / "u.csv").write_text(f"# {key}: {units}\nt,x_ref,x\n" + "\n".join(
-        ",".join(f"{float(v) / scale:.12g}" for v, scale in zip(row.split(","), (t_scale, x_scale, x_scale))) for row in rows))
+    others, cells = (",contour,measuring", ",0,1") if "contour" in units else ("", "")  # columns not read, units kept
+    (tmp_path / "u.csv").write_text(f"# {key}: {units}\nt,x_ref,x{others}\n" + "\n".join(
+        ",".join(f"{float(v) / scale:.12g}" for v, scale in zip(row.split(","), (t_scale, x_scale, x_scale))) + cells
+        for row in rows))
     (tmp_path / "mm.csv").write_text("t,x_ref,x\n" + SINE)
     trace, plain = read_trace(tmp_path / "u.csv"), read_trace(tmp_path / "mm.csv")
     np.testing.assert_allclose(trace.t, plain.t, rtol=1e-9, atol=1e-15)
@@ -230,7 +232,8 @@ def test_declared_units_are_honoured(tmp_path, key, units, t_scale, x_scale):
     assert trace.metadata["units"].startswith("t [s]; x_ref, x [mm]")
     if "contour" in units:  # the groups of columns not read stay as declared
         assert trace.metadata["units"].endswith("; contour [mm]; measuring [1 = test proper, 0 = not]")
-    write_trace(tmp_path / "back.csv", trace)
+    write_trace(tmp_path / "back.csv", trace)  # without those columns: their units are not written either
+    assert (tmp_path / "back.csv").read_text().startswith("# units: t [s]; x_ref, x [mm]\nt,x_ref,x\n")
     again = read_trace(tmp_path / "back.csv")
     np.testing.assert_array_equal(again.t, np.round(trace.t, 9))
     np.testing.assert_allclose(again.actual, trace.actual, rtol=0, atol=6e-7)
@@ -248,6 +251,23 @@ def test_units_that_cannot_be_honoured_are_refused(tmp_path, head, line, words):
     with pytest.raises(TraceFormatError) as info:
         read_trace(tmp_path / "u.csv")
     assert str(info.value).startswith(f"{tmp_path / 'u.csv'}, line {line}: {words}"), str(info.value)
+
+
+@pytest.mark.parametrize("units, words", [
+    # a 3-axis line on a 2-axis trace was ignored without a word
+    ("z_ref, z [m]", "'# units:' names columns 'z_ref', 'z', which the trace does not have (its columns: t, x_ref, x, y_ref, y)"),
+    # a typo: the data were blamed ("column 'y': the measured y does not follow y_ref"), the y column read in mm
+    ("x_ref, x, y_ref, yy [m]", "'# units:' names column 'yy', which the trace does not have (its columns: t, x_ref, x"),
+    ("t [ms]; X [m]", "'# units:' names column 'X', which the trace does not have"),
+])
+def test_a_units_line_naming_columns_the_trace_lacks_is_refused_at_its_line(tmp_path, units, words):
+    t = np.arange(200) * 1e-3
+    x, y = 10 * np.sin(2 * np.pi * t), 10 * np.cos(2 * np.pi * t)
+    rows = "\n".join(f"{a:.3f},{b:.9f},{b:.9f},{c:.9f},{c:.9f}" for a, b, c in zip(t, x, y))
+    (tmp_path / "u.csv").write_text(f"# night run\n# units: {units}\nt,x_ref,x,y_ref,y\n{rows}")
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(tmp_path / "u.csv")
+    assert str(info.value).startswith(f"{tmp_path / 'u.csv'}, line 2: {words}"), str(info.value)
 
 
 def test_a_time_base_no_servo_trace_has_is_refused_unless_declared(tmp_path):
