@@ -79,7 +79,7 @@ from .simulation import measured_force, measured_reference, simulate_batch
 from .traces import Trace
 
 __all__ = [
-    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "SIGNIFICANT",
+    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "REPORT_FORM", "SIGNIFICANT",
     "STRUCTURE_SHARE", "TIMING_SPREAD", "UNCERTAINTY_METHOD",
     "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
@@ -214,6 +214,15 @@ class Step:
     delta_bic: float
 
 
+#: The form of the report (:meth:`Diagnosis.to_dict`; :func:`contoursim.output.has_form`): ``diagnose --report``
+#: replaces only a file of it.
+REPORT_FORM = {"effects": ("name", "axis", "parameters"), "residual_rms_before_um": None,
+               "residual_rms_after_um": None, "residual_max_before_um": None, "residual_max_after_um": None,
+               "noise_um": None, "nominal_identified": None, "nominal_refit": None,
+               "steps": ("label", "rms_um", "max_um"), "where": None, "warnings": None,
+               "unexplained": ("signature", "rms_um"), "uncertainty_method": None}
+
+
 @dataclass(frozen=True)
 class Diagnosis:
     """What :func:`diagnose` found: the steps, the residuals before and after, where they were.
@@ -228,6 +237,11 @@ class Diagnosis:
         The nominal machine was identified from the trace.
     noise_um : ndarray, shape (d,)
         Measurement noise per axis [µm] (:func:`noise_level`).
+    zero_um : ndarray, shape (d,)
+        The zero taken out of each axis's measured positions [µm]: measured
+        minus finally simulated, on average (an instrument's zero: a laser
+        or a ballbar reads from where it was set; a millimetre is more
+        likely a column from another axis or instrument).
     steps : tuple of Step
         The nominal model, its refit, then one step per effect named.
     simulated_before : ndarray, shape (N, d)
@@ -257,6 +271,7 @@ class Diagnosis:
     model: Model
     identified: bool
     noise_um: np.ndarray
+    zero_um: np.ndarray
     steps: tuple
     simulated_before: np.ndarray
     simulated_after: np.ndarray
@@ -301,6 +316,7 @@ class Diagnosis:
             "residual_max_before_um": _max_um(before),
             "residual_max_after_um": _max_um(after),
             "noise_um": {a: float(n) for a, n in zip(self.trace.axes, self.noise_um)},
+            "zero_offset_um": {a: float(z) for a, z in zip(self.trace.axes, self.zero_um)},
             "nominal_identified": self.identified,
             "nominal_refit": {
                 f"{axis}.{name}": {"nominal": getattr(servo, name), "refit": getattr(self.refitted.machine.axes[axis], name)}
@@ -386,6 +402,7 @@ class Diagnosis:
             lines.append(f"{s.label:<27} {text:<51} {s.rms_um:>9.3f} {s.max_um:>9.3f} {bic:>9}")
         noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
         lines.append(f"noise floor [µm RMS]: {noise}")
+        lines.append("instrument zero taken out [µm]: " + ", ".join(f"{a} {z:+.3f}" for a, z in zip(self.trace.axes, self.zero_um)))
         if self.current_before:
             before, after = self.current_residual_rms(self.current_before), self.current_residual_rms(self.current_after)
             lines.append("measured − simulated current [A RMS]: "
@@ -586,12 +603,20 @@ def _not_following(trace, simulated, scored):
 
     An axis whose residual (measured − simulated, its mean removed) is as
     large as half its commanded motion is not a servo axis tracking its
-    command with some error: its columns are swapped or in other units.
+    command with some error: its columns are swapped or in other units. Nor
+    is one whose measured positions are its commanded ones to the last digit
+    while it moves: no servo axis follows without a lag, that is one signal
+    logged twice.
     """
     found = []
     for i, axis in enumerate(trace.axes):
         ref = trace.reference[scored, i]
         motion = float(np.std(ref))
+        if motion > 0 and np.array_equal(trace.actual[scored, i], ref):
+            found.append(f"the measured {axis} is {axis}_ref to the last digit on every sample while it moves (the model "
+                         f"lags by up to {1e3 * np.abs(simulated[scored, i] - ref).max():.4g} µm): the command logged "
+                         "twice? No effect is named")
+            continue
         miss = float(np.std(trace.actual[scored, i] - simulated[scored, i]))
         if motion > 0 and miss > 0.5 * motion:
             found.append(f"the measured {axis} does not follow {axis}_ref (the residual, {1e3 * miss:.4g} µm RMS, is "
@@ -1986,10 +2011,11 @@ def _diagnose(trace, model, identified, max_effects, say):
         warnings.append("the nominal machine was identified from the trace with an assumed mass "
                         "(forces such as force_N are relative to that axis, not in real newtons)")
         warnings += identification_warnings(model.machine)
-        if not np.any(np.ptp(trace.reference, axis=0) > 0):
-            warnings.append("the trace's reference never moves: its servo loops cannot be identified from it (it is "
-                            "compared with axes standing still: hunting and drift show, loop effects cannot); give the "
-                            "nominal model (--model)")
+    if not np.any(np.ptp(trace.reference, axis=0) > 0):
+        warnings.append("the trace's reference never moves: " + (
+            "its servo loops cannot be identified from it (it is compared with axes standing still: hunting and drift "
+            "show, loop effects cannot); give the nominal model (--model)" if identified else
+            "hunting and drift of axes standing still show, the loop and geometry effects that need motion cannot"))
     if identified and trace.force:
         warnings.append(f"the trace's force column(s) ({', '.join(f'{a}_force' for a in trace.force)}) are not used: "
                         "a force in newtons has no scale on an identified machine; give the nominal model (--model)")
@@ -2107,8 +2133,8 @@ def _diagnose(trace, model, identified, max_effects, say):
                  "encoder counts: no simulation matches its phase sample by sample, a named effect closes little of it"
                  for i, c in cycles.items()]
     currents = [_currents(trace, m, reference, force) for m in (model, problem.base)]
-    return Diagnosis(trace, model, identified, 1e3 * noise, tuple(steps), before, after, scored,
-                     problem.base, where, tuple(warnings), tuple(left), *currents)
+    return Diagnosis(trace, model, identified, 1e3 * noise, 1e3 * problem.zero_offset(), tuple(steps), before, after,
+                     scored, problem.base, where, tuple(warnings), tuple(left), *currents)
 
 
 def _acts_on(effect):

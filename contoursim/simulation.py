@@ -287,10 +287,17 @@ def _logged(trace, servo_period):
 
 
 def _servo_samples(trace, servo_period):
-    """The samples of `trace`'s measured reference: its own when logged at the servo period, else every period."""
+    """The samples of `trace`'s measured reference: its own when logged at the servo period, else every period up to
+    the first at or after its last sample.
+
+    A trace's last sample never lies past the simulation: there it would be given the last period's position, a
+    period's motion off. That happens to a trace whose samples fall between servo periods, and to one whose clock
+    reads large (t ~ 1e7 s holds 2 ns, and the duration of periods it spans can come out a hair short of a whole
+    number): within a millionth of a period a whole number of periods is that number.
+    """
     if _logged(trace, servo_period):
         return trace.t.size
-    return int(np.floor((trace.t[-1] - trace.t[0]) / servo_period * (1 + 1e-12))) + 1
+    return int(np.ceil((trace.t[-1] - trace.t[0]) / servo_period - 1e-6)) + 1
 
 
 def measured_force(trace, servo_period):

@@ -200,6 +200,7 @@ def _summary(chain, rows, sweep, values, time, rotary, rotaries, count):
         f"{'component':20s} {'worst':>10s} {'min':>10s} {'max':>10s}  at (axis positions)",
     ]
     for label, worst, low, high, at in rows:
+        worst, low, high = (round(v, 3) + 0.0 for v in (worst, low, high))  # a rounding's -1e-12 is 0, not -0.000
         lines.append(f"{label:20s} {worst:+10.3f} {low:+10.3f} {high:+10.3f}  {_fmt_q(chain, at, rotary)}")
     return "\n".join(lines) + "\n"
 

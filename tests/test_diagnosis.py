@@ -534,13 +534,17 @@ def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine, 
 @pytest.mark.parametrize("fault, words", [
     ("swapped", "the measured x leads x_ref by 1.0"),  # 1.01 times the lag the model has it behind
     ("short", "the trace has 12 samples scored: too few to tell its noise floor"),
+    ("echoed", "the measured x is x_ref to the last digit on every sample while it moves"),
 ])
 def test_a_trace_with_its_columns_swapped_or_too_short_to_judge_names_nothing_and_says_why(machine, fault, words):
-    """Measured and commanded columns swapped (the axis then leads its command by the model's lag), or 12 samples (a
-    noise floor from their second differences, a nominal refit fitting them by construction): nothing named, why said."""
+    """Measured and commanded columns swapped (the axis then leads its command by the model's lag), 12 samples (a
+    noise floor from their second differences, a nominal refit fitting them by construction), or the command logged
+    as the measured position too (a gain mismatch of 1.87 was named on it): nothing named, why said."""
     trace = synthetic_trace(Model(machine), circle("ccw"), mismatch=0.03, noise_um=0.1, every=2, seed=3)
     if fault == "swapped":
         trace = replace(trace, reference=trace.actual, actual=trace.reference)
+    elif fault == "echoed":
+        trace = replace(trace, actual=trace.reference.copy())
     else:
         trace = replace(trace, t=trace.t[:12], reference=trace.reference[:12], actual=trace.actual[:12])
     result = diagnose(trace, Model(machine))
@@ -679,10 +683,22 @@ def test_a_trace_that_never_moves_is_diagnosed_for_hunting_with_a_model_and_with
     trace = Trace(t, reference, measured, ("x", "y"))
     result = diagnose(trace, Model(machine))
     assert any(w.startswith("hunting at standstill on x") for w in result.warnings), result.report()
+    assert any(w.startswith("the trace's reference never moves: hunting and drift of axes standing still show")
+               for w in result.warnings)
     result = diagnose(trace)
     assert any(w.startswith("hunting at standstill on x") for w in result.warnings), result.report()
     assert any(w.startswith("the trace's reference never moves: its servo loops cannot be identified")
                for w in result.warnings)
+
+
+def test_the_instrument_zero_taken_out_is_reported(machine):
+    """A laser's zero 1 mm off on x (or x's column from another instrument): the refit takes it out, as it takes out any
+    zero, and the report says how much, in the table and the JSON (it was taken out without a word)."""
+    trace = synthetic_trace(Model(machine), circle("ccw"), mismatch=0.03, noise_um=0.1, every=2, seed=3)
+    result = diagnose(replace(trace, actual=trace.actual + [1.0, 0.0]), Model(machine), max_effects=0)
+    assert result.to_dict()["zero_offset_um"]["x"] == pytest.approx(1000.0, abs=0.5)
+    assert abs(result.to_dict()["zero_offset_um"]["y"]) < 0.5
+    assert "instrument zero taken out [µm]: x +1000.0" in result.report()
 
 
 def test_the_magnified_residual_of_a_trace_that_never_moves_is_drawn_without_a_warning(machine):

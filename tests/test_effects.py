@@ -327,6 +327,17 @@ def test_a_coarser_measured_reference_is_resampled_by_a_cubic_spline():
     np.testing.assert_allclose(reference.position, exact, atol=1e-8)
 
 
+@pytest.mark.parametrize("start, every", [(1e7, 2 * DT), (12345678.0, 2 * DT), (0.0, 0.7 * DT)])
+def test_a_measured_reference_reaches_the_traces_last_sample_whatever_its_clock_reads(start, every):
+    """A clock at 1e7 s holds 2 ns: the periods a trace spans can come out a hair short of a whole number, and a
+    logger's samples can fall between servo periods; either way the last sample lies within the simulation, not a
+    period's motion past it (a circle cut off in motion was diagnosed differently with its clock shifted)."""
+    logged = np.round(start + np.arange(300) * every, 3 if every == 2 * DT else 9)  # as a CSV with ms prints them
+    xy = np.column_stack([5.0 * np.cos(20.0 * (logged - start)), 5.0 * np.sin(20.0 * (logged - start))])
+    reference = measured_reference(Trace(logged, xy, xy, ("x", "y")), DT / 2)
+    assert reference.t[-1] >= logged[-1] - 1e-9
+    assert reference.t[-1] < logged[-1] + DT / 2
+
 def test_simulating_a_runs_own_trace_reproduces_the_run():
     """Without feedforward the loops see only positions: a run replayed from its trace is the same run.
 

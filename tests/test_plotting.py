@@ -198,7 +198,7 @@ def test_diagnosis_plots_keep_zero_labels_legend_and_both_runs_visible():
     before = 1e-3 * (3.0 * np.cos(2 * theta) + 0.5)[:, None] * radial  # [mm] what the nominal model misses
     after = 1e-3 * (0.2 * np.sin(3 * theta))[:, None] * radial  # [mm] what is left
     trace = Trace(t, reference, reference + before, ("x", "y"))
-    diagnosis = Diagnosis(trace, Model(machine), False, np.array([0.05, 0.05]), (), reference, reference + before - after,
+    diagnosis = Diagnosis(trace, Model(machine), False, np.array([0.05, 0.05]), np.zeros(2), (), reference, reference + before - after,
                           np.ones(len(t), bool), Model(machine))
     ax = plot_polar(diagnosis, Figure(figsize=(6.4, 7.4)).add_subplot(projection="polar"))
     zero, band, line = ax.lines

@@ -50,6 +50,13 @@ def test_report_gives_the_worst_errors_and_plots(tmp_path):
     assert "position |Δ| [µm]" in text and "tool axis y [µrad]" in text
 
 
+def test_a_component_that_is_zero_to_rounding_is_printed_as_zero(tmp_path):
+    """The 3-axis mill turns its tool axis about z by nothing, to rounding: +0.000, not -0.000."""
+    text = volumetric_report("vertical_mill_3axis", tmp_path, grid=3)
+    row = next(line for line in text.splitlines() if line.startswith("tool axis z [µrad]"))
+    assert row.split()[4:7] == ["+0.000"] * 3, row
+
+
 def test_report_never_replaces_a_file_it_did_not_write(tmp_path):
     volumetric_report("polishing_platform_4axis", tmp_path, grid=2, sweep=["x"])  # takes the empty folder
     volumetric_report("polishing_platform_4axis", tmp_path, grid=2, sweep=["x"])  # and replaces its own plot
