@@ -420,7 +420,7 @@ def compare_command(args):
     FILE as for ``simulate``; a job's ``geometric_compensation = true`` adds the strategy ``geometric``
     unless one of the strategies composes it already.
     """
-    from .comparison import compare
+    from .comparison import JSON_FORM, compare
     from .compensation import STRATEGY_NAMES
     from .output import atomic_write, report_file
     from .plotting import save_comparison_figures
@@ -438,7 +438,7 @@ def compare_command(args):
                              f"(--strategies {','.join(names)}): run it, or drop the setting")
     if args.tune and not any(part.startswith("ccc_") for part in parts):
         raise ValueError(f"--tune tunes a cross-coupled strategy's gains; none runs here (--strategies {','.join(names)})")
-    report = report_file(args.json, "runs", "comparison JSON", args.out)  # never a file the user keeps
+    report = report_file(args.json, JSON_FORM, "comparison JSON", args.out)  # never a file the user keeps
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
@@ -476,7 +476,7 @@ def diagnose_command(args):
     Several traces, or a folder of them: :func:`fleet_command`.
     """
     from ._memory import DIAGNOSIS_BYTES_PER_SAMPLE, check
-    from .diagnosis import FIGURE_FILES, diagnose, save_figures
+    from .diagnosis import FIGURE_FILES, REPORT_FORM, diagnose, save_figures
     from .identify import servo_period_for
     from .model import load_model
     from .output import report_file, writing
@@ -494,7 +494,7 @@ def diagnose_command(args):
     check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
           "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
           per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
-    report = report_file(args.report, "residual_rms_before_um", "diagnosis report", args.out,  # never a user's file,
+    report = report_file(args.report, REPORT_FORM, "diagnosis report", args.out,  # never a user's file,
                          written=(*FIGURE_FILES, "corrected_model.toml"))  # nor one the run writes
     corrected = Path(args.out) / "corrected_model.toml"
     if args.model and corrected.is_file() and Path(args.model).is_file() and os.path.samefile(corrected, args.model):
@@ -567,12 +567,16 @@ def sweep_command(args):
 
 
 def fleet_command(args):
-    """``contoursim diagnose A.csv B.csv … | DIR [--summary FLEET.json] [--scheduler …]``: a report per trace, a fleet summary."""
+    """``contoursim diagnose A.csv B.csv … | DIR [--summary FLEET.json] [--scheduler …]``: a report per trace, a fleet summary.
+
+    A trace that fails is listed with why; when every trace fails, the summary is written and the command ends in
+    an error (exit status 2).
+    """
     import json
 
     import matplotlib.pyplot as plt
 
-    from .fleet import diagnose_fleet, fleet_summary, plot_fleet, trace_files
+    from .fleet import SUMMARY_FORM, diagnose_fleet, fleet_summary, plot_fleet, trace_files
     from .output import report_file, writing
     from .sweep import Progress
 
@@ -585,7 +589,7 @@ def fleet_command(args):
     if twice:  # each trace's report is <stem>.json beside fleet.json
         raise ValueError(f"two traces named {twice[0]}.csv (or one named fleet.csv): their reports would share a "
                          "file name; rename one")
-    summary_file = report_file(args.summary, "failed", "fleet summary", args.out,  # never a file the user keeps
+    summary_file = report_file(args.summary, SUMMARY_FORM, "fleet summary", args.out,  # never a file the user keeps
                                written=[f"{stem}.json" for stem in stems] + ["fleet.png"])  # nor a trace's report
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "
@@ -595,9 +599,12 @@ def fleet_command(args):
     summary = fleet_summary(outcomes)
     out = output_dir(args.out)
     for outcome in outcomes:
+        name = f"{Path(outcome['trace']).stem}.json"
         if "report" in outcome:
-            with out.write(f"{Path(outcome['trace']).stem}.json") as stream:
+            with out.write(name) as stream:
                 stream.write(json.dumps(outcome["report"], indent=2, ensure_ascii=False) + "\n")
+        elif name in out.written():  # an earlier run's report of a trace that fails now would stand for it
+            out.remove(name)
     text = json.dumps(summary, indent=2, ensure_ascii=False) + "\n"
     with out.write("fleet.json") as stream:
         stream.write(text)
@@ -616,7 +623,13 @@ def fleet_command(args):
         print(f"  {label:<24} on {e['count']:>3} of {summary['traces']} traces: {spread}")
     for failed in summary["failed"]:
         print(f"  failed: {failed['trace']}: {failed['error']}")
-    print(f"reports, fleet.json and fleet.png written to {out}/" + (f"; summary to {summary_file}" if summary_file else ""))
+    also = f"; summary to {summary_file}" if summary_file else ""
+    if not summary["diagnosed"]:  # a fleet of failures is an error (exit 2), its summary written to say why
+        print(f"no report; fleet.json and fleet.png (the failures) written to {out}/{also}")
+        raise ValueError(f"none of the {summary['traces']} traces could be diagnosed: why, above and in "
+                         f"{out.path / 'fleet.json'}")
+    reports = f"{summary['diagnosed']} report{'s' if summary['diagnosed'] > 1 else ''}"
+    print(f"{reports} (one per trace diagnosed), fleet.json and fleet.png written to {out}/{also}")
 
 
 def _names(text):

@@ -27,11 +27,13 @@ from .exceptions import ContoursimWarning, UnstableLoopError
 from .model import as_model
 from .simulation import simulate
 
-__all__ = ["Comparison", "compare", "tune", "JSON_KEYS", "TUNE_KP_START", "TUNE_KP_STEP", "TUNE_KP_END",
+__all__ = ["Comparison", "compare", "tune", "JSON_KEYS", "JSON_FORM", "TUNE_KP_START", "TUNE_KP_STEP", "TUNE_KP_END",
            "TUNE_KI_FACTORS"]
 
 #: Keys of each run in the comparison JSON (DESIGN.md contract).
 JSON_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rms_um", "peak_current_A", "saturated")
+#: The form of the comparison JSON (:func:`contoursim.output.has_form`): ``compare --json`` replaces only a file of it.
+JSON_FORM = {"runs": JSON_KEYS, "axes": ("phase_margin_deg", "damping_ratio")}
 
 #: :func:`tune`'s coupling gains: ``kp`` from this many times the smallest position gain ``Kp`` of the coupled axes [-] ...
 TUNE_KP_START = 0.25

@@ -18,7 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "trace_files"]
+__all__ = ["SUMMARY_FORM", "diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "trace_files"]
+
+#: The form of :func:`fleet_summary` (:func:`contoursim.output.has_form`): ``--summary`` replaces only a file of it.
+SUMMARY_FORM = {"traces": None, "diagnosed": None, "failed": ("trace", "error"), "nominal": None,
+                "effects": ("name", "axis", "count", "traces", "parameters")}
 
 
 def trace_files(paths):

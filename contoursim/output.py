@@ -10,6 +10,15 @@ runs (killed with SIGKILL) is removed by the next write of that folder.
 Nothing is written through a symbolic link: a file contoursim replaces is
 renamed over the link (the file it pointed at is left as it was), and the
 output folder's record is read and appended to only as a plain file.
+
+The record, ``.contoursim-out``, lists the name of each file written, one a
+line. A command that names itself (``OutputDir(path, by="sweep")``) also
+records the files it writes, on comment lines ``#by sweep NAME``; a file of
+that name written later by another is recorded as ``#by - NAME``. The last
+such line of a name says which command wrote the file, so that a command
+replacing its own earlier set of files removes only those. To a reader of
+the names alone (an earlier contoursim, a user) these lines are comments; a
+name recorded by an earlier contoursim is no command's.
 """
 
 import json
@@ -24,10 +33,11 @@ from . import _validate
 from .config import read_text
 from .exceptions import ConfigError, OutputError
 
-__all__ = ["OutputDir", "atomic_write", "output_dir", "report_file", "writing"]
+__all__ = ["OutputDir", "atomic_write", "has_form", "output_dir", "report_file", "writing"]
 
 _MARKER = ".contoursim-out"
 _MARKER_HEADER = "# written by contoursim; the files it wrote here, one per line, are replaced on each run\n"
+_BY = "#by "  # a record's line "#by COMMAND NAME": the command that wrote NAME last ("-": none named)
 _PART = re.compile(r"\.(?P<name>.+)\.(?P<pid>[0-9]+)-[0-9a-f]{8}\.part")  # atomic_write's temporary files
 
 
@@ -46,6 +56,10 @@ class OutputDir:
     ----------
     path : str or Path
         The folder.
+    by : str, optional
+        The command writing (e.g. ``"sweep"``), recorded with each file it
+        writes: a command that replaces its own earlier files removes those
+        of :meth:`written_by`, never a file another command wrote there.
 
     Raises
     ------
@@ -58,10 +72,14 @@ class OutputDir:
     """
 
     path: Path
+    by: str = None
 
     def __post_init__(self):
         if not isinstance(self.path, (str, os.PathLike)):
             raise TypeError(f"the output folder is a folder name (str or Path), got {type(self.path).__name__}")
+        if self.by is not None and (not isinstance(self.by, str) or not self.by or self.by == "-"
+                                    or any(c.isspace() for c in self.by)):
+            raise ValueError(f"by names the command writing, one word (e.g. 'sweep'), got {self.by!r}")
         out = Path(self.path)
         object.__setattr__(self, "path", out)
         marker = out / _MARKER
@@ -100,18 +118,54 @@ class OutputDir:
         OutputError
             The marker cannot be read.
         """
+        return {line for line in self._lines() if line and not line.startswith("#")}
+
+    def written_by(self, command):
+        """Names of the files the command `command` wrote into the folder, and no other command after it.
+
+        A name an earlier contoursim recorded, without the command, is no
+        command's.
+
+        Parameters
+        ----------
+        command : str
+            As given to :class:`OutputDir` (`by`), e.g. ``"sweep"``.
+
+        Returns
+        -------
+        set of str
+
+        Raises
+        ------
+        ConfigError
+            The marker is a symbolic link or not UTF-8 text.
+        OutputError
+            The marker cannot be read.
+        """
+        return {name for name, by in self._writers().items() if by == command}
+
+    def _writers(self):
+        """Each name the marker's ``#by`` lines give, with the command that wrote its file last (None: none named)."""
+        writers = {}
+        for line in self._lines():
+            if line.startswith(_BY):
+                by, _, name = line[len(_BY):].partition(" ")
+                writers[name] = None if by == "-" else by
+        return writers
+
+    def _lines(self):
+        """The lines of the marker, read as a plain file (see :meth:`written`)."""
         marker = self.path / _MARKER
         try:
             with os.fdopen(os.open(marker, os.O_RDONLY | _NOFOLLOW), "rb") as stream:
                 data = stream.read()
             ours = data.startswith(_MARKER_HEADER.encode())  # its names are the files' names, bytes not UTF-8 escaped
-            lines = data.decode("utf-8", "surrogateescape" if ours else "strict").splitlines()
+            return data.decode("utf-8", "surrogateescape" if ours else "strict").splitlines()
         except UnicodeDecodeError as exc:
             raise ConfigError(f"{marker} is not contoursim's record of the files it wrote (byte {exc.start} is not "
                               "UTF-8 text): choose another output directory, or delete it if it is yours") from None
         except OSError as exc:
             raise _marker_error(marker, "read", exc) from None
-        return {line for line in lines if line and not line.startswith("#")}
 
     def file(self, name):
         """The path `name` would be written to, after checking contoursim may write it.
@@ -199,14 +253,18 @@ class OutputDir:
             raise OutputError(f"cannot remove {file}: {exc.strerror}") from None
 
     def _record(self, name):
-        """List `name` in the marker (once), appending to it as a plain file, never through a link."""
-        if name in self.written():
+        """List `name` in the marker (once) and, when it changes, the command writing it (``#by``), appending to the
+        marker as a plain file, never through a link."""
+        lines = [] if name in self.written() else [name]
+        if self._writers().get(name) != self.by:  # who wrote it changes (or a named command's first write)
+            lines.append(f"{_BY}{self.by or '-'} {name}")
+        if not lines:
             return
         marker = self.path / _MARKER
         try:
             with os.fdopen(os.open(marker, os.O_WRONLY | os.O_APPEND | _NOFOLLOW), "w", encoding="utf-8",
                            errors="surrogateescape") as stream:  # a name of bytes not UTF-8 (os.fsdecode), as they are
-                stream.write(name + "\n")
+                stream.write("".join(line + "\n" for line in lines))
         except OSError as exc:
             raise _marker_error(marker, f"record {self.path / name} in", exc) from None
 
@@ -281,15 +339,20 @@ def _remove_stale_parts(folder, name=None):
                 pass  # e.g. removed by another run meanwhile
 
 
-def report_file(file, key, what, out=None, written=()):
+def report_file(file, form, what, out=None, written=()):
     """Check that a JSON report may be written to `file`: a new name, or a report contoursim wrote there before.
+
+    An existing file is taken for such a report only if it has the report's
+    form (:func:`has_form`), not for a key it shares with one: a user's
+    ``{"runs": {"my": "notes"}}`` is not a comparison JSON.
 
     Parameters
     ----------
     file : str or Path or None
         The report's file (``None``: no report).
-    key : str
-        A key every such report has at its top level (e.g. ``"runs"``).
+    form : dict of str -> tuple of str or None
+        The form of every such report (see :func:`has_form`), e.g.
+        :data:`contoursim.comparison.JSON_FORM`.
     what : str
         What the report is, for the messages (e.g. ``"comparison JSON"``).
     out : str or Path, optional
@@ -327,10 +390,50 @@ def report_file(file, key, what, out=None, written=()):
             data = json.loads(read_text(file))
         except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8, not JSON
             data = None
-        ours = isinstance(data, dict) and key in data
-        if not ours:
+        if not has_form(data, form):
             raise FileExistsError(f"{file} exists and is not a {what}; refusing to overwrite it")
     return file
+
+
+def has_form(data, form):
+    """Whether `data`, read from JSON, has the form of a report contoursim writes.
+
+    That is an object with each key of `form` at its top level; where
+    `form` names keys for one, its value is an object or a list each of
+    whose entries (values, items) is an object with those keys. Keys
+    besides are allowed: a report gains fields from one version to the
+    next, and its own earlier file is still replaced.
+
+    Parameters
+    ----------
+    data : object
+        As :func:`json.loads` gives it.
+    form : dict of str -> tuple of str or None
+        Each top-level key of the report, with the keys each entry of its
+        value has (or None: any value), e.g. ``{"runs": ("contour_max_um",
+        ...), "axes": ("phase_margin_deg", "damping_ratio")}``.
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> form = {"runs": ("contour_max_um",), "axes": None}
+    >>> has_form({"runs": {"none": {"contour_max_um": 3.2}}, "axes": {}}, form)
+    True
+    >>> has_form({"runs": {"my": "notes"}, "axes": {}}, form)
+    False
+    """
+    if not isinstance(data, dict) or not set(form) <= set(data):
+        return False
+    for key, keys in form.items():
+        if keys is None:
+            continue
+        entries = list(data[key].values()) if isinstance(data[key], dict) else data[key]
+        if not isinstance(entries, list) or not all(isinstance(e, dict) and set(keys) <= set(e) for e in entries):
+            return False
+    return True
 
 
 @contextmanager

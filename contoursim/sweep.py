@@ -621,12 +621,6 @@ def plot_sweep(sweep, table):
     return figures
 
 
-#: The files a sweep writes besides its plots of each parameter (``sweep_<name>.png``): those an earlier sweep in the
-#: folder wrote and this one does not (its best and worst runs when every variant diverged) are removed.
-_RESULTS = ("sweep.csv", "sweep.parquet", "best.csv", "worst.csv", "best_path.png", "worst_path.png", "best_errors.png",
-            "worst_errors.png", "best_worst_polar.png")
-
-
 def write_results(sweep, table, out):
     """Write a sweep's table, plots and the best and worst variants re-run with full traces into `out`.
 
@@ -634,9 +628,12 @@ def write_results(sweep, table, out):
     installed, the plots of :func:`plot_sweep`, and ``best.csv``,
     ``worst.csv`` with the usual plots of both
     (:func:`contoursim.plotting.save_figures`, polar plot ``best_worst_polar.png``).
-    An earlier sweep's such files in `out` that this one does not write (the
+    An earlier sweep's files in `out` that this one does not write (the
     plots of other parameters, its best and worst runs when every variant
-    here diverged) are removed: what the folder holds is this sweep's.
+    here diverged) are removed: what the folder holds is this sweep's. They
+    are those its record names as a sweep's
+    (:meth:`contoursim.output.OutputDir.written_by`), never another
+    command's of a like name (``simulate`` of a path ``sweep_a``: ``sweep_a_path.png``).
 
     Parameters
     ----------
@@ -656,7 +653,7 @@ def write_results(sweep, table, out):
     from .plotting import save_figures
     from .simulation import simulate
 
-    out = output_dir(out)
+    out = dataclasses.replace(output_dir(out), by="sweep")  # each file recorded as a sweep's
     written = ["sweep.csv"]
     with out.write("sweep.csv") as stream:
         stream.write(table_text(sweep, table))
@@ -689,9 +686,8 @@ def write_results(sweep, table, out):
                 runs[label].save_csv(stream, metadata={"sweep": Path(sweep.source).name, "variant": i, "values": values})
             written.append(f"{label}.csv")
         written += [file.name for file in save_figures(runs, out, "best_worst")]
-    for name in out.written() - set(written):  # an earlier sweep's files this one did not write again
-        if name in _RESULTS or (name.startswith("sweep_") and name.endswith(".png")):
-            out.remove(name)
+    for name in out.written_by("sweep") - set(written):  # an earlier sweep's files this one did not write again
+        out.remove(name)
     return out, chosen
 
 

@@ -11,6 +11,8 @@ import pytest
 
 from conftest import ROOT, ReaderGone
 from contoursim.cli import main
+from contoursim.diagnosis import REPORT_FORM
+from contoursim.output import has_form
 from contoursim.simulation import SimResult
 from contoursim.traces import read_trace
 
@@ -475,6 +477,36 @@ def test_compare_writes_its_files_before_a_reader_can_go(tmp_path, monkeypatch):
     assert list(json.loads(report.read_text())["runs"]) == ["none", "ccc_arc"]
     assert {p.name for p in (tmp_path / "o").glob("*.png")} == {f"small_compare_{k}.png"
                                                                  for k in ("path", "zoom", "contour", "table")}
+
+
+def test_a_json_with_a_reports_key_but_not_its_form_is_the_users_and_never_replaced(tmp_path, capsys):
+    """r.json = {"runs": {"my": "notes"}} was replaced by compare --json r.json, the key alone taken for a comparison
+    JSON's (and likewise residual_rms_before_um for diagnose --report, failed for --summary)."""
+    import json
+
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    night, other = (ROOT / "examples" / "fleet" / f"night_2026-10-{day}.csv" for day in ("05", "12"))
+    compare = ["compare", str(tmp_path / "small.toml"), "--strategies", "none", "--json"]
+    report = tmp_path / "r.json"
+    assert main([*compare, str(report), "--out", str(tmp_path / "out")]) == 0
+    ours = json.loads(report.read_text())
+    cases = [(compare, {"runs": {"my": "notes"}}, "a comparison JSON"),
+             (compare, {**ours, "runs": {"none": {"my": "notes"}}}, "a comparison JSON"),  # not a run of its
+             (["diagnose", str(night), "--report"], {"residual_rms_before_um": 1.0, "my": "notes"},
+              "a diagnosis report"),
+             (["diagnose", str(night), str(other), "--summary"], {"failed": [], "my": "notes"}, "a fleet summary")]
+    for argv, mine, what in cases:
+        report.write_text(json.dumps(mine))
+        assert main([*argv, str(report), "--out", str(tmp_path / "out")]) == 2
+        assert f"r.json exists and is not {what}; refusing to overwrite it" in capsys.readouterr().err
+        assert json.loads(report.read_text()) == mine
+    report.write_text(json.dumps(ours))  # its own is replaced
+    assert main([*compare, str(report), "--out", str(tmp_path / "out")]) == 0
+    # so is a diagnosis report as diagnose writes it (its keys kept in step with the form its --report replaces)
+    diagnosis = tmp_path / "d.json"
+    assert main(["diagnose", str(night), "--model", str(night.parent / "nightly_mill.toml"), "--report", str(diagnosis),
+                 "--out", str(tmp_path / "d")]) == 0
+    assert has_form(json.loads(diagnosis.read_text()), REPORT_FORM)
 
 
 def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(tmp_path, capsys):

@@ -4,6 +4,7 @@ import json
 import re
 import runpy
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -70,3 +71,35 @@ def test_generated_traces_diagnose_the_same_on_a_local_cluster(tmp_path, monkeyp
     summary = fleet_summary(here)
     assert summary["effects"]["backlash.x"]["parameters"]["lost_motion_um"]["values"] == pytest.approx([10.0], abs=0.2)
     assert len(summary["failed"]) == 1
+
+
+def test_a_fleet_none_of_whose_traces_is_diagnosed_ends_in_an_error_and_claims_no_report(tmp_path, capsys):
+    """Every trace failed: the command ended with status 0 and 'reports, fleet.json and fleet.png written'. A trace
+    that failed kept the report an earlier run had written of it."""
+    (tmp_path / "tr").mkdir()
+    (tmp_path / "tr" / "a.csv").write_text("t,x_ref,x\n0,0,0\n0.001,nan,0\n")
+    (tmp_path / "tr" / "b.csv").write_text("t,x_ref,x\n0,0,0\n0.001,0,inf\n")
+    out = tmp_path / "out"
+    assert main(["diagnose", str(tmp_path / "tr"), "--out", str(out), "--summary", str(tmp_path / "s.json")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.splitlines()[-1] == f"no report; fleet.json and fleet.png (the failures) written to {out}/; " \
+                                            f"summary to {tmp_path / 's.json'}"
+    assert captured.err.splitlines()[-1] == "contoursim diagnose: error: none of the 2 traces could be diagnosed: " \
+                                            f"why, above and in {out / 'fleet.json'}"
+    assert sorted(p.name for p in out.iterdir()) == [".contoursim-out", "fleet.json", "fleet.png"]
+    summary = json.loads((out / "fleet.json").read_text())
+    assert summary["diagnosed"] == 0 and [Path(f["trace"]).name for f in summary["failed"]] == ["a.csv", "b.csv"]
+    assert json.loads((tmp_path / "s.json").read_text()) == summary
+    # one of two diagnosed: its report, and no claim of the other's
+    night, broken = FLEET / "night_2026-10-05.csv", FLEET / "night_2026-11-02.csv"
+    assert main(["diagnose", str(night), str(broken), "--model", str(FLEET / "nightly_mill.toml"), "--out",
+                 str(tmp_path / "one")]) == 0
+    closing = capsys.readouterr().out.splitlines()[-1]
+    assert closing == f"1 report (one per trace diagnosed), fleet.json and fleet.png written to {tmp_path / 'one'}/"
+    assert {p.name for p in (tmp_path / "one").iterdir()} == {".contoursim-out", "night_2026-10-05.json", "fleet.json",
+                                                            "fleet.png"}
+    # run again with that trace broken: its earlier report is removed, not left to stand for it
+    (tmp_path / "night_2026-10-05.csv").write_text("t,x_ref,x\n0,0,0\n0.001,nan,0\n")
+    assert main(["diagnose", str(tmp_path / "night_2026-10-05.csv"), str(broken), "--model",
+                 str(FLEET / "nightly_mill.toml"), "--out", str(tmp_path / "one")]) == 2
+    assert {p.name for p in (tmp_path / "one").iterdir()} == {".contoursim-out", "fleet.json", "fleet.png"}

@@ -1,5 +1,6 @@
 """The output folder: nothing a user keeps there is overwritten, nothing is left half-written."""
 
+import json
 import os
 import signal
 import subprocess
@@ -9,7 +10,9 @@ import time
 import pytest
 
 from contoursim import output
+from contoursim.comparison import JSON_FORM, JSON_KEYS
 from contoursim.exceptions import ConfigError, OutputError
+from contoursim.fleet import SUMMARY_FORM, fleet_summary
 from contoursim.output import atomic_write, output_dir
 
 
@@ -35,6 +38,32 @@ def test_output_dir_refuses_files_it_did_not_write(tmp_path):
     with pytest.raises(ValueError, match="plain file name"):
         again.file("../escape.csv")
     assert output_dir(again) is again
+
+
+def test_the_record_says_which_command_wrote_each_file_in_comments_an_earlier_reader_skips(tmp_path):
+    """A sweep took every sweep_*.png of its folder for an earlier sweep's (simulate's of a path sweep_a too)."""
+    marker = tmp_path / "out" / ".contoursim-out"
+    plain = output_dir(tmp_path / "out")
+    marker.write_text(marker.read_text() + "old.png\n")  # an earlier contoursim's record: the name alone
+    sweep = output.OutputDir(tmp_path / "out", by="sweep")
+    for out, name in ((plain, "sweep_a_path.png"), (sweep, "sweep.csv"), (sweep, "best.csv"), (plain, "best.csv"),
+                      (sweep, "best.csv"), (sweep, "sweep_x.png"), (plain, "sweep_a_path.png")):
+        with out.write(name) as stream:
+            stream.write(name)
+    assert sweep.written_by("sweep") == {"sweep.csv", "best.csv", "sweep_x.png"}
+    plain.remove("best.csv")  # the last writer of best.csv was the sweep; simulate writes it again
+    with plain.write("best.csv") as stream:
+        stream.write("simulate's")
+    assert plain.written_by("sweep") == {"sweep.csv", "sweep_x.png"}  # old.png, of an earlier contoursim: no one's
+    assert sweep.written() == {"old.png", "sweep_a_path.png", "sweep.csv", "best.csv", "sweep_x.png"}
+    names = [line for line in marker.read_text().splitlines() if not line.startswith("#")]  # as a reader of names
+    assert names == ["old.png", "sweep_a_path.png", "sweep.csv", "best.csv", "sweep_x.png"]
+    assert [line for line in marker.read_text().splitlines() if line.startswith("#by ")] == [
+        "#by sweep sweep.csv", "#by sweep best.csv", "#by - best.csv", "#by sweep best.csv", "#by sweep sweep_x.png",
+        "#by - best.csv"]  # a line when the writer changes: sweep_a_path.png, never a sweep's, has none
+    for by in ("", "-", "two words", 3):
+        with pytest.raises(ValueError, match="by names the command writing"):
+            output.OutputDir(tmp_path / "out", by=by)
 
 
 def test_output_dir_refuses_a_file_and_a_users_folder(tmp_path):
@@ -169,14 +198,24 @@ def test_a_marker_that_is_not_text_is_named(tmp_path):
 def test_a_report_file_that_is_a_directory_or_the_users_is_refused(tmp_path):
     (tmp_path / "r.json").mkdir()
     with pytest.raises(ConfigError, match=r"r\.json is a directory; name a file to write the comparison JSON to"):
-        output.report_file(tmp_path / "r.json", "runs", "comparison JSON")
-    for text in ('["runs"]', "runs", '{"other": 1}'):
-        (tmp_path / "mine.json").write_text(text)
+        output.report_file(tmp_path / "r.json", JSON_FORM, "comparison JSON")
+    run = dict.fromkeys(JSON_KEYS, 1.0)
+    axes = {"x": {"phase_margin_deg": 80.0, "damping_ratio": 0.8}}
+    for mine in (["runs"], "runs", {"other": 1}, {"runs": {"my": "notes"}}, {"runs": {"my": "notes"}, "axes": axes},
+                 {"runs": {"none": run}}, {"runs": {"none": run}, "axes": {"x": "notes"}}, {"runs": "notes", "axes": axes}):
+        (tmp_path / "mine.json").write_text(json.dumps(mine))
         with pytest.raises(FileExistsError, match="mine.json exists and is not a comparison JSON"):
-            output.report_file(tmp_path / "mine.json", "runs", "comparison JSON")
-    (tmp_path / "ours.json").write_text('{"runs": {}}')
-    assert output.report_file(tmp_path / "ours.json", "runs", "comparison JSON") == tmp_path / "ours.json"
-    assert output.report_file(None, "runs", "comparison JSON") is None
+            output.report_file(tmp_path / "mine.json", JSON_FORM, "comparison JSON")
+    (tmp_path / "ours.json").write_text(json.dumps({"runs": {"none": run | {"settings": {}}}, "axes": axes}))
+    assert output.report_file(tmp_path / "ours.json", JSON_FORM, "comparison JSON") == tmp_path / "ours.json"
+    assert output.report_file(None, JSON_FORM, "comparison JSON") is None
+    # a fleet's summary, as fleet_summary makes it, of no trace diagnosed and of one
+    failed = {"trace": "a.csv", "error": "a.csv, line 3: column 'x': value nan is not finite"}
+    diagnosed = {"trace": "b.csv", "report": {"effects": [{"name": "backlash", "axis": "x",
+                                                           "parameters": {"lost_motion_um": 4.0}}]}}
+    for outcomes in ([failed], [failed, diagnosed]):
+        assert output.has_form(json.loads(json.dumps(fleet_summary(outcomes))), SUMMARY_FORM)
+    assert not output.has_form({"failed": [], "my": "notes"}, SUMMARY_FORM)
 
 
 _WRITER = """

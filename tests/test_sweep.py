@@ -433,6 +433,20 @@ def test_a_sweep_into_an_earlier_sweeps_folder_leaves_none_of_the_earlier_sweeps
     assert kept == [".contoursim-out", "notes.txt", "sweep.csv", "sweep_axes.x.kp_per_s.png"]
 
 
+def test_a_sweep_leaves_the_files_another_command_wrote_into_its_folder(tmp_path):
+    """simulate's plots of a path named sweep_a (sweep_a_path.png) and its run of a path named best (best.csv) were
+    removed by a sweep into the same folder, taken by their names for an earlier sweep's."""
+    for name in ("sweep_a", "best"):
+        (tmp_path / f"{name}.toml").write_text('[feed]\nfeed_mm_min = 1000\n[path]\ntype = "polyline"\n'
+                                               "points_mm = [[0, 0], [5, 0], [5, 5]]\n")
+        assert main(["simulate", str(tmp_path / f"{name}.toml"), "--out", str(tmp_path / "out")]) == 0
+    simulated = set(os.listdir(tmp_path / "out"))
+    assert {"sweep_a.csv", "sweep_a_path.png", "sweep_a_errors.png", "best.csv", "best_path.png"} <= simulated
+    diverged = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[9000.0]"}], strategies="none")
+    assert main(["sweep", str(diverged), "--out", str(tmp_path / "out")]) == 0  # no best or worst run of its own
+    assert simulated <= set(os.listdir(tmp_path / "out"))
+
+
 def test_a_variant_the_coupled_loops_check_refuses_is_said_so_with_its_margins(tmp_path, capsys):
     """kp = 1e5/s of a CCC among good gains: 'a cross-coupled loop's check refused it, or its run left ±1e+06 mm',
     neither which nor how far."""
