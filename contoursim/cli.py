@@ -423,7 +423,7 @@ def compare_command(args):
     from .comparison import JSON_FORM, compare
     from .compensation import STRATEGY_NAMES
     from .output import atomic_write, report_file
-    from .plotting import save_comparison_figures
+    from .plotting import COMPARISON_FIGURES, save_comparison_figures
     from .simulation import default_settle
 
     model, path_file, job, geometric = _job(args)
@@ -438,7 +438,8 @@ def compare_command(args):
                              f"(--strategies {','.join(names)}): run it, or drop the setting")
     if args.tune and not any(part.startswith("ccc_") for part in parts):
         raise ValueError(f"--tune tunes a cross-coupled strategy's gains; none runs here (--strategies {','.join(names)})")
-    report = report_file(args.json, JSON_FORM, "comparison JSON", args.out)  # never a file the user keeps
+    report = report_file(args.json, JSON_FORM, "comparison JSON", args.out,  # never a file the user keeps, nor a plot
+                         written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES])
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")

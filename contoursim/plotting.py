@@ -23,8 +23,11 @@ __all__ = [
     "circular_deviation", "deviation_from_nominal", "envelope_indices", "fit_circle_center", "magnification_for",
     "plot_path_error", "plot_polar_deviation",
     "plot_errors_over_time", "save_figures", "plot_compared_paths", "plot_compared_contour_error",
-    "plot_compared_figures", "plot_compared_zoom", "save_comparison_figures", "RESOLUTION_UM",
+    "plot_compared_figures", "plot_compared_zoom", "save_comparison_figures", "COMPARISON_FIGURES", "RESOLUTION_UM",
 ]
+
+#: The figures :func:`save_comparison_figures` writes, each as ``<name>_<figure>.png``.
+COMPARISON_FIGURES = ("compare_path", "compare_zoom", "compare_contour", "compare_table")
 
 _COLUMNS = 1200  # pixel columns a line is thinned to: more than any plot here is wide (<= 900 px)
 _RUN_COLOURS = ("C3", "C0", "C2", "C4")  # runs overlaid: red first, as a single run is drawn
@@ -1001,12 +1004,13 @@ def save_comparison_figures(comparison, out_dir, name):
     """
     runs = comparison.runs
     grid = dict(left=0.07, right=0.98, top=0.9, bottom=0.08, hspace=0.35, wspace=0.3)
+    path, zoom, contour, table = (f"{name}_{figure}.png" for figure in COMPARISON_FIGURES)
     drawings = [
-        (f"{name}_compare_path.png", (10.0, 7.0), grid, lambda fig: plot_compared_paths(runs, fig)),
-        (f"{name}_compare_zoom.png", (10.0, 7.4), grid, lambda fig: plot_compared_zoom(runs, fig)),
-        (f"{name}_compare_contour.png", (9.0, 4.8), dict(left=0.09, right=0.78, top=0.92, bottom=0.11),
+        (path, (10.0, 7.0), grid, lambda fig: plot_compared_paths(runs, fig)),
+        (zoom, (10.0, 7.4), grid, lambda fig: plot_compared_zoom(runs, fig)),
+        (contour, (9.0, 4.8), dict(left=0.09, right=0.78, top=0.92, bottom=0.11),
          lambda fig: plot_compared_contour_error(runs, fig.add_subplot())),
-        (f"{name}_compare_table.png", (9.5, 7.0), dict(left=0.08, right=0.8, top=0.94, bottom=0.07, hspace=0.35),
+        (table, (9.5, 7.0), dict(left=0.08, right=0.8, top=0.94, bottom=0.07, hspace=0.35),
          lambda fig: plot_compared_figures(comparison.figures, fig)),
     ]  # fmt: skip
     return _draw(drawings, out_dir)

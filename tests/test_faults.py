@@ -965,6 +965,16 @@ def test_a_diagnosis_report_onto_a_file_the_run_writes_is_refused_before_it_runs
     assert not out.exists()
 
 
+def test_a_comparison_json_onto_a_plot_the_run_writes_is_refused_before_it_runs(tmp_path, capsys):
+    """--json out/line_compare_path.png --out out: the plot was written, then the JSON replaced it."""
+    (tmp_path / "line.nc").write_text("G21 G90 G17\nG1 X0 Y0 F1000\nG1 X20\nG1 X0\nM30\n")
+    out = tmp_path / "out"
+    _refused(capsys, ["compare", str(tmp_path / "line.nc"), "--strategies", "none", "--out", str(out), "--json",
+                      str(out / "line_compare_path.png")],
+             f"{out / 'line_compare_path.png'} is a file this run writes into its output directory")
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("named", ["command line", "job file"])
 def test_a_users_copy_of_a_library_path_or_a_preset_named_without_its_suffix_is_the_one_read(tmp_path, monkeypatch,
                                                                                             named):
