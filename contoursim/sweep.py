@@ -691,10 +691,16 @@ def write_results(sweep, table, out):
     return out, chosen
 
 
+#: Seconds between two lines of :class:`Progress` written to a file (not a terminal).
+LOG_EVERY = 10.0
+
+
 class Progress:
     """A one-line progress bar on stderr: ``sweep: [#####.....] 412/1000 variants, 8.1/s, 1.2 min left``.
 
-    Called as ``progress(done, total)``; the rate counts from the call with ``done = 0``. Used as a context
+    Called as ``progress(done, total)``; the rate counts from the call with ``done = 0``. On a terminal the
+    bar is drawn again in place every half second; elsewhere (a log file, a pipe) it is a line of its own every
+    :data:`LOG_EVERY` seconds and at the end, not thousands of redrawings on one line. Used as a context
     manager, it ends a line left open (a run interrupted or failed), so that what is said next has a line of
     its own.
 
@@ -710,6 +716,7 @@ class Progress:
 
     def __init__(self, label="sweep", what="variants", stream=None):
         self.label, self.what, self.stream = label, what, stream or sys.stderr
+        self.terminal = getattr(self.stream, "isatty", lambda: False)()  # a caller's stream may have none
         self.start, self.last = time.monotonic(), -1.0
         self.open = False  # a line written without its end
 
@@ -725,14 +732,14 @@ class Progress:
         now = time.monotonic()
         if done == 0:  # the work starts (a cluster is up and warm): the rate counts from here
             self.start = now
-        if done < total and now - self.last < 0.5:
+        if done < total and now - self.last < (0.5 if self.terminal else LOG_EVERY):
             return
         self.last = now
         rate = done / max(now - self.start, 1e-9)
         left = (total - done) / rate if rate > 0 else float("inf")
         bar = "#" * round(20 * done / total) + "." * (20 - round(20 * done / total))
         eta = "" if done == 0 else f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left"
-        end = "\n" if done >= total else ""
-        print(f"\r{self.label}: [{bar}] {done}/{total} {self.what}, {rate:.3g}/s, {eta}   ", end=end, file=self.stream,
-              flush=True)
+        end = "\n" if done >= total or not self.terminal else ""
+        line = f"{self.label}: [{bar}] {done}/{total} {self.what}, {rate:.3g}/s, {eta}"
+        print(f"\r{line}   " if self.terminal else line, end=end, file=self.stream, flush=True)
         self.open = not end

@@ -359,10 +359,38 @@ def test_a_sweep_interrupted_says_so_on_a_line_of_its_own(tmp_path, monkeypatch,
     monkeypatch.setattr(contoursim.sweep, "run_variants", interrupted)
     spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}])
     assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 130
-    lines = capsys.readouterr().err.split("\n")  # the bar's line: "\r"s, each drawing it again
-    assert lines[0].startswith("\rsweep: [....................] 0/2 variants") and lines[1].startswith(
+    lines = capsys.readouterr().err.split("\n")  # not a terminal: the bar's lines are lines, no "\r"
+    assert lines[0].startswith("sweep: [....................] 0/2 variants") and lines[1].startswith(
         "contoursim sweep: interrupted; files already complete are kept"), lines
     assert not (tmp_path / "out").exists()
+
+
+def test_progress_redraws_one_line_on_a_terminal_and_writes_a_line_now_and_then_to_a_file(monkeypatch):
+    """A sweep's progress sent to a log file was one line of thousands of carriage-return redrawings."""
+    import io
+
+    from contoursim.sweep import Progress
+
+    clock = iter(np.arange(0.0, 100.0, 0.25))
+    monkeypatch.setattr("contoursim.sweep.time.monotonic", lambda: next(clock))
+    log = io.StringIO()
+    with Progress(stream=log) as progress:
+        for done in range(101):
+            progress(done, 100)
+    lines = log.getvalue().splitlines()
+    assert "\r" not in log.getvalue() and 3 <= len(lines) <= 5, lines  # 25 s: one line each 10 s and the last
+    assert lines[-1].startswith("sweep: [####################] 100/100 variants")
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    clock = iter(np.arange(0.0, 100.0, 0.25))
+    screen = Terminal()
+    with Progress(stream=screen) as progress:
+        for done in range(101):
+            progress(done, 100)
+    assert screen.getvalue().count("\n") == 1 and screen.getvalue().count("\r") > 40
 
 
 def test_a_local_clusters_workers_leave_a_ctrl_c_to_the_command():
