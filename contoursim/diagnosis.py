@@ -62,6 +62,7 @@ The workflow (:func:`diagnose`):
 
 import json
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -137,6 +138,7 @@ _PRIOR_REACH = 3.0  # prior widths a given model's plant moves at most before an
 _BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–Newton step tried, the first that helps kept
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
 _FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
+_CYCLE_FALSE_ALARM = 1e-3  # share of white-noise standstill runs :func:`standstill_cycles` may take for a limit cycle
 _SLOWEST_LOG = 0.01  # a trace sampled slower than this [s] does not resolve servo dynamics (a position loop's 1/kp)
 _BOTH_WAYS = 0.25  # a trace runs its path both ways when at least this share of it turns each way [-]
 _CONTENDERS = 3  # most candidates compared by their profile over the nominal parameters (:func:`_profiled`)
@@ -660,7 +662,11 @@ def standstill_cycles(trace, reference, residual, min_samples=64):
     which no axis's reference moves (the first half may still be settling),
     the residual (linear trend removed, Hann window) is a limit cycle when
     one spectral line, at three or more periods per run, holds at least
-    half of its variance: white noise spreads over all frequencies.
+    half of its variance: white noise spreads over all frequencies. Over a
+    short run it spreads over few, and the share white noise reaches once
+    in :data:`_CYCLE_FALSE_ALARM` runs is asked for if more
+    (:func:`_cycle_share`): of 33 samples' 17 lines, five held half the
+    variance of one run of white noise in three.
 
     Parameters
     ----------
@@ -696,13 +702,33 @@ def standstill_cycles(trace, reference, residual, min_samples=64):
             if spec.sum() <= 0:
                 continue
             k = int(np.argmax(spec))
-            if k >= 3 and spec[max(k - 2, 1):k + 3].sum() >= 0.5 * spec.sum():
+            if k >= 3 and spec[max(k - 2, 1):k + 3].sum() >= _cycle_share(n) * spec.sum():
                 mask[a:b] = True
                 freqs.append(k / (n * trace.dt))
                 amps.append(0.5 * float(np.ptp(x)))
         if mask.sum() >= min_samples // 2:
             found[i] = {"samples": mask, "frequency": float(np.median(freqs)), "amplitude": float(np.median(amps))}
     return found
+
+
+@lru_cache(maxsize=None)
+def _cycle_share(n):
+    """The share of a run's variance the band of :func:`standstill_cycles` must hold in a run of `n` samples: half,
+    or what the band's share of white noise reaches once in :data:`_CYCLE_FALSE_ALARM` runs if more (Monte Carlo,
+    4/α runs, a fixed seed). From about 80 samples on that is less than half (0.41 at 100): not computed."""
+    if n >= 128:
+        return 0.5
+    x = np.random.default_rng(n).standard_normal((int(4 / _CYCLE_FALSE_ALARM), n))
+    i = np.arange(n)
+    x -= np.polynomial.polynomial.polyfit(i, x.T, 1).T @ np.vstack([np.ones(n), i])  # each run's trend removed
+    spec = np.abs(np.fft.rfft(x * np.hanning(n), axis=1)) ** 2
+    spec[:, 0] = 0.0
+    k = np.argmax(spec, axis=1)
+    total = np.concatenate([np.zeros((len(x), 1)), np.cumsum(spec, axis=1)], axis=1)
+    rows = np.arange(len(x))
+    band = total[rows, np.minimum(k + 3, spec.shape[1])] - total[rows, np.maximum(k - 2, 1)]
+    share = np.where(k >= 3, band / total[:, -1], 0.0)
+    return max(0.5, float(np.quantile(share, 1.0 - _CYCLE_FALSE_ALARM)))
 
 
 def unexplained(trace, reference, residual, noise, scored):
@@ -2109,6 +2135,8 @@ def _diagnose(trace, model, identified, max_effects, say):
                             "not told apart from a squareness")
         steps.append(step)
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
+    named = [f"{s.effect.label}: not named" for s in steps if s.effect is not None]
+    warnings = [w for w in warnings if not w.startswith(tuple(named))]  # a round's reason, which a later round overcame
     if len(steps) == 2 and not (lost or identified):  # nothing named: the plant where the trace pulls it, past the first reach
         problem.set_base(problem.base, refit=_REFIT_STEPS)
         steps[1] = _step(problem, "nominal refit", None, {}, np.nan)

@@ -411,8 +411,9 @@ _register(EffectKind(
     (
         _p("peak_um", 0.0, "µm", (-1e4, 1e4), (2.0, 15.0),
            doc="deviation perpendicular to the motion at the middle of the travel, off the line through its ends"),
-        _p("span_mm", 100.0, "mm", (1.0, 1e5), vary=False, doc="length of the axis's travel, over which the bow rises from 0 to peak_um and back"),
-        _p("start_mm", 0.0, "mm", (-1e5, 1e5), vary=False, doc="axis position (machine coordinates) where the travel starts"),
+        # where a trace's positions and a machine's travel may lie, ±1e6 mm (a bow over the trace's own extent)
+        _p("span_mm", 100.0, "mm", (1.0, 2e6), vary=False, doc="length of the axis's travel, over which the bow rises from 0 to peak_um and back"),
+        _p("start_mm", 0.0, "mm", (-1e6, 1e6), vary=False, doc="axis position (machine coordinates) where the travel starts"),
     ),
     options={"error_direction": "axes"},
     doc="bow of one axis's guideway over its travel: peak·(1 − (2(q − start)/span − 1)²) at axis position q",
@@ -431,7 +432,7 @@ _register(EffectKind(
         _p("time_constant_s", 0.0, "s", (0.0, 1e6), vary=False, doc="0: linear in time; else first-order, rate·τ·(1 − exp(−t/τ))"),
         _p("growth_ppm_per_min", 0.0, "ppm/min", (-1e4, 1e4), (0.5, 5.0),
            doc="thermal growth: the drift rate grows by this many µm/min per m of axis position from reference_mm"),
-        _p("reference_mm", 0.0, "mm", (-1e5, 1e5), vary=False, doc="axis position where the growth is zero (the screw's fixed end, or the axis zero)"),
+        _p("reference_mm", 0.0, "mm", (-1e6, 1e6), vary=False, doc="axis position where the growth is zero (the screw's fixed end, or the axis zero)"),
     ),
     doc="slow drift of an axis's position in time, growing with the distance from reference_mm (seed 004's δt(q))",
 ))

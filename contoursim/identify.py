@@ -104,6 +104,8 @@ _POLE_RANGE = (0.01, 100.0)  # range of the mechanical pole c/m of an identified
 def servo_period_for(dt):
     """The servo period to simulate a trace sampled every `dt`: `dt` up to 1 ms, else `dt` divided to 1 ms or less.
 
+    A `dt` within a millionth of 1 ms (or of a whole number of ms) is taken for it: a clock's rounding.
+
     Parameters
     ----------
     dt : float
@@ -114,7 +116,7 @@ def servo_period_for(dt):
     float
         The servo period [s].
     """
-    return dt / max(1, int(np.ceil(dt / 1e-3 - 1e-9)))
+    return dt / max(1, int(np.ceil(dt / 1e-3 - 1e-6)))
 
 
 def _machine(axes, period, x, structure=STATE):

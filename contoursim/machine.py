@@ -421,6 +421,8 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
             bad = next((key for key in table if str(exc).startswith(SERVO_KEYS[key])), None)
             keys = ("axes", axis, bad) if bad else ("axes", axis)
             raise toml.error(f"axis {axis}: {_file_names(exc)}", *keys) from None
+    if set(servos) <= set(CARTESIAN):  # [axes.y] before [axes.x]: TOML's tables have no order, the machine's axes do
+        servos = {axis: servos[axis] for axis in CARTESIAN if axis in servos}
     offset = read_work_offset(toml, chain) if "work_offset" in data and geometry else None
     for axis, servo in servos.items():  # refuse loops that cannot run at this period, pointing at the file
         try:

@@ -414,6 +414,17 @@ def test_a_machine_file_with_effects_loads_as_a_model(tmp_path):
         load_model(file)
 
 
+def test_a_machine_files_axis_tables_in_any_order_are_its_axes_x_y_z(tmp_path):
+    """TOML's tables have no order: a file with [axes.y] before [axes.x] was refused ('axes x, y (, z) in that
+    order, got ('y', 'x')')."""
+    file = tmp_path / "yx.toml"
+    body = "mass_kg = 300\nforce_constant_N_per_A = 942\nkv_A_s_per_m = 80\nti_s = 0.016\nkp_per_s = {kp}\n"
+    file.write_text('name = "yx"\nservo_period_ms = 0.5\n\n[axes.y]\n' + body.format(kp=35) + "\n[axes.x]\n"
+                    + body.format(kp=40))
+    machine = load_machine(file)
+    assert tuple(machine.axes) == ("x", "y") and (machine.axes["x"].kp, machine.axes["y"].kp) == (40.0, 35.0)
+
+
 @pytest.mark.parametrize("kind, delay_on", [("feedback", "both"), ("position", "position")])
 def test_a_feedback_delay_of_a_machine_file_reaches_the_loops_it_names(tmp_path, kind, delay_on):
     # kind = "position": the position loop alone reads late (LoopEffects.feedback_delay_on), "feedback" both loops
@@ -518,3 +529,19 @@ def test_a_jobs_effects_add_to_and_replace_the_machine_files(tmp_path):
                                '\n[[effect]]\nname = "noise"\naxis = "z"\nrms_um = 0.2\n')
     model = with_file_effects(load_model(file), job)
     assert model.values() == {"scale_error.y.ppm": 20.0, "backlash.x.lost_motion_um": 9.0, "noise.z.rms_um": 0.2}
+
+
+def test_a_position_parameter_holds_any_position_a_trace_or_a_travel_may_have():
+    """A trace 100 m from its axes' zero (within a trace's ±1e6 mm) ended its diagnosis in an error: the straightness
+    candidate over its extent had start_mm = -100043, beyond the effect's ±1e5 mm."""
+    from contoursim.multibody import MAX_TRAVEL
+    from contoursim.traces import MAX_POSITION
+
+    def bounds(effect, name):
+        return next(p.bounds for p in effect_kind(effect).parameters if p.name == name)
+
+    reach = max(MAX_POSITION, MAX_TRAVEL)
+    for effect, name in (("straightness", "start_mm"), ("thermal_drift", "reference_mm")):
+        assert bounds(effect, name)[0] <= -reach and bounds(effect, name)[1] >= reach
+    assert bounds("straightness", "span_mm")[1] >= 2 * reach
+    Effect("straightness", "y", peak_um=1.0, span_mm=300.0, start_mm=-100043.0, error_direction="x")

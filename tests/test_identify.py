@@ -14,10 +14,11 @@ import pytest
 from contoursim import paths
 from contoursim.diagnosis import diagnose, synthetic_trace
 from contoursim.feed import plan, sample
-from contoursim.identify import WEAK_KP_VFF, identify_machine, identification_warnings
+from contoursim.identify import WEAK_KP_VFF, identify_machine, identification_warnings, servo_period_for
 from contoursim.machine import Machine
 from contoursim.model import load_model
 from contoursim.servo import AxisServo
+from contoursim.traces import Trace
 from contoursim.traces import read_trace
 
 DT = 1e-3  # servo period [s], the traces logged at it
@@ -139,3 +140,12 @@ def test_an_independent_null_trace_without_a_model_names_nothing(independent_tru
     corrected = load_model(tmp_path / "corrected.toml").machine.axes
     assert any(s.damping > 0 for s in corrected.values())
     assert all(corrected[a].damping == pytest.approx(s.damping) for a, s in result.refitted.machine.axes.items())
+
+
+@pytest.mark.parametrize("start", [0.0, 86400.0, 1e7])
+def test_a_trace_logged_every_ms_is_simulated_at_1_ms_whatever_its_clock_reads(start):
+    """A logger whose clock started a day earlier: a step of its times read 1.0000000038 ms, and the identified
+    loops ran at 0.5 ms, naming other effects than the same trace with its clock at 0."""
+    t = np.round(start + np.arange(3000) * 1e-3, 6)  # as a CSV with µs writes them
+    x = np.sin(t - start)[:, None]
+    assert servo_period_for(Trace(t, x, x, ("x",)).dt) == pytest.approx(1e-3, rel=1e-9)
