@@ -404,7 +404,8 @@ class Diagnosis:
             lines.append(f"{s.label:<27} {text:<51} {s.rms_um:>9.3f} {s.max_um:>9.3f} {bic:>9}")
         noise = ", ".join(f"{a} {n:.3f}" for a, n in zip(self.trace.axes, self.noise_um))
         lines.append(f"noise floor [µm RMS]: {noise}")
-        lines.append("instrument zero taken out [µm]: " + ", ".join(f"{a} {z:+.3f}" for a, z in zip(self.trace.axes, self.zero_um)))
+        lines.append("instrument zero taken out [µm]: "  # a rounding's -0.0004 is +0.000, not -0.000
+                     + ", ".join(f"{a} {round(z, 3) + 0.0:+.3f}" for a, z in zip(self.trace.axes, self.zero_um)))
         if self.current_before:
             before, after = self.current_residual_rms(self.current_before), self.current_residual_rms(self.current_after)
             lines.append("measured − simulated current [A RMS]: "

@@ -137,10 +137,8 @@ class OutputDir:
 
         Raises
         ------
-        ConfigError
-            The marker is a symbolic link or not UTF-8 text.
-        OutputError
-            The marker cannot be read.
+        ConfigError, OutputError
+            As :meth:`written`.
         """
         return {name for name, by in self._writers().items() if by == command}
 
