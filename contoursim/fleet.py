@@ -221,14 +221,14 @@ def plot_fleet(summary):
     import matplotlib.pyplot as plt
 
     effects = summary["effects"]
-    n = max(1, len(effects))
-    fig, axes = plt.subplots(1 + math.ceil(n / 2), 2, figsize=(12, 3.2 * (1 + math.ceil(n / 2))), layout="constrained",
-                             squeeze=False)
+    rows = 1 + math.ceil(len(effects) / 2)  # the counts, then the effects two a row
+    fig, axes = plt.subplots(rows, 2, figsize=(12, 3.2 * rows), layout="constrained", squeeze=False)
     ax = axes[0, 0]
     labels = list(effects) + ["failed"]
     ax.barh(labels, [e["count"] for e in effects.values()] + [len(summary["failed"])],
             color=["C0"] * len(effects) + ["C3"])
     ax.set(xlabel=f"traces (of {summary['traces']})", title="effects named")
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # whole traces
     ax.invert_yaxis()
     axes[0, 1].axis("off")
     failed = "\n".join(textwrap.fill(f"{Path(f['trace']).name}: {f['error']}", 70, subsequent_indent="    ")
