@@ -6,7 +6,7 @@ wrong type, ``ValueError`` for bad values, ``OSError`` for a file that cannot
 be written), with a message that names what is wrong and where.
 """
 
-__all__ = ["ConfigError", "ContoursimWarning", "OutputError", "TraceFormatError", "UnstableLoopError", "PathError"]
+__all__ = ["ChainError", "ConfigError", "ContoursimWarning", "OutputError", "TraceFormatError", "UnstableLoopError", "PathError"]
 
 
 class ConfigError(ValueError):
@@ -29,6 +29,25 @@ class ConfigError(ValueError):
         if source is not None:
             where = f"{source}, line {line}: " if line is not None else f"{source}: "
         super().__init__(where + message)
+
+
+class ChainError(ValueError):
+    """A machine chain whose bodies do not form a tree, or whose axes do not match its bodies' joints.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, naming the bodies.
+    key : str
+        The parameter at fault: ``"parent"`` or ``"axis"`` of a body, or the chain's ``"axes"``.
+    body : int, optional
+        The body (1..n) whose `key` it is; None for the chain's own parameter.
+    """
+
+    def __init__(self, message, key, body=None):
+        self.key = key
+        self.body = body
+        super().__init__(message)
 
 
 class TraceFormatError(ConfigError):

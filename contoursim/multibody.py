@@ -53,7 +53,7 @@ from ._blocks import blocks
 from ._numba import njit
 from .config import FORMAT_DOC, TEXT_KEYS
 from .errormotion import _RAD_PER_URAD, COMPONENTS, ERROR_COLUMNS, ERROR_UNITS, Cyclic, ErrorMotion, read_error_table
-from .exceptions import ConfigError, ContoursimWarning
+from .exceptions import ChainError, ConfigError, ContoursimWarning
 
 __all__ = [
     "Body",
@@ -88,23 +88,24 @@ def lower_body_array(parents):
 
     Raises
     ------
-    ValueError
-        A parent out of range, a body that is its own ancestor.
+    ChainError
+        A parent out of range, or a body that is its own ancestor: its
+        ``body`` is that body (one on the cycle).
     """
     parents = np.asarray(parents)
     if parents.ndim != 1 or parents.size == 0 or not np.issubdtype(parents.dtype, np.integer):
         raise ValueError(f"parents must be a non-empty 1-D sequence of integers, got {parents!r}")
     n = parents.size
-    bad = np.flatnonzero((parents < 0) | (parents > n) | (parents == np.arange(1, n + 1)))
+    bad = np.flatnonzero((parents < 0) | (parents > n))
     if bad.size:
         j = int(bad[0]) + 1
-        raise ValueError(f"parents: body {j} has parent {int(parents[j - 1])}, which is not a body 0..{n} other than itself")
+        raise ChainError(f"parents: body {j} has parent {int(parents[j - 1])}, which is not a body 0..{n}", "parent", j)
     lookup = np.concatenate([[0], parents])  # L(0) = 0
     rows = [np.arange(1, n + 1)]
     while rows[-1].any():
-        if len(rows) > n:
-            j = int(np.flatnonzero(rows[-1])[0]) + 1
-            raise ValueError(f"parents: body {j} is its own ancestor (the bodies do not form a tree)")
+        if len(rows) > n:  # n steps up from any body reach the bed, or a body on a cycle
+            j = int(rows[-1][rows[-1] > 0][0])
+            raise ChainError(f"parents: body {j} is its own ancestor (the bodies do not form a tree)", "parent", j)
         rows.append(lookup[rows[-1]])
     return np.array(rows)
 
@@ -400,7 +401,7 @@ class MachineChain:
         dup = {n for n in names if names.count(n) > 1}
         if dup:
             raise ValueError(f"body names must be unique; repeated: {', '.join(sorted(dup))}")
-        lower = lower_body_array([b.parent for b in bodies])
+        lower = self._lower_body_array()
         lower.flags.writeable = False
         object.__setattr__(self, "lower", lower)
         n = len(bodies)
@@ -410,18 +411,7 @@ class MachineChain:
                 raise ValueError(f"{label} must be a body index, got {value!r}")
         if self.tool == self.workpiece:  # the tool relative to itself: no motion, no error, nothing to map
             raise ValueError(f"tool and workpiece must be different bodies, got body {self.tool} for both")
-        moving = [b.axis for b in bodies if b.axis is not None]
-        shared = next((a for a in moving if moving.count(a) > 1), None)  # one servo axis moving two carriages
-        if shared is not None:
-            first, second = [b.name for b in bodies if b.axis == shared][:2]
-            raise ValueError(f"axis {shared!r} drives two bodies, {first!r} and {second!r}: each axis drives one body")
-        axes = tuple(dict.fromkeys(moving)) if self.axes is None else tuple(self.axes)
-        missing = set(moving) - set(axes)
-        if missing or len(set(axes)) != len(axes):
-            raise ValueError(f"axes {axes} must list each driven axis once; missing: {sorted(missing)}")
-        idle = [a for a in axes if a not in moving]
-        if idle:
-            raise ValueError(f"axes {axes} lists {', '.join(map(repr, idle))}, which no body's joint drives")
+        axes = self._axes()
         object.__setattr__(self, "axes", axes)
         v = _validate.finite_array("tool_axis", self.tool_axis, shape=(3,))
         if abs(np.linalg.norm(v) - 1) > 1e-9:
@@ -434,6 +424,50 @@ class MachineChain:
         object.__setattr__(self, "tool_chain", self.chain_to(self.tool))
         object.__setattr__(self, "work_chain", self.chain_to(self.workpiece))
         object.__setattr__(self, "arrays", self._arrays())
+
+    def _lower_body_array(self):
+        """:func:`lower_body_array` of the bodies' parents, its errors told by the bodies' names."""
+        try:
+            return lower_body_array([b.parent for b in self.bodies])
+        except ChainError as exc:
+            names = ["bed", *(b.name for b in self.bodies)]
+            parent = self.bodies[exc.body - 1].parent
+            if not 0 <= parent <= len(self.bodies):
+                raise ChainError(f"body {names[exc.body]!r}: parent {parent} is not a body 0..{len(self.bodies)}",
+                                 "parent", exc.body) from None
+            cycle = [exc.body]
+            while self.bodies[cycle[-1] - 1].parent != exc.body:
+                cycle.append(self.bodies[cycle[-1] - 1].parent)
+            first = cycle.index(min(cycle))  # told from the cycle's first body
+            cycle = cycle[first:] + cycle[:first]
+            body = self.bodies[cycle[0] - 1]
+            raise ChainError(f"body {body.name!r}: parent = \"{names[body.parent]}\" makes a cycle, "
+                             f"{' → '.join(names[k] for k in [*cycle, cycle[0]])} (each body's parent after it): the "
+                             "bodies must form a tree on 'bed'", "parent", cycle[0]) from None
+
+    def _axes(self):
+        """The column order of q: `axes` checked against the bodies' joints, or the order the bodies drive them in."""
+        driven = {}  # axis -> the body it drives
+        for j, body in enumerate(self.bodies, start=1):
+            if body.axis in driven:  # one servo axis moving two carriages
+                raise ChainError(f"axis {body.axis!r} drives two bodies, {driven[body.axis]!r} and {body.name!r}: each "
+                                 "axis drives one body", "axis", j)
+            if body.axis is not None:
+                driven[body.axis] = body.name
+        if self.axes is None:
+            return tuple(driven)
+        axes = tuple(self.axes)
+        repeated = [axis for k, axis in enumerate(axes) if axis in axes[:k]]
+        missing = [axis for axis in driven if axis not in axes]
+        idle = [axis for axis in axes if axis not in driven]
+        if repeated or missing:
+            what = (f"lists {repeated[0]!r} more than once" if repeated else
+                    f"lacks {', '.join(f'{axis!r} (driven by body {driven[axis]!r})' for axis in missing)}")
+            raise ChainError(f"axes {what}: it lists each axis a body drives, once ({', '.join(driven)})", "axes")
+        if idle:
+            raise ChainError(f"axes lists {', '.join(map(repr, idle))}, which no body drives (the bodies drive "
+                             f"{', '.join(driven)})", "axes")
+        return axes
 
     def _arrays(self):
         """The chain as flat arrays, one entry per body, for :func:`contoursim._chainkernels.axis_jacobian`."""
@@ -1075,66 +1109,35 @@ def chain_from_toml(toml, *keys, extra=()):
 
     base = Path(toml.source).parent
     bodies = [_body_from_toml(toml, base, keys + ("body", i), raw[i], body_index) for i in range(len(raw))]
-    _check_tree_and_axes(toml, keys, bodies, top.get("axis_order"))
-    where = keys
+
+    def fail(message, *key):
+        return toml.error(message, *keys, *key)
+
+    axes = top.get("axis_order")
+    if axes is not None and not (isinstance(axes, list) and all(isinstance(axis, str) for axis in axes)):
+        raise fail(f"axis_order must be a list of axis names in quotes ([\"x\", \"y\", \"z\"]), got {axes!r}", "axis_order")
+    tool = body_index(top["tool"], *keys, "tool")
+    workpiece = body_index(top["workpiece"], *keys, "workpiece")
+    tool_axis = _vector(top, "tool_axis", [0.0, 0.0, 1.0], fail)
+    if not np.linalg.norm(tool_axis) > 0:
+        raise fail(f"tool_axis must be a non-zero vector, got {top['tool_axis']!r}", "tool_axis")
+    tool_tip = _vector(top, "tool_tip_mm", [0.0, 0.0, 0.0], fail)
     try:
-        axes = top.get("axis_order")
-        tool_axis = np.asarray(top.get("tool_axis", [0.0, 0.0, 1.0]), float)
-        if tool_axis.shape == (3,) and not np.linalg.norm(tool_axis) > 0:
-            raise toml.error(f"tool_axis must be a non-zero vector, got {top['tool_axis']!r}", *keys, "tool_axis")
-        tool_tip = np.asarray(top.get("tool_tip_mm", [0.0, 0.0, 0.0]), float)
         return MachineChain(
             tuple(bodies),
-            tool=body_index(top["tool"], *keys, "tool"),
-            workpiece=body_index(top["workpiece"], *keys, "workpiece"),
+            tool=tool,
+            workpiece=workpiece,
             axes=None if axes is None else tuple(axes),
             tool_axis=tool_axis / np.linalg.norm(tool_axis),
             tool_tip=tool_tip,
             name=str(top.get("name", Path(toml.source).stem)),
         )
-    except (ValueError, TypeError) as exc:
-        if isinstance(exc, ConfigError):
-            raise
-        raise toml.error(str(exc), *where) from None
-
-
-def _check_tree_and_axes(toml, keys, bodies, order):
-    """Refuse, at the line of the key and naming the bodies, parents that go round, an axis driving two bodies and an
-    `order` (``axis_order``) that does not list each driven axis once (:class:`MachineChain` says them by index)."""
-    names = ["bed", *(body.name for body in bodies)]
-    for i, body in enumerate(bodies, start=1):
-        path, j = [i], body.parent
-        while j and j not in path:  # up the parents to the bed, or round
-            path.append(j)
-            j = bodies[j - 1].parent
-        if j == i:  # round through this body (one leading into a cycle is left to the cycle's first body)
-            cycle = " → ".join(names[k] for k in [*path, i])
-            raise toml.error(f"body {body.name!r}: parent = \"{names[body.parent]}\" makes a cycle, {cycle} (each "
-                             "body's parent after it): the bodies must form a tree on 'bed'",
-                             *keys, "body", i - 1, "parent")
-    driven = {}  # axis -> the body it drives
-    for i, body in enumerate(bodies):
-        if body.axis in driven:
-            raise toml.error(f"axis {body.axis!r} drives two bodies, {driven[body.axis]!r} and {body.name!r}: each "
-                             "axis drives one body", *keys, "body", i, "axis")
-        if body.axis is not None:
-            driven[body.axis] = body.name
-    if order is None:
-        return
-    if not isinstance(order, list) or not all(isinstance(axis, str) for axis in order):
-        raise toml.error(f"axis_order must be a list of axis names in quotes ([\"x\", \"y\", \"z\"]), got {order!r}",
-                         *keys, "axis_order")
-    repeated = [axis for k, axis in enumerate(order) if axis in order[:k]]
-    missing = [axis for axis in driven if axis not in order]
-    idle = [axis for axis in order if axis not in driven]
-    if repeated or missing:
-        what = (f"lists {repeated[0]!r} more than once" if repeated else
-                f"lacks {', '.join(f'{axis!r} (driven by body {driven[axis]!r})' for axis in missing)}")
-        raise toml.error(f"axis_order {what}: it lists each axis a body drives, once ({', '.join(driven)})",
-                         *keys, "axis_order")
-    if idle:
-        raise toml.error(f"axis_order lists {', '.join(map(repr, idle))}, which no body drives (the bodies drive "
-                         f"{', '.join(driven)})", *keys, "axis_order")
+    except ChainError as exc:  # at the key's line: the body's parent or axis, or axis_order
+        if exc.body is None:
+            raise fail("axis_order" + str(exc).removeprefix(exc.key), "axis_order") from None
+        raise fail(str(exc), "body", exc.body - 1, exc.key) from None
+    except ValueError as exc:
+        raise fail(str(exc)) from None
 
 
 def _body_from_toml(toml, base, where, item, body_index):
@@ -1175,10 +1178,7 @@ def _body_from_toml(toml, base, where, item, body_index):
     for key, values, wanted in (("squareness", squareness, "linear"), ("tilt", tilt, "rotary")):
         if values.any() and (kind != wanted or values[direction]):
             raise fail(f"{key} applies to a {wanted} joint, towards the other two directions", key)
-    offset = item.get("offset_mm", [0.0, 0.0, 0.0])
-    if not isinstance(offset, list) or len(offset) != 3:
-        raise fail("offset_mm must be [x, y, z]", "offset_mm")
-    offset = [_number(v, fail, "offset_mm") for v in offset]
+    offset = _vector(item, "offset_mm", [0.0, 0.0, 0.0], fail)
     travel_key, wrong = ("travel_deg", "travel_mm") if rotary else ("travel_mm", "travel_deg")
     if wrong in item:
         raise fail(f"the travel of a {kind} joint is '{travel_key}'", wrong)
@@ -1351,6 +1351,14 @@ def _warn_short_table(name, tables, travel, rotary, fail):
     message = (f"error table {name!r} covers {lo:g} .. {hi:g}{unit} of the travel {start:g} .. {end:g}{unit}: its first and "
                "last values are held beyond its ends (add rows at the travel's ends to give the errors there)")
     warnings.warn(str(fail(message, "errors", "table")), ContoursimWarning, stacklevel=2)
+
+
+def _vector(table, key, default, fail):
+    """``table[key]`` (or `default`) as an array of 3 finite numbers, refused at the key's line otherwise."""
+    value = table.get(key, default)
+    if not isinstance(value, list) or len(value) != 3:
+        raise fail(f"{key} must be [x, y, z], got {value!r}", key)
+    return np.array([_number(v, fail, key) for v in value])
 
 
 def _number(value, fail, *key):

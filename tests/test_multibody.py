@@ -1,5 +1,6 @@
 """Multibody chain: topology, exact HTM products, first-order model, seed formulas."""
 
+import re
 import warnings
 from dataclasses import replace
 
@@ -13,7 +14,7 @@ from contoursim import multibody
 from contoursim._blocks import BLOCK
 from contoursim.config import TomlFile
 from contoursim.errormotion import Cyclic, ErrorMotion
-from contoursim.exceptions import ConfigError, ContoursimWarning
+from contoursim.exceptions import ChainError, ConfigError, ContoursimWarning
 from contoursim.machine import load_machine as load_preset
 from contoursim.machine import preset_names
 from contoursim.multibody import Body, MachineChain, chain_from_toml, lower_body_array, tilted_axis
@@ -60,7 +61,7 @@ def test_seed_004_preset_has_the_table_1_topology_and_its_chains():
 
 @pytest.mark.parametrize(
     "parents, match",
-    [([0, 3, 2], "own ancestor"), ([0, 5], "not a body"), ([1], "not a body"), ([0.5], "integers")],
+    [([0, 3, 2], "own ancestor"), ([0, 5], "not a body"), ([1], "own ancestor"), ([0.5], "integers")],
 )
 def test_lower_body_array_rejects_non_trees(parents, match):
     with pytest.raises(ValueError, match=match):
@@ -561,6 +562,11 @@ def test_toml_errors_name_file_and_line(old, new, line, match):
         ('workpiece = "bed"', 'workpiece = "bed"\naxis_order = ["x", "y"]', r"^m.toml, line 4: axis_order lists 'y', which "
                                                                              r"no body drives \(the bodies drive x\)"),
         ('workpiece = "bed"', 'workpiece = "bed"\ntool_axis = [0, 0, 0]', r"^m.toml, line 4: tool_axis must be a non-zero"),
+        # were "m.toml: could not convert string to float: 'a'" and "m.toml: tool_tip_mm must have shape (3)": no line
+        ('workpiece = "bed"', 'workpiece = "bed"\ntool_axis = ["a", 0, 1]', r"^m.toml, line 4: tool_axis: expected a finite "
+                                                                           r"number, got 'a'"),
+        ('workpiece = "bed"', 'workpiece = "bed"\ntool_tip_mm = [0, 0]', r"^m.toml, line 4: tool_tip_mm must be \[x, y, z\], "
+                                                                        r"got \[0, 0\]"),
     ],
 )
 def test_toml_chain_errors_name_the_file(old, new, match):
@@ -598,10 +604,33 @@ def test_a_machine_files_tree_and_axes_are_refused_at_the_line_of_the_key_naming
     assert str(info.value).startswith(f"{tmp_path / 'm.toml'}, line {line}: {words}"), str(info.value)
 
 
-def test_a_chain_with_an_axis_driving_two_bodies_is_refused_naming_them():
-    bodies = (Body("Y", 0, "linear", 1, axis="y"), Body("Z", 1, "linear", 2, axis="y"), Body("tool", 2))
-    with pytest.raises(ValueError, match="axis 'y' drives two bodies, 'Y' and 'Z': each axis drives one body"):
+@pytest.mark.parametrize("parents, axes, key, body, words", [
+    ((0, 1, 2), ("y", "y"), "axis", 2, "axis 'y' drives two bodies, 'Y' and 'Z': each axis drives one body"),
+    ((3, 1, 2), ("y", "z"), "parent", 1, "body 'Y': parent = \"tool\" makes a cycle, Y → tool → Z → Y"),
+    ((0, 3, 2), ("y", "z"), "parent", 2, "body 'Z': parent = \"tool\" makes a cycle, Z → tool → Z"),
+    ((0, 2, 2), ("y", "z"), "parent", 2, "body 'Z': parent = \"Z\" makes a cycle, Z → Z"),
+    ((0, 4, 2), ("y", "z"), "parent", 2, "body 'Z': parent 4 is not a body 0..3"),
+])
+def test_a_chain_that_is_not_a_tree_on_its_axes_is_refused_naming_the_bodies(parents, axes, key, body, words):
+    bodies = (Body("Y", parents[0], "linear", 1, axis=axes[0]), Body("Z", parents[1], "linear", 2, axis=axes[1]),
+              Body("tool", parents[2]))
+    with pytest.raises(ChainError) as info:
         MachineChain(bodies, tool=3, workpiece=0)
+    assert str(info.value).startswith(words), str(info.value)
+    assert (info.value.key, info.value.body) == (key, body)
+
+
+@pytest.mark.parametrize("axes, words", [
+    (("y",), "axes lacks 'z' (driven by body 'Z'): it lists each axis a body drives, once (y, z)"),
+    (("y", "z", "y"), "axes lists 'y' more than once"),
+    (("y", "z", "w"), "axes lists 'w', which no body drives (the bodies drive y, z)"),
+])
+def test_a_chains_axes_must_list_each_driven_axis_once(axes, words):
+    bodies = (Body("Y", 0, "linear", 1, axis="y"), Body("Z", 1, "linear", 2, axis="z"), Body("tool", 2))
+    assert MachineChain(bodies, tool=3, workpiece=0, axes=("z", "y")).axes == ("z", "y")
+    with pytest.raises(ChainError, match=re.escape(words)) as info:
+        MachineChain(bodies, tool=3, workpiece=0, axes=axes)
+    assert (info.value.key, info.value.body) == ("axes", None)
 
 
 @pytest.mark.parametrize(
