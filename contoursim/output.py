@@ -16,7 +16,8 @@ line. A command that names itself (``OutputDir(path, by="sweep")``) also
 records the files it writes, on comment lines ``#by sweep NAME``; a file of
 that name written later by another is recorded as ``#by - NAME``. The last
 such line of a name says which command wrote the file, so that a command
-replacing its own earlier set of files removes only those. To a reader of
+replacing its own earlier set of files removes only those, and takes them
+off the record (a file a user saves later under such a name is theirs). To a reader of
 the names alone (an earlier contoursim, a user) these lines are comments; a
 name recorded by an earlier contoursim is no command's.
 """
@@ -230,7 +231,8 @@ class OutputDir:
         """Remove the file `name` that contoursim wrote into the folder (a name on its record), if it is there.
 
         For a run that replaces an earlier run's set of files with fewer: the
-        earlier ones it does not write again would be taken for its own.
+        earlier ones it does not write again would be taken for its own. The
+        name leaves the record: a file saved later under it is not contoursim's.
 
         Parameters
         ----------
@@ -249,6 +251,22 @@ class OutputDir:
             file.unlink(missing_ok=True)  # a link contoursim wrote over a file: the link, never what it names
         except OSError as exc:
             raise OutputError(f"cannot remove {file}: {exc.strerror}") from None
+        self._unrecord(name)
+
+    def _unrecord(self, name):
+        """Take `name` and its ``#by`` lines off the marker (its file removed): a file a user saves later under that
+        name is theirs. The marker is replaced as a whole (:func:`atomic_write`), never written through a link."""
+        lines = self._lines()
+        kept = [line for line in lines if line != name and not (line.startswith(_BY) and
+                                                                 line[len(_BY):].partition(" ")[2] == name)]
+        if kept == lines:
+            return
+        marker = self.path / _MARKER
+        try:
+            with atomic_write(marker, binary=True) as stream:
+                stream.write("".join(line + "\n" for line in kept).encode("utf-8", "surrogateescape"))
+        except OutputError as exc:
+            raise OutputError(f"cannot take {self.path / name} off the record {marker}: {exc}") from None
 
     def _record(self, name):
         """List `name` in the marker (once) and, when it changes, the command writing it (``#by``), appending to the

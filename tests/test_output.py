@@ -57,13 +57,29 @@ def test_the_record_says_which_command_wrote_each_file_in_comments_an_earlier_re
     assert plain.written_by("sweep") == {"sweep.csv", "sweep_x.png"}  # old.png, of an earlier contoursim: no one's
     assert sweep.written() == {"old.png", "sweep_a_path.png", "sweep.csv", "best.csv", "sweep_x.png"}
     names = [line for line in marker.read_text().splitlines() if not line.startswith("#")]  # as a reader of names
-    assert names == ["old.png", "sweep_a_path.png", "sweep.csv", "best.csv", "sweep_x.png"]
+    assert names == ["old.png", "sweep_a_path.png", "sweep.csv", "sweep_x.png", "best.csv"]  # best.csv: off, then on
     assert [line for line in marker.read_text().splitlines() if line.startswith("#by ")] == [
-        "#by sweep sweep.csv", "#by sweep best.csv", "#by - best.csv", "#by sweep best.csv", "#by sweep sweep_x.png",
-        "#by - best.csv"]  # a line when the writer changes: sweep_a_path.png, never a sweep's, has none
+        "#by sweep sweep.csv", "#by sweep sweep_x.png"]  # a line when the writer changes: sweep_a_path.png, never a
+    # sweep's, has none, nor best.csv, off the record when removed and written again by no command
     for by in ("", "-", "two words", 3):
         with pytest.raises(ValueError, match="by names the command writing"):
             output.OutputDir(tmp_path / "out", by=by)
+
+
+def test_a_removed_file_leaves_the_record_so_a_users_file_of_its_name_is_kept(tmp_path):
+    """A file a sweep removed stayed on the record: a user's file saved later under its name was replaced."""
+    sweep = output.OutputDir(tmp_path / "out", by="sweep")
+    for name in ("sweep.csv", "best.csv"):
+        with sweep.write(name) as stream:
+            stream.write("contoursim's")
+    sweep.remove("best.csv")
+    assert sweep.written() == sweep.written_by("sweep") == {"sweep.csv"}
+    (tmp_path / "out" / "best.csv").write_text("mine")
+    with pytest.raises(FileExistsError, match="best.csv exists and contoursim did not write it"):
+        with sweep.write("best.csv") as stream:
+            stream.write("contoursim's again")
+    assert (tmp_path / "out" / "best.csv").read_text() == "mine"
+    assert (tmp_path / "out" / ".contoursim-out").read_text().startswith("# written by contoursim")
 
 
 def test_output_dir_refuses_a_file_and_a_users_folder(tmp_path):
