@@ -5,7 +5,7 @@ For each actual point P, taken when the reference was at sample R:
 1. the package's nearest-sample search (:func:`contoursim.nearest.nearest_knot`)
    over the distinct reference samples (the repeats of a standstill removed)
    on the part of the path connected to R inside the ball of radius 2|P - R|
-   about R: every path point nearer to P than R lies there, so the contour
+   about R (a stretch outside it no longer than its radius connecting): every path point nearer to P than R lies there, so the contour
    error is never larger than the tracking error |P - R|, wherever the path
    turns back on itself, and a branch that only comes near P elsewhere (a
    closed curve's start, a figure-eight's crossing) is not taken;
@@ -282,12 +282,12 @@ def _squared(sample_pos, i, q):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, anchors, idx, act, plane, magnitude,
+def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord, anchors, idx, act, plane, magnitude,
                  s_out, normal, out_of_plane, foot):  # fmt: skip
     """Foot point of each actual point, its arc length and the contour error's parts, into the outputs.
 
     sample_s, sample_pos : arc length and position (N, d) of the reference samples; first : the first
-    sample of each knot (distinct sample); anchors : the knot commanded at each actual point; idx : the
+    sample of each knot (distinct sample); chord : the knots' cumulative chord length; anchors : the knot commanded at each actual point; idx : the
     knot nearest to each actual point (on the anchor's part of the ball); act : the actual points
     (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has none. Fills
     magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
@@ -310,40 +310,48 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, ancho
             best_u = min(max(sample_s[j] - breaks[best_k], 0.0), breaks[best_k + 1] - breaks[best_k])
             _eval_prim(kinds[best_k], rows[best_k], best_u, frame)
         # A nearer point elsewhere on the anchor's part of the ball (another branch at a corner, whose samples
-        # straddle its foot while one of this branch is nearer): walk that part's samples both ways from j. No
-        # path point within arc length |P - K| - best of a sample K is nearer than the best, nor leaves the ball
-        # within 2|P - R| - |K - R| of it; the stretches between two samples that leaves uncovered are refined.
+        # straddle its foot while one of this branch is nearer): walk that part's samples both ways from j, across
+        # a stretch outside the ball no longer than its radius as the search does. No path point within arc
+        # length |P - K| - best of a sample K is nearer than the best, nor leaves the ball within 2|P - R| - |K - R|
+        # of it (nor, K outside, enters it within |K - R| - 2|P - R|: a point outside is farther from P than R);
+        # the stretches between two samples that leaves uncovered are refined.
         for c in range(d):
             r[c] = sample_pos[anchor, c]
         radius = 2.0 * math.sqrt(_squared(sample_pos, anchor, p))
         for step in (-1, 1):
-            a, dr, k_here, whole = j, math.sqrt(_squared(sample_pos, j, r)), -1, False
+            a, dr, k_here, whole, gone = j, math.sqrt(_squared(sample_pos, j, r)), -1, False, -1
             free = math.sqrt(_squared(sample_pos, j, p)) - math.sqrt(best_d)  # excluded arc length about a
             while True:
-                k = _primitive_at(breaks, sample_s[a])
-                if k != k_here:  # a line or plain arc no nearer anywhere than the best: excluded up to its end
-                    if k == best_k:  # the best foot is the nearest point of a line, of a plain arc if not at an end
-                        end = breaks[k + 1] - breaks[k]
-                        whole = kinds[k] == LINE or (kinds[k] == ARC and rows[k, 15] == 0.0 and 0.0 < best_u < end)
-                    else:
-                        whole = _least(kinds[k], rows[k], p, breaks[k + 1] - breaks[k], out) >= best_d
-                    k_here = k
-                reach = radius - dr  # arc length within which the path stays in the ball
-                if whole:
-                    rest = breaks[k + 1] - sample_s[a] if step == 1 else sample_s[a] - breaks[k]  # to its end
-                    free = max(free, rest)
-                    if kinds[k] == LINE:  # in the ball up to its end if that end is (convex), else it ends there
-                        # kinds[k], not LINE: a module constant is a literal to numba, typed apart (a second _eval_prim)
-                        _eval_prim(kinds[k], rows[k], breaks[k + 1] - breaks[k] if step == 1 else 0.0, out)
-                        if (out[0] - r[0]) ** 2 + (out[1] - r[1]) ** 2 + (out[2] - r[2]) ** 2 > radius * radius:
-                            break
-                        reach = max(reach, rest)
-                # past the repeats of a standstill (the same arc length) at least
-                # sample_s[::1]: a strided view to numba, as the knots' chord column the search passes (one _beyond)
-                b = _beyond(sample_s[::1], a, step, max(min(reach, free), 1e-300))
+                if dr > radius:  # a outside the ball (left at sample `gone`, less than the radius ago): no point
+                    free = max(free, dr - radius)  # within dr - radius of it is inside, nor nearer than the best
+                    b = _beyond(sample_s[::1], a, step, dr - radius)
+                else:
+                    k = _primitive_at(breaks, sample_s[a])
+                    if k != k_here:  # a line or plain arc no nearer anywhere than the best: excluded up to its end
+                        if k == best_k:  # the best foot is the nearest point of a line, of a plain arc if not at an end
+                            end = breaks[k + 1] - breaks[k]
+                            whole = kinds[k] == LINE or (kinds[k] == ARC and rows[k, 15] == 0.0 and 0.0 < best_u < end)
+                        else:
+                            whole = _least(kinds[k], rows[k], p, breaks[k + 1] - breaks[k], out) >= best_d
+                        k_here = k
+                    reach = radius - dr  # arc length within which the path stays in the ball
+                    if whole:
+                        rest = breaks[k + 1] - sample_s[a] if step == 1 else sample_s[a] - breaks[k]  # to its end
+                        free = max(free, rest)
+                        if kinds[k] == LINE:  # in the ball up to its end if that end is (convex)
+                            # kinds[k], not LINE: a module constant is a literal to numba, typed apart (a second
+                            # _eval_prim)
+                            _eval_prim(kinds[k], rows[k], breaks[k + 1] - breaks[k] if step == 1 else 0.0, out)
+                            if (out[0] - r[0]) ** 2 + (out[1] - r[1]) ** 2 + (out[2] - r[2]) ** 2 <= radius * radius:
+                                reach = max(reach, rest)
+                    # past the repeats of a standstill (the same arc length) at least
+                    # sample_s[::1]: a strided view to numba, as the knots' chord column the search passes (one _beyond)
+                    b = _beyond(sample_s[::1], a, step, max(min(reach, free), 1e-300))
                 if b < 0 or b >= sample_s.size:
                     break
-                dp = math.sqrt(_squared(sample_pos, b, p))
+                dp, dr = math.sqrt(_squared(sample_pos, b, p)), math.sqrt(_squared(sample_pos, b, r))
+                if gone >= 0 and abs(_chord_between(chord, first, gone, b)) > radius:
+                    break  # away from the ball longer than a clipped corner: the anchor's part of it ended at `gone`
                 lo, hi = min(b - step, b), max(b - step, b)  # two distinct samples: b is the first of its run
                 if (free + dp - math.sqrt(best_d) < abs(sample_s[b] - sample_s[a])
                         and not (s_prev <= sample_s[lo] and sample_s[hi] <= s_next)  # refined above
@@ -352,9 +360,13 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, ancho
                     guess = sample_s[b] if nearer else sample_s[b - step]
                     best_d, best_k, best_u = _refine(kinds, rows, breaks, p, sample_s[lo], sample_s[hi], guess, best_d,
                                                      best_k, best_u, out, frame)  # fmt: skip
-                dr = math.sqrt(_squared(sample_pos, b, r))
-                if dr > radius:  # b leaves the ball: the anchor's part of it ends before b
-                    break
+                if dr > radius:  # b outside the ball: the anchor's part of it ends where the path left it, unless back
+                    if gone < 0:  # within the radius (the tip of a corner the ball clips); a step from inside stays in
+                        gone = b - step  # the ball up to its last sample
+                    if abs(_chord_between(chord, first, gone, b)) > radius:
+                        break
+                else:
+                    gone = -1
                 a, free = b, dp - math.sqrt(best_d)
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
@@ -461,13 +473,14 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
         anchors = _anchors(first, at, part)
         hint = int(idx[part.start - 1]) if part.start else int(anchors[0])
         idx[part] = nearest_knots(knots, anchors, _xyz(act[part]), window, hint)
+    chord = knots[:, 3].copy()  # a stretch outside the ball connects by its chord length, as in the search
     del knots  # before the results are filled
     magnitude, s, normal = np.empty((3, n))
     foot = np.empty((n, d))
     out_of_plane = np.empty(n if d == 3 else 0)
     plane = np.zeros(3) if path.plane_normal is None else np.asarray(path.plane_normal, dtype=float)
     for part in blocks(n):  # the actual points as (block, 3) copies: one compiled signature, no (N, 3) copy
-        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first,
+        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first, chord,
                      _anchors(first, at, part), idx[part], _xyz(act[part]), plane, magnitude[part], s[part],
                      normal[part], out_of_plane[part], foot[part])  # fmt: skip
     if d == 2:  # a 2-D path: (P_a - foot) . z = 0
@@ -476,6 +489,13 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
         act = act.copy()
     return ContourError(magnitude=magnitude, vector=None, foot=foot, s=s, normal=normal, out_of_plane=out_of_plane,
                         actual=act)
+
+
+@njit(cache=True)
+def _chord_between(chord, first, i, j):
+    """Chord length from sample i to sample j along the knots (`chord`: theirs; `first`: each one's first sample),
+    as :func:`contoursim.nearest.nearest_knot` measures a stretch outside its ball [mm]."""
+    return chord[np.searchsorted(first, j, "right") - 1] - chord[np.searchsorted(first, i, "right") - 1]
 
 
 def _anchors(first, at, part):
