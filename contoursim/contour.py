@@ -319,7 +319,8 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord
             r[c] = sample_pos[anchor, c]
         radius = 2.0 * math.sqrt(_squared(sample_pos, anchor, p))
         for step in (-1, 1):
-            a, dr, k_here, whole, gone = j, math.sqrt(_squared(sample_pos, j, r)), -1, False, -1
+            # gone: an int64 -1, as the samples it takes (a literal -1 compiles _chord_between again)
+            a, dr, k_here, whole, gone = j, math.sqrt(_squared(sample_pos, j, r)), -1, False, np.int64(-1)
             free = math.sqrt(_squared(sample_pos, j, p)) - math.sqrt(best_d)  # excluded arc length about a
             while True:
                 if dr > radius:  # a outside the ball (left at sample `gone`, less than the radius ago): no point
@@ -366,7 +367,7 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord
                     if abs(_chord_between(chord, first, gone, b)) > radius:
                         break
                 else:
-                    gone = -1
+                    gone = np.int64(-1)
                 a, free = b, dp - math.sqrt(best_d)
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
