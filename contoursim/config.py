@@ -17,7 +17,7 @@ from types import MappingProxyType
 from ._validate import FLOAT_MAX, closest, shown
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text"]
+__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
@@ -141,6 +141,34 @@ def read_text(file, error=ConfigError):
     return text
 
 
+_LINE_END = re.compile(r"\r\n|\r|\n")
+
+
+def text_lines(text):
+    r"""The lines of `text` as an editor numbers them: split at ``\n``, ``\r\n`` and ``\r`` only.
+
+    :meth:`str.splitlines` also splits at a form feed, at U+0085 (byte 0x85,
+    a Latin-1 file's "…") and at other separators, which numbered the lines
+    after them one too far (and cut a comment holding one in two).
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    list of str
+        Without their line ends; no empty line after a final line end.
+
+    Examples
+    --------
+    >>> text_lines("G1 X1 (caf\x85)\r\nG1 Y1\x0c\n")
+    ['G1 X1 (caf\x85)', 'G1 Y1\x0c']
+    """
+    lines = _LINE_END.split(text)
+    return lines[:-1] if lines[-1] == "" else lines
+
+
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
 _KEY = re.compile(r"""^\s*("[^"]*"|'[^']*'|[A-Za-z0-9_\-]+(?:\s*\.\s*[A-Za-z0-9_\-]+)*)\s*=""")
 
@@ -233,7 +261,7 @@ class TomlFile:
         best = inside = None
         table = ()
         counts = {}
-        for number, line in enumerate(self.text.splitlines(), start=1):
+        for number, line in enumerate(text_lines(self.text), start=1):
             header = _HEADER.match(line)
             if header:
                 path = _split_key(header.group(2))

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
-from .config import read_text
+from .config import read_text, text_lines
 from .exceptions import ConfigError
 
 __all__ = ["COMPONENTS", "ERROR_COLUMNS", "ERROR_UNITS", "Cyclic", "ErrorMotion", "read_error_table"]
@@ -246,7 +246,7 @@ def read_error_table(path, rotary=False):
     """
     path = Path(path)
     source, rotary = str(path), _validate.flag("rotary", rotary)
-    lines = read_text(path).splitlines()
+    lines = text_lines(read_text(path))
     start = next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
     if start is None:
         raise ConfigError("the error table has no header row", source)

@@ -3,8 +3,8 @@
 Words that shape the path: ``G0 G1 G2 G3`` (modal motion), ``G17 G18 G19``
 (arc plane XY, ZX, YZ), ``G90 G91`` (absolute / incremental X Y Z), ``X Y Z``,
 arc centre ``I J K`` (always relative to the arc's start) or radius ``R``
-(negative for the arc over 180°), ``F`` (feed, mm/min, modal), ``M2``/``M30``
-(program end: the rest is ignored). An arc with a move along the plane's
+(negative for the arc over 180°), ``F`` (feed, mm/min, modal, set by any block), ``M2``/``M30``
+(program end: a move in its block runs, the rest is ignored). An arc with a move along the plane's
 normal axis is a helix.
 
 The modes the model assumes are accepted: ``G21`` (mm), ``G94`` (feed per
@@ -21,8 +21,8 @@ path's origin is the work offset), path modes ``G61 G64`` (with LinuxCNC's
 ``G64 P`` tolerance; the planner's own corner rule applies). The dwell ``G4``
 stops the motion at the end of the move before it, which waits there in
 position as at the end of a rapid (:attr:`Program.stops`); its ``P``/``X``
-time (milliseconds or seconds, by dialect) is not a move and is not
-simulated: once in position the axes hold it. Home returns and
+time (milliseconds or seconds, by dialect; ``X`` only without ``P``) is not a move and is not
+simulated: once in position the axes hold it. A move in its block follows the dwell. Home returns and
 machine-coordinate moves (``G28 G30 G53``, e.g. a
 post's ``G28 G91 Z0`` before a tool change) take the axes they name (``G28``
 and ``G30`` without axis words: all) to a machine position contoursim does
@@ -77,9 +77,10 @@ from pathlib import Path as _FilePath
 import numpy as np
 
 from . import _validate
-from .config import read_bytes
+from .config import read_bytes, text_lines
 from .exceptions import ConfigError, ContoursimWarning, PathError
 from .paths import Line, Path, _arc_from_point
+from .simulation import SimResult
 
 __all__ = ["DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "read_gcode"]
 
@@ -243,7 +244,11 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     prims, feeds, lines, texts, ignored, stops, optional = [], [], [], [], {}, {}, []
     away = {}  # axis -> line of the G28/G30/G53 that took it to a machine position, after the first feed move
 
-    for number, raw in enumerate(text.splitlines(), 1):
+    ended = False  # M2/M30: the program ends after its block
+    for number, raw in enumerate(text_lines(text), 1):
+        if ended:
+            break
+
         def fail(message):
             raise ConfigError(message, source=source, line=number)
 
@@ -274,8 +279,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 fail(f"subprogram calls (M{m:g}) are not supported: write the moves out in one program")
             if m not in (2, 30):
                 ignored.setdefault(f"M{m:g}", None)
-        if any(m in (2, 30) for m in mcodes):
-            break
+        ended = any(m in (2, 30) for m in mcodes)  # a move in its block runs first, as on Fanuc and LinuxCNC
         for group in ((0, 1, 2, 3), tuple(_PLANES), (90, 91)):  # a modal group twice: Fanuc takes the last, others refuse
             twice = [f"G{g:g}" for g in gcodes if g in group]
             if len(twice) > 1:
@@ -300,21 +304,24 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 nonmodal = g if g in _MACHINE_MOVES else nonmodal
             else:
                 fail(f"unknown word G{g:g} (supported: {_SUPPORTED})")
-        if nonmodal is not None:
-            if nonmodal == 4 and any(values.get(letter, 0.0) < 0 for letter in "PX"):
-                fail(f"a dwell's time (G4 P or X) must be zero or positive, got {values.get('P', values.get('X')):g}")
-            if cutting and nonmodal == 4:
+        if "F" in values:  # the feed is set first, in any block
+            if values["F"] <= 0:
+                fail(f"F must be positive, got {values['F']:g}")
+            feed = values["F"] / 60.0
+        if nonmodal == 4:  # the dwell: its time is P, or X (Fanuc) when there is no P; a move in its block follows it
+            time = "P" if "P" in values else "X"
+            if values.get(time, 0.0) < 0:
+                fail(f"a dwell's time (G4 P or X) must be zero or positive, got {values[time]:g}")
+            values.pop(time, None)
+            if cutting:
                 stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
-            elif cutting:
+        elif nonmodal is not None:
+            if cutting:
                 moved = [a for a in "XYZ" if a in values] or (list("XYZ") if nonmodal in (28, 30) else [])
                 away.update(dict.fromkeys(moved, number))
             continue
         if "P" in values and 64 not in gcodes:
             fail("P belongs to a dwell (G4)")
-        if "F" in values:
-            if values["F"] <= 0:
-                fail(f"F must be positive, got {values['F']:g}")
-            feed = values["F"] / 60.0
         axes = [a for a in "XYZ" if a in values]
         arc_words = [a for a in "IJKR" if a in values]
         if not axes and not arc_words:
@@ -412,6 +419,7 @@ class BlockErrors:
         -------
         str
         """
+        top = _validate.positive_int("top", top)
         um = lambda value: f"{'-':>14}" if np.isnan(value) else f"{1e3 * value:>14.2f}"  # noqa: E731
         rows = [f"{self.line[k]:>6}{um(self.contour_max[k])}{um(self.tracking_max[k])}  {self.text[k]}"
                 for k in np.flatnonzero(~self.rapid)[:top]]
@@ -455,7 +463,18 @@ def block_errors(program, result):
     -------
     BlockErrors
         Worst blocks first.
+
+    Raises
+    ------
+    TypeError
+        `program` is not a :class:`Program`, or `result` not a simulation result.
+    ValueError
+        `result` is not a simulation of the program's path, or has no contour error.
     """
+    if not isinstance(program, Program):
+        raise TypeError(f"program must be a Program (read_gcode), got {type(program).__name__}")
+    if not isinstance(result, SimResult):
+        raise TypeError(f"result must be a SimResult (simulate), got {type(result).__name__}")
     trajectory = result.trajectory
     if trajectory.path is not program.path or result.contour is None:
         raise ValueError("result must be a simulation of the program's path, with its contour error")

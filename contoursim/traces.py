@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate
-from .config import read_text
+from .config import read_text, text_lines
 from .exceptions import TraceFormatError
 from .output import writing
 
@@ -262,7 +262,7 @@ def read_trace(file):
         a measured column that does not follow its reference (:data:`FOLLOWING_GAIN`).
     """
     source = str(file)
-    lines = read_text(file, TraceFormatError).splitlines()  # a leading BOM (Excel) is dropped
+    lines = text_lines(read_text(file, TraceFormatError))  # a leading BOM (Excel) is dropped
 
     metadata = {}
     units_line = units_key = None

@@ -225,6 +225,36 @@ def test_a_dwell_stops_the_motion_and_waits_in_position(tmp_path):
     assert np.abs(plain.velocity[np.abs(plain.position[:, 0] - 10) < 0.01, 0]).min() == pytest.approx(20.0)
 
 
+@pytest.mark.parametrize("block, line, feed, stops", [
+    ("G1 Y10 M30\nG1 X0", 4, 600, ()),  # the program ends after the move of its block: G1 X0 is not run
+    ("G1 Y10 M2\nG1 X0", 4, 600, ()),
+    ("G4 P0.5 G1 Y10", 4, 600, (0,)),  # the dwell, then the move of its block
+    ("G4 P0.5 F300\nG1 Y10", 5, 300, (0,)),  # an F in a dwell's block sets the feed
+    ("G4 X0.5\nG1 Y10 F300", 5, 300, (0,)),  # X without P is the dwell's time (Fanuc), not a move
+])
+def test_a_move_in_a_block_that_ends_the_program_or_dwells_is_run(block, line, feed, stops):
+    """A move in the block of M30/M2 or of a G4 was dropped without a word (as if the block held no move)."""
+    program = read_gcode(f"G17 G90\nG0 X0 Y0\nG1 X10 F600\n{block}\n")
+    np.testing.assert_allclose(program.path.end, [10, 10, 0])
+    assert program.lines.tolist() == [3, line]
+    np.testing.assert_allclose(program.feeds * 60.0, [600, feed])
+    assert program.stops == stops
+
+
+@pytest.mark.parametrize("separator", ["\x85", "\x0c", "\u2028"])
+def test_lines_are_numbered_as_an_editor_numbers_them(tmp_path, separator):
+    """A Latin-1 '…' (byte 0x85, U+0085 read as Latin-1), a form feed or U+2028 split a line: the lines after it were
+    numbered one too far, and a comment holding one was refused as unbalanced."""
+    program = read_gcode(f"G17 (Fr\xe4se {separator} 1)\nG0 X0 Y0 ; caf{separator}\nG1 X10 F600\nG1 Y10 F300\n")
+    assert program.lines.tolist() == [3, 4]
+    with pytest.raises(ConfigError, match="^<gcode>, line 4: unknown word Q5"):
+        read_gcode(f"G17\nG0 X0 Y0 ; {separator}\nG1 X10 F600\nG1 Y10 Q5\n")
+    if separator == "\x85":  # as a Latin-1 file holds it
+        (tmp_path / "p.nc").write_bytes(b"G17 (Fr\xe4se \x85)\nG0 X0 Y0\nG1 X10 F600\nG1 Y10 Q5\n")
+        with pytest.raises(ConfigError, match=r"p.nc, line 4: unknown word Q5"):
+            read_gcode(tmp_path / "p.nc")
+
+
 def test_a_program_that_ignores_nothing_warns_nothing(recwarn):
     read_gcode("G0 X0 Y0\nG1 X10 F600\n")
     assert not recwarn.list
@@ -337,3 +367,10 @@ def test_block_errors_are_each_blocks_worst_samples_worst_block_first():
     table = errors.table(top=4).splitlines()
     assert table[0].split() == ["line", "contour", "max", "tracking", "max", "block"] and len(table) == 5
     assert table[1].split()[0] == "6" and table[4].split() == ["3", "-", "-", "G1", "X9.9992"]
+    # were an AttributeError from inside, and every row but the last
+    with pytest.raises(TypeError, match="program must be a Program"):
+        block_errors(None, result)
+    with pytest.raises(TypeError, match="result must be a SimResult"):
+        block_errors(program, None)
+    with pytest.raises(ValueError, match="top must be at least 1, got -1"):
+        errors.table(top=-1)
