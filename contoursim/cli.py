@@ -77,7 +77,10 @@ def _trajectory(model, path_file, job=None, direction=None):
     except ConfigError:
         raise
     except ValueError as exc:  # a feed above the machine's max feed, a run too large for the memory: naming the file
-        raise ConfigError(str(exc), str(source)) from None
+        primitive = getattr(exc, "primitive", None)  # and a program's feed by its block's line
+        line = None if primitive is None or read.program is None or source != library_file(path_file) else (
+            int(read.program.lines[primitive]))
+        raise ConfigError(str(exc), str(source), line) from None
 
 
 def _feed_override(job, path_file):
@@ -731,12 +734,17 @@ def main(argv=None, compile_notice=False):
                                           help="write every Nth sample to the trace CSV (default: 1, all, exact to the nm)")
     args = parser.parse_args(argv)
 
+    shown = set()  # each warning once: a file read for each of several runs warned once a run
+
     def show(message, category, filename, lineno, *details):
         if issubclass(category, ContoursimWarning):
-            _stderr_line(f"contoursim {args.command}: warning: {message}")
+            line = f"contoursim {args.command}: warning: {message}"
         else:  # a backstop: one line, saying where (the sources of such warnings are guarded)
-            _stderr_line(f"contoursim {args.command}: warning: {category.__name__}: {message} "
-                         f"({Path(filename).name}, line {lineno})")
+            line = (f"contoursim {args.command}: warning: {category.__name__}: {message} "
+                    f"({Path(filename).name}, line {lineno})")
+        if line not in shown:
+            shown.add(line)
+            _stderr_line(line)
 
     try:
         with warnings.catch_warnings(), _compile_notice(args.command) if compile_notice else nullcontext():

@@ -81,7 +81,19 @@ class ContoursimWarning(UserWarning):
 
 
 class PathError(ValueError):
-    """A reference path is degenerate (zero length, collinear arc points, ...)."""
+    """A reference path is degenerate (zero length, collinear arc points, ...), or one the machine cannot follow.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong.
+    primitive : int, optional
+        The index of the path's primitive at fault (a G-code program maps it to its block's line).
+    """
+
+    def __init__(self, message, primitive=None):
+        self.primitive = primitive
+        super().__init__(message)
 
 
 class UnstableLoopError(ValueError):

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _memory, _validate
+from .exceptions import PathError
 from .paths import Path
 from .trajectory import Trajectory
 
@@ -342,10 +343,8 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         max_feed = _validate.positive("max_feed", max_feed)
         if feeds.max() > max_feed:
             i = int(np.argmax(feeds))
-            raise ValueError(
-                f"feed {feeds[i]:.6g} mm/s ({feeds[i] * 60:.6g} mm/min, segment {i}) exceeds "
-                f"max_feed = {max_feed:.6g} mm/s ({max_feed * 60:.6g} mm/min)"
-            )
+            raise PathError(f"feed {feeds[i]:.6g} mm/s ({feeds[i] * 60:.6g} mm/min, segment {i}) exceeds "
+                            f"max_feed = {max_feed:.6g} mm/s ({max_feed * 60:.6g} mm/min)", primitive=i)
     limits = feeds.copy()
     if centripetal_accel is not None:
         ac = _validate.positive("centripetal_accel", centripetal_accel)

@@ -374,7 +374,7 @@ def report_file(file, form, what, out=None, written=()):
     out : str or Path, optional
         The output folder of the same run, not made yet: the report may not be it.
     written : collection of str
-        Names of the files the run writes into `out`: the report may not be one of them.
+        Names of the files the run writes into `out`: the report may not be one of them, nor the folder's record.
 
     Returns
     -------
@@ -393,7 +393,7 @@ def report_file(file, form, what, out=None, written=()):
     file = Path(file)
     if out is not None and file.resolve() == Path(out).resolve():  # the folder made first, the report refused after it
         raise ConfigError(f"{file} is the output directory (--out); name a file to write the {what} to")
-    if out is not None and file.name in written and file.resolve().parent == Path(out).resolve():
+    if out is not None and file.name in {*written, _MARKER} and file.resolve().parent == Path(out).resolve():
         raise ConfigError(f"{file} is a file this run writes into its output directory (--out); name another file to "
                           f"write the {what} to")
     if file.is_dir():

@@ -193,10 +193,11 @@ def test_effects_out_of_range_are_refused_by_file_and_line(tmp_path, capsys, eff
              f"{tmp_path / 'job.toml'}, line {line}: {words}")
 
 
-def test_a_feed_over_the_machines_max_names_the_file(tmp_path, capsys):
-    (tmp_path / "fast.nc").write_text("G21 G90 G17\nG1 X0 Y0 F99000\nG1 X50\nM30\n")
+def test_a_feed_over_the_machines_max_names_the_file_and_the_line_of_the_block(tmp_path, capsys):
+    """The error named the path's segment 2 (its third primitive), not the program's line 5."""
+    (tmp_path / "fast.nc").write_text("G21 G90 G17\nG1 X0 Y0 F600\nG1 X10\nG1 Y10\nG1 X0 F99000\nG1 Y0 F600\nM30\n")
     _refused(capsys, ["simulate", str(tmp_path / "fast.nc"), "--out", str(tmp_path / "out")],
-             f"{tmp_path / 'fast.nc'}: feed 1650 mm/s (99000 mm/min, segment 0) exceeds max_feed = 500 mm/s")
+             f"{tmp_path / 'fast.nc'}, line 5: feed 1650 mm/s (99000 mm/min, segment 2) exceeds max_feed = 500 mm/s")
 
 
 def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
@@ -965,13 +966,15 @@ def test_a_diagnosis_report_onto_a_file_the_run_writes_is_refused_before_it_runs
     assert not out.exists()
 
 
-def test_a_comparison_json_onto_a_plot_the_run_writes_is_refused_before_it_runs(tmp_path, capsys):
-    """--json out/line_compare_path.png --out out: the plot was written, then the JSON replaced it."""
+@pytest.mark.parametrize("name", ["line_compare_path.png", ".contoursim-out"])
+def test_a_comparison_json_onto_a_file_the_run_writes_is_refused_before_it_runs(tmp_path, capsys, name):
+    """--json out/line_compare_path.png --out out: the plot was written, then the JSON replaced it; --json
+    out/.contoursim-out replaced the folder's record, and the next run into it refused its own plots."""
     (tmp_path / "line.nc").write_text("G21 G90 G17\nG1 X0 Y0 F1000\nG1 X20\nG1 X0\nM30\n")
     out = tmp_path / "out"
     _refused(capsys, ["compare", str(tmp_path / "line.nc"), "--strategies", "none", "--out", str(out), "--json",
-                      str(out / "line_compare_path.png")],
-             f"{out / 'line_compare_path.png'} is a file this run writes into its output directory")
+                      str(out / name)],
+             f"{out / name} is a file this run writes into its output directory")
     assert not out.exists()
 
 
@@ -1006,3 +1009,12 @@ def test_a_folders_traces_whose_suffix_is_upper_case_are_in_the_fleet(tmp_path):
     for name in ("night_1.csv", "NIGHT_2.CSV", "night_3.Csv", "notes.txt"):
         (tmp_path / name).write_text("t,x_ref,x\n")
     assert [f.name for f in trace_files([tmp_path])] == ["NIGHT_2.CSV", "night_1.csv", "night_3.Csv"]
+
+
+def test_a_warning_of_a_file_read_for_each_run_is_said_once(tmp_path, capsys):
+    """--geometric-compensation runs the program twice: its ignored words were listed twice."""
+    (tmp_path / "p.nc").write_text("G21 G90 G17\nM3 S8000\nG1 X0 Y0 F1000\nG1 X5\nG1 Y5\nM30\n")
+    assert main(["simulate", str(tmp_path / "p.nc"), "--machine", "vertical_mill_3axis", "--geometric-compensation",
+                 "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("ignored (no contour motion): S8000 M3") == 1, err
