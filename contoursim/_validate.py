@@ -379,6 +379,24 @@ def positive_int(name, value, least=1):
     return int(value)
 
 
+def seed(name, value):
+    """Return `value` as an int after checking it is a random seed: a whole number from 0 to 2**53 - 1 (exact as a
+    float, as a trace's metadata holds it).
+
+    Raises
+    ------
+    TypeError
+        `value` is not an integer (booleans are not).
+    ValueError
+        `value` is negative or from 2**53 on.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be a whole number from 0 to 2**53 - 1, got {value!r}")
+    if not 0 <= value < 2**53:
+        raise ValueError(f"{name} must be a whole number from 0 to 2**53 - 1, got {value!r}")
+    return int(value)
+
+
 def commanded(at, n_points, n_samples):
     """The reference sample commanded at each of `n_points` actual points (`at`), checked; None for "point i at sample i".
 

@@ -131,6 +131,8 @@ def run_job(model, path_file, job=None, strategies=(), label=None, direction=Non
         warnings.simplefilter("always", ContoursimWarning)
         try:
             result = simulate(model, trajectory, strategies, settle=0.0)  # held already
+        except UnstableLoopError:  # the machine with its effects, not the path
+            raise
         except ValueError as exc:  # the path against the machine (its axes, their travel): naming the path's file
             raise ConfigError(str(exc), str(path_file)) from None
     for warning in caught:  # say which run

@@ -330,14 +330,8 @@ class Effect:
 
 def _option(name, axis, key, allowed, value):
     """An option's value checked against what it allows (default when `value` is None)."""
-    if allowed is int:
-        if value is None:
-            return 0
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise TypeError(f"{name}.{axis}: {key} must be a non-negative integer, got {value!r}")
-        if value < 0:
-            raise ValueError(f"{name}.{axis}: {key} must be a non-negative integer, got {value!r}")
-        return int(value)
+    if allowed is int:  # a seed
+        return 0 if value is None else _validate.seed(f"{name}.{axis}: {key}", value)
     if allowed == "axes":
         choices = tuple(a for a in _AXES if a not in axis)
         default = next(a for a in choices)

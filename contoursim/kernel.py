@@ -305,11 +305,7 @@ class LoopEffects:
             if value >= 1:
                 raise ValueError(f"{name} must be between 0 and 1 (exclusive), got {value!r}")
             checked[name] = value
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
-            raise TypeError(f"seed must be an integer, got {self.seed!r}")
-        if not 0 <= self.seed < 2**53:
-            raise ValueError(f"seed must be from 0 to 2**53 - 1, got {self.seed!r}")
-        checked["seed"] = int(self.seed)
+        checked["seed"] = _validate.seed("seed", self.seed)
         for name, value in checked.items():
             object.__setattr__(self, name, value)
 

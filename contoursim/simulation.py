@@ -619,9 +619,11 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     away = _ran_away(response.position)
     if away.max() >= 0:
         a = int(np.argmax(away >= 0))
-        raise UnstableLoopError(f"the simulation of axis {list(servos)[a]!r} ran away beyond ±{MAX_TRAVEL:g} mm by "
-                                f"t = {trajectory.t[away[a]]:.6g} s: its loop with these effects (or this coupling) is "
-                                "unstable")
+        axis = list(servos)[a]
+        effects = [e.label for e in model.effects if axis in e.axis] or ["none"]
+        raise UnstableLoopError(f"the simulation of axis {axis!r} ran away beyond ±{MAX_TRAVEL:g} mm by "
+                                f"t = {trajectory.t[away[a]]:.6g} s: its loop with these effects (on {axis}: "
+                                f"{', '.join(effects)}) or this coupling is unstable")
     elapsed = _elapsed(trajectory)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)

@@ -68,7 +68,9 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     (("squareness", "x"), {"angle_urad": 8.0}, "axis must be 2 different axis letters"),
     (("squareness", "xx"), {"angle_urad": 8.0}, "axis must be 2 different axis letters"),
     (("straightness", "x"), {"peak_um": 3.0, "error_direction": "x"}, "error_direction must be one of 'y', 'z'"),
-    (("noise", "x"), {"rms_um": 0.1, "seed": -1}, "seed must be a non-negative integer"),
+    (("noise", "x"), {"rms_um": 0.1, "seed": -1}, "seed must be a whole number from 0 to 2"),
+    # was refused by the kernel at the run, naming the path file
+    (("noise", "x"), {"rms_um": 0.1, "seed": 2**53}, "seed must be a whole number from 0 to 2"),
     (("time_delay", "x"), {"delay_s": 1e-3, "kind": "velocity"},
      "kind must be one of 'command', 'feedback', 'position', got 'velocity'"),
 ])
@@ -78,7 +80,7 @@ def test_a_bad_effect_says_what_is_wrong(args, kwargs, message):
 
 
 @pytest.mark.parametrize("args, kwargs, message", [
-    (("noise", "x"), {"rms_um": 0.1, "seed": 1.5}, "seed must be a non-negative integer"),
+    (("noise", "x"), {"rms_um": 0.1, "seed": 1.5}, "seed must be a whole number from 0 to 2"),
     (("backlash", 1), {"lost_motion_um": 8.0}, "axis must be a string of axis letters"),
 ])
 def test_an_effect_of_the_wrong_type_says_so(args, kwargs, message):

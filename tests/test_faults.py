@@ -1018,3 +1018,14 @@ def test_a_warning_of_a_file_read_for_each_run_is_said_once(tmp_path, capsys):
                  "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
     assert err.count("ignored (no contour motion): S8000 M3") == 1, err
+
+
+def test_a_loop_its_effects_make_unstable_is_said_so_naming_them_not_the_path_file(tmp_path, capsys):
+    """A feedback delay of 12.6 ms (within the effect's range) makes X's loop unstable: the error blamed the path file
+    ('small.toml: the simulation of axis 'x' ran away ...') and did not say which effect."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "small.toml"\n\n[[effect]]\nname = "time_delay"\n'
+                                       'axis = "x"\ndelay_s = 0.0126\nkind = "feedback"\n')
+    line = _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+                    "the simulation of axis 'x' ran away", "(on x: time_delay.x) or this coupling is unstable")
+    assert "small.toml" not in line
