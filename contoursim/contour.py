@@ -5,7 +5,8 @@ For each actual point P, taken when the reference was at sample R:
 1. the package's nearest-sample search (:func:`contoursim.nearest.nearest_knot`)
    over the distinct reference samples (the repeats of a standstill removed)
    on the part of the path connected to R inside the ball of radius 2|P - R|
-   about R (a stretch outside it no longer than its radius connecting): every path point nearer to P than R lies there, so the contour
+   about R (a stretch outside it no longer than its radius connecting):
+   every path point nearer to P than R lies there, so the contour
    error is never larger than the tracking error |P - R|, wherever the path
    turns back on itself, and a branch that only comes near P elsewhere (a
    closed curve's start, a figure-eight's crossing) is not taken;
@@ -287,8 +288,9 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord
     """Foot point of each actual point, its arc length and the contour error's parts, into the outputs.
 
     sample_s, sample_pos : arc length and position (N, d) of the reference samples; first : the first
-    sample of each knot (distinct sample); chord : the knots' cumulative chord length; anchors : the knot commanded at each actual point; idx : the
-    knot nearest to each actual point (on the anchor's part of the ball); act : the actual points
+    sample of each knot (distinct sample); chord : the knots' cumulative chord length; anchors : the knot
+    commanded at each actual point; idx : the knot nearest to each actual point (on the anchor's part of the
+    ball); act : the actual points
     (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has none. Fills
     magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
     """

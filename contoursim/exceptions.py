@@ -6,7 +6,8 @@ wrong type, ``ValueError`` for bad values, ``OSError`` for a file that cannot
 be written), with a message that names what is wrong and where.
 """
 
-__all__ = ["ChainError", "ConfigError", "ContoursimWarning", "OutputError", "TraceFormatError", "UnstableLoopError", "PathError"]
+__all__ = ["ChainError", "ConfigError", "ContoursimWarning", "OutputError", "TraceFormatError", "UnstableLoopError",
+           "PathError"]
 
 
 class ConfigError(ValueError):

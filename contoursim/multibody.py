@@ -1115,7 +1115,8 @@ def chain_from_toml(toml, *keys, extra=()):
 
     axes = top.get("axis_order")
     if axes is not None and not (isinstance(axes, list) and all(isinstance(axis, str) for axis in axes)):
-        raise fail(f"axis_order must be a list of axis names in quotes ([\"x\", \"y\", \"z\"]), got {axes!r}", "axis_order")
+        raise fail(f"axis_order must be a list of axis names in quotes ([\"x\", \"y\", \"z\"]), got {axes!r}",
+                   "axis_order")
     tool = body_index(top["tool"], *keys, "tool")
     workpiece = body_index(top["workpiece"], *keys, "workpiece")
     tool_axis = _vector(top, "tool_axis", [0.0, 0.0, 1.0], fail)
