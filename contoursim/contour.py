@@ -32,7 +32,7 @@ from ._numba import njit
 
 from . import _validate
 from ._blocks import blocks
-from .nearest import _beyond, fill_chord, moved, nearest_knots
+from .nearest import _beyond, moved, nearest_knots
 from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
 
 __all__ = ["ContourError", "exact_contour_error"]
@@ -283,14 +283,13 @@ def _squared(sample_pos, i, q):
 
 
 @njit(cache=True)
-def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord, anchors, idx, act, plane, magnitude,
+def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, anchors, idx, act, plane, magnitude,
                  s_out, normal, out_of_plane, foot):  # fmt: skip
     """Foot point of each actual point, its arc length and the contour error's parts, into the outputs.
 
     sample_s, sample_pos : arc length and position (N, d) of the reference samples; first : the first
-    sample of each knot (distinct sample); chord : the knots' cumulative chord length; anchors : the knot
-    commanded at each actual point; idx : the knot nearest to each actual point (on the anchor's part of the
-    ball); act : the actual points
+    sample of each knot (distinct sample); anchors : the knot commanded at each actual point; idx : the
+    knot nearest to each actual point (on the anchor's part of the ball); act : the actual points
     (N, 3), z = 0 for a 2-D path; plane : the path's plane normal, zero when it has none. Fills
     magnitude, s_out, normal (N,), foot (N, d) and, for d = 3, out_of_plane (N,).
     """
@@ -321,8 +320,7 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord
             r[c] = sample_pos[anchor, c]
         radius = 2.0 * math.sqrt(_squared(sample_pos, anchor, p))
         for step in (-1, 1):
-            # gone: an int64 -1, as the samples it takes (a literal -1 compiles _chord_between again)
-            a, dr, k_here, whole, gone = j, math.sqrt(_squared(sample_pos, j, r)), -1, False, np.int64(-1)
+            a, dr, k_here, whole, gone = j, math.sqrt(_squared(sample_pos, j, r)), -1, False, -1
             free = math.sqrt(_squared(sample_pos, j, p)) - math.sqrt(best_d)  # excluded arc length about a
             while True:
                 if dr > radius:  # a outside the ball (left at sample `gone`, less than the radius ago): no point
@@ -348,12 +346,12 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord
                             if (out[0] - r[0]) ** 2 + (out[1] - r[1]) ** 2 + (out[2] - r[2]) ** 2 <= radius * radius:
                                 reach = max(reach, rest)
                     # past the repeats of a standstill (the same arc length) at least
-                    # sample_s[::1]: a strided view to numba, as the knots' chord column the search passes (one _beyond)
+                    # sample_s[::1]: a strided view to numba, as the knots' length column the search passes (one _beyond)
                     b = _beyond(sample_s[::1], a, step, max(min(reach, free), 1e-300))
                 if b < 0 or b >= sample_s.size:
                     break
                 dp, dr = math.sqrt(_squared(sample_pos, b, p)), math.sqrt(_squared(sample_pos, b, r))
-                if gone >= 0 and abs(_chord_between(chord, first, gone, b)) > radius:
+                if gone >= 0 and abs(sample_s[b] - sample_s[gone]) > radius:
                     break  # away from the ball longer than a clipped corner: the anchor's part of it ended at `gone`
                 lo, hi = min(b - step, b), max(b - step, b)  # two distinct samples: b is the first of its run
                 if (free + dp - math.sqrt(best_d) < abs(sample_s[b] - sample_s[a])
@@ -366,10 +364,10 @@ def _foot_points(kinds, rows, breaks, closed, sample_s, sample_pos, first, chord
                 if dr > radius:  # b outside the ball: the anchor's part of it ends where the path left it, unless back
                     if gone < 0:  # within the radius (the tip of a corner the ball clips); a step from inside stays in
                         gone = b - step  # the ball up to its last sample
-                    if abs(_chord_between(chord, first, gone, b)) > radius:
+                    if abs(sample_s[b] - sample_s[gone]) > radius:
                         break
                 else:
-                    gone = np.int64(-1)
+                    gone = -1
                 a, free = b, dp - math.sqrt(best_d)
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
@@ -466,24 +464,23 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     at = _validate.commanded(at, n, len(position))  # None: no (N,) array of sample indices
     # the knots, the distinct reference samples: their first samples and, while the search needs them, positions
     first = np.flatnonzero(moved(position)).astype(np.int32)  # int32 (as idx): 2**31 samples would need ~1 TB
-    knots = np.zeros((first.size, 4))  # x, y, z and the chord length
+    knots = np.zeros((first.size, 4))  # x, y, z and the arc length: the search's length along the path, as the walk's
     for part in blocks(first.size):
         knots[part, :d] = position[first[part]]
-    fill_chord(knots)
+        knots[part, 3] = trajectory.s[first[part]]
     knots.flags.writeable = False  # as distinct()'s: one compiled signature of the search
     idx = np.empty(n, np.int32)  # the nearest knot to each actual point
     for part in blocks(n):  # as below: no (N, 3) copy of the actual points, no (N,) array of anchors
         anchors = _anchors(first, at, part)
         hint = int(idx[part.start - 1]) if part.start else int(anchors[0])
         idx[part] = nearest_knots(knots, anchors, _xyz(act[part]), window, hint)
-    chord = knots[:, 3].copy()  # a stretch outside the ball connects by its chord length, as in the search
     del knots  # before the results are filled
     magnitude, s, normal = np.empty((3, n))
     foot = np.empty((n, d))
     out_of_plane = np.empty(n if d == 3 else 0)
     plane = np.zeros(3) if path.plane_normal is None else np.asarray(path.plane_normal, dtype=float)
     for part in blocks(n):  # the actual points as (block, 3) copies: one compiled signature, no (N, 3) copy
-        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first, chord,
+        _foot_points(path.kinds, path.rows, path.breaks, path.closed, trajectory.s, position, first,
                      _anchors(first, at, part), idx[part], _xyz(act[part]), plane, magnitude[part], s[part],
                      normal[part], out_of_plane[part], foot[part])  # fmt: skip
     if d == 2:  # a 2-D path: (P_a - foot) . z = 0
@@ -492,13 +489,6 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
         act = act.copy()
     return ContourError(magnitude=magnitude, vector=None, foot=foot, s=s, normal=normal, out_of_plane=out_of_plane,
                         actual=act)
-
-
-@njit(cache=True)
-def _chord_between(chord, first, i, j):
-    """Chord length from sample i to sample j along the knots (`chord`: theirs; `first`: each one's first sample),
-    as :func:`contoursim.nearest.nearest_knot` measures a stretch outside its ball [mm]."""
-    return chord[np.searchsorted(first, j, "right") - 1] - chord[np.searchsorted(first, i, "right") - 1]
 
 
 def _anchors(first, at, part):

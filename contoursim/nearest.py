@@ -9,7 +9,7 @@ point of the same instant, not by the history of the search:
 
     the part of the path that is connected to R inside the ball of radius
     2|P - R| about R, where a stretch that leaves the ball for no more than
-    its radius of chord length connects too.
+    its radius of length along the path (``L`` below) connects too.
 
 Every path point nearer to P than R lies in that ball, so the distance
 found is never larger than the tracking error |P - R| (R itself is a
@@ -24,12 +24,13 @@ stretch far outside the ball and is not taken.
 
 The search runs over the *knots*, the reference samples with the repeats of a
 standstill removed (:func:`distinct`): at an exact stop the interpolator
-repeats the corner sample for many servo periods. Each knot carries the
-cumulative chord length of the knots up to it, ``L``; since
-|K_i - K_j| <= |L_i - L_j| (the triangle inequality), a knot whose distance to
-R leaves a slack below the ball's radius, and whose distance to P exceeds the
-best one found by a margin, rules out every knot within that slack and margin
-of chord length, which are skipped by a galloping search on ``L`` (sphere
+repeats the corner sample for many servo periods. Each knot carries its
+length along the path, ``L``: the cumulative chord length of the knots up to
+it, or (:func:`contoursim.contour.exact_contour_error`, which knows the path)
+their arc length; since |K_i - K_j| <= |L_i - L_j| (the triangle inequality),
+a knot whose distance to R leaves a slack below the ball's radius, and whose
+distance to P exceeds the best one found by a margin, rules out every knot
+within that slack and margin of ``L``, which are skipped by a galloping search on ``L`` (sphere
 tracing along the path). The knot found for the previous tool position, the
 *hint*, seeds the best distance: a short descent from it (a few knots) finds
 the foot point of a tool that follows the path, so that the scan of the ball
@@ -186,10 +187,9 @@ def _descend(knots, hint, p, window):
 def _beyond(length, j, step, slack):
     """The first knot past j (in direction step = ±1) whose cumulative `length` differs from j's by >= slack.
 
-    `length` (M,) is non-decreasing [mm]: the knots' chord length (the last
-    column of :func:`distinct`'s read-only knots, a strided view) or the
-    samples' arc length (:mod:`contoursim.contour` passes it as such a view:
-    one compiled version). Returns an index outside [0, M) when there is
+    `length` (M,) is non-decreasing [mm]: the knots' ``L`` (the last
+    column of read-only knots, a strided view) or the samples' arc length
+    (:mod:`contoursim.contour` passes it as such a view: one compiled version). Returns an index outside [0, M) when there is
     none. Galloping: doubling steps, then bisection, O(log k) probes for a
     jump of k knots.
     """
@@ -215,7 +215,7 @@ def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
     """Nearest knot to p among those connected to knot a inside the ball of `radius` about it.
 
     A stretch of the path that leaves the ball for no more than `radius` of
-    chord length (the tip of a corner the ball clips) connects too (see the module docstring).
+    ``L`` (the tip of a corner the ball clips) connects too (see the module docstring).
     ``best, dbest`` seed the search (a knot and its distance to p; a and
     its distance when there is no other): knots not nearer than dbest are
     skipped, and so is the range [seen_lo, seen_hi] of knots known to be no
@@ -224,18 +224,18 @@ def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
     """
     m = knots.shape[0]
     r = (knots[a, 0], knots[a, 1], knots[a, 2])
-    chord = knots[:, 3]
+    length = knots[:, 3]
     lo, hi = 0, m - 1
     for step in (-1, 1):
         j, out = a, -1  # out: the last knot inside the ball before the walk left it (-1: the walk is inside)
         while True:
-            if out >= 0 and step * (chord[j] - chord[out]) > radius:  # away longer than a clipped corner: a's part
+            if out >= 0 and step * (length[j] - length[out]) > radius:  # away longer than a clipped corner: a's part
                 break  # of the ball ends at out
             dr = _distance(knots, j, r)
-            if dr > radius:  # outside: no knot within dr - radius of chord length is inside
+            if dr > radius:  # outside: no knot within dr - radius of length is inside
                 if out < 0:
                     out = j - step  # skips inside the ball stop at its edge: the knot before j is inside
-                j = _beyond(chord, j, step, dr - radius)
+                j = _beyond(length, j, step, dr - radius)
             else:
                 out = -1
                 dp = _distance(knots, j, p)
@@ -243,10 +243,10 @@ def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
                     best, dbest = j, dp
                 if seen_lo <= j <= seen_hi:  # no nearer knot up to the end of the seen range: the ball decides alone
                     past = seen_hi + 1 if step == 1 else seen_lo - 1
-                    ball = _beyond(chord, j, step, radius - dr)
+                    ball = _beyond(length, j, step, radius - dr)
                     j = past if step * (ball - past) >= 0 else ball
-                else:  # every knot within this much chord length of j is inside the ball and no nearer to p than dbest
-                    j = _beyond(chord, j, step, min(radius - dr, dp - dbest))
+                else:  # every knot within this much length of j is inside the ball and no nearer to p than dbest
+                    j = _beyond(length, j, step, min(radius - dr, dp - dbest))
             if j < 0 or j >= m:
                 break
         if out >= 0:
@@ -269,7 +269,8 @@ def nearest_knot(knots, anchor, hint, p, window):
     Parameters
     ----------
     knots : ndarray, shape (M, 4)
-        Distinct reference samples [mm] and their cumulative chord length [mm] (:func:`distinct`), M >= 1.
+        Distinct reference samples [mm] and their length along the path ``L`` [mm] (:func:`distinct`: the chord
+        length), M >= 1.
     anchor : int
         Knot of the commanded sample: the reference point of the instant at which p was taken; clipped to [0, M - 1].
     hint : int
@@ -304,7 +305,7 @@ def nearest_knots(knots, anchors, points, window, hint):
     Parameters
     ----------
     knots : ndarray, shape (M, 4)
-        Distinct reference samples [mm] with their chord length (:func:`distinct`), M >= 1.
+        Distinct reference samples [mm] with their length along the path (:func:`distinct`), M >= 1.
     anchors : ndarray of int, shape (K,)
         Knot of the commanded sample of each position.
     points : ndarray, shape (K, 3)

@@ -262,7 +262,7 @@ def test_the_contour_error_is_the_distance_to_the_connected_part_of_the_ball(cor
 
     Against the brute force on the path sampled every spacing/200: the part of the path the search may take ends
     within a sample spacing h of the ball's surface, and a stretch outside the ball connects when no longer than its
-    radius measured in chords between samples (a corner cut short by up to h each), so the contour error lies
+    radius along the path between the samples either side of it (up to 2h longer than the stretch), so the contour error lies
     between the brute force over the ball of radius 2|P - R| + h connected across stretches of 2|P - R| + 6h and
     that over the ball of radius 2|P - R| - h connected across stretches of 2|P - R| - 3h (the same distance
     wherever the nearest point is not at the surface or beyond a stretch of about the radius), within the brute
