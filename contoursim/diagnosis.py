@@ -172,13 +172,15 @@ def noise_level(residual, measured=None):
     taken: the median over the upper half of the band of the periodogram
     of Δr (Hann window) divided by the difference's gain ``4 sin²(πf)``,
     which for white noise is ``2σ²·ln 2`` (each bin a χ²₂), and which a few
-    lines' bins do not move (for traces of at least :data:`_WHITE_SAMPLES`
-    samples: fewer, and white noise alone exceeds the ratio by chance). A
+    lines' bins do not move (for traces of more than 200 samples: with
+    fewer, white noise alone exceeds the ratio by chance). A
     two-mass axis's rattle in its backlash, ±40 µm at 497 Hz logged at
-    1 kHz, was a noise floor of 58 µm and left nothing to name. Positions logged with a resolution q
-    (the smallest step between the values an axis takes, where it takes
-    some value more than once: a log in steps of q; in a log of distinct
-    values that smallest step is only how far the axis moved) carry at
+    1 kHz, was a noise floor of 58 µm and left nothing to name.
+
+    Positions logged with a resolution q (the smallest step between the
+    values an axis takes, where it takes some value more than once: a log
+    in steps of q; in a log of distinct values that smallest step is only
+    how far the axis moved) carry at
     least the rounding noise ``q/√12``, which coarse logs hide from the
     second differences (most are zero).
 

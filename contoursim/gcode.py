@@ -3,9 +3,9 @@
 Words that shape the path: ``G0 G1 G2 G3`` (modal motion), ``G17 G18 G19``
 (arc plane XY, ZX, YZ), ``G90 G91`` (absolute / incremental X Y Z), ``X Y Z``,
 arc centre ``I J K`` (always relative to the arc's start) or radius ``R``
-(negative for the arc over 180°), ``F`` (feed, mm/min, modal, set by any block), ``M2``/``M30``
-(program end: a move in its block runs, the rest is ignored). An arc with a move along the plane's
-normal axis is a helix.
+(negative for the arc over 180°), ``F`` (feed, mm/min, modal, set by any
+block), ``M2``/``M30`` (program end: a move in its block runs, the rest is
+ignored). An arc with a move along the plane's normal axis is a helix.
 
 The modes the model assumes are accepted: ``G21`` (mm), ``G94`` (feed per
 minute), ``G40`` and ``G49`` (no cutter or tool length compensation), ``G80``
@@ -21,9 +21,9 @@ path's origin is the work offset), path modes ``G61 G64`` (with LinuxCNC's
 ``G64 P`` tolerance; the planner's own corner rule applies). The dwell ``G4``
 stops the motion at the end of the move before it, which waits there in
 position as at the end of a rapid (:attr:`Program.stops`); its ``P``/``X``
-time (milliseconds or seconds, by dialect; ``X`` only without ``P``) is not a move and is not
-simulated: once in position the axes hold it. A move in its block follows the dwell. Home returns and
-machine-coordinate moves (``G28 G30 G53``, e.g. a
+time (milliseconds or seconds, by dialect; ``X`` only without ``P``) is
+not a move and is not simulated: once in position the axes hold it. A move
+in its block follows the dwell. Home returns and machine-coordinate moves (``G28 G30 G53``, e.g. a
 post's ``G28 G91 Z0`` before a tool change) take the axes they name (``G28``
 and ``G30`` without axis words: all) to a machine position contoursim does
 not know in work coordinates. Before the first feed move they are ignored;
