@@ -484,7 +484,8 @@ def sample(path, profile, dt):
         raise TypeError(f"profile must be a FeedProfile (from plan), got {type(profile).__name__}")
     if abs(profile.length - _path(path).length) > 1e-9 * max(1.0, path.length):
         raise ValueError(f"profile length {profile.length} mm differs from the path length {path.length} mm")
-    n = max(int(math.ceil(profile.duration / dt)), 1)
+    periods = profile.duration / dt  # a whole number to rounding (a path moved: 7020.0000000000016) is that number
+    n = max(round(periods) if abs(periods - round(periods)) <= 1e-9 * max(periods, 1.0) else math.ceil(periods), 1)
     _memory.check(n + 1, f"the motion lasts {profile.duration:.6g} s: at dt = {dt:.6g} s",
                   "check the path length, the feed and the servo period")
     t = np.arange(n + 1) * dt
