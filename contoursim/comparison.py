@@ -35,6 +35,9 @@ JSON_KEYS = ("contour_max_um", "contour_rms_um", "tracking_max_um", "tracking_rm
 #: The form of the comparison JSON (:func:`contoursim.output.has_form`): ``compare --json`` replaces only a file of it.
 JSON_FORM = {"runs": JSON_KEYS, "axes": ("phase_margin_deg", "damping_ratio")}
 
+#: A strategy whose max contour error exceeds this many times that of ``none`` is warned of (:func:`compare`):
+#: compensation that doubles the worst error is not compensating.
+WORSE = 2.0
 #: :func:`tune`'s coupling gains: ``kp`` from this many times the smallest position gain ``Kp`` of the coupled axes [-] ...
 TUNE_KP_START = 0.25
 #: ... in steps of this factor [-] ...
@@ -326,7 +329,10 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
     Warns
     -----
     ContoursimWarning
-        A run's current command hit its limit (naming the strategy).
+        A run's current command hit its limit (naming the strategy); a
+        strategy's max contour error is more than :data:`WORSE` times that of
+        ``none`` (run beside it): no check before the run sees a cross-coupled
+        controller steering the tool onto another part of the path.
     """
     if isinstance(names, str):  # its letters would be the names
         raise TypeError(f"names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string {names!r}")
@@ -370,4 +376,14 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
         runs[name], caught = _run(model, trajectory, name, made)
         for warning in caught:
             warnings.warn(f"strategy {name}: {warning.message}", warning.category, stacklevel=2)
+    if "none" in runs:
+        worst = {name: run.summary()["contour_max_um"] for name, run in runs.items()}
+        for name, value in worst.items():
+            if value > WORSE * worst["none"]:
+                why = (": its contour estimate searches around the commanded point within twice the tracking error, "
+                       "and a correction that grows the error can take it onto another part of the path (rows, "
+                       "passes or loops that close to each other)" if "ccc" in name else "")
+                warnings.warn(f"strategy {name}: its max contour error, {value:.4g} µm, is {value / worst['none']:.3g} "
+                              f"times that without compensation ({worst['none']:.4g} µm){why}", ContoursimWarning,
+                              stacklevel=2)
     return Comparison(runs, gains)
