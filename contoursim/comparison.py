@@ -332,7 +332,8 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
         A run's current command hit its limit (naming the strategy); a
         strategy's max contour error is more than :data:`WORSE` times that of
         ``none`` (run beside it): no check before the run sees a cross-coupled
-        controller steering the tool onto another part of the path.
+        controller hold the tool on a line the path has left (a corner that
+        turns back) while the position loops pull it back along the path.
     """
     if isinstance(names, str):  # its letters would be the names
         raise TypeError(f"names must be a sequence of strategy names, e.g. ('none', 'ccc_arc'), got the string {names!r}")
@@ -380,9 +381,10 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
         worst = {name: run.summary()["contour_max_um"] for name, run in runs.items()}
         for name, value in worst.items():
             if value > WORSE * worst["none"]:
-                why = (": its contour estimate searches around the commanded point within twice the tracking error, "
-                       "and a correction that grows the error can take it onto another part of the path (rows, "
-                       "passes or loops that close to each other)" if "ccc" in name else "")
+                why = (": past a corner that turns back, its correction can hold the tool on the line the path left, "
+                       "where the position loops pull it back along the path while the tracking error grows, until "
+                       "its estimate's search (twice the tracking error about the commanded point) reaches the "
+                       "commanded part of the path and the tool crosses to it" if "ccc" in name else "")
                 warnings.warn(f"strategy {name}: its max contour error, {value:.4g} µm, is {value / worst['none']:.3g} "
                               f"times that without compensation ({worst['none']:.4g} µm){why}", ContoursimWarning,
                               stacklevel=2)

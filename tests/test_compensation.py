@@ -412,10 +412,11 @@ def test_the_coupled_loop_analyses_are_stored_and_read_back(tmp_path, monkeypatc
     assert coupled_loop.margins_along(rows, 50.0, 600.0, 0.0, DT, path)["phase_margin"] == 12.5
 
 
-def test_a_coupling_that_steers_the_tool_onto_another_row_of_the_path_is_warned_of():
+def test_a_coupling_that_holds_the_tool_past_a_corner_that_turns_back_is_warned_of():
     """A zig-zag whose two rows lie 5 mm apart, on the demo mill at Kp 15 1/s: ccc_arc at its designed gains passes the
-    coupled loop's check (PM 79.7°, ζ 0.70), then its estimate takes the other row after a corner and the axes follow
-    it: a max contour error of 9.8 mm against 0.43 mm without it, and nothing said."""
+    coupled loop's check (PM 79.7°, ζ 0.70), then at the corner where the path turns 117° it holds the tool on the
+    first row's line, the position loops pull it back along that row, and it crosses to the second row late: a max
+    contour error of 9.8 mm against 0.43 mm without it, and nothing said."""
     from dataclasses import replace
 
     from contoursim.comparison import WORSE, compare
@@ -431,8 +432,15 @@ def test_a_coupling_that_steers_the_tool_onto_another_row_of_the_path_is_warned_
     trajectory = sample(program.path, FeedSettings(tuple(program.feeds)).plan(program.path, in_position=0.1),
                         machine.servo_period)
     with pytest.warns(ContoursimWarning, match=r"strategy ccc_arc: its max contour error, .* times that without "
-                                               r"compensation .*another part of the path") as record:
+                                               r"compensation .*pull it back along the path") as record:
         comparison = compare(machine, trajectory, ("none", "ccc_arc", "feedforward"))
     worst = {name: run.summary()["contour_max_um"] for name, run in comparison.runs.items()}
     assert worst["ccc_arc"] > WORSE * worst["none"] > WORSE * worst["feedforward"]
     assert [str(w.message).split(":")[0] for w in record] == ["strategy ccc_arc"]  # feedforward is not warned of
+    # what the warning says: the tool's foot point goes back along the path (the exact contour error's arc length)
+    # while the commanded point goes on
+    foot, commanded = comparison.runs["ccc_arc"].contour.s, trajectory.s
+    furthest = np.maximum.accumulate(foot)
+    back = int(np.argmax(furthest - foot))
+    assert furthest[back] - foot[back] > 20.0 and commanded[back] > furthest[back] + 20.0
+    assert np.all(np.maximum.accumulate(comparison.runs["none"].contour.s) - comparison.runs["none"].contour.s < 0.1)
