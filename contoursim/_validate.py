@@ -153,13 +153,18 @@ def finite_array(name, value, ndim=None, shape=None, limit=None):
         first = np.unravel_index(np.argmax(~np.isfinite(arr)), arr.shape)
         if arr.ndim == 0:  # a number: no index to name
             raise ValueError(f"{name} must be finite, got {arr[()]}")
-        raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {tuple(map(int, first))}")
+        raise ValueError(f"{name} contains a non-finite value ({arr[first]}) at index {_index(first)}")
     if limit is not None and arr.size and max(arr.max(), -arr.min()) > limit:  # |arr| > limit, no (N, d) temporary
         first = np.unravel_index(np.argmax(np.abs(arr) > limit), arr.shape)
         if arr.ndim == 0:
             raise ValueError(f"{name} must lie within ±{limit:g}, got {arr[()]:g}")
-        raise ValueError(f"{name} holds {arr[first]:g} at index {tuple(map(int, first))}, beyond ±{limit:g}")
+        raise ValueError(f"{name} holds {arr[first]:g} at index {_index(first)}, beyond ±{limit:g}")
     return arr
+
+
+def _index(first):
+    """An array index as a user writes it: ``3`` for a 1-D array, ``(1, 2)`` for more dimensions."""
+    return int(first[0]) if len(first) == 1 else tuple(map(int, first))
 
 
 def float_array(name, value, ndim=None, shape=None):
@@ -256,8 +261,8 @@ def mask(name, value, shape):
     if arr.dtype.kind != "b":
         other = (arr != 0) & (arr != 1)  # NaN too
         if other.any():
-            first = tuple(map(int, np.unravel_index(np.argmax(other), arr.shape)))
-            raise ValueError(f"{name} must be booleans (or 0 and 1), got {arr[first]} at index {first}")
+            first = np.unravel_index(np.argmax(other), arr.shape)
+            raise ValueError(f"{name} must be booleans (or 0 and 1), got {arr[first]} at index {_index(first)}")
         arr = arr.astype(bool)
     return arr
 
