@@ -276,7 +276,7 @@ class Diagnosis:
     scored : ndarray of bool, shape (N,)
         The samples the fit scored (all but a start transient the simulation cannot reproduce).
     refitted : Model
-        The final model: the nominal machine with its servo parameters refitted, and the effects named.
+        The final model: the nominal machine with its servo parameters refitted, its own effects and the effects named.
     where : tuple of str
         Where the nominal residual concentrates and what it correlates with (:func:`locate`).
     warnings : tuple of str
@@ -374,9 +374,10 @@ class Diagnosis:
         return json.dumps(self.to_dict(), indent=2, ensure_ascii=False, allow_nan=False)
 
     def corrected_model(self):
-        """The corrected model as machine-file text: the refitted servo axes and the effects named as ``[[effect]]`` tables.
+        """The corrected model as machine-file text: the refitted servo axes and the model's effects as ``[[effect]]`` tables.
 
-        Readable by :func:`contoursim.model.load_model` (``simulate``,
+        The effects are the nominal model's own (a machine file's
+        ``[[effect]]`` tables, as given) followed by those named. Readable by :func:`contoursim.model.load_model` (``simulate``,
         ``compare``, ``diagnose --model``): identify on one experiment,
         validate on another. The geometry of the nominal machine
         (``[[body]]`` tables) is not carried over.
@@ -390,8 +391,8 @@ class Diagnosis:
         machine = self.refitted.machine
         source = self.trace.metadata.get("source", "")
         lines = ["# corrected model written by contoursim diagnose" + (f" from {source}" if source else "")
-                 + ": the nominal machine with its", "# plant refitted (see the report's nominal_refit) and the "
-                 "effects named as [[effect]] tables", "",
+                 + ": the nominal machine with its", "# plant refitted (see the report's nominal_refit), its own "
+                 "effects and the effects named as [[effect]] tables", "",
                  f"name = {json.dumps('corrected: ' + machine.name)}", f"servo_period_ms = {1e3 * machine.servo_period!r}"]
         if machine.max_feed is not None:
             lines.append(f"max_feed_mm_min = {60.0 * machine.max_feed!r}")
@@ -404,7 +405,7 @@ class Diagnosis:
             if machine.uncertain.get(axis):
                 keys = {name: key for key, name in SERVO_KEYS.items()}
                 lines.append(f"uncertain = {json.dumps([keys[name] for name in machine.uncertain[axis]])}")
-        for effect in self.effects:
+        for effect in self.refitted.effects:
             lines += ["", "[[effect]]", f"name = {json.dumps(effect.name)}", f"axis = {json.dumps(effect.axis)}"]
             lines += [f"{k} = {float(v)!r}" for k, v in effect.values().items()]
             lines += [f"{k} = {json.dumps(v)}" for k, v in effect.options.items()]

@@ -1233,3 +1233,18 @@ def test_a_gain_mismatch_that_bent_the_plant_is_told_from_a_delay_with_the_plant
     assert (named.name, named.axis) == ("gain_mismatch", "y"), result.report()
     assert named["kp_ratio"] == pytest.approx(case.truth["parameters"]["kp_ratio"], rel=1e-3)
     assert result.steps[-1].rms_um < 2 * np.sqrt(np.mean(result.noise_um**2))  # the delay left 0.349 µm: 2.3 times
+
+
+def test_the_corrected_model_keeps_the_models_own_effects(tmp_path):
+    """A machine file with a backlash of its own that explains the trace: the corrected model it writes held no
+    [[effect]] table, and a diagnosis on it named the backlash again (an outside probe: 0.130 µm, then 1.990 µm)."""
+    backlash = Effect("backlash", "y", lost_motion_um=10.0)
+    write_mill_circle(tmp_path / "measured.csv", (backlash,), seed=2)
+    own = Model(load_machine("demo_mill"), (backlash,))
+    first = diagnose(read_trace(tmp_path / "measured.csv"), own)
+    assert first.effects == ()
+    (tmp_path / "corrected.toml").write_text(first.corrected_model(), encoding="utf-8")
+    corrected = load_model(tmp_path / "corrected.toml")
+    assert [(e.name, e.axis, e["lost_motion_um"]) for e in corrected.effects] == [("backlash", "y", 10.0)]
+    again = diagnose(read_trace(tmp_path / "measured.csv"), corrected)
+    assert again.effects == () and again.steps[0].rms_um < 1.1 * first.steps[0].rms_um  # the plant refitted: lower
