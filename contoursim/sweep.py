@@ -421,7 +421,12 @@ def _build(spec):
     from .compensation import Composition, strategies_named
     from .simulation import default_settle
 
-    model, path_file, job, _ = cli._job(SimpleNamespace(file=str(spec), machine=None), extra_keys=SPEC_KEYS)
+    model, path_file, job, geometric = cli._job(SimpleNamespace(file=str(spec), machine=None, command="sweep"),
+                                                extra_keys=SPEC_KEYS)
+    if geometric:  # simulate's and compare's second run: a sweep runs one strategy on every variant, the spec's
+        raise job.error('a sweep runs its strategies on every variant: name geometric compensation there (strategies = '
+                        '"geometric", or e.g. "feedforward+geometric"), not with geometric_compensation = true',
+                        "geometric_compensation")
     settings = cli._strategy_settings(job, [job.data.get("strategies", "none")])  # its tables, as compare reads them
     try:
         strategies = strategies_named(job.data.get("strategies", "none"), chain=model.machine.chain, settings=settings)

@@ -118,6 +118,21 @@ def test_a_strategy_table_of_a_strategy_the_sweep_does_not_run_is_refused_by_its
         read_sweep(spec)
 
 
+@pytest.mark.parametrize(("text", "key", "message"), [
+    # a traceback
+    ('\n[ballbar]\ndirections = ["ccw", "cw"]\n', "[ballbar]", r"\[ballbar\] is for contoursim simulate; sweep runs"),
+    # read, checked and dropped without a word: the table held the uncompensated figures
+    ("geometric_compensation = true\n", "geometric_compensation = true",
+     r'a sweep runs its strategies on every variant: name geometric compensation there \(strategies = "geometric"')])
+def test_a_jobs_ballbar_or_geometric_switch_in_a_spec_is_refused_by_its_line(tmp_path, text, key, message):
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}], strategies="none")
+    job = spec.read_text().replace("demo_mill", "vertical_mill_3axis")
+    spec.write_text(text + job if key.startswith("geo") else job + text)
+    line = spec.read_text().splitlines().index(key) + 1
+    with pytest.raises(ConfigError, match=rf"spec.toml, line {line}: {message}"):
+        read_sweep(spec)
+
+
 @pytest.mark.parametrize("key", ["count = 7", "seed = 3"])
 def test_a_grids_count_or_seed_in_the_sweep_table_is_refused_by_its_line(tmp_path, key):
     """A grid's points are its vary tables' (it ran 2 variants, the 7 asked for ignored)."""
