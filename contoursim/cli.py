@@ -157,9 +157,16 @@ def _write(out, groups, every, nominal=None):
         :class:`~contoursim.gcode.BlockErrors` (written as ``NAME_blocks.csv``).
     """
     from .gcode import block_errors
-    from .plotting import save_figures
+    from .plotting import figure_files, save_figures
 
     out = output_dir(out)
+    for name, runs in groups.items():  # every name refused before any file is written
+        for run, _, result, program in runs:
+            out.file(f"{run}.csv")
+            if program is not None:
+                out.file(f"{run}_blocks.csv")
+        for figure in figure_files({run: result for run, _, result, _ in runs}, name, nominal):
+            out.file(figure)
     blocks = {}
     for name, runs in groups.items():
         for run, path_file, result, program in runs:
@@ -520,12 +527,13 @@ def diagnose_command(args):
         if sys.stderr.isatty():
             sys.stderr.write("\n")
     out = output_dir(args.out)  # before the report: a refused folder leaves no report of a run that ended in an error
+    out.file("corrected_model.toml")  # a file of the user's there: refused before anything is written
+    save_figures(result, out)  # its figures refused before it writes any
+    with out.write("corrected_model.toml") as stream:
+        stream.write(result.corrected_model())
     if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")
-    save_figures(result, out)
-    with out.write("corrected_model.toml") as stream:
-        stream.write(result.corrected_model())
     print(result.report())
     if report is not None:
         print(f"report written to {report}")
@@ -604,6 +612,8 @@ def fleet_command(args):
         outcomes = diagnose_fleet(files, args.model, args.scheduler, progress=progress)
     summary = fleet_summary(outcomes)
     out = output_dir(args.out)
+    for name in [f"{Path(o['trace']).stem}.json" for o in outcomes if "report" in o] + ["fleet.json", "fleet.png"]:
+        out.file(name)  # every name refused before any file is written
     for outcome in outcomes:
         name = f"{Path(outcome['trace']).stem}.json"
         if "report" in outcome:

@@ -2581,8 +2581,12 @@ def save_figures(diagnosis, out):
     drawn = plot_polar(diagnosis)
     if drawn is not None:
         figures.append((polar, drawn.figure))
-    for name, fig in figures:
-        with out.write(name, binary=True) as stream:
-            fig.savefig(stream, format="png", dpi=110)
-        plt.close(fig)
-    return [out.path / name for name, _ in figures]
+    try:
+        files = [out.file(name) for name, _ in figures]  # all refused before any is written
+        for name, fig in figures:
+            with out.write(name, binary=True) as stream:
+                fig.savefig(stream, format="png", dpi=110)
+    finally:
+        for _, fig in figures:
+            plt.close(fig)
+    return files

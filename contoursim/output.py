@@ -159,12 +159,24 @@ class OutputDir:
             with os.fdopen(os.open(marker, os.O_RDONLY | _NOFOLLOW), "rb") as stream:
                 data = stream.read()
             ours = data.startswith(_MARKER_HEADER.encode())  # its names are the files' names, bytes not UTF-8 escaped
-            return data.decode("utf-8", "surrogateescape" if ours else "strict").splitlines()
+            lines = data.decode("utf-8", "surrogateescape" if ours else "strict").splitlines()
         except UnicodeDecodeError as exc:
             raise ConfigError(f"{marker} is not contoursim's record of the files it wrote (byte {exc.start} is not "
                               "UTF-8 text): choose another output directory, or delete it if it is yours") from None
         except OSError as exc:
             raise _marker_error(marker, "read", exc) from None
+        for number, line in enumerate(lines, 1):  # a name that is no plain file name: not a record contoursim wrote
+            if line.startswith(_BY):
+                name = line[len(_BY):].partition(" ")[2]
+            elif line and not line.startswith("#"):
+                name = line
+            else:
+                continue
+            if not _plain(name):
+                raise ConfigError(f"{name!r} is not a plain file name: this is not a record contoursim wrote of the "
+                                  "files it wrote here; choose another output directory, or mend or delete the file",
+                                  str(marker), number)
+        return lines
 
     def file(self, name):
         """The path `name` would be written to, after checking contoursim may write it.
@@ -189,7 +201,7 @@ class OutputDir:
         ValueError
             `name` is not a plain file name.
         """
-        if not isinstance(name, str) or Path(name).name != name or name in ("", ".", "..", _MARKER) or "\n" in name:
+        if not isinstance(name, str) or not _plain(name):
             raise ValueError(f"name must be a plain file name, got {name!r}")
         file = self.path / name
         if name in self.written():
@@ -286,6 +298,11 @@ class OutputDir:
 
     def __str__(self):
         return str(self.path)
+
+
+def _plain(name):
+    """Whether the text `name` is a plain file name (no folder), one contoursim may write in an output folder."""
+    return Path(name).name == name and name not in ("", ".", "..", _MARKER) and "\n" not in name
 
 
 def output_dir(out):

@@ -22,7 +22,7 @@ from .output import output_dir
 __all__ = [
     "circular_deviation", "deviation_from_nominal", "envelope_indices", "fit_circle_center", "magnification_for",
     "plot_path_error", "plot_polar_deviation",
-    "plot_errors_over_time", "save_figures", "plot_compared_paths", "plot_compared_contour_error",
+    "plot_errors_over_time", "save_figures", "figure_files", "plot_compared_paths", "plot_compared_contour_error",
     "plot_compared_figures", "plot_compared_zoom", "save_comparison_figures", "COMPARISON_FIGURES", "RESOLUTION_UM",
 ]
 
@@ -727,6 +727,24 @@ def save_figures(runs, out_dir, name, nominal=None):
     FileExistsError
         A plot's file exists and contoursim did not write it.
     """
+    return _draw(_drawings(runs, name, nominal), out_dir)
+
+
+def figure_files(runs, name, nominal=None):
+    """The names of the files :func:`save_figures` writes for these arguments, drawing none of them.
+
+    For a command that writes other files beside the plots: it refuses
+    the whole set (:meth:`contoursim.output.OutputDir.file`) before writing any.
+
+    Returns
+    -------
+    list of str
+    """
+    return [file for file, *_ in _drawings(runs, name, nominal)]
+
+
+def _drawings(runs, name, nominal):
+    """:func:`save_figures`'s plots as ``(file, size [in], margins, drawing)``, for :func:`_draw`."""
     if not isinstance(runs, Mapping):
         raise TypeError(f"runs must map run names to SimResults ({{'circle': result}}), got {type(runs).__name__}")
     if not runs:
@@ -749,7 +767,7 @@ def save_figures(runs, out_dir, name, nominal=None):
         if nominal is not None:
             drawings.append((f"{name}_polar_difference.png", size, polar_margins,
                              lambda fig: plot_polar_deviation(runs, fig.add_subplot(projection="polar"), nominal)))
-    return _draw(drawings, out_dir)
+    return drawings
 
 
 def _draw(drawings, out_dir):

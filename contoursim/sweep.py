@@ -655,42 +655,50 @@ def write_results(sweep, table, out):
     import matplotlib.pyplot as plt
 
     from .output import output_dir
-    from .plotting import save_figures
+    from .plotting import figure_files, save_figures
     from .simulation import simulate
 
     out = dataclasses.replace(output_dir(out), by="sweep")  # each file recorded as a sweep's
-    written = ["sweep.csv"]
-    with out.write("sweep.csv") as stream:
-        stream.write(table_text(sweep, table))
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:
-        pass
-    else:
-        columns = {"variant": np.arange(len(table))}
-        columns.update((name, sweep.values[:, j]) for j, name in enumerate(sweep.names))
-        columns.update((key, table[:, j].astype(bool) if key == "diverged" else table[:, j]) for j, key in enumerate(FIGURES))
-        with out.write("sweep.parquet", binary=True) as stream:
-            pq.write_table(pa.table(columns), stream)
-        written.append("sweep.parquet")
-    for name, fig in plot_sweep(sweep, table).items():
-        with out.write(f"{name}.png", binary=True) as stream:
-            fig.savefig(stream, format="png", dpi=100)
-        plt.close(fig)
-        written.append(f"{name}.png")
+        pa = None
+    figures = plot_sweep(sweep, table)
     chosen = best_and_worst(table)
+    runs, metadata = {}, {}  # the best and the worst variant re-run, and what their CSVs say of them
     if chosen is not None:
         job = _job(sweep)
-        runs = {}
         for label, i in zip(("best", "worst"), chosen):
             model, strategies = job.variant(dict(zip(sweep.names, sweep.values[i])))
             runs[label] = simulate(model, job.trajectory, strategies, settle=0.0)
-            values = "; ".join(f"{n} = {v!r}" for n, v in zip(sweep.names, sweep.values[i].tolist()))
-            with out.write(f"{label}.csv") as stream:
-                runs[label].save_csv(stream, metadata={"sweep": Path(sweep.source).name, "variant": i, "values": values})
-            written.append(f"{label}.csv")
-        written += [file.name for file in save_figures(runs, out, "best_worst")]
+            metadata[label] = {"sweep": Path(sweep.source).name, "variant": i,
+                               "values": "; ".join(f"{n} = {v!r}" for n, v in zip(sweep.names, sweep.values[i].tolist()))}
+    written = ["sweep.csv", *(["sweep.parquet"] if pa is not None else []), *(f"{name}.png" for name in figures),
+               *(f"{label}.csv" for label in runs), *(figure_files(runs, "best_worst") if runs else [])]
+    try:
+        for name in written:  # every name refused before any file is written (a user's file of a plot's name)
+            out.file(name)
+        with out.write("sweep.csv") as stream:
+            stream.write(table_text(sweep, table))
+        if pa is not None:
+            columns = {"variant": np.arange(len(table))}
+            columns.update((name, sweep.values[:, j]) for j, name in enumerate(sweep.names))
+            columns.update((key, table[:, j].astype(bool) if key == "diverged" else table[:, j])
+                           for j, key in enumerate(FIGURES))
+            with out.write("sweep.parquet", binary=True) as stream:
+                pq.write_table(pa.table(columns), stream)
+        for name, fig in figures.items():
+            with out.write(f"{name}.png", binary=True) as stream:
+                fig.savefig(stream, format="png", dpi=100)
+    finally:
+        for fig in figures.values():
+            plt.close(fig)
+    for label, run in runs.items():
+        with out.write(f"{label}.csv") as stream:
+            run.save_csv(stream, metadata=metadata[label])
+    if runs:
+        save_figures(runs, out, "best_worst")
     for name in out.written_by("sweep") - set(written):  # an earlier sweep's files this one did not write again
         out.remove(name)
     return out, chosen

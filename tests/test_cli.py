@@ -260,6 +260,11 @@ def test_never_replaces_a_users_file_inside_its_own_directory(tmp_path, capsys):
     assert f"{out / 'other.csv'} exists and contoursim did not write it" in capsys.readouterr().err
     assert (out / "other.csv").read_text() == "mine" and (out / "notes.txt").read_text() == "mine"
     assert not (out / "other_path.png").exists()
+    (tmp_path / "third.toml").write_text(SMALL_PATH)
+    (out / "third_errors.png").write_text("mine")  # a plot's name: refused before the run's CSV was written
+    assert main(["simulate", str(tmp_path / "third.toml"), "--out", str(out)]) == 2
+    assert f"{out / 'third_errors.png'} exists and contoursim did not write it" in capsys.readouterr().err
+    assert not (out / "third.csv").exists() and not (out / "third_path.png").exists()
 
 
 def test_job_work_offset_moves_the_path_on_the_machine(tmp_path, capsys):

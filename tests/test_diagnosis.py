@@ -31,6 +31,7 @@ from contoursim.feed import plan, sample
 from contoursim.identify import identify_machine
 from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
+from contoursim.output import output_dir
 from contoursim.servo import AxisServo
 from contoursim.simulation import simulate, simulate_batch
 from contoursim.traces import Trace, read_trace, write_trace
@@ -1248,3 +1249,19 @@ def test_the_corrected_model_keeps_the_models_own_effects(tmp_path):
     assert [(e.name, e.axis, e["lost_motion_um"]) for e in corrected.effects] == [("backlash", "y", 10.0)]
     again = diagnose(read_trace(tmp_path / "measured.csv"), corrected)
     assert again.effects == () and again.steps[0].rms_um < 1.1 * first.steps[0].rms_um  # the plant refitted: lower
+
+
+def test_a_diagnosis_refused_by_a_users_file_in_its_folder_writes_nothing(tmp_path, capsys):
+    """A user's corrected_model.toml in the output folder: the --report and the plots had been replaced when the run
+    ended in the refusal (an outside probe)."""
+    write_mill_circle(tmp_path / "measured.csv")
+    report, out = tmp_path / "r.json", tmp_path / "out"
+    args = ["diagnose", str(tmp_path / "measured.csv"), "--model", "demo_mill", "--report", str(report), "--out", str(out)]
+    assert main([*args[:-1], str(tmp_path / "first")]) == 0
+    earlier = report.read_bytes()
+    output_dir(out)
+    (out / "corrected_model.toml").write_text("mine")
+    assert main(args) == 2
+    assert "corrected_model.toml exists and contoursim did not write it" in capsys.readouterr().err
+    assert report.read_bytes() == earlier and sorted(p.name for p in out.iterdir()) == [".contoursim-out",
+                                                                                        "corrected_model.toml"]

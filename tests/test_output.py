@@ -275,3 +275,20 @@ def test_the_part_file_of_a_killed_writer_is_removed_by_the_next_run(tmp_path):
     with atomic_write(report) as stream:
         stream.write("{}")
     assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == ["r.json"]
+
+
+@pytest.mark.parametrize("entry", ["../victim.txt", "#by sweep ../victim.txt", "sub/plot.png"])
+def test_a_record_naming_a_file_outside_the_folder_is_refused_by_its_line_before_anything_is_written(tmp_path, entry):
+    """A record with a line '../victim.txt': a sweep into the folder wrote its table and plots, then ended in 'name
+    must be a plain file name, got '../victim.txt'', naming neither the record nor its line (an outside probe)."""
+    out = output_dir(tmp_path / "out")
+    with out.write("a.csv") as stream:
+        stream.write("mine")
+    marker = tmp_path / "out" / ".contoursim-out"
+    marker.write_text(marker.read_text() + entry + "\n")
+    line = len(marker.read_text().splitlines())
+    with pytest.raises(ConfigError, match=rf"\.contoursim-out, line {line}: '(\.\./victim\.txt|sub/plot\.png)' is not a "
+                                          r"plain file name: this is not a record contoursim wrote"):
+        output_dir(tmp_path / "out")
+    assert (tmp_path / "victim.txt").exists() is False and sorted(os.listdir(tmp_path / "out")) == [".contoursim-out",
+                                                                                                    "a.csv"]

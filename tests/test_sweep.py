@@ -512,3 +512,17 @@ def test_a_variant_the_loop_check_refuses_counts_as_diverged_and_is_not_rerun(tm
     assert "1 of 3 variants diverged or were refused by a loop check" in out and "worst  variant 1:" in out
     assert ("the first, variant 2 (axes.x.kp_per_s = 2000): the position loop of axis 'x' is badly damped" in out
             and "gain margin 3.79, phase margin 11.5 deg at 112.5 Hz" in out)  # how far it is, in its margins
+
+
+def test_a_sweep_refused_by_a_users_file_of_one_of_its_names_writes_nothing(tmp_path, capsys):
+    """A user's file named as one of the second sweep's plots: sweep.csv had already been replaced by the second
+    sweep's table, the best and worst runs left from the first, when the run ended in the refusal (an outside probe)."""
+    first = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0]"}], strategies="none")
+    assert main(["sweep", str(first), "--out", str(tmp_path / "out")]) == 0
+    before = {name: (tmp_path / "out" / name).read_bytes() for name in os.listdir(tmp_path / "out")}
+    (tmp_path / "out" / "sweep_axes.y.kp_per_s.png").write_text("mine\n")
+    second = _spec(tmp_path, [{"name": '"axes.y.kp_per_s"', "values": "[35.0, 45.0]"}], strategies="none", name="b.toml")
+    assert main(["sweep", str(second), "--out", str(tmp_path / "out")]) == 2
+    assert "sweep_axes.y.kp_per_s.png exists and contoursim did not write it" in capsys.readouterr().err
+    after = {name: (tmp_path / "out" / name).read_bytes() for name in os.listdir(tmp_path / "out")}
+    assert after == {**before, "sweep_axes.y.kp_per_s.png": b"mine\n"}
