@@ -369,6 +369,10 @@ def _declared_units(text, key, names, wanted, inputs, fail):
     header does not have or declares a unit the reader does not convert.
     """
     units, lacking = {}, []
+    text = text.replace("\u03bc", "\u00b5")  # the Greek letter mu, as keyboards give it, for the micro sign
+    if not text.strip(" ;"):  # a units line is honoured or refused, never passed over
+        raise fail(f"'# {key}:' declares no unit: write them as contoursim does, '# units: t [s]; x_ref, x [mm]', "
+                   "or drop the line")
     for group in filter(None, (g.strip() for g in text.split(";"))):
         match = _GROUP.fullmatch(group)
         columns = [] if match is None else [c.strip() for c in match["columns"].split(",")]

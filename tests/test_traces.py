@@ -209,6 +209,7 @@ SINE = "\n".join(f"{k * 1e-3:.3f},{np.sin(k / 5):.6f},{np.sin((k - 1) / 5):.6f}"
     ("units", "t [s]; x_ref, x [mm]", 1.0, 1.0),
     ("units", "t [ms]; x_ref, x [m]", 1e-3, 1e3),
     ("units", "t [µs]; x_ref, x [um]", 1e-6, 1e-3),
+    ("units", "t [\u03bcs]; x_ref, x [\u03bcm]", 1e-6, 1e-3),  # the Greek mu: refused, naming a µ that looks the same
     ("units", "t [ns]; x_ref, x [in]", 1e-9, 25.4),
     ("units", "m", 1.0, 1e3),  # a bare unit: the positions'
     ("units", "t [s]; x_ref, x [nm]; contour [mm]; measuring [1 = test proper, 0 = not]", 1.0, 1e-6),  # others' not read
@@ -245,6 +246,7 @@ def test_declared_units_are_honoured(tmp_path, key, units, t_scale, x_scale):
     ("# c\n# units: metric\n", 2, "the units 'metric' cannot be read: write them as contoursim does, "
                                   "'# units: t [s]; x_ref, x [mm]'"),
     ("# units: t [ms]\n# Units: t [s]\n", 2, "a second '# units:' line (the first is line 1): declare the units once"),
+    ("# units:\n", 1, "'# units:' declares no unit: write them as contoursim does"),  # was passed over without a word
 ])
 def test_units_that_cannot_be_honoured_are_refused(tmp_path, head, line, words):
     (tmp_path / "u.csv").write_text(head + "t,x_ref,x\n" + SINE)
