@@ -331,6 +331,8 @@ def preset_file(name_or_file, here=True):
     """
     if not isinstance(name_or_file, (str, os.PathLike)):
         raise TypeError(f"a machine is a preset name or a machine file (str or Path), got {type(name_or_file).__name__}")
+    if isinstance(name_or_file, str) and not name_or_file.strip():  # Path('') would be '.': a folder
+        raise ConfigError(f"the machine's name is empty: name a preset ({', '.join(preset_names())}) or a machine file")
     path = local_file(name_or_file, suffixes=(".toml",)) if here else None  # a user's copy of a preset is the one meant
     if path is not None:
         return path

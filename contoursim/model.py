@@ -164,6 +164,9 @@ class Model:
 
     def variants(self, rows):
         """Variants of this model, one per mapping of flat parameter names to values (:meth:`with_values`)."""
+        if isinstance(rows, (Mapping, str)):  # its keys would be taken for the rows
+            raise TypeError(f"rows must be a sequence of mappings of flat parameter names to values, e.g. "
+                            f"[{{'backlash.x.lost_motion_um': 8.0}}], got a {type(rows).__name__}: put it in a list")
         return [self.with_values(row) for row in rows]
 
     def stage(self, stage):

@@ -78,6 +78,9 @@ class OutputDir:
     def __post_init__(self):
         if not isinstance(self.path, (str, os.PathLike)):
             raise TypeError(f"the output folder is a folder name (str or Path), got {type(self.path).__name__}")
+        if isinstance(self.path, str) and not self.path:  # Path('') would be '.', the working folder
+            raise ConfigError("the output folder's name is empty: contoursim writes its plots and files into a "
+                              "folder: name one, e.g. 'results'")
         if self.by is not None and (not isinstance(self.by, str) or not self.by or self.by == "-"
                                     or any(c.isspace() for c in self.by)):
             raise ValueError(f"by names the command writing, one word (e.g. 'sweep'), got {self.by!r}")

@@ -565,6 +565,12 @@ def api():
      "give (Effect('backlash', 'x', lost_motion_um=5.0, feedback=None),), not the effect alone"),
     (lambda a: Model(a.machine, (Effect("backlash", "x", lost_motion_um=5.0),)).with_values([("backlash.x.lost_motion_um", 3)]),
      TypeError, "values must be a mapping of flat parameter names to values, got list"),
+    # a dict of one variant: "values must be a mapping ..., got str", a mapping given
+    (lambda a: Model(a.machine, (Effect("backlash", "x", lost_motion_um=5.0),)).variants({"backlash.x.lost_motion_um": 3}),
+     TypeError, "rows must be a sequence of mappings of flat parameter names to values, e.g. "),
+    # read as '.': ".: cannot read the file: it is a directory", ". holds files that contoursim did not write"
+    (lambda a: load_machine(""), ConfigError, "the machine's name is empty: name a preset (aircraft_drilling_7axis"),
+    (lambda a: output_dir(""), ConfigError, "the output folder's name is empty: contoursim writes its plots"),
     (lambda a: Trace(a.trace.t, a.trace.reference, a.trace.actual, 2), TypeError,
      "axes must be a sequence of axis names like ('x', 'y'), got 2"),
     (lambda a: Trace(a.trace.t, a.trace.reference, a.trace.actual, ("x", "y"), force=np.ones(50)), TypeError,
