@@ -68,6 +68,9 @@ FOLLOWING_GAIN = (0.2, 5.0)
 an axis that follows its command (less where it lags a fast motion), 0 for swapped columns of a circle, 1e-3 or
 1e3 for a column in m or µm read as mm, -1 for a reversed sign. Axes whose reference moves less than 1 µm RMS
 are not checked."""
+FOLLOWING_SPAN = 0.5
+"""A trace shorter than this [s] whose measured column hardly moves may have ended before the axis followed its
+command (a lag of 1/Kp is 10-100 ms): its error says so beside the columns and units."""
 PLAUSIBLE_SAMPLE_PERIOD = (1e-6, 1.0)
 """Sample periods [s] of a servo trace, from 1 MHz up to (not including) 1 Hz: outside, a time column without
 a declared unit is refused."""
@@ -339,8 +342,12 @@ def read_trace(file):
         gain = _following_gain(data[:, 1 + 2 * i], data[:, 2 + 2 * i])
         if not FOLLOWING_GAIN[0] <= gain <= FOLLOWING_GAIN[1]:
             gain = gain if abs(gain) >= 1e-3 else 0.0  # not -3.8e-18 for a swapped circle
+            duration = data[-1, 0] - data[0, 0]
+            why = ("columns swapped or units wrong?" if abs(gain) >= FOLLOWING_GAIN[0] or duration >= FOLLOWING_SPAN else
+                   f"the trace lasts {duration:.3g} s, maybe too short for the axis to have started to follow "
+                   "(a longer trace tells), or columns swapped or units wrong")
             raise fail(f"column {axis!r}: the measured {axis} does not follow {axis}_ref: it moves {gain:.3g} mm per mm of "
-                       f"{axis}_ref (a servo axis following its command moves about 1): columns swapped or units wrong?")
+                       f"{axis}_ref (a servo axis following its command moves about 1): {why}")
     measured = {kind: {} for kind in INPUTS}
     for column, name in enumerate(inputs, start=1 + len(positions)):
         measured[inputs[name]][name.partition("_")[0]] = data[:, column]

@@ -306,6 +306,17 @@ def test_a_measured_column_that_does_not_follow_its_reference_is_refused(tmp_pat
     assert words in str(info.value) and "columns swapped or units wrong?" in str(info.value)
 
 
+def test_a_short_trace_whose_axis_has_not_yet_followed_is_said_maybe_too_short(tmp_path):
+    """Five rows of a start: the reference moved 3 µm in 4 ms, the axis not yet; the error blamed the columns or the
+    units alone (an outside probe)."""
+    t = np.arange(5) * 1e-3
+    rows = "\n".join(f"{a:.3f},{b:.6f},{c:.6f}" for a, b, c in zip(t, 2e-4 * np.arange(5) ** 2, [0, 0, 0, -1e-6, 0]))
+    (tmp_path / "s.csv").write_text("t,x_ref,x\n" + rows)
+    with pytest.raises(TraceFormatError, match=r"line 1: column 'x': the measured x does not follow x_ref: .* the trace "
+                                               r"lasts 0\.004 s, maybe too short for the axis to have started to follow"):
+        read_trace(tmp_path / "s.csv")
+
+
 def test_a_reference_that_does_not_move_is_not_judged(tmp_path):
     rows = "\n".join(f"{k * 1e-3:.3f},5,{5 + 1e-3 * np.sin(k):.6f}" for k in range(100))  # hunting at standstill
     (tmp_path / "h.csv").write_text("t,x_ref,x\n" + rows)
