@@ -197,12 +197,16 @@ def read_sweep(file):
     log = tuple(t.get("log", False) is True for t in tables)
     made = Sweep(str(file), files, strategies, names, values, task_size, elsewhere, log)
     job = _job(made)  # the spec's job, every name and the extreme values checked here, not on a worker
-    for i, name in enumerate(names):
-        try:
-            job.variant({name: values[:, i].min()})
-            job.variant({name: values[:, i].max()})
-        except (TypeError, ValueError) as exc:
-            raise toml.error(f"vary {name!r}: {exc}", "vary", i, "name") from None
+    for i, (name, table) in enumerate(zip(names, tables)):
+        # a draw's range checked by its bounds first: a range the parameter cannot take is said by the value written
+        bounds = () if method == "grid" else (float(table["min"]), float(table["max"]))
+        for k, value in enumerate((*bounds, values[:, i].min(), values[:, i].max())):
+            try:
+                job.variant({name: value})
+            except (TypeError, ValueError) as exc:
+                why = ("; its min and max are taken, a value drawn between them not: vary it on a grid with values = "
+                       "[...]" if k >= len(bounds) > 0 else "")
+                raise toml.error(f"vary {name!r}: {exc}{why}", "vary", i, "name") from None
     return made
 
 

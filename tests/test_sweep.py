@@ -95,6 +95,18 @@ def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message
         read_sweep(_spec(tmp_path, [vary]))
 
 
+@pytest.mark.parametrize(("vary", "message"), [
+    # "kd must be zero or positive, got -0.6591149647904255": a value drawn, which the user never wrote
+    ({"name": '"strategy.ccc_linear.kd"', "min": -1.0, "max": 1.0}, r"kd must be zero or positive, got -1\.0$"),
+    # "... must be a whole number of servo periods, got 0.28831922543926747"
+    ({"name": '"axes.x.computation_delay_periods"', "min": 0.0, "max": 2.0},
+     r"got 0\.\d+; its min and max are taken, a value drawn between them not: vary it on a grid with values = \[\.\.\.\]"),
+])
+def test_a_drawn_range_the_parameter_cannot_take_is_said_by_its_bound_or_as_a_grids(tmp_path, vary, message):
+    with pytest.raises(ConfigError, match=rf"spec.toml, line 14: vary '{vary['name'][1:-1]}': .*{message}"):
+        read_sweep(_spec(tmp_path, [vary], 'method = "lhs"\ncount = 3\nseed = 4'))
+
+
 @pytest.mark.parametrize(("vary", "sweep", "message"), [
     # was "vary.count must be a whole number, at least 1; got None"
     ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0}, 'method = "grid"', r"spec.toml, line 11: vary.count is "
