@@ -1336,7 +1336,8 @@ def _motion_from_toml(toml, base, where, item, rotary, travel, fail):
 
 
 def _warn_short_table(name, tables, travel, rotary, fail):
-    """Warn when the error table `name` (`tables`, read by :func:`read_error_table`) does not cover the axis's travel.
+    """Warn when the error table `name` (`tables`, read by :func:`read_error_table`) does not cover the axis's travel,
+    refuse it when it covers none of it.
 
     Beyond its ends the table's first and last values are held (``np.interp``): an error the table
     does not give, which the user is told of rather than left to find in the results.
@@ -1349,6 +1350,9 @@ def _warn_short_table(name, tables, travel, rotary, fail):
     unit, shown = ("°", np.rad2deg) if rotary else (" mm", np.asarray)
     lo, hi = shown([positions[0], positions[-1]])
     start, end = shown(travel)
+    if positions[-1] < travel[0] or positions[0] > travel[1]:  # held values alone: the table's errors never apply
+        raise fail(f"error table {name!r} covers {lo:g} .. {hi:g}{unit}, none of the travel {start:g} .. {end:g}{unit}: "
+                   "positions of another axis, or a sign or unit wrong?", "errors", "table")
     message = (f"error table {name!r} covers {lo:g} .. {hi:g}{unit} of the travel {start:g} .. {end:g}{unit}: its first and "
                "last values are held beyond its ends (add rows at the travel's ends to give the errors there)")
     warnings.warn(str(fail(message, "errors", "table")), ContoursimWarning, stacklevel=2)

@@ -247,6 +247,9 @@ def _draw(toml, tables, method, count, seed):
             if points == 1 and high > low:  # linspace's one point is min: max would never run
                 raise toml.error(f"vary {t['name']!r}: count = 1 is min = {low:g} alone, max = {high:g} never runs: "
                                  "give count = 2 or more, or values = [...]", "vary", i, "count")
+            if points > 1 and high == low:  # the same variant `points` times
+                raise toml.error(f"vary {t['name']!r}: min = max = {low:g}: count = {points} would run that one value "
+                                 f"{points} times; give count = 1, or a max above min", "vary", i, "count")
             columns.append((low, high, log, points))
         elif "count" in t:
             raise toml.error("a vary table's count gives a grid's points: with random or lhs set [sweep] count",

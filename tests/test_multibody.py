@@ -657,6 +657,16 @@ def test_an_error_table_shorter_than_the_travel_is_warned_of_naming_the_table_an
                         "are held beyond its ends (add rows at the travel's ends to give the errors there)"]
 
 
+def test_an_error_table_outside_the_travel_is_refused_naming_the_table_and_line(tmp_path):
+    """A table of -1000 .. -900 mm on a travel of 0 .. 100 mm: warned of as covering part of the travel, its last row's
+    errors held over all of it (an outside probe)."""
+    (tmp_path / "x.csv").write_text("position_mm,dx_um\n-1000,0\n-900,3\n")
+    (tmp_path / "m.toml").write_text(MACHINE.replace("[body.errors]\n", 'travel_mm = [0, 100]\n[body.errors]\ntable = "x.csv"\n'))
+    with pytest.raises(ConfigError, match=re.escape(f"{tmp_path / 'm.toml'}, line 12: body 'X': error table 'x.csv' covers "
+                                                    "-1000 .. -900 mm, none of the travel 0 .. 100 mm: positions of")):
+        chain_from_toml(TomlFile.read(tmp_path / "m.toml"))
+
+
 def test_a_thermal_drift_beyond_the_small_errors_within_a_run_is_refused():
     # X travels 0..100 mm (MACHINE has no travel: given here); the small errors allow 1 mm of drift along it, 10 mrad.
     text = MACHINE.replace('squareness = { y_urad = 10 }', 'squareness = { y_urad = 10 }\ntravel_mm = [0, 100]\n'

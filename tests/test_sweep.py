@@ -88,6 +88,8 @@ def test_a_latin_hypercube_puts_one_draw_in_each_stratum_of_each_parameter(count
                                                                          r"at least 1; got 0"),  # it was a TypeError's
     ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0, "count": 1},  # it ran kp 5 alone
      r"line 15: vary 'axes.x.kp_per_s': count = 1 is min = 5 alone, max = 9 never runs"),
+    ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 5.0, "count": 3},  # it ran kp 5 three times
+     r"line 15: vary 'axes.x.kp_per_s': min = max = 5: count = 3 would run that one value 3 times"),
 ])
 def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message):
     vary.setdefault("count", 2)
