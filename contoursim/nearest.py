@@ -18,9 +18,11 @@ candidate), whatever the path does elsewhere: where it turns back on itself
 search looks at the stretch around R and the reversal point is part of it,
 also where the ball clips the tip of a narrow corner (the way in, cut off
 by a fraction of a µm, was not taken: the error jumped from 4.5 to 26.7 µm
-between two samples); where a closed curve comes back near its start or a
-figure-eight crosses itself, the other branch is connected to R only by a
-stretch far outside the ball and is not taken.
+between two samples); where a figure-eight crosses itself, the other branch
+is connected to R only by a stretch far outside the ball and is not taken.
+The search runs over the knots in path order and stops at the path's ends,
+also at the seam of a closed one (:mod:`contoursim.contour`'s walk goes on
+across it).
 
 The search runs over the *knots*, the reference samples with the repeats of a
 standstill removed (:func:`distinct`): at an exact stop the interpolator
@@ -184,26 +186,42 @@ def _descend(knots, hint, p, window):
 
 
 @njit(cache=True)
-def _beyond(length, j, step, slack):
+def _along(length, v, lap):
+    """The length along the path of index v of `length` (M,): ``length[v]``; on a closed path (`lap` > 0, its length
+    [mm], ``length[M - 1]`` at the start again) any integer v, taken modulo M - 1 with a lap added per turn."""
+    if lap == 0.0:
+        return length[v]
+    period = length.shape[0] - 1
+    return length[v % period] + lap * (v // period)
+
+
+@njit(cache=True)
+def _real(v, m, lap):
+    """The index into an array of M entries of index v along the path (:func:`_along`)."""
+    return v if lap == 0.0 else v % (m - 1)
+
+
+@njit(cache=True)
+def _beyond(length, j, step, slack, lap):
     """The first knot past j (in direction step = ±1) whose cumulative `length` differs from j's by >= slack.
 
     `length` (M,) is non-decreasing [mm]: the knots' ``L`` (the last
     column of read-only knots, a strided view) or the samples' arc length
     (:mod:`contoursim.contour` passes it as such a view: one compiled version). Returns an index outside [0, M) when there is
-    none. Galloping: doubling steps, then bisection, O(log k) probes for a
-    jump of k knots.
+    none; on a closed path (`lap` > 0, :func:`_along`) an index of any sign, at most a lap away. Galloping: doubling
+    steps, then bisection, O(log k) probes for a jump of k knots.
     """
     m = length.shape[0]
-    left = j if step == -1 else m - 1 - j  # knots that way
-    c0 = length[j]
+    left = (j if step == -1 else m - 1 - j) if lap == 0.0 else m - 1  # knots that way (closed: a lap's)
+    c0 = _along(length, j, lap)
     good, k = 0, 1  # gap < slack up to good; k: the probe
-    while k <= left and step * (length[j + step * k] - c0) < slack:
+    while k <= left and step * (_along(length, j + step * k, lap) - c0) < slack:
         good = k
         k *= 2
     bad = min(k, left + 1)  # gap >= slack there, or past the end
     while bad - good > 1:
         mid = (good + bad) // 2
-        if step * (length[j + step * mid] - c0) < slack:
+        if step * (_along(length, j + step * mid, lap) - c0) < slack:
             good = mid
         else:
             bad = mid
@@ -235,7 +253,7 @@ def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
             if dr > radius:  # outside: no knot within dr - radius of length is inside
                 if out < 0:
                     out = j - step  # skips inside the ball stop at its edge: the knot before j is inside
-                j = _beyond(length, j, step, dr - radius)
+                j = _beyond(length, j, step, dr - radius, 0.0)
             else:
                 out = -1
                 dp = _distance(knots, j, p)
@@ -243,10 +261,10 @@ def _scan(knots, a, p, radius, best, dbest, seen_lo, seen_hi):
                     best, dbest = j, dp
                 if seen_lo <= j <= seen_hi:  # no nearer knot up to the end of the seen range: the ball decides alone
                     past = seen_hi + 1 if step == 1 else seen_lo - 1
-                    ball = _beyond(length, j, step, radius - dr)
+                    ball = _beyond(length, j, step, radius - dr, 0.0)
                     j = past if step * (ball - past) >= 0 else ball
                 else:  # every knot within this much length of j is inside the ball and no nearer to p than dbest
-                    j = _beyond(length, j, step, min(radius - dr, dp - dbest))
+                    j = _beyond(length, j, step, min(radius - dr, dp - dbest), 0.0)
             if j < 0 or j >= m:
                 break
         if out >= 0:
