@@ -736,6 +736,11 @@ def figure_files(runs, name, nominal=None):
     For a command that writes other files beside the plots: it refuses
     the whole set (:meth:`contoursim.output.OutputDir.file`) before writing any.
 
+    Parameters
+    ----------
+    runs, name, nominal
+        As :func:`save_figures`'s.
+
     Returns
     -------
     list of str
