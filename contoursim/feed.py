@@ -306,7 +306,8 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     corner_tolerance : float
         Tangent turn at a join above which the motion stops exactly [rad].
     max_feed : float, optional
-        Largest feed allowed [mm/s]; a larger `feed` raises ValueError.
+        Largest feed allowed [mm/s]; a larger `feed` raises ValueError,
+        but a rapid's (a primitive with role ``"rapid"``, G0) is lowered to it.
     in_position : float
         Standstill at the end of each rapid (a primitive with role
         ``"rapid"``, a G0 move) [s]: the motion always stops there, and waits
@@ -339,8 +340,10 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     accel = _validate.positive("accel", accel)
     jerk = None if jerk is None else _validate.positive("jerk", jerk)
     tolerance = _corner_tolerance(corner_tolerance)
+    waits = np.array(path.roles) == "rapid"
     if max_feed is not None:
         max_feed = _validate.positive("max_feed", max_feed)
+        feeds = np.where(waits, np.minimum(feeds, max_feed), feeds)  # a rapid traverses at the machine's fastest
         if feeds.max() > max_feed:
             i = int(np.argmax(feeds))
             raise PathError(f"feed {feeds[i]:.6g} mm/s ({feeds[i] * 60:.6g} mm/min, segment {i}) exceeds "
@@ -355,7 +358,6 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     stops = np.asarray(stops, dtype=float).ravel()
     if not np.all((stops == np.round(stops)) & (stops >= 0) & (stops < k)):
         raise ValueError(f"stops must be primitive indices in [0, {k - 1}], got {stops.tolist()}")
-    waits = np.array(path.roles) == "rapid"
     waits[stops.astype(int)] = True
     waits = waits[:-1]  # the path's end is a stop of its own
     stop = (path.corner_angles() > tolerance) | waits

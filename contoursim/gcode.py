@@ -44,7 +44,7 @@ controllers differ on which wins), any other word.
 Rapid moves: G0 moves before the first feed move (G1/G2/G3) only position
 the tool: the path starts where the first feed move starts. G0 moves after
 it are kept as straight segments with role "rapid", travelled at
-`rapid_feed`; the joins around them are sharp corners, so the planner stops
+`rapid_feed` (at most a machine's max feed); the joins around them are sharp corners, so the planner stops
 there. G0 moves after the last feed move (the retract) are dropped.
 Zero-length moves are skipped.
 

@@ -134,6 +134,21 @@ def test_centripetal_limit():
     assert traj.speed.max() == pytest.approx(np.sqrt(50.0 * 50.0), rel=1e-12)
 
 
+def test_a_rapid_traverses_at_most_at_the_machines_max_feed():
+    """A G0 between two cuts on a machine of max_feed 3000 mm/min was refused at its line, feed 10000 mm/min, a feed
+    the program never wrote: no program with a rapid between cuts could run there (an outside probe)."""
+    from contoursim.gcode import read_gcode
+
+    program = read_gcode("G0 X0 Y0\nG1 X5 F1000\nG0 X20\nG1 X25\n")
+    settings = FeedSettings(tuple(program.feeds), stops=tuple(program.stops))
+    traj = sample(program.path, settings.plan(program.path, max_feed=50.0), 1e-3)
+    rapid = (traj.s > 5.0) & (traj.s < 20.0)
+    assert traj.speed[rapid].max() == pytest.approx(50.0, rel=1e-9)
+    assert traj.speed[~rapid].max() == pytest.approx(1000 / 60, rel=1e-9)
+    with pytest.raises(ValueError, match="exceeds max_feed"):  # a cutting feed above it is still refused
+        settings.plan(program.path, max_feed=10.0)
+
+
 def test_bad_values_name_the_parameter():
     path = paths.line((0, 0), (10, 0))
     with pytest.raises(ValueError, match="exceeds max_feed"):
