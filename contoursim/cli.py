@@ -444,8 +444,13 @@ def compare_command(args):
         names = [*names, "geometric"]
     settings = {} if job is None else _strategy_settings(job, names)
     parts = {part for name in names for part in name.split("+")}
-    for text in args.set or ():  # a setting of a strategy that does not run would be dropped without a word
-        if _set_option(settings, text) not in parts:
+    given = {}  # each --set's STRATEGY.KEY: one given twice would drop the first without a word
+    for text in args.set or ():
+        where = "".join(text.partition("=")[0].split())
+        if where in given:
+            raise ValueError(f"--set {where} is given twice ({given[where]}, {text}): give it once")
+        given[where] = text
+        if _set_option(settings, text) not in parts:  # a setting of a strategy that does not run: dropped otherwise
             raise ValueError(f"--set {text}: no strategy run here has {text.partition('.')[0].strip()!r} "
                              f"(--strategies {','.join(names)}): run it, or drop the setting")
     if args.tune and not any(part.startswith("ccc_") for part in parts):
