@@ -11,7 +11,8 @@ The modes the model assumes are accepted: ``G21`` (mm), ``G94`` (feed per
 minute), ``G40`` and ``G49`` (no cutter or tool length compensation), ``G80``
 (no canned cycle), ``G91.1`` (arc centres relative to the arc's start, as
 Mach3-style posts write it; ``G90.1``, absolute centres, is refused). Accepted and ignored, because they move no axis of the
-contour: ``%`` lines, comments ``( ... )`` (a ``;`` inside one is part of the
+contour: ``%`` lines (a ``%`` after the first block ends the program, as on
+Fanuc and LinuxCNC: nothing after it runs), comments ``( ... )`` (a ``;`` inside one is part of the
 comment) and ``; ...`` (to the end of the line), sequence numbers
 ``N``, program numbers ``O``, spindle speed ``S``, tool ``T`` with its offsets
 ``D``/``H``, M codes other than the program end (spindle ``M3 M4 M5``, coolant
@@ -245,6 +246,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     away = {}  # axis -> line of the G28/G30/G53 that took it to a machine position, after the first feed move
 
     ended = False  # M2/M30: the program ends after its block
+    started = False  # a block was read: a '%' line now ends the tape
     for number, raw in enumerate(text_lines(text), 1):
         if ended:
             break
@@ -252,12 +254,14 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         def fail(message):
             raise ConfigError(message, source=source, line=number)
 
-        if raw.strip().startswith("%"):
+        if raw.strip().startswith("%"):  # the tape's start; after a block, its end: as M30, nothing after it runs
+            ended = started
             continue
         mark = _BLOCK_DELETE.match(raw)
         if mark:
             optional.append(number)
         words = _words(raw[mark.end():] if mark else raw, fail)
+        started = started or bool(words)
         values, gcodes, mcodes = {}, [], []
         for letter, value in words:
             if letter == "G":

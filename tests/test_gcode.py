@@ -241,6 +241,13 @@ def test_a_move_in_a_block_that_ends_the_program_or_dwells_is_run(block, line, f
     assert program.stops == stops
 
 
+@pytest.mark.parametrize("head", ["%\n", "%\n(a comment alone)\n%\n", ""])
+def test_a_percent_line_after_a_block_ends_the_program(head):
+    """A G1 Y10 after the closing '%' of a tape was run and scored (Fanuc and LinuxCNC read nothing after it)."""
+    program = read_gcode(f"{head}G0 X0 Y0\nG1 X10 F1000\n%\nG1 Y10\n")
+    np.testing.assert_allclose(program.path.end, [10, 0, 0])
+
+
 @pytest.mark.parametrize("separator", ["\x85", "\x0c", "\u2028"])
 def test_lines_are_numbered_as_an_editor_numbers_them(tmp_path, separator):
     """A Latin-1 '…' (byte 0x85, U+0085 read as Latin-1), a form feed or U+2028 split a line: the lines after it were
