@@ -586,7 +586,9 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     -----
     ContoursimWarning
         An axis's current command hit its limit: the message names the axis
-        and the fraction of samples (see :attr:`SimResult.saturation`).
+        and the fraction of samples (see :attr:`SimResult.saturation`); a
+        geometric compensation runs beside geometric effects, which its
+        error model (the machine's bodies) does not hold.
 
     Notes
     -----
@@ -632,6 +634,11 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     error = _contour_error(trajectory, tool) if contour else None
     known = {axis: pushing[:, list(machine.axes).index(axis)] for axis in pushed}
     result = SimResult(trajectory, machine, q, response, tool, static, error, composition.strategies, model, known)
+    uncompensated = [e.label for e in model.stage("geometry")]
+    if uncompensated and any(s.name == "geometric" for s in composition.strategies):
+        warnings.warn(f"geometric compensation corrects the errors of {machine.name}'s own error model (its [[body]] "
+                      f"tables), as a controller corrects what it was calibrated with; the effects "
+                      f"{', '.join(uncompensated)} are not in it and stay uncompensated", ContoursimWarning, stacklevel=2)
     clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
     if clipped:
         axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A)"
