@@ -72,7 +72,8 @@ def _trajectory(model, path_file, job=None, direction=None):
     machine = as_model(model).machine
     try:
         # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
-        profile = settings.plan(read.path, max_feed=machine.max_feed, in_position=default_settle(machine))
+        profile = settings.plan(read.path, max_feed=machine.max_feed, in_position=default_settle(machine),
+                                servo_period=machine.servo_period)
         return sample(read.path, profile, machine.servo_period), read.program
     except ConfigError:
         raise

@@ -31,12 +31,13 @@ across them.
 """
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import _memory, _validate
-from .exceptions import PathError
+from .exceptions import ContoursimWarning, PathError
 from .paths import Path
 from .trajectory import Trajectory
 
@@ -288,7 +289,7 @@ def _feed_values(feed):
 
 
 def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_tolerance=1e-3, max_feed=None,
-         in_position=0.0, stops=()):
+         in_position=0.0, stops=(), servo_period=None):
     """Plan the motion along a path under feed, acceleration and jerk limits.
 
     Parameters
@@ -316,11 +317,23 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     stops : sequence of int
         Primitives at whose end the motion stops and waits `in_position` as
         at the end of a rapid (a G-code dwell, G4).
+    servo_period : float, optional
+        The period the motion will be sampled at [s]: a join passed at speed
+        (its turn under `corner_tolerance`) turns the velocity within one
+        period, which is warned of where that exceeds `accel`.
 
     Returns
     -------
     FeedProfile
         Rest to rest over the path length.
+
+    Warns
+    -----
+    ContoursimWarning
+        Joins passed at speed whose velocity step exceeds `accel` over a
+        `servo_period`; ten or more joins that stop exactly though they turn
+        by less than a degree (a program of short segments, CAM output, runs
+        well below its feed: a tolerance a little higher passes them).
 
     Examples
     --------
@@ -367,7 +380,37 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     inner = np.where(stop[first[1:] - 1], 0.0, np.minimum(limits[first[1:] - 1], limits[first[1:]]))
     vjunction = np.concatenate([[0.0], inner, [0.0]])
     dwell = np.append(np.where(waits[first[1:] - 1], in_position, 0.0), 0.0)
-    return _plan_sections(breaks, limits[first], vjunction, accel, jerk, dwell)
+    profile = _plan_sections(breaks, limits[first], vjunction, accel, jerk, dwell)
+    _warn_corners(path, profile, stop, waits, tolerance, accel, servo_period)
+    return profile
+
+
+def _warn_corners(path, profile, stop, waits, tolerance, accel, servo_period):
+    """:func:`plan`'s warnings of its joins (`stop`: those it stops at, `waits` among them a rapid's end or a dwell):
+    passed at a velocity step beyond `accel`, stopped at a slight turn."""
+    turns = path.corner_angles()
+    slight = stop & ~waits & (turns < math.radians(1.0))
+    if slight.sum() >= 10:
+        speed = 60.0 * profile.length / profile.duration
+        warnings.warn(f"{slight.sum()} joins stop exactly though each turns by less than 1° (corner_tolerance_deg = "
+                      f"{math.degrees(tolerance):.3g}; up to {math.degrees(turns[slight].max()):.3g}° here): the path "
+                      f"takes {profile.duration:.4g} s, {speed:.4g} mm/min on average; a program of short segments "
+                      "(CAM output) is passed at its feed with corner_tolerance_deg a little above its turns",
+                      ContoursimWarning, stacklevel=3)
+    passed = (turns > 0.0) & ~stop
+    if servo_period is None or not passed.any():
+        return
+    piece = np.searchsorted(profile.s0, path.breaks[1:-1], side="right") - 1  # the motion's piece at each join
+    speed = np.maximum(profile.v0[piece], profile.v0[np.minimum(piece + 1, profile.v0.size - 1)])  # at most
+    step = np.where(passed, 2.0 * speed * np.sin(turns / 2.0), 0.0)  # the velocity's turn at the join [mm/s]
+    worst = int(np.argmax(step))
+    if step[worst] > accel * servo_period:
+        count = int((step > accel * servo_period).sum())
+        warnings.warn(f"{count} join{'s' * (count > 1)} under corner_tolerance_deg = {math.degrees(tolerance):.3g} "
+                      f"{'are' if count > 1 else 'is'} passed at speed: the velocity turns by up to "
+                      f"{step[worst]:.3g} mm/s within a servo period (a join of {math.degrees(turns[worst]):.3g}° at "
+                      f"{speed[worst]:.4g} mm/s), {step[worst] / servo_period:.4g} mm/s² against accel = {accel:.4g}; "
+                      "a lower corner_tolerance_deg stops there", ContoursimWarning, stacklevel=3)
 
 
 @dataclass(frozen=True)
@@ -413,7 +456,7 @@ class FeedSettings:
                 raise ValueError(f"{name} must lie within [{SETTING_RANGE[0]:g}, {SETTING_RANGE[1]:g}] "
                                  f"(mm/s, mm/s^2, mm/s^3), got {values.min() if values.min() < 1 else values.max():g}")
 
-    def plan(self, path, max_feed=None, in_position=0.0):
+    def plan(self, path, max_feed=None, in_position=0.0, servo_period=None):
         """:func:`plan` with these settings.
 
         Parameters
@@ -424,6 +467,8 @@ class FeedSettings:
             Largest feed allowed [mm/s].
         in_position : float
             Standstill at the end of each rapid and at each of `stops` [s] (see :func:`plan`).
+        servo_period : float, optional
+            The period the motion will be sampled at [s] (see :func:`plan`).
 
         Returns
         -------
@@ -431,7 +476,7 @@ class FeedSettings:
         """
         return plan(path, self.feed, self.accel, self.jerk, centripetal_accel=self.centripetal_accel,
                     corner_tolerance=self.corner_tolerance, max_feed=max_feed, in_position=in_position,
-                    stops=self.stops)
+                    stops=self.stops, servo_period=servo_period)
 
 
 def _corner_tolerance(value):
