@@ -80,7 +80,7 @@ import numpy as np
 from . import _validate
 from .config import read_bytes, text_lines
 from .exceptions import ConfigError, ContoursimWarning, PathError
-from .paths import Line, Path, _arc_from_point
+from .paths import MAX_COORDINATE, Line, Path, _arc_from_point
 from .simulation import SimResult
 
 __all__ = ["DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "read_gcode"]
@@ -271,6 +271,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             elif letter in "XYZIJKRFP" + _IGNORED_LETTERS:
                 if letter in values:
                     fail(f"word {letter} appears twice in one block")
+                if letter in "XYZIJKR" and abs(value) > MAX_COORDINATE:
+                    fail(f"{letter}{value:g} is beyond ±{MAX_COORDINATE:g} mm, not a position a machine reaches")
                 values[letter] = value
             else:
                 fail(f"unknown word {letter}{value:g} (supported: {_SUPPORTED})")

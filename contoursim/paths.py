@@ -239,8 +239,9 @@ def _scalar(check, name, value):
         value = check(name, value)
     except ValueError as exc:
         raise PathError(str(exc)) from None
-    if not 1.0 / MAX_COORDINATE <= abs(value) <= MAX_COORDINATE and value != 0:  # 1e308 hangs, 1e-300 divides by 0
-        raise PathError(f"{name} = {value:g} is outside [{1.0 / MAX_COORDINATE:g}, {MAX_COORDINATE:g}], "
+    # 1e308 hangs, 1e-300 divides by 0; the bounds to rounding (a radius of 1e-6 from a centre word I0.000001)
+    if not (1.0 - 1e-9) / MAX_COORDINATE <= abs(value) <= MAX_COORDINATE and value != 0:
+        raise PathError(f"{name} = {value:.10g} is outside [{1.0 / MAX_COORDINATE:g}, {MAX_COORDINATE:g}], "
                         "not a path a machine follows")
     return value
 

@@ -381,3 +381,12 @@ def test_block_errors_are_each_blocks_worst_samples_worst_block_first():
         block_errors(program, None)
     with pytest.raises(ValueError, match="top must be at least 1, got -1"):
         errors.table(top=-1)
+
+
+def test_a_word_beyond_the_coordinate_limit_is_named_and_the_smallest_radius_is_taken():
+    """'p1 holds 2e+06 at index 0, beyond ±1e+06' named the builder's argument, not the word; a full circle of radius
+    I0.000001, the smallest the docs allow, was 'outside [1e-06, 1e+06]' by rounding (an outside probe)."""
+    with pytest.raises(ConfigError, match=r"^<gcode>, line 2: X2e\+06 is beyond ±1e\+06 mm"):
+        read_gcode("G0 X0 Y0\nG1 X2000000 F1000\n")
+    program = read_gcode("G0 X0 Y0\nG1 X10 F1000\nG2 X10 Y0 I0.000001\n")
+    assert program.path.length == pytest.approx(10 + 2e-6 * np.pi, abs=1e-12)
