@@ -116,8 +116,9 @@ def _bisected_kp(rows, position_gain, dt, kd):
 
     low, high = 0.01 * position_gain, position_gain
     if damping(low) < DESIGN_DAMPING_RATIO:
+        why = (f"with kd = {kd:g}: lower it" if kd else "the axes' own loops are that little damped")
         raise ValueError(f"the coupled loop is damped at {damping(low):.3g} < {DESIGN_DAMPING_RATIO:g} even with "
-                         f"kp = {low:g} 1/s (the axes' own loops are that little damped): set the coupling gains kp, ki")
+                         f"kp = {low:g} 1/s ({why}): set the coupling gains kp, ki")
     while damping(high) >= DESIGN_DAMPING_RATIO:
         low, high = high, 2.0 * high
     while high - low > 1e-6 * high:

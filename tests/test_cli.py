@@ -543,6 +543,8 @@ def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(
     ("", ["--set", "zpetc.negative_zero_radius=2"], "negative_zero_radius must be between 0 and 1"),
     ("", ["--set", "ccc_arc.kp_per_s=3", "--tune"], "tuning sets the coupling's kp_per_s and ki_per_s2: ccc_arc.kp_per_s is set"),
     ("", ["--set", "ccc_arc.kp_per_s=3000"], "the coupled loop of axes x, y, z is unstable"),
+    # "(the axes' own loops are that little damped)": the kd set was the cause
+    ("", ["--set", "ccc_arc.kd=5"], "even with kp = 0.36 1/s (with kd = 5: lower it): set the coupling gains"),
     # the first dropped without a word
     ("", ["--set", "ccc_arc.kp_per_s=50", "--set", "ccc_arc. kp_per_s = 60"],
      "--set ccc_arc.kp_per_s is given twice (ccc_arc.kp_per_s=50, ccc_arc. kp_per_s = 60): give it once"),
