@@ -164,6 +164,8 @@ def _text_and_source(file_or_text):
     if isinstance(file_or_text, os.PathLike) or (isinstance(file_or_text, str) and "\n" not in file_or_text):
         file = _FilePath(file_or_text)
         raw = read_bytes(file)
+        if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16's byte-order marks: Latin-1 would read it as words
+            raise ConfigError("the file is UTF-16 text (by its byte-order mark): save it as UTF-8", str(file), 1)
         try:
             return raw.decode("utf-8-sig"), str(file)
         except UnicodeDecodeError:

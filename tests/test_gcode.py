@@ -390,3 +390,11 @@ def test_a_word_beyond_the_coordinate_limit_is_named_and_the_smallest_radius_is_
         read_gcode("G0 X0 Y0\nG1 X2000000 F1000\n")
     program = read_gcode("G0 X0 Y0\nG1 X10 F1000\nG2 X10 Y0 I0.000001\n")
     assert program.path.length == pytest.approx(10 + 2e-6 * np.pi, abs=1e-12)
+
+
+def test_a_utf16_program_is_named_so(tmp_path):
+    """A program saved as UTF-16 was read as Latin-1: "line 1: cannot read 'ÿþG\\x000\\x00 ...'" (an outside probe)."""
+    (tmp_path / "p.nc").write_bytes("G0 X0 Y0\nG1 X10 F1000\n".encode("utf-16"))
+    with pytest.raises(ConfigError, match=r"p.nc, line 1: the file is UTF-16 text \(by its byte-order mark\): save it as "
+                                          r"UTF-8$"):
+        read_gcode(tmp_path / "p.nc")
