@@ -247,6 +247,9 @@ def _job(args, extra_keys=()):
                 near = local_file(data[key], file.parent, suffixes) or data[key]  # beside the job, else a preset's name
                 if Path(near).is_dir():  # '', '.', a folder beside the job: said where the job names it
                     raise job.error(f"{key} = {data[key]!r} names the folder {near}, not a {key} file", key)
+                if Path(near).is_file() and os.path.samefile(near, file):  # pocket.toml with path = "pocket"
+                    raise job.error(f"{key} = {data[key]!r} names this job file itself: a job named as a {key} it "
+                                    f"runs hides that {key}; rename the job file (e.g. {file.stem}_job.toml)", key)
                 try:
                     return find(near)
                 except ConfigError as exc:

@@ -396,6 +396,9 @@ def test_a_machine_whose_axis_has_no_travel_is_refused_by_volumetric_naming_its_
      "demo mill (3 servo axes) has no geometric model ([[body]] tables) to compensate with"),
     ('machine = "demo_mill"\npath = ""\n', 2, "path = '' names the folder"),  # the job's own folder: said so, by its line
     ('machine = "."\npath = "small.toml"\n', 1, "machine = '.' names the folder"),
+    # a job named job.toml beside the library's paths, running itself: "this is a job file, not a path file"
+    ('machine = "demo_mill"\npath = "job"\n', 2, "path = 'job' names this job file itself: a job named as a path it runs "
+                                               "hides that path; rename the job file (e.g. job_job.toml)"),
 ])
 @pytest.mark.parametrize("command", [["simulate"], ["compare", "--strategies", "none"]])
 def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys, job, line, words, command):
