@@ -185,7 +185,8 @@ def _words(raw, fail):
         rest = rest.strip()
         hint = (": a decimal comma? write the number with a point" if rest.startswith(",") else
                 ": macro variables and expressions (# [ ]) are not supported: write the numbers out"
-                if any(c in rest for c in "#[") else "")
+                if any(c in rest for c in "#[") else
+                ": a space inside a number (X 1 0)? write the number without one" if rest[:1].isdigit() else "")
         fail(f"cannot read {rest!r}{hint}")
 
     words, pos = [], 0

@@ -160,6 +160,7 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G1 X1 F100 (nested (comment) here)\n", 1, "unbalanced parenthesis"),
     ("G0 X1\nG0 X2\n", None, "no feed move"),
     ("G1 X10,5 F100\n", 1, "cannot read ',5': a decimal comma\\? write the number with a point"),
+    ("G1 X 1 0 F100\n", 1, r"cannot read '0': a space inside a number \(X 1 0\)\? write the number without one"),
     ("#100=5\nG1 X#100 F100\n", 1, "cannot read '#100=5': macro variables and expressions"),
     ("G1 X[1+2] F100\n", 1, r"cannot read 'X\[1\+2\]': macro variables"),
 ])
