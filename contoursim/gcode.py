@@ -35,7 +35,9 @@ block-delete mark ``/`` (Fanuc's ``/1``–``/9`` too) runs, as with the
 controller's block-delete switch off: the program as written, all of it
 (the lines are named in a warning). What was ignored (all but ``N``) is
 listed in :attr:`Program.ignored` and in one
-:class:`~contoursim.exceptions.ContoursimWarning`. Refused with a message
+:class:`~contoursim.exceptions.ContoursimWarning`, grouped by why: path modes
+(the planner's corner rule decides the stops), tool length and work offsets
+(the path is the tool tip's from the work offset), no contour motion. Refused with a message
 naming file and line: inch units (``G20``), cutter radius compensation
 (``G41 G42``), feed per revolution or inverse time (``G93 G95``), subprogram
 calls (``M98 M99``), a centre word off the arc's plane (``K`` in ``G17``, ``J`` in
@@ -131,8 +133,8 @@ class Program:
     source : str
         File name, or "<gcode>" for text.
     ignored : tuple of str
-        The words that move no axis and were ignored (``"S12000"``, ``"M3"``,
-        ``"G54"`` ...), each once, in the order they first appear.
+        The words ignored (``"S12000"``, ``"M3"``, ``"G54"``, ``"G64 P0.01"``
+        ...), each once, in the order they first appear.
     stops : tuple of int
         The primitives after which the program dwells (G4): the motion stops
         at their end (:class:`contoursim.feed.FeedSettings`).
@@ -309,7 +311,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             elif g == 4:
                 nonmodal = g
             elif g in _IGNORED_G or g in _MACHINE_MOVES:
-                ignored.setdefault(_IGNORED_G.get(g, f"G{g:g}"), None)
+                tolerance = f" P{values['P']:g}" if g == 64 and "P" in values else ""  # a blend tolerance, not kept
+                ignored.setdefault(_IGNORED_G.get(g, f"G{g:g}") + tolerance, None)
                 nonmodal = g if g in _MACHINE_MOVES else nonmodal
             else:
                 fail(f"unknown word G{g:g} (supported: {_SUPPORTED})")
@@ -376,12 +379,25 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         prims.pop(), feeds.pop(), lines.pop(), texts.pop()
     stops = tuple(k for k in stops if k < len(prims) - 1)  # the path's end is a stop of its own
     if ignored:
-        warnings.warn(f"{source}: ignored (no contour motion): {' '.join(ignored)}", ContoursimWarning, stacklevel=2)
+        warnings.warn(f"{source}: ignored: {_ignored_text(ignored)}", ContoursimWarning, stacklevel=2)
     if optional:
         shown = ", ".join(map(str, optional[:10])) + (f" … ({len(optional)} in all)" if len(optional) > 10 else "")
         warnings.warn(f"{source}: block delete (/) on line{'s' if len(optional) > 1 else ''} {shown}: run, as with the "
                       "switch off", ContoursimWarning, stacklevel=2)
     return Program(Path(tuple(prims)), np.array(feeds), np.array(lines), tuple(texts), source, tuple(ignored), stops)
+
+
+def _ignored_text(ignored):
+    """The words a program's reading ignored, grouped by why the path is as if they were not there."""
+    why = {"mode": "path modes: the planner's corner_tolerance_deg decides where the motion stops",
+           "frame": "tool length and work offsets: the path is the tool tip's, from the work offset",
+           "other": "no contour motion"}
+    groups = {kind: [] for kind in why}
+    for word in ignored:
+        head = word.split()[0]
+        groups["mode" if head in ("G61", "G64") else "frame" if head in ("G43", *(f"G{g}" for g in range(54, 60)))
+               else "other"].append(word)
+    return "; ".join(f"{' '.join(words)} ({why[kind]})" for kind, words in groups.items() if words)
 
 
 @dataclass(frozen=True)

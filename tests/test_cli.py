@@ -311,8 +311,9 @@ def test_real_gcode_runs_and_says_in_one_line_what_it_ignored(tmp_path, capsys):
                                       "N50 G1 X2 F600\nN60 G2 X4 Y0 I1 J0\nN70 M30\n%\n")
     assert main(["simulate", str(tmp_path / "part.nc"), "--out", str(tmp_path / "o")]) == 0
     captured = capsys.readouterr()
-    assert captured.err.splitlines() == [f"contoursim simulate: warning: {tmp_path / 'part.nc'}: ignored "
-                                         "(no contour motion): O1234 G54 T1 M6 S12000 M3 M8"]
+    assert captured.err.splitlines() == [f"contoursim simulate: warning: {tmp_path / 'part.nc'}: ignored: G54 (tool "
+                                         "length and work offsets: the path is the tool tip's, from the work offset); "
+                                         "O1234 T1 M6 S12000 M3 M8 (no contour motion)"]
     assert "part " in captured.out
 
 

@@ -1026,7 +1026,7 @@ def test_a_warning_of_a_file_read_for_each_run_is_said_once(tmp_path, capsys):
     assert main(["simulate", str(tmp_path / "p.nc"), "--machine", "vertical_mill_3axis", "--geometric-compensation",
                  "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
-    assert err.count("ignored (no contour motion): S8000 M3") == 1, err
+    assert err.count("ignored: S8000 M3 (no contour motion)") == 1, err
 
 
 def test_a_loop_its_effects_make_unstable_is_said_so_naming_them_not_the_path_file(tmp_path, capsys):

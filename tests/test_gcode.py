@@ -203,7 +203,10 @@ def test_a_real_program_reads_and_lists_what_it_ignored():
     words = "O1234 G28 T1 M6 G54 S12000 M3 H1 M8 G43 M9 M5".split()
     with pytest.warns(ContoursimWarning) as record:
         program = read_gcode(REAL)
-    assert [str(w.message) for w in record] == [f"<gcode>: ignored (no contour motion): {' '.join(words)}"]
+    # grouped by why the path is as if they were not there: G54 and G43 change where it is, as the path says
+    assert [str(w.message) for w in record] == ["<gcode>: ignored: G54 G43 (tool length and work offsets: the path is "
+                                                "the tool tip's, from the work offset); O1234 G28 T1 M6 S12000 M3 H1 M8 "
+                                                "M9 M5 (no contour motion)"]
     assert program.ignored == tuple(words)
     # G91 in the G28 block stays modal: G90 on N30 restores absolute; the dwell's X is a time, not a move
     assert program.lines.tolist() == [9, 10, 13]
@@ -318,8 +321,10 @@ def test_mach3_arc_centre_mode_is_the_one_assumed():
 
 
 def test_linuxcnc_path_tolerance_is_accepted():
-    with pytest.warns(ContoursimWarning, match="ignored"):
-        assert read_gcode("G64 P0.01\nG0 X0 Y0\nG1 X1 F100\n").ignored == ("G64",)
+    # said as a path mode, with its tolerance; it was "ignored (no contour motion): G64", P0.01 not named
+    with pytest.warns(ContoursimWarning, match=r"ignored: G64 P0.01 \(path modes: the planner's corner_tolerance_deg "
+                                               r"decides where the motion stops\)$"):
+        assert read_gcode("G64 P0.01\nG0 X0 Y0\nG1 X1 F100\n").ignored == ("G64 P0.01",)
 
 
 @pytest.mark.parametrize("suffix", [".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".EIA"])
