@@ -97,13 +97,17 @@ def library_file(name):
     """
     if not isinstance(name, (str, os.PathLike)):
         raise TypeError(f"a path file is a file or library name (str or Path), got {type(name).__name__}")
+    if isinstance(name, str) and not name.strip():  # Path('') would be '.', a folder
+        raise ConfigError("the path file's name is empty: name a path file or a library path (e.g. butterfly)")
     here = local_file(name, suffixes=(".toml", ".nc"))  # a user's copy of a library entry is the one meant
-    if here is not None:
+    if here is not None and not here.is_dir():
         return here
     library = _library()
     for candidate in (str(name), f"{name}.toml", f"{name}.nc"):
         if library.joinpath(candidate).is_file():
             return library / candidate
+    if here is not None:  # a folder of that name, and no library entry
+        raise ConfigError(f"{here} is a folder, not a path file: name a path file (.toml or G-code) or a library path")
     known = sorted(p.name for p in library.iterdir() if p.suffix.lower() in (".toml", *SUFFIXES))
     meant = _validate.closest(str(name), [*known, *(_FilePath(k).stem for k in known)])
     raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library{meant}; the library: "

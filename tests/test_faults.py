@@ -34,7 +34,7 @@ from contoursim.gcode import read_gcode
 from contoursim.machine import load_machine, preset_file
 from contoursim.model import Model
 from contoursim.output import output_dir
-from contoursim.pathfile import load_path_file
+from contoursim.pathfile import library_file, load_path_file
 from contoursim.paths import circle, spline
 from contoursim.plotting import save_comparison_figures, save_figures
 from contoursim.servo import closed_loop
@@ -674,6 +674,21 @@ def test_a_dash_for_where_contoursim_writes_is_refused_not_made_a_folder_or_file
     assert info.value.code == 2
     assert words in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+@pytest.mark.parametrize("name, words", [
+    ("", "the path file's name is empty: name a path file or a library path"),  # ".: unknown path file type ''"
+    ("sub", "sub is a folder, not a path file"),  # "sub: unknown path file type ''"
+    ("butterfly", None),  # a folder of a library path's name does not hide it
+])
+def test_an_empty_or_folder_path_argument_is_said_so(tmp_path, monkeypatch, capsys, name, words):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "butterfly").mkdir()
+    if words is None:
+        assert library_file(name).name == "butterfly.toml"
+        return
+    _refused(capsys, ["simulate", name, "--out", str(tmp_path / "out")], words)
 
 
 @pytest.mark.parametrize("call, words", [
