@@ -659,7 +659,7 @@ def fleet_command(args):
 
 def _names(text):
     """``--strategies A,B``: the comma-separated names, at least one."""
-    names = [n.strip() for n in text.split(",") if n.strip()]
+    names = ["+".join(part.strip() for part in n.split("+")) for n in text.split(",") if n.strip()]  # "a + b": a+b
     if not names:
         raise argparse.ArgumentTypeError(f"names no strategy; got {text!r} (e.g. none,ccc_arc)")
     return names

@@ -341,7 +341,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         if motion is None:
             fail("a move needs a motion mode first (G0, G1, G2 or G3)")
         if arc_words and motion in (0, 1):
-            fail(f"{'/'.join(arc_words)} only belong to arc moves (G2/G3)")
+            fail(f"{'/'.join(arc_words)} {'belongs' if len(arc_words) == 1 else 'belong'} to arc moves (G2/G3) only")
         target = here.copy()
         for i, a in enumerate("XYZ"):
             if a in values:

@@ -894,3 +894,10 @@ def test_a_warning_during_a_diagnosis_on_a_terminal_takes_a_line_of_its_own(tmp_
     assert main(["diagnose", str(tmp_path / "m.csv"), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 2
     assert terminal.getvalue().split("\n")[0] == \
         "\ridentify: kp = 30.00 1/s\x1b[K\r\x1b[Kcontoursim diagnose: warning: the current command hit its limit"
+
+
+def test_strategy_names_are_read_with_spaces_around_commas_and_pluses():
+    """Spaces around ',' were stripped, around '+' kept: 'feedforward + ccc_arc' was an unknown strategy."""
+    from contoursim.cli import _names
+
+    assert _names(" none , feedforward + ccc_arc ") == ["none", "feedforward+ccc_arc"]

@@ -152,7 +152,7 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G19 G0 Y10 Z0\nG3 Y20 Z0 I1 J5 F100\n", 2, "I is not a centre word of the G19 \\(YZ\\) arc"),
     ("G0 X1\n\nG1 X2\n", 3, "missing F before the first feed move"),
     ("G0 X10\nG2 X0 Y10.1 I-10 F100\n", 2, "start radius 10 mm and end radius 10.1 mm differ"),
-    ("G1 X1 F100\nG1 X2 I3\n", 2, "only belong to arc moves"),
+    ("G1 X1 F100\nG1 X2 I3\n", 2, r"I belongs to arc moves \(G2/G3\) only"),
     ("G1 X1 F100\nG1 X2 X3\n", 2, "appears twice"),
     ("X1\n", 1, "needs a motion mode"),
     ("G1 X1 F100 (open comment\n", 1, "unbalanced parenthesis"),
