@@ -377,10 +377,11 @@ class Diagnosis:
         """The corrected model as machine-file text: the refitted servo axes and the model's effects as ``[[effect]]`` tables.
 
         The effects are the nominal model's own (a machine file's
-        ``[[effect]]`` tables, as given) followed by those named. Readable by :func:`contoursim.model.load_model` (``simulate``,
-        ``compare``, ``diagnose --model``): identify on one experiment,
-        validate on another. The geometry of the nominal machine
-        (``[[body]]`` tables) is not carried over.
+        ``[[effect]]`` tables, as given) followed by those named. Readable
+        by :func:`contoursim.model.load_model` (``simulate``, ``compare``,
+        ``diagnose --model``): identify on one experiment, validate on
+        another. The geometry of the nominal machine (``[[body]]`` tables) is
+        not carried over.
 
         Returns
         -------
