@@ -203,8 +203,11 @@ class Machine:
         if self.chain is None:
             n = len(self.axes)
             if np.abs(p[:, n:]).max(initial=0.0) > 0:
+                beyond = ", ".join(f"{c} {p[:, i].min():.6g} .. {p[:, i].max():.6g}" for i, c in enumerate("xyz") if i >= n
+                                   and np.any(p[:, i] != 0))  # a constant height (Z5) too: no axis takes it
                 raise ValueError(f"the path moves in {trajectory.dim} coordinates but the machine has only {n} "
-                                 f"{'axis' if n == 1 else 'axes'} ({', '.join(self.axes)})")
+                                 f"{'axis' if n == 1 else 'axes'} ({', '.join(self.axes)}): it has {beyond} [mm], "
+                                 "where the machine's coordinates are zero (without bodies they are the axes')")
             self._check_travel(p[:, :n])
             return p[:, :n], v[:, :n], a[:, :n]
         home = self.home()

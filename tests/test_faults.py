@@ -359,8 +359,14 @@ def test_a_path_with_more_coordinates_than_the_machine_has_axes_names_the_path_f
     (tmp_path / "small.toml").write_text(SMALL_PATH)
     _refused(capsys, [command[0], str(tmp_path / "small.toml"), *command[1:], "--machine", str(tmp_path / "m.toml"),
                       "--out", str(tmp_path / "out")],
-             f"{tmp_path / 'small.toml'}: the path moves in 2 coordinates but the machine has only 1 axis (x)")
+             f"{tmp_path / 'small.toml'}: the path moves in 2 coordinates but the machine has only 1 axis (x): it has "
+             "y -2 .. 2 [mm], where the machine's coordinates are zero")
     assert not (tmp_path / "out").exists()
+    # a constant height on a machine without z: "moves in 3 coordinates", the Z5 it meant not said
+    (tmp_path / "xy.toml").write_text(MACHINE.format(mass=300.0))
+    (tmp_path / "p.nc").write_text("G0 X0 Y0 Z5\nG1 X10 F1000\n")
+    _refused(capsys, [command[0], str(tmp_path / "p.nc"), *command[1:], "--machine", str(tmp_path / "xy.toml"),
+                      "--out", str(tmp_path / "out")], "only 2 axes (x, y): it has z 5 .. 5 [mm]")
 
 
 def test_a_machine_drifting_metres_within_the_run_is_refused(tmp_path, capsys):
