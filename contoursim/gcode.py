@@ -451,7 +451,9 @@ class BlockErrors:
         return "\n".join([f"{'line':>6}{'contour max':>14}{'tracking max':>14}  block", *rows])
 
     def save_csv(self, stream):
-        """Write every block that moves (zero-length moves are skipped when read) as CSV: ``line, rapid, feed_mm_min, contour_max_um, tracking_max_um, block``.
+        """Write every block that moves as CSV: ``line, rapid, feed_mm_min, contour_max_um, tracking_max_um, block``.
+
+        Zero-length moves are skipped when the program is read: they have no row.
 
         Errors to the nm (3 decimals of a µm), empty for a block without a
         sample; ``rapid`` is 1 for a G0 block; ``block`` is the source text.
