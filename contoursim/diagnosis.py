@@ -2088,7 +2088,9 @@ def _diagnose(trace, model, identified, max_effects, say):
     for round_ in range(0 if lost else max_effects):
         base = problem.base
         rss0 = float(problem.base_residual @ problem.base_residual)
-        if rss0 <= problem.n * NOISE_FLOOR**2:
+        # at the noise floor, unless only a plant bent beyond its prior got it there (it stands for what is missing)
+        if rss0 <= problem.n * NOISE_FLOOR**2 and (identified or not _far_from_prior(problem.nominal, base.machine,
+                                                                                      trace.axes)):
             say("the residual is at the noise floor: stopping")
             break
         cands = _candidates(problem, base, warnings)
