@@ -2088,9 +2088,10 @@ def _diagnose(trace, model, identified, max_effects, say):
     for round_ in range(0 if lost else max_effects):
         base = problem.base
         rss0 = float(problem.base_residual @ problem.base_residual)
-        # at the noise floor, unless only a plant bent beyond its prior got it there (it stands for what is missing)
-        if rss0 <= problem.n * NOISE_FLOOR**2 and (identified or not _far_from_prior(problem.nominal, base.machine,
-                                                                                      trace.axes)):
+        # at the noise floor, unless the first refit got it there only by bending the plant beyond its prior (it stands
+        # for what is missing); with an effect named the refit goes where the trace pulls it
+        if rss0 <= problem.n * NOISE_FLOOR**2 and (identified or round_ > 0
+                                                   or not _far_from_prior(problem.nominal, base.machine, trace.axes)):
             say("the residual is at the noise floor: stopping")
             break
         cands = _candidates(problem, base, warnings)
