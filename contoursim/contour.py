@@ -333,14 +333,15 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
         radius = 2.0 * math.sqrt(_squared(sample_pos, anchor, p))
         for step in (-1, 1):  # a, b: indices along the path (on a closed one any integer, :func:`_real` the sample's)
             a, dr, k_here, whole, outside, left_at = j, math.sqrt(_squared(sample_pos, j, r)), -1, False, False, 0.0
+            s_a = sample_s[j]  # a's arc length along the path (beyond [0, L] on a closed one)
             free = math.sqrt(_squared(sample_pos, j, p)) - math.sqrt(best_d)  # excluded arc length about a
             while True:
                 if dr > radius:  # a outside the ball (left at `left_at`, less than the radius ago): no point
                     free = max(free, dr - radius)  # within dr - radius of it is inside, nor nearer than the best
                     b = _beyond(sample_s[::1], a, step, dr - radius, lap)
                 else:
-                    s_a = sample_s[_real(a, ns, lap)]  # on the path's primitives
-                    k = _primitive_at(breaks, s_a)
+                    on = sample_s[_real(a, ns, lap)]  # a's arc length on the path's primitives
+                    k = _primitive_at(breaks, on)
                     if k != k_here:  # a line or plain arc no nearer anywhere than the best: excluded up to its end
                         if k == best_k:  # the best foot is the nearest point of a line, of a plain arc if not at an end
                             end = breaks[k + 1] - breaks[k]
@@ -350,7 +351,7 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
                         k_here = k
                     reach = radius - dr  # arc length within which the path stays in the ball
                     if whole:
-                        rest = breaks[k + 1] - s_a if step == 1 else s_a - breaks[k]  # to its end
+                        rest = breaks[k + 1] - on if step == 1 else on - breaks[k]  # to its end
                         free = max(free, rest)
                         if kinds[k] == LINE:  # in the ball up to its end if that end is (convex)
                             # kinds[k], not LINE: a module constant is a literal to numba, typed apart (a second
@@ -364,7 +365,7 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
                 if lap == 0.0 and (b < 0 or b >= sample_s.size):
                     break
                 s_b = _along(sample_s[::1], b, lap)
-                if lap != 0.0 and abs(s_b - _along(sample_s[::1], j, lap)) > lap:  # round a closed path once
+                if lap != 0.0 and abs(s_b - sample_s[j]) > lap:  # round a closed path once
                     break
                 rb, rb_prev = _real(b, ns, lap), _real(b - step, ns, lap)
                 dp, dr = math.sqrt(_squared(sample_pos, rb, p)), math.sqrt(_squared(sample_pos, rb, r))
@@ -374,7 +375,7 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
                 # upper one the closed path's last sample where it ends a lap
                 lo, hi = (rb_prev, rb) if step == 1 else (rb, rb_prev)
                 hi = ns - 1 if lap != 0.0 and hi == 0 else hi
-                if (free + dp - math.sqrt(best_d) < abs(s_b - _along(sample_s[::1], a, lap))
+                if (free + dp - math.sqrt(best_d) < abs(s_b - s_a)
                         and not (s_prev <= sample_s[lo] and sample_s[hi] <= s_next)  # refined above
                         and _stretch_bound(sample_pos, lo, hi, sample_s[hi] - sample_s[lo], p) < math.sqrt(best_d)):
                     nearer = dp * dp <= _squared(sample_pos, rb_prev, p)
@@ -388,7 +389,7 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
                         break
                 else:
                     outside = False
-                a, free = b, dp - math.sqrt(best_d)
+                a, s_a, free = b, s_b, dp - math.sqrt(best_d)
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
             for _ in range(k_count):
