@@ -17,7 +17,7 @@ from types import MappingProxyType
 from ._validate import FLOAT_MAX, closest, shown
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines"]
+__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines", "text_only"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
@@ -135,9 +135,21 @@ def read_text(file, error=ConfigError):
     except UnicodeDecodeError as exc:
         line = raw.count(b"\n", 0, exc.start) + 1
         raise error(f"byte 0x{raw[exc.start]:02X} is not UTF-8 text: save the file as UTF-8", str(file), line) from None
-    if "\x00" in text:  # valid UTF-8, but no text file's: UTF-16 without its mark, or binary
+    return text_only(text, file, error)
+
+
+def text_only(text, file, error=ConfigError):
+    """`text` read from `file`, unless it holds a NUL byte: no text file does (UTF-16 without its mark, or binary).
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and the line of the first NUL byte.
+    """
+    if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
-        raise error("byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark?): save the file as UTF-8", str(file), line)
+        raise error("byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark, or a binary file?): save the file "
+                    "as UTF-8 text", str(file), line)
     return text
 
 

@@ -80,7 +80,7 @@ from pathlib import Path as _FilePath
 import numpy as np
 
 from . import _validate
-from .config import read_bytes, text_lines
+from .config import read_bytes, text_lines, text_only
 from .exceptions import ConfigError, ContoursimWarning, PathError
 from .paths import MAX_COORDINATE, Line, Path, _arc_from_point
 from .simulation import SimResult
@@ -169,9 +169,10 @@ def _text_and_source(file_or_text):
         if raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16's byte-order marks: Latin-1 would read it as words
             raise ConfigError("the file is UTF-16 text (by its byte-order mark): save it as UTF-8", str(file), 1)
         try:
-            return raw.decode("utf-8-sig"), str(file)
-        except UnicodeDecodeError:
-            return raw.decode("latin-1"), str(file)
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError:  # an older controller's program (a degree sign in a comment)
+            text = raw.decode("latin-1")
+        return text_only(text, file), str(file)
     if not isinstance(file_or_text, str):
         raise TypeError(f"file_or_text must be a file name or G-code text, got {type(file_or_text).__name__}")
     return file_or_text.removeprefix("\ufeff"), "<gcode>"

@@ -469,7 +469,8 @@ def test_a_pipe_a_device_a_folder_or_a_packed_file_is_refused_before_it_is_read(
 
 @pytest.mark.parametrize("encoding, words", [
     ("utf-16", "line 1: the file is UTF-16 text (by its byte-order mark): save it as UTF-8"),
-    ("utf-16-le", "line 1: byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark?): save the file as UTF-8"),
+    ("utf-16-le", "line 1: byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark, or a binary file?): save the "
+                  "file as UTF-8 text"),
 ])
 def test_a_utf16_trace_is_named_so(tmp_path, encoding, words):
     """Excel's 'Unicode text' and Windows loggers write UTF-16: said so, not 'missing column 't' in '\\x00t\\x00,...'."""

@@ -404,3 +404,13 @@ def test_a_utf16_program_is_named_so(tmp_path):
     with pytest.raises(ConfigError, match=r"p.nc, line 1: the file is UTF-16 text \(by its byte-order mark\): save it as "
                                           r"UTF-8$"):
         read_gcode(tmp_path / "p.nc")
+
+
+def test_a_binary_file_given_as_a_program_is_said_not_to_be_text(tmp_path):
+    """A binary file (here a PNG's start) was read as Latin-1 words: "line 1: unbalanced parenthesis in a comment"."""
+    (tmp_path / "p.nc").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR(")
+    with pytest.raises(ConfigError, match=r"p.nc, line 3: byte 0x00 \(NUL\) is not text \(UTF-16 without a byte-order "
+                                          r"mark, or a binary file\?\): save the file as UTF-8 text$"):
+        read_gcode(tmp_path / "p.nc")
+    (tmp_path / "q.nc").write_bytes(b"G0 X0 Y0 (\xb0 Latin-1)\nG1 X10 F1000\n")  # an older controller's degree sign
+    assert read_gcode(tmp_path / "q.nc").path.length == pytest.approx(10.0)
