@@ -181,9 +181,10 @@ class Comparison:
         """
         figures, loops = self.figures, self.coupled_loops
         base = figures.get("none", {}).get("contour_max_um")
-        head = (f"{'strategy':<22}{'contour max':>12}{'contour RMS':>12}{'tracking max':>13}{'tracking RMS':>13}"
+        first = max([22] + [len(name) + 2 for name in figures])  # a long composition's name keeps the columns in line
+        head = (f"{'strategy':<{first}}{'contour max':>12}{'contour RMS':>12}{'tracking max':>13}{'tracking RMS':>13}"
                 f"{'peak current':>13}{'clamped':>9}{'PM':>7}{'ζ':>6}{'vs none':>9}")
-        units = f"{'':<22}{'[µm]':>12}{'[µm]':>12}{'[µm]':>13}{'[µm]':>13}{'[A]':>13}{'[%]':>9}{'[°]':>7}{'':>6}{'[%]':>9}"
+        units = f"{'':<{first}}{'[µm]':>12}{'[µm]':>12}{'[µm]':>13}{'[µm]':>13}{'[A]':>13}{'[%]':>9}{'[°]':>7}{'':>6}{'[%]':>9}"
         lines = [self.header(), "", head, units, "-" * len(head)]
         for name, f in figures.items():
             change = "" if not base or base < 5e-4 or name == "none" else f"{100 * (f['contour_max_um'] / base - 1):+.1f}"
@@ -191,7 +192,7 @@ class Comparison:
             margins = f"{'':>7}{'':>6}" if loop is None else f"{loop['phase_margin']:>7.1f}{loop['damping_ratio']:>6.2f}"
             errors = "".join(f"{_nm(f[key]):>{width}}" for key, width in
                              (("contour_max_um", 12), ("contour_rms_um", 12), ("tracking_max_um", 13), ("tracking_rms_um", 13)))
-            lines.append(f"{name:<22}{errors}{f['peak_current_A']:>13.3g}{f['clamped_pct']:>9.2f}{margins}{change:>9}")
+            lines.append(f"{name:<{first}}{errors}{f['peak_current_A']:>13.3g}{f['clamped_pct']:>9.2f}{margins}{change:>9}")
         return "\n".join(lines)
 
 

@@ -828,6 +828,15 @@ def test_compare_runs_a_job_with_geometric_compensation(tmp_path, capsys):
     assert main(["compare", str(job), "--strategies", "none,geometric+feedforward", "--json", str(report),
                  "--out", str(tmp_path / "out")]) == 0
     assert list(json.loads(report.read_text())["runs"]) == ["none", "geometric+feedforward"]
+    # a composition's name longer than the column keeps the table in line (it pushed its row's figures right)
+    capsys.readouterr()
+    assert main(["compare", str(job), "--strategies", "none,feedforward+ccc_linear+geometric",
+                 "--out", str(tmp_path / "out")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    head = next(line for line in lines if line.startswith("strategy"))
+    rows = [line for line in lines if line.split()[:1] in (["none"], ["feedforward+ccc_linear+geometric"])]
+    end = head.index("contour max") + len("contour max")
+    assert len(rows) == 2 and all(row[end - 1] != " " and row[end] == " " for row in rows)
 
 
 def test_a_ballbar_job_runs_the_circle_both_ways_and_subtracts_the_nominal_run(tmp_path, capsys):
