@@ -9,6 +9,8 @@ inside numpy. Readers of files turn both into a
 :class:`~contoursim.exceptions.ConfigError` naming the file and line.
 """
 
+import datetime
+
 import numpy as np
 
 __all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative",
@@ -120,6 +122,15 @@ def shown(value):
     return text if len(text) <= 24 else f"{text[:12]}… ({len(text)} characters)"
 
 
+def _no_number(value):
+    """A value that is no number, as a message says it: a file's date or time by its text, else :func:`shown`."""
+    if isinstance(value, datetime.datetime):
+        return f"the date and time {value.isoformat()}"
+    if isinstance(value, (datetime.date, datetime.time)):
+        return f"the {type(value).__name__} {value.isoformat()}"
+    return shown(value)
+
+
 def _finite_scalar(name, value):
     if isinstance(value, (str, bytes, bool, np.bool_)):  # float() would take "40" and True
         raise TypeError(f"{name} must be a number, got {value!r}")
@@ -128,7 +139,7 @@ def _finite_scalar(name, value):
     except OverflowError:  # an int beyond a float's range
         raise ValueError(f"{name} must be finite, got {shown(value)}: beyond ±{FLOAT_MAX:.4g}") from None
     except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number, got {value!r}") from None
+        raise TypeError(f"{name} must be a number, got {_no_number(value)}") from None
     if not np.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return value

@@ -1,5 +1,6 @@
 """The shared argument checks: text and booleans are not numbers, time-base problems carry their step."""
 
+import datetime
 import re
 
 import numpy as np
@@ -14,6 +15,17 @@ def test_scalar_checks_refuse_text_and_booleans(check, value):
     # float("40") == 40.0 and float(True) == 1.0: the checks must not let them through
     with pytest.raises(TypeError, match=f"kp must be a number, got {value!r}"):
         check("kp", value)
+
+
+@pytest.mark.parametrize("value, said", [
+    (datetime.date(1979, 5, 27), "the date 1979-05-27"), (datetime.time(7, 32), "the time 07:32:00"),
+    (datetime.datetime(1979, 5, 27, 7, 32, tzinfo=datetime.timezone.utc), "the date and time 1979-05-27T07:32:00+00:00"),
+    ([1.0, 2.0], "[1.0, 2.0]"), (list(range(100)), "[0, 1, 2, 3,… (390 characters)")])
+def test_scalar_checks_say_a_date_as_written_and_cut_a_long_value_short(value, said):
+    """A TOML date for a number was said as its repr: "feed_mm_min must be a number, got datetime.date(1979, 5, 27)"."""
+    with pytest.raises(TypeError) as info:
+        _validate.positive("feed_mm_min", value)
+    assert str(info.value) == f"feed_mm_min must be a number, got {said}"
 
 
 def test_scalar_checks_take_numbers():
