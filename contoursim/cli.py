@@ -539,7 +539,7 @@ def diagnose_command(args):
     out.file("corrected_model.toml")  # a file of the user's there: refused before anything is written
     save_figures(result, out)  # its figures refused before it writes any
     with out.write("corrected_model.toml") as stream:
-        stream.write(result.corrected_model())
+        stream.write(result.corrected_model(args.model))
     if report is not None:  # the files before the story: a reader gone half-way (| head) costs none of them
         with writing(report, overwrite=True) as stream:
             stream.write(result.to_json() + "\n")

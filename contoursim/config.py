@@ -5,7 +5,9 @@ keeps the text so that a bad or unknown key can be reported as
 ``machine.toml, line 12: unknown key 'kpp' in [axes.x]; expected one of ...``.
 """
 
+import json
 import math
+import numbers
 import os
 import re
 import stat
@@ -14,10 +16,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
+import numpy as np
+
 from ._validate import FLOAT_MAX, closest, shown
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines", "text_only"]
+__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines", "text_only", "toml_text"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
@@ -141,6 +145,20 @@ def read_text(file, error=ConfigError):
 def text_only(text, file, error=ConfigError):
     """`text` read from `file`, unless it holds a NUL byte: no text file does (UTF-16 without its mark, or binary).
 
+    Parameters
+    ----------
+    text : str
+        The file's decoded text.
+    file : str or Path
+        The file, for the message.
+    error : type
+        The :class:`ConfigError` subclass to raise.
+
+    Returns
+    -------
+    str
+        `text`.
+
     Raises
     ------
     ConfigError
@@ -151,6 +169,71 @@ def text_only(text, file, error=ConfigError):
         raise error("byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark, or a binary file?): save the file "
                     "as UTF-8 text", str(file), line)
     return text
+
+
+def toml_text(data):
+    """TOML text of the table `data`, which :mod:`tomllib` reads back as `data`: what a file the reader read holds.
+
+    Parameters
+    ----------
+    data : mapping
+        Text keys; values text, booleans, numbers (finite or not), lists and tables of them. A table is written
+        as a ``[table]`` section and a list of tables as ``[[table]]`` sections (a file's ``[[body]]`` with its
+        ``[body.errors]``), a table within a list as an inline one.
+
+    Returns
+    -------
+    str
+    """
+    lines = []
+    _toml_section(lines, "", data, "")
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def _toml_string(text):
+    # JSON's escapes are a TOML basic string's; DEL, which JSON leaves as it is, TOML wants escaped
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
+def _toml_key(key):
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_string(key)
+
+
+def _toml_tables(value):
+    return isinstance(value, list) and bool(value) and all(isinstance(item, dict) for item in value)
+
+
+def _toml_value(value):
+    if isinstance(value, str):
+        return _toml_string(value)
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        return repr(float(value))  # 'inf', 'nan' and '1e-06' are TOML floats
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"a TOML value is text, a boolean, a number, a list or a table, got {type(value).__name__}")
+
+
+def _toml_section(lines, header, table, prefix):
+    """`table`'s keys after `header`, then its tables and lists of tables as sections named from `prefix`.
+
+    A ``[table]`` of tables alone goes without its header (its tables' sections make it)."""
+    nested = {k: v for k, v in table.items() if isinstance(v, dict) or _toml_tables(v)}
+    if header and (header.startswith("[[") or len(nested) < len(table) or not table):
+        lines += ["", header]
+    lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items() if k not in nested]
+    for k, v in nested.items():
+        name = prefix + _toml_key(k)
+        if isinstance(v, dict):
+            _toml_section(lines, f"[{name}]", v, name + ".")
+        else:
+            for item in v:
+                _toml_section(lines, f"[[{name}]]", item, name + ".")
 
 
 _LINE_END = re.compile(r"\r\n|\r|\n")

@@ -60,10 +60,12 @@ The workflow (:func:`diagnose`):
    gain is named.
 """
 
+import copy
 import json
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from itertools import combinations
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -373,44 +375,69 @@ class Diagnosis:
         """:meth:`to_dict` as strict JSON text (no NaN or Infinity: a value that is not finite is ``null``)."""
         return json.dumps(self.to_dict(), indent=2, ensure_ascii=False, allow_nan=False)
 
-    def corrected_model(self):
+    def corrected_model(self, machine_file=None):
         """The corrected model as machine-file text: the refitted servo axes and the model's effects as ``[[effect]]`` tables.
 
         The effects are the nominal model's own (a machine file's
         ``[[effect]]`` tables, as given) followed by those named. Readable
         by :func:`contoursim.model.load_model` (``simulate``, ``compare``,
         ``diagnose --model``): identify on one experiment, validate on
-        another. The geometry of the nominal machine (``[[body]]`` tables) is
-        not carried over.
+        another.
+
+        Parameters
+        ----------
+        machine_file : str or Path, optional
+            The machine file (or preset name) the nominal model was read from:
+            everything else it holds is carried over as it is (its geometry's
+            ``[[body]]`` tables, an error table's file named where it lies).
+            Needed for a machine with geometry.
 
         Returns
         -------
         str
+
+        Raises
+        ------
+        ValueError
+            The machine has geometry and no `machine_file` gives it.
         """
-        from .machine import SERVO_KEYS
+        from .config import TomlFile, toml_text
+        from .machine import SERVO_KEYS, preset_file
 
         machine = self.refitted.machine
-        source = self.trace.metadata.get("source", "")
-        lines = ["# corrected model written by contoursim diagnose" + (f" from {source}" if source else "")
-                 + ": the nominal machine with its", "# plant refitted (see the report's nominal_refit), its own "
-                 "effects and the effects named as [[effect]] tables", "",
-                 f"name = {json.dumps('corrected: ' + machine.name)}", f"servo_period_ms = {1e3 * machine.servo_period!r}"]
-        if machine.max_feed is not None:
-            lines.append(f"max_feed_mm_min = {60.0 * machine.max_feed!r}")
+        if machine_file is None:
+            if machine.chain is not None:
+                raise ValueError("the nominal machine has geometry ([[body]] tables), which only its machine file holds: "
+                                 "give machine_file")
+            data = {"servo_period_ms": 1e3 * machine.servo_period, "axes": {}}
+            if machine.max_feed is not None:
+                data["max_feed_mm_min"] = 60.0 * machine.max_feed
+        else:
+            toml = TomlFile.read(preset_file(machine_file))
+            data = copy.deepcopy(dict(toml.data))
+            for body in data.get("body", []):  # an error table's file, named where it lies (not beside this text)
+                if "table" in body.get("errors", {}):
+                    body["errors"]["table"] = str((Path(toml.source).parent / body["errors"]["table"]).resolve())
+        data["name"] = "corrected: " + machine.name
+        keys = {name: key for key, name in SERVO_KEYS.items()}
         for axis, servo in machine.axes.items():
-            lines += ["", f"[axes.{axis}]"]
-            lines += [f"{key} = {_toml_value(getattr(servo, name))}" for key, name in SERVO_KEYS.items()
-                      if getattr(servo, name) is not None]
-            if axis in machine.axis_travel:
-                lines.append(f"travel_mm = [{machine.axis_travel[axis][0]!r}, {machine.axis_travel[axis][1]!r}]")
-            if machine.uncertain.get(axis):
-                keys = {name: key for key, name in SERVO_KEYS.items()}
-                lines.append(f"uncertain = {json.dumps([keys[name] for name in machine.uncertain[axis]])}")
-        for effect in self.refitted.effects:
-            lines += ["", "[[effect]]", f"name = {json.dumps(effect.name)}", f"axis = {json.dumps(effect.axis)}"]
-            lines += [f"{k} = {float(v)!r}" for k, v in effect.values().items()]
-            lines += [f"{k} = {json.dumps(v)}" for k, v in effect.options.items()]
-        return "\n".join(lines) + "\n"
+            table = data["axes"].setdefault(axis, {})
+            for key, name in SERVO_KEYS.items():
+                if getattr(servo, name) is None:
+                    table.pop(key, None)
+                else:
+                    table[key] = getattr(servo, name)
+            if machine_file is None and axis in machine.axis_travel:
+                table["travel_mm"] = list(machine.axis_travel[axis])
+            if machine_file is None and machine.uncertain.get(axis):
+                table["uncertain"] = [keys[name] for name in machine.uncertain[axis]]
+        data["effect"] = [{"name": e.name, "axis": e.axis, **e.values(), **e.options} for e in self.refitted.effects]
+        if not data["effect"]:
+            del data["effect"]
+        source = self.trace.metadata.get("source", "")
+        return ("# corrected model written by contoursim diagnose" + (f" from {source}" if source else "")
+                + ": the nominal machine with its\n# plant refitted (see the report's nominal_refit), its own effects "
+                "and the effects named as [[effect]] tables\n\n" + toml_text(data))
 
     def report(self):
         """The story as a short table: per step the effect, its parameters ± 1σ, residual RMS and max [µm]."""
@@ -461,13 +488,6 @@ def _strict(value):
     if isinstance(value, (float, np.floating)):
         return float(value) if np.isfinite(value) else None
     return value
-
-
-def _toml_value(value):
-    """A servo setting as a machine file writes it: a name quoted, a whole number as one, else a float."""
-    if isinstance(value, str):
-        return json.dumps(value)
-    return str(value) if isinstance(value, int) else repr(float(value))
 
 
 def _rms_um(r):

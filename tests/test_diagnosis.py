@@ -1251,6 +1251,25 @@ def test_the_corrected_model_keeps_the_models_own_effects(tmp_path):
     assert again.effects == () and again.steps[0].rms_um < 1.1 * first.steps[0].rms_um  # the plant refitted: lower
 
 
+@pytest.mark.parametrize("machine", ["vertical_mill_3axis", "aircraft_drilling_7axis"])
+def test_the_corrected_model_of_a_machine_with_geometry_keeps_it(tmp_path, machine):
+    """corrected_model.toml held the [axes] tables alone (an outside probe): on the 3-axis mill a diagnosis against it of
+    the very trace it came from gave 14.2 µm and named two cyclic errors; the 7-axis machine's was refused by simulate,
+    compare and diagnose ("a machine without a chain has axes x, y (, z) in that order")."""
+    (tmp_path / "p.nc").write_text("G0 X0 Y0 Z5\nG1 Z0 F300\nG1 X20 F1500\nG2 X0 Y0 I-10 J0 F1200\nM30\n")
+    (tmp_path / "job.toml").write_text(f'machine = "{machine}"\npath = "p.nc"\n')
+    assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "sim")]) == 0
+    trace = read_trace(tmp_path / "sim" / "p.csv")
+    assert main(["diagnose", str(tmp_path / "sim" / "p.csv"), "--model", machine, "--out", str(tmp_path / "first")]) == 0
+    corrected = load_model(tmp_path / "first" / "corrected_model.toml")  # its error table's file named where it lies
+    nominal = load_model(machine)
+    assert corrected.machine.axis_names == nominal.machine.axis_names and corrected.machine.chain is not None
+    again = diagnose(trace, corrected)
+    assert again.effects == () and again.steps[0].rms_um < 0.01
+    with pytest.raises(ValueError, match=r"geometry \(\[\[body\]\] tables\), which only its machine file holds"):
+        again.corrected_model()
+
+
 def test_a_diagnosis_refused_by_a_users_file_in_its_folder_writes_nothing(tmp_path, capsys):
     """A user's corrected_model.toml in the output folder: the --report and the plots had been replaced when the run
     ended in the refusal (an outside probe)."""
