@@ -712,7 +712,10 @@ def standstill_cycles(trace, reference, residual, min_samples=64):
     short run it spreads over few, and the share white noise reaches once
     in :data:`_CYCLE_FALSE_ALARM` runs is asked for if more
     (:func:`_cycle_share`): of 33 samples' 17 lines, five held half the
-    variance of one run of white noise in three.
+    variance of one run of white noise in three. The measured position
+    itself must turn back and forth over those periods: a position that
+    only creeps one way, rounded to its counts, leaves a residual sawtooth
+    of one line too.
 
     Parameters
     ----------
@@ -748,7 +751,10 @@ def standstill_cycles(trace, reference, residual, min_samples=64):
             if spec.sum() <= 0:
                 continue
             k = int(np.argmax(spec))
-            if k >= 3 and spec[max(k - 2, 1):k + 3].sum() >= _cycle_share(n) * spec.sum():
+            steps = np.diff(trace.actual[a:b, i])
+            steps = np.sign(steps[steps != 0])
+            turns = int(np.count_nonzero(steps[1:] != steps[:-1]))  # a machine that hunts turns twice a cycle
+            if k >= 3 and turns >= 2 * 3 and spec[max(k - 2, 1):k + 3].sum() >= _cycle_share(n) * spec.sum():
                 mask[a:b] = True
                 freqs.append(k / (n * trace.dt))
                 amps.append(0.5 * float(np.ptp(x)))

@@ -713,14 +713,36 @@ def test_standstill_white_noise_is_no_limit_cycle_however_short_the_standstill(m
     t = np.arange(400) * 1e-3
     ramp = np.clip(t / 0.3, 0.0, 1.0)
     x = 2.0 * (ramp - np.sin(2 * np.pi * ramp) / (2 * np.pi))  # stands still from 0.3 s: 100 samples
-    trace = Trace(t, np.column_stack([x, 0 * x]), np.column_stack([x, 0 * x]), ("x", "y"))
-    reference = measured_reference(trace, 5e-4)
+    commanded = np.column_stack([x, 0 * x])
+    reference = measured_reference(Trace(t, commanded, commanded, ("x", "y")), 5e-4)
     rng = np.random.default_rng(7)
     noise = [rng.normal(0.0, 1e-4, (t.size, 2)) for _ in range(40)]
-    assert not any(standstill_cycles(trace, reference, n, min_samples=64) for n in noise)
+    assert not any(standstill_cycles(Trace(t, commanded, commanded + n, ("x", "y")), reference, n, min_samples=64)
+                   for n in noise)
     cycle = noise[0].copy()
     cycle[:, 0] += np.where(t > 0.3, 3e-4 * np.sin(2 * np.pi * 125.0 * t), 0.0)  # ±0.3 µm at 125 Hz on x
+    trace = Trace(t, commanded, commanded + cycle, ("x", "y"))
     assert set(standstill_cycles(trace, reference, cycle, min_samples=64)) == {0}
+
+
+def test_a_position_creeping_one_way_in_its_counts_is_no_limit_cycle_one_hunting_between_two_is(machine):
+    """An outside probe: a noise-free axis settling at standstill, logged to 1 nm, was said to hunt (±0.000494 µm at
+    61 Hz): the staircase of its counts less the smooth simulation is a sawtooth of one spectral line. The measured
+    position never turned back; one that alternates between two counts does, and hunts."""
+    from contoursim.simulation import measured_reference
+
+    t = np.arange(700) * 1e-3  # stands still from 0.3 s: 400 samples
+    ramp = np.clip(t / 0.3, 0.0, 1.0)
+    x = 2.0 * (ramp - np.sin(2 * np.pi * ramp) / (2 * np.pi))
+    commanded = np.column_stack([x, 0 * x])
+    reference = measured_reference(Trace(t, commanded, commanded, ("x", "y")), 5e-4)
+    settling = np.column_stack([x - 1.3e-7 * np.clip(t - 0.3, 0.0, None) / 1e-3, 0 * x])  # creeps a count in 8 ms
+    counts = np.round(settling * 1e6) / 1e6
+    assert not standstill_cycles(Trace(t, commanded, counts, ("x", "y")), reference, counts - settling, min_samples=64)
+    hunting = counts.copy()
+    hunting[:, 0] += np.where(t > 0.3, 1e-6 * (np.arange(t.size) // 5 % 2), 0.0)  # one count up and down, 100 Hz
+    assert set(standstill_cycles(Trace(t, commanded, hunting, ("x", "y")), reference, hunting - settling,
+                                 min_samples=64)) == {0}
 
 
 def test_a_reason_not_to_name_an_effect_is_not_said_once_a_later_round_names_it(independent_truth, tmp_path):
