@@ -497,6 +497,13 @@ def _elapsed(trajectory):
     return trajectory.t - trajectory.t[0]
 
 
+def _lacks(chain, model, q, samples=256):
+    """Whether the error model `chain` of a geometric compensation puts the tool elsewhere than `model`'s geometry
+    (its machine with the geometric effects) does, at up to `samples` of the run's axis positions `q` (by a nm)."""
+    q = q[:: max(1, len(q) // samples)]
+    return bool(np.abs(chain.tool_pose(q)[0] - model.geometry.chain.tool_pose(q)[0]).max() > 1e-6)
+
+
 def _ran_away(position):
     """Per column of `position` (N, n) [mm] the first row beyond ±:data:`MAX_TRAVEL` or not finite, -1 for none.
 
@@ -635,7 +642,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     known = {axis: pushing[:, list(machine.axes).index(axis)] for axis in pushed}
     result = SimResult(trajectory, machine, q, response, tool, static, error, composition.strategies, model, known)
     uncompensated = [e.label for e in model.stage("geometry")]
-    if uncompensated and any(s.name == "geometric" for s in composition.strategies):
+    if uncompensated and any(s.name == "geometric" and _lacks(s.chain, model, q) for s in composition.strategies):
         warnings.warn(f"geometric compensation corrects the errors of {machine.name}'s own error model (its [[body]] "
                       f"tables), as a controller corrects what it was calibrated with; the effects "
                       f"{', '.join(uncompensated)} are not in it and stay uncompensated", ContoursimWarning, stacklevel=2)
