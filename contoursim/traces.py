@@ -298,6 +298,9 @@ def read_trace(file):
     if "t" not in names:
         raise fail(_header_problem(names))
     if axes not in AXIS_SETS:
+        upper = [name for name in names if name != name.lower() and name.lower() in _POSITION_COLUMNS]
+        if upper:  # 't' in lower case, the axes not: said as for a header without 't'
+            raise fail(_header_problem(names))
         raise fail(f"the axes present ({', '.join(axes) or 'none'}) must be x, x+y or x+y+z")
     for axis in axes:
         for name in (f"{axis}_ref", axis):
@@ -435,6 +438,9 @@ def _units_written(text, columns):
     return "; ".join(groups)
 
 
+_POSITION_COLUMNS = ("x_ref", "x", "y_ref", "y", "z_ref", "z")
+
+
 def _header_problem(names):
     """What is wrong with a header that has no column 't', saying what was found and what is expected."""
     expected = "expected comma-separated column names t, x_ref, x (then y_ref, y, z_ref, z), in lower case"
@@ -442,7 +448,7 @@ def _header_problem(names):
     for separator, label in ((";", "semicolons"), ("\t", "tabs")):
         if separator in found:
             return f"the header {found!r} is separated by {label}; {expected}"
-    if any(name.lower() == "t" for name in names):
+    if any(name.lower() in ("t", *_POSITION_COLUMNS) and name != name.lower() for name in names):
         upper = [name for name in names if name != name.lower()]
         return f"column names are case-sensitive: the header has {', '.join(map(repr, upper))}; {expected}"
     return f"missing column 't' in the header {found!r}; {expected}"

@@ -123,6 +123,9 @@ def test_reads_metadata_and_ignores_extra_columns(tmp_path):
                                                "comma-separated column names t, x_ref, x"),
         ("T,X_REF,X\n0,0,0\n0.001,1,1\n", 1, "column names are case-sensitive: the header has 'T', 'X_REF', 'X'; "
                                               "expected comma-separated column names t, x_ref, x"),
+        # 't' in lower case, the axes not (an outside probe: "the axes present (none) must be x, x+y or x+y+z")
+        ("t,X_ref,X,Y_ref,Y\n0,0,0,0,0\n0.001,1,1,1,1\n", 1, "column names are case-sensitive: the header has 'X_ref', "
+                                                          "'X', 'Y_ref', 'Y'; expected comma-separated column names t"),
         ("time,x_ref,x\n0,0,0\n0.001,1,1\n", 1, "missing column 't' in the header 'time,x_ref,x'; expected"),
         ("# c\nt,x_ref,x\n0,0,0\n0.002,1,1\n0.001,1,1\n", 5, "column 't' must be strictly increasing"),
         # steps 1, 1, 2, 1 ms: step 2 (rows 2 -> 3) is off, row 3 is on line 1 + 1 + 3
