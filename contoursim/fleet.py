@@ -28,6 +28,9 @@ SUMMARY_FORM = {"traces": None, "diagnosed": None, "failed": ("trace", "error"),
 def trace_files(paths):
     """The trace files of the command line: the files given, and each folder's ``*.csv`` (any case) sorted by name.
 
+    A folder's per-block tables of G-code runs (``NAME_blocks.csv``, which ``simulate`` writes beside each trace:
+    :data:`contoursim.gcode.BLOCK_COLUMNS`) are no traces and are left out.
+
     Parameters
     ----------
     paths : sequence of str or Path
@@ -42,7 +45,7 @@ def trace_files(paths):
     files = []
     for path in map(Path, paths):
         if path.is_dir():
-            found = sorted(p for p in path.iterdir() if p.suffix.lower() == ".csv")  # NIGHT_1.CSV too
+            found = sorted(p for p in path.iterdir() if p.suffix.lower() == ".csv" and not _block_table(p))  # NIGHT_1.CSV too
             if not found:
                 raise ValueError(f"{path} holds no .csv trace")
             files += found
@@ -57,6 +60,17 @@ def trace_files(paths):
             also = "" if str(first) == str(f) else f" (also as {f})"
             raise ValueError(f"{first} is given twice{also}: name each trace once")
     return files
+
+
+def _block_table(file):
+    """Whether `file` is a G-code run's per-block table (its first line :data:`~contoursim.gcode.BLOCK_COLUMNS`)."""
+    from .gcode import BLOCK_COLUMNS
+
+    try:
+        with open(file, encoding="utf-8", errors="replace") as stream:
+            return stream.readline(1000).rstrip("\r\n") == ",".join(BLOCK_COLUMNS)
+    except OSError:  # unreadable: read as a trace, whose reading says why
+        return False
 
 
 def diagnose_text(name, text, model=None):

@@ -85,7 +85,10 @@ from .exceptions import ConfigError, ContoursimWarning, PathError
 from .paths import MAX_COORDINATE, Line, Path, _arc_from_point
 from .simulation import SimResult
 
-__all__ = ["DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "read_gcode"]
+__all__ = ["BLOCK_COLUMNS", "DIALECT", "SUFFIXES", "BlockErrors", "Program", "block_errors", "read_gcode"]
+
+#: The columns of a program's per-block table (:meth:`BlockErrors.save_csv`, ``NAME_blocks.csv`` beside a run's trace).
+BLOCK_COLUMNS = ("line", "rapid", "feed_mm_min", "contour_max_um", "tracking_max_um", "block")
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _EXPONENT = re.compile(r"[eE][-+]?\d+")  # right after a number: its exponent
@@ -466,7 +469,7 @@ class BlockErrors:
         """
         um = lambda value: "" if np.isnan(value) else f"{1e3 * value:.3f}"  # noqa: E731
         writer = csv.writer(stream, lineterminator="\n")
-        writer.writerow(["line", "rapid", "feed_mm_min", "contour_max_um", "tracking_max_um", "block"])
+        writer.writerow(BLOCK_COLUMNS)
         for row in zip(self.line, self.rapid, self.feed, self.contour_max, self.tracking_max, self.text):
             line, rapid, feed, contour, tracking, text = row
             writer.writerow([line, int(rapid), f"{60 * feed:g}", um(contour), um(tracking), text])

@@ -53,6 +53,11 @@ def test_one_trace_keeps_the_single_report_and_fleet_options_need_several(tmp_pa
         trace_files([tmp_path])
     with pytest.raises(ValueError, match="no trace file"):
         trace_files([tmp_path / "missing.csv"])
+    # simulate's folder of a G-code run: its per-block table is no trace (an outside probe: "1 of 2 traces diagnosed")
+    (tmp_path / "p.nc").write_text("G0 X0 Y0\nG1 X10 F1000\nG1 Y5\n")
+    assert main(["simulate", str(tmp_path / "p.nc"), "--machine", "demo_mill", "--out", str(tmp_path / "run")]) == 0
+    assert sorted(p.name for p in (tmp_path / "run").glob("*.csv")) == ["p.csv", "p_blocks.csv"]
+    assert trace_files([tmp_path / "run"]) == [tmp_path / "run" / "p.csv"]
     with pytest.raises(ValueError, match=f"^{trace} is given twice: name each trace once$"):  # it was 'rename one'
         trace_files([trace, FLEET])
     (tmp_path / "logs").symlink_to(FLEET)
