@@ -501,7 +501,7 @@ def diagnose_command(args):
     from .diagnosis import FIGURE_FILES, REPORT_FORM, diagnose, save_figures
     from .identify import servo_period_for
     from .model import load_model
-    from .output import report_file, writing
+    from .output import refused_early, report_file, writing
     from .traces import read_trace
 
     if len(args.file) > 1 or Path(args.file[0]).is_dir():
@@ -522,6 +522,7 @@ def diagnose_command(args):
     if args.model and corrected.is_file() and Path(args.model).is_file() and os.path.samefile(corrected, args.model):
         raise ConfigError(f"--out {args.out} would replace {args.model}, the model this run reads, with this trace's "
                           "corrected model: give another --out")
+    refused_early(args.out, (*FIGURE_FILES, "corrected_model.toml"))  # not after the diagnosis
     print(f"contoursim diagnose — {Path(args.file).name}: axes {', '.join(trace.axes)}, {trace.t.size} samples every "
           f"{1e3 * trace.dt:.4g} ms; nominal model: {args.model or 'identified from the trace'}", flush=True)
     try:
@@ -566,6 +567,7 @@ def sweep_command(args):
     from .sweep import FIGURES, Progress, diverged_why, read_sweep, run_sweep, write_results
 
     sweep = read_sweep(args.spec)
+    refused_early(args.out, [f"{stem}.json" for stem in stems] + ["fleet.json", "fleet.png"])  # not after the fleet
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim sweep — {Path(args.spec).name}: {len(sweep.values)} variants of {', '.join(sweep.names)}; "
           f"strategies {sweep.strategies}; on {where}", flush=True)
@@ -600,7 +602,7 @@ def fleet_command(args):
     import matplotlib.pyplot as plt
 
     from .fleet import SUMMARY_FORM, diagnose_fleet, fleet_summary, plot_fleet, trace_files
-    from .output import report_file, writing
+    from .output import refused_early, report_file, writing
     from .sweep import Progress
 
     if args.report:
@@ -614,6 +616,7 @@ def fleet_command(args):
                          "file name; rename one")
     summary_file = report_file(args.summary, SUMMARY_FORM, "fleet summary", args.out,  # never a file the user keeps
                                written=[f"{stem}.json" for stem in stems] + ["fleet.png"])  # nor a trace's report
+    refused_early(args.out, [f"{stem}.json" for stem in stems] + ["fleet.json", "fleet.png"])  # not after the fleet
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "
           f"on {where}", flush=True)

@@ -34,7 +34,7 @@ from . import _validate
 from .config import read_text
 from .exceptions import ConfigError, OutputError
 
-__all__ = ["OutputDir", "atomic_write", "has_form", "output_dir", "report_file", "writing"]
+__all__ = ["OutputDir", "atomic_write", "has_form", "output_dir", "refused_early", "report_file", "writing"]
 
 _MARKER = ".contoursim-out"
 _MARKER_HEADER = "# written by contoursim; the files it wrote here, one per line, are replaced on each run\n"
@@ -326,6 +326,32 @@ def output_dir(out):
         `out` is a file, cannot be created, or holds files that contoursim did not write.
     """
     return out if isinstance(out, OutputDir) else OutputDir(out)
+
+
+def refused_early(out, names):
+    """Refuse now what writing `names` into the folder `out` would refuse at the end of a long run (a diagnosis).
+
+    An existing `out` is checked as :func:`output_dir` and :meth:`OutputDir.file` check it; one that does not exist
+    yet is left to be made when written to (a run that ends in an error leaves no folder).
+
+    Parameters
+    ----------
+    out : str or Path
+        The output folder.
+    names : iterable of str
+        The file names the run will write there.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`output_dir`.
+    FileExistsError
+        As :meth:`OutputDir.file`.
+    """
+    if os.path.lexists(out):
+        folder = output_dir(out)
+        for name in names:
+            folder.file(name)
 
 
 _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)  # POSIX; opening a symbolic link with it fails (ELOOP)

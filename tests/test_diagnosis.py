@@ -1292,9 +1292,11 @@ def test_the_corrected_model_of_a_machine_with_geometry_keeps_it(tmp_path, machi
         again.corrected_model()
 
 
-def test_a_diagnosis_refused_by_a_users_file_in_its_folder_writes_nothing(tmp_path, capsys):
+def test_a_diagnosis_refused_by_a_users_file_in_its_folder_writes_nothing(tmp_path, capsys, monkeypatch):
     """A user's corrected_model.toml in the output folder: the --report and the plots had been replaced when the run
-    ended in the refusal (an outside probe)."""
+    ended in the refusal (an outside probe); a later probe: refused only once the whole diagnosis had run."""
+    import contoursim.diagnosis
+
     write_mill_circle(tmp_path / "measured.csv")
     report, out = tmp_path / "r.json", tmp_path / "out"
     args = ["diagnose", str(tmp_path / "measured.csv"), "--model", "demo_mill", "--report", str(report), "--out", str(out)]
@@ -1302,6 +1304,7 @@ def test_a_diagnosis_refused_by_a_users_file_in_its_folder_writes_nothing(tmp_pa
     earlier = report.read_bytes()
     output_dir(out)
     (out / "corrected_model.toml").write_text("mine")
+    monkeypatch.setattr(contoursim.diagnosis, "diagnose", lambda *a, **k: pytest.fail("diagnosed before the refusal"))
     assert main(args) == 2
     assert "corrected_model.toml exists and contoursim did not write it" in capsys.readouterr().err
     assert report.read_bytes() == earlier and sorted(p.name for p in out.iterdir()) == [".contoursim-out",

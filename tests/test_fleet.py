@@ -43,7 +43,7 @@ def test_the_nightly_fleet_names_the_drifting_backlash_and_the_broken_log(tmp_pa
     assert json.loads((tmp_path / "out" / "fleet.json").read_text()) == summary
 
 
-def test_one_trace_keeps_the_single_report_and_fleet_options_need_several(tmp_path, capsys):
+def test_one_trace_keeps_the_single_report_and_fleet_options_need_several(tmp_path, capsys, monkeypatch):
     trace = FLEET / "night_2026-10-05.csv"
     assert main(["diagnose", str(trace), "--summary", str(tmp_path / "s.json"), "--out", str(tmp_path / "o")]) == 2
     assert "--summary and --scheduler are for several traces" in capsys.readouterr().err
@@ -58,6 +58,15 @@ def test_one_trace_keeps_the_single_report_and_fleet_options_need_several(tmp_pa
     assert main(["simulate", str(tmp_path / "p.nc"), "--machine", "demo_mill", "--out", str(tmp_path / "run")]) == 0
     assert sorted(p.name for p in (tmp_path / "run").glob("*.csv")) == ["p.csv", "p_blocks.csv"]
     assert trace_files([tmp_path / "run"]) == [tmp_path / "run" / "p.csv"]
+    # a folder of the user's as --out: refused before the fleet is diagnosed, not after
+    import contoursim.fleet
+
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine")
+    monkeypatch.setattr(contoursim.fleet, "diagnose_fleet", lambda *a, **k: pytest.fail("diagnosed before the refusal"))
+    capsys.readouterr()
+    assert main(["diagnose", str(tmp_path / "run"), str(trace), "--out", str(tmp_path / "mine")]) == 2
+    assert "holds files that contoursim did not write" in capsys.readouterr().err
     with pytest.raises(ValueError, match=f"^{trace} is given twice: name each trace once$"):  # it was 'rename one'
         trace_files([trace, FLEET])
     (tmp_path / "logs").symlink_to(FLEET)
