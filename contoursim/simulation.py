@@ -407,9 +407,10 @@ def default_settle(machine):
     return 5.0 / min(servo.kp for servo in machine.axes.values())
 
 
-def _target(model, trajectory, composition):
-    """Axis commands of the interpolator after the strategies' target stages, shape (N, n_axes) each."""
-    return composition.target(*model.machine.axis_commands(trajectory), _elapsed(trajectory))
+def _target(model, trajectory, composition, preview):
+    """Axis commands of the interpolator after the strategies' target stages, shape (N, n_axes) each (the reference
+    from sample `preview` on)."""
+    return composition.target(*model.machine.axis_commands(trajectory), _elapsed(trajectory, preview))
 
 
 def _sent(model, composition, servos, target):
@@ -423,15 +424,16 @@ def _sent(model, composition, servos, target):
     return model.commands(q, v, a)
 
 
-def _servo_run(model, composition, trajectory, force):
+def _servo_run(model, composition, trajectory, force, preview):
     """Target commands (N, n_axes), the servo kernel's response to what is sent, and the servos with the drive settings.
 
-    `force`: the known external forces on the servo axes, shape (N, n_servo) [N], or None. Commands that do not
-    start at rest are stepped after a run-in (:func:`_lead`), left out of the response.
+    `force`: the known external forces on the servo axes, shape (N, n_servo) [N], or None; the reference from sample
+    `preview` on. Commands that do not start at rest are stepped after a run-in (:func:`_lead`), left out of the
+    response.
 
     The velocity and acceleration commands and what is sent are freed on return.
     """
-    q, v, a = _target(model, trajectory, composition)
+    q, v, a = _target(model, trajectory, composition, preview)
     dt = model.machine.servo_period
     servos = composition.drive(model.servos())
     lead = _lead(model.machine, *(_servo_part(model, x) for x in (v, a)))
@@ -492,9 +494,10 @@ def _run_in(q, v, a, lead, dt):
     return tuple(np.concatenate([h, x]) for h, x in zip(head, (q, v, a)))
 
 
-def _elapsed(trajectory):
-    """Time since the reference's first sample [s], shape (N,): the clock of thermal drift and strategies."""
-    return trajectory.t - trajectory.t[0]
+def _elapsed(trajectory, preview):
+    """Time since the reference's first sample, sample `preview` of `trajectory` (after a strategy's dwell) [s],
+    shape (N,), 0 over the dwell: the clock of thermal drift and strategies."""
+    return np.maximum(trajectory.t - trajectory.t[preview], 0.0)
 
 
 def _lacks(chain, model, q, samples=256):
@@ -624,7 +627,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     trajectory, pushing, pushed = _reference(machine, reference, settle, preview, force)
     if machine.chain is not None:  # before the run: the machine file's drift over it within the chain's small errors
         check_drift(machine.chain, trajectory.t[-1] - trajectory.t[0])
-    q, response, servos = _servo_run(model, composition, trajectory, pushing)
+    q, response, servos = _servo_run(model, composition, trajectory, pushing, preview)
     away = _ran_away(response.position)
     if away.max() >= 0:
         a = int(np.argmax(away >= 0))
@@ -633,7 +636,7 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
         raise UnstableLoopError(f"the simulation of axis {axis!r} ran away beyond ±{MAX_TRAVEL:g} mm by "
                                 f"t = {trajectory.t[away[a]]:.6g} s: its loop with these effects (on {axis}: "
                                 f"{', '.join(effects)}) or this coupling is unstable")
-    elapsed = _elapsed(trajectory)
+    elapsed = _elapsed(trajectory, preview)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
     del elapsed  # before the contour error is computed
@@ -788,7 +791,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     trajectory, pushing, _ = _reference(first, reference, settle, preview, force)
     if first.chain is not None:  # one chain for all (simulate's check)
         check_drift(first.chain, trajectory.t[-1] - trajectory.t[0])
-    q, v, a = _target(models[0], trajectory, compositions[0])
+    q, v, a = _target(models[0], trajectory, compositions[0], preview)
     summary = "summary" in outputs
     traces = [name for name in outputs if name != "summary"]
     keep = slice(None, None, every)
@@ -812,7 +815,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     kernel_outputs = ("tool",) + (("current",) if summary or "current" in outputs else ()) + (("saturated",) if summary else ())
     n_kernel = len(range(0, lead + len(trajectory), kernel_every))
     chunk = max(os.cpu_count() or 1, BATCH_CHUNK_BYTES // (8 * len(kernel_outputs) * n_kernel * servo.size))
-    elapsed = _elapsed(trajectory)
+    elapsed = _elapsed(trajectory, preview)
     pushing = None if pushing is None else np.pad(pushing, ((lead, 0), (0, 0)), mode="edge")
     path = _run_in(*(_servo_part(models[0], x) for x in (q, v, a)), lead, dt)[0]
     couplings = {}

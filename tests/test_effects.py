@@ -163,6 +163,24 @@ def test_geometric_effects_land_in_the_chain_of_a_machine_with_bodies():
         np.testing.assert_allclose(moved[:, column] - base[:, column], shift(d), atol=2e-7)  # first order in the errors
 
 
+def test_thermal_drift_runs_from_the_references_first_sample_after_a_strategys_dwell():
+    """With ZPETC's two-sample dwell before the reference, the drift's clock started at the dwell (an outside probe:
+    0.04 µm at the reference's first sample, 100.04 µm at 1 s for 100 µm/s)."""
+    from contoursim.compensation import ZPETC
+
+    machine = load_machine("demo_mill")
+    path = paths.circle(center=(0.0, 0.0), radius=10.0, direction="ccw")
+    reference = sample(path, plan(path, feed=50.0, accel=2000.0), machine.servo_period)
+    model = Model(machine, (Effect("thermal_drift", "x", rate_um_per_min=6000.0),))
+    for strategies in ((), (ZPETC(),)):
+        result = simulate(model, reference, strategies)
+        drift = result.static_tool_position[:, 0] - result.axis_command[:, 0]  # mm
+        t = result.trajectory.t
+        np.testing.assert_allclose(drift[t <= reference.t[0]], 0.0, atol=1e-12)
+        at = np.searchsorted(t, reference.t[0] + 1.0)
+        assert drift[at] == pytest.approx(0.1 * (t[at] - reference.t[0]), rel=1e-9)
+
+
 def test_a_machine_without_bodies_takes_each_axis_travel_from_its_axes_table(tmp_path):
     """``travel_mm`` in ``[axes.x]``: the travel a straightness bows over; commands leaving it are refused; the
     trace's coordinates stay the axes' (the path's origin at their zero)."""
