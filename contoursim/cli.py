@@ -567,7 +567,6 @@ def sweep_command(args):
     from .sweep import FIGURES, Progress, diverged_why, read_sweep, run_sweep, write_results
 
     sweep = read_sweep(args.spec)
-    refused_early(args.out, [f"{stem}.json" for stem in stems] + ["fleet.json", "fleet.png"])  # not after the fleet
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim sweep — {Path(args.spec).name}: {len(sweep.values)} variants of {', '.join(sweep.names)}; "
           f"strategies {sweep.strategies}; on {where}", flush=True)
