@@ -21,7 +21,8 @@ import numpy as np
 from ._validate import FLOAT_MAX, closest, shown
 from .exceptions import ConfigError
 
-__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines", "text_only", "toml_text"]
+__all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines", "text_only",
+           "toml_text"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"

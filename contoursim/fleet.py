@@ -45,7 +45,8 @@ def trace_files(paths):
     files = []
     for path in map(Path, paths):
         if path.is_dir():
-            found = sorted(p for p in path.iterdir() if p.suffix.lower() == ".csv" and not _block_table(p))  # NIGHT_1.CSV too
+            found = sorted(p for p in path.iterdir()  # NIGHT_1.CSV too
+                           if p.suffix.lower() == ".csv" and not _block_table(p))
             if not found:
                 raise ValueError(f"{path} holds no .csv trace")
             files += found

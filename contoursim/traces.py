@@ -442,7 +442,8 @@ _POSITION_COLUMNS = ("x_ref", "x", "y_ref", "y", "z_ref", "z")
 
 
 def _header_problem(names):
-    """What is wrong with a header that has no column 't', saying what was found and what is expected."""
+    """What is wrong with a header that has no column 't', or no axis in lower case, saying what was found and what is
+    expected."""
     expected = "expected comma-separated column names t, x_ref, x (then y_ref, y, z_ref, z), in lower case"
     found = ",".join(names)
     for separator, label in ((";", "semicolons"), ("\t", "tabs")):
