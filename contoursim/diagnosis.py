@@ -549,7 +549,8 @@ def locate(trace, reference, residual):
     tuple of str
         The time spans (and path stations, the distance along the commanded
         path) holding most of it; for a circle test the angles of
-        the largest radial residual and, run both ways, its oval per
+        the largest radial residual (per direction where it is run both
+        ways) and, run both ways, its oval per
         direction (:func:`_ovals`): the part keeping its orientation
         (geometric) and the part flipping (servo); per axis the features (reversals,
         velocity, acceleration, position, time, a spatial period) it
@@ -580,16 +581,20 @@ def locate(trace, reference, residual):
         rel = trace.reference - center
         theta = np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) % 360
         radial = np.sum(residual[:, :2] * rel[:, :2], axis=1) / np.linalg.norm(rel[:, :2], axis=1)
-        bins = np.clip((theta // 10).astype(int), 0, 35)
-        mean = np.array([radial[bins == k].mean() if np.any(bins == k) else 0.0 for k in range(36)])
-        top = np.argsort(-np.abs(mean))[:3]
-        found.append(f"circle R = {radius:.4g} mm: largest radial residual at "
-                     + ", ".join(f"{10 * k + 5}° ({1e3 * mean[k]:+.2f} µm)" for k in top))
     v = _on_trace(trace, reference.t, reference.velocity)
     a = _on_trace(trace, reference.t, reference.acceleration)
     if circle is not None:
-        on = np.abs(np.linalg.norm(rel[:, :2], axis=1) - radius) < 1e-3 * radius
         sense = np.sign(rel[:, 0] * v[:, 1] - rel[:, 1] * v[:, 0])
+        # per 10° of angle, and per direction where the circle is run both ways (their mean would cancel a servo oval)
+        bins = np.clip((theta // 10).astype(int), 0, 35)
+        moving = sense[sense != 0]
+        both = moving.size > 0 and min(np.mean(moving > 0), np.mean(moving < 0)) >= _BOTH_WAYS
+        ways = ((sense > 0, " CCW"), (sense < 0, " CW")) if both else ((np.ones(len(t), bool), ""),)
+        means = [(float(radial[way & (bins == k)].mean()), f"{10 * k + 5}°{label}") for way, label in ways
+                 for k in range(36) if np.any(way & (bins == k))]
+        found.append(f"circle R = {radius:.4g} mm: largest radial residual at " + ", ".join(
+            f"{where} ({1e3 * mean:+.2f} µm)" for mean, where in sorted(means, key=lambda m: -abs(m[0]))[:3]))
+        on = np.abs(np.linalg.norm(rel[:, :2], axis=1) - radius) < 1e-3 * radius
         ovals = _ovals(np.radians(theta[on]), radial[on], sense[on])
         if ovals is not None:
             ccw, cw = ovals

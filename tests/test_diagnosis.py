@@ -24,7 +24,7 @@ from conftest import ROOT, ReaderGone
 
 from contoursim import paths
 from contoursim.cli import main
-from contoursim.diagnosis import diagnose, noise_level, standstill_cycles, synthetic_trace, turning
+from contoursim.diagnosis import diagnose, locate, noise_level, standstill_cycles, synthetic_trace, turning
 from contoursim.effects import Effect
 from contoursim.exceptions import UnstableLoopError
 from contoursim.feed import plan, sample
@@ -198,9 +198,6 @@ def test_a_circle_run_both_ways_tells_squareness_from_a_servo_mismatch(machine, 
 def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
     """The oval's 2θ term per direction: a squareness's keeps its orientation, at 135° and of size αR/2 (closed
     form); a Y gain 1 % low gives one as large that flips between CCW (at 135°) and CW (at 45°)."""
-    import re
-
-    from contoursim.diagnosis import locate
     from contoursim.simulation import measured_reference
 
     reference = both_ways()
@@ -654,6 +651,22 @@ def test_without_a_model_axes_of_different_gains_and_noise_never_crash_and_repor
     assert set(report["current_residual_rms_before_A"]) == set(report["current_residual_rms_after_A"]) == {"y"}
     rms = [s.rms_um for s in result.steps[1:]]
     assert all(b < a for a, b in zip(rms, rms[1:])), result.report()
+
+
+def test_a_circle_run_both_ways_gives_its_largest_radial_residual_per_direction():
+    """A servo oval flips with the direction: averaged over CCW and CW at each angle it cancels, and the report said
+    "largest radial residual at 95° (+4.50 µm)" for a residual of 59 µm each way (an outside probe)."""
+    from contoursim.simulation import measured_reference
+
+    t = np.arange(4000) * 1e-3
+    theta = np.where(t < 2.0, np.pi * t, np.pi * (4.0 - t))  # one lap CCW, then one CW
+    sense = np.where(t < 2.0, 1.0, -1.0)
+    reference = 50.0 * np.column_stack([np.cos(theta), np.sin(theta)])
+    residual = 5e-3 * (np.cos(2 * theta) * sense)[:, None] * reference / 50.0  # radial, ±5 µm, flipping
+    trace = Trace(t, reference, reference + residual, ("x", "y"))
+    line = next(w for w in locate(trace, measured_reference(trace, 1e-3), residual) if "largest radial residual" in w)
+    shown = [(float(m.group(2)), m.group(1)) for m in re.finditer(r"\d+° (CCW|CW) \(([-+\d.]+) µm\)", line)]
+    assert len(shown) == 3 and all(abs(value) > 4.5 for value, _ in shown), line
 
 
 def test_swapped_columns_are_said_and_nothing_is_named(machine):
