@@ -2189,6 +2189,7 @@ def _diagnose(trace, model, identified, max_effects, say):
         undetermined = _size_undetermined(best, share)
         if undetermined is not None:
             warnings.append(undetermined)
+        warnings += _shape_at_edge(problem, best)
         if best.fit.name == "straightness" and best.fit.axis not in base.machine.travel:
             warnings.append(f"{best.fit.label}: the machine gives no travel for axis {best.fit.axis} (travel_mm): the bow "
                             "is fitted over the trace's own extent, its curvature the guideway's, its slope there "
@@ -2241,6 +2242,20 @@ def _size_at_edge(problem, cand):
     if any(b != none and np.isfinite(b) and abs(size.value - b) <= 1e-6 * max(abs(b), 1e-12) for b in (lower, upper)):
         return f"its {size.name} = {size.value:.4g} is at the edge of the range the fit may take ({lower:.4g}–{upper:.4g})"
     return None
+
+
+def _shape_at_edge(problem, cand):
+    """What to say of a named effect's free parameters other than its size that ran to an edge of the range the fit
+    may take (a mode's damping ratio at its floor): the trace does not pin them down, the size may stand."""
+    lower, upper = _bounds(problem, cand)
+    said = []
+    for name, low, high in zip(cand.free, lower, upper):
+        value = cand.fit[name]
+        if name != cand.fit.parameters[0].name and any(abs(value - b) <= 1e-6 * max(abs(b), 1e-12) for b in (low, high)):
+            said.append(f"{cand.fit.label}: its {name} = {value:.4g} is at the edge of the range the fit may take "
+                        f"({low:.4g}–{high:.4g}): the trace does not pin it down (the parameters held at a default, "
+                        "such as a mode's mass ratio, may be bent to it)")
+    return said
 
 
 def _size_undetermined(cand, share):

@@ -996,6 +996,22 @@ def test_a_refit_pulled_far_beyond_its_prior_is_said(independent_truth, tmp_path
     assert abs(result.refitted.machine.axes["y"].mass / model.machine.axes["y"].mass - 1.0) <= 3 * NOMINAL_SPREAD
 
 
+def test_a_modes_damping_ratio_at_the_floor_of_its_range_is_said_not_pinned_down():
+    """A 60 Hz mode of damping ratio 0.03 and mass ratio 0.1 (held at 0.2 in the fit): named at the right frequency
+    with its damping ratio run to the floor, 1e-4 ± 0.065, and nothing said (an outside probe)."""
+    from contoursim.pathfile import load_path_file
+
+    mill = load_machine("demo_mill")
+    path, settings = load_path_file("rounded_square")
+    reference = sample(path, settings.plan(path), mill.servo_period)
+    mode = Effect("vibration", "x", freq_hz=60.0, damping_ratio=0.03, mass_ratio=0.1)
+    result = diagnose(synthetic_trace(Model(mill, (mode,)), reference, every=2, seed=3, noise_um=0.3), Model(mill))
+    assert [e.label for e in result.effects] == ["vibration.x"]
+    assert result.effects[0]["freq_hz"] == pytest.approx(60.0, rel=0.05)
+    assert any(w.startswith("vibration.x: its damping_ratio = 0.0001 is at the edge of the range the fit may take "
+                            "(0.0001–0.35): the trace does not pin it down") for w in result.warnings), result.warnings
+
+
 def test_a_vibration_named_on_a_compliant_axis_leaves_its_screw_out_of_the_refit_report(independent_truth, tmp_path):
     """An independent two-mass pair with a tool-side mode on y: the vibration is tried and named with y's compliant
     screw taken as rigid (one structural mode per axis), so the refitted machine has no screw on y to weigh against
