@@ -756,16 +756,21 @@ def standstill_cycles(trace, reference, residual, min_samples=64):
             if spec.sum() <= 0:
                 continue
             k = int(np.argmax(spec))
-            steps = np.diff(trace.actual[a:b, i])
-            steps = np.sign(steps[steps != 0])
-            turns = int(np.count_nonzero(steps[1:] != steps[:-1]))  # a machine that hunts turns twice a cycle
-            if k >= 3 and turns >= 2 * 3 and spec[max(k - 2, 1):k + 3].sum() >= _cycle_share(n) * spec.sum():
+            if (k >= 3 and spec[max(k - 2, 1):k + 3].sum() >= _cycle_share(n) * spec.sum()
+                    and _turns(trace.actual[a:b, i]) >= 2 * 3):
                 mask[a:b] = True
                 freqs.append(k / (n * trace.dt))
                 amps.append(0.5 * float(np.ptp(x)))
         if mask.sum() >= min_samples // 2:
             found[i] = {"samples": mask, "frequency": float(np.median(freqs)), "amplitude": float(np.median(amps))}
     return found
+
+
+def _turns(x):
+    """How many times the position `x` turns back (a machine that hunts turns twice a cycle)."""
+    steps = np.diff(x)
+    steps = np.sign(steps[steps != 0])
+    return int(np.count_nonzero(steps[1:] != steps[:-1]))
 
 
 @lru_cache(maxsize=None)
@@ -2239,9 +2244,14 @@ def _size_at_edge(problem, cand):
         return None
     lower, upper = (b[cand.free.index(size.name)] for b in _bounds(problem, cand))
     none = effect_kind(cand.fit.name).parameters[0].value
-    if any(b != none and np.isfinite(b) and abs(size.value - b) <= 1e-6 * max(abs(b), 1e-12) for b in (lower, upper)):
+    if any(b != none and _at(size.value, b) for b in (lower, upper)):
         return f"its {size.name} = {size.value:.4g} is at the edge of the range the fit may take ({lower:.4g}–{upper:.4g})"
     return None
+
+
+def _at(value, bound):
+    """Whether a fitted `value` ran to its finite `bound`."""
+    return bool(np.isfinite(bound) and abs(value - bound) <= 1e-6 * max(abs(bound), 1e-12))
 
 
 def _shape_at_edge(problem, cand):
@@ -2251,7 +2261,7 @@ def _shape_at_edge(problem, cand):
     said = []
     for name, low, high in zip(cand.free, lower, upper):
         value = cand.fit[name]
-        if name != cand.fit.parameters[0].name and any(abs(value - b) <= 1e-6 * max(abs(b), 1e-12) for b in (low, high)):
+        if name != cand.fit.parameters[0].name and (_at(value, low) or _at(value, high)):
             said.append(f"{cand.fit.label}: its {name} = {value:.4g} is at the edge of the range the fit may take "
                         f"({low:.4g}–{high:.4g}): the trace does not pin it down (the parameters held at a default, "
                         "such as a mode's mass ratio, may be bent to it)")
