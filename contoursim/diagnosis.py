@@ -2098,7 +2098,6 @@ def _diagnose(trace, model, identified, max_effects, say):
     if identified:
         warnings.append("the nominal machine was identified from the trace with an assumed mass "
                         "(forces such as force_N are relative to that axis, not in real newtons)")
-        warnings += identification_warnings(model.machine)
     if not np.any(np.ptp(trace.reference, axis=0) > 0):
         warnings.append("the trace's reference never moves: " + (
             "its servo loops cannot be identified from it (it is compared with axes standing still: hunting and drift "
@@ -2213,7 +2212,9 @@ def _diagnose(trace, model, identified, max_effects, say):
                 warnings.append(f"{step.effect.label}: with one position gain identified for both axes only the ratio of "
                                 f"their gains is known; kp_ratio {step.effect['kp_ratio']:.4g} on "
                                 f"{step.effect.axis} is the same machine as {1.0 / step.effect['kp_ratio']:.4g} on {other}")
-    if not identified:
+    if identified:
+        warnings += identification_warnings(model.machine, problem.base.machine)
+    else:
         warnings += _far_from_prior(problem.nominal, problem.base.machine, trace.axes)
         refused = problem.base.machine.refusal(trace.axes)
         if refused is not None:

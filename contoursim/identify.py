@@ -308,19 +308,23 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     return _machine(axes, period, best)
 
 
-def identification_warnings(machine):
+def identification_warnings(machine, refitted=None):
     """What a diagnosis on an identified `machine` says of it: the drive structure chosen, a weakly determined kp.
 
     Parameters
     ----------
     machine : Machine
         A machine of :func:`identify_machine` (one kp, vff and structure for all axes).
+    refitted : Machine, optional
+        The diagnosis's refit of `machine`, the loops the report gives: kp is weakly determined where the velocity
+        feedforward reaches :data:`WEAK_KP_VFF` as identified or as refitted.
 
     Returns
     -------
     list of str
     """
     servo = next(iter(machine.axes.values()))
+    refit = max(s.vff for s in (refitted or machine).axes.values())
     period_ms = 1e3 * machine.servo_period
     if servo.velocity_feedback == "difference":
         drive = (f"velocity loops on the encoder's backward difference over {servo.velocity_taps} period(s), the command "
@@ -328,8 +332,9 @@ def identification_warnings(machine):
     else:
         drive = f"velocity loops on the motor velocity, at a servo period of {period_ms:.3g} ms"
     said = [f"identified drive structure: {drive} (chosen among the candidate structures by the fit)"]
-    if servo.vff >= WEAK_KP_VFF:
-        said.append(f"the identified velocity feedforward is {servo.vff:.3g}: with almost no steady lag left, the "
+    if max(servo.vff, refit) >= WEAK_KP_VFF:
+        vff = f"{servo.vff:.3g}" + (f" ({refit:.3g} as refitted)" if f"{refit:.3g}" != f"{servo.vff:.3g}" else "")
+        said.append(f"the identified velocity feedforward is {vff}: with almost no steady lag left, the "
                     f"position gain kp = {servo.kp:.4g} 1/s shows only in the transients and is weakly determined "
                     "(a gain_mismatch or time_delay named on it is as uncertain)")
     return said
