@@ -48,9 +48,12 @@ TUNE_KP_END = 64.0
 TUNE_KI_FACTORS = (0.0, 1.0 / 16.0, 1.0)
 
 
+_RESOLUTION = 0.0005  # half the nm the trace CSV holds [µm]: an error below it is shown as <0.001
+
+
 def _nm(error):
     """An error [µm] to the nm the trace CSV holds; ``<0.001`` below it."""
-    return "<0.001" if error < 0.0005 else f"{error:.3f}"
+    return "<0.001" if error < _RESOLUTION else f"{error:.3f}"
 
 
 def _figures(result):
@@ -381,12 +384,13 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
     if "none" in runs:
         worst = {name: run.summary()["contour_max_um"] for name, run in runs.items()}
         for name, value in worst.items():
-            if value > WORSE * worst["none"]:
+            # below the table's resolution (a path along one axis: none's error is exactly 0) nothing is worse
+            if value > WORSE * max(worst["none"], _RESOLUTION):
                 why = (": past a corner that turns back, its correction can hold the tool on the line the path left, "
                        "where the position loops pull it back along the path while the tracking error grows, until "
                        "its estimate's search (twice the tracking error about the commanded point) reaches the "
                        "commanded part of the path and the tool crosses to it" if "ccc" in name else "")
-                warnings.warn(f"strategy {name}: its max contour error, {value:.4g} µm, is {value / worst['none']:.3g} "
-                              f"times that without compensation ({worst['none']:.4g} µm){why}", ContoursimWarning,
-                              stacklevel=2)
+                times = f"is {value / worst['none']:.3g} times" if worst["none"] >= _RESOLUTION else "exceeds"
+                warnings.warn(f"strategy {name}: its max contour error, {value:.4g} µm, {times} that without compensation "
+                              f"({_nm(worst['none'])} µm){why}", ContoursimWarning, stacklevel=2)
     return Comparison(runs, gains)

@@ -240,9 +240,8 @@ def _zpetc_filter(servo, dt, negative_radius=ZPETC_NEGATIVE_RADIUS):
     delay = n - zeros.size
     unacceptable = (np.abs(zeros) >= ZPETC_RADIUS) | ((zeros.real < 0) & (np.abs(zeros) > negative_radius))
     dc = (C @ np.linalg.solve(np.eye(n) - A, B) + D).item()
-    a_poly = np.poly(poles).real
-    ba_poly = np.poly(zeros[~unacceptable]).real
-    bu_poly = np.poly(zeros[unacceptable]).real
+    # np.poly of no roots is the scalar 1.0: a loop without zeros (a P velocity loop) has polynomials of degree 0
+    a_poly, ba_poly, bu_poly = (np.atleast_1d(np.poly(r)).real for r in (poles, zeros[~unacceptable], zeros[unacceptable]))
     # G(1) = k·B_a(1)·B_u(1)/A(1) fixes the gain k
     k = dc * a_poly.sum() / (ba_poly.sum() * bu_poly.sum())
     return ba_poly * k, a_poly, bu_poly / bu_poly.sum() ** 2, delay

@@ -153,8 +153,10 @@ def test_zpetc_error_on_a_circle_is_the_filters_steady_state():
     assert result.trajectory.t[preview] == 0.0 and not result.trajectory.velocity[:preview].any()
 
 
-def test_zpetc_times_the_python_control_loop_has_zero_phase_and_unit_dc_gain():
-    servo = AxisServo(kp=40.0, **AXIS)
+@pytest.mark.parametrize("velocity_loop", [dict(ti=AXIS["ti"]), dict(ti=None)], ids=["PI", "P"])
+def test_zpetc_times_the_python_control_loop_has_zero_phase_and_unit_dc_gain(velocity_loop):
+    """Also on a P velocity loop, whose sampled closed loop has no zeros at all (no polynomial to cancel)."""
+    servo = AxisServo(kp=40.0, **(AXIS | velocity_loop))
     den, num, fir, delay = cp._zpetc_filter(servo, DT)
     omega = np.linspace(1.0, 0.9 * np.pi / DT, 200)
     z = np.exp(1j * omega * DT)

@@ -229,10 +229,18 @@ def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
 
 
 def test_compare_on_a_move_along_one_axis_has_no_change_relative_to_none(tmp_path, capsys):
+    """none's contour error is exactly 0 on a move along one axis (a path file's line: 0, not 1e-12 as on the G-code's):
+    a strategy's overshoot at the end is warned of without a ratio to it (it was a ZeroDivisionError)."""
     (tmp_path / "line.nc").write_text("G21 G90 G17\nG1 X0 Y0 F1000\nG1 X20\nG1 X0\nM30\n")
     assert main(["compare", str(tmp_path / "line.nc"), "--strategies", "none,ccc_arc", "--out", str(tmp_path / "out")]) == 0
     captured = capsys.readouterr()
     assert not captured.err
+    (tmp_path / "line.toml").write_text('[feed]\nfeed_mm_min = 1000\n[path]\ntype = "polyline"\n'
+                                        'points_mm = [[0, 0], [100, 0]]\n')
+    assert main(["compare", str(tmp_path / "line.toml"), "--strategies", "none,feedforward",
+                 "--out", str(tmp_path / "out2")]) == 0
+    said = capsys.readouterr().err
+    assert "strategy feedforward: its max contour error, 0.4506 µm, exceeds that without compensation (<0.001 µm)" in said
     none = next(line for line in captured.out.splitlines() if line.startswith("none "))
     fields = none.split()  # strategy, 4 errors, peak current, clamped: no margins, and vs none empty
     assert fields[1] in ("<0.001", "0.000") and len(fields) == 7, none
