@@ -38,7 +38,6 @@ __all__ = [
 
 #: The closed-loop damping ratio the coupling's default gains are designed for [-].
 DESIGN_DAMPING_RATIO = 0.7
-_SETTLED = math.exp(-1.0)  # a sampled pole at most this far from 0 decays by e within a servo period [-]
 
 
 def designed_gains(servos, dt, kd=0.0, kp=None):
@@ -112,7 +111,7 @@ def _bisected_kp(rows, position_gain, dt, kd):
     def damping(kp):
         ki = (position_gain + kp) ** 2 / 4.0
         poles = (np.linalg.eigvals(a + b @ c) for a, b, c in (_coupled_system(rows, kp, ki, kd, dt, d) for d in directions))
-        return min(_damping_ratio(p[np.abs(p) > _SETTLED], dt) for p in poles)
+        return min(_damping_ratio(p, dt) for p in poles)
 
     low, high = 0.01 * position_gain, position_gain
     if damping(low) < DESIGN_DAMPING_RATIO:

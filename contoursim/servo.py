@@ -939,12 +939,20 @@ def discretize(servo, dt):
     )
 
 
+# a sampled pole at most this far from 0 decays by e within a servo period [-]: it has settled before it could ring
+# (a drive's two-tap velocity filter's alternating pole, z ≈ -0.1), whatever the damping ratio's formula gives it
+# (at least 1/√(1 + π²) = 0.30, above the check's floor: it decides no check)
+_SETTLED = np.exp(-1.0)
+
+
 def _damping_ratio(poles, dt, below=np.inf):
-    """Smallest damping ratio of continuous (`dt` = 0) or discrete poles slower than `below` [rad/s]; 1 for none."""
+    """Smallest damping ratio of continuous (`dt` = 0) or discrete poles slower than `below` [rad/s]; 1 for none.
+
+    Of discrete poles, those that last longer than a servo period (``|z| > 1/e``).
+    """
     poles = np.asarray(poles, complex)
     if dt:
-        poles = poles[np.abs(poles) > 1e-12]  # z = 0 (pure delay) is s = -inf: fully damped
-        poles = np.log(poles) / dt
+        poles = np.log(poles[np.abs(poles) > _SETTLED]) / dt
     poles = poles[(np.abs(poles) > 0) & (np.abs(poles) < below)]
     if poles.size == 0:
         return 1.0

@@ -218,6 +218,14 @@ def test_designed_coupling_gains_for_drives_that_filter_their_velocity_differenc
     fast = np.concatenate([p[(np.abs(p) <= np.exp(-1.0)) & (np.abs(p) > 1e-12)] for p in poles])
     assert fast.size and _damping(fast) < 0.7  # the filter's poles, which the ratio alone would count
     assert min(_damping(p[np.abs(p) > np.exp(-1.0)]) for p in poles) == pytest.approx(0.7, abs=1e-5)
+    # the ζ given of the coupled loop (compare's table) and of each axis's own is the design's: 0.6 said "designed
+    # for ζ = 0.7" beside 0.60
+    theta = np.linspace(0.0, 2 * np.pi, 721)  # a circle: every direction of the normal, binned at 5°
+    circle = 10.0 * np.column_stack([np.cos(theta), np.sin(theta)])
+    assert cp.CrossCoupled().margins(circle, servos, DT)["damping_ratio"] == pytest.approx(0.7, abs=1e-3)
+    for servo in servos.values():
+        own = servo.discretize(DT).closed_loop.poles()
+        assert servo.margins(DT)["position"]["damping_ratio"] == pytest.approx(_damping(own[np.abs(own) > np.exp(-1.0)]))
 
 
 def test_coupled_margins_equal_python_control_on_the_loop_gain():
