@@ -90,8 +90,9 @@ class Trajectory:
         Returns
         -------
         Trajectory
-            The extra samples have zero velocity and acceleration and are not
-            `measuring`. Raises ValueError unless the reference ends at rest
+            The extra samples have zero velocity and acceleration and are
+            `measuring` as the last sample is (the tool still comes to rest on
+            the end of a cut, not on a run-out). Raises ValueError unless the reference ends at rest
             (or `duration` rounds to no sample).
         """
         duration = _validate.nonnegative("duration", duration)
@@ -111,7 +112,7 @@ class Trajectory:
             np.concatenate([self.acceleration, tail]),
             np.concatenate([self.s, np.full(n, self.s[-1])]),
             self.path,
-            np.concatenate([self.measuring, np.zeros(n, bool)]),
+            np.concatenate([self.measuring, np.full(n, self.measuring[-1])]),
         )
 
     def preceded(self, samples):
