@@ -243,28 +243,29 @@ def _job(args, extra_keys=()):
             geometric = data.get("geometric_compensation", False)
             if not isinstance(geometric, bool):
                 raise job.error(f"geometric_compensation must be true or false, got {geometric!r}", "geometric_compensation")
-            def named(key, find, suffixes):
-                near = local_file(data[key], file.parent, suffixes) or data[key]  # beside the job, else a preset's name
-                if Path(near).is_dir():  # '', '.', a folder beside the job: said where the job names it
+            def named(key, find, shipped, suffixes):
+                near = local_file(data[key], file.parent, suffixes)  # beside the job, else a preset's or entry's name
+                if near is not None and near.is_dir():  # '', '.', a folder beside the job: said where the job names it
                     raise job.error(f"{key} = {data[key]!r} names the folder {near}, not a {key} file", key)
-                if Path(near).is_file() and os.path.samefile(near, file):  # pocket.toml with path = "pocket"
+                if near is not None and os.path.samefile(near, file):  # pocket.toml with path = "pocket"
                     raise job.error(f"{key} = {data[key]!r} names this job file itself: a job named as a {key} it "
                                     f"runs hides that {key}; rename the job file (e.g. {file.stem}_job.toml)", key)
-                try:
-                    return find(near)
+                try:  # never a file of the current folder: the job would run differently from elsewhere
+                    return find(shipped(data[key], here=False) if near is None else near)
                 except ConfigError as exc:
                     if exc.source is None:  # a name that is no file and no preset: said where the job names it
-                        raise job.error(str(exc), key) from None
+                        raise job.error(f"{exc} (a job's files are looked for beside it, in "
+                                        f"{file.parent.resolve()})", key) from None
                     raise
 
-            model = named("machine", load_model, (".toml",))
+            model = named("machine", load_model, preset_file, (".toml",))
             machine = model.machine
             if "work_offset" in data:
                 machine = replace(machine, work_offset={**machine.work_offset, **read_work_offset(job, machine.chain)})
             model = with_file_effects(replace(model, machine=machine), job)
             if geometric and machine.chain is None:  # simulate's, compare's and a sweep's, said where the job asks
                 raise job.error(_no_chain(machine), "geometric_compensation")
-            return model, named("path", library_file, (".toml", ".nc")), job, geometric
+            return model, named("path", lambda near: near, library_file, (".toml", ".nc")), job, geometric
     return load_model(args.machine or preset_file(DEMO_MACHINE, here=False)), library_file(args.file), None, False
 
 

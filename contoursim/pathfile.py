@@ -81,7 +81,7 @@ def _library():
     return next(f for f in (package / "trajectories", package.parent / "trajectories") if f.is_dir())
 
 
-def library_file(name):
+def library_file(name, here=True):
     """The path file `name`: an existing file, else an entry of the trajectories library.
 
     Parameters
@@ -90,6 +90,8 @@ def library_file(name):
         A file name, or a library entry with or without its suffix
         (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then ``.nc`` is tried, here
         first: a file here is read rather than the library's of that name).
+    here : bool
+        ``False``: the library's entry only (a job file's name not found beside the job).
 
     Returns
     -------
@@ -99,19 +101,19 @@ def library_file(name):
         raise TypeError(f"a path file is a file or library name (str or Path), got {type(name).__name__}")
     if isinstance(name, str) and not name.strip():  # Path('') would be '.', a folder
         raise ConfigError("the path file's name is empty: name a path file or a library path (e.g. butterfly)")
-    here = local_file(name, suffixes=(".toml", ".nc"))  # a user's copy of a library entry is the one meant
-    if here is not None and not here.is_dir():
-        return here
+    found = local_file(name, suffixes=(".toml", ".nc")) if here else None  # a user's copy of a library entry is meant
+    if found is not None and not found.is_dir():
+        return found
     library = _library()
     for candidate in (str(name), f"{name}.toml", f"{name}.nc"):
         if library.joinpath(candidate).is_file():
             return library / candidate
-    if here is not None:  # a folder of that name, and no library entry
-        raise ConfigError(f"{here} is a folder, not a path file: name a path file (.toml or G-code) or a library path")
+    if found is not None:  # a folder of that name, and no library entry
+        raise ConfigError(f"{found} is a folder, not a path file: name a path file (.toml or G-code) or a library path")
     known = sorted(p.name for p in library.iterdir() if p.suffix.lower() in (".toml", *SUFFIXES))
     meant = _validate.closest(str(name), [*known, *(_FilePath(k).stem for k in known)])
-    raise ConfigError(f"no path file {str(name)!r} here nor in the trajectories library{meant}; the library: "
-                      f"{', '.join(known)}")
+    raise ConfigError(f"no path file {str(name)!r} {'here nor ' if here else ''}in the trajectories library{meant}; "
+                      f"the library: {', '.join(known)}")
 
 
 @dataclass(frozen=True)

@@ -405,7 +405,7 @@ def test_a_machine_whose_axis_has_no_travel_is_refused_by_volumetric_naming_its_
 
 @pytest.mark.parametrize("job, line, words", [
     ('machine = "demo_mil"\npath = "small.toml"\n', 1, "no machine file 'demo_mil' and no preset of that name"),
-    ('machine = "demo_mill"\npath = "smal.toml"\n', 2, "no path file 'smal.toml' here nor in the trajectories library"),
+    ('machine = "demo_mill"\npath = "smal.toml"\n', 2, "no path file 'smal.toml' in the trajectories library"),
     ('machine = "demo_mill"\npath = "small.toml"\ngeometric_compensation = true\n', 3,
      "demo mill (3 servo axes) has no geometric model ([[body]] tables) to compensate with"),
     ('machine = "demo_mill"\npath = ""\n', 2, "path = '' names the folder"),  # the job's own folder: said so, by its line
@@ -422,6 +422,25 @@ def test_a_job_naming_what_is_not_there_is_refused_by_its_line(tmp_path, capsys,
     (tmp_path / "job.toml").write_text(job)
     _refused(capsys, [command[0], str(tmp_path / "job.toml"), *command[1:], "--out", str(tmp_path / "out")],
              f"{tmp_path / 'job.toml'}, line {line}: {words}")
+
+
+@pytest.mark.parametrize("key, job", [("machine", 'machine = "mine.toml"\npath = "butterfly"\n'),
+                                      ("path", 'machine = "demo_mill"\npath = "small"\n')])
+def test_a_job_reads_its_files_beside_it_never_from_the_current_folder(tmp_path, capsys, monkeypatch, key, job):
+    """A job in a folder naming a file that lies only in the folder it is run from (an outside probe): it ran that file,
+    so the same job ran differently from elsewhere. Refused by its line, saying where a job's files are looked for;
+    with the file beside the job, that one runs."""
+    (tmp_path / "mine.toml").write_text(preset_file("demo_mill").read_text())
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "jobs").mkdir()
+    (tmp_path / "jobs" / "job.toml").write_text(job)
+    monkeypatch.chdir(tmp_path)
+    _refused(capsys, ["simulate", str(Path("jobs") / "job.toml"), "--out", "out"],
+             f"{Path('jobs') / 'job.toml'}, line {1 if key == 'machine' else 2}: no ",
+             f"(a job's files are looked for beside it, in {tmp_path / 'jobs'})")
+    for name in ("mine.toml", "small.toml"):
+        (tmp_path / "jobs" / name).write_text((tmp_path / name).read_text())
+    assert main(["simulate", str(Path("jobs") / "job.toml"), "--every", "50", "--out", "out"]) == 0
 
 
 # -- the third pass (issue 18, item 8): files that are not files, the Python API ----------------------------------------
