@@ -27,10 +27,11 @@ not a move and is not simulated: once in position the axes hold it. A move
 in its block follows the dwell. Home returns and machine-coordinate moves (``G28 G30 G53``, e.g. a
 post's ``G28 G91 Z0`` before a tool change) take the axes they name (``G28``
 and ``G30`` without axis words: all) to a machine position contoursim does
-not know in work coordinates. Before the first feed move they are ignored;
-after it the tool is taken to stay where it was, and the G0 moves that
-follow position it from there (rapids, not scored); a feed move while an
-axis is still at such a position is refused. A block that starts with the
+not know in work coordinates: the tool is taken to stay where it was (before
+the first move, the program's start), and the G0 moves that follow position
+it from there (rapids, not scored); a feed move while an axis is still at
+such a position is refused (also before the first feed move: a program's
+``G28 G91 Z0`` before it cuts would cut at the home height). A block that starts with the
 block-delete mark ``/`` (Fanuc's ``/1``–``/9`` too) runs, as with the
 controller's block-delete switch off: the program as written, all of it
 (the lines are named in a warning). What was ignored (all but ``N``) is
@@ -256,8 +257,13 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
 
     ended = False  # M2/M30: the program ends after its block
     started = False  # a block was read: a '%' line now ends the tape
-    for number, raw in enumerate(text_lines(text), 1):
-        if ended:
+    rows = text_lines(text)
+    for number, raw in enumerate(rows, 1):
+        if ended:  # a controller reads nothing after it: said, if a block follows
+            after = [k for k, rest in enumerate(rows[number - 1:], number) if rest.strip()[:1] not in ("", "(", ";", "%")]
+            if after:
+                warnings.warn(f"{source}: the program ends on line {number - 1}: the {len(after)} line(s) after it "
+                              f"(from line {after[0]}) are not run, as on a controller", ContoursimWarning, stacklevel=2)
             break
 
         def fail(message):
@@ -332,9 +338,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             if cutting:
                 stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
         elif nonmodal is not None:
-            if cutting:
-                moved = [a for a in "XYZ" if a in values] or (list("XYZ") if nonmodal in (28, 30) else [])
-                away.update(dict.fromkeys(moved, number))
+            moved = [a for a in "XYZ" if a in values] or (list("XYZ") if nonmodal in (28, 30) else [])
+            away.update(dict.fromkeys(moved, number))
             continue
         if "P" in values and 64 not in gcodes:
             fail("P belongs to a dwell (G4)")

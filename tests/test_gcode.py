@@ -1,6 +1,7 @@
 """G-code reader: geometry of the moves worked out by hand, errors naming file and line."""
 
 import io
+import warnings
 
 import numpy as np
 import pytest
@@ -144,6 +145,8 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G1 X1 F100\nG90 G91 X2\n", 2, "G90 and G91 in one block"),
     ("G1 X1 F100\nG28 G91 Z0\nG0 Z-5\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # still unknown
     ("G1 X1 F100\nG53 G0 Z0\nG1 X2\n", 3, "line 2 \\(G28/G30/G53\\) took Z there"),
+    # before the first feed move too (it cut at the home height, silently; an outside probe)
+    ("G90\nG28 G91 Z0\nG90\nG1 X5 F3000\n", 4, "line 2 \\(G28/G30/G53\\) took Z there; position Z with G0 first"),
     ("G0 X10 Y0\nG2 X20 Y0 F100\n", 2, "the arc centre is missing: give I/J \\(relative to the arc's start\\) or R"),
     # a centre word off the arc's plane (it was read as 0: another arc, silently)
     ("G18 G0 X10 Y0\nG2 X20 Y0 J5 F100\n", 2, "J is not a centre word of the G18 \\(ZX\\) arc: give I/K"),
@@ -236,6 +239,7 @@ def test_a_dwell_stops_the_motion_and_waits_in_position(tmp_path):
     ("G4 P0.5 F300\nG1 Y10", 5, 300, (0,)),  # an F in a dwell's block sets the feed
     ("G4 X0.5\nG1 Y10 F300", 5, 300, (0,)),  # X without P is the dwell's time (Fanuc), not a move
 ])
+@pytest.mark.filterwarnings("ignore:.*the program ends on line 4")  # the G1 X0 after M30/M2: said, not run
 def test_a_move_in_a_block_that_ends_the_program_or_dwells_is_run(block, line, feed, stops):
     """A move in the block of M30/M2 or of a G4 was dropped without a word (as if the block held no move)."""
     program = read_gcode(f"G17 G90\nG0 X0 Y0\nG1 X10 F600\n{block}\n")
@@ -247,9 +251,15 @@ def test_a_move_in_a_block_that_ends_the_program_or_dwells_is_run(block, line, f
 
 @pytest.mark.parametrize("head", ["%\n", "%\n(a comment alone)\n%\n", ""])
 def test_a_percent_line_after_a_block_ends_the_program(head):
-    """A G1 Y10 after the closing '%' of a tape was run and scored (Fanuc and LinuxCNC read nothing after it)."""
-    program = read_gcode(f"{head}G0 X0 Y0\nG1 X10 F1000\n%\nG1 Y10\n")
+    """A G1 Y10 after the closing '%' of a tape was run and scored (Fanuc and LinuxCNC read nothing after it);
+    the blocks not run are said (they went without a word)."""
+    with pytest.warns(ContoursimWarning, match=r"the program ends on line \d+: the 1 line\(s\) after it \(from line "
+                                               r"\d+\) are not run"):
+        program = read_gcode(f"{head}G0 X0 Y0\nG1 X10 F1000\n%\nG1 Y10\n")
     np.testing.assert_allclose(program.path.end, [10, 0, 0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing but comments and blank lines after M30: nothing to say
+        read_gcode("G0 X0 Y0\nG1 X10 F1000\nM30\n\n(end)\n%\n")
 
 
 @pytest.mark.parametrize("separator", ["\x85", "\x0c", "\u2028"])
