@@ -461,7 +461,7 @@ def compare_command(args):
     if args.tune and not any(part.startswith("ccc_") for part in parts):
         raise ValueError(f"--tune tunes a cross-coupled strategy's gains; none runs here (--strategies {','.join(names)})")
     report = report_file(args.json, JSON_FORM, "comparison JSON", args.out,  # never a file the user keeps, nor a plot
-                         written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES])
+                         written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES], also=())
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
@@ -499,7 +499,7 @@ def diagnose_command(args):
     Several traces, or a folder of them: :func:`fleet_command`.
     """
     from ._memory import DIAGNOSIS_BYTES_PER_SAMPLE, check
-    from .diagnosis import FIGURE_FILES, REPORT_FORM, diagnose, save_figures
+    from .diagnosis import FIGURE_FILES, REPORT_FORM, REPORT_OPTIONAL, diagnose, save_figures
     from .identify import servo_period_for
     from .model import load_model
     from .output import refused_early, report_file, writing
@@ -518,7 +518,7 @@ def diagnose_command(args):
           "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
           per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
     report = report_file(args.report, REPORT_FORM, "diagnosis report", args.out,  # never a user's file,
-                         written=(*FIGURE_FILES, "corrected_model.toml"))  # nor one the run writes
+                         written=(*FIGURE_FILES, "corrected_model.toml"), also=REPORT_OPTIONAL)  # nor one the run writes
     corrected = Path(args.out) / "corrected_model.toml"
     if args.model and corrected.is_file() and Path(args.model).is_file() and os.path.samefile(corrected, args.model):
         raise ConfigError(f"--out {args.out} would replace {args.model}, the model this run reads, with this trace's "
@@ -615,7 +615,7 @@ def fleet_command(args):
         raise ValueError(f"two traces named {twice[0]}.csv (or one named fleet.csv): their reports would share a "
                          "file name; rename one")
     summary_file = report_file(args.summary, SUMMARY_FORM, "fleet summary", args.out,  # never a file the user keeps
-                               written=[f"{stem}.json" for stem in stems] + ["fleet.png"])  # nor a trace's report
+                               written=[f"{stem}.json" for stem in stems] + ["fleet.png"], also=())  # nor a trace's report
     refused_early(args.out, [f"{stem}.json" for stem in stems] + ["fleet.json", "fleet.png"])  # not after the fleet
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "

@@ -82,7 +82,7 @@ from .simulation import measured_force, measured_reference, simulate_batch
 from .traces import Trace
 
 __all__ = [
-    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "REPORT_FORM", "SIGNIFICANT",
+    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "REPORT_FORM", "REPORT_OPTIONAL", "SIGNIFICANT",
     "STRUCTURE_SHARE", "TIMING_SPREAD", "UNCERTAINTY_METHOD",
     "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
@@ -248,6 +248,10 @@ REPORT_FORM = {"effects": ("name", "axis", "parameters"), "residual_rms_before_u
                "noise_um": None, "nominal_identified": None, "nominal_refit": None,
                "steps": ("label", "rms_um", "max_um"), "where": None, "warnings": None,
                "unexplained": ("signature", "rms_um"), "uncertainty_method": None}
+#: The keys the report has besides those of :data:`REPORT_FORM`, some only where they apply: a file holding any other
+#: (notes a user added to a report) is not replaced.
+REPORT_OPTIONAL = ("zero_offset_um", "residual_normal_rms_before_um", "residual_normal_rms_after_um",
+                   "current_residual_rms_before_A", "current_residual_rms_after_A")
 
 
 @dataclass(frozen=True)

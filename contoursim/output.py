@@ -401,12 +401,13 @@ def _remove_stale_parts(folder, name=None):
                 pass  # e.g. removed by another run meanwhile
 
 
-def report_file(file, form, what, out=None, written=()):
+def report_file(file, form, what, out=None, written=(), also=()):
     """Check that a JSON report may be written to `file`: a new name, or a report contoursim wrote there before.
 
     An existing file is taken for such a report only if it has the report's
     form (:func:`has_form`), not for a key it shares with one: a user's
-    ``{"runs": {"my": "notes"}}`` is not a comparison JSON.
+    ``{"runs": {"my": "notes"}}`` is not a comparison JSON, nor is one of
+    contoursim's reports to which the user added notes of their own.
 
     Parameters
     ----------
@@ -421,6 +422,8 @@ def report_file(file, form, what, out=None, written=()):
         The output folder of the same run, not made yet: the report may not be it.
     written : collection of str
         Names of the files the run writes into `out`: the report may not be one of them, nor the folder's record.
+    also : collection of str
+        The keys such a report may have besides those of `form` (:func:`has_form`).
 
     Returns
     -------
@@ -452,19 +455,23 @@ def report_file(file, form, what, out=None, written=()):
             data = json.loads(read_text(file))
         except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8, not JSON
             data = None
-        if not has_form(data, form):
-            raise FileExistsError(f"{file} exists and is not a {what}; refusing to overwrite it")
+        if not has_form(data, form, also):
+            added = sorted(set(data) - {*form, *also}) if has_form(data, form) else ()  # a report the user wrote in
+            raise FileExistsError(f"{file} exists and is not a {what}" + (
+                f" as contoursim writes it (it holds {', '.join(map(repr, added))} besides)" if added else "")
+                + "; refusing to overwrite it")
     return file
 
 
-def has_form(data, form):
+def has_form(data, form, also=None):
     """Whether `data`, read from JSON, has the form of a report contoursim writes.
 
     That is an object with each key of `form` at its top level; where
     `form` names keys for one, its value is an object or a list each of
-    whose entries (values, items) is an object with those keys. Keys
-    besides are allowed: a report gains fields from one version to the
-    next, and its own earlier file is still replaced.
+    whose entries (values, items) is an object with those keys. With
+    `also`, no top-level key but those of `form` and `also`: a key a user
+    added (their notes) makes the file theirs, while an earlier version's
+    report, with fewer keys, is still taken for one.
 
     Parameters
     ----------
@@ -474,6 +481,8 @@ def has_form(data, form):
         Each top-level key of the report, with the keys each entry of its
         value has (or None: any value), e.g. ``{"runs": ("contour_max_um",
         ...), "axes": ("phase_margin_deg", "damping_ratio")}``.
+    also : collection of str, optional
+        The keys the report may have besides (``None``: any).
 
     Returns
     -------
@@ -486,8 +495,12 @@ def has_form(data, form):
     True
     >>> has_form({"runs": {"my": "notes"}, "axes": {}}, form)
     False
+    >>> has_form({"runs": {}, "axes": {}, "notes": "mine"}, form, also=())
+    False
     """
     if not isinstance(data, dict) or not set(form) <= set(data):
+        return False
+    if also is not None and not set(data) <= {*form, *also}:
         return False
     for key, keys in form.items():
         if keys is None:

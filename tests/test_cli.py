@@ -11,7 +11,7 @@ import pytest
 
 from conftest import ROOT, ReaderGone
 from contoursim.cli import main
-from contoursim.diagnosis import REPORT_FORM
+from contoursim.diagnosis import REPORT_FORM, REPORT_OPTIONAL
 from contoursim.output import has_form
 from contoursim.simulation import SimResult
 from contoursim.traces import read_trace
@@ -506,13 +506,23 @@ def test_a_json_with_a_reports_key_but_not_its_form_is_the_users_and_never_repla
         assert main([*argv, str(report), "--out", str(tmp_path / "out")]) == 2
         assert f"r.json exists and is not {what}; refusing to overwrite it" in capsys.readouterr().err
         assert json.loads(report.read_text()) == mine
+    # its own report with the user's notes added is theirs now (an outside probe: the notes were lost)
+    report.write_text(json.dumps({**ours, "notes": "operator: bob, spindle warm"}))
+    assert main([*compare, str(report), "--out", str(tmp_path / "out")]) == 2
+    assert ("r.json exists and is not a comparison JSON as contoursim writes it (it holds 'notes' besides); refusing "
+            "to overwrite it") in capsys.readouterr().err
     report.write_text(json.dumps(ours))  # its own is replaced
     assert main([*compare, str(report), "--out", str(tmp_path / "out")]) == 0
-    # so is a diagnosis report as diagnose writes it (its keys kept in step with the form its --report replaces)
+    # so is a diagnosis report as diagnose writes it (its keys kept in step with the form its --report replaces), not
+    # with a note added
     diagnosis = tmp_path / "d.json"
-    assert main(["diagnose", str(night), "--model", str(night.parent / "nightly_mill.toml"), "--report", str(diagnosis),
-                 "--out", str(tmp_path / "d")]) == 0
-    assert has_form(json.loads(diagnosis.read_text()), REPORT_FORM)
+    argv = ["diagnose", str(night), "--model", str(night.parent / "nightly_mill.toml"), "--report", str(diagnosis)]
+    assert main([*argv, "--out", str(tmp_path / "d")]) == 0
+    written = json.loads(diagnosis.read_text())
+    assert has_form(written, REPORT_FORM, REPORT_OPTIONAL)
+    diagnosis.write_text(json.dumps({**written, "my_notes": "spindle warm"}))
+    assert main([*argv, "--out", str(tmp_path / "d2")]) == 2
+    assert "(it holds 'my_notes' besides)" in capsys.readouterr().err
 
 
 def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(tmp_path, capsys):

@@ -24,14 +24,15 @@ from conftest import ROOT, ReaderGone
 
 from contoursim import paths
 from contoursim.cli import main
-from contoursim.diagnosis import diagnose, locate, noise_level, standstill_cycles, synthetic_trace, turning
+from contoursim.diagnosis import (REPORT_FORM, REPORT_OPTIONAL, diagnose, locate, noise_level, standstill_cycles,
+                                 synthetic_trace, turning)
 from contoursim.effects import Effect
 from contoursim.exceptions import UnstableLoopError
 from contoursim.feed import plan, sample
 from contoursim.identify import identify_machine
 from contoursim.machine import Machine, load_machine
 from contoursim.model import Model, load_model
-from contoursim.output import output_dir
+from contoursim.output import has_form, output_dir
 from contoursim.servo import AxisServo
 from contoursim.simulation import simulate, simulate_batch
 from contoursim.traces import Trace, read_trace, write_trace
@@ -649,6 +650,7 @@ def test_without_a_model_axes_of_different_gains_and_noise_never_crash_and_repor
     assert report["residual_rms_after_um"] is not None
     assert any(w.startswith("the trace's force column(s) (x_force) are not used") for w in report["warnings"])
     assert set(report["current_residual_rms_before_A"]) == set(report["current_residual_rms_after_A"]) == {"y"}
+    assert has_form(report, REPORT_FORM, REPORT_OPTIONAL)  # every key its --report knows for its own: rerun, replaced
     rms = [s.rms_um for s in result.steps[1:]]
     assert all(b < a for a, b in zip(rms, rms[1:])), result.report()
 
