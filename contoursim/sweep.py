@@ -471,17 +471,25 @@ def run_variants(files, names, rows):
     job = _job(files)
     task_threads()
     variants = [job.variant(dict(zip(names, row))) for row in rows]
-    groups = [variants] if not job.prefilters else [[v] for v in variants]  # a pre-filter: one by one
-    out = []
-    for group in groups:
-        summary = simulate_batch([m for m, _ in group], job.trajectory, outputs=("summary",),
-                                 strategies=[s for _, s in group], settle=0.0, check=False)["summary"]
-        figures = np.column_stack([summary[key].astype(float) for key in FIGURES])
-        refused = [i for i, (model, _) in enumerate(group) if model.machine.refusal() is not None]
-        figures[refused] = np.nan
-        figures[refused, FIGURES.index("diverged")] = 1.0
-        out += figures.tolist()
-    return out
+    # a variant the loop check refuses is not run: its coupling's gains, designed on its loops, would not exist
+    runs = [i for i, (model, _) in enumerate(variants) if model.machine.refusal() is None]
+    for i in runs:  # designed coupling gains that its loops do not allow: said of the variant, not of the batch
+        model, strategies = variants[i]
+        try:
+            for strategy in strategies:
+                strategy.settings(model.machine.axes, model.machine.servo_period)
+        except ValueError as exc:
+            values = ", ".join(f"{name} = {value:g}" for name, value in zip(names, rows[i]))
+            raise ValueError(f"the variant {values}: {exc} (in the spec: a [[strategy]] table's kp_per_s and "
+                             "ki_per_s2, or vary strategy.<name>.kp_per_s)") from None
+    figures = np.full((len(variants), len(FIGURES)), np.nan)
+    figures[:, FIGURES.index("diverged")] = 1.0
+    groups = [runs] if not job.prefilters else [[i] for i in runs]  # a pre-filter: one by one
+    for group in groups if runs else ():
+        summary = simulate_batch([variants[i][0] for i in group], job.trajectory, outputs=("summary",),
+                                 strategies=[variants[i][1] for i in group], settle=0.0, check=False)["summary"]
+        figures[group] = np.column_stack([summary[key].astype(float) for key in FIGURES])
+    return figures.tolist()
 
 
 # ---------------------------------------------------------------------------------------------

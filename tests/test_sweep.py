@@ -514,10 +514,13 @@ def test_a_variant_the_coupled_loops_check_refuses_is_said_so_with_its_margins(t
             in out and "is unstable (spectral radius" in out and "phase margin" in out), out
 
 
-def test_a_variant_the_loop_check_refuses_counts_as_diverged_and_is_not_rerun(tmp_path, capsys):
+@pytest.mark.parametrize("strategies", ["none", "ccc_arc"])
+def test_a_variant_the_loop_check_refuses_counts_as_diverged_and_is_not_rerun(tmp_path, capsys, strategies):
     """kp = 2000/s: the batch ran it unchecked and the re-run of the worst variant (simulate, checked) ended the sweep
-    in an error after its table was written; it is refused like a coupled loop the check refuses."""
-    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0, 2000.0]"}], strategies="none")
+    in an error after its table was written; it is refused like a coupled loop the check refuses. With a coupling's
+    designed gains the whole sweep ended in "the coupled loop is damped at ... set the coupling gains" (an outside
+    probe): the refused variant is not run, so nothing is designed on its loops."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0, 45.0, 2000.0]"}], strategies=strategies)
     assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 0
     out = capsys.readouterr().out
     table = run_sweep(read_sweep(spec))
@@ -526,6 +529,15 @@ def test_a_variant_the_loop_check_refuses_counts_as_diverged_and_is_not_rerun(tm
     assert "1 of 3 variants diverged or were refused by a loop check" in out and "worst  variant 1:" in out
     assert ("the first, variant 2 (axes.x.kp_per_s = 2000): the position loop of axis 'x' is badly damped" in out
             and "gain margin 3.79, phase margin 11.5 deg at 112.5 Hz" in out)  # how far it is, in its margins
+
+
+def test_a_variant_whose_loops_allow_no_designed_coupling_gains_is_named(tmp_path):
+    """kp = 64/s passes the axis check (damped at 0.696) but leaves the coupling no gain damped at 0.7: the sweep's
+    error named no variant."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0, 64.0]"}], strategies="ccc_arc")
+    with pytest.raises(ValueError, match=r"^the variant axes.x.kp_per_s = 64: the coupled loop is damped at 0.696 < "
+                                         r"0.7 .* \(in the spec: a \[\[strategy\]\] table's kp_per_s and ki_per_s2"):
+        run_sweep(read_sweep(spec))
 
 
 def test_a_sweep_refused_by_a_users_file_of_one_of_its_names_writes_nothing(tmp_path, capsys):
