@@ -994,9 +994,9 @@ def polyline(points, blend_radius=0.0, role="path"):
     Raises
     ------
     PathError
-        If points coincide, the path reverses at a corner, or a fillet does
-        not fit: the tangent lengths r tan(φ/2) of a segment's two corners
-        exceed its length.
+        If points coincide, the path reverses at a corner to be rounded, or
+        a fillet does not fit: the tangent lengths r tan(φ/2) of a segment's
+        two corners exceed its length.
     """
     pts, lengths = _point_rows("points", points, 2)
     r = _scalar(_validate.nonnegative, "blend_radius", blend_radius)
@@ -1004,9 +1004,10 @@ def polyline(points, blend_radius=0.0, role="path"):
     # atan2(|sin|, cos), not arccos(cos): exact near 0, where arccos made a straight-through point (1 - cos ~ 1e-16)
     # a corner of 2e-8 rad, whose fillet had no inward direction (a NaN centre)
     turn = np.arctan2(np.linalg.norm(np.cross(d[:-1], d[1:]), axis=1), np.sum(d[:-1] * d[1:], axis=1))
-    if np.any(turn > np.pi - 1e-9):
+    if r > 0 and np.any(turn > np.pi - 1e-9):  # a sharp reversal (blend_radius 0) is a stop, as in G-code
         i = int(np.argmax(turn > np.pi - 1e-9)) + 1
-        raise PathError(f"polyline reverses direction at points[{i}]: no corner blend is possible")
+        raise PathError(f"polyline reverses direction at points[{i}]: no corner blend (blend_radius {r:g} mm) can "
+                        "round a reversal; give blend_radius = 0, the corner then a stop")
     blend = (turn > 1e-9) & (r > 0)
     back = np.where(blend, r * np.tan(turn / 2), 0.0)
     need = np.concatenate([[0.0], back]) + np.concatenate([back, [0.0]])

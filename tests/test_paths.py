@@ -115,8 +115,11 @@ def test_polyline_errors_name_the_problem():
         paths.polyline([[0, 0], [10, 0], [10, 5], [20, 5]], blend_radius=3.0)
     with pytest.raises(PathError, match=r"points\[1\] and points\[2\] coincide"):
         paths.polyline([[0, 0], [1, 0], [1, 0]])
-    with pytest.raises(PathError, match=r"reverses direction at points\[1\]"):
+    with pytest.raises(PathError, match=r"reverses direction at points\[1\]: no corner blend \(blend_radius 0.1 mm\)"):
         paths.polyline([[0, 0], [1, 0], [0, 0]], blend_radius=0.1)
+    # with sharp corners a reversal is a stop, as the same moves in G-code (it was refused: "no corner blend")
+    there_and_back = paths.polyline([[0, 0], [1, 0], [0, 0]])
+    assert there_and_back.length == pytest.approx(2.0) and len(there_and_back.primitives) == 2
     with pytest.raises(PathError, match="non-finite"):
         paths.polyline([[0, 0], [np.nan, 1]])
 
