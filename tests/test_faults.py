@@ -226,6 +226,12 @@ def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
         (tmp_path / "big.toml").write_text(preset.replace(old, new, 1))
         _refused(capsys, ["volumetric", str(tmp_path / "big.toml"), "--out", str(tmp_path / "out")],
                  f"{tmp_path / 'big.toml'}, line {line}: body 'Y': {words}")
+    # a squareness in mrad, not µrad: blamed on the error motion dy, a 4 µm bow (an outside probe); said by its line
+    (tmp_path / "big.toml").write_text(preset.replace("squareness = { y_urad = 25 }", "squareness = { y_urad = 25000 }"))
+    line = preset.splitlines().index("squareness = { y_urad = 25 }            # S_XY") + 1
+    _refused(capsys, ["volumetric", str(tmp_path / "big.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'big.toml'}, line {line}: body 'X': its error motion dy reaches 1.25e+04 µm at 500 mm of its "
+             "travel (1.25e+04 µm of it from its squareness y_urad = 2.5e+04)", "check the squareness' units")
 
 
 def test_compare_on_a_move_along_one_axis_has_no_change_relative_to_none(tmp_path, capsys):
