@@ -481,6 +481,10 @@ def _parse_rows(body, width, index, names, limits, units, fail):
         if cells[row] > width and all(_WHOLE.fullmatch(cell) for cell in body[row].split(",")):
             raise fail(f"expected {width} cells (as in the header), found {cells[row]}, all whole numbers: decimal "
                        "commas? the decimal separator is a point ('0.25'), the cells are separated by commas", row)
+        if cells[row] > width and re.search(r'"[^",]*,[^",]*"', body[row]):  # "0,0002": a comma inside quotes
+            raise fail(f"expected {width} cells (as in the header), found {cells[row]} counting the commas inside "
+                       "quotes: decimal commas in quoted cells? the decimal separator is a point ('0.25'), the cells "
+                       "are separated by commas (quotes are not needed)", row)
         raise fail(f"expected {width} cells (as in the header), found {cells[row]}", row)
     try:
         data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2, usecols=index)

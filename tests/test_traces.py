@@ -116,6 +116,9 @@ def test_reads_metadata_and_ignores_extra_columns(tmp_path):
         ("t,x_ref,x\n0,0,0\n0.001,1,1,7\n", 3, "expected 3 cells (as in the header), found 4"),
         ("t,x_ref,x\n0,0,0\n0,001,1,25,1,5\n", 3, "found 6, all whole numbers: decimal commas? the decimal separator "
                                                   "is a point ('0.25')"),
+        # quoted cells with decimal commas (an outside probe: "expected 3 cells, found 5", nothing said of why)
+        ('t,x_ref,x\n"0","0","0"\n"0,001","1,25","1"\n', 3, "found 5 counting the commas inside quotes: decimal "
+                                                            "commas in quoted cells?"),
         ("t,x_ref,x\n0,0,0\n0.001,1e308,1\n", 3, "column 'x_ref': value 1e+308 is beyond ±1e+06 mm"),
         ("t,x_ref,x\n0,0,0\n0.001,1,-2e6\n", 3, "column 'x': value -2e+06 is beyond ±1e+06 mm"),
         ("t,x_ref,x\n0,0,0\n1e300,1,1\n", 3, "column 't': value 1e+300 is beyond ±1e+09 s"),
