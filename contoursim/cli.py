@@ -78,10 +78,13 @@ def _trajectory(model, path_file, job=None, direction=None):
     except ConfigError:
         raise
     except ValueError as exc:  # a feed above the machine's max feed, a run too large for the memory: naming the file
-        primitive = getattr(exc, "primitive", None)  # and a program's feed by its block's line
-        line = None if primitive is None or read.program is None or source != library_file(path_file) else (
-            int(read.program.lines[primitive]))
-        raise ConfigError(str(exc), str(source), line) from None
+        primitive = getattr(exc, "primitive", None)  # and a feed by its line: a program's block's, a [feed] table's
+        feed_key = ("feed", "feed_mm_min") if primitive is not None else ()
+        if source != library_file(path_file):  # the job's feed
+            raise job.error(str(exc), *feed_key) from None
+        if read.program is None:  # a path file's
+            raise TomlFile.read(source).error(str(exc), *feed_key) from None
+        raise ConfigError(str(exc), str(source), None if primitive is None else int(read.program.lines[primitive])) from None
 
 
 def _feed_override(job, path_file):

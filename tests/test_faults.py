@@ -198,6 +198,14 @@ def test_a_feed_over_the_machines_max_names_the_file_and_the_line_of_the_block(t
     (tmp_path / "fast.nc").write_text("G21 G90 G17\nG1 X0 Y0 F600\nG1 X10\nG1 Y10\nG1 X0 F99000\nG1 Y0 F600\nM30\n")
     _refused(capsys, ["simulate", str(tmp_path / "fast.nc"), "--out", str(tmp_path / "out")],
              f"{tmp_path / 'fast.nc'}, line 5: feed 1650 mm/s (99000 mm/min, segment 2) exceeds max_feed = 500 mm/s")
+    # a path file's [feed] and a job's that overrides it: their feed_mm_min's line (they named no line)
+    (tmp_path / "fast.toml").write_text(SMALL_PATH.replace("feed_mm_min = ", "feed_mm_min = 99000  # ", 1))
+    line = SMALL_PATH.splitlines().index(next(x for x in SMALL_PATH.splitlines() if x.startswith("feed_mm_min"))) + 1
+    _refused(capsys, ["simulate", str(tmp_path / "fast.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'fast.toml'}, line {line}: feed 1650 mm/s (99000 mm/min, segment 0) exceeds max_feed")
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "fast.nc"\n[feed]\nfeed_mm_min = 99000\n')
+    _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'job.toml'}, line 4: feed 1650 mm/s (99000 mm/min, segment 0) exceeds max_feed")
 
 
 def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
