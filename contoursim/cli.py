@@ -504,6 +504,7 @@ def diagnose_command(args):
     from ._memory import DIAGNOSIS_BYTES_PER_SAMPLE, check
     from .diagnosis import FIGURE_FILES, REPORT_FORM, REPORT_OPTIONAL, diagnose, save_figures
     from .identify import servo_period_for
+    from .machine import _file_names
     from .model import load_model
     from .output import refused_early, report_file, writing
     from .traces import read_trace
@@ -534,7 +535,7 @@ def diagnose_command(args):
     except ConfigError:  # naming its own file (the model's)
         raise
     except UnstableLoopError as exc:  # a loop of the model no plant within its prior makes stable
-        raise UnstableLoopError(f"{args.model}: {exc}", exc.margins) from None
+        raise UnstableLoopError(f"{args.model}: {_file_names(exc)}", exc.margins) from None  # its keys, as simulate's
     except ValueError as exc:  # what the trace cannot give: naming it
         raise ConfigError(str(exc), args.file) from None
     finally:

@@ -1070,6 +1070,7 @@ def test_cli_diagnose_names_the_model_file_when_no_plant_in_its_prior_passes_the
     assert main(["diagnose", str(tmp_path / "measured.csv"), "--model", str(model), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert f"{model}: the position loop of axis 'x' is badly damped" in err and "No plant within 3 prior widths" in err
+    assert "(kp_per_s = 900)" in err and "lower kp_per_s" in err  # the file's keys, as simulate says them (it said kp)
 
 
 def test_emps_real_axis_names_coulomb_friction_first(real_data, tmp_path, capsys):
