@@ -463,6 +463,7 @@ def compare_command(args):
                              f"(--strategies {','.join(names)}): run it, or drop the setting")
     if args.tune and not any(part.startswith("ccc_") for part in parts):
         raise ValueError(f"--tune tunes a cross-coupled strategy's gains; none runs here (--strategies {','.join(names)})")
+    names, left_out = (names, None) if args.tune else _designable(model, names, settings, args.strategies is None)
     report = report_file(args.json, JSON_FORM, "comparison JSON", args.out,  # never a file the user keeps, nor a plot
                          written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES], also=())
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
@@ -482,10 +483,38 @@ def compare_command(args):
     print(f"contoursim compare — machine: {machine.name}, path: {Path(path_file).name}; errors over the test proper")
     if _feed_override(job, path_file):
         print(_feed_override(job, path_file))
+    if left_out:
+        print(left_out)
     print(comparison.table())
     if report is not None:
         print(f"\ncomparison written to {report}")
     print(f"plots written to {out}/")
+
+
+def _designable(model, names, settings, drop):
+    """`names` without the strategies whose coupling gains are to be designed on loops too little damped for it, and
+    the line that says so (`drop`: the default set); else such a strategy is refused, saying how to give its gains."""
+    from .compensation import strategies_named
+
+    servos, dt = model.machine.axes, model.machine.servo_period
+    kept, why = [], None
+    for name in names:
+        try:
+            for strategy in strategies_named(name, chain=model.machine.chain, settings=settings):
+                strategy.settings(servos, dt)
+        except ValueError as exc:
+            if not drop:
+                coupled = next(part for part in name.split("+") if part.startswith("ccc_"))
+                raise ValueError(f"--strategies {name}: {exc} (--set {coupled}.kp_per_s=... --set "
+                                 f"{coupled}.ki_per_s2=..., or a [[strategy]] table), or tune them (--tune)") from None
+            why = why or str(exc)
+            continue
+        kept.append(name)
+    if not kept:
+        raise ValueError(f"no strategy runs: {why}")
+    left = [name for name in names if name not in kept]
+    return kept, (f"left out: {', '.join(left)} — {why} (--set ccc_arc.kp_per_s=... --set ccc_arc.ki_per_s2=..., "
+                  "or a [[strategy]] table), or tune them (--tune)" if left else None)
 
 
 def volumetric(args):

@@ -525,6 +525,26 @@ def test_a_json_with_a_reports_key_but_not_its_form_is_the_users_and_never_repla
     assert "(it holds 'my_notes' besides)" in capsys.readouterr().err
 
 
+def test_compare_leaves_out_the_couplings_a_machine_allows_no_designed_gains_and_runs_the_rest(tmp_path, capsys):
+    """Axis loops damped below 0.7 (kp 80/s on the 0.5 ms machine: 0.64) leave the coupling no designed gains: the
+    whole comparison ended in 'set the coupling gains kp, ki' (an outside probe). The default set runs the other
+    strategies and says what it left out and how to give the gains; asked for by name, a coupling is refused so."""
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp=80.0).replace("kp_per_s = 40.0", "kp_per_s = 80.0"))
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    argv = ["compare", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml")]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert ("left out: ccc_linear, ccc_arc, feedforward+ccc_arc — the coupled loop is damped at 0.6" in out
+            and "(--set ccc_arc.kp_per_s=... --set ccc_arc.ki_per_s2=..., or a [[strategy]] table), or tune them" in out)
+    rows = [line.split()[0] for line in out.splitlines()[out.splitlines().index(next(
+        x for x in out.splitlines() if x.startswith("---"))) + 1:] if line and not line.startswith("plots")]
+    assert rows == ["none", "feedforward", "zpetc"]
+    assert main([*argv, "--strategies", "none,ccc_arc", "--out", str(tmp_path / "out")]) == 2
+    assert "error: --strategies ccc_arc: the coupled loop is damped at 0.6" in capsys.readouterr().err
+    assert main([*argv, "--strategies", "none,ccc_arc", "--set", "ccc_arc.kp_per_s=20", "--set",
+                 "ccc_arc.ki_per_s2=900", "--out", str(tmp_path / "out")]) == 0  # given gains: run
+
+
 def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(tmp_path, capsys):
     import json
 
