@@ -465,7 +465,7 @@ def compare_command(args):
         raise ValueError(f"--tune tunes a cross-coupled strategy's gains; none runs here (--strategies {','.join(names)})")
     names, left_out = (names, None) if args.tune else _designable(model, names, settings, args.strategies is None)
     report = report_file(args.json, JSON_FORM, "comparison JSON", args.out,  # never a file the user keeps, nor a plot
-                         written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES], also=())
+                         written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES])
     trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
@@ -503,8 +503,10 @@ def _designable(model, names, settings, drop):
             for strategy in strategies_named(name, chain=model.machine.chain, settings=settings):
                 strategy.settings(servos, dt)
         except ValueError as exc:
+            coupled = next((part for part in name.split("+") if part.startswith("ccc_")), None)
+            if coupled is None:  # not a coupling's design: the comparison says it as it would
+                raise
             if not drop:
-                coupled = next(part for part in name.split("+") if part.startswith("ccc_"))
                 raise ValueError(f"--strategies {name}: {exc} (--set {coupled}.kp_per_s=... --set "
                                  f"{coupled}.ki_per_s2=..., or a [[strategy]] table), or tune them (--tune)") from None
             why = why or str(exc)
@@ -648,7 +650,7 @@ def fleet_command(args):
         raise ValueError(f"two traces named {twice[0]}.csv (or one named fleet.csv): their reports would share a "
                          "file name; rename one")
     summary_file = report_file(args.summary, SUMMARY_FORM, "fleet summary", args.out,  # never a file the user keeps
-                               written=[f"{stem}.json" for stem in stems] + ["fleet.png"], also=())  # nor a trace's report
+                               written=[f"{stem}.json" for stem in stems] + ["fleet.png"])  # nor a trace's report
     refused_early(args.out, [f"{stem}.json" for stem in stems] + ["fleet.json", "fleet.png"])  # not after the fleet
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "

@@ -1243,10 +1243,10 @@ def _check_small_errors(body, fail):
         square = body.squareness[c] * q[k] if c < 3 and body.joint == "linear" else 0.0
         source = (f" ({1e3 * abs(square):.4g} µm of it from its squareness {_DIRECTIONS[c]}_urad = "
                   f"{1e6 * body.squareness[c]:.4g})" if square else "")
+        mostly = bool(abs(square) > 0.5 * error[k, c])  # said by the squareness's line, where it is most of it
         raise fail(f"its error motion {COMPONENTS[c]} reaches {size} at {at} of its travel{source}: beyond the small "
                    f"errors a machine's model is for ({SMALL_ERROR:g} {what}); check the "
-                   f"{'squareness' if square else 'coefficients'}' units and the travel",
-                   *(("squareness",) if abs(square) > 0.5 * error[k, c] else ()))  # its line, where it is most of it
+                   f"{'squareness' if mostly else 'coefficients'}' units and the travel", *(("squareness",) * mostly))
 
 
 def check_drift(chain, duration):
