@@ -477,7 +477,8 @@ def run_variants(files, names, rows):
         model, strategies = variants[i]
         try:
             for strategy in strategies:
-                strategy.settings(model.machine.axes, model.machine.servo_period)
+                if strategy.kind == "coupling":
+                    strategy.settings(model.machine.axes, model.machine.servo_period)
         except ValueError as exc:
             values = ", ".join(f"{name} = {value:g}" for name, value in zip(names, rows[i]))
             raise ValueError(f"the variant {values}: {exc} (in the spec: a [[strategy]] table's kp_per_s and "
