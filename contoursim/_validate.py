@@ -10,11 +10,12 @@ inside numpy. Readers of files turn both into a
 """
 
 import datetime
+from collections.abc import Mapping
 
 import numpy as np
 
 __all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative",
-           "float_array", "finite_array", "mask", "read_only", "shown", "time_base", "within", "TimeStepError"]
+           "float_array", "finite_array", "Frozen", "mask", "read_only", "shown", "time_base", "within", "TimeStepError"]
 
 #: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
 FLOAT_MAX = float(np.finfo(float).max)
@@ -247,6 +248,42 @@ def read_only(array, given):
             array = array.copy()
         array.flags.writeable = False
     return array
+
+
+class Frozen(Mapping):
+    """A read-only mapping an object keeps (a copy of the caller's): unlike :class:`types.MappingProxyType` it
+    pickles, deep-copies and hashes (where its values hash), so the objects holding one do too.
+
+    Examples
+    --------
+    >>> import pickle
+    >>> offset = Frozen({"x": 250.0})
+    >>> pickle.loads(pickle.dumps(offset)) == offset == {"x": 250.0}
+    True
+    """
+
+    __slots__ = ("_data",)
+
+    def __init__(self, data=()):
+        self._data = dict(data)
+
+    def __getitem__(self, key):
+        return self._data[key]
+
+    def __iter__(self):
+        return iter(self._data)
+
+    def __len__(self):
+        return len(self._data)
+
+    def __hash__(self):
+        return hash(frozenset(self._data.items()))
+
+    def __repr__(self):
+        return f"{type(self).__name__}({self._data!r})"
+
+    def __reduce__(self):
+        return type(self), (self._data,)
 
 
 def mask(name, value, shape):

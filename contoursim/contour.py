@@ -46,6 +46,7 @@ from . import _validate
 from ._blocks import blocks
 from .nearest import _along, _beyond, _real, moved, nearest_knots
 from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
+from .trajectory import Trajectory
 
 __all__ = ["ContourError", "exact_contour_error"]
 
@@ -474,6 +475,8 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     >>> np.round(err.normal * 1e3, 6).tolist()   # R - |P - c| [µm]
     [-2.0, 1.0]
     """
+    if not isinstance(trajectory, Trajectory):
+        raise TypeError(f"trajectory must be a Trajectory (its path and samples), got {type(trajectory).__name__}")
     path = trajectory.path
     if path is None:
         raise ValueError("trajectory has no path: the exact contour error needs the continuous reference geometry")

@@ -36,7 +36,6 @@ Every kind of effect is an :class:`EffectKind` registered under its name
 """
 
 from dataclasses import dataclass, field, replace
-from types import MappingProxyType
 
 import numpy as np
 
@@ -160,7 +159,7 @@ class EffectKind:
         if any(s not in STAGES for s in stages):
             raise ValueError(f"{self.name}: stage must be one of {STAGES}, got {self.stage!r}")
         object.__setattr__(self, "parameters", tuple(self.parameters))
-        object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+        object.__setattr__(self, "options", _validate.Frozen(self.options))
 
     @property
     def parameter_names(self):
@@ -277,7 +276,7 @@ class Effect:
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "axis", axis)
         object.__setattr__(self, "parameters", tuple(params))
-        object.__setattr__(self, "options", MappingProxyType(options))
+        object.__setattr__(self, "options", _validate.Frozen(options))
 
     @property
     def kind(self):

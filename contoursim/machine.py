@@ -24,6 +24,7 @@ a contouring test, say) follow their commands exactly.
 
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import MISSING, dataclass
 from importlib import resources
 from pathlib import Path
@@ -85,6 +86,9 @@ class Machine:
     axis_travel: dict = None
 
     def __post_init__(self):
+        if not isinstance(self.axes, Mapping):  # a list of servos has no names
+            raise TypeError(f"axes must be a mapping of axis name -> AxisServo ({{'x': servo, ...}}), got "
+                            f"{type(self.axes).__name__}")
         axes = dict(self.axes)
         if not axes:
             raise ValueError("a machine needs at least one servo axis")
@@ -109,7 +113,7 @@ class Machine:
         if unknown:
             raise ValueError(f"work_offset names axes {unknown} that the machine does not have")
         offset = {a: _validate.finite_array(f"work_offset[{a!r}]", v, ndim=0).item() for a, v in offset.items()}
-        object.__setattr__(self, "work_offset", MappingProxyType(offset))
+        object.__setattr__(self, "work_offset", _validate.Frozen(offset))
         uncertain = {a: tuple(fields) for a, fields in (self.uncertain or {}).items() if fields}
         for a, fields in uncertain.items():
             if a not in axes:
@@ -118,7 +122,7 @@ class Machine:
             if bad:
                 raise ValueError(f"uncertain: {bad[0]!r} of axis {a} is not a controller setting the axis has; "
                                  f"controller settings: {', '.join(CONTROLLER_FIELDS)}")
-        object.__setattr__(self, "uncertain", MappingProxyType(uncertain))
+        object.__setattr__(self, "uncertain", _validate.Frozen(uncertain))
         travel = dict(self.axis_travel or {})
         if travel and self.chain is not None:
             raise ValueError("axis_travel is for a machine without geometry: with bodies, a body's travel gives its axis's")
@@ -129,8 +133,8 @@ class Machine:
             if not lo < hi:
                 raise ValueError(f"the travel of axis {a} must be [min, max] with min < max, got [{lo:g}, {hi:g}]")
             travel[a] = (float(lo), float(hi))
-        object.__setattr__(self, "axis_travel", MappingProxyType(travel))
-        object.__setattr__(self, "axes", MappingProxyType(axes))
+        object.__setattr__(self, "axis_travel", _validate.Frozen(travel))
+        object.__setattr__(self, "axes", _validate.Frozen(axes))
         object.__setattr__(self, "servo_period", _validate.positive("servo_period", self.servo_period))
         if self.max_feed is not None:
             object.__setattr__(self, "max_feed", _validate.positive("max_feed", self.max_feed))

@@ -140,7 +140,7 @@ def tilted_axis(direction, tilt):
     raise ValueError(f"direction must be 0, 1 or 2, got {direction!r}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Body:
     """One body of the machine and the joint to its parent.
 
@@ -362,7 +362,7 @@ class Body:
         return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class MachineChain:
     """A machine as a multibody chain: tool pose, volumetric error, Jacobians, inverse kinematics.
 

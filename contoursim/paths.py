@@ -756,7 +756,10 @@ def line(start, end, role="path"):
     -------
     Path
     """
-    return Path((Line(_vector("start", start), _vector("end", end), role),))
+    a, b = _vector("start", start), _vector("end", end)
+    if np.size(start) != np.size(end):  # a 2-D end read as z = 0 would take a 3-D start down to it
+        raise PathError(f"start has {np.size(start)} coordinates and end {np.size(end)}: give both in 2-D or both in 3-D")
+    return Path((Line(a, b, role),))
 
 
 def arc(center, radius, start_angle, end_angle=None, *, sweep=None, direction="ccw", normal=(0, 0, 1), role="path"):

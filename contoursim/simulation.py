@@ -39,7 +39,7 @@ __all__ = ["SimResult", "SUMMARY_KEYS", "default_settle", "measured_force", "mea
 
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SimResult:
     """Everything a simulation produced, time first.
 
@@ -89,6 +89,11 @@ class SimResult:
     strategies: tuple = field(default=())
     model: object = None
     force: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        # read-only as the servo response and the contour error are: a write would change what summary() says
+        for array in (self.axis_command, self.tool_position, self.static_tool_position, *self.force.values()):
+            array.flags.writeable = False
 
     @property
     def tracking_error(self):
@@ -760,6 +765,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         A nominal machine's loop is unstable or badly damped, or (with
         `check`) a variant's cross-coupled controller fails its check.
     """
+    if not isinstance(models, (list, tuple)):  # one model: the batch is a list of them
+        raise TypeError(f"models must be a list of models or machines (one per variant), got a "
+                        f"{type(models).__name__}: give [model] for one")
     models = [as_model(m) for m in models]
     check = _validate.flag("check", check)
     if not models:

@@ -76,7 +76,7 @@ PLAUSIBLE_SAMPLE_PERIOD = (1e-6, 1.0)
 a declared unit is refused."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Trace:
     """A trace: commanded and measured positions over time.
 

@@ -6,7 +6,12 @@ import numpy as np
 
 from . import _validate
 from ._blocks import blocks
-from .paths import Path
+from .paths import MAX_COORDINATE, Path
+
+#: Samples of a trajectory checked to lie on its path at their arc length (evenly spread, the ends among them) [-] ...
+CHECKED = 257
+#: ... within this distance [mm] (the interpolator's samples lie on it to rounding).
+ON_PATH = 1e-6
 
 __all__ = ["Trajectory"]
 
@@ -14,7 +19,7 @@ _AT_REST = 1e-9  # an end velocity (acceleration) within this share of the large
 
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Trajectory:
     """A reference path sampled at the servo period.
 
@@ -37,7 +42,9 @@ class Trajectory:
     path : contoursim.paths.Path, optional
         The continuous geometry the samples were taken from; the exact contour
         error is the distance to it. ``None`` for a reference known only by
-        its samples (a measured trace).
+        its samples (a measured trace). The samples must be the path's
+        points at their `s` (checked at up to :data:`CHECKED` samples, to
+        :data:`ON_PATH`): the exact error searches the path from them.
     measuring : ndarray of bool, shape (N,), optional
         The test proper, the samples that are scored
         (:func:`contoursim.feed.sample`): those whose reference lies on the
@@ -60,7 +67,7 @@ class Trajectory:
     def __post_init__(self):
         t, dt = _validate.time_base("t", self.t)
         n = t.size
-        pos = _validate.finite_array("position", self.position, ndim=2)
+        pos = _validate.finite_array("position", self.position, ndim=2, limit=MAX_COORDINATE)
         if pos.shape[0] != n or pos.shape[1] not in (1, 2, 3):
             raise ValueError(f"position must have shape (N, d), d = 1, 2 or 3, with N = {n}, got {pos.shape}")
         d = pos.shape[1]
@@ -72,6 +79,8 @@ class Trajectory:
         measuring = np.ones(n, bool) if self.measuring is None else _validate.mask("measuring", self.measuring, (n,))
         if not measuring.any():
             raise ValueError(f"measuring must mark at least one of the {n} samples, got none")
+        if self.path is not None:
+            _on_path(self.path, pos, s)
         for name, value in dict(t=t, position=pos, velocity=vel, acceleration=acc, s=s, measuring=measuring).items():
             object.__setattr__(self, name, _validate.read_only(value, getattr(self, name)))
         object.__setattr__(self, "dt", dt)
@@ -195,3 +204,17 @@ class Trajectory:
         speed = self.speed
         cross = np.linalg.norm(np.cross(v, a), axis=1)
         return np.divide(cross, speed**3, out=np.zeros_like(speed), where=speed > 0)
+
+
+def _on_path(path, position, s):
+    """Refuse samples that are not `path`'s points at their arc lengths `s` (:data:`CHECKED` of them, to :data:`ON_PATH`):
+    the exact contour error, which searches the path from them, would measure to the wrong part of it."""
+    k = np.unique(np.linspace(0, len(s) - 1, min(CHECKED, len(s))).round().astype(int))
+    on = path.evaluate(s[k])[0][:, : position.shape[1]]
+    off = np.linalg.norm(on - position[k], axis=1)
+    bad = np.flatnonzero(off > ON_PATH + 1e-12 * np.abs(position[k]).max(axis=1))
+    if bad.size:
+        i = k[bad[0]]
+        raise ValueError(f"position[{i}] lies {off[bad[0]]:.6g} mm from its path at its s = {s[i]:.6g} mm: a "
+                         "trajectory's samples are its path's points at their arc length (contoursim.feed.sample "
+                         "makes them so)")

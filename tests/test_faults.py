@@ -24,18 +24,19 @@ from contoursim import _memory
 from contoursim.cli import main
 from contoursim.comparison import compare
 from contoursim.compensation import STRATEGY_NAMES, Feedforward
+from contoursim.contour import exact_contour_error
 from contoursim.diagnosis import diagnose
 from contoursim.effects import Effect, Parameter
 from contoursim.errormotion import read_error_table
-from contoursim.exceptions import ConfigError, TraceFormatError
+from contoursim.exceptions import ConfigError, PathError, TraceFormatError
 from contoursim.feed import plan, sample
 from contoursim.fleet import diagnose_fleet, trace_files
 from contoursim.gcode import read_gcode
-from contoursim.machine import load_machine, preset_file
+from contoursim.machine import Machine, load_machine, preset_file
 from contoursim.model import Model
 from contoursim.output import output_dir
 from contoursim.pathfile import library_file, load_path_file
-from contoursim.paths import circle, spline
+from contoursim.paths import circle, line, spline
 from contoursim.plotting import save_comparison_figures, save_figures
 from contoursim.servo import closed_loop
 from contoursim.simulation import measured_reference, simulate, simulate_batch
@@ -661,12 +662,50 @@ def api():
      "measuring must be booleans (or 0 and 1), got 2 at index 2"),
     (lambda a: _trajectory_with(a.trajectory, measuring=["no"] * len(a.trajectory)), TypeError,
      "measuring must be booleans (or 0 and 1), got <U2 values"),
+    # an outside probe's API pass: a list of servos, one model for a batch, no trajectory, a 3-D start with a 2-D end
+    (lambda a: Machine([a.machine.axes["x"]] * 2, 2e-4), TypeError,
+     "axes must be a mapping of axis name -> AxisServo ({'x': servo, ...}), got list"),
+    (lambda a: simulate_batch(a.machine, a.trajectory), TypeError, "models must be a list of models or machines (one "
+                                                                   "per variant), got a Machine: give [model] for one"),
+    (lambda a: exact_contour_error(None, np.zeros((10, 2))), TypeError, "trajectory must be a Trajectory"),
+    (lambda a: line((0, 0, 5), (1, 1)), PathError, "start has 3 coordinates and end 2"),
+    # samples off their own path or beyond any machine: the contour error exceeded the tracking error, 3.7 mm
+    (lambda a: Trajectory(a.trajectory.t, a.trajectory.position + [1.0, 0.0], a.trajectory.velocity,
+                          a.trajectory.acceleration, a.trajectory.s, a.trajectory.path), ValueError,
+     "position[0] lies 1 mm from its path at its s = 0 mm"),
+    (lambda a: Trajectory(a.trajectory.t, a.trajectory.position, a.trajectory.velocity, a.trajectory.acceleration,
+                          a.trajectory.s[::-1], a.trajectory.path), ValueError, "from its path at its s = "),
+    (lambda a: Trajectory(a.trajectory.t, a.trajectory.position + 1e12, a.trajectory.velocity,
+                          a.trajectory.acceleration, a.trajectory.s), ValueError, "position"),
 ])
 def test_the_api_refuses_what_it_cannot_use_naming_the_argument(api, call, error, words):
     """Wrong types, a bare effect, a settle of years, a column name with a comma: the argument named, not numpy's error."""
     with pytest.raises(error) as info:
         call(api)
     assert words in str(info.value)
+
+
+def test_results_and_machines_pickle_and_copy_and_a_result_cannot_be_written_into(api):
+    """An outside probe's API pass: Machine, Model, Effect and SimResult did not pickle nor deep-copy ('cannot pickle
+    mappingproxy'), == on a Trajectory raised numpy's 'truth value ... ambiguous', and a write into a result's
+    static_tool_position or axis_command changed what summary() said (0 -> 707 µm volumetric)."""
+    import copy
+    import pickle
+
+    mill = load_machine("vertical_mill_3axis")
+    model = Model(api.machine, (Effect("backlash", "x", lost_motion_um=8.0),))
+    result = simulate(model, api.trajectory)
+    for thing in (mill, model, model.effects[0], result):
+        for again in (pickle.loads(pickle.dumps(thing)), copy.deepcopy(thing)):
+            assert type(again) is type(thing)
+    assert pickle.loads(pickle.dumps(model)) == model and hash(pickle.loads(pickle.dumps(model))) == hash(model)
+    assert pickle.loads(pickle.dumps(result)).summary() == result.summary()
+    assert api.trajectory == api.trajectory and api.trajectory != _trajectory_with(api.trajectory)  # as objects
+    before = result.summary()
+    for name in ("axis_command", "static_tool_position", "tool_position"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(result, name)[:] += 0.5
+    assert result.summary() == before
 
 
 # -- faults4: wrong TOML types, '-' for a file, flags given text, numbers too large, strategy keys -----------------
