@@ -401,6 +401,8 @@ def _gain_field(strategies, name, gain, value):
 
 
 _JOBS = {}  # per process: the job of each set of files, by their digest
+_BATCH = 32  # most variants run as one batch (the kernel's lanes)
+_PROGRESS_SECONDS = 2.0  # in this process, a batch takes about this long: the progress moves at least so often
 
 
 def _job(sweep_or_files):
@@ -526,11 +528,16 @@ def run_sweep(sweep, scheduler=None, progress=None):
     report = progress or (lambda done, total: None)
     if scheduler is None:
         report(0, n)
-        size = sweep.task_size or 32
-        for start in range(0, n, size):
+        start, size = 0, sweep.task_size or 1  # a first variant alone times one (compiling, if it must)
+        while start < n:
             rows = slice(start, min(start + size, n))
+            began = time.perf_counter()
             table[rows] = run_variants(sweep.files, sweep.names, sweep.values[rows].tolist())
             report(rows.stop, n)
+            if not sweep.task_size:  # batches that take about _PROGRESS_SECONDS: the progress moves, lanes stay many
+                each = (time.perf_counter() - began) / (rows.stop - rows.start)
+                size = int(min(_BATCH, max(1, _PROGRESS_SECONDS / max(each, 1e-9))))
+            start = rows.stop
         return table
     if sweep.elsewhere:
         raise ValueError(f"{sweep.source} names {sweep.elsewhere[0]}, outside its folder: a cluster's workers get the "
@@ -542,7 +549,7 @@ def run_sweep(sweep, scheduler=None, progress=None):
         threads = sum(w["nthreads"] for w in client.scheduler_info()["workers"].values())
         client.run(run_variants, sweep.files, sweep.names, sweep.values[:1].tolist())  # build the job, compile: warm
         report(0, n)
-        size = sweep.task_size or max(1, min(32, math.ceil(n / (4 * threads))))
+        size = sweep.task_size or max(1, min(_BATCH, math.ceil(n / (4 * threads))))
         parts = [slice(start, min(start + size, n)) for start in range(0, n, size)]
         tasks = [(sweep.files, sweep.names, sweep.values[rows].tolist()) for rows in parts]
         done = 0

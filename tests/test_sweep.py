@@ -1,5 +1,6 @@
 """Sweeps: the spec, the draws, each row against its own single run, and the same table on any number of workers."""
 
+import dataclasses
 import os
 import re
 import signal
@@ -392,6 +393,18 @@ def test_a_sweep_interrupted_says_so_on_a_line_of_its_own(tmp_path, monkeypatch,
     assert lines[0].startswith("sweep: [....................] 0/2 variants") and lines[1].startswith(
         "contoursim sweep: interrupted; files already complete are kept"), lines
     assert not (tmp_path / "out").exists()
+
+
+def test_a_sweep_in_this_process_reports_progress_before_its_last_batch_and_the_table_does_not_depend_on_it(tmp_path):
+    """In this process the variants ran in batches of 32: a sweep of 30 showed 0/30, then 30/30 half a minute later
+    (an outside probe). A first variant alone times a batch; the rows are those of one batch of all."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 6}], strategies="none")
+    calls = []
+    table = run_sweep(read_sweep(spec), progress=lambda done, total: calls.append((done, total)))
+    assert calls[0] == (0, 6) and calls[1] == (1, 6) and calls[-1] == (6, 6)
+    assert [done for done, _ in calls] == sorted(done for done, _ in calls)
+    whole = read_sweep(spec)
+    np.testing.assert_array_equal(table, run_sweep(dataclasses.replace(whole, task_size=6)))
 
 
 def test_progress_redraws_one_line_on_a_terminal_and_writes_a_line_now_and_then_to_a_file(monkeypatch):
