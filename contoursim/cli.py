@@ -658,16 +658,17 @@ def fleet_command(args):
     with Progress("diagnose", "traces") as progress:
         outcomes = diagnose_fleet(files, args.model, args.scheduler, progress=progress)
     summary = fleet_summary(outcomes)
-    out = output_dir(args.out)
-    for name in [f"{Path(o['trace']).stem}.json" for o in outcomes if "report" in o] + ["fleet.json", "fleet.png"]:
+    out = replace(output_dir(args.out), by="fleet")  # each file recorded as a fleet's
+    written = [f"{Path(o['trace']).stem}.json" for o in outcomes if "report" in o] + ["fleet.json", "fleet.png"]
+    for name in written:
         out.file(name)  # every name refused before any file is written
     for outcome in outcomes:
-        name = f"{Path(outcome['trace']).stem}.json"
         if "report" in outcome:
-            with out.write(name) as stream:
+            with out.write(f"{Path(outcome['trace']).stem}.json") as stream:
                 stream.write(json.dumps(outcome["report"], indent=2, ensure_ascii=False) + "\n")
-        elif name in out.written():  # an earlier run's report of a trace that fails now would stand for it
-            out.remove(name)
+    # an earlier fleet's reports of traces this one did not diagnose (failed now, or not in it) would stand beside it
+    for name in out.written_by("fleet") - set(written):
+        out.remove(name)
     text = json.dumps(summary, indent=2, ensure_ascii=False) + "\n"
     with out.write("fleet.json") as stream:
         stream.write(text)

@@ -117,3 +117,13 @@ def test_a_fleet_none_of_whose_traces_is_diagnosed_ends_in_an_error_and_claims_n
     assert main(["diagnose", str(tmp_path / "night_2026-10-05.csv"), str(broken), "--model",
                  str(FLEET / "nightly_mill.toml"), "--out", str(tmp_path / "one")]) == 2
     assert {p.name for p in (tmp_path / "one").iterdir()} == {".contoursim-out", "fleet.json", "fleet.png"}
+    # a fleet run again without a trace it had: that trace's report went on standing beside the new fleet.json (an
+    # outside probe); a file of the user's in the folder stays
+    other = FLEET / "night_2026-10-12.csv"
+    assert main(["diagnose", str(night), str(other), "--model", str(FLEET / "nightly_mill.toml"), "--out",
+                 str(tmp_path / "two")]) == 0
+    (tmp_path / "two" / "notes.txt").write_text("mine")
+    assert main(["diagnose", str(night), str(broken), "--model", str(FLEET / "nightly_mill.toml"), "--out",
+                 str(tmp_path / "two")]) == 0
+    assert {p.name for p in (tmp_path / "two").iterdir()} == {".contoursim-out", "night_2026-10-05.json", "fleet.json",
+                                                            "fleet.png", "notes.txt"}
