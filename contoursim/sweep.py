@@ -50,6 +50,7 @@ import math
 import sys
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -694,7 +695,11 @@ def write_results(sweep, table, out):
         job = _job(sweep)
         for label, i in zip(("best", "worst"), chosen):
             model, strategies = job.variant(dict(zip(sweep.names, sweep.values[i])))
-            runs[label] = simulate(model, job.trajectory, strategies, settle=0.0)
+            with warnings.catch_warnings(record=True) as caught:  # said of the variant they came from
+                warnings.simplefilter("always")
+                runs[label] = simulate(model, job.trajectory, strategies, settle=0.0)
+            for warning in caught:
+                warnings.warn(f"the {label} variant, {i}: {warning.message}", warning.category, stacklevel=2)
             metadata[label] = {"sweep": Path(sweep.source).name, "variant": i,
                                "values": "; ".join(f"{n} = {v!r}" for n, v in zip(sweep.names, sweep.values[i].tolist()))}
     written = ["sweep.csv", *(["sweep.parquet"] if pa is not None else []), *(f"{name}.png" for name in figures),

@@ -407,6 +407,15 @@ def test_a_sweep_in_this_process_reports_progress_before_its_last_batch_and_the_
     np.testing.assert_array_equal(table, run_sweep(dataclasses.replace(whole, task_size=6)))
 
 
+def test_a_warning_of_the_best_or_worst_run_names_its_variant(tmp_path, capsys):
+    """'the current command hit its limit on x in 6.36 %' came from the re-run of the best or worst variant and said not
+    which (an outside probe)."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.current_limit_A"', "values": "[0.05, 5.0]"}], strategies="none")
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "hit its limit" in line]
+    assert said and all(re.search(r"the (best|worst) variant, [01]: the current command hit its limit", s) for s in said)
+
+
 def test_progress_redraws_one_line_on_a_terminal_and_writes_a_line_now_and_then_to_a_file(monkeypatch):
     """A sweep's progress sent to a log file was one line of thousands of carriage-return redrawings."""
     import io
