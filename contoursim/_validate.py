@@ -470,6 +470,14 @@ def commanded(at, n_points, n_samples):
                              "the sample commanded at each actual point")  # fmt: skip
         return None
     at = np.asarray(at)
-    if at.shape != (n_points,) or at.dtype.kind not in "iu" or (n_points and (at.min() < 0 or at.max() >= n_samples)):
-        raise ValueError(f"at must hold {n_points} sample indices in [0, {n_samples}), got {at.dtype} {at.shape}")
+    if at.size == 0:  # [] is read as floats
+        at = at.astype(np.int64)
+    if at.shape != (n_points,):
+        raise ValueError(f"at must hold one sample index per actual point ({n_points}), got shape {at.shape}")
+    if at.dtype.kind not in "iu":
+        raise ValueError(f"at must hold whole sample indices, got {at.dtype} values")
+    outside = np.flatnonzero((at < 0) | (at >= n_samples))
+    if outside.size:
+        raise ValueError(f"at[{outside[0]}] = {at[outside[0]]} is not a sample index of the reference's "
+                         f"{n_samples} samples (0 to {n_samples - 1})")
     return at

@@ -167,8 +167,15 @@ def test_iso_circle_trajectory_and_input_checks():
         exact_contour_error(ref, np.zeros((3, 3)))
     with pytest.raises(ValueError, match="give `at`, the sample commanded at each actual point"):
         exact_contour_error(ref, actual[:10])
-    with pytest.raises(ValueError, match=rf"at must hold 10 sample indices in \[0, {len(ref.t)}\)"):
-        exact_contour_error(ref, actual[:10], at=np.arange(10) + len(ref.t))
+    n = len(ref.t)
+    with pytest.raises(ValueError, match=rf"at\[0\] = {n} is not a sample index of the reference's {n} samples"):
+        exact_contour_error(ref, actual[:10], at=np.arange(10) + n)
+    # each fault said as itself (an outside probe: 'at must hold 0 sample indices ..., got float64 (0,)' for none)
+    with pytest.raises(ValueError, match=r"at must hold one sample index per actual point \(10\), got shape \(9,\)"):
+        exact_contour_error(ref, actual[:10], at=np.arange(9))
+    with pytest.raises(ValueError, match="at must hold whole sample indices, got float64 values"):
+        exact_contour_error(ref, actual[:10], at=np.arange(10) + 0.5)
+    assert exact_contour_error(ref, actual[:0], at=[]).magnitude.shape == (0,)
     from contoursim.estimators import three_point
     with pytest.raises(ValueError, match="give `at`"):
         three_point(ref.position, actual[:10])
