@@ -403,7 +403,7 @@ def _gain_field(strategies, name, gain, value):
 
 _JOBS = {}  # per process: the job of each set of files, by their digest
 _BATCH = 32  # most variants run as one batch (the kernel's lanes)
-_PROGRESS_SECONDS = 2.0  # in this process, a batch takes about this long: the progress moves at least so often
+_PROGRESS_SECONDS = 10.0  # in this process the batches double from one variant while they take less than this
 
 
 def _job(sweep_or_files):
@@ -529,15 +529,14 @@ def run_sweep(sweep, scheduler=None, progress=None):
     report = progress or (lambda done, total: None)
     if scheduler is None:
         report(0, n)
-        start, size = 0, sweep.task_size or 1  # a first variant alone times one (compiling, if it must)
+        start, size = 0, sweep.task_size or 1
         while start < n:
             rows = slice(start, min(start + size, n))
             began = time.perf_counter()
             table[rows] = run_variants(sweep.files, sweep.names, sweep.values[rows].tolist())
             report(rows.stop, n)
-            if not sweep.task_size:  # batches that take about _PROGRESS_SECONDS: the progress moves, lanes stay many
-                each = (time.perf_counter() - began) / (rows.stop - rows.start)
-                size = int(min(_BATCH, max(1, _PROGRESS_SECONDS / max(each, 1e-9))))
+            if not sweep.task_size and time.perf_counter() - began < _PROGRESS_SECONDS:
+                size = min(_BATCH, 2 * size)  # doubled while a batch is short: the progress moves, then the lanes fill
             start = rows.stop
         return table
     if sweep.elsewhere:

@@ -397,7 +397,8 @@ def test_a_sweep_interrupted_says_so_on_a_line_of_its_own(tmp_path, monkeypatch,
 
 def test_a_sweep_in_this_process_reports_progress_before_its_last_batch_and_the_table_does_not_depend_on_it(tmp_path):
     """In this process the variants ran in batches of 32: a sweep of 30 showed 0/30, then 30/30 half a minute later
-    (an outside probe). A first variant alone times a batch; the rows are those of one batch of all."""
+    (an outside probe). The batches double from one variant while they are short; the rows are those of one batch of
+    all."""
     spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 6}], strategies="none")
     calls = []
     table = run_sweep(read_sweep(spec), progress=lambda done, total: calls.append((done, total)))
