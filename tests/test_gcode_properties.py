@@ -24,6 +24,7 @@ def _read(text):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a numpy warning would end here as an exception
         warnings.filterwarnings("ignore", message=".*: ignored: ")  # the reader's own, by design
+        warnings.filterwarnings("ignore", message=".*: the program ends on line")
         try:
             return read_gcode(text)
         except ConfigError as exc:
