@@ -659,13 +659,16 @@ class Path:
         -------
         HelicalArc or None
             The path's one primitive with role ``"test"`` when it is a full
-            circle (``|sweep| = 2π``) in the XY plane; its ``center``,
-            ``radius`` and the sign of its ``sweep`` (CCW positive) describe
-            the test.
+            circle (``|sweep| = 2π``, no rise) in a plane parallel to XY, at
+            any height; its ``center``, ``radius`` and the sign of ``sweep``
+            times ``axis[2]`` (counter-clockwise seen from +z positive)
+            describe the test.
         """
         tests = [p for p in self.primitives if p.role == "test"]
-        if len(tests) == 1 and isinstance(tests[0], HelicalArc) and tests[0].in_xy_plane:
-            return tests[0] if abs(abs(tests[0].sweep) - 2 * np.pi) < 1e-9 else None
+        if len(tests) == 1 and isinstance(tests[0], HelicalArc):
+            arc = tests[0]
+            if arc.rise == 0 and np.linalg.norm(arc.axis[:2]) < 1e-12 and abs(abs(arc.sweep) - 2 * np.pi) < 1e-9:
+                return arc
         return None
 
     def corner_angles(self):

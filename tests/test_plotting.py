@@ -221,3 +221,22 @@ def test_diagnosis_plots_keep_zero_labels_legend_and_both_runs_visible():
     ax = plot_magnified(diagnosis, Figure(figsize=(7.0, 7.0), layout="constrained").add_subplot())
     ax.figure.canvas.draw()
     assert ax.get_legend().get_window_extent().y1 <= ax.get_window_extent().y0
+
+
+def test_a_test_circle_at_a_height_or_about_minus_z_is_read_as_seen_from_above():
+    """An ISO 230-4 circle centred at z = 10 mm was no test circle ("use a path of type = iso230_4_circle"); a
+    circle about −z that runs clockwise seen from above would have been called CCW by the sign of its sweep."""
+    machine = load_machine("vertical_mill_3axis")
+    runs = []
+    for center in ((0.0, 0.0, 0.0), (0.0, 0.0, 10.0)):
+        path = paths.iso230_4_circle(50.0, center=center)
+        runs.append(circular_deviation(simulate(machine, sample(path, plan(path, 1000 / 60, 1000.0, 50_000.0),
+                                                                machine.servo_period))))
+    assert runs[0]["direction"] == runs[1]["direction"] == "CCW"
+    assert runs[1]["circularity"] == pytest.approx(runs[0]["circularity"], abs=0.05)
+    below = paths.circle((0.0, 0.0, 0.0), 20.0, direction="ccw", normal=(0, 0, -1), role="test")
+    assert below.test_circle() is below.primitives[0]
+    run = circular_deviation(simulate(machine, sample(below, plan(below, 1000 / 60, 1000.0, 50_000.0),
+                                                      machine.servo_period)))
+    assert run["direction"] == "CW"
+    assert np.all(np.diff(np.unwrap(run["theta"])) <= 1e-9)  # clockwise seen from +z, as it says
