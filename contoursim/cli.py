@@ -162,7 +162,11 @@ def _write(out, groups, every, nominal=None):
     """
     from .gcode import block_errors
     from .plotting import figure_files, save_figures
+    from .traces import check_every
 
+    for runs in groups.values():  # a trace every N leaves none of is refused before the folder is made
+        for _, _, result, _ in runs:
+            check_every(every, len(result.trajectory), result.machine.servo_period)
     out = output_dir(out)
     for name, runs in groups.items():  # every name refused before any file is written
         for run, _, result, program in runs:

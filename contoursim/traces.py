@@ -150,6 +150,39 @@ POSITION_DECIMALS = 6
 _CHUNK = 1 << 14  # rows formatted at once: bounds the formatter's memory (its buffers, ~0.5 kB a row)
 
 
+def check_every(every, size, dt):
+    """`every` as a whole number, if writing every `every`-th of `size` samples `dt` apart makes a trace.
+
+    Parameters
+    ----------
+    every : int
+        Write every `every`-th sample.
+    size : int
+        The samples there are.
+    dt : float
+        Their period [s].
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        `every` is not a whole number >= 1, leaves fewer than 2 samples or
+        samples further apart than :data:`PLAUSIBLE_SAMPLE_PERIOD` allows
+        (:func:`read_trace` refuses such a trace).
+    """
+    every = _validate.positive_int("every", every)
+    kept = -(-size // every)
+    if kept < 2 or (every > 1 and every * dt >= PLAUSIBLE_SAMPLE_PERIOD[1]):
+        below = min(size, math.ceil(PLAUSIBLE_SAMPLE_PERIOD[1] / dt))
+        raise ValueError(f"every = {every} keeps {kept} of the {size} samples, one every {every * dt:.6g} s: a trace "
+                         f"holds 2 or more, less than {PLAUSIBLE_SAMPLE_PERIOD[1]:g} s apart (read_trace refuses "
+                         f"others); give every below {below}")
+    return every
+
+
 def write_trace(file, trace, extra=None, overwrite=False, every=1):
     """Write `trace` as CSV in the measured-trace format.
 
@@ -191,13 +224,7 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace (read_trace reads one; SimResult.save_csv writes a run), got "
                         f"{type(trace).__name__}")
-    every = _validate.positive_int("every", every)
-    kept = -(-trace.t.size // every)  # `every` makes no trace read_trace refuses: of 1 row, or of too slow a clock
-    if kept < 2 or (every > 1 and every * trace.dt >= PLAUSIBLE_SAMPLE_PERIOD[1]):
-        below = min(trace.t.size, math.ceil(PLAUSIBLE_SAMPLE_PERIOD[1] / trace.dt))
-        raise ValueError(f"every = {every} keeps {kept} of the {trace.t.size} samples, one every "
-                         f"{every * trace.dt:.6g} s: a trace holds 2 or more, less than {PLAUSIBLE_SAMPLE_PERIOD[1]:g} "
-                         f"s apart (read_trace refuses others); give every below {below}")
+    every = check_every(every, trace.t.size, trace.dt)
     columns = {"t": (trace.t, TIME_DECIMALS)}
     for i, axis in enumerate(trace.axes):
         columns[f"{axis}_ref"] = (trace.reference[:, i], POSITION_DECIMALS)

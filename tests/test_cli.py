@@ -88,6 +88,9 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
         main(["demo", "--out", str(tmp_path / "out"), "--every", "0"])
     assert exit_.value.code == 2
     assert "--every: must be a whole number of samples, at least 1; got '0'" in capsys.readouterr().err
+    assert main(["demo", "--out", str(tmp_path / "new"), "--every", "20000"]) == 2  # a CSV of 2 rows 4 s apart
+    assert "every = 20000 keeps" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()  # refused before the folder was made (it held a record of nothing)
 
 
 # a fresh process with an empty numba cache (a function loaded from the cache does not compile its callees):
