@@ -301,7 +301,7 @@ def _direction(result):
     """``"CCW"`` or ``"CW"`` for a run on a path with a test circle, else ``None``."""
     path = result.trajectory.path
     circle = path.test_circle() if path is not None else None
-    return None if circle is None else "CCW" if circle.sweep > 0 else "CW"
+    return None if circle is None else "CCW" if circle.sweep * circle.axis[2] > 0 else "CW"
 
 
 def _drawable(name):
@@ -466,7 +466,7 @@ def circular_deviation(result):
     rel = points - fitted
     deviation = 1e3 * (np.hypot(rel[:, 0], rel[:, 1]) - circle.radius)
     return dict(theta=np.arctan2(rel[:, 1], rel[:, 0]), deviation=deviation, offset=1e3 * (fitted - circle.center[:2]),
-                circularity=float(np.ptp(deviation)), radius=circle.radius, direction="CCW" if circle.sweep > 0 else "CW")
+                circularity=float(np.ptp(deviation)), radius=circle.radius, direction=_direction(result))
 
 
 def deviation_from_nominal(result, nominal):
@@ -510,8 +510,8 @@ def _polar_frame(ax, curves):
     The rings span the data's range in 2 to 6 round divisions (zero need not
     be among them: a radius loss of 50 µm does not hide a 2 µm ellipse); the
     blank centre keeps the shape of a circle. The ring labels sit on a white
-    ground on the ray where the data keeps farthest from them, a ring the
-    data passes there unlabelled; the dashed zero circle is drawn over the
+    ground on the ray where the data keeps farthest from them, off the
+    angle labels, a ring the data passes there unlabelled; the dashed zero circle is drawn over the
     data when it is in range.
 
     Returns
@@ -532,9 +532,11 @@ def _polar_frame(ax, curves):
     ax.set_rorigin(lo - 0.75 * (hi - lo))
     ax.set_ylim(lo, hi)
     ax.set_yticks(rings)
-    # the labels go on the ray (every 5°) where the data within ±6° keeps clear of most of them, then farthest;
-    # a ring the data passes there within 0.45 division goes unlabelled (the title gives the spacing)
-    rays = np.radians(np.arange(0.0, 360.0, 5.0))
+    # the labels go on the ray (every 5°, 10° or more off the angle labels at each 45°, which the outer ring's would
+    # print over) where the data within ±6° keeps clear of most of them, then farthest; a ring the data passes there
+    # within 0.45 division goes unlabelled (the title gives the spacing)
+    degrees = np.arange(0.0, 360.0, 5.0)
+    rays = np.radians(degrees[np.minimum(degrees % 45, 45 - degrees % 45) >= 10])
     near = np.abs((theta[None, :] - rays[:, None] + np.pi) % (2 * np.pi) - np.pi) < np.radians(6.0)
     gap = np.abs(values[:, None] - rings[None, :])  # (samples, rings)
     clearance = np.array([gap[ray].min(axis=0) if ray.any() else np.full(len(rings), np.inf) for ray in near])
