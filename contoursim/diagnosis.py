@@ -2177,7 +2177,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                 if np.isfinite(step.rms_um) else "the model with it in place does not follow the trace (its simulation diverged)"))
             problem.set_base(base)
             break
-        edge = _size_at_edge(problem, best)
+        edge = _size_at_edge(problem, best) or _controller_far_off(problem, best.fit)
         if edge is not None:
             warnings.append(f"{best.fit.label}: not named, {edge}")
             problem.set_base(base)
@@ -2252,6 +2252,24 @@ def _size_at_edge(problem, cand):
     if any(b != none and _at(size.value, b) for b in (lower, upper)):
         return f"its {size.name} = {size.value:.4g} is at the edge of the range the fit may take ({lower:.4g}–{upper:.4g})"
     return None
+
+
+def _controller_far_off(problem, effect):
+    """Why `effect` does not stand for what the trace shows, or ``None``: it departs from a controller setting the
+    model gives exactly (:func:`_departs_from`) by more than the catalogue's typical size (a ``kp_ratio`` beyond
+    0.7–1.3, a delay beyond 3 ms). A data sheet's software constant is not that far off; a fit that asks for it is
+    bent to something the catalogue lacks (an independent axis's Stribeck friction at full feedforward, with its
+    Coulomb part named, was followed by a ``kp_ratio`` of 1.47 ± 0.14)."""
+    setting = _departs_from(problem, effect)
+    size = effect.parameters[0]
+    lo, hi = size.typical
+    if setting is None or lo <= size.value <= hi or (effect.name == "time_delay" and size.value < lo):  # a short delay is
+        return None  # as plausible as a typical one
+    unit = "" if size.unit == "-" else f" {size.unit}"
+    return (f"its {size.name} = {size.value:.4g} lies beyond the typical {lo:g}–{hi:g}{unit}, and the model gives "
+            f"{setting} exactly: a controller set that far from its data sheet is not a plant a few % off; the trace "
+            "asks for something the catalogue lacks (see the unexplained structure). If the setting may be otherwise, "
+            "list it in the machine file's uncertain = [...] of that axis")
 
 
 def _at(value, bound):

@@ -1261,6 +1261,31 @@ def test_an_effect_at_the_edge_of_its_range_is_not_named_and_one_within_twice_it
     assert _size_undetermined(cand(Effect("vibration", "x", freq_hz=80.0), 100.0, ("freq_hz", "damping_ratio")), 0.5) is None
 
 
+def test_a_controller_setting_given_exactly_is_not_named_far_beyond_its_typical_departure():
+    """A gain mismatch or a delay departs from a controller the model gives exactly; beyond the typical size (kp_ratio
+    0.7–1.3, a delay up to 3 ms) it is not named: an independent axis's Stribeck friction at full feedforward, its
+    Coulomb part named, was followed by gain_mismatch.x at 1.47 ± 0.14. Listed as uncertain, or identified, the
+    setting may be that far off; a delay shorter than typical is as plausible as a typical one."""
+    from types import SimpleNamespace
+
+    from contoursim.diagnosis import _controller_far_off
+
+    given = SimpleNamespace(identified=False, nominal=SimpleNamespace(uncertain={}))
+    said = _controller_far_off(given, Effect("gain_mismatch", "x", kp_ratio=1.472))
+    assert said.startswith("its kp_ratio = 1.472 lies beyond the typical 0.7–1.3, and the model gives x's position gain "
+                           "exactly")
+    assert "uncertain = [...]" in said
+    assert "0.7–1.3" in _controller_far_off(given, Effect("gain_mismatch", "x", kp_ratio=0.6))
+    assert "beyond the typical 0.0001–0.003 s" in _controller_far_off(given, Effect("time_delay", "y", delay_s=5e-3))
+    for effect in (Effect("gain_mismatch", "x", kp_ratio=1.25), Effect("time_delay", "y", delay_s=5e-5),
+                   Effect("coulomb_friction", "x", force_N=500.0)):  # typical, short, or no controller setting
+        assert _controller_far_off(given, effect) is None
+    uncertain = SimpleNamespace(identified=False, nominal=SimpleNamespace(uncertain={"x": ("kp",)}))
+    identified = SimpleNamespace(identified=True, nominal=None)
+    assert _controller_far_off(uncertain, Effect("gain_mismatch", "x", kp_ratio=1.472)) is None
+    assert _controller_far_off(identified, Effect("gain_mismatch", "x", kp_ratio=1.472)) is None
+
+
 def test_identified_loops_bent_to_a_large_delay_are_identified_again_with_it_in_place(independent_truth, tmp_path):
     """An independent rigid pair whose y reads its commands 2.41 ms late, diagnosed without a model: one position gain
     and feedforward shared by both axes, the identification bent to y's lag (kp 143 1/s with no feedforward, the data
