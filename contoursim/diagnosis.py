@@ -142,6 +142,9 @@ _JACKKNIFE_BLOCKS = (40, 20, 10)
 _PRIOR_REACH = 3.0  # prior widths a given model's plant moves at most before any effect is tried; moved further, it is said
 _BACKTRACK = (1.0, 0.5, 0.25, 0.125)  # fractions of a nominal refit's Gauss–Newton step tried, the first that helps kept
 _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the residual's cost by more than this share is undone
+# a refit whose current residual grows by more than this factor (and 1 % of the current's spread) departs from the
+# measured current: said in a warning
+_CURRENT_WORSE = 1.5
 _FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
 _WHITE_SAMPLES = 200  # fewer samples than this: the noise from the second differences alone (see LINE_RATIO)
 _CYCLE_FALSE_ALARM = 1e-3  # share of white-noise standstill runs :func:`standstill_cycles` may take for a limit cycle
@@ -2232,6 +2235,12 @@ def _diagnose(trace, model, identified, max_effects, say):
                  "encoder counts: no simulation matches its phase sample by sample, a named effect closes little of it"
                  for i, c in cycles.items()]
     currents = [_currents(trace, m, reference, force) for m in (model, problem.base)]
+    for a in () if identified else trace.current:  # the positions alone refit the plant: does the current agree?
+        was, now = (float(np.sqrt(np.mean((trace.current[a] - c[a])[scored] ** 2))) for c in currents)
+        if now > _CURRENT_WORSE * was and now - was > 0.01 * float(np.std(trace.current[a][scored])):
+            warnings.append(f"{a}: the refitted model's current is further from the measured one than the nominal "
+                            f"model's ({was:.3g} -> {now:.3g} A RMS): the positions pulled the plant (mass, damping) "
+                            "where the current does not follow; take the refitted plant for a fit, not for the machine's")
     return Diagnosis(trace, model, identified, 1e3 * noise, 1e3 * problem.zero_offset(), tuple(steps), before, after,
                      scored, problem.base, where, tuple(warnings), tuple(left), *currents)
 

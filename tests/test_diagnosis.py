@@ -1157,6 +1157,28 @@ def test_a_known_force_is_an_input_not_an_effect(machine):
     assert 1e3 * np.std(trace.actual - unforced.tool_position[::2]) > 20 * floor  # the servo samples at the trace's
 
 
+def test_a_refit_the_measured_current_does_not_follow_is_said(machine):
+    """The positions of a machine whose X damping is three times its data sheet's, the currents of the data sheet's:
+    the refit follows the positions, the currents say otherwise (an outside probe's effect-free trace: its current
+    residual rose from 0.0021 to 0.0155 A RMS as the refit moved the mass and damping away from the truth, unsaid).
+    Currents that agree with the positions bring no such warning."""
+    reference = circle("ccw")
+    damped = Machine({**machine.axes, "x": replace(machine.axes["x"], damping=3.0 * machine.axes["x"].damping)}, DT)
+    keep = slice(None, None, 2)
+    rng = np.random.default_rng(7)
+    said = {}
+    for name, positions, currents in (("pulled", damped, machine), ("agreeing", damped, damped)):
+        run, amps = (simulate(m, reference, contour=False) for m in (positions, currents))
+        actual = run.tool_position[keep] + rng.normal(0.0, 2e-4, run.tool_position[keep].shape)
+        trace = Trace(run.trajectory.t[keep], run.trajectory.position[keep], actual, ("x", "y"),
+                      current={"x": amps.servo_response.current[keep, 0]})
+        result = diagnose(trace, Model(machine))
+        said[name] = [w for w in result.warnings if w.startswith("x: the refitted model's current is further")]
+        before, after = (result.current_residual_rms(c)["x"] for c in (result.current_before, result.current_after))
+        assert (after > 1.5 * before) == (name == "pulled"), result.report()
+    assert said["pulled"] and not said["agreeing"], said
+
+
 def test_a_compliant_screw_in_the_model_the_friction_is_still_named(machine):
     """Both axes two masses on a 450 Hz screw behind scales (a data sheet would say so): a hidden friction is named
     with the screw in the model; a vibration is tried on those axes with the screw taken as rigid (the kernel holds
