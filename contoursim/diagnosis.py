@@ -2272,8 +2272,9 @@ def _controller_far_off(problem, effect):
     setting = _departs_from(problem, effect)
     size = effect.parameters[0]
     lo, hi = size.typical
-    if setting is None or lo <= size.value <= hi or (effect.name == "time_delay" and size.value < lo):  # a short delay is
-        return None  # as plausible as a typical one
+    short = effect.name == "time_delay" and size.value < lo  # a delay shorter than typical is as plausible as one typical
+    if setting is None or lo <= size.value <= hi or short:
+        return None
     unit = "" if size.unit == "-" else f" {size.unit}"
     return (f"its {size.name} = {size.value:.4g} lies beyond the typical {lo:g}–{hi:g}{unit}, and the model gives "
             f"{setting} exactly: a controller set that far from its data sheet is not a plant a few % off; the trace "

@@ -510,9 +510,9 @@ def _polar_frame(ax, curves):
     The rings span the data's range in 2 to 6 round divisions (zero need not
     be among them: a radius loss of 50 µm does not hide a 2 µm ellipse); the
     blank centre keeps the shape of a circle. The ring labels sit on a white
-    ground on the ray where the data keeps farthest from them, off the
-    angle labels, a ring the data passes there unlabelled; the dashed zero circle is drawn over the
-    data when it is in range.
+    ground on the ray, off the angle labels, where the data keeps farthest
+    from them, a ring the data passes there unlabelled; the dashed zero
+    circle is drawn over the data when it is in range.
 
     Returns
     -------

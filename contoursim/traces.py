@@ -46,7 +46,7 @@ from .config import read_text, text_lines
 from .exceptions import TraceFormatError
 from .output import writing
 
-__all__ = ["Trace", "read_trace", "write_trace"]
+__all__ = ["Trace", "check_every", "read_trace", "write_trace"]
 
 AXIS_SETS = (("x",), ("x", "y"), ("x", "y", "z"))
 MAX_POSITION = 1e6  # [mm]: largest |position| in a trace
