@@ -41,7 +41,8 @@ listed in :attr:`Program.ignored` and in one
 (the path is the tool tip's from the work offset), no contour motion. Refused with a message
 naming file and line: inch units (``G20``), cutter radius compensation
 (``G41 G42``), feed per revolution or inverse time (``G93 G95``), subprogram
-calls (``M98 M99``), a centre word off the arc's plane (``K`` in ``G17``, ``J`` in
+calls (``M98 M99``), canned cycles (``G73``–``G89``, ``G98 G99``: by the cycle's code, not by
+its ``Q`` or ``R`` word), a centre word off the arc's plane (``K`` in ``G17``, ``J`` in
 ``G18``, ``I`` in ``G19``), two words of one modal group in a block (``G2 G3``, ``G17 G19``, ``G90 G91``:
 controllers differ on which wins), any other word.
 
@@ -105,7 +106,9 @@ _REFUSED_G = {20: "inch programs are not supported (G20): convert to mm and use 
               41: "cutter radius compensation (G41) is not supported: program the tool-centre path with G40",
               42: "cutter radius compensation (G42) is not supported: program the tool-centre path with G40",
               93: "inverse-time feed (G93) is not supported: program F in mm/min (G94)",
-              95: "feed per revolution (G95) is not supported: program F in mm/min (G94)"}
+              95: "feed per revolution (G95) is not supported: program F in mm/min (G94)",
+              **{g: f"canned cycles (G{g}: a cycle or its return level) are not supported: write the cycle's moves "
+                    "out as G0/G1 blocks" for g in (73, 74, 76, 81, 82, 83, 84, 85, 86, 87, 88, 89, 98, 99)}}
 _IGNORED_LETTERS = "ONSTDH"  # program and sequence numbers, spindle, tool and its offsets
 #: File name endings read as G-code (lower case).
 SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".eia")
@@ -277,7 +280,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             optional.append(number)
         words = _words(raw[mark.end():] if mark else raw, fail)
         started = started or bool(words)
-        values, gcodes, mcodes = {}, [], []
+        values, gcodes, mcodes, unknown = {}, [], [], []
         for letter, value in words:
             if letter == "G":
                 gcodes.append(value)
@@ -289,8 +292,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 if letter in "XYZIJKR" and abs(value) > MAX_COORDINATE:
                     fail(f"{letter}{value:g} is beyond ±{MAX_COORDINATE:g} mm, not a position a machine reaches")
                 values[letter] = value
-            else:
-                fail(f"unknown word {letter}{value:g} (supported: {_SUPPORTED})")
+            else:  # said after the block's G and M codes: a cycle's Q word is the cycle's (G83) to refuse
+                unknown.append(f"{letter}{value:g}")
         for letter in _IGNORED_LETTERS:
             if letter in values and letter != "N":
                 ignored.setdefault(f"{letter}{values.pop(letter):g}", None)
@@ -326,6 +329,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 nonmodal = g if g in _MACHINE_MOVES else nonmodal
             else:
                 fail(f"unknown word G{g:g} (supported: {_SUPPORTED})")
+        if unknown:
+            fail(f"unknown word {unknown[0]} (supported: {_SUPPORTED})")
         if "F" in values:  # the feed is set first, in any block
             if values["F"] <= 0:
                 fail(f"F must be positive, got {values['F']:g}")

@@ -129,7 +129,11 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G21\nG20 G1 X1 F100\n", 2, "inch programs are not supported"),
     ("G1 X1 F100\nE5\n", 2, "unknown word E5"),
     ("G1 X1 F100\nG1 X1e-3\n", 2, "X1e-3: a number in exponent notation is not G-code; write it in decimals"),
-    ("G1 X1 F100\nG10 L2 P1 X0\n", 2, "unknown word L2"),
+    ("G1 X1 F100\nG10 L2 P1 X0\n", 2, "unknown word G10"),  # the block's G code, not its L word
+    # a canned cycle's own words were blamed ("unknown word Q2"), as were a subprogram call's (an outside probe)
+    ("G0 X0 Y0 Z5\nG99 G83 X5 Y5 Z-10 R2 Q2 F200\n", 2, "canned cycles \\(G99: a cycle or its return level\\)"),
+    ("G0 X0 Y0 Z5\nG83 X5 Y5 Z-10 R2 Q2 F200\n", 2, "canned cycles \\(G83: a cycle or its return level\\) are not"),
+    ("G1 X1 F100\nM98 P2000 L2\n", 2, "subprogram calls \\(M98\\)"),
     ("G1 X1 F100\nG7\n", 2, "unknown word G7"),
     ("G1 X1 F100\nG41 D1 X2\n", 2, "cutter radius compensation \\(G41\\) is not supported"),
     ("G1 X1 F100\nG95 X2 F0.1\n", 2, "feed per revolution"),
