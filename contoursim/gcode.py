@@ -563,7 +563,7 @@ def _arc(start, end, values, normal_axis, ccw, tolerance, fail):
         center = start + offset
         r_start = np.linalg.norm(offset)
         r_end = np.linalg.norm((end - center) * inplane)
-        if abs(r_start - r_end) > tolerance:
+        if abs(r_start - r_end) > tolerance * (1 + 1e-9):  # radii written exactly the tolerance apart are within it
             fail(f"arc start radius {r_start:.6g} mm and end radius {r_end:.6g} mm differ by more than "
                  f"{tolerance:g} mm")
         sweep = _sweep(start - center, end - center, axis, ccw)

@@ -159,6 +159,7 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G19 G0 Y10 Z0\nG3 Y20 Z0 I1 J5 F100\n", 2, "I is not a centre word of the G19 \\(YZ\\) arc"),
     ("G0 X1\n\nG1 X2\n", 3, "missing F before the first feed move"),
     ("G0 X10\nG2 X0 Y10.1 I-10 F100\n", 2, "start radius 10 mm and end radius 10.1 mm differ"),
+    ("G0 X10\nG2 X0 Y10.0021 I-10 F100\n", 2, "end radius 10.0021 mm differ by more than 0.002 mm"),
     ("G1 X1 F100\nG1 X2 I3\n", 2, r"I belongs to arc moves \(G2/G3\) only"),
     ("G1 X1 F100\nG1 X2 X3\n", 2, "appears twice"),
     ("X1\n", 1, "needs a motion mode"),
@@ -428,3 +429,10 @@ def test_a_binary_file_given_as_a_program_is_said_not_to_be_text(tmp_path):
         read_gcode(tmp_path / "p.nc")
     (tmp_path / "q.nc").write_bytes(b"G0 X0 Y0 (\xb0 Latin-1)\nG1 X10 F1000\n")  # an older controller's degree sign
     assert read_gcode(tmp_path / "q.nc").path.length == pytest.approx(10.0)
+
+
+def test_an_arc_whose_radii_differ_by_the_tolerance_exactly_is_within_it():
+    """Radii written 0.002 mm apart were said to "differ by more than 0.002 mm" (their difference in floating point is
+    2.0000000000000018e-3; an outside probe)."""
+    program = read_gcode("G0 X10 Y0\nG2 X0 Y10.002 I-10 J0 F600\n")
+    assert np.linalg.norm(program.path.end[:2] - [0.0, 10.002]) < 1e-12
