@@ -87,6 +87,14 @@ def _trajectory(model, path_file, job=None, direction=None):
         raise ConfigError(str(exc), str(source), None if primitive is None else int(read.program.lines[primitive])) from None
 
 
+def _against_machine(exc, path_file, program):
+    """The error `exc` of a path against the machine (more coordinates than its axes, beyond their travel) naming the
+    path's file, and a G-code `program`'s block where the path leaves the travel."""
+    primitive = getattr(exc, "primitive", None)
+    return ConfigError(str(exc), str(path_file), None if primitive is None or program is None else
+                       int(program.lines[primitive]))
+
+
 def _feed_override(job, path_file):
     """The line saying that a job's feed overrides a G-code program's F words; None where it does not apply."""
     from .gcode import SUFFIXES
@@ -137,8 +145,8 @@ def run_job(model, path_file, job=None, strategies=(), label=None, direction=Non
             result = simulate(model, trajectory, strategies, settle=0.0)  # held already
         except UnstableLoopError:  # the machine with its effects, not the path
             raise
-        except ValueError as exc:  # the path against the machine (its axes, their travel): naming the path's file
-            raise ConfigError(str(exc), str(path_file)) from None
+        except ValueError as exc:  # the path against the machine (its axes, their travel)
+            raise _against_machine(exc, path_file, program) from None
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
     return name, path_file, result, program
@@ -470,13 +478,13 @@ def compare_command(args):
     names, left_out = (names, None) if args.tune else _designable(model, names, settings, args.strategies is None)
     report = report_file(args.json, JSON_FORM, "comparison JSON", args.out,  # never a file the user keeps, nor a plot
                          written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES])
-    trajectory, dt = _trajectory(model, path_file, job)[0], model.machine.servo_period
+    (trajectory, program), dt = _trajectory(model, path_file, job), model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
     try:
         model.machine.axis_commands(trajectory)  # the path against the machine, as simulate's run_job says it
-    except ValueError as exc:  # (more coordinates than its axes, beyond their travel): naming the path's file
-        raise ConfigError(str(exc), str(path_file)) from None
+    except ValueError as exc:  # (more coordinates than its axes, beyond their travel)
+        raise _against_machine(exc, path_file, program) from None
     comparison = compare(model, trajectory, names, settings=settings, tuned=args.tune)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)

@@ -34,7 +34,7 @@ import numpy as np
 
 from . import _validate
 from .config import TEXT_KEYS, TomlFile, local_file
-from .exceptions import ConfigError, UnstableLoopError
+from .exceptions import ConfigError, PathError, UnstableLoopError
 from .multibody import MAX_TRAVEL
 from .servo import AxisServo
 
@@ -200,8 +200,10 @@ class Machine:
         Raises
         ------
         ValueError
-            The path needs more axes than the machine has, or an axis would
-            leave its travel.
+            The path needs more axes than the machine has.
+        PathError
+            An axis would leave its travel (``primitive``: the path's
+            primitive where it first does).
         """
         p, v, a = (_validate.as_xyz(x) for x in (trajectory.position, trajectory.velocity, trajectory.acceleration))
         if self.chain is None:
@@ -212,7 +214,7 @@ class Machine:
                 raise ValueError(f"the path moves in {trajectory.dim} coordinates but the machine has only {n} "
                                  f"{'axis' if n == 1 else 'axes'} ({', '.join(self.axes)}): it has {beyond} [mm], "
                                  "where the machine's coordinates are zero (without bodies they are the axes')")
-            self._check_travel(p[:, :n])
+            self._check_travel(p[:, :n], trajectory)
             return p[:, :n], v[:, :n], a[:, :n]
         home = self.home()
         linear = ~self.chain.rotary_axes
@@ -230,7 +232,7 @@ class Machine:
         q[:, linear] += p @ jac.T
         qv[:, linear] = v @ jac.T
         qa[:, linear] = a @ jac.T
-        self._check_travel(q)
+        self._check_travel(q, trajectory)
         return q, qv, qa
 
     def origin(self):
@@ -249,16 +251,19 @@ class Machine:
             return str(exc)
         return None
 
-    def _check_travel(self, q):
-        """Refuse commands that leave an axis's travel."""
+    def _check_travel(self, q, trajectory):
+        """Refuse commands `q` (of `trajectory`'s samples) that leave an axis's travel, naming the path's primitive
+        where they first do (none for a measured reference, which has no path)."""
         for axis, (lo, hi) in self.travel.items():
             column = q[:, self.axis_names.index(axis)]
-            if column.min() < lo - 1e-9 or column.max() > hi + 1e-9:
-                raise ValueError(
+            outside = (column < lo - 1e-9) | (column > hi + 1e-9)
+            if outside.any():
+                raise PathError(
                     f"axis {axis} would move over {column.min():.6g} .. {column.max():.6g}, outside its travel "
                     f"{lo:.6g} .. {hi:.6g} [mm or rad]: "
                     + ("move the path with work_offset or make it smaller" if self.chain is not None else
-                       "place the path inside it or make it smaller (without bodies the path's coordinates are the axes')")
+                       "place the path inside it or make it smaller (without bodies the path's coordinates are the axes')"),
+                    None if trajectory.path is None else int(trajectory.primitive[np.argmax(outside)]),
                 )
 
     def tool_position(self, q, t, dim):

@@ -270,6 +270,17 @@ def test_never_replaces_a_users_file_inside_its_own_directory(tmp_path, capsys):
     assert not (out / "third.csv").exists() and not (out / "third_path.png").exists()
 
 
+def test_a_program_leaving_the_travel_is_refused_by_the_block_that_leaves_it(tmp_path, capsys):
+    """The refusal named the program but not the block (an outside probe)."""
+    program = tmp_path / "p.nc"
+    program.write_text("G21 G90\nG0 X0 Y0\nG1 X100 F3000\nG1 X2000\nM30\n")
+    assert main(["simulate", str(program), "--machine", "vertical_mill_3axis", "--out", str(tmp_path / "o")]) == 2
+    assert f"{program}, line 4: axis x would move over" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    assert main(["compare", str(program), "--machine", "vertical_mill_3axis", "--out", str(tmp_path / "o")]) == 2
+    assert f"{program}, line 4: axis x would move over" in capsys.readouterr().err
+
+
 def test_job_work_offset_moves_the_path_on_the_machine(tmp_path, capsys):
     job = tmp_path / "job.toml"
     job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { x_mm = 470 }\n')
