@@ -84,12 +84,12 @@ def _trajectory(model, path_file, job=None, direction=None):
             raise job.error(str(exc), *feed_key) from None
         if read.program is None:  # a path file's
             raise TomlFile.read(source).error(str(exc), *feed_key) from None
-        raise ConfigError(str(exc), str(source), None if primitive is None else int(read.program.lines[primitive])) from None
+        raise _against_machine(exc, source, read.program) from None
 
 
 def _against_machine(exc, path_file, program):
-    """The error `exc` of a path against the machine (more coordinates than its axes, beyond their travel) naming the
-    path's file, and a G-code `program`'s block where the path leaves the travel."""
+    """The error `exc` of a path against the machine (more coordinates than its axes, beyond their travel or max feed)
+    naming the path's file, and a G-code `program`'s block where it does."""
     primitive = getattr(exc, "primitive", None)
     return ConfigError(str(exc), str(path_file), None if primitive is None or program is None else
                        int(program.lines[primitive]))
