@@ -22,7 +22,10 @@ exact, plant within ±3 %) written beside it as a machine file.
 
 Each case is diagnosed as a user would: with the nominal model
 (``--model``: the demo mill's axes, or the data sheet) and without it (the
-loops identified from the trace). A diagnosis that ends in an error counts
+loops identified from the trace); mode ``current`` (the independent
+families) diagnoses with the data sheet the same trace with each drive's
+logged current command beside the positions (``<axis>_current``), which
+the fit takes as a second output. A diagnosis that ends in an error counts
 as wrong. Without the model a gain mismatch on two axes counts on either
 axis, as the ratio of their gains: one shared position gain is identified,
 so that ratio is all the trace can tell. Printed per family and mode: the
@@ -37,7 +40,8 @@ uncertainty) where the hidden effect was named, the median seconds per
 30 s of trace; then per effect: named right / cases, the hidden effect among those named, its
 median parameter error and 2σ coverage. Progress goes to stderr.
 
-Run:  python benchmarks/bench_diagnose.py [--cases 22] [--seed 1] [--families own,rigid,two_mass] [--modes model,identified]
+Run:  python benchmarks/bench_diagnose.py [--cases 22] [--seed 1] [--families own,rigid,two_mass]
+                                         [--modes model,current,identified]
                                          [--effects none,squareness,straightness]
       python benchmarks/bench_diagnose.py --fast      (one null case and one effect per family and mode)
 """
@@ -145,9 +149,10 @@ def own_case(mill, name, seed):
     return path_name, trace, Model(machine), described, signal
 
 
-def independent_case(family, name, seed, folder):
-    """A case of an independent family: ``(path, trace, data sheet's file, truth dict or None, effect's RMS [µm])``."""
-    case = independent_truth.make_case(family, name, seed, folder)
+def independent_case(family, name, seed, folder, currents=False):
+    """A case of an independent family: ``(path, trace, data sheet's file, truth dict or None, effect's RMS [µm])``;
+    with `currents` the trace carries the drives' current commands."""
+    case = independent_truth.make_case(family, name, seed, folder, currents=currents)
     return case.path, read_trace(case.csv), case.machine_file, case.truth, case.signal_um
 
 
@@ -191,18 +196,20 @@ def grade(truth, report, named):
 
 
 def run(family, mode, name, seed, mill, folder):
-    """Generate one case and diagnose it blind in `mode` ("model" or "identified"); a dict of what happened."""
+    """Generate one case and diagnose it blind in `mode` ("model", "current" or "identified"); a dict of what
+    happened."""
     if family == "own":
         path, trace, model, truth, signal = own_case(mill, name, seed)
     else:
-        path, trace, model, truth, signal = independent_case(family, name, seed, folder)
+        path, trace, model, truth, signal = independent_case(family, name, seed, folder, currents=mode == "current")
     case = dict(family=family, mode=mode, truth=truth, path=path, signal=signal, duration=float(trace.t[-1] - trace.t[0]),
                 error=None, named=(), right=False, false_positive=False, found=False, floor=np.inf)
     start = time.perf_counter()
     try:
-        if mode == "model" and isinstance(model, Path):  # as `contoursim diagnose --model` reads it
+        given = mode != "identified"
+        if given and isinstance(model, Path):  # as `contoursim diagnose --model` reads it
             model = load_model(model, check=False)
-        result = diagnose(trace, model if mode == "model" else None)
+        result = diagnose(trace, model if given else None)
         report = result.to_dict()
     except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is a result to count, not a reason to stop
         case["error"] = f"{type(exc).__name__}: {exc}"
@@ -243,13 +250,18 @@ def main():
     parser.add_argument("--cases", type=int, default=22, help="cases per family (default 22: two of each effect and null)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--families", default="own,rigid,two_mass")
-    parser.add_argument("--modes", default="model,identified")
+    parser.add_argument("--modes", default="model,current,identified",
+                        help="model: with the nominal model; current: with it, the trace carrying the drives' currents "
+                             "(independent families); identified: without it")
     parser.add_argument("--effects", default=",".join(("none",) + CATALOGUE),
                         help="the hidden effects cycled through, 'none' for a null case (default: none and the catalogue)")
     parser.add_argument("--fast", action="store_true", help="two cases per family (a null case and a backlash)")
     args = parser.parse_args()
     families, modes = args.families.split(","), args.modes.split(",")
     effects = tuple(None if name == "none" else name for name in args.effects.split(","))
+    strange = [m for m in modes if m not in ("model", "current", "identified")]
+    if strange:
+        parser.error(f"--modes: unknown mode {strange[0]!r}; the modes are: model, current, identified")
     unknown = [name for name in effects if name is not None and name not in CATALOGUE]
     if unknown:
         parser.error(f"--effects: unknown effect {unknown[0]!r}; the effects are: none, {', '.join(CATALOGUE)}")
@@ -260,6 +272,8 @@ def main():
         for family in families:
             for i, (name, seed) in enumerate(plan):
                 for mode in modes:
+                    if family == "own" and mode == "current":
+                        continue  # the own family's traces log no current
                     case = run(family, mode, name, seed, mill, Path(folder))
                     results.setdefault((family, mode), []).append(case)
                     named = ", ".join(e.label for e in case["named"]) or "nothing"

@@ -142,7 +142,7 @@ def _run_axis(xref, vref, p, ctrl, dt, substeps):
     s[2] = xref[0]
     s[4] = xref[0]
     k1, k2, k3, k4, tmp = np.zeros(8), np.zeros(8), np.zeros(8), np.zeros(8), np.zeros(8)
-    table, tool, tool_mid = np.zeros(n), np.zeros(n), np.zeros(n)
+    table, tool, tool_mid, command = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
     history = np.zeros(n)
     enc_last = np.round(s[0] / res_m) * res_m
     v_f, integral, held = 0.0, 0.0, 0.0
@@ -168,6 +168,7 @@ def _run_axis(xref, vref, p, ctrl, dt, substeps):
         if abs(current) <= i_max or (current > 0.0) != (e_v > 0.0):
             integral = trial  # conditional integration: no windup at the current limit
         current = min(max(kv * (e_v + integral), -i_max), i_max)
+        command[k] = current
         applied = held if comp_delay == 1 else current
         held = current
         for step in range(substeps):
@@ -185,7 +186,7 @@ def _run_axis(xref, vref, p, ctrl, dt, substeps):
                 s[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
             if step == substeps // 2 - 1:
                 tool_mid[k] = s[4]
-    return table, tool, tool_mid
+    return table, tool, tool_mid, command
 
 
 # -- the reference: paths and an interpolator of their own ---------------------------------------
@@ -294,7 +295,7 @@ def _commission(axis, family, period):
     for _ in range(12):
         ctrl = np.array([axis["kp"], axis["kv"], axis["ti"], axis["vff"], 50.0, axis["computation_delay"], axis["tau_v"],
                          float(axis["scale_feedback"]), axis["res_m"], axis["res_s"], 0.0])
-        table, tool, _ = _run_axis(step, np.zeros(t.size), _plant_vector(axis, None, family, ""), ctrl, period,
+        table, tool, _, _ = _run_axis(step, np.zeros(t.size), _plant_vector(axis, None, family, ""), ctrl, period,
                                    int(np.ceil(period / _SUBSTEP)))
         tail = np.max(np.abs(tool[t > t[-1] - 0.3] - 1e-5))
         earlier = np.max(np.abs(tool[(t >= 0.3) & (t < 0.6)] - 1e-5))
@@ -406,8 +407,9 @@ def _geometry(q, t, effect):
 
 
 def _simulate(axes, machine, reference, velocity, effect, family, period, every, jitter):
-    """Noise-free logged tool positions [mm] (rows every `every` servo samples, sampled late by `jitter` [periods])."""
-    columns = []
+    """Noise-free logged tool positions [mm] (rows every `every` servo samples, sampled late by `jitter` [periods]),
+    and the drives' current commands at those servo samples [A], each shape (rows, axes)."""
+    columns, currents = [], []
     for i, a in enumerate(axes):
         axis = machine[a]
         x, v = reference[:, i] * 1e-3, velocity[:, i] * 1e-3
@@ -426,18 +428,19 @@ def _simulate(axes, machine, reference, velocity, effect, family, period, every,
         ctrl = np.array([kp, axis["kv"], axis["ti"], axis["vff"], 50.0, axis["computation_delay"], axis["tau_v"],
                          float(scale), axis["res_m"], axis["res_s"], fb_delay])
         substeps = int(np.ceil(period / _SUBSTEP))
-        _, tool, mid = _run_axis(x, v, _plant_vector(axis, effect, family, a), ctrl, period, substeps)
+        _, tool, mid, command = _run_axis(x, v, _plant_vector(axis, effect, family, a), ctrl, period, substeps)
         rows = np.arange(0, x.size, every)
+        currents.append(command[rows])
         late = np.clip(jitter, 0.0, 0.5)  # sampled late by a fraction of the period: between the instant and mid-period
         early = np.clip(-jitter, 0.0, 0.5)
         value = tool[rows] + 2 * late * (mid[rows] - tool[rows])
         before = np.concatenate([[tool[0]], mid[:-1]])[rows]  # half a period earlier
         value = value + 2 * early * (before - tool[rows])
         columns.append(1e3 * value)
-    return np.column_stack(columns)
+    return np.column_stack(columns), np.column_stack(currents)
 
 
-def make_case(family, effect_name, seed, folder, path=None):
+def make_case(family, effect_name, seed, folder, path=None, currents=False):
     """Generate one trace of `family` with the hidden effect `effect_name` (``None``: none) into `folder`.
 
     Parameters
@@ -451,6 +454,9 @@ def make_case(family, effect_name, seed, folder, path=None):
     path : str, optional
         ``"circle_ccw"``, ``"circle_cw"``, ``"trefoil"``, ``"square"`` (default: drawn from these), or
         ``"circle_both"`` (never drawn): the circle run CCW, then after a stop CW, as a ballbar test does.
+    currents : bool
+        Also log each axis's current command as the drive computed it at the logged servo samples
+        (``<axis>_current`` [A]); the positions and the data sheet are the same either way.
 
     Returns
     -------
@@ -495,8 +501,9 @@ def make_case(family, effect_name, seed, folder, path=None):
         if name == "without" and effect is None:
             measured[name] = measured["with"]
             continue
-        tool = _simulate(axes, machine, reference, velocity, hidden, family, period, every, jitter)
+        tool, command = _simulate(axes, machine, reference, velocity, hidden, family, period, every, jitter)
         measured[name] = _geometry(tool, t[rows], hidden)
+        measured.setdefault("current", command)  # the trace's: the run with the effect
     added = measured["with"] - measured["without"]
     added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
     signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
@@ -505,7 +512,8 @@ def make_case(family, effect_name, seed, folder, path=None):
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     csv, toml = folder / f"case_{seed}.csv", folder / f"case_{seed}.toml"
-    _write_csv(csv, t[rows], reference[rows], actual, axes, f"independent truth, family {family}, path {path}, seed {seed}")
+    _write_csv(csv, t[rows], reference[rows], actual, axes, f"independent truth, family {family}, path {path}, seed {seed}",
+               measured["current"] if currents else None)
     _write_data_sheet(toml, machine, period, rng, f"independent truth {family} seed {seed} (data sheet)", effect)
     truth = None if effect is None else {k: effect[k] for k in ("name", "axis", "parameters", "options")}
     notes = dict(period_s=period, log_s=every * period, noise_um=noise_um, vff=vff, computation_delay=computation_delay,
@@ -513,10 +521,13 @@ def make_case(family, effect_name, seed, folder, path=None):
     return Case(family, path, csv, toml, truth, signal, float(t[rows][-1]), notes)
 
 
-def _write_csv(file, t, reference, actual, axes, comment):
-    """The measured-trace CSV of DESIGN.md: ``t, <axis>_ref, <axis>`` [s, mm]."""
-    header = ",".join(["t"] + [c for a in axes for c in (f"{a}_ref", a)])
-    table = np.column_stack([t] + [c for i in range(len(axes)) for c in (reference[:, i], actual[:, i])])
+def _write_csv(file, t, reference, actual, axes, comment, current=None):
+    """The measured-trace CSV of DESIGN.md: ``t, <axis>_ref, <axis>`` [s, mm], then ``<axis>_current`` [A] with
+    `current`."""
+    header = ",".join(["t"] + [c for a in axes for c in (f"{a}_ref", a)] + ([] if current is None else
+                                                                          [f"{a}_current" for a in axes]))
+    table = np.column_stack([t] + [c for i in range(len(axes)) for c in (reference[:, i], actual[:, i])]
+                            + ([] if current is None else list(current.T)))
     with open(file, "w", encoding="utf-8") as f:
         f.write(f"# {comment}\n{header}\n")
         for row in table:

@@ -145,6 +145,12 @@ _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the resi
 # a refit whose current residual grows by more than this factor (and 1 % of the current's spread) departs from the
 # measured current: said in a warning
 _CURRENT_WORSE = 1.5
+#: Effects whose named fit takes the measured current of their axis (``<axis>_current``) as a second output beside
+#: the positions, with a given model: the force they put on the axis is what the current measures. Not the
+#: others: the current sees the drive's own dynamics (a backlash's contacts ringing the screw) that no variant
+#: of the kernel follows sample by sample, and, whitened by its noise, that misfit bent their fits (an
+#: independent backlash's lost motion 21 % off, a straightness lost; bench_diagnose, seed 23).
+CURRENT_FITS = ("coulomb_friction",)
 _FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
 _WHITE_SAMPLES = 200  # fewer samples than this: the noise from the second differences alone (see LINE_RATIO)
 _CYCLE_FALSE_ALARM = 1e-3  # share of white-noise standstill runs :func:`standstill_cycles` may take for a limit cycle
@@ -968,40 +974,71 @@ def _spatial_period(q, r):
 
 
 class _Problem:
-    """A measured trace against variants of one model: predictions, whitening, nominal refit."""
+    """A measured trace against variants of one model: predictions, whitening, nominal refit.
 
-    def __init__(self, trace, model, noise, scored, identified=False, force=None):
+    The fit's outputs are the tool positions of the trace's axes (d
+    columns), then, while :meth:`use_currents` has them on, the current of
+    each axis in `current_noise` (c columns, whitened by its noise [A]).
+    An output array here is (N, d + c); :meth:`fitted` and :meth:`unwhiten`
+    give the positions alone.
+    """
+
+    def __init__(self, trace, model, noise, scored, identified=False, force=None, current_noise=None):
         self.trace = trace
         self.identified = identified  # the controller too was identified: its parameters carry the prior
         self.reference = measured_reference(trace, model.machine.servo_period)
         self.force = force or {}  # the known external forces on the reference's samples [N], by axis
         self.scored = scored  # samples the fit scores, shape (N,)
-        self.weight = scored[:, None] / noise  # 1/σ per axis on scored samples, 0 elsewhere [1/mm], (N, d)
-        self.n = int(scored.sum()) * len(noise)  # residual entries scored
+        self.noise = noise  # the positions' [mm], shape (d,)
+        self.current_noise = current_noise or {}  # the measured currents' the fit may take as outputs [A], by axis
         self.nominal = model.machine  # the prior of the nominal refit is centred here
         self.base = None
+        self._outputs(())
         self.set_base(model, refit=_REFIT_STEPS, reach=np.inf if identified else _PRIOR_REACH)
+
+    def _outputs(self, currents):
+        """Fit the positions and the measured currents of the axes `currents`."""
+        self.currents = list(currents)
+        self.measured = np.column_stack([self.trace.actual] + [self.trace.current[a] for a in self.currents])
+        sigma = np.concatenate([self.noise, [self.current_noise[a] for a in self.currents]])
+        self.weight = self.scored[:, None] / sigma  # 1/σ per output on scored samples, 0 elsewhere [1/mm, 1/A]
+        self.n = int(self.scored.sum()) * len(sigma)  # residual entries scored
+
+    def use_currents(self, on):
+        """Take the measured currents (of :attr:`current_noise`) as outputs beside the positions, or not: the base
+        linearised again for them."""
+        self._outputs(self.current_noise if on else ())
+        self._linearise(self.base)
 
     # predictions at the trace's samples
     def predict(self, models):
-        """Tool positions of `models` at the trace's samples, list of (N, d)."""
+        """The outputs of `models` at the trace's samples (tool positions, then the currents fitted), list of (N, d + c)."""
         out = []
         loop = [m for m in models if not self._geometric_only(m)]
-        if loop:
-            for start in range(0, len(loop), 64):
-                part = loop[start : start + 64]
-                tool = simulate_batch(part, self.reference, outputs=("tool_position",), settle=0.0, check=False,
-                                      force=self.force)["tool_position"]
-                out += [_on_trace(self.trace, self.reference.t, y) for y in tool]
+        for start in range(0, len(loop), 64):
+            runs = self._run(loop[start : start + 64], ("tool_position",))
+            out += [_on_trace(self.trace, self.reference.t, y) for y in runs["outputs"]]
         loop_results = iter(out)
         results = []
         for m in models:
-            if self._geometric_only(m):
+            if self._geometric_only(m):  # the loop is the base's: its currents too
                 y = m.geometry.tool_position(self.axis_position, self.reference.t, self.trace.reference.shape[1])
-                results.append(_on_trace(self.trace, self.reference.t, y))
+                d = y.shape[1]
+                results.append(np.column_stack([_on_trace(self.trace, self.reference.t, y),
+                                                self.base_prediction[:, d:]]))
             else:
                 results.append(next(loop_results))
         return results
+
+    def _run(self, models, outputs):
+        """:func:`simulate_batch` of `models` with `outputs`, and under ``"outputs"`` the fit's outputs on the
+        servo grid: the tool positions, then the currents of the axes in :attr:`currents`, shape (B, M, d + c)."""
+        run = simulate_batch(models, self.reference, outputs=outputs + (("current",) if self.currents else ()),
+                             settle=0.0, check=False, force=self.force)
+        names = list(models[0].machine.axes)
+        currents = [run["current"][:, :, [names.index(a) for a in self.currents]]] if self.currents else []
+        run["outputs"] = np.concatenate([run["tool_position"]] + currents, axis=2)
+        return run
 
     def _geometric_only(self, model):
         """`model` differs from the base in geometric effects only (the loop's axis positions can be reused)."""
@@ -1011,8 +1048,8 @@ class _Problem:
         return model.machine is self.base.machine and other == [e for e in self.base.effects if e.stage != "geometry"]
 
     def whitened(self, y):
-        """``(measured − y)/σ`` per axis, flattened, shape (N·d,)."""
-        return ((self.trace.actual - y) * self.weight).ravel()
+        """``(measured − y)/σ`` per output, flattened, shape (N·(d + c),)."""
+        return ((self.measured - y) * self.weight).ravel()
 
     def coefficients(self, r):
         """The nominal refit of a whitened residual `r`: zero offsets [steps of σ], the instrument frame's turn per
@@ -1022,7 +1059,7 @@ class _Problem:
     def residual(self, y):
         """The residual of prediction `y` after the nominal refit: whitened misfit, then the prior's terms.
 
-        Shape (N·d + I + K,): what the refit leaves of the whitened residual,
+        Shape (N·(d + c) + I + K,): what the refit leaves of the whitened residual,
         then the refit's coefficients over their prior widths (a nominal
         parameter is known to its spread; the instrument's I columns, its
         zero per axis and the turn of its frame per pair of axes, are free).
@@ -1033,9 +1070,9 @@ class _Problem:
             return np.concatenate([r - self.columns @ c, self.prior * (c + self.shift)])
 
     def samples(self, r):
-        """The misfit part of a :meth:`residual`, per sample, shape (N, d)."""
-        n, d = self.trace.actual.shape
-        return r[: n * d].reshape(n, d)
+        """The misfit part of a :meth:`residual`, per sample, shape (N, d + c)."""
+        n, w = self.measured.shape
+        return r[: n * w].reshape(n, w)
 
     def set_base(self, model, refit=0, reach=np.inf):
         """Make `model` the base: its prediction, axis positions and the nominal refit's sensitivities.
@@ -1093,16 +1130,17 @@ class _Problem:
 
     def _linearise(self, model):
         self.base = None
-        run = simulate_batch([model], self.reference, outputs=("tool_position", "axis_position"), settle=0.0, check=False,
-                             force=self.force)
+        run = self._run([model], ("tool_position", "axis_position"))
         self.axis_position = run["axis_position"][0]
-        self.base_prediction = _on_trace(self.trace, self.reference.t, run["tool_position"][0])
+        self.base_prediction = _on_trace(self.trace, self.reference.t, run["outputs"][0])
         self.changes = _nuisance_changes(model, self.trace.axes, self.identified)
-        n, d = self.trace.actual.shape
-        columns = [(np.eye(d)[i] * self.weight).ravel() for i in range(d)]  # instrument zero per axis
+        n, w = self.measured.shape
+        d = self.trace.actual.shape[1]
+        # instrument zero per axis's position (a current's offset is a force, which the candidates stand for)
+        columns = [(np.eye(w)[i] * self.weight).ravel() for i in range(d)]
         q = self.trace.reference - self.trace.reference[self.scored].mean(axis=0)
         for i, j in combinations(range(d), 2):  # the instrument's frame turned a little in the plane of axes i, j
-            turn = np.zeros((n, d))
+            turn = np.zeros((n, w))
             turn[:, i], turn[:, j] = -q[:, j], q[:, i]
             if np.any(turn[self.scored]):  # two axes that stand still have no frame to turn
                 columns.append((turn * self.weight).ravel())
@@ -1114,7 +1152,7 @@ class _Problem:
             # moves further from the base's than the trace moves at all (no sensitivity of a 2 % step does)
             reach = max(float(np.ptp(self.trace.actual)), 1.0)
             with np.errstate(invalid="ignore", over="ignore"):
-                kept = [bool(np.all(np.abs(y - self.base_prediction) <= reach)) for y in ys]
+                kept = [bool(np.all(np.abs(y - self.base_prediction)[:, :d] <= reach)) for y in ys]
             self.changes = [c for c, ok in zip(self.changes, kept) if ok]
             columns += [r0 - self.whitened(y) for y, ok in zip(ys, kept) if ok]  # each nominal step's effect, whitened
         s = self.columns = np.column_stack(columns)
@@ -1134,14 +1172,17 @@ class _Problem:
         return self.coefficients(self.whitened(self.base_prediction))[:d]
 
     def fitted(self):
-        """The base's prediction with the nominal refit (and instrument zero) added [mm], shape (N, d)."""
+        """The base's tool positions with the nominal refit (and instrument zero) added [mm], shape (N, d)."""
         r = self.whitened(self.base_prediction)
-        return self.base_prediction + self.unwhiten(self.columns @ self.coefficients(r))
+        d = self.trace.actual.shape[1]
+        return self.base_prediction[:, :d] + self.unwhiten(self.columns @ self.coefficients(r))
 
     def unwhiten(self, r):
-        """A whitened vector (its first N·d entries) as positions [mm], shape (N, d); 0 on samples not scored."""
-        n, d = self.trace.actual.shape
-        return np.divide(r[: n * d].reshape(n, d), self.weight, out=np.zeros((n, d)), where=self.weight > 0)
+        """The positions' part of a whitened vector (its first N·(d + c) entries) [mm], shape (N, d); 0 on samples
+        not scored."""
+        d = self.trace.actual.shape[1]
+        weight = self.weight[:, :d]
+        return np.divide(self.samples(r)[:, :d], weight, out=np.zeros(weight.shape), where=weight > 0)
 
 
 def _nuisance_changes(model, axes, identified):
@@ -1521,7 +1562,7 @@ def _acceleration_twins(problem, cands, warnings):
     """
     if not problem.identified:
         return cands
-    n, d = problem.trace.actual.shape
+    n, d = problem.measured.shape
     acc = _on_trace(problem.trace, problem.reference.t, problem.reference.acceleration)
     kept = []
     for cand in cands:
@@ -1652,10 +1693,10 @@ def _smoothed(x, jac, residuals, scale, lower, upper):
 
 
 def _marginal(problem, j, variance):
-    """The Gauss–Newton covariance of a fit's parameters, marginal over a time shift of each axis's measured position.
+    """The Gauss–Newton covariance of a fit's parameters, marginal over a time shift of each measured output.
 
-    The residual's sensitivity to axis a's positions read τ late is its
-    sensitivity to ``τ·v_a`` (the base's velocity on that axis), through the
+    The residual's sensitivity to an output (an axis's position, a current)
+    read τ late is its sensitivity to ``τ·ẏ`` (the base's rate of that output), through the
     nominal refit like any misfit; each τ carries the prior
     :data:`TIMING_SPREAD` of the servo period. `j` is the Jacobian of
     :meth:`_Problem.residual` in the fit's parameters, `variance` the
@@ -1726,7 +1767,7 @@ def _jackknife(problem, j, r, blocks):
     -------
     ndarray, shape (k,)
     """
-    n, d = problem.trace.actual.shape
+    d = problem.measured.shape[1]
     rows = np.flatnonzero(problem.scored)
     if rows.size < 4 * blocks:
         return np.zeros(j.shape[1])
@@ -2115,7 +2156,9 @@ def _diagnose(trace, model, identified, max_effects, say):
                         "a force in newtons has no scale on an identified machine; give the nominal model (--model)")
     if len(trace.axes) == 1:
         warnings.append("one axis: gain_mismatch cannot be told from the nominal position gain and is not a candidate")
-    problem = _Problem(trace, model, noise, scored, identified, force)
+    current_noise = {} if identified else _current_noise(trace, _currents(trace, model, reference, force), scored,
+                                                         warnings)
+    problem = _Problem(trace, model, noise, scored, identified, force, current_noise)
     raw = (trace.actual - before)[scored]
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
@@ -2163,8 +2206,14 @@ def _diagnose(trace, model, identified, max_effects, say):
             break
         best, ambiguities = _choose(problem, cands, both_ways)
         gap = (trace.actual - problem.fitted())[scored]  # what the base leaves, per axis [mm]
+        # a friction's force, and the plant's mass beside it, is what a measured current sees directly: fitted with
+        # the current as a second output (:data:`CURRENT_FITS`); the candidates are told apart by the positions alone
+        current = best.fit.name in CURRENT_FITS and best.fit.axis in problem.current_noise
         try:
-            if best.settled is None:
+            if current:
+                problem.use_currents(True)
+                best.settled = _settle(problem, base, best)
+            elif best.settled is None:
                 best.settled = _settle(problem, base, best)
             else:
                 problem.set_base(best.settled[0])
@@ -2173,6 +2222,9 @@ def _diagnose(trace, model, identified, max_effects, say):
             warnings.append(f"{best.fit.label}: not named, the refit with it in place failed ({exc})")
             problem.set_base(base)
             break
+        finally:
+            if current:
+                problem.use_currents(False)
         step = _step(problem, best.fit.label, best.fit, best.uncertainty, best.delta_bic)
         if not step.rms_um < steps[-1].rms_um:  # an effect that does not close any of the gap is no explanation
             warnings.append(f"{best.fit.label}: not named, " + (
@@ -2235,7 +2287,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                  "encoder counts: no simulation matches its phase sample by sample, a named effect closes little of it"
                  for i, c in cycles.items()]
     currents = [_currents(trace, m, reference, force) for m in (model, problem.base)]
-    for a in () if identified else trace.current:  # the positions alone refit the plant: does the current agree?
+    for a in () if identified else trace.current:  # does the current agree with the plant the fit moved to?
         was, now = (float(np.sqrt(np.mean((trace.current[a] - c[a])[scored] ** 2))) for c in currents)
         if now > _CURRENT_WORSE * was and now - was > 0.01 * float(np.std(trace.current[a][scored])):
             warnings.append(f"{a}: the refitted model's current is further from the measured one than the nominal "
@@ -2313,6 +2365,24 @@ def _size_undetermined(cand, share):
     return (f"{cand.fit.label}: named, it closes {share:.0%} of the residual above the noise floor on {_acts_on(cand.fit)}, "
             f"but its {size.name} = {size.value:.4g} ± {sigma:.2g} (1σ) lies within 2σ of none ({none:g}): the trace "
             "does not pin its size down (model error the uncertainty counts: see uncertainty_method)")
+
+
+def _current_noise(trace, simulated, scored, warnings):
+    """The noise level of each measured current the fit may take as an output [A], by axis (:func:`noise_level` of
+    the nominal model's misfit, `simulated` its currents); a current the nominal model does not follow at all (its
+    misfit wider than the current's own spread: a current in other units, of another sign, or not the command) is
+    left out, said in `warnings`."""
+    out = {}
+    for a, y in simulated.items():
+        misfit = (trace.current[a] - y)[scored]
+        rms, spread = float(np.sqrt(np.mean(misfit**2))), float(np.std(trace.current[a][scored]))
+        if not rms < spread:
+            warnings.append(f"{a}_current: not fitted, the nominal model's current is further from it ({rms:.3g} A "
+                            f"RMS) than it spreads ({spread:.3g} A): check its unit, its sign and that it is the "
+                            "current command (a force constant in N/A)")
+            continue
+        out[a] = float(noise_level(misfit[:, None], trace.current[a][scored, None])[0])
+    return out
 
 
 def _currents(trace, model, reference, force):

@@ -31,7 +31,7 @@ def test_independent_truth_lags_its_ramp_by_the_closed_form(independent_truth, v
     t = np.arange(int(1.5 / dt)) * dt
     ctrl = np.array([axis["kp"], axis["kv"], axis["ti"], vff, 50.0, computation_delay, axis["tau_v"], 0.0,
                      axis["res_m"], axis["res_s"], 0.0])
-    table, _, _ = it._run_axis(speed * t, np.full(t.size, speed), it._plant_vector(axis, None, "rigid", "x"), ctrl, dt, 100)
+    table, _, _, _ = it._run_axis(speed * t, np.full(t.size, speed), it._plant_vector(axis, None, "rigid", "x"), ctrl, dt, 100)
     lag = (speed * t - table)[t > 1.2]
     assert np.mean(lag) == pytest.approx(speed * (1 - vff) / axis["kp"], rel=2e-3, abs=2e-9)
     assert np.ptp(lag) < 1e-7  # steady: within 0.1 µm
