@@ -2156,8 +2156,8 @@ def _diagnose(trace, model, identified, max_effects, say):
                         "a force in newtons has no scale on an identified machine; give the nominal model (--model)")
     if len(trace.axes) == 1:
         warnings.append("one axis: gain_mismatch cannot be told from the nominal position gain and is not a candidate")
-    current_noise = {} if identified else _current_noise(trace, _currents(trace, model, reference, force), scored,
-                                                         warnings)
+    nominal_current = _currents(trace, model, reference, force)
+    current_noise = {} if identified else _current_noise(trace, nominal_current, scored, warnings)
     problem = _Problem(trace, model, noise, scored, identified, force, current_noise)
     raw = (trace.actual - before)[scored]
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
@@ -2286,7 +2286,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                  "hunts against a backlash or a stick-slip friction (more so closed on a linear scale), or a few "
                  "encoder counts: no simulation matches its phase sample by sample, a named effect closes little of it"
                  for i, c in cycles.items()]
-    currents = [_currents(trace, m, reference, force) for m in (model, problem.base)]
+    currents = [nominal_current, _currents(trace, problem.base, reference, force)]
     for a in () if identified else trace.current:  # does the current agree with the plant the fit moved to?
         was, now = (float(np.sqrt(np.mean((trace.current[a] - c[a])[scored] ** 2))) for c in currents)
         if now > _CURRENT_WORSE * was and now - was > 0.01 * float(np.std(trace.current[a][scored])):
