@@ -146,10 +146,12 @@ _STEP_TOLERANCE = 0.01  # a nominal refit's Gauss–Newton step raising the resi
 # measured current: said in a warning
 _CURRENT_WORSE = 1.5
 #: Effects whose named fit takes the measured current of their axis (``<axis>_current``) as a second output beside
-#: the positions, with a given model: the force they put on the axis is what the current measures. Not the
-#: others: the current sees the drive's own dynamics (a backlash's contacts ringing the screw) that no variant
-#: of the kernel follows sample by sample, and, whitened by its noise, that misfit bent their fits (an
-#: independent backlash's lost motion 21 % off, a straightness lost; bench_diagnose, seed 23).
+#: the positions, with a given model: the force they put on the axis is what the current measures. The candidates
+#: are told apart, and the plant refitted, by the positions alone: the current sees the drive's own dynamics (a
+#: backlash's contacts ringing the screw) that no variant of the kernel follows sample by sample, and, whitened by
+#: its noise, that misfit bent the fits it entered (as an output of every candidate's fit, an independent
+#: backlash's lost motion came out 21 % off and a straightness was lost; in the plant's refit beside a friction,
+#: the positions' misfit it left was named as a gain mismatch or a scale error: bench_diagnose, seeds 23 and 31).
 CURRENT_FITS = ("coulomb_friction",)
 _FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
 _WHITE_SAMPLES = 200  # fewer samples than this: the noise from the second differences alone (see LINE_RATIO)
@@ -1007,8 +1009,10 @@ class _Problem:
     def use_currents(self, on):
         """Take the measured currents (of :attr:`current_noise`) as outputs beside the positions, or not: the base
         linearised again for them."""
-        self._outputs(self.current_noise if on else ())
-        self._linearise(self.base)
+        currents = list(self.current_noise) if on else []
+        if currents != self.currents:
+            self._outputs(currents)
+            self._linearise(self.base)
 
     # predictions at the trace's samples
     def predict(self, models):
@@ -2206,15 +2210,12 @@ def _diagnose(trace, model, identified, max_effects, say):
             break
         best, ambiguities = _choose(problem, cands, both_ways)
         gap = (trace.actual - problem.fitted())[scored]  # what the base leaves, per axis [mm]
-        # a friction's force, and the plant's mass beside it, is what a measured current sees directly: fitted with
-        # the current as a second output (:data:`CURRENT_FITS`); the candidates are told apart by the positions alone
+        # a friction's force is what a measured current sees directly: fitted with the current as a second output
+        # (:data:`CURRENT_FITS`); the candidates are told apart, and the plant refitted, by the positions alone
         current = best.fit.name in CURRENT_FITS and best.fit.axis in problem.current_noise
         try:
-            if current:
-                problem.use_currents(True)
-                best.settled = _settle(problem, base, best)
-            elif best.settled is None:
-                best.settled = _settle(problem, base, best)
+            if best.settled is None or current:
+                best.settled = _settle(problem, base, best, current)
             else:
                 problem.set_base(best.settled[0])
             warnings += best.settled[1]
@@ -2222,9 +2223,6 @@ def _diagnose(trace, model, identified, max_effects, say):
             warnings.append(f"{best.fit.label}: not named, the refit with it in place failed ({exc})")
             problem.set_base(base)
             break
-        finally:
-            if current:
-                problem.use_currents(False)
         step = _step(problem, best.fit.label, best.fit, best.uncertainty, best.delta_bic)
         if not step.rms_um < steps[-1].rms_um:  # an effect that does not close any of the gap is no explanation
             warnings.append(f"{best.fit.label}: not named, " + (
@@ -2395,17 +2393,24 @@ def _currents(trace, model, reference, force):
     return {a: _on_trace(trace, reference.t, run[:, [names.index(a)]])[:, 0] for a in trace.current}
 
 
-def _settle(problem, base, best):
+def _settle(problem, base, best, current=False):
     """Make `base` with `best`'s effect the problem's base: nominal parameters refitted with it in place, then the
-    effect refitted around them, then the nominal parameters again. Returns ``(the new base, warnings it brings)``."""
+    effect refitted around them (with `current`, the measured currents its second output), then the nominal
+    parameters again. Returns ``(the new base, warnings it brings)``."""
     problem.set_base(_with_effect(base, best.fit), refit=_REFIT_STEPS)
     problem.set_base(Model(problem.base.machine, base.effects))
-    best.x = np.array([best.fit[name] for name in best.free])
-    _refine(problem, best, problem.base)
-    # how far the fit moved with the nominal parameters refitted around it: how much it hangs on a plant known
-    # only to its prior, model error the residual of either fit cannot show
-    best.uncertainty = {name: float(np.hypot(e, best.fit[name] - x))
-                        for (name, e), x in zip(best.uncertainty.items(), best.x)}
+    problem.use_currents(current)
+    try:
+        best.x = np.array([best.fit[name] for name in best.free])
+        _refine(problem, best, problem.base)
+        # how far the fit moved with the nominal parameters refitted around it: how much it hangs on a plant known
+        # only to its prior, model error the residual of either fit cannot show
+        moved = {name: best.fit[name] - x for name, x in zip(best.free, best.x)}
+        if best.fit.name == "coulomb_friction":
+            _with_stribeck(problem, best, problem.base)
+    finally:
+        problem.use_currents(False)
+    best.uncertainty = {name: float(np.hypot(e, moved.get(name, 0.0))) for name, e in best.uncertainty.items()}
     problem.set_base(_with_effect(problem.base, best.fit), refit=_REFIT_STEPS)
     said = []
     if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
@@ -2415,6 +2420,36 @@ def _settle(problem, base, best):
                     "measurement's zero offset; without an integrator in the velocity loop the two "
                     "cannot be told apart")
     return problem.base, said
+
+
+def _with_stribeck(problem, cand, model):
+    """`cand`, a Coulomb friction fitted on `model`, fitted again with a Stribeck part where the trace asks for one.
+
+    A friction that breaks away above its sliding level (``stribeck_N``,
+    decaying over ``stribeck_velocity_mm_s``) is fitted by a Coulomb level
+    alone as the level between the two: an independent LuGre friction of
+    120 N sliding and 1.1–1.5 times that at rest came out at 142–149 N. The
+    Stribeck part's two parameters, started from a grid of shares and
+    speeds, are kept when they earn their place (a ΔBIC above
+    :data:`SIGNIFICANT` over the Coulomb level alone, counted with the
+    same autocorrelation time); `cand` then takes that fit (in place).
+    """
+    if "stribeck_N" in cand.free:  # fitted with it already (settled once more: with the current)
+        return
+    force = cand.fit["force_N"]
+    grid = [{"force_N": force * (1.0 - share), "stribeck_N": force * share, "stribeck_velocity_mm_s": v}
+            for share in (0.1, 0.3) for v in (0.5, 2.0, 8.0)]
+    trial = _Candidate(cand.fit, cand.free + ("stribeck_N", "stribeck_velocity_mm_s"), grid)
+    if not _start(problem, [trial], model, []):
+        return
+    try:
+        _refine(problem, trial, model)
+    except _FIT_FAILURES:
+        return
+    if delta_bic(cand.cost, trial.cost, problem.n, 2, cand.tau) > SIGNIFICANT:
+        _score(problem, trial, trial.residual, cand.tau)
+        for name in ("free", "x", "residual", "cost", "fit", "uncertainty", "delta_bic", "tau"):
+            setattr(cand, name, getattr(trial, name))
 
 
 def _profiled(problem, base, cands, warnings, say):
