@@ -153,6 +153,7 @@ _CURRENT_WORSE = 1.5
 #: backlash's lost motion came out 21 % off and a straightness was lost; in the plant's refit beside a friction,
 #: the positions' misfit it left was named as a gain mismatch or a scale error: bench_diagnose, seeds 23 and 31).
 CURRENT_FITS = ("coulomb_friction",)
+_CURRENT_SCALE = (0.0, 100.0)  # a measured current more than the first, less than the second times the model's is fitted
 _FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
 _WHITE_SAMPLES = 200  # fewer samples than this: the noise from the second differences alone (see LINE_RATIO)
 _CYCLE_FALSE_ALARM = 1e-3  # share of white-noise standstill runs :func:`standstill_cycles` may take for a limit cycle
@@ -2174,6 +2175,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                     f"differences) or to refit the nominal parameters, which then fit them by construction; at least "
                     f"{_FEWEST_SAMPLES} are needed. No effect is named")
     warnings += lost
+    disputed = set()  # axes whose measured current did not bear out the friction named on them (said)
     for round_ in range(0 if lost else max_effects):
         base = problem.base
         rss0 = float(problem.base_residual @ problem.base_residual)
@@ -2214,10 +2216,20 @@ def _diagnose(trace, model, identified, max_effects, say):
         # (:data:`CURRENT_FITS`); the candidates are told apart, and the plant refitted, by the positions alone
         current = best.fit.name in CURRENT_FITS and best.fit.axis in problem.current_noise
         try:
-            if best.settled is None or current:
+            if current:
+                alone = copy.copy(best)
                 best.settled = _settle(problem, base, best, current)
-            else:
-                problem.set_base(best.settled[0])
+                if not best.delta_bic > SIGNIFICANT:  # the current and the positions disagree about it
+                    warnings.append(f"{best.fit.label}: fitted from the positions alone; with the measured current as "
+                                    f"well its fit is not significant (ΔBIC {best.delta_bic:.3g}): the current does "
+                                    "not bear it out (a friction at standstill the model does not follow?)")
+                    best, current = alone, False
+                    disputed.add(best.fit.axis)
+            if not current:
+                if best.settled is None:
+                    best.settled = _settle(problem, base, best)
+                else:
+                    problem.set_base(best.settled[0])
             warnings += best.settled[1]
         except _FIT_FAILURES as exc:
             warnings.append(f"{best.fit.label}: not named, the refit with it in place failed ({exc})")
@@ -2285,7 +2297,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                  "encoder counts: no simulation matches its phase sample by sample, a named effect closes little of it"
                  for i, c in cycles.items()]
     currents = [nominal_current, _currents(trace, problem.base, reference, force)]
-    for a in () if identified else trace.current:  # does the current agree with the plant the fit moved to?
+    for a in [a for a in problem.current_noise if a not in disputed]:  # does the current agree with the refit plant?
         was, now = (float(np.sqrt(np.mean((trace.current[a] - c[a])[scored] ** 2))) for c in currents)
         if now > _CURRENT_WORSE * was and now - was > 0.01 * float(np.std(trace.current[a][scored])):
             warnings.append(f"{a}: the refitted model's current is further from the measured one than the nominal "
@@ -2367,19 +2379,30 @@ def _size_undetermined(cand, share):
 
 def _current_noise(trace, simulated, scored, warnings):
     """The noise level of each measured current the fit may take as an output [A], by axis (:func:`noise_level` of
-    the nominal model's misfit, `simulated` its currents); a current the nominal model does not follow at all (its
-    misfit wider than the current's own spread: a current in other units, of another sign, or not the command) is
-    left out, said in `warnings`."""
+    the nominal model's misfit, `simulated` its currents).
+
+    A current the nominal model does not follow is left out, said in
+    `warnings`: its misfit wider than its own spread, or its scale against
+    the simulated current (the least-squares gain through zero) outside
+    :data:`_CURRENT_SCALE`: negative (the other sign), or a hundred times
+    or more (a current logged in mA: one whose mean is near zero has a
+    misfit just under its spread, 134.38 against 134.39 A, and a gain of
+    2,600). A friction the model lacks raises that gain too, by the
+    friction's share of the force (an independent square path's: 2.5 and
+    4.2), so the bound is wide.
+    """
     out = {}
     for a, y in simulated.items():
-        misfit = (trace.current[a] - y)[scored]
-        rms, spread = float(np.sqrt(np.mean(misfit**2))), float(np.std(trace.current[a][scored]))
-        if not rms < spread:
-            warnings.append(f"{a}_current: not fitted, the nominal model's current is further from it ({rms:.3g} A "
-                            f"RMS) than it spreads ({spread:.3g} A): check its unit, its sign and that it is the "
-                            "current command (a force constant in N/A)")
+        measured = trace.current[a][scored]
+        misfit = measured - y[scored]
+        rms, spread = float(np.sqrt(np.mean(misfit**2))), float(np.std(measured))
+        gain = float(measured @ y[scored]) / max(float(y[scored] @ y[scored]), 1e-300)
+        if not (rms < spread and _CURRENT_SCALE[0] < gain < _CURRENT_SCALE[1]):
+            warnings.append(f"{a}_current: not fitted, the nominal model does not follow it (its misfit {rms:.3g} A RMS "
+                            f"against a spread of {spread:.3g} A; it is {gain:.3g} times the simulated current): check "
+                            "its unit, its sign and that it is the current command (a force constant in N/A)")
             continue
-        out[a] = float(noise_level(misfit[:, None], trace.current[a][scored, None])[0])
+        out[a] = float(noise_level(misfit[:, None], measured[:, None])[0])
     return out
 
 
