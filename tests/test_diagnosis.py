@@ -1453,17 +1453,20 @@ def test_a_current_the_model_does_not_follow_is_not_fitted(machine, scale):
     assert [e.values() for e in result.effects] == [e.values() for e in alone.effects]
 
 
-def test_a_friction_the_measured_current_does_not_bear_out_is_fitted_from_the_positions(machine):
-    """Positions with a 60 N friction of X, currents of the same machine without it: the friction's fit with the
-    current as well is not significant (an outside probe's square path, where the current at standstill is what
-    its friction law holds, named a friction at ΔBIC −1.5): the friction is fitted from the positions alone, and
-    said; the rise of the current's misfit is not blamed on the plant."""
+@pytest.mark.parametrize("current_force, reason", [(0.0, "its fit is not significant"),
+                                                   (30.0, "it leaves the positions")])
+def test_a_friction_the_measured_current_does_not_bear_out_is_fitted_from_the_positions(machine, current_force, reason):
+    """Positions with a 60 N friction of X, currents of the same machine with none or 30 N: the friction's fit with the
+    current as well is not significant, or leaves the positions far from what they alone reach (an outside probe's
+    square paths, whose axes stand still holding a current its friction law at standstill sets: a friction named at
+    ΔBIC −1.5, a LuGre friction of 48.8 N fitted at 71.3 N leaving 3.8 µm where the positions alone left 0.92 µm).
+    The friction is fitted from the positions alone, and said; the current's misfit is not blamed on the plant."""
     rng = np.random.default_rng(0)
-    run, bare = (simulate(Model(machine, hidden), freeform(), contour=False)
-                 for hidden in ([Effect("coulomb_friction", "x", force_N=60.0)], []))
+    run, other = (simulate(Model(machine, [Effect("coulomb_friction", "x", force_N=force)]), freeform(), contour=False)
+                  for force in (60.0, current_force))
     keep = slice(None, None, 2)
     actual = run.tool_position[keep] + rng.normal(0.0, 2e-4, run.tool_position[keep].shape)
-    amps = bare.servo_response.current[keep]
+    amps = other.servo_response.current[keep]
     amps = amps + rng.normal(0.0, 0.02 * np.std(amps, axis=0), amps.shape)
     trace = Trace(run.trajectory.t[keep], run.trajectory.position[keep], actual, ("x", "y"),
                   current={a: amps[:, i] for i, a in enumerate("xy")})
@@ -1471,8 +1474,8 @@ def test_a_friction_the_measured_current_does_not_bear_out_is_fitted_from_the_po
     assert [e.label for e in result.effects] == ["coulomb_friction.x"], result.report()
     assert result.steps[2].delta_bic > 10 and abs(result.effects[0]["force_N"] - 60.0) <= 2 * result.steps[2].uncertainty["force_N"]
     said = [w for w in result.warnings if "current" in w]
-    assert len(said) == 1 and said[0].startswith("coulomb_friction.x: fitted from the positions alone; with the measured "
-                                                 "current as well its fit is not significant"), said
+    assert len(said) == 1 and said[0].startswith("coulomb_friction.x: fitted from the positions alone"), said
+    assert reason in said[0], said
 
 
 @pytest.mark.parametrize("stribeck_N", [30.0, 0.0])
