@@ -496,14 +496,13 @@ def make_case(family, effect_name, seed, folder, path=None, currents=False):
     rows = np.arange(0, t.size, every)
     jitter = rng.uniform(-0.02, 0.02, rows.size)
     noise_um = rng.uniform(0.05, 0.3)
-    measured = {}
+    measured, commands = {}, {}  # the logged positions [mm] and current commands [A] of the runs with, without it
     for name, hidden in (("with", effect), ("without", None)):
         if name == "without" and effect is None:
             measured[name] = measured["with"]
             continue
-        tool, command = _simulate(axes, machine, reference, velocity, hidden, family, period, every, jitter)
+        tool, commands[name] = _simulate(axes, machine, reference, velocity, hidden, family, period, every, jitter)
         measured[name] = _geometry(tool, t[rows], hidden)
-        measured.setdefault("current", command)  # the trace's: the run with the effect
     added = measured["with"] - measured["without"]
     added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
     signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
@@ -513,7 +512,7 @@ def make_case(family, effect_name, seed, folder, path=None, currents=False):
     folder.mkdir(parents=True, exist_ok=True)
     csv, toml = folder / f"case_{seed}.csv", folder / f"case_{seed}.toml"
     _write_csv(csv, t[rows], reference[rows], actual, axes, f"independent truth, family {family}, path {path}, seed {seed}",
-               measured["current"] if currents else None)
+               commands["with"] if currents else None)
     _write_data_sheet(toml, machine, period, rng, f"independent truth {family} seed {seed} (data sheet)", effect)
     truth = None if effect is None else {k: effect[k] for k in ("name", "axis", "parameters", "options")}
     notes = dict(period_s=period, log_s=every * period, noise_um=noise_um, vff=vff, computation_delay=computation_delay,
