@@ -1183,6 +1183,11 @@ class _Problem:
         d = self.trace.actual.shape[1]
         return self.base_prediction[:, :d] + self.unwhiten(self.columns @ self.coefficients(r))
 
+    def left(self):
+        """What the base (its nominal refit and instrument zero included) leaves of the measured positions on the
+        scored samples [mm], shape (n, d)."""
+        return (self.trace.actual - self.fitted())[self.scored]
+
     def unwhiten(self, r):
         """The positions' part of a whitened vector (its first N·(d + c) entries) [mm], shape (N, d); 0 on samples
         not scored."""
@@ -2214,7 +2219,7 @@ def _diagnose(trace, model, identified, max_effects, say):
             say("nothing significant left: stopping")
             break
         best, ambiguities = _choose(problem, cands, both_ways)
-        gap = (trace.actual - problem.fitted())[scored]  # what the base leaves, per axis [mm]
+        gap = problem.left()  # what the base leaves, per axis [mm]
         # a friction's force is what a measured current sees directly: fitted with the current as a second output
         # (:data:`CURRENT_FITS`); the candidates are told apart, and the plant refitted, by the positions alone
         current = best.fit.name in CURRENT_FITS and best.fit.axis in problem.current_noise
@@ -2249,7 +2254,7 @@ def _diagnose(trace, model, identified, max_effects, say):
             break
         # the gap on the axes the effect acts on: another axis's misfit is none of its business
         on = [trace.axes.index(a) for a in _acts_on(best.fit)]
-        before_um, after_um = (_rms_um(r[:, on]) for r in (gap, (trace.actual - problem.fitted())[scored]))
+        before_um, after_um = (_rms_um(r[:, on]) for r in (gap, problem.left()))
         floor = float(np.linalg.norm(noise[on])) * 1e3
         share = (before_um**2 - after_um**2) / max(before_um**2 - floor**2, 1e-300)
         if share < GAP_SHARE:  # significant, but a sliver of the gap: model error the effect bends to, not the effect
@@ -2479,7 +2484,7 @@ def _revisited(problem, named, disputed, moves, warnings):
     revisited = []
     for step in named:
         base, label = problem.base, step.effect.label
-        was = _rms_um((problem.trace.actual - problem.fitted())[problem.scored])
+        was = _rms_um(problem.left())
         current = (step.effect.name in CURRENT_FITS and step.effect.axis in problem.current_noise
                    and step.effect.axis not in disputed)
         cand = _Candidate(step.effect, tuple(step.uncertainty), [], fit=step.effect, uncertainty=dict(step.uncertainty),
@@ -2489,11 +2494,8 @@ def _revisited(problem, named, disputed, moves, warnings):
                               current)
         except _FIT_FAILURES as exc:
             warnings.append(f"{label}: kept as named, its refit with the other effects named in place failed ({exc})")
-            problem.set_base(base)
-            revisited.append(step)
-            continue
-        now = _rms_um((problem.trace.actual - problem.fitted())[problem.scored])
-        if not now <= (_CURRENT_TOLERANCE if current else 1.0) * was:
+            said = None
+        if said is None or not _rms_um(problem.left()) <= (_CURRENT_TOLERANCE if current else 1.0) * was:
             problem.set_base(base)
             revisited.append(step)
             continue
@@ -2522,12 +2524,12 @@ def _settled_with_current(problem, base, best):
     if not best.delta_bic > SIGNIFICANT:
         why = f"with the measured current as well its fit is not significant (ΔBIC {best.delta_bic:.3g})"
     else:
-        leaves = _rms_um((problem.trace.actual - problem.fitted())[problem.scored])
+        leaves = _rms_um(problem.left())
         if alone.settled is None:
             alone.settled = _settle(problem, base, alone)
         else:
             problem.set_base(alone.settled[0])
-        alone_leaves = _rms_um((problem.trace.actual - problem.fitted())[problem.scored])
+        alone_leaves = _rms_um(problem.left())
         if leaves <= _CURRENT_TOLERANCE * alone_leaves:
             problem.set_base(best.settled[0])
             return best, None
@@ -2629,7 +2631,7 @@ def _constant_force(problem, effect):
 
 def _step(problem, label, effect, uncertainty, delta_bic):
     """The step after `problem`'s base was set: residual RMS and max on the scored samples."""
-    r = (problem.trace.actual - problem.fitted())[problem.scored]
+    r = problem.left()
     return Step(label, effect, uncertainty, _rms_um(r), _max_um(r), float(delta_bic))
 
 
