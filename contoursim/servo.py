@@ -67,6 +67,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
+from ._numba import njit
 from .exceptions import UnstableLoopError
 
 __all__ = [
@@ -959,17 +960,62 @@ def _damping_ratio(poles, dt, below=np.inf):
     return float(np.min(-poles.real / np.abs(poles)))
 
 
-def _loop_response(loop, omega):
-    """Complex frequency response of a SISO state-space `loop` at `omega` [rad/s].
+def _loop_response(loop):
+    """The complex frequency response of a SISO state-space `loop`: a function of ω [rad/s].
 
     Evaluated as ``C (sI - A)^-1 B + D`` with ``s = jω`` (or ``z = e^{jω dt}``),
     which stays accurate where the transfer-function polynomials of a sampled
-    loop with poles near z = 1 lose all their digits.
+    loop with poles near z = 1 lose all their digits; on A's Hessenberg form
+    ``A = Q H Qᵀ``, reduced once, each frequency costs O(n²) instead of a
+    dense solve's O(n³) (Laub, "Efficient multivariable frequency response
+    computations", IEEE TAC 26, 1981).
     """
-    s = np.exp(1j * omega * loop.dt) if loop.dt else 1j * omega
-    n = loop.nstates
-    resolvent = np.linalg.solve(s[:, None, None] * np.eye(n) - loop.A, np.broadcast_to(loop.B, (s.size, n, 1)))
-    return (loop.C @ resolvent)[:, 0, 0] + loop.D[0, 0]
+    from scipy.linalg import hessenberg, matrix_balance  # slow to import; only the analysis needs it
+
+    A, T = matrix_balance(np.asarray(loop.A, float), permute=False)  # A = T Ab T⁻¹, T diagonal (powers of 2)
+    H, Q = hessenberg(A, calc_q=True)
+    b, c = Q.T @ (np.asarray(loop.B, float)[:, 0] / np.diag(T)), (np.asarray(loop.C, float)[0] * np.diag(T)) @ Q
+    d, dt = float(np.asarray(loop.D)[0, 0]), loop.dt
+
+    def response(omega):
+        omega = np.asarray(omega, float)
+        return _hessenberg_gain(H, b, c, np.exp(1j * omega * dt) if dt else 1j * omega) + d
+
+    return response
+
+
+@njit(cache=True)
+def _hessenberg_gain(H, b, c, s):
+    """``c (s_k I - H)^-1 b`` for each `s_k`, H upper Hessenberg: Gaussian elimination with partial pivoting,
+    where a column has one entry below the diagonal to eliminate. A pole at `s_k`: inf or nan there."""
+    n = H.shape[0]
+    out = np.empty(s.size, np.complex128)
+    M = np.empty((n, n), np.complex128)
+    x = np.empty(n, np.complex128)
+    for f in range(s.size):
+        for i in range(n):
+            for j in range(n):
+                M[i, j] = -H[i, j]
+            M[i, i] += s[f]
+            x[i] = b[i]
+        for k in range(n - 1):
+            if abs(M[k + 1, k]) > abs(M[k, k]):  # rows k and k + 1 are zero left of column k: swap from there
+                for j in range(k, n):
+                    M[k, j], M[k + 1, j] = M[k + 1, j], M[k, j]
+                x[k], x[k + 1] = x[k + 1], x[k]
+            if M[k + 1, k] != 0:
+                m = M[k + 1, k] / M[k, k]
+                for j in range(k + 1, n):
+                    M[k + 1, j] -= m * M[k, j]
+                x[k + 1] -= m * x[k]
+        total = 0j
+        for i in range(n - 1, -1, -1):
+            for j in range(i + 1, n):
+                x[i] -= M[i, j] * x[j]
+            x[i] /= M[i, i]
+            total += c[i] * x[i]
+        out[f] = total
+    return out
 
 
 def _frequency_grid(loop):
@@ -981,14 +1027,15 @@ def _frequency_grid(loop):
     return np.logspace(-1, np.log10(top), int(100 * (np.log10(top) + 1)) + 1)
 
 
-def _crossings(loop, omega, f):
-    """Frequencies [rad/s] where ``f(L(jω))`` changes sign on the grid `omega`, refined on the exact response."""
+def _crossings(response, omega, grid, f):
+    """Frequencies [rad/s] where ``f(L(jω))`` changes sign on the grid `omega` (`grid`: L there), refined on the
+    exact response (:func:`_loop_response`)."""
     from scipy.optimize import brentq  # slow to import; only the analysis needs it
 
     def g(w):
-        return f(_loop_response(loop, np.array([w])))[0]
+        return f(response(np.array([w])))[0]
 
-    values = f(_loop_response(loop, omega))
+    values = f(grid)
     i = np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)
     return np.array([brentq(g, omega[j], omega[j + 1], xtol=1e-12 * omega[j], rtol=1e-14) for j in i])
 
@@ -999,21 +1046,22 @@ def _loop_margins(loop, below=np.inf):
     The phase margin is the smallest at the gain crossovers below `below` [rad/s].
     """
     omega = _frequency_grid(loop)
-    response = _loop_response(loop, omega)
+    at = _loop_response(loop)
+    response = at(omega)
     # gain crossovers: |L| = 1; phase crossovers: L crosses the negative real axis
     with np.errstate(divide="ignore"):  # |L| = 0 (a loop gain below 1e-308): -inf, no crossing there
-        w_gain = _crossings(loop, omega, lambda L: np.log(np.abs(L)))
+        w_gain = _crossings(at, omega, response, lambda L: np.log(np.abs(L)))
     w_gain = w_gain[w_gain < below]
-    w_phase = _crossings(loop, omega, lambda L: L.imag)
-    w_phase = w_phase[_loop_response(loop, w_phase).real < 0] if w_phase.size else w_phase
+    w_phase = _crossings(at, omega, response, lambda L: L.imag)
+    w_phase = w_phase[at(w_phase).real < 0] if w_phase.size else w_phase
     gm, pm, wpc, wgc = np.inf, np.inf, np.nan, np.nan
     if w_phase.size:
         with np.errstate(divide="ignore", over="ignore"):  # a loop gain below 1e-308 there: an infinite margin
-            gains = 1.0 / np.abs(_loop_response(loop, w_phase))
+            gains = 1.0 / np.abs(at(w_phase))
         best = np.argmin(np.abs(np.log(gains)))  # the gain margin closest to 1
         gm, wpc = gains[best], w_phase[best]
     if w_gain.size:
-        phases = np.remainder(np.angle(_loop_response(loop, w_gain), deg=True), 360.0) - 180.0
+        phases = np.remainder(np.angle(at(w_gain), deg=True), 360.0) - 180.0
         best = np.argmin(np.abs(phases))  # the smallest phase margin
         pm, wgc = phases[best], w_gain[best]
     return dict(
