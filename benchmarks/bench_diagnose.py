@@ -40,9 +40,16 @@ uncertainty) where the hidden effect was named, the median seconds per
 30 s of trace; then per effect: named right / cases, the hidden effect among those named, its
 median parameter error and 2σ coverage. Progress goes to stderr.
 
+``--effects a+b`` hides effects a and b together in each of its cases (an
+effect twice, ``coulomb_friction+coulomb_friction``: on both axes), as a
+machine has more than one thing wrong: named right is then both and nothing
+else, "hidden effect among those named" both, and each one named is graded
+on its main parameter. One effect a case by default.
+
 Run:  python benchmarks/bench_diagnose.py [--cases 22] [--seed 1] [--families own,rigid,two_mass]
                                          [--modes model,current,identified]
                                          [--effects none,squareness,straightness]
+                                         [--effects coulomb_friction+coulomb_friction,backlash+squareness]
       python benchmarks/bench_diagnose.py --fast      (one null case and one effect per family and mode)
 """
 
@@ -102,13 +109,13 @@ def hidden_effect(name, axes, travel, rng):
     raise ValueError(name)
 
 
-def cases(n, seed, effects=(None,) + CATALOGUE):
-    """`n` cases cycling through `effects` (``None``: a null case), ``(effect name, seed)``.
+def cases(n, seed, effects=((),) + tuple((name,) for name in CATALOGUE)):
+    """`n` cases cycling through `effects` (each the names hidden together; empty: a null case), ``(names, seed)``.
 
-    By default one in eleven is a null case, the others cycle through the catalogue.
+    By default one in eleven is a null case, the others cycle through the catalogue one effect a case.
     """
     rng = np.random.default_rng(seed)
-    return [(effects[i % len(effects)], int(rng.integers(1 << 30))) for i in range(n)]
+    return [(tuple(effects[i % len(effects)]), int(rng.integers(1 << 30))) for i in range(n)]
 
 
 def travel(reference, axes, seed):
@@ -123,8 +130,9 @@ def travel(reference, axes, seed):
     return out
 
 
-def own_case(mill, name, seed):
-    """A case of the own family: ``(trace, nominal model, truth dict or None, effect's RMS [µm])``."""
+def own_case(mill, names, seed):
+    """A case of the own family: ``(path, trace, nominal model, truths, the effects' RMS [µm])``, one truth dict for
+    each of the effects `names` (an effect named twice: on two axes)."""
     rng = np.random.default_rng(seed)
     path_name = PATHS[int(rng.integers(len(PATHS)))]
     path, settings = load_path_file(path_name)
@@ -132,10 +140,15 @@ def own_case(mill, name, seed):
     reference = sample(path, settings.plan(path), SERVO_PERIOD)
     machine = Machine({a: replace(mill.axes[a], kp=mill.axes["x"].kp) for a in axes}, SERVO_PERIOD,
                       axis_travel=travel(reference, axes, seed))
-    truth = () if name is None else (hidden_effect(name, axes, machine.travel, rng),)
-    if truth and truth[0].name == "backlash":  # where its axis's loop reads is the machine's, known to the diagnosis
-        a = truth[0].axis
-        machine = replace(machine, axes={**machine.axes, a: replace(machine.axes[a], position_feedback=truth[0].options["feedback"])})
+    truth = []
+    for name in names:
+        effect = hidden_effect(name, axes, machine.travel, rng)
+        while any((e.name, e.axis) == (effect.name, effect.axis) for e in truth):  # named twice: another axis
+            effect = hidden_effect(name, axes, machine.travel, rng)
+        truth.append(effect)
+    for effect in (e for e in truth if e.name == "backlash"):  # where its axis's loop reads is the machine's, known
+        a = effect.axis
+        machine = replace(machine, axes={**machine.axes, a: replace(machine.axes[a], position_feedback=effect.options["feedback"])})
     noise = rng.uniform(0.05, 0.5)
     trace = synthetic_trace(Model(machine, truth), reference, mismatch=0.03, noise_um=noise, quantum_um=0.05,
                             every=2, seed=seed)
@@ -144,16 +157,15 @@ def own_case(mill, name, seed):
     added = clean[0] - clean[1]
     added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
     signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
-    described = None if not truth else dict(name=truth[0].name, axis=truth[0].axis, parameters=truth[0].values(),
-                                            options=dict(truth[0].options))
+    described = tuple(dict(name=e.name, axis=e.axis, parameters=e.values(), options=dict(e.options)) for e in truth)
     return path_name, trace, Model(machine), described, signal
 
 
-def independent_case(family, name, seed, folder, currents=False):
-    """A case of an independent family: ``(path, trace, data sheet's file, truth dict or None, effect's RMS [µm])``;
+def independent_case(family, names, seed, folder, currents=False):
+    """A case of an independent family: ``(path, trace, data sheet's file, truths, the effects' RMS [µm])``;
     with `currents` the trace carries the drives' current commands."""
-    case = independent_truth.make_case(family, name, seed, folder, currents=currents)
-    return case.path, read_trace(case.csv), case.machine_file, case.truth, case.signal_um
+    case = independent_truth.make_case(family, names, seed, folder, currents=currents)
+    return case.path, read_trace(case.csv), case.machine_file, case.truths, case.signal_um
 
 
 def truth_value(truth, named):
@@ -165,13 +177,18 @@ def truth_value(truth, named):
     return value
 
 
-def equivalent(truth, report, axes):
-    """The truth as the report can know it: without a nominal model, on two axes, a gain mismatch only as a ratio.
+def equivalent(truths, report, axes):
+    """The truths as the report can know them: without a nominal model, on two axes, a gain mismatch only as a ratio.
 
     With one position gain identified for both axes, kp_ratio r on one axis and 1/r on the other are the
     same machine; the report's choice of axis is then graded in its own terms.
     """
-    if truth is None or truth["name"] != "gain_mismatch" or not report["nominal_identified"] or len(axes) != 2:
+    return tuple(_equivalent(truth, report, axes) for truth in truths)
+
+
+def _equivalent(truth, report, axes):
+    """:func:`equivalent` of one truth."""
+    if truth["name"] != "gain_mismatch" or not report["nominal_identified"] or len(axes) != 2:
         return truth
     other = next(a for a in axes if a != truth["axis"])
     if not any(e["name"] == "gain_mismatch" and e["axis"] == other for e in report["effects"]):
@@ -179,31 +196,34 @@ def equivalent(truth, report, axes):
     return dict(truth, axis=other, parameters=dict(truth["parameters"], kp_ratio=1.0 / truth["parameters"]["kp_ratio"]))
 
 
-def grade(truth, report, named):
-    """What one diagnosis got right: exact set, false positives, the main parameter's error and 2σ coverage."""
+def grade(truths, report, named):
+    """What one diagnosis got right: exact set, false positives, all hidden effects among those named, and of each
+    hidden effect named its main parameter's error and 2σ coverage (lists, in the order of `truths`)."""
     labels = [(e["name"], e["axis"]) for e in report["effects"]]
-    hidden = [] if truth is None else [(truth["name"], truth["axis"])]
-    graded = dict(right=sorted(labels) == hidden, false_positive=any(label not in hidden for label in labels),
-                  found=bool(hidden) and hidden[0] in labels)
-    if graded["found"]:
-        k = labels.index(hidden[0])
-        key = MAIN[truth["name"]]
-        value = truth_value(truth, named[k])
-        sigma = report["effects"][k].get("uncertainty", {}).get(key)
-        graded["parameter_error"] = abs(named[k][key] - value) / abs(value)
-        graded["covered"] = sigma is not None and abs(named[k][key] - value) <= 2 * sigma
+    hidden = [(truth["name"], truth["axis"]) for truth in truths]
+    graded = dict(right=sorted(labels) == sorted(hidden), false_positive=any(label not in hidden for label in labels),
+                  found=bool(hidden) and all(h in labels for h in hidden), parameter_errors=[], covered=[])
+    for truth, label in zip(truths, hidden):
+        if label in labels:
+            k = labels.index(label)
+            key = MAIN[truth["name"]]
+            value = truth_value(truth, named[k])
+            sigma = report["effects"][k].get("uncertainty", {}).get(key)
+            graded["parameter_errors"].append(abs(named[k][key] - value) / abs(value))
+            graded["covered"].append(sigma is not None and abs(named[k][key] - value) <= 2 * sigma)
     return graded
 
 
-def run(family, mode, name, seed, mill, folder):
+def run(family, mode, names, seed, mill, folder):
     """Generate one case and diagnose it blind in `mode` ("model", "current" or "identified"); a dict of what
     happened."""
     if family == "own":
-        path, trace, model, truth, signal = own_case(mill, name, seed)
+        path, trace, model, truths, signal = own_case(mill, names, seed)
     else:
-        path, trace, model, truth, signal = independent_case(family, name, seed, folder, currents=mode == "current")
-    case = dict(family=family, mode=mode, truth=truth, path=path, signal=signal, duration=float(trace.t[-1] - trace.t[0]),
-                error=None, named=(), right=False, false_positive=False, found=False, floor=np.inf)
+        path, trace, model, truths, signal = independent_case(family, names, seed, folder, currents=mode == "current")
+    case = dict(family=family, mode=mode, truths=truths, path=path, signal=signal, duration=float(trace.t[-1] - trace.t[0]),
+                error=None, named=(), right=False, false_positive=False, found=False, parameter_errors=[], covered=[],
+                floor=np.inf)
     start = time.perf_counter()
     try:
         given = mode != "identified"
@@ -214,7 +234,7 @@ def run(family, mode, name, seed, mill, folder):
     except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is a result to count, not a reason to stop
         case["error"] = f"{type(exc).__name__}: {exc}"
     else:
-        case.update(grade(equivalent(truth, report, trace.axes), report, result.effects), named=result.effects, before=report["residual_rms_before_um"],
+        case.update(grade(equivalent(truths, report, trace.axes), report, result.effects), named=result.effects, before=report["residual_rms_before_um"],
                     after=report["residual_rms_after_um"], floor=float(np.linalg.norm(result.noise_um)))
     case["seconds"] = time.perf_counter() - start
     return case
@@ -222,12 +242,12 @@ def run(family, mode, name, seed, mill, folder):
 
 def summary(results):
     """The ``name: value`` lines of one family and mode."""
-    hidden = [c for c in results if c["truth"] is not None]
-    nulls = [c for c in results if c["truth"] is None]
+    hidden = [c for c in results if c["truths"]]
+    nulls = [c for c in results if not c["truths"]]
     visible = [c for c in hidden if c["signal"] >= c["floor"] and c["error"] is None]
-    servo = [c for c in hidden if effect_kind(c["truth"]["name"]).stage != "geometry"]
-    errors = [c["parameter_error"] for c in hidden if "parameter_error" in c]
-    covered = [c["covered"] for c in hidden if "covered" in c]
+    servo = [c for c in hidden if all(effect_kind(t["name"]).stage != "geometry" for t in c["truths"])]
+    errors = [e for c in hidden for e in c["parameter_errors"]]
+    covered = [x for c in hidden for x in c["covered"]]
     per_30 = [30.0 * c["seconds"] / c["duration"] for c in results]
     fraction = lambda xs: f"{np.mean(xs):.3f} ({sum(xs)} of {len(xs)})" if xs else "n/a"  # noqa: E731
     return {
@@ -254,15 +274,16 @@ def main():
                         help="model: with the nominal model; current: with it, the trace carrying the drives' currents "
                              "(independent families); identified: without it")
     parser.add_argument("--effects", default=",".join(("none",) + CATALOGUE),
-                        help="the hidden effects cycled through, 'none' for a null case (default: none and the catalogue)")
+                        help="the hidden effects cycled through, 'none' for a null case, 'a+b' for effects a and b hidden "
+                             "together (an effect twice: on two axes) (default: none and the catalogue)")
     parser.add_argument("--fast", action="store_true", help="two cases per family (a null case and a backlash)")
     args = parser.parse_args()
     families, modes = args.families.split(","), args.modes.split(",")
-    effects = tuple(None if name == "none" else name for name in args.effects.split(","))
+    effects = tuple(() if entry == "none" else tuple(entry.split("+")) for entry in args.effects.split(","))
     strange = [m for m in modes if m not in ("model", "current", "identified")]
     if strange:
         parser.error(f"--modes: unknown mode {strange[0]!r}; the modes are: model, current, identified")
-    unknown = [name for name in effects if name is not None and name not in CATALOGUE]
+    unknown = [name for names in effects for name in names if name not in CATALOGUE]
     if unknown:
         parser.error(f"--effects: unknown effect {unknown[0]!r}; the effects are: none, {', '.join(CATALOGUE)}")
     mill = load_machine("demo_mill")
@@ -270,17 +291,17 @@ def main():
     results = {}
     with tempfile.TemporaryDirectory() as folder:
         for family in families:
-            for i, (name, seed) in enumerate(plan):
+            for i, (names, seed) in enumerate(plan):
                 for mode in modes:
                     if family == "own" and mode == "current":
                         continue  # the own family's traces log no current
-                    case = run(family, mode, name, seed, mill, Path(folder))
+                    case = run(family, mode, names, seed, mill, Path(folder))
                     results.setdefault((family, mode), []).append(case)
                     named = ", ".join(e.label for e in case["named"]) or "nothing"
                     what = case["error"] or (f"named {named}; RMS {case['before'] or np.nan:.3f} -> {case['after'] or np.nan:.3f} µm "
                                              f"(noise {case['floor']:.3f})")  # a report's null (not finite) as nan
                     print(f"[{family}/{mode} {i + 1}/{len(plan)}] {'ok ' if case['right'] else 'BAD'} {case['path']:<20} "
-                          f"hidden {case['truth']['name'] + '.' + case['truth']['axis'] if case['truth'] else 'none'}; "
+                          f"hidden {' + '.join(t['name'] + '.' + t['axis'] for t in case['truths']) or 'none'}; "
                           f"{what}; effect {case['signal']:.3f} µm RMS; {case['seconds']:.1f} s", file=sys.stderr, flush=True)
     columns = list(results)
     head = [f"{f}/{m}" for f, m in columns]
@@ -289,15 +310,16 @@ def main():
     lines = {key: summary(results[key]) for key in columns}
     for row in next(iter(lines.values())):
         print(f"{row:<{width}}" + "".join(f"{lines[key][row]:>24}" for key in columns))
-    print("\nper effect: named right / cases (hidden effect among those named) median parameter error, 2σ covered / found")
-    for name in dict.fromkeys(effects):
+    print("\nper effect: named right / cases (hidden effects all among those named) median parameter error, 2σ covered / "
+          "found")
+    for names in dict.fromkeys(effects):
         row = []
         for key in columns:
-            these = [c for c in results[key] if (c["truth"] or {}).get("name") == name]
-            errors = [c["parameter_error"] for c in these if "parameter_error" in c]
-            fit = f" {np.median(errors):.2f} {sum(c['covered'] for c in these if 'covered' in c)}/{len(errors)}" if errors else ""
+            these = [c for c in results[key] if tuple(t["name"] for t in c["truths"]) == names]
+            errors = [e for c in these for e in c["parameter_errors"]]
+            fit = f" {np.median(errors):.2f} {sum(x for c in these for x in c['covered'])}/{len(errors)}" if errors else ""
             row.append(f"{sum(c['right'] for c in these)}/{len(these)} ({sum(c['found'] for c in these)}){fit}" if these else "-")
-        print(f"{name or 'none':<{width}}" + "".join(f"{r:>24}" for r in row))
+        print(f"{'+'.join(names) or 'none':<{width}}" + "".join(f"{r:>24}" for r in row))
 
 
 if __name__ == "__main__":

@@ -57,7 +57,8 @@ coordinates: ``squareness`` (x read as ``x − α·y``: the angle between the
 positive axes exceeds 90° for α > 0), ``scale_error``, ``cyclic_error``
 (the screw's lead), ``straightness`` (a bow over the axis's whole travel
 of 400 mm, not over the test path; graded by its curvature) and
-``thermal_drift``.
+``thermal_drift``. A case may hide several at once (an effect named twice:
+on both axes), each acting as it would alone.
 
 Public: :func:`make_case` (one trace and its data sheet into a folder) and
 :data:`EFFECTS` (the hidden effects a case may carry).
@@ -249,9 +250,9 @@ def _reference(points, feed, accel, windows, dt, dwell=(0.1, 0.3)):
 class Case:
     """One generated trace: where it was written and what is hidden in it.
 
-    ``truth`` is ``None`` (no effect) or ``{"name", "axis", "parameters", "options"}`` in
-    contoursim's names and units; ``signal_um`` is the RMS the effect adds to the logged
-    positions (the same truth run with and without it, noise-free), its mean per axis (a
+    ``truths`` holds the hidden effects, each ``{"name", "axis", "parameters", "options"}`` in
+    contoursim's names and units (empty: none); ``signal_um`` is the RMS they add to the logged
+    positions (the same truth run with and without them, noise-free), its mean per axis (a
     constant shift, the instrument's zero) left out [µm].
     """
 
@@ -259,7 +260,7 @@ class Case:
     path: str
     csv: Path
     machine_file: Path
-    truth: dict
+    truths: tuple
     signal_um: float
     duration_s: float
     notes: dict = field(default_factory=dict)
@@ -295,7 +296,7 @@ def _commission(axis, family, period):
     for _ in range(12):
         ctrl = np.array([axis["kp"], axis["kv"], axis["ti"], axis["vff"], 50.0, axis["computation_delay"], axis["tau_v"],
                          float(axis["scale_feedback"]), axis["res_m"], axis["res_s"], 0.0])
-        table, tool, _, _ = _run_axis(step, np.zeros(t.size), _plant_vector(axis, None, family, ""), ctrl, period,
+        table, tool, _, _ = _run_axis(step, np.zeros(t.size), _plant_vector(axis, (), family, ""), ctrl, period,
                                    int(np.ceil(period / _SUBSTEP)))
         tail = np.max(np.abs(tool[t > t[-1] - 0.3] - 1e-5))
         earlier = np.max(np.abs(tool[(t >= 0.3) & (t < 0.6)] - 1e-5))
@@ -306,11 +307,12 @@ def _commission(axis, family, period):
     raise RuntimeError("the axis could not be tuned to a quiet step response")
 
 
-def _plant_vector(axis, effect, family, axis_name):
-    """The parameter vector of :func:`_rhs` for one true axis and the hidden effect."""
+def _plant_vector(axis, effects, family, axis_name):
+    """The parameter vector of :func:`_rhs` for one true axis and the hidden `effects`."""
+    mine = [e for e in effects if e["axis"] == axis_name]
     m = axis["mass"]
     m3 = 0.0
-    vib = effect if effect is not None and effect["name"] == "vibration" and effect["axis"] == axis_name else None
+    vib = next((e for e in mine if e["name"] == "vibration"), None)
     if vib is not None:
         m3 = vib["notes"]["tool_share"] * m
     m1 = axis["motor_share"] * m
@@ -328,7 +330,7 @@ def _plant_vector(axis, effect, family, axis_name):
         w3 = 2 * np.pi * vib["parameters"]["freq_hz"]
         p[_K3] = m3 * w3**2
         p[_C3] = 2 * vib["parameters"]["damping_ratio"] * m3 * w3
-    if effect is not None and effect["axis"] == axis_name:
+    for effect in mine:
         if effect["name"] == "backlash":
             p[_PLAY] = effect["parameters"]["lost_motion_um"] * 1e-6
         if effect["name"] == "coulomb_friction":
@@ -384,11 +386,17 @@ def _hidden(rng, name, axes, period):
     return effect
 
 
-def _geometry(q, t, effect):
-    """The instrument's reading [mm] of machine positions `q` (N, 2) [mm] at times `t` [s] with a geometric effect."""
+def _geometry(q, t, effects):
+    """The instrument's reading [mm] of machine positions `q` (N, 2) [mm] at times `t` [s] with the geometric ones of
+    `effects`."""
     q = q.copy()
-    if effect is None:
-        return q
+    for effect in effects:
+        q = _geometric(q, t, effect)
+    return q
+
+
+def _geometric(q, t, effect):
+    """`q` [mm] read with one effect (in place; unchanged by an effect that is not geometric)."""
     name, prm = effect["name"], effect["parameters"]
     i = "xy".index(effect["axis"][0])
     if name == "squareness":
@@ -406,7 +414,7 @@ def _geometry(q, t, effect):
     return q
 
 
-def _simulate(axes, machine, reference, velocity, effect, family, period, every, jitter):
+def _simulate(axes, machine, reference, velocity, effects, family, period, every, jitter):
     """Noise-free logged tool positions [mm] (rows every `every` servo samples, sampled late by `jitter` [periods]),
     and the drives' current commands at those servo samples [A], each shape (rows, axes)."""
     columns, currents = [], []
@@ -414,7 +422,7 @@ def _simulate(axes, machine, reference, velocity, effect, family, period, every,
         axis = machine[a]
         x, v = reference[:, i] * 1e-3, velocity[:, i] * 1e-3
         kp, fb_delay, scale = axis["kp"], 0.0, axis["scale_feedback"]
-        if effect is not None and effect["axis"] == a:
+        for effect in (e for e in effects if e["axis"] == a):
             prm = effect["parameters"]
             if effect["name"] == "gain_mismatch":
                 kp *= prm["kp_ratio"]
@@ -428,7 +436,7 @@ def _simulate(axes, machine, reference, velocity, effect, family, period, every,
         ctrl = np.array([kp, axis["kv"], axis["ti"], axis["vff"], 50.0, axis["computation_delay"], axis["tau_v"],
                          float(scale), axis["res_m"], axis["res_s"], fb_delay])
         substeps = int(np.ceil(period / _SUBSTEP))
-        _, tool, mid, command = _run_axis(x, v, _plant_vector(axis, effect, family, a), ctrl, period, substeps)
+        _, tool, mid, command = _run_axis(x, v, _plant_vector(axis, effects, family, a), ctrl, period, substeps)
         rows = np.arange(0, x.size, every)
         currents.append(command[rows])
         late = np.clip(jitter, 0.0, 0.5)  # sampled late by a fraction of the period: between the instant and mid-period
@@ -440,14 +448,15 @@ def _simulate(axes, machine, reference, velocity, effect, family, period, every,
     return np.column_stack(columns), np.column_stack(currents)
 
 
-def make_case(family, effect_name, seed, folder, path=None, currents=False):
-    """Generate one trace of `family` with the hidden effect `effect_name` (``None``: none) into `folder`.
+def make_case(family, effects, seed, folder, path=None, currents=False):
+    """Generate one trace of `family` with the hidden `effects` into `folder`.
 
     Parameters
     ----------
     family : {"rigid", "two_mass"}
-    effect_name : str or None
-        One of :data:`EFFECTS`.
+    effects : str, sequence of str or None
+        Of :data:`EFFECTS`, one or several (``None`` or empty: none); an effect named twice acts on both axes
+        (a squareness, which has one pair of axes, cannot be).
     seed : int
     folder : Path
         Receives ``case_<seed>.csv`` and ``case_<seed>.toml`` (the data sheet).
@@ -491,18 +500,26 @@ def make_case(family, effect_name, seed, folder, path=None, currents=False):
         (rng.uniform(4e-3, 1.5e-2), rng.uniform(2e-3, 8e-3))
     runs = [points, _circle(size, "cw")] if path == "circle_both" else [points]  # a ballbar's two runs, a stop between
     reference, velocity = (np.vstack(x) for x in zip(*[_reference(p + start, feed, accel, windows, period) for p in runs]))
-    effect = None if effect_name is None else _hidden(rng, effect_name, axes, period)
+    hidden = []
+    for name in (() if effects is None else (effects,) if isinstance(effects, str) else effects):
+        hidden.append(_hidden(rng, name, axes, period))
+        if any((e["name"], e["axis"]) == (name, hidden[-1]["axis"]) for e in hidden[:-1]):  # the other axis
+            if name == "squareness":
+                raise ValueError("a squareness acts on the one pair of axes x, y: it cannot be hidden twice")
+            hidden[-1]["axis"] = next(a for a in axes if a != hidden[-1]["axis"])
+            if name == "straightness":
+                hidden[-1]["options"]["error_direction"] = next(a for a in axes if a != hidden[-1]["axis"])
     t = np.arange(reference.shape[0]) * period
     rows = np.arange(0, t.size, every)
     jitter = rng.uniform(-0.02, 0.02, rows.size)
     noise_um = rng.uniform(0.05, 0.3)
     measured, commands = {}, {}  # the logged positions [mm] and current commands [A] of the runs with, without it
-    for name, hidden in (("with", effect), ("without", None)):
-        if name == "without" and effect is None:
+    for name, acting in (("with", hidden), ("without", [])):
+        if name == "without" and not hidden:
             measured[name] = measured["with"]
             continue
-        tool, commands[name] = _simulate(axes, machine, reference, velocity, hidden, family, period, every, jitter)
-        measured[name] = _geometry(tool, t[rows], hidden)
+        tool, commands[name] = _simulate(axes, machine, reference, velocity, acting, family, period, every, jitter)
+        measured[name] = _geometry(tool, t[rows], acting)
     added = measured["with"] - measured["without"]
     added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
     signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
@@ -513,11 +530,11 @@ def make_case(family, effect_name, seed, folder, path=None, currents=False):
     csv, toml = folder / f"case_{seed}.csv", folder / f"case_{seed}.toml"
     _write_csv(csv, t[rows], reference[rows], actual, axes, f"independent truth, family {family}, path {path}, seed {seed}",
                commands["with"] if currents else None)
-    _write_data_sheet(toml, machine, period, rng, f"independent truth {family} seed {seed} (data sheet)", effect)
-    truth = None if effect is None else {k: effect[k] for k in ("name", "axis", "parameters", "options")}
+    _write_data_sheet(toml, machine, period, rng, f"independent truth {family} seed {seed} (data sheet)", hidden)
+    truths = tuple({k: e[k] for k in ("name", "axis", "parameters", "options")} for e in hidden)
     notes = dict(period_s=period, log_s=every * period, noise_um=noise_um, vff=vff, computation_delay=computation_delay,
                  scale_feedback=scale_feedback, windows_s=windows)
-    return Case(family, path, csv, toml, truth, signal, float(t[rows][-1]), notes)
+    return Case(family, path, csv, toml, truths, signal, float(t[rows][-1]), notes)
 
 
 def _write_csv(file, t, reference, actual, axes, comment, current=None):
@@ -533,9 +550,9 @@ def _write_csv(file, t, reference, actual, axes, comment, current=None):
             f.write(f"{row[0]:.9f}," + ",".join(f"{v:.6f}" for v in row[1:]) + "\n")
 
 
-def _write_data_sheet(file, machine, period, rng, name, effect):
+def _write_data_sheet(file, machine, period, rng, name, effects):
     """The machine as its data sheet gives it: controller and drive settings exact (the current loop's bandwidth to
-    10 Hz), where the position loop reads (as `effect`, a backlash, closes it), total mass, force constant and
+    10 Hz), where the position loop reads (as a backlash of `effects` closes it), total mass, force constant and
     damping within ±3 %, the motor side's mass and the screw's stiffness within ±5 % (drawn after the others), a
     typical screw damping ratio, each axis's travel."""
     off = lambda: rng.uniform(0.97, 1.03)  # noqa: E731
@@ -552,7 +569,7 @@ def _write_data_sheet(file, machine, period, rng, name, effect):
             tables[a].append(f"velocity_filter_hz = {np.log1p(period / axis['tau_v']) / (2 * np.pi * period):.10g}")
     for a, axis in machine.items():  # the screw, drawn after the entries above (which stay as they were)
         scale = axis["scale_feedback"]
-        if effect is not None and effect["name"] == "backlash" and effect["axis"] == a:
+        for effect in (e for e in effects if e["name"] == "backlash" and e["axis"] == a):
             scale = effect["options"]["feedback"] == "scale"  # the loop _simulate closes for this case
         m1 = axis["motor_share"] * axis["mass"]
         stiffness = m1 * (axis["mass"] - m1) / axis["mass"] * (2 * np.pi * axis["screw_hz"]) ** 2  # [N/m]

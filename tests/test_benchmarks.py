@@ -31,7 +31,7 @@ def test_independent_truth_lags_its_ramp_by_the_closed_form(independent_truth, v
     t = np.arange(int(1.5 / dt)) * dt
     ctrl = np.array([axis["kp"], axis["kv"], axis["ti"], vff, 50.0, computation_delay, axis["tau_v"], 0.0,
                      axis["res_m"], axis["res_s"], 0.0])
-    table, _, _, _ = it._run_axis(speed * t, np.full(t.size, speed), it._plant_vector(axis, None, "rigid", "x"), ctrl, dt, 100)
+    table, _, _, _ = it._run_axis(speed * t, np.full(t.size, speed), it._plant_vector(axis, (), "rigid", "x"), ctrl, dt, 100)
     lag = (speed * t - table)[t > 1.2]
     assert np.mean(lag) == pytest.approx(speed * (1 - vff) / axis["kp"], rel=2e-3, abs=2e-9)
     assert np.ptp(lag) < 1e-7  # steady: within 0.1 µm
@@ -60,9 +60,24 @@ def test_independent_truth_writes_a_contract_trace_and_a_data_sheet(independent_
     case = independent_truth.make_case("two_mass", "backlash", 3, tmp_path)
     trace, model = read_trace(case.csv), load_model(case.machine_file)
     assert trace.axes == ("x", "y") and trace.dt == pytest.approx(case.notes["log_s"])
-    assert case.truth["name"] == "backlash" and case.signal_um > 0
+    assert case.truths[0]["name"] == "backlash" and case.signal_um > 0
     assert all(servo.vff == case.notes["vff"] for servo in model.machine.axes.values())
     assert model.machine.travel == {a: (0.0, independent_truth.TRAVEL_MM) for a in "xy"}  # the data sheet's travel
+
+
+def test_independent_truth_hides_effects_together_an_effect_named_twice_on_both_axes(independent_truth, tmp_path):
+    """Two backlashes, one on each axis, each closing the loop where the data sheet says; a squareness has one pair of
+    axes and is refused twice; one effect in a sequence is the same case as named alone."""
+    from contoursim.model import load_model
+
+    case = independent_truth.make_case("two_mass", ("backlash", "backlash"), 3, tmp_path / "pair")
+    assert sorted(t["axis"] for t in case.truths) == ["x", "y"] and all(t["name"] == "backlash" for t in case.truths)
+    sheet = load_model(case.machine_file).machine.axes
+    assert all(sheet[t["axis"]].position_feedback == t["options"]["feedback"] for t in case.truths)
+    with pytest.raises(ValueError, match="squareness"):
+        independent_truth.make_case("rigid", ("squareness", "squareness"), 3, tmp_path / "twice")
+    alone, listed = (independent_truth.make_case("rigid", e, 5, tmp_path / f) for e, f in (("vibration", "a"), (["vibration"], "b")))
+    assert alone.truths == listed.truths and alone.csv.read_bytes() == listed.csv.read_bytes()
 
 
 def test_independent_straightness_is_the_guideways_over_its_travel(independent_truth):
@@ -72,9 +87,9 @@ def test_independent_straightness_is_the_guideways_over_its_travel(independent_t
     end = it.TRAVEL_MM
     q = np.array([[0.0, 50.0], [end / 2, 350.0], [end, 120.0]])
     bow = dict(name="straightness", axis="x", parameters=dict(peak_um=7.0, span_mm=end), options=dict(error_direction="y"))
-    np.testing.assert_allclose(1e3 * (it._geometry(q, np.zeros(3), bow) - q), [[0, 0], [0, 7.0], [0, 0]], atol=1e-9)
+    np.testing.assert_allclose(1e3 * (it._geometry(q, np.zeros(3), [bow]) - q), [[0, 0], [0, 7.0], [0, 0]], atol=1e-9)
     square = dict(name="squareness", axis="xy", parameters=dict(angle_urad=100.0), options={})
-    np.testing.assert_allclose(it._geometry(q, np.zeros(3), square)[:, 0] - q[:, 0], -100e-6 * q[:, 1], atol=1e-12)
+    np.testing.assert_allclose(it._geometry(q, np.zeros(3), [square])[:, 0] - q[:, 0], -100e-6 * q[:, 1], atol=1e-12)
 
 
 @pytest.mark.parametrize("effect, seed", [("squareness", 11), ("gain_mismatch", 14)])
@@ -89,7 +104,7 @@ def test_the_diagnosis_tells_squareness_from_a_gain_mismatch_on_independent_circ
 
     case = independent_truth.make_case("rigid", effect, seed, tmp_path, path="circle_both")
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
-    truth = case.truth
+    truth = case.truths[0]
     named = result.effects[0]
     assert (named.name, named.axis) == (truth["name"], truth["axis"]), result.report()
     size = named.kind.parameters[0].name
@@ -113,8 +128,8 @@ def test_a_screws_cyclic_error_longer_than_half_the_stroke_is_found_where_the_ax
         (tmp_path / folder).mkdir()
         case = independent_truth.make_case("rigid", "cyclic_error", seed, tmp_path / folder)
         result = diagnose(read_trace(case.csv), load_model(case.machine_file))
-        truth = case.truth["parameters"]
-        assert [(e.name, e.axis) for e in result.effects] == [("cyclic_error", case.truth["axis"])], result.report()
+        truth = case.truths[0]["parameters"]
+        assert [(e.name, e.axis) for e in result.effects] == [("cyclic_error", case.truths[0]["axis"])], result.report()
         assert result.effects[0]["period_mm"] == pytest.approx(truth["period_mm"], rel=0.05), result.report()
         assert result.effects[0]["amplitude_um"] == pytest.approx(truth["amplitude_um"], rel=0.1), result.report()
 
@@ -152,7 +167,7 @@ def test_a_backlash_the_first_refit_would_bend_the_plant_around_is_named(indepen
     case = independent_truth.make_case("two_mass", "backlash", 549564284, tmp_path)
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
     assert [(e.name, e.axis) for e in result.effects] == [("backlash", "x")], result.report()
-    assert result.effects[0]["lost_motion_um"] == pytest.approx(case.truth["parameters"]["lost_motion_um"], rel=0.15)
+    assert result.effects[0]["lost_motion_um"] == pytest.approx(case.truths[0]["parameters"]["lost_motion_um"], rel=0.15)
     assert result.steps[-1].rms_um < 0.8 * result.steps[1].rms_um
 
 
@@ -172,8 +187,8 @@ def test_without_a_model_a_scale_error_is_named_only_where_acceleration_does_not
     result = diagnose(read_trace(case.csv))
     named = [(e.name, e.axis) for e in result.effects]
     if effect == "scale_error":
-        assert named == [("scale_error", case.truth["axis"])], result.report()
-        assert result.effects[0]["ppm"] == pytest.approx(case.truth["parameters"]["ppm"], rel=0.2), result.report()
+        assert named == [("scale_error", case.truths[0]["axis"])], result.report()
+        assert result.effects[0]["ppm"] == pytest.approx(case.truths[0]["parameters"]["ppm"], rel=0.2), result.report()
     else:
         assert ("scale_error", "x") not in named, result.report()
         assert any(w.startswith("scale_error.x: not named, on this path a misfit of the loop identified for x in "
@@ -191,9 +206,9 @@ def test_a_friction_fitted_to_an_independent_dahl_law_is_within_its_uncertainty(
 
     case = independent_truth.make_case("rigid", "coulomb_friction", 117365849, tmp_path)
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
-    truth = case.truth["parameters"]["force_N"]
+    truth = case.truths[0]["parameters"]["force_N"]
     step = next(s for s in result.steps if s.effect is not None and s.effect.name == "coulomb_friction")
-    assert step.effect.axis == case.truth["axis"], result.report()
+    assert step.effect.axis == case.truths[0]["axis"], result.report()
     sigma = step.uncertainty["force_N"]
     assert abs(step.effect["force_N"] - truth) <= 2 * sigma < 0.25 * truth, result.report()
 
@@ -214,19 +229,19 @@ def test_a_delay_of_the_position_loop_alone_is_named_where_the_trace_tells_it_fr
         return case, diagnose(read_trace(case.csv), load_model(case.machine_file))
 
     case, result = diagnosed("two_mass", "time_delay", 1018604587)
-    assert case.truth["options"]["kind"] == "feedback" and case.truth["axis"] == "y"  # the generator's: position only
+    assert case.truths[0]["options"]["kind"] == "feedback" and case.truths[0]["axis"] == "y"  # the generator's: position only
     named = result.effects[0]
     assert len(result.effects) == 1 and (named.name, named.axis, named.options["kind"]) == ("time_delay", "y", "position")
-    assert named["delay_s"] == pytest.approx(case.truth["parameters"]["delay_s"], rel=0.02), result.report()
+    assert named["delay_s"] == pytest.approx(case.truths[0]["parameters"]["delay_s"], rel=0.02), result.report()
     case, result = diagnosed("rigid", "time_delay", 267607210)
-    delay, kp = case.truth["parameters"]["delay_s"], load_model(case.machine_file).machine.axes["x"].kp
+    delay, kp = case.truths[0]["parameters"]["delay_s"], load_model(case.machine_file).machine.axes["x"].kp
     assert [(e.name, e.axis) for e in result.effects] == [("gain_mismatch", "x")], result.report()
     assert result.effects[0]["kp_ratio"] == pytest.approx(1 / (1 - kp * delay), rel=0.01), result.report()
     assert any("time_delay.x (kind = position)" in w and "to separate them: a position step" in w
                for w in result.warnings), result.report()  # said beside it, with the test that tells them apart
     case, result = diagnosed("rigid", "gain_mismatch", 810854937)
     assert [(e.name, e.axis) for e in result.effects] == [("gain_mismatch", "x")], result.report()
-    assert result.effects[0]["kp_ratio"] == pytest.approx(case.truth["parameters"]["kp_ratio"], rel=0.01)
+    assert result.effects[0]["kp_ratio"] == pytest.approx(case.truths[0]["parameters"]["kp_ratio"], rel=0.01)
 
 
 def test_a_squareness_on_a_one_way_circle_is_named_before_its_servo_look_alikes_of_untypical_size(independent_truth,
@@ -241,6 +256,6 @@ def test_a_squareness_on_a_one_way_circle_is_named_before_its_servo_look_alikes_
     case = independent_truth.make_case("rigid", "squareness", 444329031, tmp_path)
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
     assert [(e.name, e.axis) for e in result.effects] == [("squareness", "xy")], result.report()
-    assert result.effects[0]["angle_urad"] == pytest.approx(case.truth["parameters"]["angle_urad"], rel=0.02)
+    assert result.effects[0]["angle_urad"] == pytest.approx(case.truths[0]["parameters"]["angle_urad"], rel=0.02)
     assert any(w.startswith("squareness.xy") and "the first is named, its size typical and the second's not" in w
                for w in result.warnings), result.warnings

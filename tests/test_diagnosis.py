@@ -452,7 +452,7 @@ def test_an_independent_effect_is_covered_by_its_uncertainty(independent_truth, 
     (named,) = result.effects
     assert (named.name, named.axis) == (effect, "y"), result.report()
     sigma = result.steps[-1].uncertainty[key]
-    assert abs(named[key] - case.truth["parameters"][key]) <= within * sigma, result.report()
+    assert abs(named[key] - case.truths[0]["parameters"][key]) <= within * sigma, result.report()
     assert sigma < bound * named[key], result.report()
 
 
@@ -466,7 +466,7 @@ def test_an_effect_refitted_with_another_named_after_it_keeps_the_plant_s_share_
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
     assert result.effects[0].label == "backlash.x", result.report()
     named, sigma = result.effects[0], result.steps[2].uncertainty["lost_motion_um"]
-    assert abs(named["lost_motion_um"] - case.truth["parameters"]["lost_motion_um"]) <= 2 * sigma, result.report()
+    assert abs(named["lost_motion_um"] - case.truths[0]["parameters"]["lost_motion_um"]) <= 2 * sigma, result.report()
     assert sigma < 0.1 * named["lost_motion_um"], result.report()
 
 
@@ -484,7 +484,7 @@ def test_a_one_way_circles_squareness_is_uncertain_by_what_a_timing_difference_o
     (named,) = result.effects
     assert (named.name, named.axis) == ("squareness", "xy"), result.report()
     sigma = result.steps[-1].uncertainty["angle_urad"]
-    truth = case.truth["parameters"]["angle_urad"]
+    truth = case.truths[0]["parameters"]["angle_urad"]
     assert abs(named["angle_urad"] - truth) > 0.005 * abs(truth)  # the fit is off by model error, not noise
     assert abs(named["angle_urad"] - truth) <= 2 * sigma < 0.1 * abs(truth), result.report()
 
@@ -575,7 +575,7 @@ def test_an_axis_behind_its_command_by_a_delay_the_model_lacks_is_no_swap(indepe
     assert not any("swapped" in w for w in result.warnings), result.warnings
     named = result.effects[0]
     assert (named.name, named.axis, named.options["kind"]) == ("time_delay", "x", "command"), result.report()
-    assert named["delay_s"] == pytest.approx(case.truth["parameters"]["delay_s"], rel=0.01), result.report()
+    assert named["delay_s"] == pytest.approx(case.truths[0]["parameters"]["delay_s"], rel=0.01), result.report()
 
 
 def test_noise_level_from_the_second_differences():
@@ -1055,7 +1055,7 @@ def test_the_corrected_model_of_an_identified_machine_is_one_simulate_runs(indep
     reference, velocity = it._reference(it._circle(10.0, "ccw") + 200.0, 1500.0 / 60.0, 1000.0, (), period)
     effect = it._hidden(rng, "time_delay", ("x", "y"), period)
     rows = np.arange(0, reference.shape[0], every)
-    tool, _ = it._simulate(("x", "y"), machine, reference, velocity, effect, "rigid", period, every, np.zeros(rows.size))
+    tool, _ = it._simulate(("x", "y"), machine, reference, velocity, [effect], "rigid", period, every, np.zeros(rows.size))
     t = np.arange(reference.shape[0]) * period
     write_trace(tmp_path / "t.csv", Trace(t[rows], reference[rows], tool + rng.normal(0.0, 1e-4, tool.shape), ("x", "y")))
     (tmp_path / "corrected.toml").write_text(diagnose(read_trace(tmp_path / "t.csv")).corrected_model(), encoding="utf-8")
@@ -1069,7 +1069,7 @@ def test_an_effect_on_one_axis_is_weighed_against_that_axis_gap_only(independent
     case = independent_truth.make_case("rigid", "scale_error", 154790205, tmp_path)
     result = diagnose(read_trace(case.csv))
     assert [(e.name, e.axis) for e in result.effects] == [("scale_error", "x")], result.report()
-    assert result.effects[0]["ppm"] == pytest.approx(case.truth["parameters"]["ppm"], rel=0.2)
+    assert result.effects[0]["ppm"] == pytest.approx(case.truths[0]["parameters"]["ppm"], rel=0.2)
 
 
 @pytest.mark.parametrize("screw", ["", "\nmotor_mass_kg = 90.0\nscrew_stiffness_N_per_um = 300.0"])
@@ -1260,7 +1260,7 @@ def test_a_cyclic_error_is_fitted_from_the_sinusoid_the_residual_shows(independe
     case = independent_truth.make_case("two_mass", "cyclic_error", 933331401, tmp_path)
     result = diagnose(read_trace(case.csv), load_model(case.machine_file, check=False))
     assert [(e.name, e.axis) for e in result.effects] == [("cyclic_error", "x")], result.report()
-    truth, named = case.truth["parameters"], result.effects[0]
+    truth, named = case.truths[0]["parameters"], result.effects[0]
     assert named["amplitude_um"] == pytest.approx(truth["amplitude_um"], rel=0.01)
     assert abs(named["amplitude_um"] - truth["amplitude_um"]) <= 2 * result.steps[-1].uncertainty["amplitude_um"]
     assert named["period_mm"] == pytest.approx(truth["period_mm"], rel=0.002)
@@ -1332,7 +1332,7 @@ def test_identified_loops_bent_to_a_large_delay_are_identified_again_with_it_in_
     named = {(e.name, e.axis, e.options.get("kind")): e for e in result.effects}
     assert ("time_delay", "y", "command") in named, result.report()
     delay = named[("time_delay", "y", "command")]
-    assert delay["delay_s"] == pytest.approx(case.truth["parameters"]["delay_s"], rel=0.01)
+    assert delay["delay_s"] == pytest.approx(case.truths[0]["parameters"]["delay_s"], rel=0.01)
     assert result.steps[-1].rms_um < 2 * np.linalg.norm(result.noise_um)
     assert any("identified again with" in w for w in result.warnings)
 
@@ -1347,7 +1347,7 @@ def test_a_gain_mismatch_that_bent_the_plant_is_told_from_a_delay_with_the_plant
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
     (named,) = result.effects
     assert (named.name, named.axis) == ("gain_mismatch", "y"), result.report()
-    assert named["kp_ratio"] == pytest.approx(case.truth["parameters"]["kp_ratio"], rel=1e-3)
+    assert named["kp_ratio"] == pytest.approx(case.truths[0]["parameters"]["kp_ratio"], rel=1e-3)
     assert result.steps[-1].rms_um < 2 * np.sqrt(np.mean(result.noise_um**2))  # the delay left 0.349 µm: 2.3 times
 
 
@@ -1409,7 +1409,7 @@ def test_a_residual_at_the_noise_floor_only_by_a_plant_bent_beyond_its_prior_is_
     4.5 prior widths to take it up, the residual sat at the noise floor and no candidate was tried; the report said
     "explained by the nominal model within noise" beside a warning that the damping moved 7.8 prior widths."""
     case = independent_truth.make_case("rigid", "vibration", 489929472, tmp_path)
-    truth = case.truth["parameters"]
+    truth = case.truths[0]["parameters"]
     result = diagnose(read_trace(case.csv), load_model(case.machine_file, check=False))
     assert [e.label for e in result.effects] == ["vibration.x"]
     fitted, sigma = result.effects[0]["freq_hz"], result.steps[-1].uncertainty["freq_hz"]
