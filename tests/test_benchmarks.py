@@ -171,6 +171,24 @@ def test_a_backlash_the_first_refit_would_bend_the_plant_around_is_named(indepen
     assert result.steps[-1].rms_um < 0.8 * result.steps[1].rms_um
 
 
+def test_an_axis_no_effect_named_acts_on_keeps_its_plant_near_the_data_sheet_for_the_effect_still_missing(
+        independent_truth, tmp_path):
+    """An independent two-mass machine with a scale error of X and a 6.4 µm backlash of Y read on a scale, on a
+    rounded square: as the scale error was named, Y's screw was refitted 12 prior widths off to take up the backlash,
+    which then closed 16 % of what was left and was not named. Y's plant stays within three prior widths until an
+    effect acts on Y: both are named, and no plant of an axis is said to be far from its data sheet on Y."""
+    from contoursim.diagnosis import diagnose
+    from contoursim.model import load_model
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("two_mass", ("scale_error", "backlash"), 138130684, tmp_path)
+    assert [(t["name"], t["axis"]) for t in case.truths] == [("scale_error", "x"), ("backlash", "y")]
+    result = diagnose(read_trace(case.csv), load_model(case.machine_file))
+    assert sorted((e.name, e.axis) for e in result.effects) == [("backlash", "y"), ("scale_error", "x")], result.report()
+    assert not any(w.startswith("y.") and "prior widths" in w for w in result.warnings), result.warnings
+    assert result.steps[-1].rms_um < 0.7 * result.steps[2].rms_um
+
+
 @pytest.mark.parametrize("family, effect, seed, path", [("two_mass", "thermal_drift", 644353033, "circle_cw"),
                                                         ("rigid", "scale_error", 154790205, "square")])
 def test_without_a_model_a_scale_error_is_named_only_where_acceleration_does_not_draw_it(independent_truth, tmp_path,
