@@ -987,7 +987,8 @@ def _loop_response(loop):
 @njit(cache=True)
 def _hessenberg_gain(H, b, c, s):
     """``c (s_k I - H)^-1 b`` for each `s_k`, H upper Hessenberg: Gaussian elimination with partial pivoting,
-    where a column has one entry below the diagonal to eliminate. A pole at `s_k`: inf or nan there."""
+    where a column has one entry below the diagonal to eliminate. A pole exactly at an `s_k` (the matrix singular
+    there) raises ZeroDivisionError, as a dense solve raises LinAlgError."""
     n = H.shape[0]
     out = np.empty(s.size, np.complex128)
     M = np.empty((n, n), np.complex128)
