@@ -80,7 +80,7 @@ def _echo(files, names, rows):
 def _timed_sweep(sweep, scheduler):
     """Variants per second from the first ``progress(0, n)`` (workers warm) to the end, and the seconds before it.
 
-    The loops' analyses (the coupled loop's margins along the path, most of a variant's cost) are stored in a
+    The loops' analyses (the coupled loop's margins along the path, a fifth of a variant's cost) are stored in a
     folder of this sweep's own (``CONTOURSIM_CACHE_DIR``, which a cluster's workers started here inherit): each
     sweep analyses every variant, as a first sweep does, not reads what the one before it stored.
     """
