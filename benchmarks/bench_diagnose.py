@@ -142,8 +142,12 @@ def own_case(mill, names, seed):
                       axis_travel=travel(reference, axes, seed))
     truth = []
     for name in names:
+        taken = {e.axis for e in truth if e.name == name}  # named twice: another axis (drawn again)
+        places = len(axes) * (len(axes) - 1) // 2 if name == "squareness" else len(axes)  # pairs of axes, or axes
+        if len(taken) == places:
+            raise ValueError(f"{name} is hidden more times than the path's axes {''.join(axes)} have places for it")
         effect = hidden_effect(name, axes, machine.travel, rng)
-        while any((e.name, e.axis) == (effect.name, effect.axis) for e in truth):  # named twice: another axis
+        while effect.axis in taken:
             effect = hidden_effect(name, axes, machine.travel, rng)
         truth.append(effect)
     for effect in (e for e in truth if e.name == "backlash"):  # where its axis's loop reads is the machine's, known

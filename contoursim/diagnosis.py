@@ -1111,6 +1111,7 @@ class _Problem:
         far as the trace pulls it on the axes they act on (:func:`_reach`),
         with none found on every axis.
         """
+        free = set(free)
         self._linearise(model)
         for _ in range(refit):
             if not self.changes:
@@ -1119,7 +1120,7 @@ class _Problem:
             if not np.all(np.isfinite(coef)):
                 break
             widths, shift = self.prior[self.instrument:], self.shift[self.instrument:]  # per step; steps from nominal
-            limit = np.array([np.inf if set(change) & set(free) else reach for change, _ in self.changes])
+            limit = np.array([np.inf if free.intersection(change) else reach for change, _ in self.changes])
             coef = np.clip((coef + shift) * widths, -limit, limit) / widths - shift
             cost = float(self.base_residual @ self.base_residual)
             changes = [change for change, _ in self.changes]
@@ -2434,7 +2435,8 @@ def _settle(problem, base, best, current=False):
     """Make `base` with `best`'s effect the problem's base: nominal parameters refitted with it in place, then the
     effect refitted around them (with `current`, the measured currents its second output), then the nominal
     parameters again. Returns ``(the new base, warnings it brings)``."""
-    problem.set_base(_with_effect(base, best.fit), refit=_REFIT_STEPS, **_reach(problem, [*base.effects, best.fit]))
+    reach = _reach(problem, [*base.effects, best.fit])
+    problem.set_base(_with_effect(base, best.fit), refit=_REFIT_STEPS, **reach)
     problem.set_base(Model(problem.base.machine, base.effects))
     problem.use_currents(current)
     try:
@@ -2451,7 +2453,7 @@ def _settle(problem, base, best, current=False):
     finally:
         problem.use_currents(False)
     best.uncertainty = {name: float(np.hypot(e, moved.get(name, 0.0))) for name, e in best.uncertainty.items()}
-    problem.set_base(_with_effect(problem.base, best.fit), refit=_REFIT_STEPS, **_reach(problem, [*base.effects, best.fit]))
+    problem.set_base(_with_effect(problem.base, best.fit), refit=_REFIT_STEPS, **reach)
     said = []
     if best.fit.name == "coulomb_friction" and base.machine.axes[best.fit.axis].ti is None:
         best.fit = _constant_force(problem, best.fit)
