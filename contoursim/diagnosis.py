@@ -2067,7 +2067,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         ``None``: identified from the trace (:func:`contoursim.identify.identify_machine`); where
         the effects named include one in the loops and leave more than twice the noise, the loops
         are identified again with them held in place and the diagnosis starts over (said in a
-        warning when that closes the gap).
+        warning when that closes the gap); where nothing was named against such a misfit, so is
+        the best candidate that fell short, unless a geometric one.
     max_effects : int
         Most effects to name.
     progress : callable, optional
@@ -2099,38 +2100,49 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                          f"the trace has {len(trace.t)}")
     say = progress or (lambda text: None)
     if model is not None:
-        return _diagnose(trace, as_model(model), False, max_effects, say)
+        return _diagnose(trace, as_model(model), False, max_effects, say)[0]
     say("no nominal model given: identifying the servo loops from the trace")
-    result = _diagnose(trace, Model(identify_machine(trace, progress=say)), True, max_effects, say)
+    result, near = _diagnose(trace, Model(identify_machine(trace, progress=say)), True, max_effects, say)
     for _ in range(_REIDENTIFY):
         # identified alone, the loops bend to an effect in them (one shared position gain to one axis's gain mismatch
-        # or delay): where the effects named include one in the loops and leave a clear misfit, they are held in place
-        # while the loops are identified again, and the diagnosis starts over from those loops; kept when it names as
-        # many effects and, with as many named, closes most of what the first left above the noise floor (less is the
-        # loops' own misfit moved about, for the next effect to be bent to)
+        # or delay) and may take up most of it: where the effects named include one in the loops and leave a clear
+        # misfit, they are held in place while the loops are identified again, and the diagnosis starts over from those
+        # loops; where nothing was named against a clear misfit, so is the best candidate that fell short (its fit on
+        # the bent loops), unless geometric. Kept when it names as many effects (at least the candidate held) and, with as many named,
+        # closes most of what the first left above the noise floor (less is the loops' own misfit moved about, for the
+        # next effect to be bent to)
         left, floor = result.steps[-1].rms_um, float(np.linalg.norm(result.noise_um))
-        if all(e.stage == "geometry" for e in result.effects) or not left > _REIDENTIFY_GAP * floor:
+        held = result.effects or tuple(near[:1])
+        if all(e.stage == "geometry" for e in held) or not left > _REIDENTIFY_GAP * floor:
             break
-        say("identifying the servo loops again with the effects named held in place")
+        labels = ", ".join(e.label for e in held)
+        say(f"identifying the servo loops again with {labels} held in place")
         try:
-            again = _diagnose(trace, Model(identify_machine(trace, progress=say, effects=result.effects)), True,
-                              max_effects, say)
+            again, near = _diagnose(trace, Model(identify_machine(trace, progress=say, effects=held)), True,
+                                    max_effects, say)
         except _FIT_FAILURES as exc:
-            result = replace(result, warnings=result.warnings + (f"identifying the servo loops again with "
-                             f"{', '.join(e.label for e in result.effects)} in place failed ({exc})",))
+            result = replace(result, warnings=result.warnings + (f"identifying the servo loops again with {labels} in "
+                                                                 f"place failed ({exc})",))
             break
-        k = len(result.effects)  # steps: the nominal model, its refit, then one per effect
-        if len(again.effects) < k or not left**2 - again.steps[k + 1].rms_um**2 >= _REIDENTIFY_SHARE * (left**2 - floor**2):
+        k = len(held)  # steps: the nominal model, its refit, then one per effect
+        if (len(again.effects) < k or not result.effects and (held[0].name, held[0].axis) not in
+                {(e.name, e.axis) for e in again.effects}
+                or not left**2 - again.steps[k + 1].rms_um**2 >= _REIDENTIFY_SHARE * (left**2 - floor**2)):
             break  # loops that explain the trace only without the effects they were identified with: not the premise
-        held = ", ".join(e.label for e in result.effects)
+        bent = (f"the loops identified before had bent to them: the diagnosis left {left:.4g} µm RMS" if result.effects
+                else f"the loops identified before had taken it up: nothing was named, {left:.4g} µm RMS left")
         result = replace(again, warnings=again.warnings + (
-            f"the servo loops were identified again with {held} held in place (the loops identified before had bent "
-            f"to them: the diagnosis left {left:.4g} µm RMS, now {again.steps[-1].rms_um:.4g} µm)",))
+            f"the servo loops were identified again with {labels} held in place ({bent}, now "
+            f"{again.steps[-1].rms_um:.4g} µm)",))
     return result
 
 
 def _diagnose(trace, model, identified, max_effects, say):
-    """One diagnosis of `trace` against the nominal `model` (`identified` from the trace or given): :func:`diagnose`."""
+    """One diagnosis of `trace` against the nominal `model` (`identified` from the trace or given): :func:`diagnose`.
+
+    Returns ``(Diagnosis, fits)``, `fits` the candidates of the round that found nothing significant to name, fitted,
+    best first (empty where the rounds stopped otherwise).
+    """
     missing = [a for a in trace.axes if a not in model.machine.axes]
     if missing:
         raise ValueError(f"the model has no servo axis {missing[0]!r} for the trace's column {missing[0]!r}; "
@@ -2188,6 +2200,7 @@ def _diagnose(trace, model, identified, max_effects, say):
     warnings += lost
     disputed = set()  # axes whose measured current did not bear out the friction named on them (said)
     moves = {}  # of each effect named, how far its fit moved as the nominal parameters were refitted around it
+    near = []  # the candidates of a round that found nothing significant, fitted
     for round_ in range(0 if lost else max_effects):
         base = problem.base
         rss0 = float(problem.base_residual @ problem.base_residual)
@@ -2221,6 +2234,7 @@ def _diagnose(trace, model, identified, max_effects, say):
             cands = _profiled(problem, base, cands, warnings, say)
         if not cands or not cands[0].delta_bic > SIGNIFICANT:
             say("nothing significant left: stopping")
+            near = [c.fit for c in cands if c.delta_bic > 0]
             break
         best, ambiguities = _choose(problem, cands, both_ways)
         gap = problem.left()  # what the base leaves, per axis [mm]
@@ -2319,7 +2333,7 @@ def _diagnose(trace, model, identified, max_effects, say):
                             f"model's ({was:.3g} -> {now:.3g} A RMS): the positions pulled the plant (mass, damping) "
                             "where the current does not follow; take the refitted plant for a fit, not for the machine's")
     return Diagnosis(trace, model, identified, 1e3 * noise, 1e3 * problem.zero_offset(), tuple(steps), before, after,
-                     scored, problem.base, where, tuple(warnings), tuple(left), *currents)
+                     scored, problem.base, where, tuple(warnings), tuple(left), *currents), near
 
 
 def _acts_on(effect):
