@@ -169,6 +169,7 @@ _SCREW_DAMPING_SPREAD = 0.5  # prior spread of a compliant screw's damping ratio
 # what a candidate's simulation or fit may raise on a trace it cannot follow: the candidate is left out, not the run
 _STABILISING = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)  # moves of one plant parameter tried on a loop the check refuses [prior widths]
 _FIT_FAILURES = (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
+_AS_WRITTEN = 1.1  # the corrected model as written leaving more than this × the last row's RMS is said
 _REIDENTIFY = 2  # most times an identified machine's loops are identified again with the effects named held in place
 _REIDENTIFY_GAP = 2.0  # ... when the diagnosis leaves more than this many noise levels (RMS) [-]
 _REIDENTIFY_SHARE = 0.5  # ... kept when it closes this share of what was left above the noise floor (RMS² − floor²)
@@ -1191,6 +1192,13 @@ class _Problem:
         """What the base (its nominal refit and instrument zero included) leaves of the measured positions on the
         scored samples [mm], shape (n, d)."""
         return (self.trace.actual - self.fitted())[self.scored]
+
+    def as_written(self):
+        """What the base itself leaves of the measured positions on the scored samples [mm], shape (n, d): the
+        instrument's zero and turn fitted, not the linearised refit of its plant (:meth:`left` adds it)."""
+        r = self.whitened(self.base_prediction)
+        own = self.columns[:, : self.instrument]
+        return self.unwhiten(r - own @ np.linalg.lstsq(own, r, rcond=None)[0])[self.scored]
 
     def unwhiten(self, r):
         """The positions' part of a whitened vector (its first N·(d + c) entries) [mm], shape (N, d); 0 on samples
@@ -2318,6 +2326,13 @@ def _diagnose(trace, model, identified, max_effects, say):
         if refused is not None:
             warnings.append(f"the refitted plant's loops fail the loop check ({refused}): the corrected model is read "
                             "by diagnose --model; simulate and compare refuse it")
+    written = _rms_um(problem.as_written())  # the corrected model's own: what diagnose --model of it starts from
+    if written > _AS_WRITTEN * steps[-1].rms_um:
+        warnings.append(f"the corrected model as written leaves {written:.4g} µm RMS on this trace (the instrument's "
+                        f"zero and turn taken out), not the {steps[-1].rms_um:.4g} µm of the last row: each row adds a "
+                        "refit of the plant linearised around it (2 % steps of each parameter), which the plant "
+                        "simulated where that refit points does not bear out (a friction's or backlash's contacts, a "
+                        "plant pulled far from its data sheet)")
     after = problem.fitted()
     left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
     warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "
