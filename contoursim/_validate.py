@@ -15,7 +15,8 @@ from collections.abc import Mapping
 import numpy as np
 
 __all__ = ["as_xyz", "closest", "finite", "flag", "float_dtype", "positive", "positive_int", "nonnegative",
-           "float_array", "finite_array", "Frozen", "mask", "read_only", "shown", "time_base", "within", "TimeStepError"]
+           "float_array", "finite_array", "Frozen", "mask", "read_only", "rounded_grid", "shown", "time_base", "within",
+           "TimeStepError"]
 
 #: The largest magnitude of a float [-]: a number written beyond it overflows to infinity.
 FLOAT_MAX = float(np.finfo(float).max)
@@ -344,6 +345,53 @@ def time_base(name, t, rtol=1e-3):
             worst,
         )
     return t, float((t[-1] - t[0]) / (t.size - 1))
+
+
+def rounded_grid(t, unit):
+    """The uniform grid ``t0 + k dt`` that the times `t` are, rounded to multiples of `unit`; None if there is none.
+
+    A 3 kHz clock printed to the µs steps 333 and 334 µs, too unevenly for :func:`time_base`: every time lies within
+    half a µs of a uniform grid, and no more is known of it. The grid is the one whose greatest deviation from `t` is
+    least (the spread of ``t - k dt`` is convex in `dt`: a bounded search over the periods a grid so near can have).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        The times [s], N >= 2.
+    unit : float
+        The unit of the last decimal they are printed to [s] (1e-6 for ``0.000333``).
+
+    Returns
+    -------
+    grid : ndarray, shape (N,)
+        The grid [s].
+    dt : float
+        Its period [s].
+
+    None instead when a time lies further than half a `unit` from every uniform grid (beyond the float rounding of
+    `t`), or when the `unit` is over a tenth of the mean step (times printed to the ms, 0, 1, 2, 4, 5 ms with a
+    sample missing, lie within half a ms of a grid at 800 Hz).
+    """
+    from scipy.optimize import minimize_scalar  # slow to import; only times printed short of their step need it
+
+    k = np.arange(t.size)
+    span = t - t[0]
+    mean = span[-1] / (t.size - 1)
+    if not 0 < unit <= mean / 10:
+        return None
+    reach = unit / (t.size - 1)  # a grid within half a unit of both ends steps within this of the mean step
+    slack = 4 * float(np.spacing(max(abs(t[0]), abs(t[-1]))))  # the float rounding of a printed time, and of the grid
+
+    def width(shift):  # the spread of the deviations from the grid of period mean + shift * reach, shift in [-1, 1]
+        deviation = span - k * (mean + shift * reach)
+        return deviation.max() - deviation.min()
+
+    best = minimize_scalar(width, bounds=(-1.0, 1.0), method="bounded", options={"xatol": 1e-9})
+    if best.fun > unit * (1 + 1e-6) + 2 * slack:  # the least spread, found to 1e-8 of a unit; a tie rounds by half one
+        return None
+    dt = mean + best.x * reach
+    deviation = span - k * dt
+    return t[0] + (deviation.max() + deviation.min()) / 2 + k * dt, float(dt)
 
 
 def as_xyz(points):

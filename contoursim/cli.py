@@ -87,9 +87,14 @@ def _trajectory(model, path_file, job=None, direction=None):
         raise _against_machine(exc, source, read.program) from None
 
 
-def _against_machine(exc, path_file, program):
+def _against_machine(exc, path_file, program, job=None):
     """The error `exc` of a path against the machine (more coordinates than its axes, beyond their travel or max feed)
-    naming the path's file, and a G-code `program`'s block where it does."""
+    naming the path's file, and a G-code `program`'s block where it does; a `job`'s work_offset line instead when it
+    places the axis beyond its travel."""
+    offset = job.data.get("work_offset", {}) if job is not None else {}
+    key = next((key for key in offset if key.rpartition("_")[0] == getattr(exc, "axis", None)), None)
+    if key is not None:
+        return job.error(f"work_offset.{key} = {offset[key]:g}: {exc}", "work_offset", key)
     primitive = getattr(exc, "primitive", None)
     return ConfigError(str(exc), str(path_file), None if primitive is None or program is None else
                        int(program.lines[primitive]))
@@ -146,7 +151,7 @@ def run_job(model, path_file, job=None, strategies=(), label=None, direction=Non
         except UnstableLoopError:  # the machine with its effects, not the path
             raise
         except ValueError as exc:  # the path against the machine (its axes, their travel)
-            raise _against_machine(exc, path_file, program) from None
+            raise _against_machine(exc, path_file, program, job) from None
     for warning in caught:  # say which run
         warnings.warn(f"{name}: {warning.message}", warning.category, stacklevel=2)
     return name, path_file, result, program
@@ -484,7 +489,7 @@ def compare_command(args):
     try:
         model.machine.axis_commands(trajectory)  # the path against the machine, as simulate's run_job says it
     except ValueError as exc:  # (more coordinates than its axes, beyond their travel)
-        raise _against_machine(exc, path_file, program) from None
+        raise _against_machine(exc, path_file, program, job) from None
     comparison = compare(model, trajectory, names, settings=settings, tuned=args.tune)
     out = output_dir(args.out)
     save_comparison_figures(comparison, out, Path(path_file).stem)

@@ -5,6 +5,7 @@ keeps the text so that a bad or unknown key can be reported as
 ``machine.toml, line 12: unknown key 'kpp' in [axes.x]; expected one of ...``.
 """
 
+import bisect
 import json
 import math
 import numbers
@@ -294,6 +295,9 @@ class TomlFile:
         except tomllib.TOMLDecodeError as exc:
             line = re.search(r"line (\d+)", str(exc))
             raise ConfigError(f"not valid TOML: {exc}", self.source, int(line.group(1)) if line else None) from None
+        except RecursionError:  # tomllib recurses into each array and inline table: a few hundred exhaust the stack
+            raise ConfigError("not valid TOML: arrays or inline tables nested too deeply", self.source,
+                              _too_deep_line(self.text)) from None
         except ValueError:  # tomllib's int() of more than 4300 digits
             digits = re.search(r"\d[\d_]{4300,}", self.text)
             line = self.text.count("\n", 0, digits.start()) + 1 if digits else None
@@ -435,9 +439,11 @@ class TomlFile:
             if key not in value:
                 raise self.error(f"missing key '{key}' in [{_dotted(keys)}]", *keys)
         for key, what in (text or {}).items():
+            where = f" in [{_dotted(keys)}]" if keys else ""
             if key in value and not isinstance(value[key], str):
-                where = f" in [{_dotted(keys)}]" if keys else ""
                 raise self.error(f"{key}{where} must be {what} in quotes, got {value[key]!r}", *keys, key)
+            if key == "name" and key in value and re.search(r"[\r\n]", value[key]):  # it heads a '# key: value' line
+                raise self.error(f"{key}{where} must be one line, got {value[key]!r}", *keys, key)
         return value
 
 
@@ -454,6 +460,22 @@ def _float(text):
     """A TOML float: ``inf`` is infinite as written, a finite number too large for a float is :class:`_Overflowed`."""
     value = float(text)
     return _Overflowed(text) if math.isinf(value) and "inf" not in text else value
+
+
+def _too_deep_line(text):
+    """The line where the nesting of `text` exhausts :mod:`tomllib`'s stack: the last of the fewest lines that do."""
+    lines = text.split("\n")
+
+    def exhausts(count):
+        try:
+            tomllib.loads("\n".join(lines[:count]))
+        except RecursionError:
+            return True
+        except ValueError:  # the prefix cuts an array or a string short
+            pass
+        return False
+
+    return bisect.bisect_left(range(1, len(lines) + 1), True, key=exhausts) + 1
 
 
 def _too_large(value, keys=()):

@@ -2326,7 +2326,7 @@ def _diagnose(trace, model, identified, max_effects, say):
         if refused is not None:
             warnings.append(f"the refitted plant's loops fail the loop check ({refused}): the corrected model is read "
                             "by diagnose --model; simulate and compare refuse it")
-    written = _rms_um(problem.as_written())  # the corrected model's own: what diagnose --model of it starts from
+    written = _rms_um(problem.as_written())  # what the corrected model, simulated as written, leaves
     if written > _AS_WRITTEN * steps[-1].rms_um:
         warnings.append(f"the corrected model as written leaves {written:.4g} µm RMS on this trace (the instrument's "
                         f"zero and turn taken out), not the {steps[-1].rms_um:.4g} µm of the last row: each row adds a "

@@ -237,8 +237,11 @@ class Effect:
     A backlash's ``feedback`` says where the position loop's encoder is,
     which is the axis's setting (``position_feedback``): left out
     (``None``), a :class:`~contoursim.model.Model` fills in the axis's;
-    given, the model's axis reads there (a machine file that does not say
-    where its encoder is, with a backlash found on a scale).
+    given, the model's axis reads there, the effect's setting winning (a
+    machine file that does not say where its encoder is, with a backlash
+    found on a scale). A file that gives its axis's ``position_feedback``
+    and a backlash's other ``feedback`` is refused
+    (:func:`~contoursim.model.with_file_effects`).
     """
 
     name: str
@@ -347,6 +350,9 @@ def _option(name, axis, key, allowed, value):
 # -- the catalogue -----------------------------------------------------------------------------
 
 _INF = np.inf
+#: Largest friction force [N]: beyond what the biggest machine-tool feed drives push (tens of kN), 500 times
+#: the top of a typical friction; the viscous part's, 1e6 N·s/m, gives as much at 0.1 m/s.
+_MAX_FRICTION_N = 1e5
 
 
 def _p(name, value, unit, bounds, typical=None, vary=True, doc=""):
@@ -358,19 +364,23 @@ _register(EffectKind(
     (_p("lost_motion_um", 0.0, "µm", (0.0, 1000.0), (2.0, 20.0), doc="lost motion between motor/screw and table"),),
     options={"feedback": (None, "motor", "scale")},
     doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk); "
-        "the axis's position_feedback when not given, and the axis's when given; on an axis with a compliant screw "
+        "the axis's position_feedback when not given, and the axis's when given (refused against the position_feedback "
+        "its file gives the axis); on an axis with a compliant screw "
         "a dead zone in the screw (the table, with its mass, crosses it when the force on it reverses), else a play "
         "(the table stops when the motor reverses)",
 ))
 _register(EffectKind(
     "coulomb_friction", "loop",
     (
-        _p("force_N", 0.0, "N", (0.0, _INF), (5.0, 200.0), doc="Coulomb friction level while sliding"),
-        _p("viscous_N_s_per_m", 0.0, "N·s/m", (0.0, _INF), (0.0, 2000.0), vary=False, doc="viscous friction on top of the machine's damping"),
-        _p("stribeck_N", 0.0, "N", (0.0, _INF), (0.0, 50.0), vary=False, doc="extra static (breakaway) friction decaying with speed"),
+        _p("force_N", 0.0, "N", (0.0, _MAX_FRICTION_N), (5.0, 200.0), doc="Coulomb friction level while sliding"),
+        _p("viscous_N_s_per_m", 0.0, "N·s/m", (0.0, 10 * _MAX_FRICTION_N), (0.0, 2000.0), vary=False,
+           doc="viscous friction on top of the machine's damping"),
+        _p("stribeck_N", 0.0, "N", (0.0, _MAX_FRICTION_N), (0.0, 50.0), vary=False, doc="extra static (breakaway) friction decaying with speed"),
         _p("stribeck_velocity_mm_s", 1.0, "mm/s", (1e-3, _INF), (0.1, 10.0), vary=False, doc="speed scale of the Stribeck decay"),
-        _p("asymmetry_N", 0.0, "N", (-_INF, _INF), (0.0, 10.0), vary=False, doc="added to the friction force while moving, whatever the direction"),
-        _p("offset_N", 0.0, "N", (-_INF, _INF), (0.0, 10.0), vary=False, doc="constant force (gravity on an inclined axis, cable drag)"),
+        _p("asymmetry_N", 0.0, "N", (-_MAX_FRICTION_N, _MAX_FRICTION_N), (0.0, 10.0), vary=False,
+           doc="added to the friction force while moving, whatever the direction"),
+        _p("offset_N", 0.0, "N", (-_MAX_FRICTION_N, _MAX_FRICTION_N), (0.0, 10.0), vary=False,
+           doc="constant force (gravity on an inclined axis, cable drag)"),
     ),
     doc="friction force opposing motion in the loop: reversal spikes (quadrant glitches)",
 ))

@@ -151,6 +151,17 @@ class ErrorMotion:
             and (self.table is None or not self.table[1].any())
         )
 
+    def repeats_every(self, period):
+        """True when the error motion repeats every `period` [mm or rad]: no polynomial term beyond the
+        constant, no table (held beyond its ends, it never repeats) and every cyclic term's period a whole
+        fraction of `period` (a rotary axis's error motions over a turn, 2π: its bearing's and encoder's)."""
+        turns = [period / t.period for t in self.cyclic if t.sin or t.cos]
+        return (
+            not any(self.poly[1:])
+            and (self.table is None or not self.table[1].any())
+            and all(abs(n - round(n)) <= 1e-9 * n for n in turns)
+        )
+
     def parameters(self):
         """The adjustable coefficients as ``{name: value}`` [mm or rad per unit of q^k]."""
         out = {f"p{k}": c for k, c in enumerate(self.poly)}

@@ -90,10 +90,13 @@ class PathError(ValueError):
         What is wrong.
     primitive : int, optional
         The index of the path's primitive at fault (a G-code program maps it to its block's line).
+    axis : str, optional
+        The machine axis at fault (one the path would take outside its travel).
     """
 
-    def __init__(self, message, primitive=None):
+    def __init__(self, message, primitive=None, axis=None):
         self.primitive = primitive
+        self.axis = axis
         super().__init__(message)
 
 

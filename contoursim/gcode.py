@@ -4,7 +4,7 @@ Words that shape the path: ``G0 G1 G2 G3`` (modal motion), ``G17 G18 G19``
 (arc plane XY, ZX, YZ), ``G90 G91`` (absolute / incremental X Y Z), ``X Y Z``,
 arc centre ``I J K`` (always relative to the arc's start) or radius ``R``
 (negative for the arc over 180°), ``F`` (feed, mm/min, modal, set by any
-block), ``M2``/``M30`` (program end: a move in its block runs, the rest is
+block, within the planner's range: 6e-5 to 6e13 mm/min), ``M2``/``M30`` (program end: a move in its block runs, the rest is
 ignored). An arc with a move along the plane's normal axis is a helix.
 
 The modes the model assumes are accepted: ``G21`` (mm), ``G94`` (feed per
@@ -51,7 +51,8 @@ the tool: the path starts where the first feed move starts. G0 moves after
 it are kept as straight segments with role "rapid", travelled at
 `rapid_feed` (at most a machine's max feed); the joins around them are sharp corners, so the planner stops
 there. G0 moves after the last feed move (the retract) are dropped.
-Zero-length moves are skipped.
+Zero-length moves are skipped (a program whose feed moves all are is refused, said so); a position beyond
+±1e6 mm, written or reached by incremental words, is refused at its block.
 
 Arcs whose start and end radii (about the programmed centre) differ by less
 than `arc_tolerance` are accepted, the centre moved onto the perpendicular
@@ -84,6 +85,7 @@ import numpy as np
 from . import _validate
 from .config import read_bytes, text_lines, text_only
 from .exceptions import ConfigError, ContoursimWarning, PathError
+from .feed import SETTING_RANGE
 from .paths import MAX_COORDINATE, Line, Path, _arc_from_point
 from .simulation import SimResult
 
@@ -254,7 +256,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
     rapid_feed = _validate.positive("rapid_feed", rapid_feed)
     arc_tolerance = _validate.positive("arc_tolerance", arc_tolerance)
     here = _validate.finite_array("start", start, shape=(3,))
-    motion, plane, absolute, feed, cutting = None, 2, True, None, False
+    motion, plane, absolute, feed, cutting, fed = None, 2, True, None, False, False  # fed: a feed move read, if of no length
     prims, feeds, lines, texts, ignored, stops, optional = [], [], [], [], {}, {}, []
     away = {}  # axis -> line of the G28/G30/G53 that took it to a machine position, after the first feed move
 
@@ -332,8 +334,9 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         if unknown:
             fail(f"unknown word {unknown[0]} (supported: {_SUPPORTED})")
         if "F" in values:  # the feed is set first, in any block
-            if values["F"] <= 0:
-                fail(f"F must be positive, got {values['F']:g}")
+            low, high = (60.0 * limit for limit in SETTING_RANGE)  # [mm/min]
+            if not low <= values["F"] <= high:
+                fail(f"F{values['F']:g} must lie within [{low:g}, {high:g}] mm/min")
             feed = values["F"] / 60.0
         if nonmodal == 4:  # the dwell: its time is P, or X (Fanuc) when there is no P; a move in its block follows it
             time = "P" if "P" in values else "X"
@@ -360,6 +363,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         for i, a in enumerate("XYZ"):
             if a in values:
                 target[i] = values[a] if absolute else here[i] + values[a]
+                if abs(target[i]) > MAX_COORDINATE:  # incremental words (G91) adding up beyond what a machine reaches
+                    fail(f"G91 {a}{values[a]:g} takes {a} to {target[i]:g} mm, beyond ±{MAX_COORDINATE:g} mm")
         if motion > 0 and feed is None:
             fail("missing F before the first feed move")
         if motion > 0 and away:
@@ -371,6 +376,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         if motion == 0 and not cutting:
             here = target
             continue
+        fed = fed or motion > 0
         try:
             if motion in (0, 1):
                 if np.linalg.norm(target - here) > 1e-9:
@@ -388,7 +394,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         here = target
 
     if not cutting:
-        raise ConfigError("the program has no feed move (G1, G2 or G3)", source=source)
+        raise ConfigError("the program's feed moves (G1, G2 or G3) all have zero length" if fed else
+                          "the program has no feed move (G1, G2 or G3)", source=source)
     while prims[-1].role == "rapid":
         prims.pop(), feeds.pop(), lines.pop(), texts.pop()
     stops = tuple(k for k in stops if k < len(prims) - 1)  # the path's end is a stop of its own

@@ -36,7 +36,7 @@ from . import _validate
 from .config import TEXT_KEYS, TomlFile, local_file
 from .exceptions import ConfigError, PathError, UnstableLoopError
 from .multibody import MAX_TRAVEL
-from .servo import AxisServo
+from .servo import AxisServo, SamplingError
 
 __all__ = ["CARTESIAN", "CONTROLLER_FIELDS", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
 
@@ -258,12 +258,14 @@ class Machine:
             column = q[:, self.axis_names.index(axis)]
             outside = (column < lo - 1e-9) | (column > hi + 1e-9)
             if outside.any():
+                rotary = self.chain is not None and self.chain.axis_kind(axis) == "rotary"
+                unit, shown = ("deg", np.degrees) if rotary else ("mm", float)
                 raise PathError(
-                    f"axis {axis} would move over {column.min():.6g} .. {column.max():.6g}, outside its travel "
-                    f"{lo:.6g} .. {hi:.6g} [mm or rad]: "
+                    f"axis {axis} would move over {shown(column.min()):.6g} .. {shown(column.max()):.6g}, outside its "
+                    f"travel {shown(lo):.6g} .. {shown(hi):.6g} [{unit}]: "
                     + ("move the path with work_offset or make it smaller" if self.chain is not None else
                        "place the path inside it or make it smaller (without bodies the path's coordinates are the axes')"),
-                    None if trajectory.path is None else int(trajectory.primitive[np.argmax(outside)]),
+                    None if trajectory.path is None else int(trajectory.primitive[np.argmax(outside)]), axis,
                 )
 
     def tool_position(self, q, t, dim):
@@ -383,7 +385,8 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
     ------
     ConfigError
         Naming the file and line of an unknown key or a bad value, or of the
-        servo period when it is too long for an axis's loops.
+        servo period when it is too long for an axis's loops (of the axis's
+        integral time when its integral action makes the loop too fast).
     UnstableLoopError
         With `check`, an axis's sampled loop is unstable or badly damped: the
         message names the file, the line of its ``[axes.*]`` table, the loop
@@ -445,8 +448,9 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
             if check:
                 raise UnstableLoopError(f"{toml.source}, line {toml.line_of('axes', axis)}: {_file_names(exc)}",
                                         exc.margins) from None
-        except ValueError as exc:
-            raise toml.error(_file_names(exc), "servo_period_ms") from None
+        except SamplingError as exc:  # the period, or the parameter making the loop too fast for it
+            keys = ("servo_period_ms",) if exc.parameter == "dt" else ("axes", axis, _RENAMED[exc.parameter])
+            raise toml.error(_file_names(exc), *keys) from None
     try:
         return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
                        max_feed=max_feed, work_offset=offset, uncertain=uncertain, axis_travel=travel if geometry else None)

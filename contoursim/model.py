@@ -290,7 +290,10 @@ def with_file_effects(model, toml):
 
     An effect of the same name and axis as one of `model` replaces it (a job
     file's effect overrides its machine file's); the same effect twice in
-    one file is refused.
+    one file is refused, and so is a backlash whose ``feedback`` differs
+    from the ``position_feedback`` the same file gives its axis (the file
+    says where that loop reads; a backlash's ``feedback`` is for a file that
+    does not, see :class:`~contoursim.effects.Effect`).
 
     Parameters
     ----------
@@ -306,7 +309,8 @@ def with_file_effects(model, toml):
     ------
     ConfigError
         Naming the file and line of a bad table, of an effect on an axis the
-        machine lacks or beyond what it allows, or of an effect given twice.
+        machine lacks or beyond what it allows, of an effect given twice, or
+        of a backlash's feedback against its axis's in the file.
     """
     first = {}
     for i, effect in enumerate(read_effects(toml)):
@@ -316,6 +320,14 @@ def with_file_effects(model, toml):
         first[effect.label] = i
         if _delay_problem(effect, model.machine):
             raise toml.error(_delay_problem(effect, model.machine), "effect", i, "delay_s")
+        axis = toml.data.get("axes", {}).get(effect.axis, {})  # the file's own axis table (a job file has none)
+        said = axis.get("position_feedback") if effect.name == "backlash" else None
+        if said is not None and effect.options["feedback"] not in (None, said):
+            raise toml.error(f"{effect.label}: feedback = {effect.options['feedback']!r}, but this file's axis "
+                             f"{effect.axis} says where its position loop reads: position_feedback = {said!r} (line "
+                             f"{toml.line_of('axes', effect.axis, 'position_feedback')}); a backlash is read where its "
+                             "axis's loop reads: leave feedback out, or change the axis's position_feedback",
+                             "effect", i, "feedback")
         try:
             model = model.with_effect(effect)
         except (TypeError, ValueError) as exc:

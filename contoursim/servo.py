@@ -82,6 +82,7 @@ __all__ = [
     "bandwidth",
     "margins",
     "check",
+    "SamplingError",
     "MIN_PHASE_MARGIN_DEG",
     "MIN_DAMPING_RATIO",
     "MAX_CROSSOVER_FRACTION",
@@ -91,6 +92,22 @@ __all__ = [
     "MAX_VELOCITY_TAPS",
     "MAX_COMPUTATION_DELAY",
 ]
+
+
+class SamplingError(ValueError):
+    """A servo loop too fast to simulate at its servo period (:func:`check`'s sampling criterion).
+
+    Parameters
+    ----------
+    message : str
+        Which axis and loop, and what to change.
+    parameter : str
+        The setting at fault: ``"dt"``, or the servo parameter (``"ti"``, ...) that makes the loop so fast.
+    """
+
+    def __init__(self, message, parameter):
+        self.parameter = parameter
+        super().__init__(message)
 
 
 class _LazyControl:
@@ -970,11 +987,14 @@ def _loop_response(loop):
     dense solve's O(n³) (Laub, "Efficient multivariable frequency response
     computations", IEEE TAC 26, 1981).
     """
-    from scipy.linalg import hessenberg, matrix_balance  # slow to import; only the analysis needs it
+    from scipy.linalg import hessenberg  # slow to import; only the analysis needs it
+    from scipy.linalg.lapack import dgebal
 
-    A, T = matrix_balance(np.asarray(loop.A, float), permute=False)  # A = T Ab T⁻¹, T diagonal (powers of 2)
+    # A = T Ab T⁻¹, T = diag(scale) (powers of 2), by LAPACK itself: scipy's matrix_balance casts the scales to int
+    # with its permutation, invalid past 2^63 (a stiff current loop's sampled pole e^-500 is balanced by 2^371)
+    A, _, _, scale, _ = dgebal(np.asarray(loop.A, float), scale=1)
     H, Q = hessenberg(A, calc_q=True)
-    b, c = Q.T @ (np.asarray(loop.B, float)[:, 0] / np.diag(T)), (np.asarray(loop.C, float)[0] * np.diag(T)) @ Q
+    b, c = Q.T @ (np.asarray(loop.B, float)[:, 0] / scale), (np.asarray(loop.C, float)[0] * scale) @ Q
     d, dt = float(np.asarray(loop.D)[0, 0]), loop.dt
 
     def response(omega):
@@ -1234,6 +1254,13 @@ def _remedy(loop, servo, dt, m, inner):
                 return f"{slow}, and at dt = {dt:.6g} s none may cross over above {ceiling / (2 * np.pi):.4g} Hz: {lower}"
             return f"{slow}: raise kv, or {lower}"
     integral = getattr(servo, _INTEGRAL_OF.get(loop, ""), None)
+    if loop == "velocity" and np.isfinite(crossover):  # the current's lag: a current loop as slow is the cause
+        current, bandwidth = (("current_bandwidth_hz", 2 * np.pi * servo.current_bandwidth_hz)
+                              if servo.current_bandwidth_hz is not None else
+                              ("kc", inner["gain_crossover"]) if inner is not None else (None, np.inf))
+        if not bandwidth > crossover:  # its lag at the crossover is over 45° (NaN: a current loop never reaching 1)
+            return (f"the current loop is too slow for it (bandwidth {bandwidth / (2 * np.pi):.4g} Hz, below its "
+                    f"crossover {crossover / (2 * np.pi):.4g} Hz): raise {current}")
     if np.isfinite(crossover):
         if integral and crossover * integral < 1.0:  # the PI's phase lag at the crossover is over 45°
             return (f"its crossover lies below the integral action's corner 1/(2π·{_INTEGRAL_OF[loop]}) = "
@@ -1252,7 +1279,8 @@ def check(servo, dt, axis="x"):
     1. sampling: the continuous loop's gain crossover must stay below
        ``MAX_CROSSOVER_FRACTION`` (1/4) of the Nyquist frequency ``1/(2 dt)``,
        so the sampling delay costs at most ``π/8`` (22.5°) of phase there —
-       otherwise :class:`ValueError` naming ``dt`` and the loop's gain;
+       otherwise :class:`SamplingError` naming ``dt`` and the loop's gain, or
+       the loop's integral time when its integral action sets the crossover;
     2. stability of the sampled loop: every closed-loop pole strictly inside
        the unit circle, phase margin >= ``MIN_PHASE_MARGIN_DEG`` (30°) and
        closed-loop damping ratio >= ``MIN_DAMPING_RATIO`` (0.2) — otherwise
@@ -1276,8 +1304,8 @@ def check(servo, dt, axis="x"):
 
     Raises
     ------
-    ValueError
-        `dt` is too long for a loop.
+    SamplingError
+        `dt` is too long for a loop (or its integral time too short for `dt`).
     UnstableLoopError
         A sampled loop is unstable or badly damped.
     """
@@ -1286,12 +1314,17 @@ def check(servo, dt, axis="x"):
     for loop, m in margins(servo).items():
         f_c = m["gain_crossover"] / (2 * np.pi)
         if f_c > f_max:
-            gain = _GAIN_OF[loop]
-            raise ValueError(
+            gain, integral = _GAIN_OF[loop], _INTEGRAL_OF.get(loop)
+            use = f"dt <= {MAX_CROSSOVER_FRACTION / (2 * f_c):.3g} s"
+            if integral and getattr(servo, integral) and m["gain_crossover"] * getattr(servo, integral) < 1.0:
+                raise SamplingError(  # the integral action sets the crossover, beyond its corner 1/(2π ti)
+                    f"{integral} = {getattr(servo, integral):.6g} s is too short for the {loop} loop of axis {axis!r} at "
+                    f"dt = {dt:.6g} s: its integral action lifts the crossover to {f_c:.4g} Hz, above 1/4 of the "
+                    f"Nyquist frequency ({f_max:.4g} Hz). Lengthen {integral}, or use {use}.", integral)
+            raise SamplingError(
                 f"dt = {dt:.6g} s is too long for the {loop} loop of axis {axis!r}: its crossover "
                 f"{f_c:.4g} Hz is above 1/4 of the Nyquist frequency ({f_max:.4g} Hz). Use "
-                f"dt <= {MAX_CROSSOVER_FRACTION / (2 * f_c):.3g} s, or lower {gain} = {getattr(servo, gain):.6g}."
-            )
+                f"{use}, or lower {gain} = {getattr(servo, gain):.6g}.", "dt")
     sampled = margins(servo, dt)
     inner = None  # the margins of the loop inside the one checked (innermost first)
     for loop, m in sampled.items():

@@ -601,7 +601,9 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     -----
     ContoursimWarning
         An axis's current command hit its limit: the message names the axis
-        and the fraction of samples (see :attr:`SimResult.saturation`); a
+        and the fraction of samples (see :attr:`SimResult.saturation`), and
+        says so when the axis never moved (a friction or force beyond what
+        its drive pushes at the limit held it); a
         geometric compensation runs beside geometric effects, which its
         error model (the machine's bodies) does not hold.
 
@@ -655,8 +657,13 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
                       f"tables), as a controller corrects what it was calibrated with; the effects "
                       f"{', '.join(uncompensated)} are not in it and stay uncompensated", ContoursimWarning, stacklevel=2)
     clipped = {axis: f for axis, f in result.saturation.items() if f > 0}
-    if clipped:
-        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A)"
+    if clipped:  # an axis commanded to move that stood still to rounding: its drive at the limit cannot push it
+        spans = zip(servos, np.ptp(_servo_part(model, q), axis=0), np.ptp(response.position, axis=0))
+        held = {axis: commanded for axis, commanded, moved in spans if commanded > 0 and moved <= 1e-9 * commanded}
+        axes = ", ".join(f"axis {axis} in {100 * f:.3g} % of the samples (limit ±{servos[axis].current_limit:g} A"
+                         + (f"; it never moved, commanded over {held[axis]:.4g} mm: the most its drive pushes, "
+                            f"{servos[axis].force_constant * servos[axis].current_limit:.4g} N, does not overcome what "
+                            "holds it" if axis in held else "") + ")"
                          for axis, f in clipped.items())
         warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
                       ContoursimWarning, stacklevel=2)

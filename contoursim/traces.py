@@ -2,7 +2,9 @@
 
 Format (DESIGN.md): optional leading ``#`` lines (free text or ``# key: value``
 metadata), a header row, numeric rows. Required columns: ``t`` [s], strictly
-increasing and uniform, and for each axis the pair ``<axis>_ref``, ``<axis>``
+increasing and uniform (to the decimals it is printed to: a 3 kHz clock printed
+to the µs, steps of 333 and 334 µs, is read as the uniform grid it was rounded
+from), and for each axis the pair ``<axis>_ref``, ``<axis>``
 [mm] for the axis sets ``x``, ``x, y`` or ``x, y, z``. ``*_ref`` are the
 commanded (interpolator) positions, the others the measured tool positions.
 Optional measured inputs, per axis: ``<axis>_force`` [N], a known external
@@ -23,8 +25,8 @@ m``, is that of all the position columns; ``# Units:`` and ``# unit:`` too). The
 :data:`TIME_UNITS` to s, positions from :data:`LENGTH_UNITS` to mm, forces
 from :data:`FORCE_UNITS` to N and currents from :data:`CURRENT_UNITS` to A,
 and refuses any other unit of a column it reads (the units of the header's other columns are not read), a
-column the header does not have (a typo, a line of another trace) and a second ``# units:`` line (one of the
-two would be ignored).
+column the header does not have (a typo, a line of another trace), a column declared twice and a second
+``# units:`` line (one of the two would be ignored).
 Without a declared time unit, a sample period outside
 :data:`PLAUSIBLE_SAMPLE_PERIOD` is refused as no servo trace's (a time column
 in ms, µs or ns read as seconds): declaring ``t [s]`` accepts it. A measured
@@ -284,10 +286,11 @@ def read_trace(file):
         Naming the file, line and column of the first problem: a missing
         column (saying what the header holds), a non-numeric, non-finite or
         out-of-range cell (see :data:`MAX_POSITION`, :data:`MAX_TIME`), a row
-        with more or fewer cells than the header, non-monotonic or non-uniform
-        time, text that is not UTF-8, a ``# units:`` line that cannot be read,
-        names a column the header does not have or declares a unit the
-        reader does not convert, a sample period
+        with more or fewer cells than the header, non-monotonic time or time
+        non-uniform beyond the rounding of its printed decimals (within it,
+        read as the uniform grid it was rounded from), text that is not UTF-8, a ``# units:`` line that cannot be read,
+        names a column the header does not have or a column twice, or
+        declares a unit the reader does not convert, a sample period
         outside :data:`PLAUSIBLE_SAMPLE_PERIOD` without a declared time unit,
         a measured column that does not follow its reference (:data:`FOLLOWING_GAIN`).
     """
@@ -362,7 +365,10 @@ def read_trace(file):
     try:
         _, dt = _validate.time_base("column 't'", data[:, 0])
     except _validate.TimeStepError as exc:  # step k ends on data row k + 1
-        raise fail(str(exc), header_line + 2 + exc.step) from None
+        grid = _validate.rounded_grid(data[:, 0], scale[0] * _printed_unit(body, index[0]))
+        if grid is None:
+            raise fail(str(exc), header_line + 2 + exc.step) from None
+        data[:, 0], dt = grid  # a 3 kHz clock printed to the µs (steps of 333 and 334 µs): read as its grid
     low, high = PLAUSIBLE_SAMPLE_PERIOD
     if "t" not in units and not low <= dt < high:
         raise fail(f"column 't': a sample every {dt:.6g} s ({1 / dt:.6g} Hz) is no servo trace's (from {1 / high:g} Hz "
@@ -403,9 +409,10 @@ def _declared_units(text, key, names, wanted, inputs, fail):
     `key` is the line's key as written (``units``, ``Units``), `names` the header's columns, `wanted` those
     read; `inputs` maps the measured-input columns among `wanted` to their kind (a key of :data:`INPUTS`); a
     bare unit is the positions'. `fail` makes the error of a line that cannot be read, names a column the
-    header does not have or declares a unit the reader does not convert.
+    header does not have or a column twice (one of the two would be ignored; in the same unit too, as a second
+    ``# units:`` line is refused), or declares a unit the reader does not convert.
     """
-    units, lacking = {}, []
+    declared, lacking, bare = {}, [], ()
     text = text.replace("\u03bc", "\u00b5")  # the Greek letter mu, as keyboards give it, for the micro sign
     if not text.strip(" ;"):  # a units line is honoured or refused, never passed over
         raise fail(f"'# {key}:' declares no unit: write them as contoursim does, '# units: t [s]; x_ref, x [mm]', "
@@ -414,16 +421,26 @@ def _declared_units(text, key, names, wanted, inputs, fail):
         match = _GROUP.fullmatch(group)
         columns = [] if match is None else [c.strip() for c in match["columns"].split(",")]
         if match is None and group in LENGTH_UNITS:  # a bare unit: all the positions'
-            units.update((name, group) for name in wanted[1:] if name not in inputs)
+            columns = bare = [name for name in wanted[1:] if name not in inputs]
+            unit = group
         elif match is None or not all(columns):  # "[mm]", "x_ref,, x [mm]": a unit of no column
             raise fail(f"the units {group!r} cannot be read: write them as contoursim does, "
                        "'# units: t [s]; x_ref, x [mm]' (columns, then the unit in brackets)")
         else:
-            units.update((name, match["unit"].strip()) for name in columns if name in wanted)
+            unit = match["unit"].strip()
             lacking += [name for name in columns if name not in names]  # a typo ('yy'), another trace's line
+        for name in columns:
+            if name in declared:
+                first = declared[name]
+                twice = f"in {first!r} and in {unit!r}" if first != unit else f"in {unit!r} both times"
+                aside = " (a bare unit is that of all the position columns)" if name in bare else ""
+                raise fail(f"'# {key}:' declares column {name!r} twice, {twice}{aside}: declare each column's unit "
+                           "once")
+            declared[name] = unit
     if lacking:
         raise fail(f"'# {key}:' names column{'s' * (len(lacking) > 1)} {', '.join(map(repr, lacking))}, which the "
                    f"trace does not have (its columns: {', '.join(names)})")
+    units = {name: unit for name, unit in declared.items() if name in wanted}
     for name, unit in units.items():
         if name in inputs:
             known, read = INPUTS[inputs[name]][0], f"the {inputs[name]} columns are"
@@ -480,6 +497,16 @@ def _header_problem(names):
         upper = [name for name in names if name != name.lower()]
         return f"column names are case-sensitive: the header has {', '.join(map(repr, upper))}; {expected}"
     return f"missing column 't' in the header {found!r}; {expected}"
+
+
+_DIGITS = re.compile(r"[^.eE]*(?:\.(\d*))?(?:[eE]([-+]?\d+))?")  # a number's fraction digits and exponent
+
+
+def _printed_unit(body, col):
+    """The unit of the last decimal that column `col` of the rows `body` is printed to, its finest cell's (``0.000333``
+    and ``3.33e-4``: 1e-6); 0 or infinite past a float's range (no unit :func:`_validate.rounded_grid` takes)."""
+    cells = (_DIGITS.match(row.split(",", col + 1)[col].strip()) for row in body)
+    return float(f"1e{min(int(match[2] or 0) - len(match[1] or '') for match in cells)}")
 
 
 _WHOLE = re.compile(r"\s*[-+]?\d+\s*")  # a cell a decimal comma leaves of a number: its whole or its fraction digits

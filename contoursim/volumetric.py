@@ -5,6 +5,16 @@ tool axis, in workpiece coordinates) on a grid of axis positions spanning the
 travels, the rotary axes turned over theirs, prints the worst errors per
 component and plots the error field: magnified arrows and colour maps, one
 figure per plane of linear axes, the rotary axes where the error is worst.
+
+A rotary axis whose travel spans a turn or more is looked at over one turn,
+its positions evenly spread without the end (the start again), when its error
+motions repeat every turn (:meth:`~contoursim.errormotion.ErrorMotion.repeats_every`):
+the rest of the travel repeats that turn, and positions spread over the
+whole travel would be whole turns apart, one angle looked at many times
+(``travel_deg = [0, 36000]`` at 5 positions: C = 0° only). Error motions
+that do not repeat (a polynomial beyond the constant, an error table, a
+cyclic term whose period is no whole fraction of a turn) are looked at over
+the whole travel, as many positions a turn.
 """
 
 from itertools import combinations, product
@@ -20,6 +30,10 @@ from .plotting import magnification_for
 
 __all__ = ["volumetric_grid", "volumetric_report"]
 
+_TURN = 2 * np.pi  # [rad]
+#: Most positions at which a rotary axis whose errors do not repeat every turn is looked at over its travel.
+MAX_ROTARY_POSITIONS = 10_000
+
 
 def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
     """Axis positions on a grid spanning the workspace.
@@ -33,16 +47,26 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
     points : int
         Grid points per swept axis (>= 2).
     ranges : dict, optional
-        ``{axis: (min, max)}`` [mm or rad]; default the axes' travels.
+        ``{axis: (min, max)}`` [mm or rad]; default the axes' travels, a
+        rotary axis's of a turn or more looked at as :func:`volumetric_report`
+        says (over one turn, or `points` positions a turn).
     fixed : dict, optional
         ``{axis: position}`` for the other axes [mm or rad]; default 0.
 
     Returns
     -------
-    q : ndarray, shape (points**len(sweep), n_axes)
-        Axis positions [mm, rad], the swept axes varying as ``np.meshgrid(..., indexing="ij")``.
+    q : ndarray, shape (M, n_axes)
+        Axis positions [mm, rad], the swept axes varying as ``np.meshgrid(..., indexing="ij")``;
+        M the product of the lengths of `axes` (``points**len(sweep)`` but for a rotary axis
+        looked at over many turns).
     axes : tuple of ndarray
         The grid values of each swept axis.
+
+    Raises
+    ------
+    ValueError
+        A bad argument, an axis to sweep without travel or range, or a rotary axis whose
+        errors do not repeat every turn over more positions than :data:`MAX_ROTARY_POSITIONS`.
     """
     sweep = _swept(chain, sweep)
     unknown = set(sweep) - set(chain.axes)
@@ -56,7 +80,8 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
         lohi = ranges.get(a, travel[a])
         if lohi is None:
             raise ValueError(f"axis {a!r} has no travel: give its range")
-        values.append(np.linspace(lohi[0], lohi[1], points))
+        rotary = a not in ranges and chain.axis_kind(a) == "rotary"
+        values.append(_rotary_positions(chain, a, points)[0] if rotary else np.linspace(lohi[0], lohi[1], points))
     fixed = dict(fixed or {})
     mesh = np.meshgrid(*values, indexing="ij")
     q = np.zeros((mesh[0].size, len(chain.axes)))
@@ -67,6 +92,32 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
     for a, m in zip(sweep, mesh):
         q[:, chain.axes.index(a)] = m.ravel()
     return q, tuple(values)
+
+
+def _rotary_positions(chain, axis, count, source=None):
+    """Positions [rad] at which the rotary `axis` is looked at over its travel, and what the summary says of them.
+
+    Under a turn, `count` spanning the travel; over a turn or more, `count`
+    over one turn from the travel's start when the axis's error motions
+    repeat every turn, else `count` a turn over the whole travel (at most
+    :data:`MAX_ROTARY_POSITIONS`: a ConfigError naming `source`, the machine file, beyond).
+    """
+    body = next(b for b in chain.bodies if b.axis == axis)
+    lo, hi = body.travel
+    turns = (hi - lo) / _TURN
+    if turns < 1 - 1e-9:
+        return np.linspace(lo, hi, count), ""
+    travel = f"its travel {_span(np.array([lo, hi]), True)}"
+    if all(m.repeats_every(_TURN) for m in body.motion):
+        return lo + _TURN / count * np.arange(count), f" (one turn of {travel}: its errors repeat every turn)"
+    n = int(np.ceil(turns * count - 1e-9)) + 1
+    if n > MAX_ROTARY_POSITIONS:
+        raise ConfigError(f"axis {axis!r} (body {body.name!r}): its errors do not repeat every turn (a polynomial "
+                          f"beyond the constant, an error table, or a cyclic term whose period is no whole fraction "
+                          f"of a turn), so each of the {turns:.6g} turns of {travel} is looked at, {count} positions "
+                          f"a turn: {n} positions, more than {MAX_ROTARY_POSITIONS}; give it a shorter travel_deg, "
+                          "or hold it (volumetric_report's fixed)", source)
+    return np.linspace(lo, hi, n), f" ({count} a turn: its errors do not repeat every turn)"
 
 
 def _swept(chain, sweep):
@@ -82,6 +133,16 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     (one not in `fixed`), so the worst errors are those of the whole
     workspace; the plots show the plane of each pair of swept axes with the
     rotary axes where the position error |Δ| is worst, and say where.
+
+    A rotary axis whose travel spans a turn or more is looked at over one
+    turn, `rotary_grid` positions ``360°/rotary_grid`` apart from the
+    travel's start, when its error motions repeat every turn (no polynomial
+    term beyond the constant, no error table, every cyclic term's period a
+    whole fraction of a turn): the rest of the travel repeats that turn
+    (positions spread over ``[0, 36000]°`` would all be C = 0°). Otherwise
+    every turn differs and the whole travel is looked at, `rotary_grid`
+    positions a turn (at most :data:`MAX_ROTARY_POSITIONS`). The summary says
+    which.
 
     Parameters
     ----------
@@ -104,7 +165,8 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
         Time [s] at which the thermal drift is evaluated.
     rotary_grid : int
         Positions per rotary axis outside `sweep` and `fixed` (>= 2; 0 holds
-        them at 0, as the output then says).
+        them at 0, as the output then says); per turn over a travel of a turn
+        or more (see above).
 
     Returns
     -------
@@ -114,7 +176,9 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     Raises
     ------
     ConfigError
-        The machine file is bad or has no geometric half, or `out_dir` cannot be used.
+        The machine file is bad or has no geometric half, a rotary axis's errors do not
+        repeat every turn over more positions than :data:`MAX_ROTARY_POSITIONS`, or
+        `out_dir` cannot be used.
     FileExistsError
         A plot's file exists in `out_dir` and contoursim did not write it.
     """
@@ -138,7 +202,8 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     if rotary_grid == 1:
         raise ValueError(f"rotary_grid must be 0 (hold the rotary axes at 0) or at least 2, got {rotary_grid}")
     turned = [a for a in turned if travel.get(a) is not None] if rotary_grid else []
-    angles = [np.linspace(*travel[a], rotary_grid) for a in turned]
+    source = None if isinstance(machine, MachineChain) else str(machine)
+    angles, notes = zip(*[_rotary_positions(chain, a, rotary_grid, source) for a in turned]) if turned else ((), ())
     t = np.full(q.shape[0], float(time))
     columns = [chain.axes.index(a) for a in turned]
     rows, largest = None, -1.0
@@ -148,7 +213,7 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
         rows = _worst(rows, dp, dv, q)
         if rows[3][1] > largest:  # the largest |Δ| so far: the setting the plots show
             largest, shown = rows[3][1], (setting, dp)
-    rotaries = _rotaries(chain, sweep, fixed, turned, angles)
+    rotaries = _rotaries(chain, sweep, fixed, turned, angles, notes)
     text = _summary(chain, rows, sweep, values, float(time), rotary, rotaries, len(q) * max(1, len(list(product(*angles)))))
     if out_dir is not None:
         out = output_dir(out_dir)
@@ -182,9 +247,9 @@ def _worst(rows, dp, dv, q):
     return new
 
 
-def _rotaries(chain, sweep, fixed, turned, angles):
-    """What the summary says of the rotary axes outside `sweep`: turned over their travels, or held where."""
-    parts = [f"{a} {_span(v, True)} at {len(v)} positions" for a, v in zip(turned, angles)]
+def _rotaries(chain, sweep, fixed, turned, angles, notes):
+    """What the summary says of the rotary axes outside `sweep`: turned over their travels (`notes`: how), or held."""
+    parts = [f"{a} {_span(v, True)} at {len(v)} positions{note}" for a, v, note in zip(turned, angles, notes)]
     held = [a for a, rot in zip(chain.axes, chain.rotary_axes) if rot and a not in sweep and a not in turned]
     if held:
         parts.append("held: " + ", ".join(_at(a, (fixed or {}).get(a, 0.0), True) for a in held))

@@ -281,6 +281,21 @@ def test_a_program_leaving_the_travel_is_refused_by_the_block_that_leaves_it(tmp
     assert f"{program}, line 4: axis x would move over" in capsys.readouterr().err
 
 
+def test_a_job_work_offset_beyond_the_travel_is_said_at_its_line_in_its_unit(tmp_path, capsys):
+    """It blamed the path file, and gave a rotary axis's travel in radians ('-1.91986 .. 1.91986 [mm or rad]')."""
+    job = tmp_path / "job.toml"
+    for command in ("simulate", "compare"):
+        job.write_text('machine = "table_tilting_5axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { a_deg = 1000 }\n')
+        assert main([command, str(job), "--out", str(tmp_path / "o")]) == 2
+        assert (f"{job}, line 3: work_offset.a_deg = 1000: axis a would move over 1000 .. 1000, outside its travel "
+                "-110 .. 110 [deg]: move the path with work_offset") in capsys.readouterr().err
+        job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\n\nwork_offset = { x_mm = 1e7 }\n')
+        assert main([command, str(job), "--out", str(tmp_path / "o")]) == 2
+        assert (f"{job}, line 4: work_offset.x_mm = 1e+07: axis x would move over 9.99995e+06 .. 1e+07, "
+                "outside its travel 0 .. 500 [mm]") in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
 def test_job_work_offset_moves_the_path_on_the_machine(tmp_path, capsys):
     job = tmp_path / "job.toml"
     job.write_text('machine = "vertical_mill_3axis"\npath = "iso230_4_circle_ccw"\nwork_offset = { x_mm = 470 }\n')

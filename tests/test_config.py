@@ -48,11 +48,30 @@ def test_missing_key_and_table():
         f.table("feed")
 
 
+def test_a_name_with_a_line_break_is_refused_by_its_line():
+    """It reached the trace files' '# machine: ...' line: refused at write time, no line, an empty out folder left."""
+    f = TomlFile("m.toml", 'servo_period_ms = 0.5\nname = "two\\naxes"\n[[body]]\nname = "x\\r"\n')
+    with pytest.raises(ConfigError, match=r"^m.toml, line 2: name must be one line, got 'two\\naxes'$"):
+        f.table(text={"name": "text"})
+    with pytest.raises(ConfigError, match=r"^m.toml, line 4: name in \[body.0\] must be one line"):
+        f.table("body", 0, text={"name": "a body's name"})
+
+
 def test_syntax_error_names_the_line(tmp_path):
     file = tmp_path / "bad.toml"
     file.write_text("[a]\nx = 1\ny = = 2\n")
     with pytest.raises(ConfigError, match=r"bad.toml, line 3: not valid TOML"):
         TomlFile.read(file)
+
+
+@pytest.mark.parametrize("value", ["[" * 1000, "[" * 1000 + "]" * 1000, "{a = " * 1000 + "1" + "}" * 1000])
+def test_values_nested_too_deeply_are_refused_by_their_line(tmp_path, value):
+    """tomllib recurses into each array and inline table: 500 nested ended in a RecursionError traceback."""
+    file = tmp_path / "deep.toml"
+    file.write_text(f'[a]\nx = 1\ny = {value}\nz = 2\n')
+    with pytest.raises(ConfigError) as info:
+        TomlFile.read(file)
+    assert str(info.value) == f"{file}, line 3: not valid TOML: arrays or inline tables nested too deeply"
 
 
 def test_unreadable_file(tmp_path):

@@ -73,6 +73,14 @@ def test_an_effect_knows_its_parameters_stage_and_label():
     (("noise", "x"), {"rms_um": 0.1, "seed": 2**53}, "seed must be a whole number from 0 to 2"),
     (("time_delay", "x"), {"delay_s": 1e-3, "kind": "velocity"},
      "kind must be one of 'command', 'feedback', 'position', got 'velocity'"),
+    # a friction's forces ran to 1e300 N, the axis standing still in a run that read as an ordinary one
+    (("coulomb_friction", "x"), {"force_N": 1e300}, r"force_N must lie in \[0, 100000\] N, got 1e\+300"),
+    (("coulomb_friction", "x"), {"force_N": 30.0, "stribeck_N": 2e5}, r"stribeck_N must lie in \[0, 100000\] N"),
+    (("coulomb_friction", "x"), {"force_N": 30.0, "viscous_N_s_per_m": 2e6},
+     r"viscous_N_s_per_m must lie in \[0, 1e\+06\] N·s/m"),
+    (("coulomb_friction", "x"), {"force_N": 30.0, "asymmetry_N": -2e5},
+     r"asymmetry_N must lie in \[-100000, 100000\] N"),
+    (("coulomb_friction", "x"), {"force_N": 30.0, "offset_N": 1e300}, r"offset_N must lie in \[-100000, 100000\] N"),
 ])
 def test_a_bad_effect_says_what_is_wrong(args, kwargs, message):
     with pytest.raises(ValueError, match=message):
@@ -432,6 +440,32 @@ def test_a_machine_file_with_effects_loads_as_a_model(tmp_path):
     file.write_text(text + '\n[[effect]]\nname = "backlash"\naxis = "w"\nlost_motion_um = 1\n')
     with pytest.raises(ConfigError, match="mill.toml, line .*axis must be one axis letter of x, y, z, got 'w'"):
         load_model(file)
+
+
+def test_a_machine_files_backlash_reads_where_the_file_says_its_axis_reads(tmp_path):
+    """A file whose X says position_feedback = "scale" and whose backlash on X says feedback = "motor" ran as if X
+    read on its motor, silently: refused, naming both lines. Left out or the same, the backlash reads on the scale;
+    on Y, which the file does not say (the motor by default), a backlash read on a scale (a diagnosis's hypothesis)
+    makes Y read there."""
+    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    header = text.splitlines().index(next(s for s in text.splitlines() if s.startswith("[axes.x]")))
+    text = text.replace("[axes.x]", '[axes.x]\nposition_feedback = "scale"', 1)
+    file = tmp_path / "mill.toml"
+
+    def with_backlash(axis, feedback=""):
+        file.write_text(text + f'\n[[effect]]\nname = "backlash"\naxis = "{axis}"\nlost_motion_um = 5\n{feedback}\n')
+        return load_model(file)
+
+    effect_line = text.count("\n") + 6  # the feedback line of the [[effect]] appended
+    with pytest.raises(ConfigError, match=rf"mill\.toml, line {effect_line}: backlash\.x: feedback = 'motor', but this "
+                                          rf"file's axis x says where its position loop reads: position_feedback = "
+                                          rf"'scale' \(line {header + 2}\); .* leave feedback out"):
+        with_backlash("x", 'feedback = "motor"')
+    for given in ("", 'feedback = "scale"'):
+        model = with_backlash("x", given)
+        assert model.effects[0].options["feedback"] == model.machine.axes["x"].position_feedback == "scale"
+    model = with_backlash("y", 'feedback = "scale"')
+    assert model.machine.axes["y"].position_feedback == "scale" and model.effects[0].options["feedback"] == "scale"
 
 
 def test_a_machine_files_axis_tables_in_any_order_are_its_axes_x_y_z(tmp_path):

@@ -28,6 +28,22 @@ def test_zero_motion():
     assert not ErrorMotion(poly=(0, 1e-6)).is_zero
 
 
+def test_repeats_every_a_turn_only_when_every_term_does():
+    """A constant and cyclic terms 1, 3 and 7 times a turn repeat every turn (checked against the values a turn on);
+    a slope, a table, a period of 144° (2.5 a turn) or of two turns do not."""
+    turn = 2 * np.pi
+    motion = ErrorMotion((1e-3,), tuple(Cyclic(turn / n, 1e-3, 2e-3) for n in (1, 3, 7)))
+    q = np.linspace(-turn, turn, 37)
+    np.testing.assert_allclose(motion(q + 5 * turn), motion(q), atol=1e-15)
+    assert motion.repeats_every(turn) and ErrorMotion().repeats_every(turn)
+    assert ErrorMotion(cyclic=(Cyclic(np.deg2rad(120.0), 1e-3),)).repeats_every(turn)  # 3.0000000000000004 a turn
+    for other in (ErrorMotion((0.0, 1e-6)), ErrorMotion(table=([0.0, turn], [0.0, 1e-3])),
+                  ErrorMotion(cyclic=(Cyclic(np.deg2rad(144.0), 1e-3),)),
+                  ErrorMotion(cyclic=(Cyclic(2 * turn, 0.0, 1e-3),))):
+        assert not other.repeats_every(turn)
+    assert ErrorMotion(cyclic=(Cyclic(2 * turn, 0.0, 0.0),)).repeats_every(turn)  # a term of size 0 is no term
+
+
 def test_basis_is_the_derivative_and_with_parameter_sets_it():
     motion = ErrorMotion(poly=(1e-3, 2e-5), cyclic=(Cyclic(7.0, 1e-3, -2e-3),))
     q = np.linspace(0, 30, 31)

@@ -210,6 +210,20 @@ def test_a_feed_over_the_machines_max_names_the_file_and_the_line_of_the_block(t
              f"{tmp_path / 'job.toml'}, line 4: feed 1650 mm/s (99000 mm/min, segment 0) exceeds max_feed")
 
 
+def test_a_loop_made_too_fast_or_unstable_by_one_setting_is_said_at_that_setting(tmp_path, capsys):
+    """ti_s = 1 µs was told at servo_period_ms's line to lower kv; a current loop of 1 mHz, to raise kv or lengthen ti."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).replace("ti_s = 0.016", "ti_s = 1e-6", 1))
+    command = ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "out")]
+    _refused(capsys, command, f"{tmp_path / 'm.toml'}, line 10: ti_s = 1e-06 s is too short for the velocity loop of "
+                              "axis 'x' at dt = 0.0005 s", "Lengthen ti_s, or use dt <= 4.96e-05 s.")
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass="300.0\ncurrent_bandwidth_hz = 1e-3"))
+    _refused(capsys, command, f"{tmp_path / 'm.toml'}, line 6: the velocity loop of axis 'x' is unstable",
+             "the current loop is too slow for it (bandwidth 0.001 Hz, below its crossover 0.7361 Hz): raise "
+             "current_bandwidth_hz.")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
     (tmp_path / "m.toml").write_text(MACHINE.format(mass=1e11))  # a heavy axis: the loop gain never reaches 1
     (tmp_path / "small.toml").write_text(SMALL_PATH)
@@ -271,6 +285,9 @@ def test_compare_on_a_move_along_one_axis_has_no_change_relative_to_none(tmp_pat
     ("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 1e-300", 9, "axis x: kv_A_s_per_m must lie within [1e-12, 1e+12]"),
     ("force_constant_N_per_A = 942.0", "force_constant_N_per_A = 1e308", 8, "force_constant_N_per_A must lie within"),
     ("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 1e-9", 6, "no gain crossover (the loop gain never reaches 1)"),
+    # a sampled pole e^-500, balanced by 2^371: scipy's matrix_balance warned "invalid value encountered in cast"
+    ("kp_per_s = 40.0", "kp_per_s = 40.0\ninductance_H = 1e-6\nresistance_ohm = 1.0\nkc_V_per_A = 1e6\n"
+                        "ti_current_s = 1e-6", 6, "the current loop of axis 'x' is unstable at dt = 0.0005 s"),
 ])
 def test_machine_values_far_out_of_range_end_in_one_line_without_a_warning(tmp_path, capsys, key, value, line, words):
     (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).replace(key, value, 1))

@@ -167,6 +167,11 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G1 X1 F100\n(open ; comment\n", 2, "unbalanced parenthesis"),  # the ; is inside the open comment
     ("G1 X1 F100 (nested (comment) here)\n", 1, "unbalanced parenthesis"),
     ("G0 X1\nG0 X2\n", None, "no feed move"),
+    # G1 blocks that move nothing were said to be no feed move at all (an outside probe)
+    ("G0 X0 Y0\nG1 X0 Y0 F600\nG1 X0\n", None, r"the program's feed moves \(G1, G2 or G3\) all have zero length"),
+    # F0.000001 was "feed must lie within [1e-06, 1e+12] (mm/s, ...), got 1.66667e-08": no line, and in mm/s
+    ("G0 X0\nG1 X5 F0.000001\n", 2, r"F1e-06 must lie within \[6e-05, 6e\+13\] mm/min"),
+    ("G1 X5 F0\n", 1, r"F0 must lie within \[6e-05, 6e\+13\] mm/min"),
     ("G1 X10,5 F100\n", 1, "cannot read ',5': a decimal comma\\? write the number with a point"),
     ("G1 X 1 0 F100\n", 1, r"cannot read '0': a space inside a number \(X 1 0\)\? write the number without one"),
     ("#100=5\nG1 X#100 F100\n", 1, "cannot read '#100=5': macro variables and expressions"),
@@ -409,6 +414,9 @@ def test_a_word_beyond_the_coordinate_limit_is_named_and_the_smallest_radius_is_
     I0.000001, the smallest the docs allow, was 'outside [1e-06, 1e+06]' by rounding (an outside probe)."""
     with pytest.raises(ConfigError, match=r"^<gcode>, line 2: X2e\+06 is beyond ±1e\+06 mm"):
         read_gcode("G0 X0 Y0\nG1 X2000000 F1000\n")
+    # words within it adding up beyond it (G91) were 'p1 holds 1.1e+06 at index 0, beyond ±1e+06' too
+    with pytest.raises(ConfigError, match=r"^<gcode>, line 4: G91 X600000 takes X to 1\.2e\+06 mm, beyond ±1e\+06 mm$"):
+        read_gcode("G91 G0 X0 Y0\nG1 X600000 F1000\nG1 Y5\nG1 X600000\n")
     program = read_gcode("G0 X0 Y0\nG1 X10 F1000\nG2 X10 Y0 I0.000001\n")
     assert program.path.length == pytest.approx(10 + 2e-6 * np.pi, abs=1e-12)
 

@@ -351,3 +351,30 @@ def test_a_pi_velocity_loop_crossing_below_its_integral_corner_is_told_to_raise_
     dataclasses.replace(servo, ti=0.2).check(2e-4)  # ... and so does a longer ti
     with pytest.raises(UnstableLoopError):
         dataclasses.replace(servo, kv=0.5).check(2e-4)  # lowering it, the old advice, does not
+
+
+@pytest.mark.parametrize("extra, words", [
+    (dict(current_bandwidth_hz=1e-3), "the current loop is too slow for it (bandwidth 0.001 Hz, below its crossover "
+                                      "0.7361 Hz): raise current_bandwidth_hz."),
+    (dict(**ELECTRICAL | dict(kc=1e-3)), "the current loop is too slow for it"),
+])
+def test_a_velocity_loop_failing_for_a_slow_current_loop_is_told_to_speed_up_the_current_loop(extra, words):
+    """A current loop of 1 mHz lags the velocity loop by nearly 90°: raising kv or lengthening ti, as it was told, won't."""
+    servo = AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, **extra)
+    with pytest.raises(UnstableLoopError, match=r"the velocity loop of axis 'x' is") as err:
+        servo.check(5e-4)
+    assert words in str(err.value) and "lengthen ti" not in str(err.value)
+
+
+def test_an_integral_time_too_short_for_the_period_is_named_not_the_period_or_kv():
+    """ti = 1 µs lifts the velocity loop's crossover to 2.5 kHz: it was told to shorten dt or lower kv."""
+    from contoursim.servo import SamplingError
+
+    with pytest.raises(SamplingError, match=r"ti = 1e-06 s is too short for the velocity loop of axis 'x' at dt = "
+                                            r"0.0005 s: its integral action lifts the crossover to 2523 Hz.*"
+                                            r"Lengthen ti, or use dt <= 4.96e-05 s\.$") as err:
+        AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=1e-6, kp=40.0).check(5e-4)
+    assert err.value.parameter == "ti"
+    with pytest.raises(SamplingError, match=r"dt = 0.01 s is too long.*or lower kv = 80\.$") as err:
+        AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0).check(1e-2)
+    assert err.value.parameter == "dt"

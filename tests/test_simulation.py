@@ -238,6 +238,26 @@ def test_saturation_is_reported_by_axis_and_fraction():
     assert starved.summary()["tracking_max_um"] > 1.1 * ample.summary()["tracking_max_um"]
 
 
+def test_an_axis_its_drive_cannot_push_is_said_never_to_have_moved():
+    """A friction of 20 kN on X, whose drive pushes at most 942 N/A · 20 A = 18.84 kN: X stands still all along, a
+    run that read as an ordinary one (its contour error the path's size); the saturation warning says so. At 18 kN
+    X breaks away, clipped for a while, and the warning is the plain one."""
+    from contoursim.effects import Effect
+    from contoursim.model import Model
+
+    path = paths.line((0, 0), (20, 0))
+    trajectory = sample(path, plan(path, feed=40.0, accel=2000.0), DT)
+    machine = Machine({"x": AxisServo(kp=40.0, current_limit=20.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    for force, says in ((2e4, True), (1.8e4, False)):
+        with pytest.warns(ContoursimWarning) as record:
+            result = simulate(Model(machine, (Effect("coulomb_friction", "x", force_N=force),)), trajectory)
+        assert (np.ptp(result.servo_response.position[:, 0]) < 1e-9) == says
+        message = str(record[0].message)
+        assert message.startswith("the current command hit its limit on axis x in ")
+        assert ("(limit ±20 A; it never moved, commanded over 20 mm: the most its drive pushes, 1.884e+04 N, does not "
+                "overcome what holds it): the errors include the saturation" in message) == says
+
+
 def test_the_api_refuses_a_path_faster_than_the_machine_allows_like_the_cli():
     machine = Machine({"x": AxisServo(**AXIS), "y": AxisServo(**AXIS)}, DT, max_feed=5000 / 60)  # [mm/s]
     path = paths.line((0, 0), (50, 0))

@@ -253,6 +253,13 @@ def test_declared_units_are_honoured(tmp_path, key, units, t_scale, x_scale):
                                   "'# units: t [s]; x_ref, x [mm]'"),
     ("# units: t [ms]\n# Units: t [s]\n", 2, "a second '# units:' line (the first is line 1): declare the units once"),
     ("# units:\n", 1, "'# units:' declares no unit: write them as contoursim does"),  # was passed over without a word
+    # a column declared twice: the last was honoured without a word (the positions read in µm, 1000 times too small)
+    ("# units: x_ref, x [mm]; x_ref, x [um]\n", 1, "'# units:' declares column 'x_ref' twice, in 'mm' and in 'um': "
+                                                   "declare each column's unit once"),
+    ("# units: t [s]; t [ms]\n", 1, "'# units:' declares column 't' twice, in 's' and in 'ms'"),
+    ("# units: t [s]; t [s]\n", 1, "'# units:' declares column 't' twice, in 's' both times"),
+    ("# units: m; x [mm]\n", 1, "'# units:' declares column 'x' twice, in 'm' and in 'mm' (a bare unit is that of all "
+                                "the position columns)"),
 ])
 def test_units_that_cannot_be_honoured_are_refused(tmp_path, head, line, words):
     (tmp_path / "u.csv").write_text(head + "t,x_ref,x\n" + SINE)
@@ -293,6 +300,29 @@ def test_a_time_base_no_servo_trace_has_is_refused_unless_declared(tmp_path):
         read_trace(tmp_path / "ns.csv")
     (tmp_path / "ns.csv").write_text("# units: t [ns]\nt,x_ref,x\n" + in_ns)
     assert read_trace(tmp_path / "ns.csv").dt == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("rate, head, scale, decimals", [
+    (3000, "", 1.0, 6), (4096, "", 1.0, 6), (30000, "", 1.0, 6), (3000, "# units: t [ms]\n", 1e3, 3)])
+def test_times_printed_short_of_their_step_are_read_as_the_grid_they_were_rounded_from(tmp_path, rate, head, scale,
+                                                                                        decimals):
+    """A 3 kHz log printed to the µs steps 333 and 334 µs: it was refused as not uniformly sampled."""
+    t = np.arange(1500) / rate
+    x = 10 * np.sin(2 * np.pi * t)
+    cells = [f"{scale * a:.{decimals}f}" for a in t]
+
+    def written(times):
+        rows = "\n".join(f"{a},{b:.6f},{b:.6f}" for a, b in zip(times, x))
+        (tmp_path / "r.csv").write_text(f"{head}t,x_ref,x\n{rows}\n")
+        return tmp_path / "r.csv"
+
+    trace = read_trace(written(cells))
+    assert trace.dt == pytest.approx(1 / rate, rel=1e-12)  # the grid's period, not a rounded step
+    np.testing.assert_allclose(trace.t, t, rtol=0, atol=1e-12)
+    # a time the rounding does not explain is refused as before: a sample late by 2 units of the last decimal
+    cells[700] = f"{float(cells[700]) + 2 * 10.0**-decimals:.{decimals}f}"
+    with pytest.raises(TraceFormatError, match=r"line \d+: column 't' must be uniformly sampled: step (699|700) is"):
+        read_trace(written(cells))
 
 
 @pytest.mark.parametrize("actual, words", [

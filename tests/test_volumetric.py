@@ -83,12 +83,14 @@ def test_report_turns_the_rotary_axes_over_their_travels_and_says_so(tmp_path):
     on its own; larger than with A and C held at 0°, as the output then says; the plots show where."""
     chain = load_machine("table_tilting_5axis")
     text = volumetric_report("table_tilting_5axis", tmp_path, grid=3, rotary_grid=3)
-    q, _ = volumetric_grid(chain, sweep=list(chain.axes), points=3)
+    # C turns a whole turn, 0..360°, and its errors repeat every turn: 0, 120, 240° (360° is 0° again)
+    q, _ = volumetric_grid(chain, sweep=list(chain.axes), points=3, ranges={"c": (0.0, np.deg2rad(240.0))})
     dp, _ = chain.volumetric_error(q)
     norm = 1e3 * np.linalg.norm(dp, axis=1)
     row = next(line for line in text.splitlines() if line.startswith("position |Δ| [µm]"))
     assert float(row.split()[3]) == pytest.approx(norm.max(), abs=1e-3)
-    assert "243 points" in text and "rotary axes a -110..110° at 3 positions; c 0..360° at 3 positions" in text
+    assert "243 points" in text and ("rotary axes a -110..110° at 3 positions; c 0..240° at 3 positions (one turn of "
+                                     "its travel 0..360°: its errors repeat every turn)") in text
     held = volumetric_report("table_tilting_5axis", grid=3, rotary_grid=0)
     assert "rotary axes held: a = 0°, c = 0°" in held
     held_row = next(line for line in held.splitlines() if line.startswith("position |Δ| [µm]"))
@@ -97,3 +99,48 @@ def test_report_turns_the_rotary_axes_over_their_travels_and_says_so(tmp_path):
     assert f"plots at a = {a:g}°, c = {c:g}°, where |Δ| is worst: {tmp_path / 'volumetric_xy.png'}" in text
     with pytest.raises(ValueError, match="rotary_grid must be 0"):
         volumetric_report("table_tilting_5axis", grid=3, rotary_grid=1)
+
+
+def _c_travel(tmp_path, travel_deg, errors=""):
+    """The 5-axis preset with C's travel (and error motions added to C's) changed, as a file."""
+    text = preset_file("table_tilting_5axis").read_text()
+    old = "travel_deg = [0, 360]\noffset_mm = [0, 0, -150]"
+    assert text.count(old) == 1
+    text = text.replace(old, f"travel_deg = {travel_deg}\noffset_mm = [0, 0, -150]")
+    if errors:  # after C's last error motion
+        last = "# angular positioning, twice per turn\n"
+        text = text.replace(last, last + errors + "\n")
+    path = tmp_path / "c.toml"
+    path.write_text(text)
+    return path
+
+
+def test_a_rotary_axis_turning_many_times_is_looked_at_over_one_turn_or_every_turn(tmp_path):
+    """C over 100 turns at 4 positions: 0, 12000, 24000, 36000° are all C = 0°. Its errors repeat every turn, so one
+    turn, at 0, 90, 180, 270°: the worst |Δ| that of a grid built here on its own at those angles, well above
+    C = 0°'s. With an error growing with the angle (a polynomial in it: no turn is the one before), every turn, 4
+    positions a turn; over more turns than MAX_ROTARY_POSITIONS allows, refused naming the file, body and travel."""
+    chain = load_machine("table_tilting_5axis")
+
+    def worst(text):  # the worst |Δ| the report gives [µm]
+        return float(next(s for s in text.splitlines() if s.startswith("position |Δ| [µm]")).split()[3])
+
+    def grid(chain, c_deg):  # the linear axes over their travels at 3 points, A at 4 over its travel, C at `c_deg`
+        axes = [np.linspace(-300, 300, 3), np.linspace(-250, 250, 3), np.linspace(-400, 0, 3),
+                np.deg2rad(np.linspace(-110, 110, 4)), np.deg2rad(c_deg)]
+        dp, _ = chain.volumetric_error(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 5))
+        return 1e3 * np.linalg.norm(dp, axis=1).max()
+
+    many = volumetric_report(_c_travel(tmp_path, "[0, 36000]"), grid=3, rotary_grid=4)
+    assert "c 0..270° at 4 positions (one turn of its travel 0..36000°: its errors repeat every turn)" in many
+    assert worst(many) == pytest.approx(grid(chain, [0.0, 90.0, 180.0, 270.0]), abs=1e-3)
+    assert worst(many) > grid(chain, [0.0]) + 5.0  # what C = 0° alone missed
+
+    growing = _c_travel(tmp_path, "[0, 36000]", "ex_urad = { poly = [0, 0.01] }")
+    text = volumetric_report(growing, grid=3, rotary_grid=4)
+    assert "c 0..36000° at 401 positions (4 a turn: its errors do not repeat every turn)" in text
+    assert worst(text) == pytest.approx(grid(load_preset(growing).chain, np.arange(0.0, 36000.1, 90.0)), abs=1e-3)
+    with pytest.raises(ConfigError, match=r"c\.toml: axis 'c' \(body 'C'\): its errors do not repeat every turn .* "
+                                          r"2777\.78 turns of its travel 0\.\.1e\+06°.* 11113 positions, more than "
+                                          r"10000; give it a shorter travel_deg"):
+        volumetric_report(_c_travel(tmp_path, "[0, 1e6]", "ex_urad = { poly = [0, 1e-6] }"), grid=2, rotary_grid=4)
