@@ -2116,9 +2116,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         # or delay) and may take up most of it: where the effects named include one in the loops and leave a clear
         # misfit, they are held in place while the loops are identified again, and the diagnosis starts over from those
         # loops; where nothing was named against a clear misfit, so is the best candidate that fell short (its fit on
-        # the bent loops), unless geometric. Kept when it names as many effects (at least the candidate held) and, with as many named,
-        # closes most of what the first left above the noise floor (less is the loops' own misfit moved about, for the
-        # next effect to be bent to)
+        # the bent loops), unless geometric. Kept when it names as many effects and, with as many named, closes most of
+        # what the first left above the noise floor (less is the loops' own misfit moved about, for the next effect to
+        # be bent to); a candidate that fell short, when it is then named and what is left lies within the noise
+        # levels that called for it (less is its fit bent to that misfit)
         left, floor = result.steps[-1].rms_um, float(np.linalg.norm(result.noise_um))
         held = result.effects or tuple(near[:1])
         if all(e.stage == "geometry" for e in held) or not left > _REIDENTIFY_GAP * floor:
@@ -2133,9 +2134,10 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
                                                                  f"place failed ({exc})",))
             break
         k = len(held)  # steps: the nominal model, its refit, then one per effect
-        if (len(again.effects) < k or not result.effects and (held[0].name, held[0].axis) not in
-                {(e.name, e.axis) for e in again.effects}
-                or not left**2 - again.steps[k + 1].rms_um**2 >= _REIDENTIFY_SHARE * (left**2 - floor**2)):
+        unsure = not result.effects and ((held[0].name, held[0].axis) not in {(e.name, e.axis) for e in again.effects}
+                                         or not again.steps[-1].rms_um <= _REIDENTIFY_GAP * floor)
+        if unsure or len(again.effects) < k or not left**2 - again.steps[k + 1].rms_um**2 >= _REIDENTIFY_SHARE * (
+                left**2 - floor**2):
             break  # loops that explain the trace only without the effects they were identified with: not the premise
         bent = (f"the loops identified before had bent to them: the diagnosis left {left:.4g} µm RMS" if result.effects
                 else f"the loops identified before had taken it up: nothing was named, {left:.4g} µm RMS left")
