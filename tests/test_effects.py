@@ -9,7 +9,7 @@ from contoursim.effects import CATALOGUE, STAGES, Effect, effect_kind, effect_na
 from contoursim.exceptions import ConfigError
 from contoursim.feed import plan, sample
 from contoursim.kernel import LoopEffects
-from contoursim.machine import Machine, load_machine
+from contoursim.machine import Machine, load_machine, preset_file
 from contoursim.model import Model, load_model
 from contoursim.servo import AxisServo
 from contoursim.simulation import measured_reference, simulate, simulate_batch
@@ -430,7 +430,7 @@ def test_a_bad_effect_table_names_the_file_and_line(body, message):
 
 
 def test_a_machine_file_with_effects_loads_as_a_model(tmp_path):
-    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    text = preset_file("demo_mill").read_text()
     file = tmp_path / "mill.toml"
     file.write_text(text + '\n[[effect]]\nname = "gain_mismatch"\naxis = "y"\nkp_ratio = 0.8\n')
     model = load_model(file)
@@ -447,7 +447,7 @@ def test_a_machine_files_backlash_reads_where_the_file_says_its_axis_reads(tmp_p
     read on its motor, silently: refused, naming both lines. Left out or the same, the backlash reads on the scale;
     on Y, which the file does not say (the motor by default), a backlash read on a scale (a diagnosis's hypothesis)
     makes Y read there."""
-    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    text = preset_file("demo_mill").read_text()
     header = text.splitlines().index(next(s for s in text.splitlines() if s.startswith("[axes.x]")))
     text = text.replace("[axes.x]", '[axes.x]\nposition_feedback = "scale"', 1)
     file = tmp_path / "mill.toml"
@@ -482,7 +482,7 @@ def test_a_machine_files_axis_tables_in_any_order_are_its_axes_x_y_z(tmp_path):
 @pytest.mark.parametrize("kind, delay_on", [("feedback", "both"), ("position", "position")])
 def test_a_feedback_delay_of_a_machine_file_reaches_the_loops_it_names(tmp_path, kind, delay_on):
     # kind = "position": the position loop alone reads late (LoopEffects.feedback_delay_on), "feedback" both loops
-    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    text = preset_file("demo_mill").read_text()
     file = tmp_path / "mill.toml"
     file.write_text(text + f'\n[[effect]]\nname = "time_delay"\naxis = "y"\ndelay_s = 1e-3\nkind = "{kind}"\n')
     model = load_model(file)
@@ -575,7 +575,7 @@ def test_a_batch_reports_an_unstable_variant_and_runs_the_others():
 def test_a_jobs_effects_add_to_and_replace_the_machine_files(tmp_path):
     from contoursim.model import with_file_effects
 
-    text = (load_machine.__globals__["preset_file"]("demo_mill")).read_text()
+    text = preset_file("demo_mill").read_text()
     file = tmp_path / "mill.toml"
     file.write_text(text + '\n[[effect]]\nname = "backlash"\naxis = "x"\nlost_motion_um = 4\n'
                     '\n[[effect]]\nname = "scale_error"\naxis = "y"\nppm = 20\n')
