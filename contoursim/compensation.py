@@ -680,10 +680,13 @@ def strategies_named(name, model=None, chain=None, settings=None):
         "geometric": lambda: None if chain is None else GeometricCompensation(chain),
     }
     strategies = []
-    for part in name.split("+"):
+    parts = name.split("+")
+    for i, part in enumerate(parts):
         if part not in makers:
             raise ValueError(f"unknown strategy {part!r} in {name!r}{_validate.closest(part, makers)}: use "
                              f"{', '.join(makers)}, joined by '+'")
+        if part in parts[:i]:  # "none+none" ran as a strategy of its own; a strategy twice is refused below
+            raise ValueError(f"strategy {part!r} is named twice in {name!r}: name each part once")
         try:
             made = makers[part]()
         except ValueError as exc:  # a value the strategy refuses: said by its file key ("kp_per_s must be ...")

@@ -646,6 +646,7 @@ def test_compare_tune_tunes_each_coupled_strategy_under_the_check(tmp_path, caps
     ("none,pid", "unknown strategy 'pid'"),
     ("feedforward+zpetc", "feedforward and zpetc are both a feedforward"),
     ("none,none", "strategy 'none' is named twice"),
+    ("none+none", "strategy 'none' is named twice in 'none+none'"),  # ran as a strategy called 'none+none'
     ("geometric", "needs a machine with a geometric error model"),
     (" , ", "argument --strategies: names no strategy; got ' , '"),  # the API's message named no option
 ])
