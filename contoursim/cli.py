@@ -35,6 +35,8 @@ FILE_HELP = ("job .toml, path .toml or G-code (.nc .ngc .gcode .tap .cnc .mpf .i
              "trajectories library")
 _JOB_KEYS = ("machine", "path", "feed", "work_offset", "geometric_compensation", "effect", "ballbar", "strategy")
 _DIRECTIONS = ("ccw", "cw")
+#: Servo periods beyond which a run takes minutes: said on stderr before it starts (a slow feed, a long path).
+_LONG_RUN = 5_000_000
 
 
 _COLUMNS = {"tracking max": "tracking_max_um", "tracking RMS": "tracking_rms_um", "contour max": "contour_max_um",
@@ -59,6 +61,7 @@ def _trajectory(model, path_file, job=None, direction=None):
     :func:`~contoursim.simulation.default_settle` seconds, a controller's
     in-position check: a cut starts with the axes in position.
     """
+    from ._memory import RUN_BYTES_PER_SAMPLE
     from .feed import sample
     from .model import as_model
     from .pathfile import library_file, override_feed, read_path_file
@@ -74,6 +77,11 @@ def _trajectory(model, path_file, job=None, direction=None):
         # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
         profile = settings.plan(read.path, max_feed=machine.max_feed, in_position=default_settle(machine),
                                 servo_period=machine.servo_period)
+        periods = profile.duration / machine.servo_period
+        if periods > _LONG_RUN:
+            _stderr_line(f"contoursim: the motion lasts {profile.duration:.6g} s, {periods:.3g} servo periods of "
+                         f"{machine.servo_period:.6g} s to simulate, about {RUN_BYTES_PER_SAMPLE * periods / 1e9:.2g} GB "
+                         "of memory: this takes minutes")
         return sample(read.path, profile, machine.servo_period), read.program
     except ConfigError:
         raise

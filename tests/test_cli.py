@@ -161,6 +161,23 @@ def test_simulate_a_library_path_on_a_named_machine(tmp_path, capsys):
     assert "rounded_square" in capsys.readouterr().out
 
 
+def test_a_long_run_is_said_before_it_starts(tmp_path, capsys, monkeypatch):
+    """A slow feed on a small circle (8,900 s of motion, 44 M servo periods) ran for minutes and 20 GB without a
+    word. Beyond a threshold (lowered here below this run's 9,520 periods) its length, periods and memory are said
+    first."""
+    import contoursim.cli
+
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    monkeypatch.setattr(contoursim.cli, "_LONG_RUN", 1000)
+    assert main(["simulate", str(tmp_path / "small.toml"), "--machine", "demo_mill", "--out", str(tmp_path / "o")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "servo periods of" in line]
+    assert len(said) == 1 and said[0].startswith("contoursim: the motion lasts ") and said[0].endswith(
+        "GB of memory: this takes minutes"), said
+    monkeypatch.setattr(contoursim.cli, "_LONG_RUN", 10**9)
+    assert main(["simulate", str(tmp_path / "small.toml"), "--machine", "demo_mill", "--out", str(tmp_path / "p")]) == 0
+    assert "servo periods of" not in capsys.readouterr().err
+
+
 def test_unknown_job_key_names_file_and_line(tmp_path, capsys):
     (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "rounded_square"\nspeed = 3\n')
     assert main(["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "o")]) == 2
