@@ -453,7 +453,7 @@ def report_file(file, form, what, out=None, written=(), also=()):
     if file.exists() or file.is_symlink():
         try:
             data = json.loads(read_text(file))
-        except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8, not JSON
+        except (OSError, ValueError, RecursionError):  # unreadable, not a regular file, not UTF-8, not JSON, nested deep
             data = None
         if not has_form(data, form, also):
             added = sorted(set(data) - {*form, *also}) if has_form(data, form) else ()  # a report the user wrote in

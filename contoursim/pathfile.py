@@ -101,6 +101,9 @@ def library_file(name, here=True):
         raise TypeError(f"a path file is a file or library name (str or Path), got {type(name).__name__}")
     if isinstance(name, str) and not name.strip():  # Path('') would be '.', a folder
         raise ConfigError("the path file's name is empty: name a path file or a library path (e.g. butterfly)")
+    if any(c in os.fspath(name) for c in "\r\n"):  # its stem names the files written: refused there, after the run
+        raise ConfigError(f"the path file's name {os.fspath(name)!r} has a line break, which no file written from it "
+                          "may have: rename it")
     found = local_file(name, suffixes=(".toml", ".nc")) if here else None  # a user's copy of a library entry is meant
     if found is not None and not found.is_dir():
         return found

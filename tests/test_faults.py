@@ -1159,3 +1159,21 @@ def test_a_loop_its_effects_make_unstable_is_said_so_naming_them_not_the_path_fi
     line = _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
                     "the simulation of axis 'x' ran away", "(on x: time_delay.x) or this coupling is unstable")
     assert "small.toml" not in line
+
+
+def test_a_path_file_whose_name_has_a_line_break_is_refused_before_anything_is_written(tmp_path, capsys):
+    """Its stem names the files written: it was refused at write time ('name must be a plain file name'), no file or
+    line said, an empty output folder left."""
+    (tmp_path / "nl\nname.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "nl\nname.toml"), "--out", str(tmp_path / "out")],
+             "the path file's name", "has a line break, which no file written from it may have: rename it")
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_existing_report_nested_too_deeply_to_read_is_not_overwritten(tmp_path, capsys):
+    """json.loads of a user's file named as --json recursed past the stack: a RecursionError traceback."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "r.json").write_text("[" * 100_000 + "]" * 100_000)
+    _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--strategies", "none", "--json", str(tmp_path / "r.json"),
+                      "--out", str(tmp_path / "out")], "r.json exists and is not a")
+    assert (tmp_path / "r.json").read_text().startswith("[[[")
