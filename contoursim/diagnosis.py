@@ -2332,9 +2332,9 @@ def _diagnose(trace, model, identified, max_effects, say):
     if written > _AS_WRITTEN * steps[-1].rms_um:
         warnings.append(f"the corrected model as written leaves {written:.4g} µm RMS on this trace (the instrument's "
                         f"zero and turn taken out), not the {steps[-1].rms_um:.4g} µm of the last row: each row adds a "
-                        "refit of the plant linearised around it (2 % steps of each parameter), which the plant "
-                        "simulated where that refit points does not bear out (a friction's or backlash's contacts, a "
-                        "plant pulled far from its data sheet)")
+                        f"refit of the plant linearised around it ({100 * _NUISANCE_STEP:g} % steps of each "
+                        "parameter), which the plant simulated where that refit points does not bear out (a friction's "
+                        "or backlash's contacts, a plant pulled far from its data sheet)")
     after = problem.fitted()
     left = unexplained(trace, problem.reference, np.where(scored[:, None], trace.actual - after, 0.0), noise, scored)
     warnings += [f"hunting at standstill on {trace.axes[i]}: a limit cycle of ±{1e3 * c['amplitude']:.3g} µm at "

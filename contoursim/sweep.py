@@ -195,6 +195,10 @@ def read_sweep(file):
     strategies = toml.data.get("strategies", "none")
     if not isinstance(strategies, str):
         raise toml.error(f"strategies must be a name in quotes (e.g. \"ccc_arc\"), got {strategies!r}", "strategies")
+    if "," in strategies:  # compare's list: it read as one unknown strategy 'none,feedforward'
+        raise toml.error(f"strategies = {strategies!r}: a sweep runs one composition on every variant, its parts "
+                         "joined by '+' (\"feedforward+ccc_arc\"); to set several side by side, sweep each in a spec of "
+                         "its own (or compare them on one job: contoursim compare)", "strategies")
     log = tuple(t.get("log", False) is True for t in tables)
     made = Sweep(str(file), files, strategies, names, values, task_size, elsewhere, log)
     job = _job(made)  # the spec's job, every name and the extreme values checked here, not on a worker

@@ -133,6 +133,15 @@ def test_a_strategy_table_of_a_strategy_the_sweep_does_not_run_is_refused_by_its
         read_sweep(spec)
 
 
+def test_a_comparison_list_as_a_sweeps_strategies_is_refused_saying_what_a_sweep_runs(tmp_path):
+    """'none,feedforward', compare's list, read as one unknown strategy of that name (did you mean 'feedforward'?)."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}], strategies="none,feedforward")
+    line = spec.read_text().splitlines().index('strategies = "none,feedforward"') + 1
+    with pytest.raises(ConfigError, match=rf"spec.toml, line {line}: strategies = 'none,feedforward': a sweep runs one "
+                                          r"composition on every variant, its parts joined by '\+'"):
+        read_sweep(spec)
+
+
 @pytest.mark.parametrize(("text", "key", "message"), [
     # a traceback
     ('\n[ballbar]\ndirections = ["ccw", "cw"]\n', "[ballbar]", r"\[ballbar\] is for contoursim simulate; sweep runs"),
