@@ -487,8 +487,10 @@ class Diagnosis:
         elif not self.effects:
             lines.append(f"no effect named: no catalogue effect explains the residual significantly; it stays at "
                          f"{self.steps[-1].rms_um:.3g} µm RMS against a noise floor of "
-                         f"{float(np.linalg.norm(self.noise_um)):.3g} µm (see where it is and what it correlates with)")
-        lines += [f"where: {w}" for w in self.where]
+                         f"{float(np.linalg.norm(self.noise_um)):.3g} µm"
+                         + (" (its structure: the 'unexplained' lines above)" if self.unexplained else ""))
+        # where the nominal model's residual is, not the last row's (an effect named takes its part away)
+        lines += [f"where (nominal model's residual): {w}" for w in self.where]
         lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 

@@ -379,7 +379,7 @@ def test_a_trace_stamped_by_a_clock_running_for_days_is_diagnosed(tmp_path, caps
     assert main(["diagnose", str(trace), "--model", "demo_mill", "--out", str(tmp_path / "out")]) == 0
     out, err = capsys.readouterr()
     assert "error" not in err and "Warning" not in err, err
-    spans = next(line for line in out.splitlines() if line.startswith("where: the residual"))
+    spans = next(line for line in out.splitlines() if line.startswith("where (nominal model's residual): the residual"))
     assert "e+05" not in spans and (start == 0 or "5000" in spans), spans  # its times to the ms, not '5e+05–5e+05 s'
 
 
