@@ -400,6 +400,20 @@ def as_xyz(points):
     return points if points.shape[1] == 3 else np.column_stack([points, np.zeros((len(points), 3 - points.shape[1]))])
 
 
+def callback(name, value):
+    """Return `value` after checking it is ``None`` or callable (a progress function): one given a number or a file
+    name failed deep inside the work it was to follow ("'int' object is not callable").
+
+    Raises
+    ------
+    TypeError
+        `value` is neither.
+    """
+    if value is not None and not callable(value):
+        raise TypeError(f"{name} must be a function (or None), got {value!r}")
+    return value
+
+
 def flag(name, value):
     """Return `value` after checking it is a boolean (``True``, ``False`` or numpy's).
 

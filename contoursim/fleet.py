@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _validate
+
 __all__ = ["SUMMARY_FORM", "diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "trace_files"]
 
 #: The form of :func:`fleet_summary` (:func:`contoursim.output.has_form`): ``--summary`` replaces only a file of it.
@@ -152,7 +154,7 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
             todo.append(i)
         except ConfigError as exc:  # a folder, a pipe, not UTF-8: that trace's failure, the others go on
             outcomes[i] = {"trace": str(f), "error": str(exc).replace(str(f), f.name, 1)}  # as diagnose_text names it
-    report = progress or (lambda done, total: None)
+    report = _validate.callback("progress", progress) or (lambda done, total: None)
     done = len(files) - len(todo)
     if scheduler is None:
         report(done, len(files))

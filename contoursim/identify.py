@@ -51,9 +51,12 @@ position gains or delays. Then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
 integrator); then with the damping, kept likewise. These stages run on the state
 structure; each drive structure of :data:`DRIVES` is then fitted from
-there with the same parameters free, and the best one replaces the state
-structure when it is significant (:func:`delta_bic`, the choice counted
-as one parameter). The structures are those of a sampled loop at the
+there with the same parameters free and, where the damping was not kept,
+with it free too (behind a sampled loop's lags the mechanical pole can
+show where on the state structure it did not), and the fit of most
+:func:`delta_bic` over the state structure's replaces it when that is
+significant (the choice of structure counted as one parameter, the
+damping as one per axis). The structures are those of a sampled loop at the
 identified servo period (:func:`servo_period_for`, the trace's own up to
 1 ms): a drive that runs faster than it logs is identified by the
 structure whose lags match its own best at that period, not necessarily
@@ -66,6 +69,7 @@ transients: :func:`identify_machine` is then weakly determined in kp
 import numpy as np
 from scipy.optimize import least_squares
 
+from . import _validate
 from .machine import Machine
 from .model import Model
 from .servo import AxisServo
@@ -184,6 +188,7 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
         it the ``damping`` where that does too). A trace
         whose reference never moves leaves them at their starting values.
     """
+    progress = _validate.callback("progress", progress)
     period = servo_period_for(trace.dt) if servo_period is None else float(servo_period)
     reference = measured_reference(trace, period)
     axes = trace.axes
@@ -291,21 +296,28 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     rss4, tau = rss(x4, STATE)
     if delta_bic(rss0, rss4, measured.size, d + added, tau) > SIGNIFICANT:
         best, rss0 = x4, rss4
-    # the sampled drive structures, each fitted from the state structure's fit with the same parameters free
-    found = [(rss0, STATE, best)]
-    free = np.ones(best.size, bool)
-    free[1] = feedforward
+    # the sampled drive structures, each fitted from the state structure's fit with the PI loop and the damping free
+    # (where the state structure kept neither): behind a sampled velocity loop's lags the mechanical pole can show
+    # where on the state structure it did not (an effect-free trace was left at 8 times its noise)
+    found = [(STATE, best, rss0), (STATE, x4, rss4)]
     for drive in DRIVES:
-        x = best.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
+        free = np.ones(x4.size, bool)
+        free[1] = feedforward
+        x = x4.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
         x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
         x = fitted(x, free, drive)
-        found.append((rss(x, drive)[0], drive, x))
-    low, structure, x = min(found, key=lambda f: f[0])
-    _, tau = rss(x, structure)
-    # a drive structure replaces the state one when significantly better (the choice counted as one parameter)
-    if structure != STATE and delta_bic(rss0, low, measured.size, 1, tau) > SIGNIFICANT:
-        return _machine(axes, period, x, structure)
-    return _machine(axes, period, best)
+        found.append((drive, x, rss(x, drive)[0]))
+
+    def gain(fit):
+        """ΔBIC of a fit over the state structure's kept one (a drive structure's choice counted as one parameter)."""
+        structure, x, low = fit
+        if not np.isfinite(low):  # a fit whose loop diverged on the trace
+            return -np.inf
+        return delta_bic(rss0, low, measured.size, x.size - best.size + (structure != STATE), rss(x, structure)[1])
+
+    chosen = max(found, key=gain)
+    structure, x, _ = chosen if gain(chosen) > SIGNIFICANT else found[0]
+    return _machine(axes, period, x, structure)
 
 
 def identification_warnings(machine, refitted=None):

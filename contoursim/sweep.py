@@ -530,7 +530,7 @@ def run_sweep(sweep, scheduler=None, progress=None):
     """
     n = len(sweep.values)
     table = np.full((n, len(FIGURES)), np.nan)
-    report = progress or (lambda done, total: None)
+    report = _validate.callback("progress", progress) or (lambda done, total: None)
     if scheduler is None:
         report(0, n)
         start, size = 0, sweep.task_size or 1
