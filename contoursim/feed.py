@@ -368,10 +368,11 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         curved = kappa > 0
         limits[curved] = np.minimum(limits[curved], np.sqrt(ac / kappa[curved]))
     in_position = _validate.nonnegative("in_position", in_position)
-    stops = np.asarray(stops, dtype=float).ravel()
-    if not np.all((stops == np.round(stops)) & (stops >= 0) & (stops < k)):
+    servo_period = None if servo_period is None else _validate.positive("servo_period", servo_period)
+    stops = np.array(_stops(stops), dtype=int)
+    if np.any(stops >= k):
         raise ValueError(f"stops must be primitive indices in [0, {k - 1}], got {stops.tolist()}")
-    waits[stops.astype(int)] = True
+    waits[stops] = True
     waits = waits[:-1]  # the path's end is a stop of its own
     stop = (path.corner_angles() > tolerance) | waits
     split = stop | (limits[1:] != limits[:-1])
@@ -449,7 +450,7 @@ class FeedSettings:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _validate.positive(name, getattr(self, name)))
         object.__setattr__(self, "corner_tolerance", _corner_tolerance(self.corner_tolerance))
-        object.__setattr__(self, "stops", tuple(int(k) for k in self.stops))
+        object.__setattr__(self, "stops", _stops(self.stops))
         for name in ("feed", "accel", "jerk", "centripetal_accel"):  # 1e-300 or 1e308 overflow the planning
             values = np.atleast_1d(np.asarray(getattr(self, name) or 1.0, dtype=float))
             if not (SETTING_RANGE[0] <= values.min() and values.max() <= SETTING_RANGE[1]):
@@ -486,6 +487,14 @@ def _corner_tolerance(value):
         raise ValueError(f"corner_tolerance must be at most π rad (180°, a reversal), got {value:g} rad "
                          f"({np.degrees(value):g}°)")
     return value
+
+
+def _stops(stops):
+    """`stops` as a tuple of primitive indices, after checking each is a whole number >= 0 (1.5 is no primitive, and
+    would be cut to 1)."""
+    if isinstance(stops, (str, bytes)) or not np.iterable(stops):
+        raise TypeError(f"stops must be a sequence of primitive indices, got {stops!r}")
+    return tuple(_validate.positive_int(f"stops[{i}]", k, least=0) for i, k in enumerate(stops))
 
 
 def _path(path):

@@ -203,6 +203,27 @@ def test_bad_values_name_the_parameter():
         sample(path, plan(path, 10.0, 100.0), 0.0)
 
 
+def test_servo_period_and_stops_are_checked_where_given():
+    # a servo period of 0, NaN or -1 was taken (-1 warned of a velocity step "against -0.001 mm/s²"), one of text
+    # failed inside the corner check; a stop at 1.5 was cut to primitive 1, one at -3 or of text failed elsewhere
+    path = paths.polyline([(0, 0), (1, 0), (2, 1e-4)])
+    for period in (0.0, float("nan"), -1.0):
+        with pytest.raises(ValueError, match="servo_period must be"):
+            plan(path, 10.0, 100.0, servo_period=period)
+    with pytest.raises(TypeError, match="servo_period must be a number"):
+        plan(path, 10.0, 100.0, servo_period="a")
+    for stops, want in (([1.5], r"stops\[0\] must be a whole number, got 1.5"), ([True], r"stops\[0\] must be a whole"),
+                        ([0, -3], r"stops\[1\] must be at least 0, got -3"), ("ab", "stops must be a sequence")):
+        with pytest.raises((TypeError, ValueError), match=want):
+            FeedSettings(10.0, stops=stops)
+        with pytest.raises((TypeError, ValueError), match=want):
+            plan(path, 10.0, 100.0, stops=stops)
+    with pytest.raises(ValueError, match=r"stops must be primitive indices in \[0, 1\], got \[2\]"):
+        plan(path, 10.0, 100.0, stops=[2])
+    assert FeedSettings(10.0, stops=[np.int64(1)]).stops == (1,)
+    assert plan(path, 10.0, 100.0, stops=[0]).duration > plan(path, 10.0, 100.0).duration
+
+
 def test_sampled_circle_lies_on_the_path_with_analytic_derivatives():
     radius, feed, dt = 50.0, 1000 / 60, 1e-3
     path = paths.iso230_4_circle(radius)
