@@ -140,6 +140,8 @@ class SimResult:
         """The result in the measured-trace format: reference vs actual tool position, and the known forces applied."""
         axes = CARTESIAN[: self.trajectory.dim]
         force = {axis: values for axis, values in self.force.items() if axis in axes}
+        if metadata is not None and not isinstance(metadata, Mapping):
+            raise TypeError(f"metadata must map keys to values ({{'path': 'circle.toml'}}), got {type(metadata).__name__}")
         return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}), force=force)
 
     def save_csv(self, file, metadata=None, overwrite=False, every=1):
@@ -169,6 +171,8 @@ class SimResult:
         every : int
             Write every `every`-th sample (1: all, at the servo period).
         """
+        if metadata is not None and not isinstance(metadata, Mapping):
+            raise TypeError(f"metadata must map keys to values ({{'path': 'circle.toml'}}), got {type(metadata).__name__}")
         columns = ", ".join(f"{a}_ref, {a}" for a in CARTESIAN[: self.trajectory.dim])
         contour = "" if self.contour is None else ", contour, contour_normal"
         force = "".join(f"; {axis}_force [N]" for axis in self.force if axis in CARTESIAN[: self.trajectory.dim])

@@ -237,9 +237,14 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
         if not str(key).strip() or ":" in str(key) or re.search(r"[\r\n]", f"{key}{value}"):
             raise ValueError(f"metadata {key!r}: {value!r} is not one '# key: value' line (a key without ':', "
                              "no line breaks)")
+    if extra is not None and not isinstance(extra, Mapping):
+        raise TypeError(f"extra must map column names to arrays ({{'contour': ...}}), got {type(extra).__name__}")
     for name, values in (extra or {}).items():
         if name in columns:
             raise ValueError(f"extra column {name!r} clashes with a trace column")
+        if name in _READ_COLUMNS:  # read back as the trace's own: another axis, a force, a current
+            raise ValueError(f"extra column {name!r} is a column read_trace reads ({_READ_COLUMNS[name]}): the file "
+                             "would read back as another trace; name it otherwise")
         if not isinstance(name, str) or name != name.strip() or not name or re.search(r'[,"#\r\n]', name):
             raise ValueError(f"extra column {name!r} is not a CSV column name (one without commas, quotes, '#', line "
                              "breaks or surrounding spaces)")
@@ -255,8 +260,9 @@ def write_trace(file, trace, extra=None, overwrite=False, every=1):
         if largest * 10.0**decimals >= 2.0**53:
             raise ValueError(f"column {name!r}: {largest:g} is too large to write to 1e-{decimals}")
     metadata = dict(trace.metadata)
-    if "units" in metadata:  # a trace read from a file with more columns: the units of those written (read_trace
-        metadata["units"] = _units_written(str(metadata["units"]), columns)  # refuses a column the header lacks)
+    for key in _units_keys(metadata):  # a trace read from a file with more columns: the units of those written
+        metadata[key] = _units_written(str(metadata[key]), columns)  # (read_trace refuses a column the header lacks)
+        _check_units_written(key, metadata[key], columns, trace)
     header = "".join(f"# {key}: {value}\n" for key, value in metadata.items()) + ",".join(columns) + "\n"
     values = [v[::every] for v, _ in columns.values()]
     decimals = [d for _, d in columns.values()]
@@ -468,6 +474,34 @@ def _units_as_read(text, positions, inputs):
     return "; ".join(groups)
 
 
+def _units_keys(metadata):
+    """The keys of `metadata` that :func:`read_trace` reads as its ``# units:`` line (``units``, ``Units``, ``unit``),
+    checked to be one: a second such line is refused by the reader."""
+    keys = [key for key in metadata if str(key).strip().lower() in ("units", "unit")]
+    if len(keys) > 1:
+        raise ValueError(f"metadata {keys[0]!r} and {keys[1]!r} are both a '# units:' line: read_trace refuses a "
+                         "second; give one")
+    return keys
+
+
+def _check_units_written(key, text, columns, trace):
+    """Refuse a units line `text` (metadata `key`) that declares a written column of `trace` in other units than it
+    holds (s, mm, N, A): the file would be read converted, 1000 times off for ``t [ms]``."""
+    inputs = {f"{axis}_{kind}": kind for kind in INPUTS for axis in getattr(trace, kind)}
+    wanted = [name for name in columns if name in ("t", *_POSITION_COLUMNS) or name in inputs]
+
+    def fail(message):
+        return ValueError(f"metadata {key!r}: {message}")
+
+    units = _declared_units(text, str(key).strip(), list(columns), wanted, inputs, fail)
+    for name, unit in units.items():
+        size = (INPUTS[inputs[name]][0] if name in inputs else TIME_UNITS if name == "t" else LENGTH_UNITS)[unit]
+        if size != 1:
+            held = INPUTS[inputs[name]][1] if name in inputs else "s" if name == "t" else "mm"
+            raise fail(f"declares column {name!r} in {unit!r}, but the trace holds it in {held}, as it is written: "
+                       f"read_trace would scale it by {size:g}; declare [{held}] or leave the line out")
+
+
 def _units_written(text, columns):
     """The ``# units:`` line `text` for a file of `columns`: its groups' other columns left out (and groups left
     empty)."""
@@ -483,6 +517,12 @@ def _units_written(text, columns):
 
 
 _POSITION_COLUMNS = ("x_ref", "x", "y_ref", "y", "z_ref", "z")
+#: Every column :func:`read_trace` reads, but ``t``, and what it is: no extra column of :func:`write_trace` may be one.
+_READ_COLUMNS = {
+    **{f"{axis}_ref": f"axis {axis}'s reference" for axis in "xyz"},
+    **{axis: f"axis {axis}'s measured position" for axis in "xyz"},
+    **{f"{axis}_{kind}": f"a measured {kind} of axis {axis}" for kind in INPUTS for axis in "xyz"},
+}
 
 
 def _header_problem(names):

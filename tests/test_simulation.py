@@ -112,6 +112,16 @@ def test_saved_trace_follows_the_csv_contract(tmp_path):
     np.testing.assert_allclose(trace.actual, result.tool_position, rtol=0, atol=0.5e-6 + 1e-12)
     with pytest.raises(FileExistsError):
         result.save_csv(tmp_path / "run.csv")
+    # the metadata given cannot declare other units than the file's (t [ms] read the times back 1000 times too short)
+    with pytest.raises(ValueError, match="metadata 'units': declares column 't' in 'ms'"):
+        result.save_csv(tmp_path / "ms.csv", metadata={"units": "t [ms]"})
+    with pytest.raises(ValueError, match="'units' and 'Units' are both a '# units:' line"):
+        result.save_csv(tmp_path / "ms.csv", metadata={"Units": "m"})
+    for call in (lambda: result.save_csv(tmp_path / "ms.csv", metadata=[("path", "circle")]),
+                 lambda: result.to_trace("circle")):
+        with pytest.raises(TypeError, match="metadata must map keys to values"):
+            call()
+    assert not (tmp_path / "ms.csv").exists()
 
 
 SQUARE_XY = """

@@ -489,3 +489,30 @@ def test_a_trace_checks_its_inputs():
         Trace(t, t[:, None], t[:, None], ("x",), current={"x": np.zeros(4)})
     with pytest.raises(ValueError, match="x_force contains a non-finite value"):
         Trace(t, t[:, None], t[:, None], ("x",), force={"x": [0, 1, np.inf, 0, 0]})
+
+
+def test_a_units_line_in_the_metadata_declares_the_units_the_trace_holds(tmp_path):
+    # a Trace holds s and mm: metadata {"units": "t [ms]"} wrote its times in s under "t [ms]", read back a thousand
+    # times off (dt 1e-6 s for 1e-3 s), " units" or "unit" the same; "Units" beside "units" wrote a file read_trace
+    # refuses
+    trace = _trace(axes=("x",))
+    for metadata, words in (({"units": "t [ms]"}, r"metadata 'units': declares column 't' in 'ms', but the trace holds "
+                              r"it in s.*scale it by 0.001"),
+                            ({" units": "m"}, r"metadata ' units': declares column 'x_ref' in 'm'.*scale it by 1000"),
+                            ({"unit": "x_ref, x [in]"}, "declares column 'x_ref' in 'in'"),
+                            ({"Units": "x [mm]", "units": "t [s]"}, "'Units' and 'units' are both a '# units:' line")):
+        with pytest.raises(ValueError, match=words):
+            write_trace(tmp_path / "a.csv", Trace(trace.t, trace.reference, trace.actual, ("x",), metadata))
+    assert not (tmp_path / "a.csv").exists()
+    write_trace(tmp_path / "a.csv", Trace(trace.t, trace.reference, trace.actual, ("x",), {"units": "t [s]; x [mm]"}))
+    assert read_trace(tmp_path / "a.csv").dt == pytest.approx(1e-3)
+
+
+@pytest.mark.parametrize("name, what", [("y_ref", "axis y's reference"), ("y", "axis y's measured position"),
+                                        ("x_force", "a measured force of axis x"), ("z_current", "a measured current")])
+def test_an_extra_column_read_back_as_the_traces_own_is_refused(tmp_path, name, what):
+    # extra={"y_ref": ..., "y": ...} made an x trace read back as an x, y trace; "x_force" as a force it never had
+    with pytest.raises(ValueError, match=f"extra column {name!r} is a column read_trace reads \\({what}"):
+        write_trace(tmp_path / "a.csv", _trace(axes=("x",)), extra={name: np.zeros(50)})
+    with pytest.raises(TypeError, match="extra must map column names to arrays"):
+        write_trace(tmp_path / "a.csv", _trace(axes=("x",)), extra=[np.zeros(50)])
