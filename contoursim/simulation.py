@@ -273,6 +273,7 @@ def measured_reference(trace, servo_period):
 
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
+    servo_period = _validate.positive("servo_period", servo_period)
     logged = _logged(trace, servo_period)
     duration = trace.t[-1] - trace.t[0]
     n = _servo_samples(trace, servo_period)
@@ -339,6 +340,7 @@ def measured_force(trace, servo_period):
     """
     if not isinstance(trace, Trace):
         raise TypeError(f"trace must be a Trace, got {type(trace).__name__}")
+    servo_period = _validate.positive("servo_period", servo_period)
     if _logged(trace, servo_period) or not trace.force:
         return dict(trace.force)
     t = trace.t[0] + servo_period * np.arange(_servo_samples(trace, servo_period))
@@ -413,6 +415,8 @@ def default_settle(machine):
     float
         Five time constants of the machine's slowest position loop, ``5 / min(kp)`` [s].
     """
+    if not isinstance(machine, Machine):
+        raise TypeError(f"machine must be a Machine (load_machine loads one), got {type(machine).__name__}")
     return 5.0 / min(servo.kp for servo in machine.axes.values())
 
 

@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _validate
+from . import _memory, _validate
 from ._blocks import blocks
 from .paths import MAX_COORDINATE, Path
 
@@ -108,6 +108,7 @@ class Trajectory:
         n = int(np.ceil(duration / self.dt - 1e-9))
         if n == 0:
             return self
+        _memory.check(len(self) + n, f"a hold of {duration:.6g} s: at dt = {self.dt:.6g} s", "check the duration")
         # at rest to rounding: a spline through measured positions ends at 1e-41 mm/s, not 0
         moving = [np.abs(x[-1]).max() > _AT_REST * np.abs(x).max() for x in (self.velocity, self.acceleration)]
         if any(moving):

@@ -6,7 +6,7 @@ import control as ct
 import numpy as np
 import pytest
 
-from contoursim import paths
+from contoursim import _memory, paths
 from contoursim.exceptions import ContoursimWarning
 from contoursim.feed import plan, sample
 from contoursim.traces import Trace, read_trace
@@ -14,7 +14,7 @@ from contoursim.machine import Machine
 from contoursim.plotting import circular_deviation
 from contoursim.servo import AxisServo
 from contoursim.trajectory import Trajectory
-from contoursim.simulation import measured_force, measured_reference, simulate, simulate_batch
+from contoursim.simulation import default_settle, measured_force, measured_reference, simulate, simulate_batch
 
 DT = 2e-4
 AXIS = dict(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, damping=500.0)
@@ -484,3 +484,22 @@ def test_a_loop_running_away_is_reported_diverged_not_as_figures_of_kilometres()
     # the single run: a feedback delay of 50 periods makes x's loop grow, still finite where the run ends
     with pytest.raises(UnstableLoopError, match=r"the simulation of axis 'x' ran away beyond ±1e\+06 mm by t = "):
         simulate(Model(machine, (Effect("time_delay", "x", delay_s=0.01, kind="feedback"),)), trajectory)
+
+
+def test_the_measured_reference_hold_and_settle_refuse_bad_arguments_naming_them(monkeypatch):
+    # a servo period of 0 was an OverflowError (NaN: "cannot convert float NaN to integer"), a hold of 1e9 s a
+    # MemoryError of 14.6 TiB, default_settle of a name an AttributeError
+    t = np.arange(10) * 1e-3
+    trace = Trace(t, t[:, None], t[:, None], ("x",), force={"x": np.ones(10)})
+    for call in (measured_reference, measured_force):
+        for period in (0.0, float("nan"), -1e-3):
+            with pytest.raises(ValueError, match="servo_period must be"):
+                call(trace, period)
+    reference = measured_reference(trace, 1e-3)
+    still = Trajectory(reference.t, np.zeros((10, 1)), np.zeros((10, 1)), np.zeros((10, 1)), np.zeros(10))
+    monkeypatch.setattr(_memory, "available", lambda: 2**30)
+    with pytest.raises(ValueError, match=r"a hold of 1e\+09 s: at dt = 0.001 s that is 1e\+12 samples"):
+        still.held(1e9)
+    assert len(still.held(0.0025)) == 13
+    with pytest.raises(TypeError, match="machine must be a Machine"):
+        default_settle("demo_mill")
