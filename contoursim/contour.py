@@ -50,6 +50,10 @@ from .trajectory import Trajectory
 
 __all__ = ["ContourError", "exact_contour_error"]
 
+#: Largest |coordinate| of an actual tool position [mm] the contour error is taken of (a thousand km; paths, traces and
+#: axis travels lie within ±1e6 mm): a point of 1e300 made the error's squares overflow, said of ``magnitude``.
+MAX_ACTUAL = 1e9
+
 
 class _Correction:
     """The `vector` field of :class:`ContourError`: the array given, or ``foot - actual`` when ``None`` was given.
@@ -481,7 +485,7 @@ def exact_contour_error(trajectory, actual, at=None, window=8):
     if path is None:
         raise ValueError("trajectory has no path: the exact contour error needs the continuous reference geometry")
     d = trajectory.dim
-    act = _validate.finite_array("actual", actual, ndim=2)
+    act = _validate.finite_array("actual", actual, ndim=2, limit=MAX_ACTUAL)
     if act.shape[1] != d:
         raise ValueError(f"actual must have shape (N, {d}) like the trajectory's positions, got {act.shape}")
     position, window, n = trajectory.position, _validate.positive_int("window", window), act.shape[0]

@@ -56,7 +56,7 @@ import numpy as np
 from ._numba import njit
 
 from . import _validate
-from .contour import ContourError, exact_contour_error
+from .contour import MAX_ACTUAL, ContourError, exact_contour_error
 from .nearest import distinct, nearest_knot
 
 __all__ = [
@@ -570,8 +570,7 @@ def search_params(up=(0.0, 0.0, 1.0), window=4):
     norm = float(np.linalg.norm(up))
     if norm == 0.0:
         raise ValueError("up must be a nonzero direction, got (0, 0, 0)")
-    if int(window) != window or window < 1:
-        raise ValueError(f"window must be a positive integer, got {window!r}")
+    window = _validate.positive_int("window", window)
     return np.append(up / norm, float(window))
 
 
@@ -594,7 +593,7 @@ def circular_params(center, radius, normal=(0.0, 0.0, 1.0), direction="ccw"):
     -------
     params : ndarray, shape (8,)
     """
-    center = _validate.finite_array("center", center, ndim=1)
+    center = _validate.finite_array("center", center, ndim=1, limit=MAX_ACTUAL)
     if center.size not in (2, 3):
         raise ValueError(f"center must have 2 or 3 coordinates, got {center.size}")
     radius = _validate.positive("radius", radius)
@@ -757,7 +756,7 @@ def _result(out, index, dim, method):
 
 
 def _points(name, value, like=None):
-    pts = _validate.finite_array(name, value, ndim=2)
+    pts = _validate.finite_array(name, value, ndim=2, limit=MAX_ACTUAL)
     if pts.shape[1] not in (2, 3) or len(pts) == 0:
         raise ValueError(f"{name} must have shape (N, 2) or (N, 3) with N >= 1, got {pts.shape}")
     if like is not None and pts.shape[1] != like.shape[1]:

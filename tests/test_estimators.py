@@ -285,7 +285,7 @@ def test_step_function_inside_a_compiled_loop_matches_the_offline_estimate():
         (lambda: est.linear(np.zeros((5, 2)), np.zeros((4, 2))), "one row per reference sample"),
         (lambda: est.three_point(np.zeros((5, 2)), [[np.nan, 0.0]]), "actual contains a non-finite"),
         (lambda: est.three_point(np.zeros((0, 2)), np.zeros((1, 2))), "reference must have shape"),
-        (lambda: est.three_point(np.zeros((5, 2)), np.zeros((1, 2)), window=0), "window must be a positive"),
+        (lambda: est.three_point(np.zeros((5, 2)), np.zeros((1, 2)), window=0), "window must be at least 1"),
         (lambda: est.newton(np.zeros((5, 2)), np.zeros((1, 2)), up=(0, 0, 0)), "up must be a nonzero"),
         (lambda: est.circular(np.zeros((1, 2)), (0, 0), -1.0), "radius must be positive"),
         (lambda: est.circular(np.zeros((1, 2)), (0, 0), 1.0, direction="left"), "direction must be"),
@@ -317,6 +317,32 @@ def test_exact_delegates_to_the_continuous_path():
     got = est.exact(ref, act)
     np.testing.assert_allclose(got.normal, 50.0 * 2e-5, rtol=1e-6)
     np.testing.assert_allclose(est.three_point(ref.position, act).normal, got.normal, rtol=0, atol=1e-12)
+
+
+def test_bad_window_and_far_actual_points_are_refused_naming_them():
+    # window NaN: "cannot convert float NaN to integer", inf: an OverflowError, "a": "invalid literal for int()"; 2.5e12
+    # and True were taken; actual points of 1e200 mm were refused as a non-finite "magnitude"
+    from contoursim.feed import plan, sample
+    from contoursim.paths import circle
+
+    path = circle((0.0, 0.0), 5.0)
+    ref = sample(path, plan(path, 20.0, 500.0), 2e-3)
+    act = ref.position * 1.001
+    for window, error in ((float("nan"), TypeError), (float("inf"), TypeError), ("a", TypeError), (True, TypeError),
+                          (1.5, TypeError), (0, ValueError)):
+        with pytest.raises(error, match="window must be"):
+            est.three_point(ref.position, act, window=window)
+        with pytest.raises(error, match="window must be"):
+            est.search_params(window=window)
+    far = act.copy()
+    far[3] = 1e200
+    for call in (lambda: est.exact(ref, far), lambda: est.linear(ref.position, far), lambda: est.newton(ref.position, far),
+                 lambda: est.three_point(ref.position, far), lambda: est.circular(far, (0, 0), 5.0)):
+        with pytest.raises(ValueError, match=r"actual holds 1e\+200 at index \(3, 0\), beyond ±1e\+09"):
+            call()
+    with pytest.raises(ValueError, match=r"center holds 1e\+300 at index 0"):
+        est.circular(act, (1e300, 0.0), 5.0)
+    assert est.linear(ref.position, act + 1e6).magnitude.max() == pytest.approx(1e6 * 2**0.5, rel=1e-6)
 
 
 def test_in_loop_arc_estimate_equals_the_offline_estimator():
