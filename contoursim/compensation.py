@@ -44,6 +44,7 @@ from types import MappingProxyType
 import numpy as np
 
 from . import _validate, kernel
+from .estimators import search_params
 from .exceptions import UnstableLoopError
 from .coupled_loop import (
     DESIGN_DAMPING_RATIO,
@@ -247,6 +248,14 @@ def _zpetc_filter(servo, dt, negative_radius=ZPETC_NEGATIVE_RADIUS):
     return ba_poly * k, a_poly, bu_poly / bu_poly.sum() ** 2, delay
 
 
+def _negative_radius(value):
+    """`value` after checking it is a radius in the z-plane, 0..1 (ZPETC's `negative_radius`)."""
+    radius = _validate.nonnegative("negative_radius", value)
+    if radius > 1:
+        raise ValueError(f"negative_radius must be between 0 and 1 (a radius in the z-plane), got {radius!r}")
+    return radius
+
+
 def zpetc_commands(servo, dt, q, negative_radius=ZPETC_NEGATIVE_RADIUS):
     """ZPETC pre-filtered position commands for one axis (see :class:`ZPETC`).
 
@@ -268,7 +277,13 @@ def zpetc_commands(servo, dt, q, negative_radius=ZPETC_NEGATIVE_RADIUS):
     """
     from scipy.signal import lfilter
 
-    den, num, fir, delay = _zpetc_filter(servo, float(dt), float(negative_radius))
+    if not isinstance(servo, AxisServo):
+        raise TypeError(f"servo must be an AxisServo, got {type(servo).__name__}")
+    dt = _validate.positive("dt", dt)
+    q = _validate.finite_array("q", q, ndim=1)
+    if q.size == 0:
+        raise ValueError("q must hold at least one target position, got none")
+    den, num, fir, delay = _zpetc_filter(servo, dt, _negative_radius(negative_radius))
     start, end = q[0], q[-1]
     ahead = fir.size - 1 + delay
     held = np.concatenate([q - start, np.full(ahead, end - start)])
@@ -320,10 +335,7 @@ class ZPETC(Strategy):
 
     def __post_init__(self):
         object.__setattr__(self, "model", _check_model(self.model))
-        radius = _validate.nonnegative("negative_radius", self.negative_radius)
-        if radius > 1:
-            raise ValueError(f"negative_radius must be between 0 and 1 (a radius in the z-plane), got {radius!r}")
-        object.__setattr__(self, "negative_radius", radius)
+        object.__setattr__(self, "negative_radius", _negative_radius(self.negative_radius))
 
     def settings(self, servos, dt):
         return {"negative_zero_radius": self.negative_radius, "preview_samples": self.preview(servos, dt)}
@@ -346,6 +358,11 @@ class ZPETC(Strategy):
 
 # ---------------------------------------------------------------------------------------------
 # Cross-coupled control
+
+
+#: Largest coupling gains of :class:`CrossCoupled`: kp [1/s], ki [1/s^2], kd [-]. Far beyond any gain a sampled loop
+#: takes (the loop check refuses them); beyond, the default ki, ``(Kp + kp)^2 / 4``, overflows.
+MAX_COUPLING_GAIN = MappingProxyType({"kp": 1e9, "ki": 1e18, "kd": 1e9})
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -410,13 +427,16 @@ class CrossCoupled(Strategy):
     def __post_init__(self):
         if self.estimator not in kernel.COUPLING_ESTIMATORS:
             raise ValueError(f"estimator must be one of {', '.join(kernel.COUPLING_ESTIMATORS)}, got {self.estimator!r}")
-        for gain in ("kp", "ki"):
+        for gain in ("kp", "ki", "kd"):  # kp = 1e300 overflowed the default ki, (Kp + kp)^2 / 4, in a traceback
             if getattr(self, gain) is not None:
-                object.__setattr__(self, gain, _validate.nonnegative(gain, getattr(self, gain)))
-        object.__setattr__(self, "kd", _validate.nonnegative("kd", self.kd))
+                value = _validate.nonnegative(gain, getattr(self, gain))
+                if value > MAX_COUPLING_GAIN[gain]:
+                    raise ValueError(f"{gain} must be at most {MAX_COUPLING_GAIN[gain]:g}, got {value:g}")
+                object.__setattr__(self, gain, value)
         object.__setattr__(self, "model", _check_model(self.model))
         if isinstance(self.window, bool) or not isinstance(self.window, (int, np.integer)) or self.window < 1:
             raise ValueError(f"window must be a whole number of samples, at least 1; got {self.window!r}")
+        object.__setattr__(self, "up", tuple(search_params(self.up)[:3].tolist()))  # (0, 0, 0) failed in the run
 
     @property
     def name(self):

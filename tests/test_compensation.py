@@ -454,3 +454,30 @@ def test_a_coupling_that_holds_the_tool_past_a_corner_that_turns_back_is_warned_
     back = int(np.argmax(furthest - foot))
     assert furthest[back] - foot[back] > 20.0 and commanded[back] > furthest[back] + 20.0
     assert np.all(np.maximum.accumulate(comparison.runs["none"].contour.s) - comparison.runs["none"].contour.s < 0.1)
+
+
+def test_zpetc_commands_and_coupling_settings_are_checked_where_given():
+    # zpetc_commands turned NaN targets into NaN commands, an empty q into an IndexError, (N, 3) targets into a
+    # numpy broadcast error, a servo's name into dataclasses' TypeError, and took negative_radius = 5 (ZPETC refuses it);
+    # CrossCoupled took up = (0, 0, 0) until the run, and kp = 1e300 overflowed its default ki in a traceback
+    servo = AxisServo(mass=300.0, force_constant=942.0, kv=80.0, kp=40.0)
+    q = np.concatenate([np.zeros(50), np.ones(50)])
+    for call, error, words in (
+        (lambda: cp.zpetc_commands(servo, 2e-4, np.where(np.arange(100) == 7, np.nan, q)), ValueError,
+         r"q contains a non-finite value \(nan\) at index 7"),
+        (lambda: cp.zpetc_commands(servo, 2e-4, q[:0]), ValueError, "q must hold at least one target position"),
+        (lambda: cp.zpetc_commands(servo, 2e-4, np.zeros((100, 3))), ValueError, "q must have 1 dimension"),
+        (lambda: cp.zpetc_commands("x", 2e-4, q), TypeError, "servo must be an AxisServo, got str"),
+        (lambda: cp.zpetc_commands(servo, 2e-4, q, negative_radius=5.0), ValueError, "negative_radius must be between 0 and 1"),
+        (lambda: cp.zpetc_commands(servo, float("nan"), q), ValueError, "dt must be finite"),
+        (lambda: cp.CrossCoupled(up=(0, 0, 0)), ValueError, "up must be a nonzero direction"),
+        (lambda: cp.CrossCoupled(up=(0, 1)), ValueError, r"up must have shape \(3\)"),
+        (lambda: cp.CrossCoupled(kp=1e300), ValueError, r"kp must be at most 1e\+09, got 1e\+300"),
+        (lambda: cp.CrossCoupled(kd=float("inf")), ValueError, "kd must be finite"),
+        (lambda: cp.strategies_named("ccc_arc", settings={"ccc_arc": {"kp_per_s": 1e300}}), ValueError,
+         r"kp_per_s must be at most 1e\+09"),
+    ):
+        with pytest.raises(error, match=words):
+            call()
+    assert cp.zpetc_commands(servo, 2e-4, q[:1]).tolist() == [0.0]
+    assert cp.CrossCoupled(up=(0, 0, 2)).up == (0.0, 0.0, 1.0)
