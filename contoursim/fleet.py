@@ -12,6 +12,7 @@ named by date read as a drift), and which traces failed and why.
 
 import json
 import math
+import os
 import tempfile
 import textwrap
 from pathlib import Path
@@ -45,7 +46,7 @@ def trace_files(paths):
         trace given twice (itself and in its folder).
     """
     files = []
-    for path in map(Path, paths):
+    for path in map(Path, _names("paths", paths)):
         if path.is_dir():
             found = sorted(p for p in path.iterdir()  # NIGHT_1.CSV too
                            if p.suffix.lower() == ".csv" and not _block_table(p))
@@ -63,6 +64,13 @@ def trace_files(paths):
             also = "" if str(first) == str(f) else f" (also as {f})"
             raise ValueError(f"{first} is given twice{also}: name each trace once")
     return files
+
+
+def _names(name, files):
+    """`files` as a list, refused when it is one file name: its characters would be taken for the files ('/' no trace)."""
+    if isinstance(files, (str, bytes, os.PathLike)):
+        raise TypeError(f"{name} must be a sequence of file names, got the single name {str(files)!r}: give [{str(files)!r}]")
+    return list(files)
 
 
 def _block_table(file):
@@ -147,6 +155,7 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
     if model is not None:
         file = preset_file(model)  # a preset or a file: refused here, before any trace, when neither
         machine = (str(model), None) if not Path(model).exists() else (file.name, read_text(file))
+    files = _names("files", files)
     outcomes, tasks, todo = [None] * len(files), [], []
     for i, f in enumerate(map(Path, files)):
         try:

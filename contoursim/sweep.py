@@ -528,6 +528,8 @@ def run_sweep(sweep, scheduler=None, progress=None):
     ValueError
         A bad scheduler; dask.distributed missing (saying how to install it).
     """
+    if not isinstance(sweep, Sweep):
+        raise TypeError(f"sweep must be a Sweep (read_sweep reads one from its spec), got {type(sweep).__name__}")
     n = len(sweep.values)
     table = np.full((n, len(FIGURES)), np.nan)
     report = _validate.callback("progress", progress) or (lambda done, total: None)

@@ -127,3 +127,15 @@ def test_a_fleet_none_of_whose_traces_is_diagnosed_ends_in_an_error_and_claims_n
                  str(tmp_path / "two")]) == 0
     assert {p.name for p in (tmp_path / "two").iterdir()} == {".contoursim-out", "night_2026-10-05.json", "fleet.json",
                                                             "fleet.png", "notes.txt"}
+
+
+def test_a_single_file_name_is_refused_where_a_sequence_of_traces_is_wanted(tmp_path):
+    # trace_files("night.csv") took each character for a trace ("/ holds no .csv trace"); diagnose_fleet diagnosed
+    # each character and returned one failure per character
+    trace = tmp_path / "night.csv"
+    trace.write_text("t,x_ref,x\n0,0,0\n0.001,0.1,0.1\n")
+    with pytest.raises(TypeError, match=r"paths must be a sequence of file names, got the single name .*night.csv"):
+        trace_files(str(trace))
+    with pytest.raises(TypeError, match=r"files must be a sequence of file names, got the single name"):
+        diagnose_fleet(trace)
+    assert trace_files([trace]) == [trace]

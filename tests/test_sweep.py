@@ -585,3 +585,9 @@ def test_a_sweep_refused_by_a_users_file_of_one_of_its_names_writes_nothing(tmp_
     assert "sweep_axes.y.kp_per_s.png exists and contoursim did not write it" in capsys.readouterr().err
     after = {name: (tmp_path / "out" / name).read_bytes() for name in os.listdir(tmp_path / "out")}
     assert after == {**before, "sweep_axes.y.kp_per_s.png": b"mine\n"}
+
+
+def test_run_sweep_of_a_spec_file_name_says_to_read_it_first():
+    # run_sweep("spec.toml") was an AttributeError ('str' object has no attribute 'values')
+    with pytest.raises(TypeError, match="sweep must be a Sweep \\(read_sweep reads one from its spec\\), got str"):
+        run_sweep("spec.toml")
