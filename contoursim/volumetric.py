@@ -21,11 +21,11 @@ from itertools import combinations, product
 
 import numpy as np
 
-from . import _validate
+from . import _memory, _validate
 from .exceptions import ConfigError
 from .output import output_dir
 from .machine import load_machine
-from .multibody import MachineChain
+from .multibody import MAX_TRAVEL, MachineChain
 from .plotting import magnification_for
 
 __all__ = ["volumetric_grid", "volumetric_report"]
@@ -68,13 +68,15 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
         A bad argument, an axis to sweep without travel or range, or a rotary axis whose
         errors do not repeat every turn over more positions than :data:`MAX_ROTARY_POSITIONS`.
     """
+    if not isinstance(chain, MachineChain):
+        raise TypeError(f"chain must be a MachineChain (a machine's .chain), got {type(chain).__name__}")
     sweep = _swept(chain, sweep)
     unknown = set(sweep) - set(chain.axes)
     if unknown or not sweep:
         raise ValueError(f"sweep must name some of the axes {list(chain.axes)}, got {sweep}")
     points = _validate.positive_int("points", points, least=2)
     travel = {b.axis: b.travel for b in chain.bodies if b.axis is not None}
-    ranges = dict(ranges or {})
+    ranges, fixed = _positions(chain, ranges, fixed, sweep, travel)
     values = []
     for a in sweep:
         lohi = ranges.get(a, travel[a])
@@ -82,16 +84,38 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
             raise ValueError(f"axis {a!r} has no travel: give its range")
         rotary = a not in ranges and chain.axis_kind(a) == "rotary"
         values.append(_rotary_positions(chain, a, points)[0] if rotary else np.linspace(lohi[0], lohi[1], points))
-    fixed = dict(fixed or {})
+    sizes = [v.size for v in values]
+    _memory.check(np.prod(np.array(sizes, dtype=float)), f"points = {points}: a grid of {' x '.join(map(str, sizes))} "
+                  "positions:", "give fewer points (or sweep fewer axes)")
     mesh = np.meshgrid(*values, indexing="ij")
     q = np.zeros((mesh[0].size, len(chain.axes)))
     for a, v in fixed.items():
-        if a not in chain.axes:
-            raise ValueError(f"fixed: unknown axis {a!r}")
         q[:, chain.axes.index(a)] = v
     for a, m in zip(sweep, mesh):
         q[:, chain.axes.index(a)] = m.ravel()
     return q, tuple(values)
+
+
+def _positions(chain, ranges, fixed, sweep, travel):
+    """`ranges` ``{axis: (min, max)}`` and `fixed` ``{axis: position}`` of :func:`volumetric_grid`, checked: axes of
+    the chain (a range of an axis not swept, a fixed axis that is swept, would be ignored), finite positions within
+    ±:data:`~contoursim.multibody.MAX_TRAVEL`, a fixed one within its axis's travel."""
+    ranges, fixed = dict(ranges or {}), dict(fixed or {})
+    for a, span in ranges.items():
+        if a not in sweep:
+            raise ValueError(f"ranges: axis {a!r} is not swept (sweep: {', '.join(sweep)}): its range would be ignored")
+        ranges[a] = tuple(_validate.finite_array(f"ranges[{a!r}]", span, shape=(2,), limit=MAX_TRAVEL).tolist())
+    for a, position in fixed.items():
+        if a not in chain.axes:
+            raise ValueError(f"fixed: unknown axis {a!r}")
+        if a in sweep:
+            raise ValueError(f"fixed: axis {a!r} is swept (sweep: {', '.join(sweep)}): its position would be ignored")
+        fixed[a] = _validate.within(f"fixed[{a!r}]", position, -MAX_TRAVEL, MAX_TRAVEL)
+        lo, hi = travel.get(a) or (-MAX_TRAVEL, MAX_TRAVEL)
+        if not lo - 1e-9 <= fixed[a] <= hi + 1e-9:
+            as_given = f"{fixed[a]:g} mm" if chain.axis_kind(a) == "linear" else f"{fixed[a]:g} rad ({np.degrees(fixed[a]):g}°)"
+            raise ValueError(f"fixed[{a!r}] = {as_given} lies outside the travel of axis {a}, {_span(np.array([lo, hi]), chain.axis_kind(a) == 'rotary')}")
+    return ranges, fixed
 
 
 def _rotary_positions(chain, axis, count, source=None):
@@ -204,7 +228,7 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     turned = [a for a in turned if travel.get(a) is not None] if rotary_grid else []
     source = None if isinstance(machine, MachineChain) else str(machine)
     angles, notes = zip(*[_rotary_positions(chain, a, rotary_grid, source) for a in turned]) if turned else ((), ())
-    t = np.full(q.shape[0], float(time))
+    t = np.full(q.shape[0], _validate.finite("time", time))
     columns = [chain.axes.index(a) for a in turned]
     rows, largest = None, -1.0
     for setting in product(*angles):  # one grid of the swept axes at a time: memory as without rotary axes

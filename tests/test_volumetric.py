@@ -144,3 +144,37 @@ def test_a_rotary_axis_turning_many_times_is_looked_at_over_one_turn_or_every_tu
                                           r"2777\.78 turns of its travel 0\.\.1e\+06°.* 11113 positions, more than "
                                           r"10000; give it a shorter travel_deg"):
         volumetric_report(_c_travel(tmp_path, "[0, 1e6]", "ex_urad = { poly = [0, 1e-6] }"), grid=2, rotary_grid=4)
+
+
+def test_ranges_fixed_time_and_points_are_checked_naming_them(monkeypatch):
+    # ranges {"x": (nan, 1)} made a grid of NaN positions ("q contains a non-finite value" in the report), a range of
+    # text a numpy DTypePromotionError, of a number "'int' object is not subscriptable", a range of an axis not swept
+    # and the position of a swept one were ignored, fixed = 100 rad on a ±120° axis was mapped as "a = 5729.58°",
+    # time NaN was said of "t", points = 10**4 was a MemoryError of 7.28 TiB and a chain of None an AttributeError
+    from contoursim import _memory
+    from contoursim.machine import load_machine
+
+    chain = load_machine("table_tilting_5axis").chain
+    for kwargs, error, words in (
+        (dict(ranges={"x": (float("nan"), 1.0)}), ValueError, r"ranges\['x'\] contains a non-finite value \(nan\)"),
+        (dict(ranges={"x": "ab"}), TypeError, r"ranges\['x'\] must be numeric"),
+        (dict(ranges={"x": 5.0}), ValueError, r"ranges\['x'\] must have shape \(2\)"),
+        (dict(ranges={"x": (0.0, 1e300)}), ValueError, r"ranges\['x'\] holds 1e\+300 at index 1, beyond ±1e\+06"),
+        (dict(ranges={"a": (0.0, 1.0)}), ValueError, r"ranges: axis 'a' is not swept \(sweep: x, y, z\)"),
+        (dict(fixed={"a": float("nan")}), ValueError, r"fixed\['a'\] must be finite"),
+        (dict(fixed={"a": "a"}), TypeError, r"fixed\['a'\] must be a number"),
+        (dict(fixed={"x": 5.0}), ValueError, r"fixed: axis 'x' is swept \(sweep: x, y, z\)"),
+        (dict(fixed={"a": 100.0}), ValueError, r"fixed\['a'\] = 100 rad \(5729.58°\) lies outside the travel of axis a"),
+    ):
+        with pytest.raises(error, match=words):
+            volumetric_grid(chain, points=2, **kwargs)
+        with pytest.raises(error, match=words):
+            volumetric_report(chain, grid=2, **kwargs)
+    with pytest.raises(ValueError, match="time must be finite, got nan"):
+        volumetric_report(chain, grid=2, time=float("nan"))
+    with pytest.raises(TypeError, match="chain must be a MachineChain"):
+        volumetric_grid(None)
+    monkeypatch.setattr(_memory, "available", lambda: 2**30)
+    with pytest.raises(ValueError, match=r"points = 10000: a grid of 10000 x 10000 x 10000 positions: that is 1e\+12"):
+        volumetric_grid(chain, points=10**4)
+    assert volumetric_grid(chain, points=2, fixed={"a": 0.1})[0].shape == (8, 5)
