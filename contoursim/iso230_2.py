@@ -39,6 +39,7 @@ import numpy as np
 
 from . import _validate
 from .output import writing
+from .traces import MAX_POSITION
 
 __all__ = ["PositioningFigures", "PositioningTest", "positioning_figures", "write_error_table"]
 
@@ -73,11 +74,12 @@ class PositioningTest:
     down: np.ndarray
 
     def __post_init__(self):
-        targets = _validate.finite_array("targets", self.targets, ndim=1)
+        # a position of 1e300 mm made the figures inf (their squares overflow): one beyond a trace's is refused
+        targets = _validate.finite_array("targets", self.targets, ndim=1, limit=MAX_POSITION)
         if targets.size < 2 or np.any(np.diff(targets) <= 0):
             raise ValueError(f"targets must be at least 2 strictly increasing positions, got {targets}")
-        up = _validate.finite_array("up", self.up, shape=(targets.size, None))
-        down = _validate.finite_array("down", self.down, shape=up.shape)
+        up = _validate.finite_array("up", self.up, shape=(targets.size, None), limit=MAX_POSITION)
+        down = _validate.finite_array("down", self.down, shape=up.shape, limit=MAX_POSITION)
         if up.shape[1] < 2:
             raise ValueError(f"up and down need at least 2 cycles (columns) each, got {up.shape[1]}")
         for name, arr in (("targets", targets), ("up", up), ("down", down)):
@@ -223,6 +225,9 @@ def write_error_table(file, axis, figures, source=None, overwrite=False):
         raise ValueError(f"axis must be 'x', 'y' or 'z', got {axis!r}")
     if not isinstance(figures, PositioningFigures):
         raise TypeError(f"figures must be PositioningFigures, got {type(figures).__name__}")
+    if source is not None and (not isinstance(source, str) or any(c in source for c in "\r\n")):
+        # its line break began a line of its own: the header's, and the table read_error_table refuses
+        raise ValueError(f"source must be one line of text, got {source!r}")
     f = figures
     summary = ", ".join(
         f"{label} = {_UM_PER_MM * value:.2f}"

@@ -101,6 +101,8 @@ def test_results_are_read_only():
         (None, np.zeros((3, 1)), np.zeros((3, 1)), "at least 2 cycles"),
         (None, None, [[0, 0, 0], [0, np.nan, 0], [0, 0, 0]], "down contains a non-finite value (nan) at index (1, 1)"),
         ([[0.0, 10.0, 20.0]], None, None, "targets must have 1 dimension"),
+        # a position of 1e300 made the accuracy inf (an overflow warning)
+        (None, [[1e300, 0, 0], [10, 10, 10], [20, 20, 20]], None, "up holds 1e+300 at index (0, 0), beyond ±1e+06"),
     ],
 )
 def test_bad_measurements_are_named(targets, up, down, message):
@@ -146,3 +148,14 @@ def test_error_table_rejects_bad_arguments(tmp_path, axis, figures, error):
     with pytest.raises(error, match="axis must be|figures must be"):
         write_error_table(tmp_path / "t.csv", axis, figures or positioning_figures(hand_test()))
     assert not (tmp_path / "t.csv").exists()
+
+
+def test_a_source_of_more_than_one_line_is_refused(tmp_path):
+    # source = "a\nb,c" wrote "b,c" as a line of its own, which read_error_table then took for the header
+    figures = positioning_figures(hand_test())
+    for source in ("bench\nb,c", "bench\r"):
+        with pytest.raises(ValueError, match="source must be one line of text"):
+            write_error_table(tmp_path / "x.csv", "x", figures, source=source)
+    assert not (tmp_path / "x.csv").exists()
+    write_error_table(tmp_path / "x.csv", "x", figures, source="laser run 3")
+    assert read_error_table(tmp_path / "x.csv") is not None
