@@ -161,6 +161,8 @@ def read_path_file(file, direction=None):
         Naming the file and line of an unknown or missing key or a bad value,
         a file of another type, or a `direction` for a path that has none.
     """
+    if direction is not None and direction not in ("ccw", "cw"):  # not the file's: said of the argument, not its line
+        raise ValueError(f"direction must be 'ccw', 'cw' or None (the file's), got {direction!r}")
     file = library_file(file)
     if direction is not None and file.suffix.lower() != ".toml":
         raise ConfigError("only a circle, iso230_4_circle or helix path file can be run in another direction",

@@ -785,7 +785,9 @@ def arc(center, radius, start_angle, end_angle=None, *, sweep=None, direction="c
     sweep : float, optional
         Signed angle travelled about `normal`, counter-clockwise positive [rad].
     direction : {"ccw", "cw"}
-        Turning direction about `normal`, used with `end_angle`.
+        Turning direction about `normal`, used with `end_angle` (with
+        `sweep`, its sign gives the direction: "cw" with a positive one is
+        refused).
     normal : array_like, shape (3,)
         Plane normal (arc axis).
     role : str
@@ -800,13 +802,16 @@ def arc(center, radius, start_angle, end_angle=None, *, sweep=None, direction="c
     start_angle = _number("start_angle", start_angle)
     if (end_angle is None) == (sweep is None):
         raise PathError("give exactly one of end_angle and sweep")
+    sign = _direction(direction)  # checked with sweep too: a misspelt direction was passed over
     if sweep is None:
-        sign = _direction(direction)
         end_angle = _number("end_angle", end_angle)
         sweep = (sign * (end_angle - start_angle)) % (2 * np.pi)
         sweep = sign * (sweep if sweep > 1e-12 else 2 * np.pi)
     else:
         sweep = _number("sweep", sweep)
+        if sign < 0 < sweep:  # the arc ran counter-clockwise, the direction given passed over
+            raise PathError(f"direction 'cw' and sweep {sweep:g} > 0 (counter-clockwise) disagree: with sweep, its "
+                            "sign gives the direction (negative: clockwise); direction goes with end_angle")
     e1, e2 = _plane_basis(n)
     return Path((HelicalArc(c, e1, e2, radius, start_angle, sweep, 0.0, role),))
 

@@ -34,6 +34,21 @@ def test_arc_end_angle_and_direction():
     assert len(joined) == 2 and joined.length == pytest.approx(10 + 10 * np.pi)
     with pytest.raises(PathError, match="exactly one of end_angle and sweep"):
         paths.arc((0, 0), 10.0, 0.0)
+    # with sweep the direction was passed over, misspelt or contradicting it: a ccw arc for direction="cw"
+    with pytest.raises(PathError, match="direction must be 'ccw' or 'cw', got 'left'"):
+        paths.arc((0, 0), 10.0, 0.0, sweep=1.0, direction="left")
+    with pytest.raises(PathError, match="direction 'cw' and sweep 1 > 0 \\(counter-clockwise\\) disagree"):
+        paths.arc((0, 0), 10.0, 0.0, sweep=1.0, direction="cw")
+    assert paths.arc((0, 0), 10.0, 0.0, sweep=-1.0, direction="cw").primitives[0].sweep == -1.0
+
+
+def test_a_direction_argument_of_a_path_file_is_said_of_the_argument(tmp_path):
+    # direction="left" was reported at the file's [path] line, as if the file said it
+    file = tmp_path / "c.toml"
+    file.write_text('[feed]\nfeed_mm_min = 1000\n[path]\ntype = "circle"\ncenter_mm = [0, 0]\nradius_mm = 5\n')
+    with pytest.raises(ValueError, match="^direction must be 'ccw', 'cw' or None \\(the file's\\), got 'left'$"):
+        load_path_file(file, direction="left")
+    assert load_path_file(file, direction="cw")[0].primitives[0].sweep < 0
 
 
 def test_tilted_circle_lies_in_its_plane():
