@@ -670,10 +670,12 @@ def fleet_command(args):
                          "and --summary FLEET.json gets the fleet's")
     files = trace_files(args.file)
     stems = [f.stem for f in files]
-    twice = sorted({stem for stem in stems if stems.count(stem) > 1 or stem == "fleet"})
+    twice = sorted({stem for stem in stems if stems.count(stem) > 1})
     if twice:  # each trace's report is <stem>.json beside fleet.json
-        raise ValueError(f"two traces named {twice[0]}.csv (or one named fleet.csv): their reports would share a "
-                         "file name; rename one")
+        raise ValueError(f"two traces named {twice[0]}.csv: their reports would share a file name; rename one")
+    if "fleet" in stems:
+        raise ValueError(f"the trace {files[stems.index('fleet')]}'s report would be fleet.json, the fleet summary's "
+                         "file; rename the trace")
     summary_file = report_file(args.summary, SUMMARY_FORM, "fleet summary", args.out,  # never a file the user keeps
                                written=[f"{stem}.json" for stem in stems] + ["fleet.png"])  # nor a trace's report
     refused_early(args.out, [f"{stem}.json" for stem in stems] + ["fleet.json", "fleet.png"])  # not after the fleet

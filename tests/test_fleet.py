@@ -139,3 +139,21 @@ def test_a_single_file_name_is_refused_where_a_sequence_of_traces_is_wanted(tmp_
     with pytest.raises(TypeError, match=r"files must be a sequence of file names, got the single name"):
         diagnose_fleet(trace)
     assert trace_files([trace]) == [trace]
+
+
+def test_a_trace_named_fleet_is_told_apart_from_two_of_a_name(tmp_path, capsys, monkeypatch):
+    # a folder with one fleet.csv was refused as "two traces named fleet.csv (or one named fleet.csv)"
+    import contoursim.fleet
+
+    monkeypatch.setattr(contoursim.fleet, "diagnose_fleet", lambda *a, **k: pytest.fail("diagnosed before the refusal"))
+    (tmp_path / "logs").mkdir()
+    for name in ("fleet.csv", "night.csv"):
+        (tmp_path / "logs" / name).write_text("t,x_ref,x\n0,0,0\n0.001,0.1,0.1\n")
+    assert main(["diagnose", str(tmp_path / "logs"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"the trace {tmp_path / 'logs' / 'fleet.csv'}'s report would be fleet.json, the fleet summary's" in err
+    assert "two traces" not in err
+    (tmp_path / "more").mkdir()
+    (tmp_path / "more" / "night.csv").write_text("t,x_ref,x\n0,0,0\n0.001,0.1,0.1\n")
+    assert main(["diagnose", str(tmp_path / "logs" / "night.csv"), str(tmp_path / "more"), "--out", str(tmp_path / "o")]) == 2
+    assert "two traces named night.csv: their reports would share a file name; rename one" in capsys.readouterr().err
