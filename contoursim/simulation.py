@@ -140,9 +140,7 @@ class SimResult:
         """The result in the measured-trace format: reference vs actual tool position, and the known forces applied."""
         axes = CARTESIAN[: self.trajectory.dim]
         force = {axis: values for axis, values in self.force.items() if axis in axes}
-        if metadata is not None and not isinstance(metadata, Mapping):
-            raise TypeError(f"metadata must map keys to values ({{'path': 'circle.toml'}}), got {type(metadata).__name__}")
-        return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, dict(metadata or {}), force=force)
+        return Trace(self.trajectory.t, self.trajectory.position, self.tool_position, axes, _metadata(metadata), force=force)
 
     def save_csv(self, file, metadata=None, overwrite=False, every=1):
         """Write the trace CSV (DESIGN.md contract) with the contour error (if any) and the test proper.
@@ -171,8 +169,7 @@ class SimResult:
         every : int
             Write every `every`-th sample (1: all, at the servo period).
         """
-        if metadata is not None and not isinstance(metadata, Mapping):
-            raise TypeError(f"metadata must map keys to values ({{'path': 'circle.toml'}}), got {type(metadata).__name__}")
+        metadata = _metadata(metadata)
         columns = ", ".join(f"{a}_ref, {a}" for a in CARTESIAN[: self.trajectory.dim])
         contour = "" if self.contour is None else ", contour, contour_normal"
         force = "".join(f"; {axis}_force [N]" for axis in self.force if axis in CARTESIAN[: self.trajectory.dim])
@@ -187,7 +184,14 @@ class SimResult:
         extra = {} if self.contour is None else {"contour": self.contour.magnitude, "contour_normal": self.contour.normal}
         extra["measuring"] = self.trajectory.measuring
         extra["rapid"] = self.trajectory.rapid
-        write_trace(file, self.to_trace({**standard, **(metadata or {})}), extra=extra, overwrite=overwrite, every=every)
+        write_trace(file, self.to_trace({**standard, **metadata}), extra=extra, overwrite=overwrite, every=every)
+
+
+def _metadata(metadata):
+    """`metadata` (``None`` or a mapping) as a dict, refused when it is not a mapping (a list of lines)."""
+    if metadata is not None and not isinstance(metadata, Mapping):
+        raise TypeError(f"metadata must map keys to values ({{'path': 'circle.toml'}}), got {type(metadata).__name__}")
+    return dict(metadata or {})
 
 
 def _error_figures(trajectory, tool, contour, static=None, measuring_only=True):
