@@ -2139,14 +2139,11 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         if all(e.stage == "geometry" for e in held) or not left > _REIDENTIFY_GAP * floor:
             break
         labels = ", ".join(e.label for e in held)
-        say(f"identifying the servo loops again with {labels} held in place")
-        try:
-            again, near = _diagnose(trace, Model(identify_machine(trace, progress=say, effects=held)), True,
-                                    max_effects, say)
-        except _FIT_FAILURES as exc:
-            result = replace(result, warnings=result.warnings + (f"identifying the servo loops again with {labels} in "
-                                                                 f"place failed ({exc})",))
+        again, near_again = _identified_again(trace, held, max_effects, say)
+        if again is None:
+            result = replace(result, warnings=result.warnings + (near_again,))
             break
+        near = near_again
         k = len(held)  # steps: the nominal model, its refit, then one per effect
         unsure = not result.effects and ((held[0].name, held[0].axis) not in {(e.name, e.axis) for e in again.effects}
                                          or not again.steps[-1].rms_um <= _REIDENTIFY_GAP * floor)
@@ -2174,13 +2171,9 @@ def _geometry_held(trace, result, near, max_effects, say):
     if not geometric or len(geometric) == len(result.effects):
         return result, near
     labels = ", ".join(e.label for e in geometric)
-    say(f"identifying the servo loops again with {labels} held in place")
-    try:
-        again, near_again = _diagnose(trace, Model(identify_machine(trace, progress=say, effects=geometric)), True,
-                                      max_effects, say)
-    except _FIT_FAILURES as exc:
-        return replace(result, warnings=result.warnings + (f"identifying the servo loops again with {labels} in place "
-                                                           f"failed ({exc})",)), near
+    again, near_again = _identified_again(trace, geometric, max_effects, say)
+    if again is None:
+        return replace(result, warnings=result.warnings + (near_again,)), near
     if len(again.effects) >= len(result.effects) or again.steps[-1].rms_um > result.steps[-1].rms_um:
         return result, near
     dropped = ", ".join(e.label for e in result.effects if e.label not in {f.label for f in again.effects})
@@ -2189,6 +2182,17 @@ def _geometry_held(trace, result, near, max_effects, say):
         f"the servo loops were identified again with {labels} held in place: identified with {it} in the trace, they "
         f"had bent to {it}, and {dropped} named on them took that up ({result.steps[-1].rms_um:.4g} µm RMS left; now "
         f"{again.steps[-1].rms_um:.4g} µm with fewer effects)",)), near_again
+
+
+def _identified_again(trace, held, max_effects, say):
+    """The diagnosis on loops identified again with the effects `held` in place: ``(Diagnosis, near)`` as
+    :func:`_diagnose`'s, or ``(None, warning)`` where that fails."""
+    labels = ", ".join(e.label for e in held)
+    say(f"identifying the servo loops again with {labels} held in place")
+    try:
+        return _diagnose(trace, Model(identify_machine(trace, progress=say, effects=held)), True, max_effects, say)
+    except _FIT_FAILURES as exc:
+        return None, f"identifying the servo loops again with {labels} in place failed ({exc})"
 
 
 def _diagnose(trace, model, identified, max_effects, say):
