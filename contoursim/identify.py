@@ -51,12 +51,12 @@ position gains or delays. Then with a PI velocity loop, kept likewise
 (or when the P loop's bandwidth ran to its bound: it was imitating an
 integrator); then with the damping, kept likewise. These stages run on the state
 structure; each drive structure of :data:`DRIVES` is then fitted from
-there with the same parameters free and, where the damping was not kept,
-with it free too (behind a sampled loop's lags the mechanical pole can
-show where on the state structure it did not), and the fit of most
-:func:`delta_bic` over the state structure's replaces it when that is
-significant (the choice of structure counted as one parameter, the
-damping as one per axis). The structures are those of a sampled loop at the
+there with the PI loop and the damping free, kept or not on the state
+structure (behind a sampled loop's lags the mechanical pole can show
+where on the state structure it did not), and the fit of most
+:func:`delta_bic` over the state structure's kept one replaces it when
+that is significant (the choice of structure counted as one parameter,
+and each parameter the state structure did not keep as one). The structures are those of a sampled loop at the
 identified servo period (:func:`servo_period_for`, the trace's own up to
 1 ms): a drive that runs faster than it logs is identified by the
 structure whose lags match its own best at that period, not necessarily
@@ -296,13 +296,13 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     rss4, tau = rss(x4, STATE)
     if delta_bic(rss0, rss4, measured.size, d + added, tau) > SIGNIFICANT:
         best, rss0 = x4, rss4
-    # the sampled drive structures, each fitted from the state structure's fit with the PI loop and the damping free
-    # (where the state structure kept neither): behind a sampled velocity loop's lags the mechanical pole can show
-    # where on the state structure it did not (an effect-free trace was left at 8 times its noise)
+    # the sampled drive structures, each fitted from the state structure's fit with the PI loop and the damping free,
+    # kept or not there: behind a sampled velocity loop's lags the mechanical pole can show where on the state
+    # structure it did not (an effect-free trace was left at 8 times its noise)
     found = [(STATE, best, rss0), (STATE, x4, rss4)]
+    free = np.ones(x4.size, bool)
+    free[1] = feedforward
     for drive in DRIVES:
-        free = np.ones(x4.size, bool)
-        free[1] = feedforward
         x = x4.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
         x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
         x = fitted(x, free, drive)
