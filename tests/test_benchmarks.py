@@ -193,10 +193,12 @@ def test_an_axis_no_effect_named_acts_on_keeps_its_plant_near_the_data_sheet_for
                                                         ("rigid", "scale_error", 154790205, "square")])
 def test_without_a_model_a_scale_error_is_named_only_where_acceleration_does_not_draw_it(independent_truth, tmp_path,
                                                                                         family, effect, seed, path):
-    """Without a model, on a circle at one feed, the loop identified for x misfits its acceleration, which there is in
-    proportion to x about the centre: a scale error of x (−20 ppm, 6σ) was named for it beside a thermal drift. It is
-    not named, and the report says why and what tells them apart. On a square the acceleration is not in proportion
-    to the position: a true scale error is named there, of its size."""
+    """Without a model, on a circle at one feed, the loop identified for x misfit its acceleration, which there is in
+    proportion to x about the centre: a scale error of x (−20 ppm, 6σ) was named for it beside a thermal drift. It
+    was then not named, the report saying why and what tells them apart; with the drive structures fitted with the
+    damping free, the loop identified no longer misfits the acceleration there and the scale error is not a
+    candidate the trace draws. On a square the acceleration is not
+    in proportion to the position: a true scale error is named there, of its size."""
     from contoursim.diagnosis import diagnose
     from contoursim.traces import read_trace
 
@@ -209,8 +211,6 @@ def test_without_a_model_a_scale_error_is_named_only_where_acceleration_does_not
         assert result.effects[0]["ppm"] == pytest.approx(case.truths[0]["parameters"]["ppm"], rel=0.2), result.report()
     else:
         assert ("scale_error", "x") not in named, result.report()
-        assert any(w.startswith("scale_error.x: not named, on this path a misfit of the loop identified for x in "
-                                "proportion to its acceleration") for w in result.warnings), result.warnings
 
 
 def test_a_friction_fitted_to_an_independent_dahl_law_is_within_its_uncertainty(independent_truth, tmp_path):
