@@ -315,8 +315,8 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
             return -np.inf
         return delta_bic(rss0, low, measured.size, x.size - best.size + (structure != STATE), rss(x, structure)[1])
 
-    chosen = max(found, key=gain)
-    structure, x, _ = chosen if gain(chosen) > SIGNIFICANT else found[0]
+    gains = [gain(fit) for fit in found]  # each one simulation (its residual's autocorrelation time)
+    structure, x, _ = found[int(np.argmax(gains))] if max(gains) > SIGNIFICANT else found[0]
     return _machine(axes, period, x, structure)
 
 
