@@ -74,7 +74,8 @@ from scipy.signal import lombscargle, periodogram
 from . import _validate
 from .effects import Effect, effect_kind
 from .exceptions import UnstableLoopError
-from .identify import SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identification_warnings, identify_machine
+from .identify import (SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identification_warnings, identify_machine,
+                       one_blas_thread)
 from .kernel import MAX_DELAY_SAMPLES
 from .machine import CONTROLLER_FIELDS
 from .model import Model, as_model
@@ -2076,6 +2077,7 @@ def _separating_test(a, b, both_ways=False):
 # -- the workflow ------------------------------------------------------------------------------
 
 
+@one_blas_thread
 def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     """Name the catalogue effects a nominal model lacks to explain a measured trace (module docstring).
 
