@@ -2040,6 +2040,11 @@ def _oval_kind(effect):
     return None
 
 
+#: What tells a squareness from a straightness's slope over the path (:func:`_separating_test`).
+_SLOPE_TEST = ("the same path placed elsewhere in the travel, or a straightness measurement over the whole travel "
+               "(ISO 230-1): a straightness's slope changes with where the path lies, a squareness's does not")
+
+
 def _separating_test(a, b, both_ways=False):
     """The extra test that tells effect `a` from effect `b` (`both_ways`: the trace already runs its path both ways)."""
     kinds = {e.options["kind"] for e in (a, b) if e.name == "time_delay"}
@@ -2059,8 +2064,7 @@ def _separating_test(a, b, both_ways=False):
     if a.name == b.name == "backlash":
         return "a reversal test read on the motor encoder and on a linear scale: with motor feedback the table lags, with scale feedback the loop chases the lost motion"
     if {a.name, b.name} == {"squareness", "straightness"}:
-        return ("the same path placed elsewhere in the travel, or a straightness measurement over the whole travel "
-                "(ISO 230-1): a straightness's slope changes with where the path lies, a squareness's does not")
+        return _SLOPE_TEST
     if {a.name, b.name} == {"scale_error", "thermal_drift"}:
         return "the same move at another feed, or with a dwell: a drift grows with time, a scale error with position"
     stages = {a.stage, b.stage}
@@ -2350,6 +2354,14 @@ def _diagnose(trace, model, identified, max_effects, say):
             warnings.append(f"{best.fit.label}: the machine gives no travel for axis {best.fit.axis} (travel_mm): the bow "
                             "is fitted over the trace's own extent, its curvature the guideway's, its slope there "
                             "not told apart from a squareness")
+        untravelled = [a for a in best.fit.axis if a not in base.machine.travel]
+        if best.fit.name == "squareness" and untravelled:
+            # the straightness candidates then bow over the trace's own extent, without a slope there: the look-alikes
+            # cannot weigh a straightness over the travel, mostly its slope over a path small against it
+            warnings.append(f"{best.fit.label}: the machine gives no travel for axis {', '.join(untravelled)} "
+                            "(travel_mm): a guideway's straightness over the travel shows over a path small against "
+                            "it mostly as its slope there, a squareness's shear, and is not told apart from it; to "
+                            f"separate them: {_SLOPE_TEST}")
         steps.append(step)
         moves[best.fit.label] = best.moved
         if len(steps) > 3 and not identified:

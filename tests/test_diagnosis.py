@@ -196,6 +196,21 @@ def test_a_circle_run_both_ways_tells_squareness_from_a_servo_mismatch(machine, 
     assert said and "squareness.xy" in said[0] and "run the circle in the other direction" in said[0], one_way.report()
 
 
+def test_a_squareness_named_without_the_axes_travel_says_a_straightnesss_slope_would_look_the_same(machine):
+    """Without a travel the straightness candidates bow over the trace's own extent, with no slope there; a
+    straightness over a travel much longer than the path shows there mostly as that slope, a squareness's shear
+    (without a model, the independent rigid family's straightness case on five seeds of six). With the
+    travel given, the straightness candidates weigh it and nothing is added."""
+    said = {}
+    for travel in (None, {"x": (-200.0, 200.0), "y": (-200.0, 200.0)}):
+        result = run_blind(replace(machine, axis_travel=travel), (Effect("squareness", "xy", angle_urad=150.0),),
+                           both_ways(), seed=7)
+        assert [e.label for e in result.effects] == ["squareness.xy"], result.report()
+        said[travel is None] = [w for w in result.warnings if "no travel" in w]
+    assert len(said[True]) == 1 and "axis x, y (travel_mm)" in said[True][0] and "ISO 230-1" in said[True][0]
+    assert said[False] == []
+
+
 def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
     """The oval's 2θ term per direction: a squareness's keeps its orientation, at 135° and of size αR/2 (closed
     form); a Y gain 1 % low gives one as large that flips between CCW (at 135°) and CW (at 45°)."""
