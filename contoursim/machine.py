@@ -135,7 +135,7 @@ class Machine:
             travel[a] = (float(lo), float(hi))
         object.__setattr__(self, "axis_travel", _validate.Frozen(travel))
         object.__setattr__(self, "axes", _validate.Frozen(axes))
-        object.__setattr__(self, "servo_period", _validate.positive("servo_period", self.servo_period))
+        object.__setattr__(self, "servo_period", _servo_period("servo_period", self.servo_period))
         if self.max_feed is not None:
             object.__setattr__(self, "max_feed", _validate.positive("max_feed", self.max_feed))
 
@@ -325,11 +325,45 @@ CONTROLLER_FIELDS = ("kp", "kv", "ti", "vff", "aff", "kc", "ti_current", "curren
 _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
 # a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")
 _SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| is| \(| \[|,| given| as well|\.|$))")
-#: Servo periods a machine file may give [s]: servo loops from 1 MHz down to 1 Hz.
+#: Servo periods a machine may have [s]: servo loops from 1 MHz down to 1 Hz.
 SERVO_PERIOD_RANGE = (1e-6, 1.0)
 _SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes", "effect")
 #: Keys of an ``[axes.<name>]`` table besides the servo parameters.
 _AXIS_KEYS = ("uncertain", "travel_mm")
+
+
+def _servo_period(name, value, unit="s"):
+    """`value` as a servo period [s], after checking it lies in :data:`SERVO_PERIOD_RANGE`: the one check of
+    :class:`Machine`'s `servo_period` and of a machine file's ``servo_period_ms``.
+
+    Parameters
+    ----------
+    name : str
+        The parameter or file key, as messages name it.
+    value : float
+        The period in `unit`.
+    unit : {"s", "ms"}
+        The unit of `value` (and of the range as the message says it).
+
+    Returns
+    -------
+    float
+        The period [s].
+
+    Raises
+    ------
+    TypeError
+        `value` is not a number.
+    ValueError
+        `value` is not finite, not positive, or outside the range.
+    """
+    scale = {"s": 1.0, "ms": 1e-3}[unit]
+    period = _validate.positive(name, value) * scale
+    low, high = SERVO_PERIOD_RANGE
+    if not low <= period <= high:
+        raise ValueError(f"{name} must lie in [{low / scale:g}, {high / scale:g}] {unit} (servo loops from 1 MHz "
+                         f"down to 1 Hz), got {value:g}")
+    return period
 
 
 def preset_names():
@@ -411,10 +445,7 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
     if "servo_period_ms" not in data:
         raise toml.error("missing key 'servo_period_ms': the servo period [ms]")
     try:
-        period = _validate.positive("servo_period_ms", data["servo_period_ms"]) * 1e-3
-        if not SERVO_PERIOD_RANGE[0] <= period <= SERVO_PERIOD_RANGE[1]:
-            raise ValueError(f"servo_period_ms must lie in [{1e3 * SERVO_PERIOD_RANGE[0]:g}, {1e3 * SERVO_PERIOD_RANGE[1]:g}] ms "
-                             f"(servo loops from 1 MHz down to 1 Hz), got {data['servo_period_ms']:g}")
+        period = _servo_period("servo_period_ms", data["servo_period_ms"], unit="ms")
         max_feed = data.get("max_feed_mm_min")
         max_feed = None if max_feed is None else _validate.positive("max_feed_mm_min", max_feed) / 60.0
     except (TypeError, ValueError) as exc:

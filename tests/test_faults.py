@@ -296,6 +296,17 @@ def test_machine_values_far_out_of_range_end_in_one_line_without_a_warning(tmp_p
                       str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, line {line}: ", words)
 
 
+def test_a_machine_built_in_python_takes_the_servo_periods_a_machine_file_takes():
+    # Machine(axes, 10.0) and Machine(axes, 1e-9) were built, where a machine file's servo_period_ms of 1e4 or 1e-6
+    # is refused
+    axes = dict(load_machine("demo_mill").axes)
+    for period, shown in ((10.0, "10"), (1e-9, "1e-09")):
+        with pytest.raises(ValueError, match=re.escape(f"servo_period must lie in [1e-06, 1] s (servo loops from 1 MHz "
+                                                       f"down to 1 Hz), got {shown}")):
+            Machine(axes, period)
+    assert [Machine(axes, period).servo_period for period in (1e-6, 1.0)] == [1e-6, 1.0]
+
+
 @pytest.mark.parametrize("n, dt, noise", [(5, 1e-3, 0.0), (50, 0.1, 1e-3), (500, 1e-4, 1e-6)])
 def test_a_trace_that_stands_still_is_diagnosed_without_a_numpy_warning(tmp_path, capsys, n, dt, noise):
     t = np.arange(n) * dt
