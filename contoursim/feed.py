@@ -43,9 +43,10 @@ from .trajectory import Trajectory
 
 __all__ = ["FeedProfile", "FeedSettings", "plan", "sample"]
 
-#: Range of a feed [mm/s], acceleration [mm/s^2] and jerk [mm/s^3] of :class:`FeedSettings`: beyond, the
-#: planning's squares and ratios overflow, and no machine moves so.
+#: Range of a feed [mm/s], acceleration [mm/s^2] and jerk [mm/s^3] of :func:`plan` and :class:`FeedSettings`:
+#: beyond, the planning's squares and ratios overflow, and no machine moves so.
 SETTING_RANGE = (1e-6, 1e12)
+_UNITS = {"feed": "mm/s", "accel": "mm/s^2", "jerk": "mm/s^3", "centripetal_accel": "mm/s^2"}
 
 @dataclass(frozen=True)
 class FeedProfile:
@@ -297,7 +298,8 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     path : contoursim.paths.Path
         The path to travel.
     feed : float or array_like, shape (K,)
-        Feed rate [mm/s], one value or one per primitive (G-code blocks).
+        Feed rate [mm/s], one value or one per primitive (G-code blocks);
+        it, `accel`, `jerk` and `centripetal_accel` within :data:`SETTING_RANGE`.
     accel : float
         Path acceleration limit [mm/s^2].
     jerk : float, optional
@@ -350,8 +352,9 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
         feeds = np.full(k, feeds)
     elif feeds.shape != (k,):
         raise ValueError(f"feed must be one value or one per primitive ({k}), got {feeds.size} values")
-    accel = _validate.positive("accel", accel)
-    jerk = None if jerk is None else _validate.positive("jerk", jerk)
+    _setting("feed", feeds)
+    accel = _setting("accel", _validate.positive("accel", accel))
+    jerk = None if jerk is None else _setting("jerk", _validate.positive("jerk", jerk))
     tolerance = _corner_tolerance(corner_tolerance)
     waits = np.array(path.roles) == "rapid"
     if max_feed is not None:
@@ -363,7 +366,7 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
                             f"max_feed = {max_feed:.6g} mm/s ({max_feed * 60:.6g} mm/min)", primitive=i)
     limits = feeds.copy()
     if centripetal_accel is not None:
-        ac = _validate.positive("centripetal_accel", centripetal_accel)
+        ac = _setting("centripetal_accel", _validate.positive("centripetal_accel", centripetal_accel))
         kappa = path.max_curvature()
         curved = kappa > 0
         limits[curved] = np.minimum(limits[curved], np.sqrt(ac / kappa[curved]))
@@ -451,11 +454,9 @@ class FeedSettings:
                 object.__setattr__(self, name, _validate.positive(name, getattr(self, name)))
         object.__setattr__(self, "corner_tolerance", _corner_tolerance(self.corner_tolerance))
         object.__setattr__(self, "stops", _stops(self.stops))
-        for name in ("feed", "accel", "jerk", "centripetal_accel"):  # 1e-300 or 1e308 overflow the planning
-            values = np.atleast_1d(np.asarray(getattr(self, name) or 1.0, dtype=float))
-            if not (SETTING_RANGE[0] <= values.min() and values.max() <= SETTING_RANGE[1]):
-                raise ValueError(f"{name} must lie within [{SETTING_RANGE[0]:g}, {SETTING_RANGE[1]:g}] "
-                                 f"(mm/s, mm/s^2, mm/s^3), got {values.min() if values.min() < 1 else values.max():g}")
+        for name in ("feed", "accel", "jerk", "centripetal_accel"):
+            if getattr(self, name) is not None:
+                _setting(name, getattr(self, name))
 
     def plan(self, path, max_feed=None, in_position=0.0, servo_period=None):
         """:func:`plan` with these settings.
@@ -478,6 +479,21 @@ class FeedSettings:
         return plan(path, self.feed, self.accel, self.jerk, centripetal_accel=self.centripetal_accel,
                     corner_tolerance=self.corner_tolerance, max_feed=max_feed, in_position=in_position,
                     stops=self.stops, servo_period=servo_period)
+
+
+def _setting(name, value):
+    """`value`, a feed (or one per primitive), acceleration or jerk limit, after checking it lies within
+    :data:`SETTING_RANGE` in the unit of `name`: 1e-300 or 1e308 overflow the planning (a feed of 1e-300 mm/s plans a
+    motion of 1e301 s that no servo period samples)."""
+    values = np.atleast_1d(np.asarray(value, dtype=float))
+    low, high = SETTING_RANGE
+    outside = (values < low) | (values > high)
+    if outside.any():
+        i = int(np.argmax(outside))
+        where = f"{name}[{i}]" if values.size > 1 else name
+        raise ValueError(f"{where} must lie within [{low:g}, {high:g}] {_UNITS[name]}, got {values[i]:g}: no machine "
+                         "moves so slowly or so fast, and beyond the range the planning's squares and ratios overflow")
+    return value
 
 
 def _corner_tolerance(value):

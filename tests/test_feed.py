@@ -203,6 +203,22 @@ def test_bad_values_name_the_parameter():
         sample(path, plan(path, 10.0, 100.0), 0.0)
 
 
+def test_a_feed_slower_than_any_machine_moves_is_refused_by_plan_as_by_feed_settings():
+    # plan(path, 1e-300, ...) planned a motion of 1e301 s, which sample then refused for the memory its run needs
+    # (FeedSettings(1e-300) was refused at once)
+    path = paths.line((0, 0), (10, 0))
+    two = path + paths.line((10, 0), (20, 0))
+    for call, words in ((lambda: plan(path, 1e-300, 100.0), r"feed must lie within \[1e-06, 1e\+12\] mm/s, got 1e-300: "
+                                                           r"no machine moves so slowly or so fast"),
+                        (lambda: plan(two, [10.0, 1e-9], 100.0), r"feed\[1\] must lie within \[1e-06, 1e\+12\] mm/s, "
+                                                                  "got 1e-09"),
+                        (lambda: plan(path, 10.0, 1e-300), r"accel must lie within \[1e-06, 1e\+12\] mm/s\^2"),
+                        (lambda: FeedSettings(1e-300), r"feed must lie within \[1e-06, 1e\+12\] mm/s, got 1e-300")):
+        with pytest.raises(ValueError, match=words):
+            call()
+    assert plan(path, 1e-6, 100.0).duration == pytest.approx(1e7)
+
+
 def test_servo_period_and_stops_are_checked_where_given():
     # a servo period of 0, NaN or -1 was taken (-1 warned of a velocity step "against -0.001 mm/s²"), one of text
     # failed inside the corner check; a stop at 1.5 was cut to primitive 1, one at -3 or of text failed elsewhere
