@@ -666,7 +666,7 @@ def circular(actual, center, radius, normal=(0.0, 0.0, 1.0), direction="ccw"):
     actual : array_like, shape (N, d)
         Actual tool positions [mm].
     center, radius, normal, direction
-        The circle, as in :func:`circular_params`.
+        The circle, as in :func:`circular_params`; `center` of shape (d,).
 
     Returns
     -------
@@ -676,6 +676,9 @@ def circular(actual, center, radius, normal=(0.0, 0.0, 1.0), direction="ccw"):
     """
     act = _points("actual", actual)
     params = circular_params(center, radius, normal, direction)
+    if np.shape(center) != act.shape[1:]:  # the missing coordinate would be 0: an offset added to every magnitude
+        raise ValueError(f"center has shape {np.shape(center)} but actual has shape {act.shape}: give the centre in the "
+                         f"{act.shape[1]} coordinates of the points")
     out, _ = _run(_CIRCULAR, np.empty((0, 4)), np.zeros(len(act), np.int64), act, params)
     return _result(out, None, act.shape[1], "circular")
 

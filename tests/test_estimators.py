@@ -296,6 +296,19 @@ def test_bad_input_is_rejected_with_a_message_naming_it(call, message):
         call()
 
 
+def test_circular_refuses_a_centre_of_other_dimensions_than_the_points():
+    # a 3-D centre with planar points took the centre's z as an out-of-plane offset of every point (a circle of
+    # radius 10 about (0, 0, 5) read 5 mm off), as did points at z = 5 about a planar centre
+    phi = np.linspace(0.0, 2 * np.pi, 8)
+    planar = 10.0 * np.column_stack([np.cos(phi), np.sin(phi)])
+    lifted = np.column_stack([planar, np.full(phi.size, 5.0)])
+    for act, center, words in ((planar, (0.0, 0.0, 5.0), r"center has shape \(3,\) but actual has shape \(8, 2\)"),
+                               (lifted, (0.0, 0.0), r"center has shape \(2,\) but actual has shape \(8, 3\)")):
+        with pytest.raises(ValueError, match=words):
+            est.circular(act, center, 10.0)
+    np.testing.assert_allclose(est.circular(lifted, (0.0, 0.0, 5.0), 10.0).magnitude, 0.0, atol=1e-12)
+
+
 def test_result_is_read_only_and_time_first():
     ref = np.column_stack([np.linspace(0, 1, 10), np.zeros(10)])
     got = est.three_point(ref, ref + [0.0, 0.01])
