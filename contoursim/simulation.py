@@ -747,6 +747,7 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     every : int
         Keep the samples ``k = 0, every, 2·every, …`` only (M = ceil(N / every)),
         to bound memory; the summary is taken over every sample all the same.
+        It must be below N, the run's samples (the reference held `settle`).
         For a trace logged every k-th servo period, ``every = k`` gives the
         trace's own instants.
     dtype : {numpy.float64, numpy.float32}
@@ -776,10 +777,10 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     Raises
     ------
     ValueError
-        The variants do not share one structure; an unknown output; a `dtype`
-        other than float64 or float32; per-variant
-        strategies that are not B sequences; noise on an encoder (``noise``
-        with ``at = "encoder"``).
+        The variants do not share one structure; an unknown output; `every`
+        keeping the first sample alone; a `dtype` other than float64 or
+        float32; per-variant strategies that are not B sequences; noise on an
+        encoder (``noise`` with ``at = "encoder"``).
     UnstableLoopError
         A nominal machine's loop is unstable or badly damped, or (with
         `check`) a variant's cross-coupled controller fails its check.
@@ -816,6 +817,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         for axis, nominal in machine.axes.items():
             nominal.check(dt, axis)  # analysed once per servo in a process
     trajectory, pushing, _ = _reference(first, reference, settle, preview, force)
+    if every > 1 and every >= len(trajectory):  # t and every trace asked for would be the first sample alone
+        raise ValueError(f"every = {every} keeps only the first of the run's {len(trajectory)} samples: give every "
+                         f"below {len(trajectory)} (1 keeps them all)")
     if first.chain is not None:  # one chain for all (simulate's check)
         check_drift(first.chain, trajectory.t[-1] - trajectory.t[0])
     q, v, a = _target(models[0], trajectory, compositions[0], preview)

@@ -486,6 +486,19 @@ def test_a_loop_running_away_is_reported_diverged_not_as_figures_of_kilometres()
         simulate(Model(machine, (Effect("time_delay", "x", delay_s=0.01, kind="feedback"),)), trajectory)
 
 
+def test_a_batch_keeping_the_first_sample_alone_is_refused_naming_every():
+    # simulate_batch(..., every=10**6) returned the run's first sample alone (t of shape (1,)) without a word
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    path = paths.line((0, 0), (0.2, 0))
+    trajectory = sample(path, plan(path, feed=10.0, accel=500.0), DT)
+    n = len(trajectory)
+    for every in (n, 10**6):
+        with pytest.raises(ValueError, match=rf"every = {every} keeps only the first of the run's {n} samples: give "
+                                             rf"every below {n}"):
+            simulate_batch([machine], trajectory, settle=0.0, every=every)
+    assert simulate_batch([machine], trajectory, settle=0.0, every=n - 1)["t"].tolist() == [0.0, trajectory.t[-1]]
+
+
 def test_the_measured_reference_hold_and_settle_refuse_bad_arguments_naming_them(monkeypatch):
     # a servo period of 0 was an OverflowError (NaN: "cannot convert float NaN to integer"), a hold of 1e9 s a
     # MemoryError of 14.6 TiB, default_settle of a name an AttributeError
