@@ -15,6 +15,7 @@ import math
 import os
 import tempfile
 import textwrap
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -208,7 +209,15 @@ def fleet_summary(outcomes):
         named on), ``traces`` (which, in order) and per parameter its
         distribution over those traces (``values`` in trace order, ``min``,
         ``median``, ``max``, ``mean``, ``std``).
+
+    Raises
+    ------
+    TypeError
+        `outcomes` is no list of dicts (one outcome, a file name).
+    ValueError
+        `outcomes` is empty, or an outcome is not one :func:`diagnose_text` returns.
     """
+    _outcomes(outcomes)
     effects, nominal = {}, []
     reports = [o for o in outcomes if "report" in o]
     for o in reports:
@@ -227,6 +236,25 @@ def fleet_summary(outcomes):
     return {"traces": len(outcomes), "diagnosed": len(reports),
             "failed": [{"trace": o["trace"], "error": o["error"]} for o in outcomes if "error" in o],
             "nominal": nominal, "effects": dict(sorted(effects.items(), key=lambda item: -item[1]["count"]))}
+
+
+def _outcomes(outcomes):
+    """Refuse `outcomes` unless it is a non-empty list of :func:`diagnose_text`'s outcomes (``trace`` and a
+    ``report`` holding its ``effects``, or an ``error``): one outcome alone, or a file name, read as several."""
+    if not isinstance(outcomes, (list, tuple)):
+        raise TypeError(f"outcomes must be a list of diagnose_fleet's outcomes (one dict per trace), got "
+                        f"{type(outcomes).__name__}")
+    if not outcomes:
+        raise ValueError("outcomes is empty: a fleet summary needs the outcome of one trace or more")
+    for i, o in enumerate(outcomes):
+        if not isinstance(o, Mapping):
+            raise TypeError(f"outcomes[{i}] must be a dict (diagnose_text's outcome), got {type(o).__name__}")
+        if "trace" not in o or ("report" in o) == ("error" in o):
+            raise ValueError(f"outcomes[{i}] must hold 'trace' and either 'report' or 'error' (diagnose_text's "
+                             f"outcome), got the keys {list(o)}")
+        if "report" in o and not (isinstance(o["report"], Mapping) and "effects" in o["report"]):
+            raise ValueError(f"outcomes[{i}]['report'] must be a diagnosis report (Diagnosis.to_dict) with its "
+                             f"'effects', got {_validate.shown(o['report'])}")
 
 
 def plot_fleet(summary):

@@ -51,6 +51,7 @@ import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -101,7 +102,18 @@ class Sweep:
         Files the job reads that are not in the spec's folder (or below it):
         the sweep runs here, not on a cluster.
     log : tuple of bool
-        Per parameter: drawn uniform in log(value) (plotted on a log axis).
+        Per parameter: drawn uniform in log(value) (plotted on a log axis);
+        ``()`` for none.
+
+    Raises
+    ------
+    TypeError
+        A name, a flag, the strategies or a file's text of the wrong type;
+        `names` a single name.
+    ValueError
+        `values` not finite or not one column per name, no variant, a name
+        given twice, no files, a `task_size` below 1, or `log` not one flag
+        per name.
     """
 
     source: str
@@ -112,6 +124,39 @@ class Sweep:
     task_size: int | None = None
     elsewhere: tuple = ()
     log: tuple = ()
+
+    def __post_init__(self):
+        if not isinstance(self.files, Mapping) or not self.files:
+            raise ValueError(f"files must map the spec's file name to its text, first, then the files it names; got "
+                             f"{_validate.shown(self.files)}")
+        bad = next((name for name, text in self.files.items() if not (isinstance(name, str) and isinstance(text, str))),
+                   None)
+        if bad is not None:
+            raise TypeError(f"files must map file names to their texts (str), got {bad!r}: "
+                            f"{_validate.shown(self.files[bad])}")
+        if not isinstance(self.strategies, str):
+            raise TypeError(f"strategies must be a comparison name (\"ccc_arc\", \"feedforward+ccc_arc\"), got "
+                            f"{self.strategies!r}")
+        if isinstance(self.names, str):  # its characters would be the names
+            raise TypeError(f"names must be a sequence of parameter names, got the single name {self.names!r}: "
+                            f"give ({self.names!r},)")
+        names = tuple(self.names)
+        for i, name in enumerate(names):
+            if not isinstance(name, str):
+                raise TypeError(f"names[{i}] must be a parameter name (text), got {name!r}")
+            if names.index(name) != i:
+                raise ValueError(f"names[{i}] {name!r} is varied twice (names[{names.index(name)}]): vary each once")
+        values = _validate.finite_array("values", self.values, shape=(None, len(names)))
+        if not len(values):
+            raise ValueError("values holds no variant: a sweep needs one row or more")
+        if self.task_size is not None:
+            object.__setattr__(self, "task_size", _validate.positive_int("task_size", self.task_size))
+        log = tuple(_validate.flag(f"log[{i}]", v) for i, v in enumerate(self.log)) or (False,) * len(names)
+        if len(log) != len(names):
+            raise ValueError(f"log must hold one flag per name ({len(names)}), got {len(log)}")
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "log", log)
 
 
 def _bundle(spec, toml):

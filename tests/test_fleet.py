@@ -141,6 +141,28 @@ def test_a_single_file_name_is_refused_where_a_sequence_of_traces_is_wanted(tmp_
     assert trace_files([trace]) == [trace]
 
 
+def test_a_fleet_summary_of_what_diagnose_fleet_does_not_return_is_refused_naming_it():
+    # one outcome (a dict) or a file name failed as "string indices must be integers", a string of the name's
+    # characters was 5 traces, [] a fleet of none, an outcome of neither report nor error a trace neither diagnosed
+    # nor failed, one without its trace a KeyError 'trace', a report without its effects a KeyError 'effects'
+    failed = {"trace": "a.csv", "error": "a.csv, line 3: column 'x': value nan is not finite"}
+    for outcomes, error, words in (
+        (failed, TypeError, r"outcomes must be a list of diagnose_fleet's outcomes \(one dict per trace\), got dict"),
+        ("a.csv", TypeError, r"outcomes must be a list of diagnose_fleet's outcomes .*, got str"),
+        (None, TypeError, r"outcomes must be a list of diagnose_fleet's outcomes .*, got NoneType"),
+        ([], ValueError, r"outcomes is empty: a fleet summary needs the outcome of one trace or more"),
+        ([failed, "b.csv"], TypeError, r"outcomes\[1\] must be a dict \(diagnose_text's outcome\), got str"),
+        ([{"trace": "b.csv"}], ValueError, r"outcomes\[0\] must hold 'trace' and either 'report' or 'error' "
+                                           r"\(diagnose_text's outcome\), got the keys \['trace'\]"),
+        ([{"error": "x"}], ValueError, r"outcomes\[0\] must hold 'trace' and either .*, got the keys \['error'\]"),
+        ([{"trace": "b.csv", "report": {}}], ValueError, r"outcomes\[0\]\['report'\] must be a diagnosis report "
+                                                         r"\(Diagnosis.to_dict\) with its 'effects'"),
+    ):
+        with pytest.raises(error, match=words):
+            fleet_summary(outcomes)
+    assert fleet_summary([failed])["failed"] == [failed]
+
+
 def test_a_trace_named_fleet_is_told_apart_from_two_of_a_name(tmp_path, capsys, monkeypatch):
     # a folder with one fleet.csv was refused as "two traces named fleet.csv (or one named fleet.csv)"
     import contoursim.fleet

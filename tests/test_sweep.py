@@ -587,6 +587,33 @@ def test_a_sweep_refused_by_a_users_file_of_one_of_its_names_writes_nothing(tmp_
     assert after == {**before, "sweep_axes.y.kp_per_s.png": b"mine\n"}
 
 
+def test_a_sweep_made_in_python_is_refused_where_its_names_values_and_options_do_not_fit(tmp_path):
+    # values of one column for two names ran the first parameter alone (zip cut the second), a name given alone was
+    # its characters, no values a table of none, log = () (the default) an IndexError in plot_sweep, task_size = 0 or
+    # files = {} were taken
+    sweep = read_sweep(_spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 30.0, "max": 50.0, "count": 2},
+                                        {"name": '"axes.y.kp_per_s"', "values": "[30.0, 40.0]"}]))
+    for change, error, words in (
+        (dict(values=sweep.values[:, :1]), ValueError, r"values must have shape \(N, 2\), got \(4, 1\)"),
+        (dict(values=sweep.values[:, 0]), ValueError, r"values must have shape \(N, 2\), got \(4,\)"),
+        (dict(values=np.empty((0, 2))), ValueError, r"values holds no variant: a sweep needs one row or more"),
+        (dict(values=np.full((1, 2), np.nan)), ValueError, r"values contains a non-finite value \(nan\)"),
+        (dict(names="axes.x.kp_per_s"), TypeError, r"names must be a sequence of parameter names, got the single name "
+                                                   r"'axes.x.kp_per_s': give \('axes.x.kp_per_s',\)"),
+        (dict(names=("axes.x.kp_per_s", 3)), TypeError, r"names\[1\] must be a parameter name \(text\), got 3"),
+        (dict(names=("axes.x.kp_per_s",) * 2), ValueError, r"names\[1\] 'axes.x.kp_per_s' is varied twice"),
+        (dict(strategies=["none"]), TypeError, r"strategies must be a comparison name \(\"ccc_arc\", "),
+        (dict(files={}), ValueError, r"files must map the spec's file name to its text, first, then the files it "
+                                     r"names; got \{\}"),
+        (dict(task_size=0), ValueError, r"task_size must be at least 1, got 0"),
+        (dict(log=(True,)), ValueError, r"log must hold one flag per name \(2\), got 1"),
+    ):
+        with pytest.raises(error, match=words):
+            dataclasses.replace(sweep, **change)
+    assert dataclasses.replace(sweep, log=()).log == (False, False)  # none on a log scale, as the default
+    assert dataclasses.replace(sweep, names=list(sweep.names)).names == sweep.names
+
+
 def test_run_sweep_of_a_spec_file_name_says_to_read_it_first():
     # run_sweep("spec.toml") was an AttributeError ('str' object has no attribute 'values')
     with pytest.raises(TypeError, match="sweep must be a Sweep \\(read_sweep reads one from its spec\\), got str"):
