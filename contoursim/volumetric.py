@@ -47,7 +47,7 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
     points : int
         Grid points per swept axis (>= 2).
     ranges : dict, optional
-        ``{axis: (min, max)}`` [mm or rad]; default the axes' travels, a
+        ``{axis: (min, max)}`` [mm or rad], min < max; default the axes' travels, a
         rotary axis's of a turn or more looked at as :func:`volumetric_report`
         says (over one turn, or `points` positions a turn).
     fixed : dict, optional
@@ -99,12 +99,15 @@ def volumetric_grid(chain, sweep=None, points=11, ranges=None, fixed=None):
 def _positions(chain, ranges, fixed, sweep, travel):
     """`ranges` ``{axis: (min, max)}`` and `fixed` ``{axis: position}`` of :func:`volumetric_grid`, checked: axes of
     the chain (a range of an axis not swept, a fixed axis that is swept, would be ignored), finite positions within
-    ±:data:`~contoursim.multibody.MAX_TRAVEL`, a fixed one within its axis's travel."""
+    ±:data:`~contoursim.multibody.MAX_TRAVEL`, a range's min below its max, a fixed one within its axis's travel."""
     ranges, fixed = dict(ranges or {}), dict(fixed or {})
     for a, span in ranges.items():
         if a not in sweep:
             raise ValueError(f"ranges: axis {a!r} is not swept (sweep: {', '.join(sweep)}): its range would be ignored")
-        ranges[a] = tuple(_validate.finite_array(f"ranges[{a!r}]", span, shape=(2,), limit=MAX_TRAVEL).tolist())
+        lo, hi = _validate.finite_array(f"ranges[{a!r}]", span, shape=(2,), limit=MAX_TRAVEL).tolist()
+        if not lo < hi:  # a grid running backwards, or one position `points` times
+            raise ValueError(f"ranges[{a!r}] must be (min, max) of axis {a} with min < max, got ({lo:g}, {hi:g})")
+        ranges[a] = (lo, hi)
     for a, position in fixed.items():
         if a not in chain.axes:
             raise ValueError(f"fixed: unknown axis {a!r}")

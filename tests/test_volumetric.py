@@ -146,6 +146,19 @@ def test_a_rotary_axis_turning_many_times_is_looked_at_over_one_turn_or_every_tu
         volumetric_report(_c_travel(tmp_path, "[0, 1e6]", "ex_urad = { poly = [0, 1e-6] }"), grid=2, rotary_grid=4)
 
 
+def test_a_range_given_max_first_or_of_one_position_is_refused_naming_its_axis():
+    # ranges {"x": (100, 0)} made a grid running backwards (x = 100, 50, 0), (5, 5) one position `points` times
+    from contoursim.machine import load_machine
+
+    chain = load_machine("table_tilting_5axis").chain
+    for span, shown in (((100.0, 0.0), r"\(100, 0\)"), ((5.0, 5.0), r"\(5, 5\)")):
+        with pytest.raises(ValueError, match=rf"ranges\['x'\] must be \(min, max\) of axis x with min < max, "
+                                             rf"got {shown}"):
+            volumetric_grid(chain, sweep=["x"], points=3, ranges={"x": span})
+    _, (x,) = volumetric_grid(chain, sweep=["x"], points=3, ranges={"x": (0.0, 100.0)})
+    assert x.tolist() == [0.0, 50.0, 100.0]
+
+
 def test_ranges_fixed_time_and_points_are_checked_naming_them(monkeypatch):
     # ranges {"x": (nan, 1)} made a grid of NaN positions ("q contains a non-finite value" in the report), a range of
     # text a numpy DTypePromotionError, of a number "'int' object is not subscriptable", a range of an axis not swept
