@@ -1996,12 +1996,13 @@ def _partner(cand, cands):
 def _first_order_said(problem, gain, delay, both_ways):
     """The gain named over the delay it is to first order (:func:`_first_order_twin`), and the pair said (one sentence
     in a list, as :func:`_choose` gives them)."""
-    share = (gain.cost - delay.cost) / max(gain.cost - problem.n, 1e-300)
+    above = gain.cost - problem.n  # what the gain's fit leaves above the noise floor (whitened: n entries of 1)
+    closing = (f"the delay closing {max(gain.cost - delay.cost, 0.0) / above:.0%} of what the gain leaves above the noise "
+               "floor" if above > 0 else "the gain leaving nothing above the noise floor")
     return gain, [(f"{gain.fit.label} ({_size(gain.fit)}) and {delay.fit.label}{_options(delay.fit)} ({_size(delay.fit)}): "
                   f"the trace does not tell the delay from the gain it is to first order (ΔBIC {delay.delta_bic:.0f} "
-                  f"vs {gain.delta_bic:.0f}, the delay closing {max(share, 0.0):.0%} of what the gain leaves above "
-                  f"the noise floor; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): the gain is named; "
-                  f"to separate them: {_separating_test(gain.fit, delay.fit, both_ways)}")]
+                  f"vs {gain.delta_bic:.0f}, {closing}; told apart beyond {SIGNIFICANT:g} and from {GAP_SHARE:.0%}): "
+                  f"the gain is named; to separate them: {_separating_test(gain.fit, delay.fit, both_ways)}")]
 
 
 def _typical(effect):

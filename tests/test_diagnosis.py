@@ -211,6 +211,16 @@ def test_a_squareness_named_without_the_axes_travel_says_a_straightnesss_slope_w
     assert said[False] == []
 
 
+def test_a_delay_named_as_its_first_order_gain_says_so_without_a_share_of_nothing(machine):
+    """A delay of Y's position reading (1.5 ms) on a one-way circle is fitted as well by the gain it is to first order,
+    which leaves nothing above the noise floor: the warning said "the delay closing 7477205507636…% of what the gain
+    leaves" (a division by the floor's 1e-300 stand-in), about 300 digits, in the report and its JSON."""
+    result = run_blind(machine, (Effect("time_delay", "y", delay_s=0.0015, kind="position"),), circle("ccw"), seed=7)
+    said = [w for w in result.warnings if "the gain it is to first order" in w]
+    assert said and "the gain leaving nothing above the noise floor" in said[0], result.report()
+    assert not re.search(r"\d{4,}%", " ".join(result.warnings)), result.report()
+
+
 def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
     """The oval's 2θ term per direction: a squareness's keeps its orientation, at 135° and of size αR/2 (closed
     form); a Y gain 1 % low gives one as large that flips between CCW (at 135°) and CW (at 45°)."""
