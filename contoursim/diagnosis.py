@@ -2350,7 +2350,7 @@ def _diagnose(trace, model, identified, max_effects, say):
         undetermined = _size_undetermined(best, share)
         if undetermined is not None:
             warnings.append(undetermined)
-        warnings += _shape_at_edge(problem, best)
+        warnings += _shape_at_edge(problem, best) + _atypical(best.fit, identified)
         if best.fit.name == "straightness" and best.fit.axis not in base.machine.travel:
             warnings.append(f"{best.fit.label}: the machine gives no travel for axis {best.fit.axis} (travel_mm): the bow "
                             "is fitted over the trace's own extent, its curvature the guideway's, its slope there "
@@ -2503,6 +2503,20 @@ def _size_undetermined(cand, share):
     return (f"{cand.fit.label}: named, it closes {share:.0%} of the residual above the noise floor on {_acts_on(cand.fit)}, "
             f"but its {size.name} = {size.value:.4g} ± {sigma:.2g} (1σ) lies within 2σ of none ({none:g}): the trace "
             "does not pin its size down (model error the uncertainty counts: see uncertainty_method)")
+
+
+def _atypical(effect, identified):
+    """What to say of a named `effect` whose size lies outside the catalogue's typical range (a list of one sentence,
+    or empty). A vibration's first parameter is its frequency, not a size; a force fitted on an `identified` machine is
+    in the units of its assumed mass, not in newtons: neither judged."""
+    size = effect.parameters[0]
+    if effect.name == "vibration" or _typical(effect) or (identified and size.unit == "N"):
+        return []
+    lo, hi = size.typical
+    return [f"{effect.label}: its {size.name} = {size.value:.4g} lies outside what machines typically show ({lo:g}–{hi:g} "
+            f"{size.unit}): measure it directly before acting on it; the trace may hold something the catalogue lacks, "
+            "which this effect was bent to (an outside tester's friction of 60 N was fitted so, without the model, as a "
+            "backlash of 172 µm read on a scale)"]
 
 
 def _current_noise(trace, simulated, scored, warnings):

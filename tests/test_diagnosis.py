@@ -221,6 +221,19 @@ def test_a_delay_named_as_its_first_order_gain_says_so_without_a_share_of_nothin
     assert not re.search(r"\d{4,}%", " ".join(result.warnings)), result.report()
 
 
+@pytest.mark.parametrize("lost_motion_um, said", [(60.0, True), (8.0, False)])
+def test_an_effect_named_beyond_what_machines_typically_show_is_said_to_be(machine, lost_motion_um, said):
+    """A backlash of 60 µm, three times the catalogue's typical 2–20 µm, is named, of its size, with a warning to
+    measure it before acting on it (an outside tester's friction was fitted, without the model, as a backlash of
+    172 µm and said nothing); one of 8 µm is named without it."""
+    result = run_blind(machine, (Effect("backlash", "x", lost_motion_um=lost_motion_um),), circle("ccw"), seed=7)
+    assert [e.label for e in result.effects] == ["backlash.x"], result.report()
+    assert result.effects[0]["lost_motion_um"] == pytest.approx(lost_motion_um, rel=0.02)
+    atypical = [w for w in result.warnings if "lies outside what machines typically show (2–20 µm)" in w]
+    assert len(atypical) == int(said) and (not said or atypical[0].startswith("backlash.x: its lost_motion_um")), \
+        result.report()
+
+
 def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
     """The oval's 2θ term per direction: a squareness's keeps its orientation, at 135° and of size αR/2 (closed
     form); a Y gain 1 % low gives one as large that flips between CCW (at 135°) and CW (at 45°)."""
