@@ -338,10 +338,15 @@ def time_base(name, t, rtol=1e-3):
     np.subtract(t[1:], t[:-1], out=step)  # the steps again, in order
     step -= dt
     worst = int(np.argmax(np.abs(step, out=step)))  # the deviations from the median step, in place
-    if step[worst] > rtol * max(dt, 1e-300) + 1e-12:
+    tolerance = rtol * max(dt, 1e-300) + 1e-12
+    if step[worst] > tolerance:
+        uneven = int(np.count_nonzero(step > tolerance))
+        spread = (f" ({uneven} of its {step.size} steps are off the median by more than {rtol:.1%}, up to "
+                  f"{step[worst] / dt:.1%}: a clock that jitters; resample to a uniform grid, or write the "
+                  "logger's nominal times)" if uneven > 2 else "")  # one sample off makes two steps
         raise TimeStepError(
             f"{name} must be uniformly sampled: step {worst} is {t[worst + 1] - t[worst]:.9g} s, "
-            f"the median step is {dt:.9g} s",
+            f"the median step is {dt:.9g} s{spread}",
             worst,
         )
     return t, float((t[-1] - t[0]) / (t.size - 1))

@@ -325,6 +325,24 @@ def test_times_printed_short_of_their_step_are_read_as_the_grid_they_were_rounde
         read_trace(written(cells))
 
 
+def test_a_clock_that_jitters_is_refused_saying_so_not_blaming_one_step(tmp_path):
+    """A logger's times printed with ±20 µs of jitter on 2 ms steps: refused as before (the diagnosis needs a uniform
+    grid), but the message named only the worst step, 4354, as though the other 4353 were even; now it says how many
+    are off and what to do. One step off is still named alone."""
+    rng = np.random.default_rng(3)
+    t = np.arange(2000) * 2e-3 + rng.uniform(-2e-5, 2e-5, 2000)
+    rows = "\n".join(f"{a:.6f},{b:.4f},{b:.4f}" for a, b in zip(t, np.linspace(0.0, 10.0, t.size)))
+    (tmp_path / "j.csv").write_text(f"t,x_ref,x\n{rows}\n")
+    with pytest.raises(TraceFormatError, match=r"of its 1999 steps are off the median by more than 0\.1%.*a clock that "
+                                               r"jitters; resample to a uniform grid"):
+        read_trace(tmp_path / "j.csv")
+    one = np.arange(2000) * 2e-3
+    one[700] += 3e-5
+    (tmp_path / "j.csv").write_text("t,x_ref,x\n" + "\n".join(f"{a:.6f},0,0" for a in one) + "\n")
+    with pytest.raises(TraceFormatError, match=r"median step is 0\.002 s$"):
+        read_trace(tmp_path / "j.csv")
+
+
 @pytest.mark.parametrize("actual, words", [
     (lambda x, y: (y, x), "the measured x does not follow x_ref: it moves 0 mm per mm"),  # swapped columns of a circle
     (lambda x, y: (x / 1e3, y / 1e3), "it moves 0.001 mm per mm of x_ref"),  # in m, read as mm
