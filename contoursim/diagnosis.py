@@ -2005,6 +2005,25 @@ def _first_order_said(problem, gain, delay, both_ways):
                   f"the gain is named; to separate them: {_separating_test(gain.fit, delay.fit, both_ways)}")]
 
 
+def _delay_as_ratio(delay, kp, other):
+    """What to say of a `delay` named on identified loops of two axes sharing one position gain `kp` [1/s] (a list of
+    one sentence, or empty): to first order it is a gain of its axis, kp/(1 + kp·τ) for a command late by τ, kp/(1 −
+    kp·τ) for a reading late by τ, and only the ratio of the two axes' gains is known; the `other` axis's gain by the
+    inverse ratio fits alike (an outside tester's Y gain 0.8 times X's was named, without the model, as a delay of 1.81
+    ms of X's reading)."""
+    kp_tau = kp * delay["delay_s"]
+    command = delay.options["kind"] == "command"
+    if not command and kp_tau >= 1.0:
+        return []
+    ratio = 1.0 / (1.0 + kp_tau) if command else 1.0 / (1.0 - kp_tau)
+    what = "command" if command else "reading"
+    return [f"{delay.label}: with one position gain identified for both axes, a delay of {delay.axis}'s {what} of "
+            f"{1e3 * delay['delay_s']:.3g} ms is to first order {delay.axis}'s gain times {ratio:.4g}, and only the ratio "
+            f"of the axes' gains is known: to first order the same machine as a kp_ratio of {1.0 / ratio:.4g} on {other} "
+            f"(gain_mismatch.{other}); to separate them: the data sheet's gains (diagnose --model), or a step of each "
+            "axis alone"]
+
+
 def _typical(effect):
     """The effect's size (its first parameter; the magnitude of a signed one) lies within its typical range (if any)."""
     size = effect.parameters[0]
@@ -2383,6 +2402,9 @@ def _diagnose(trace, model, identified, max_effects, say):
                 warnings.append(f"{step.effect.label}: with one position gain identified for both axes only the ratio of "
                                 f"their gains is known; kp_ratio {step.effect['kp_ratio']:.4g} on "
                                 f"{step.effect.axis} is the same machine as {1.0 / step.effect['kp_ratio']:.4g} on {other}")
+            elif step.effect is not None and step.effect.name == "time_delay":
+                warnings += _delay_as_ratio(step.effect, problem.base.machine.axes[step.effect.axis].kp,
+                                            next(a for a in trace.axes if a != step.effect.axis))
     if identified:
         warnings += identification_warnings(model.machine, problem.base.machine)
     else:
@@ -2517,8 +2539,9 @@ def _atypical(effect, identified):
     if effect.name == "vibration" or _typical(effect) or (identified and size.unit == "N"):
         return []
     lo, hi = size.typical
-    return [f"{effect.label}: its {size.name} = {size.value:.4g} lies outside what machines typically show ({lo:g}–{hi:g} "
-            f"{size.unit}): measure it directly before acting on it; the trace may hold something the catalogue lacks, "
+    unit = "" if size.unit == "-" else f" {size.unit}"
+    return [f"{effect.label}: its {size.name} = {size.value:.4g} lies outside what machines typically show ({lo:g}–{hi:g}"
+            f"{unit}): measure it directly before acting on it; the trace may hold something the catalogue lacks, "
             "which this effect was bent to (an outside tester's friction of 60 N was fitted so, without the model, as a "
             "backlash of 172 µm read on a scale)"]
 

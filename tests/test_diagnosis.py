@@ -234,6 +234,20 @@ def test_an_effect_named_beyond_what_machines_typically_show_is_said_to_be(machi
         result.report()
 
 
+def test_a_delay_named_on_identified_loops_is_said_to_be_the_other_axiss_gain_to_first_order(machine):
+    """Without a model one position gain is identified for both axes: a delay τ of X's reading, to first order X's
+    gain times 1/(1 − kp·τ), is then the same machine as Y's gain times 1 − kp·τ (an outside tester's Y gain 0.8 times
+    X's was named as a delay of X's reading, and the report did not say that the gain of Y fits alike)."""
+    trace = synthetic_trace(Model(machine, (Effect("time_delay", "x", delay_s=0.0015, kind="position"),)), circle("ccw"),
+                            mismatch=0.03, noise_um=0.2, quantum_um=0.05, every=2, seed=7)
+    result = diagnose(trace)
+    assert [(e.name, e.axis) for e in result.effects] == [("time_delay", "x")], result.report()
+    tau, kp = result.effects[0]["delay_s"], result.model.machine.axes["x"].kp
+    said = [w for w in result.warnings if w.startswith("time_delay.x: with one position gain identified")]
+    ratio = re.search(r"a kp_ratio of ([0-9.]+) on y \(gain_mismatch\.y\)", said[0] if said else "")
+    assert ratio and float(ratio.group(1)) == pytest.approx(1.0 - kp * tau, rel=0.01), result.report()
+
+
 def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
     """The oval's 2θ term per direction: a squareness's keeps its orientation, at 135° and of size αR/2 (closed
     form); a Y gain 1 % low gives one as large that flips between CCW (at 135°) and CW (at 45°)."""
