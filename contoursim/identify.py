@@ -171,8 +171,8 @@ def _start(trace, reference, period):
 
 #: Runs a function with one BLAS thread. Identification's and diagnosis's least squares work on tall, thin Jacobians
 #: (10⁴ residuals × at most a dozen parameters), too small for threads to share; and numpy and scipy each load their own
-#: OpenBLAS, whose idle threads spin against each other's work and the kernel's: with their default threads an
-#: identification on 2 cores took 2.5 times as long (7.3 s against 2.9 s, the same fit).
+#: OpenBLAS, whose idle threads spin against each other's work: with their default threads an identification on 2
+#: cores took 2.5 times as long (7.3 s against 2.9 s, the same fit).
 one_blas_thread = threadpool_limits.wrap(limits=1, user_api="blas")
 
 
@@ -220,7 +220,7 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     measured = trace.actual
     scale = max(float(np.std(trace.tracking_error)), 1e-6)
     # an axis whose reference never moves shows nothing of its loop: it takes the loop of the first axis that moves,
-    # its own parameters held (left free, they wandered to a loop that diverged, and the fit of the others stopped there)
+    # its own parameters held (left free, they wandered, and on an outside tester's trace the others' fit stuck there)
     moving = np.ptp(trace.reference, axis=0) > 0
     like = [i if moving[i] or not moving.any() else int(np.argmax(moving)) for i in range(len(axes))]
     shown = np.concatenate([[True, True], np.tile([like[i] == i for i in range(len(axes))], 3)])
