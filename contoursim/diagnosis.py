@@ -2284,6 +2284,7 @@ def _diagnose(trace, model, identified, max_effects, say):
     warnings += lost
     disputed = set()  # axes whose measured current did not bear out the friction named on them (said)
     moves = {}  # of each effect named, how far its fit moved as the nominal parameters were refitted around it
+    shares = {}  # of each effect named, the share of the gap above the noise floor it closed
     near = []  # the candidates of a round that found nothing significant, fitted
     for round_ in range(0 if lost else max_effects):
         base = problem.base
@@ -2366,10 +2367,8 @@ def _diagnose(trace, model, identified, max_effects, say):
             problem.set_base(base)
             break
         warnings += ambiguities
-        undetermined = _size_undetermined(best, share)
-        if undetermined is not None:
-            warnings.append(undetermined)
-        warnings += _shape_at_edge(problem, best) + _atypical(best.fit, identified)
+        shares[best.fit.label] = share
+        warnings += _shape_at_edge(problem, best)
         if best.fit.name == "straightness" and best.fit.axis not in base.machine.travel:
             warnings.append(f"{best.fit.label}: the machine gives no travel for axis {best.fit.axis} (travel_mm): the bow "
                             "is fitted over the trace's own extent, its curvature the guideway's, its slope there "
@@ -2392,6 +2391,9 @@ def _diagnose(trace, model, identified, max_effects, say):
         say(f"named {best.fit!r}: residual RMS {steps[-2].rms_um:.3f} -> {steps[-1].rms_um:.3f} µm")
     named = [f"{s.effect.label}: not named" for s in steps if s.effect is not None]
     warnings = [w for w in warnings if not w.startswith(tuple(named))]  # a round's reason, which a later round overcame
+    for step in steps[2:]:  # of the sizes the table gives (the effects refitted each with the others in place)
+        undetermined = _size_undetermined(step.effect, step.uncertainty, shares[step.label])
+        warnings += ([] if undetermined is None else [undetermined]) + _atypical(step.effect, identified)
     if len(steps) == 2 and not (lost or identified):  # nothing named: the plant where the trace pulls it, past the first reach
         problem.set_base(problem.base, refit=_REFIT_STEPS)
         steps[1] = _step(problem, "nominal refit", None, {}, np.nan)
@@ -2517,16 +2519,16 @@ def _shape_at_edge(problem, cand):
     return said
 
 
-def _size_undetermined(cand, share):
-    """What to say of a named effect whose size lies within twice its uncertainty of no effect (it closes `share` of
-    the gap: the effect is there, its size is not pinned down), or ``None``. A vibration's first parameter is its
-    frequency, not a size: not judged."""
-    size = cand.fit.parameters[0]
-    sigma = cand.uncertainty.get(size.name)
-    none = effect_kind(cand.fit.name).parameters[0].value
-    if cand.fit.name == "vibration" or sigma is None or abs(size.value - none) >= 2.0 * sigma:
+def _size_undetermined(effect, uncertainty, share):
+    """What to say of a named `effect` whose size lies within twice its `uncertainty` (1σ by parameter) of no effect
+    (it closes `share` of the gap: the effect is there, its size is not pinned down), or ``None``. A vibration's first
+    parameter is its frequency, not a size: not judged."""
+    size = effect.parameters[0]
+    sigma = uncertainty.get(size.name)
+    none = effect_kind(effect.name).parameters[0].value
+    if effect.name == "vibration" or sigma is None or abs(size.value - none) >= 2.0 * sigma:
         return None
-    return (f"{cand.fit.label}: named, it closes {share:.0%} of the residual above the noise floor on {_acts_on(cand.fit)}, "
+    return (f"{effect.label}: named, it closes {share:.0%} of the residual above the noise floor on {_acts_on(effect)}, "
             f"but its {size.name} = {size.value:.4g} ± {sigma:.2g} (1σ) lies within 2σ of none ({none:g}): the trace "
             "does not pin its size down (model error the uncertainty counts: see uncertainty_method)")
 

@@ -1383,13 +1383,16 @@ def test_an_effect_at_the_edge_of_its_range_is_not_named_and_one_within_twice_it
     assert edge(Effect("coulomb_friction", "x", force_N=120.0)) is None  # its range open above
     assert edge(Effect("backlash", "x", lost_motion_um=0.0)) is None  # no effect: the ΔBIC's business
 
-    said = _size_undetermined(cand(Effect("coulomb_friction", "x", force_N=2.553), 4.6), 0.96)
+    def undetermined(effect, sigma, share):
+        return _size_undetermined(effect, {p.name: sigma for p in effect.parameters}, share)
+
+    said = undetermined(Effect("coulomb_friction", "x", force_N=2.553), 4.6, 0.96)
     assert said.startswith("coulomb_friction.x: named, it closes 96% of the residual above the noise floor on x")
     assert "force_N = 2.553 ± 4.6 (1σ) lies within 2σ of none (0)" in said
-    assert "within 2σ of none (1)" in _size_undetermined(cand(Effect("gain_mismatch", "x", kp_ratio=1.02), 0.015), 0.5)
-    assert _size_undetermined(cand(Effect("gain_mismatch", "x", kp_ratio=1.05), 0.01), 0.5) is None
-    assert _size_undetermined(cand(Effect("squareness", "xy", angle_urad=-30.0), 14.0), 0.5) is None
-    assert _size_undetermined(cand(Effect("vibration", "x", freq_hz=80.0), 100.0, ("freq_hz", "damping_ratio")), 0.5) is None
+    assert "within 2σ of none (1)" in undetermined(Effect("gain_mismatch", "x", kp_ratio=1.02), 0.015, 0.5)
+    assert undetermined(Effect("gain_mismatch", "x", kp_ratio=1.05), 0.01, 0.5) is None
+    assert undetermined(Effect("squareness", "xy", angle_urad=-30.0), 14.0, 0.5) is None
+    assert undetermined(Effect("vibration", "x", freq_hz=80.0), 100.0, 0.5) is None
 
 
 def test_a_controller_setting_given_exactly_is_not_named_far_beyond_its_typical_departure():
