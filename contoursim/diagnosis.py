@@ -2534,15 +2534,20 @@ def _size_undetermined(effect, uncertainty, share):
 
 
 def _atypical(effect, identified):
-    """What to say of a named `effect` whose size lies outside the catalogue's typical range (a list of one sentence,
-    or empty). A vibration's first parameter is its frequency, not a size; a force fitted on an `identified` machine is
-    in the units of its assumed mass, not in newtons: neither judged."""
+    """What to say of a named `effect` whose size lies beyond the catalogue's typical range, further from no effect
+    than machines typically show (a list of one sentence, or empty); one nearer to no effect (a squareness of 17 µrad
+    against a typical 20–200) is a machine in good order. A vibration's first parameter is its frequency, not a size;
+    a force fitted on an `identified` machine is in the units of its assumed mass, not in newtons: neither judged."""
     size = effect.parameters[0]
-    if effect.name == "vibration" or _typical(effect) or (identified and size.unit == "N"):
+    if effect.name == "vibration" or size.typical is None or (identified and size.unit == "N"):
         return []
     lo, hi = size.typical
+    value = abs(size.value) if size.signed else size.value
+    none = effect_kind(effect.name).parameters[0].value
+    if not ((value > hi and hi >= none) or (value < lo and lo <= none)):
+        return []
     unit = "" if size.unit == "-" else f" {size.unit}"
-    return [f"{effect.label}: its {size.name} = {size.value:.4g} lies outside what machines typically show ({lo:g}–{hi:g}"
+    return [f"{effect.label}: its {size.name} = {size.value:.4g} lies beyond what machines typically show ({lo:g}–{hi:g}"
             f"{unit}): measure it directly before acting on it; the trace may hold something the catalogue lacks, "
             "which this effect was bent to (an outside tester's friction of 60 N was fitted so, without the model, as a "
             "backlash of 172 µm read on a scale)"]

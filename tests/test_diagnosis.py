@@ -229,9 +229,26 @@ def test_an_effect_named_beyond_what_machines_typically_show_is_said_to_be(machi
     result = run_blind(machine, (Effect("backlash", "x", lost_motion_um=lost_motion_um),), circle("ccw"), seed=7)
     assert [e.label for e in result.effects] == ["backlash.x"], result.report()
     assert result.effects[0]["lost_motion_um"] == pytest.approx(lost_motion_um, rel=0.02)
-    atypical = [w for w in result.warnings if "lies outside what machines typically show (2–20 µm)" in w]
+    atypical = [w for w in result.warnings if "lies beyond what machines typically show (2–20 µm)" in w]
     assert len(atypical) == int(said) and (not said or atypical[0].startswith("backlash.x: its lost_motion_um")), \
         result.report()
+
+
+def test_only_a_size_further_from_none_than_machines_typically_show_is_said_to_be_atypical():
+    """Beyond the typical range on the far side from no effect, a size is said to be atypical; below it, nearer to none
+    (a squareness of 16.8 µrad against a typical 20–200 µrad, said so on an independent trace), it is a machine in good
+    order. A gain ratio is atypical either way from 1; a force on identified loops, not in newtons, is not judged."""
+    from contoursim.diagnosis import _atypical
+
+    def said(effect, identified=False):
+        return bool(_atypical(effect, identified))
+
+    assert said(Effect("squareness", "xy", angle_urad=-250.0)) and not said(Effect("squareness", "xy", angle_urad=16.8))
+    assert said(Effect("gain_mismatch", "x", kp_ratio=0.6)) and said(Effect("gain_mismatch", "x", kp_ratio=1.4))
+    assert not said(Effect("gain_mismatch", "x", kp_ratio=0.95))
+    assert said(Effect("backlash", "x", lost_motion_um=25.0)) and not said(Effect("backlash", "x", lost_motion_um=1.0))
+    assert said(Effect("coulomb_friction", "x", force_N=500.0))
+    assert not said(Effect("coulomb_friction", "x", force_N=500.0), identified=True)
 
 
 def test_a_delay_named_on_identified_loops_is_said_to_be_the_other_axiss_gain_to_first_order(machine):
