@@ -2186,7 +2186,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
 
 def _geometry_held(trace, result, near, max_effects, say):
     """`result` of a diagnosis on identified loops, or the diagnosis on loops identified with its geometric effects
-    held in place where that names fewer effects and leaves no more: ``(Diagnosis, near)`` as :func:`_diagnose`'s.
+    held in place where that names fewer effects and leaves no more (where only geometric effects are named: the same
+    ones, leaving no more): ``(Diagnosis, near)`` as :func:`_diagnose`'s.
 
     Loops identified from a trace with a geometric error in it bend to it (a screw's cyclic error of 3.6 µm on a
     circle took x's loop with it), and a loop effect named beside the geometric one takes up what they bent (a gain
@@ -2194,20 +2195,24 @@ def _geometry_held(trace, result, near, max_effects, say):
     are the trace's without them.
     """
     geometric = tuple(e for e in result.effects if e.stage == "geometry")
-    if not geometric or len(geometric) == len(result.effects):
+    if not geometric:
         return result, near
+    alone = len(geometric) == len(result.effects)
     labels = ", ".join(e.label for e in geometric)
     again, near_again = _identified_again(trace, geometric, max_effects, say)
     if again is None:
         return replace(result, warnings=result.warnings + (near_again,)), near
-    if len(again.effects) >= len(result.effects) or again.steps[-1].rms_um > result.steps[-1].rms_um:
+    kept = ({e.label for e in again.effects} == {e.label for e in result.effects} if alone
+            else len(again.effects) < len(result.effects))
+    if not kept or again.steps[-1].rms_um > result.steps[-1].rms_um:
         return result, near
-    dropped = ", ".join(e.label for e in result.effects if e.label not in {f.label for f in again.effects})
     it = "them" if len(geometric) > 1 else "it"
+    left = f"{result.steps[-1].rms_um:.4g} µm RMS left; now {again.steps[-1].rms_um:.4g} µm"
+    dropped = ", ".join(e.label for e in result.effects if e.label not in {f.label for f in again.effects})
+    said = f" ({left})" if alone else f", and {dropped} named on them took that up ({left} with fewer effects)"
     return replace(again, warnings=again.warnings + (
         f"the servo loops were identified again with {labels} held in place: identified with {it} in the trace, they "
-        f"had bent to {it}, and {dropped} named on them took that up ({result.steps[-1].rms_um:.4g} µm RMS left; now "
-        f"{again.steps[-1].rms_um:.4g} µm with fewer effects)",)), near_again
+        f"had bent to {it}{said}",)), near_again
 
 
 def _identified_again(trace, held, max_effects, say):
