@@ -2541,7 +2541,8 @@ def _size_undetermined(effect, uncertainty, share):
 def _atypical(effect, identified):
     """What to say of a named `effect` whose size lies beyond the catalogue's typical range, further from no effect
     than machines typically show (a list of one sentence, or empty); one nearer to no effect (a squareness of 17 µrad
-    against a typical 20–200) is a machine in good order. A vibration's first parameter is its frequency, not a size;
+    against a typical 20–200) is a machine in good order (an outside tester's friction of 60 N was named, without the
+    model, as a backlash of 172 µm read on a scale). A vibration's first parameter is its frequency, not a size;
     a force fitted on an `identified` machine is in the units of its assumed mass, not in newtons: neither judged."""
     size = effect.parameters[0]
     if effect.name == "vibration" or size.typical is None or (identified and size.unit == "N"):
@@ -2554,8 +2555,7 @@ def _atypical(effect, identified):
     unit = "" if size.unit == "-" else f" {size.unit}"
     return [f"{effect.label}: its {size.name} = {size.value:.4g} lies beyond what machines typically show ({lo:g}–{hi:g}"
             f"{unit}): measure it directly before acting on it; the trace may hold something the catalogue lacks, "
-            "which this effect was bent to (an outside tester's friction of 60 N was fitted so, without the model, as a "
-            "backlash of 172 µm read on a scale)"]
+            "which this effect was bent to"]
 
 
 def _current_noise(trace, simulated, scored, warnings):
