@@ -270,7 +270,7 @@ def main():
     outputs = [np.empty((N, 3)) for _ in range(4)] + [np.empty((N, 3), bool), np.empty((0, 3)), np.empty((3, 3), np.int64)]
 
     def inner_loop():
-        state = kernel._initial_state((3,), pos[0])
+        state = kernel._initial_state(rows, pos[0])
         kernel._variant(rows, state, *refs, *coupling_off, np.empty((0, 3)), np.empty((0, 3)), 1, *outputs)
 
     (t_plain, t_effects, t_noisy, t_inner), cpu = side_by_side([

@@ -395,8 +395,7 @@ def _set_values(effect):
     kind = effect.kind
     values = [f"{p.name} = {p.value:g}" for i, (p, default) in enumerate(zip(effect.parameters, kind.parameters))
               if i == 0 or p.value != default.value]  # fmt: skip
-    values += [f"{key} = {effect.options[key]!r}" for key, allowed in kind.options.items()
-               if effect.options[key] != (allowed[0] if isinstance(allowed, tuple) else 0)]  # fmt: skip
+    values += [f"{key} = {value!r}" for key, value in effect.set_options().items()]
     return ", ".join(values)
 
 

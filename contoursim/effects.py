@@ -308,6 +308,11 @@ class Effect:
         """``{parameter name: value}`` in the parameters' units."""
         return {p.name: p.value for p in self.parameters}
 
+    def set_options(self):
+        """``{option: value}`` of the options not at their default (what a report needs to say of them)."""
+        return {key: value for key, value in self.options.items()
+                if value != _option(self.name, self.axis, key, self.kind.options[key], None)}
+
     def with_values(self, **values):
         """A copy with some parameter values (or options) changed."""
         return Effect(self.name, self.axis, **{**self.values(), **self.options, **values})
@@ -362,12 +367,14 @@ def _p(name, value, unit, bounds, typical=None, vary=True, doc=""):
 _register(EffectKind(
     "backlash", "loop",
     (_p("lost_motion_um", 0.0, "µm", (0.0, 1000.0), (2.0, 20.0), doc="lost motion between motor/screw and table"),),
-    options={"feedback": (None, "motor", "scale")},
+    options={"feedback": (None, "motor", "scale"), "approach": ("none", "+", "-")},
     doc="lost motion at reversal; feedback 'motor': the table lags, 'scale': the loop sees it (hunting risk); "
         "the axis's position_feedback when not given, and the axis's when given (refused against the position_feedback "
         "its file gives the axis); on an axis with a compliant screw "
         "a dead zone in the screw (the table, with its mass, crosses it when the force on it reverses), else a play "
-        "(the table stops when the motor reverses)",
+        "(the table stops when the motor reverses); approach '+' or '-': the axis came to its start moving that way, "
+        "which closed the play on that side (a first move the same way takes the table along at once), 'none': the "
+        "play centred, as a simulation starts",
 ))
 _register(EffectKind(
     "coulomb_friction", "loop",

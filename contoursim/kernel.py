@@ -156,7 +156,8 @@ _DELAY_POSITION = 69  # 1.0 when the feedback delay is the position loop's only 
 _HALF_GAP = 70  # a compliant screw's backlash: half its dead zone [mm] (0: none; _HALF_PLAY is 0 then)
 _SUBSTEPS = 71  # the substeps M of a period that its plant takes (_gap_plant)
 _ENGAGED, _OPEN = 72, 107  # 35 entries each: Ad (5 x 5), Bu, BF over dt/M, the gap closed (spring offset) and open
-NPAR = 142  #: length of one axis's parameter row from :func:`pack`
+_APPROACH = 142  # the side a backlash's play is closed on at the start (LoopEffects.backlash_approach): +1, -1, 0
+NPAR = 143  #: length of one axis's parameter row from :func:`pack`
 
 # Substeps per cycle of the screw's relative mode that a compliant screw with a backlash takes (pack; measured:
 # tests/test_kernel_gap.py)
@@ -204,6 +205,14 @@ class LoopEffects:
         dead zone of this width in the screw's spring and damper: the
         table, with its mass, coasts across the gap when the force on it
         reverses (step 1 of :mod:`contoursim.kernel`).
+    backlash_approach : {0, 1, -1}, default 0
+        Where the play stands at the start: ``0`` centred (the table, or
+        the compliant screw's dead zone, midway), ``1`` closed as a move
+        in + leaves it (the table behind the motor by half the play: a
+        first move in + takes it along at once, one in − crosses the whole
+        play first), ``-1`` as a move in − leaves it. A machine at the
+        start of a logged move came there by some move, which closed the
+        play on its side (ISO 230-2's approach direction).
     coulomb_N : float, default 0
         Coulomb friction level [N].
     viscous_N_s_per_m : float, default 0
@@ -271,6 +280,7 @@ class LoopEffects:
     """
 
     backlash_mm: float = 0.0
+    backlash_approach: int = 0
     coulomb_N: float = 0.0
     viscous_N_s_per_m: float = 0.0
     stribeck_N: float = 0.0
@@ -294,6 +304,9 @@ class LoopEffects:
         checked["stribeck_velocity_mm_s"] = _validate.positive("stribeck_velocity_mm_s", self.stribeck_velocity_mm_s)
         for name in ("asymmetry_N", "offset_N"):
             checked[name] = _validate.finite(name, getattr(self, name))
+        if self.backlash_approach not in (0, 1, -1) or isinstance(self.backlash_approach, bool):
+            raise ValueError(f"backlash_approach must be 0 (the play centred), 1 or -1 (closed as a move in + or - "
+                             f"leaves it), got {self.backlash_approach!r}")
         if self.noise_at not in ("recorded", "encoder"):
             raise ValueError(f'noise_at must be "recorded" or "encoder", got {self.noise_at!r}')
         if self.feedback_delay_on not in ("both", "position"):
@@ -475,6 +488,16 @@ def _sensors(x, d, table, half_play, scale, quantum):
     """
     table = _play(x, table, half_play)
     return table, _quantised(table + d if scale else x, quantum)
+
+
+@njit(cache=True)
+def _at_rest(start, approach, half_play, half_gap, scale):
+    """An axis at rest in position at `start` [mm], its play closed on the side of its `approach` (+1, -1; 0:
+    centred): ``(motor x, table, a compliant screw's stretch d)``. The position loop holds what it reads at `start`:
+    the motor (the table behind it by half the play, or the screw's stretch at the dead zone's edge), or, on a scale,
+    the table (the motor beyond it)."""
+    x = start + approach * (half_play + half_gap) if scale else start
+    return x, x - approach * half_play, -approach * half_gap
 
 
 @njit(cache=True)
@@ -923,16 +946,17 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
     kept_saturated = np.empty((_CHUNK if write_saturated else 0, n_axes, LANES))
     for a in range(n_axes):  # at rest at the first reference position; the delay buffers hold the first reading
         for l in range(n_lanes):
-            start = ref_pos[0, a]
             for q in range(NPAR, _LROWS):
                 s[a, q, l] = 0.0
+            scale, difference = p[a, _SCALE, l] != 0.0, p[a, _VDIFF, l] != 0.0
+            start, table, s[a, _LD, l] = _at_rest(ref_pos[0, a], p[a, _APPROACH, l], p[a, _HALF_PLAY, l],
+                                                  p[a, _HALF_GAP, l], scale)  # fmt: skip
             s[a, _LX, l] = start
             s[a, _LLOWER, l], s[a, _LUPPER, l] = _friction_bounds(p[a, _FC, l], p[a, _FA, l])
-            scale, difference = p[a, _SCALE, l] != 0.0, p[a, _VDIFF, l] != 0.0
-            table, enc = _sensors(start, 0.0, start, p[a, _HALF_PLAY, l], scale, p[a, _QUANTUM, l])
+            table, enc = _sensors(start, s[a, _LD, l], table, p[a, _HALF_PLAY, l], scale, p[a, _QUANTUM, l])
             motor = _quantised(start, p[a, _QUANTUM, l]) if scale else enc
             s[a, _LTABLE, l] = table
-            s[a, _LXFB, l] = table + 0.0 if scale else start  # quantised in the first step
+            s[a, _LXFB, l] = table + s[a, _LD, l] if scale else start  # quantised in the first step
             s[a, _LVFB, l] = start if difference else 0.0  # the motor encoder (the difference's), or the velocity
             for q in range(_NBUF):
                 buf_x[a, q, l] = enc
@@ -1259,6 +1283,7 @@ def pack(servo, dt, effects=LoopEffects()):
         row[_OPEN : _OPEN + 35] = _padded_zoh(servo, effects, dt / substeps, gap_open=True)
     else:
         row[_HALF_PLAY] = e.backlash_mm / 2.0
+    row[_APPROACH] = e.backlash_approach
     row[_SCALE] = float(servo.position_feedback == "scale")
     friction = (e.coulomb_N, e.viscous_N_s_per_m / 1000.0, e.stribeck_N, e.stribeck_velocity_mm_s, e.asymmetry_N,
                 e.offset_N)  # fmt: skip
@@ -1450,11 +1475,12 @@ def _read_only(array):
     return view
 
 
-def _initial_state(shape, start):
-    """At rest at the first reference position: zero velocity, current, integrators."""
-    state = np.zeros(shape + (_NSTATE,))
-    state[..., 0] = start
-    state[..., _TABLE] = start
+def _initial_state(par, start):
+    """At rest at the first reference position (:func:`_at_rest`): zero velocity, current, integrators."""
+    state = np.zeros(par.shape[:-1] + (_NSTATE,))
+    for a in range(par.shape[0]):
+        state[a, 0], state[a, _TABLE], state[a, 2] = _at_rest(start[a], par[a, _APPROACH], par[a, _HALF_PLAY],
+                                                               par[a, _HALF_GAP], par[a, _SCALE] != 0.0)
     state[..., _PAIR] = -1.0
     return state
 
@@ -1553,7 +1579,7 @@ def run(servos, dt, ref_pos, ref_vel, ref_acc, coupling=None, effects=None, forc
 
     n_steps = ref_pos.shape[0]
     external = _external(force, n_steps, n)
-    state = _initial_state((n,), ref_pos[0])
+    state = _initial_state(par, ref_pos[0])
     noise = _encoder_noise([effects.get(name) or LoopEffects() for name in names], n_steps)
     # An array each, also where the encoder reads the tool position exactly: it reads -0 where the tool stands at +0
     # (the table plus a rigid axis's +0 deflection), as run_batch's are.
@@ -1699,7 +1725,7 @@ def run_batch(rows, dt, ref_pos, ref_vel, ref_acc, outputs=("tool",), every=1, d
             return
         no_noise, no_estimate = np.empty((0, n)), np.empty((0, 3))
         for b in range(lo, hi):
-            state = _initial_state((n,), ref_pos[0])
+            state = _initial_state(rows[b], ref_pos[0])
             _variant(rows[b], state, ref_pos, ref_vel, ref_acc, cpars[b], knots, knot_of_sample, cstate.copy(),
                      no_noise, external, every, *(a[b] for a in signals), no_estimate, status[b])  # fmt: skip
 

@@ -440,7 +440,8 @@ _GEOMETRY = {
 }
 
 _LOOP = {
-    "backlash": lambda e: dict(backlash_mm=e["lost_motion_um"] * _MM_PER_UM),  # feedback: the servo's, bound by Model
+    "backlash": lambda e: dict(backlash_mm=e["lost_motion_um"] * _MM_PER_UM,  # feedback: the servo's, bound by Model
+                               backlash_approach={"none": 0, "+": 1, "-": -1}[e.options["approach"]]),
     "coulomb_friction": lambda e: dict(
         coulomb_N=e["force_N"],
         viscous_N_s_per_m=e["viscous_N_s_per_m"],

@@ -201,11 +201,15 @@ def reference_loop(servo, effects, start):
     loop = ct.interconnect(blocks, inplist=["xr", "vr", "ar"], outlist=["tool", "x_fb", "i_cmd"])
     x0 = np.zeros(loop.nstates)
     plant_states = [i for i, label in enumerate(loop.state_labels) if label.startswith("plant_")]
-    x0[plant_states[0]] = start  # at rest at the first command: x1 (and x2)
+    # at rest in position at the first command, the loop holding what it reads there: the motor, or on a scale the
+    # table, the motor then beyond it by half the play on the side the approach closed
+    motor = start + effects.backlash_approach * h if servo.position_feedback == "scale" else start
+    x0[plant_states[0]] = motor  # x1 (and x2)
     if effects.mode_freq_hz is not None:
-        x0[plant_states[2]] = start
+        x0[plant_states[2]] = motor
     first = loop.state_labels.index("sensors_x[0]")
-    x0[first : first + 1 + m] = start  # the table and the encoder history
+    x0[first] = motor - effects.backlash_approach * h  # the table, behind the motor after a move in +
+    x0[first + 1 : first + 1 + m] = start  # the encoder history
     return loop, x0
 
 
@@ -216,6 +220,9 @@ EFFECTS = {
     "friction": LoopEffects(**REVERSING),
     "backlash_motor": LoopEffects(backlash_mm=0.004),
     "backlash_scale": LoopEffects(backlash_mm=0.004),  # on a scale: SCALE
+    # the play closed at the start by a move in + (the table behind the motor), or on a scale by a move in -
+    "backlash_motor_approached": LoopEffects(backlash_mm=0.004, backlash_approach=1),
+    "backlash_scale_approached": LoopEffects(backlash_mm=0.004, backlash_approach=-1),  # SCALE
     "delay_whole": LoopEffects(feedback_delay_s=3 * DT),
     "delay_fraction": LoopEffects(feedback_delay_s=2.37 * DT),
     # the position loop late, the velocity loop on the motor now: z^-3 on the position reading alone, or interpolated
@@ -229,7 +236,7 @@ EFFECTS = {
 }
 
 
-SCALE = ("backlash_scale",)  # the effects whose axis closes its position loop on a scale
+SCALE = ("backlash_scale", "backlash_scale_approached")  # the effects whose axis closes its position loop on a scale
 
 
 @pytest.mark.parametrize("name", list(EFFECTS))
@@ -564,7 +571,7 @@ def random_effects(rng):
     position loop reads: ``(position_feedback, LoopEffects)``."""
     kw, feedback = {}, "motor"
     if rng.random() < 0.5:
-        kw.update(backlash_mm=rng.uniform(0.001, 0.01))
+        kw.update(backlash_mm=rng.uniform(0.001, 0.01), backlash_approach=int(rng.choice([0, 1, -1])))
         feedback = str(rng.choice(["motor", "scale"]))
     if rng.random() < 0.6:
         kw.update(coulomb_N=rng.uniform(10.0, 150.0), viscous_N_s_per_m=rng.choice([0.0, rng.uniform(0.0, 500.0)]),

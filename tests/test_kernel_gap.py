@@ -32,14 +32,16 @@ def sine(n, amplitude=1.0, hz=5.0):
     return x, v, -w * w * x
 
 
-def continuous_table(servo, backlash_mm, x_ref, v_ref, dt=DT):
+def continuous_table(servo, backlash_mm, x_ref, v_ref, dt=DT, approach=0):
     """The table position [mm] at the servo instants: the plant with its dead zone, integrated in continuous time.
 
     Motor side m1 (drive force, the axis's damping while in contact), table m2, joined by the screw's spring k and
     damper c on the stretch beyond ±h/2; with the gap open each mass on its own, damped by its share of the damping.
     The position loop reads the motor or the table (`servo.position_feedback`), the velocity loop the motor
     velocity or the backward difference of the motor position (`servo.velocity_feedback`, one tap, no filter);
-    the current command is applied `servo.computation_delay` (0 or 1) periods later.
+    the current command is applied `servo.computation_delay` (0 or 1) periods later. At the start the axis is at rest
+    in position, the screw's stretch at the dead zone's edge a last move in the direction `approach` (+1 or -1; 0:
+    the stretch zero) left it at.
     """
     m, m1 = servo.mass, servo.motor_mass
     m2, k = m - m1, 1e6 * servo.screw_stiffness
@@ -57,7 +59,9 @@ def continuous_table(servo, backlash_mm, x_ref, v_ref, dt=DT):
             f, cm, ct = 0.0, servo.damping * m1 / m, servo.damping * m2 / m
         return [vm, (force - cm * vm + f) / m1, vt, (-f - ct * vt) / m2]
 
-    s = np.array([x_ref[0] * 1e-3, 0.0, x_ref[0] * 1e-3, 0.0])
+    read = x_ref[0] * 1e-3  # where the loop holds what it reads: the motor, or on a scale the table
+    shift = approach * half if servo.position_feedback == "scale" else 0.0
+    s = np.array([read + shift, 0.0, read + shift - approach * half, 0.0])
     integral, last, held = 0.0, s[0], 0.0
     table = np.empty(len(x_ref))
     for n in range(len(x_ref)):
@@ -87,6 +91,20 @@ def test_screw_backlash_follows_the_continuous_plant(stiffness):
     without = run([servo], DT, x, v, a).position[:, 0]
     assert np.abs(without - reference).max() > 0.5 * h  # the backlash shows
     assert np.abs(kernel - reference).max() < 0.02 * h
+
+
+@pytest.mark.parametrize("feedback, approach", [("motor", 1), ("motor", -1), ("scale", 1), ("scale", -1)])
+def test_screw_backlash_closed_by_an_approach_follows_the_continuous_plant(feedback, approach):
+    """At rest at the start with the play closed by a move either way, read on the motor or on a scale: as the
+    continuous plant started so (within 2 % of the backlash, as centred), and not as the play centred."""
+    h = 0.01
+    servo = screw_axis(150.0, position_feedback=feedback)
+    x, v, a = sine(600)
+    kernel = run([servo], DT, x, v, a, effects={"x": LoopEffects(backlash_mm=h, backlash_approach=approach)})
+    reference = continuous_table(servo, h, x[:, 0], v[:, 0], approach=approach)
+    centred = run([servo], DT, x, v, a, effects={"x": LoopEffects(backlash_mm=h)}).position[:, 0]
+    assert np.abs(kernel.position[:, 0] - reference).max() < 0.02 * h
+    assert np.abs(centred - reference).max() > 0.2 * h
 
 
 @pytest.mark.parametrize("drive", [dict(velocity_feedback="difference", computation_delay=1, kv=1500.0),
