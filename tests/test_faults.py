@@ -644,7 +644,7 @@ def api():
     (lambda a: diagnose(a.trace, a.machine, max_effects=-1), ValueError, "max_effects must be zero or more, got -1"),
     (lambda a: diagnose(a.trace, a.machine, max_effects=1.5), TypeError, "max_effects must be a whole number, got 1.5"),
     (lambda a: Model(a.machine, Effect("backlash", "x", lost_motion_um=5.0)), TypeError,
-     "give (Effect('backlash', 'x', lost_motion_um=5.0, feedback=None),), not the effect alone"),
+     "give (Effect('backlash', 'x', lost_motion_um=5.0, feedback=None, approach='none'),), not the effect alone"),
     (lambda a: Model(a.machine, (Effect("backlash", "x", lost_motion_um=5.0),)).with_values([("backlash.x.lost_motion_um", 3)]),
      TypeError, "values must be a mapping of flat parameter names to values, got list"),
     # a dict of one variant: "values must be a mapping ..., got str", a mapping given
