@@ -1422,8 +1422,8 @@ def _candidates(problem, model, warnings):
     for a in servo:
         s = model.machine.axes[a]
         # read where the axis's encoder is; on a rigid axis whose file says motor (the default), on a scale too:
-        # the file may not say where its encoder is
-        # with the play centred at the start (closed by an approach either way: :func:`_approached`)
+        # the file may not say where its encoder is; the play centred at the start (closed by an approach: see
+        # :func:`_approached`)
         for feedback in (s.position_feedback,) + (("scale",) if s.position_feedback == "motor" and not s.compliant else ()):
             add(Effect("backlash", a, lost_motion_um=1.0, feedback=feedback), ("lost_motion_um",),
                 [{"lost_motion_um": v} for v in sizes("backlash")])
@@ -1694,7 +1694,10 @@ def _approached(problem, cand, model):
     best = min(others, key=lambda c: c.cost)
     if not delta_bic(cand.cost, best.cost, problem.n, 1, cand.tau) > SIGNIFICANT:
         return cand
-    _refine(problem, best, model)
+    try:
+        _refine(problem, best, model)
+    except _FIT_FAILURES:
+        return cand
     return best if best.cost < cand.cost else cand
 
 
