@@ -175,6 +175,7 @@ _AS_WRITTEN = 1.1  # the corrected model as written leaving more than this × th
 _REIDENTIFY = 2  # most times an identified machine's loops are identified again with the effects named held in place
 _REIDENTIFY_GAP = 2.0  # ... when the diagnosis leaves more than this many noise levels (RMS) [-]
 _REIDENTIFY_SHARE = 0.5  # ... kept when it closes this share of what was left above the noise floor (RMS² − floor²)
+_HELD_SIZES = 4  # sizes over the typical range a friction is held at where nothing was named (_friction_held)
 
 
 def noise_level(residual, measured=None):
@@ -2176,6 +2177,11 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     say("no nominal model given: identifying the servo loops from the trace")
     result, near = _diagnose(trace, Model(identify_machine(trace, progress=say)), True, max_effects, say)
     result, near = _geometry_held(trace, result, near, max_effects, say)
+    # nothing named against a clear misfit and no candidate that fell short: the loops may have bent to a friction
+    searched = not result.effects and not near and result.steps[-1].rms_um > _REIDENTIFY_GAP * np.linalg.norm(
+        result.noise_um)
+    if searched:
+        near = _friction_held(trace, say)
     for _ in range(_REIDENTIFY):
         # identified alone, the loops bend to an effect in them (one shared position gain to one axis's gain mismatch
         # or delay) and may take up most of it: where the effects named include one in the loops and leave a clear
@@ -2184,7 +2190,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         # the bent loops), unless geometric. Kept when it names as many effects and, with as many named, closes most of
         # what the first left above the noise floor (less is the loops' own misfit moved about, for the next effect to
         # be bent to); a candidate that fell short, when it is then named and what is left lies within the noise
-        # levels that called for it (less is its fit bent to that misfit)
+        # levels that called for it (less is its fit bent to that misfit); a friction searched for (_friction_held),
+        # when it is then named (its size was not fitted on the bent loops)
         left, floor = result.steps[-1].rms_um, float(np.linalg.norm(result.noise_um))
         held = result.effects or tuple(near[:1])
         if all(e.stage == "geometry" for e in held) or not left > _REIDENTIFY_GAP * floor:
@@ -2197,7 +2204,7 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         near = near_again
         k = len(held)  # steps: the nominal model, its refit, then one per effect
         unsure = not result.effects and ((held[0].name, held[0].axis) not in {(e.name, e.axis) for e in again.effects}
-                                         or not again.steps[-1].rms_um <= _REIDENTIFY_GAP * floor)
+                                         or not (searched or again.steps[-1].rms_um <= _REIDENTIFY_GAP * floor))
         if unsure or len(again.effects) < k or not left**2 - again.steps[k + 1].rms_um**2 >= _REIDENTIFY_SHARE * (
                 left**2 - floor**2):
             break  # loops that explain the trace only without the effects they were identified with: not the premise
@@ -2207,6 +2214,34 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
             f"the servo loops were identified again with {labels} held in place ({bent}, now "
             f"{again.steps[-1].rms_um:.4g} µm)",))
     return result
+
+
+def _friction_held(trace, say):
+    """``[the friction]`` held in place with which the loops identified from `trace` follow it closest, of a friction of
+    each moving axis at sizes over the typical range (``[]`` where none was identified).
+
+    For a diagnosis on identified loops that named nothing against a clear misfit and had no candidate that fell
+    short to identify them again with: loops identified with a friction in the trace bend to it (an independent
+    two-mass friction took the shared kp from 44 to 186 1/s behind a feedforward of 1, where only the transients show
+    kp), and on them no friction fits, whatever its size (every candidate's start lowered nothing). Identified with
+    the friction held, the loops are the trace's without it (there 23 N on the assumed mass left 1.6 µm against 8.2).
+    """
+    best, held = np.inf, []
+    for axis in (a for a, moving in zip(trace.axes, np.ptp(trace.reference, axis=0) > 0) if moving):
+        for force in np.geomspace(*effect_kind("coulomb_friction").parameters[0].typical, _HELD_SIZES):
+            effect = Effect("coulomb_friction", axis, force_N=float(force))
+            say(f"identifying the servo loops with {effect.label} of {force:.3g} N held in place")
+            try:
+                model = Model(identify_machine(trace, effects=(effect,)), (effect,))
+                reference = measured_reference(trace, model.machine.servo_period)
+                y = simulate_batch([model], reference, settle=0.0, check=False)["tool_position"][0]
+            except _FIT_FAILURES:
+                continue
+            r = trace.actual - _on_trace(trace, reference.t, y)
+            cost = float(np.sum((r - r.mean(axis=0)) ** 2))
+            if cost < best:
+                best, held = cost, [effect]
+    return held
 
 
 def _geometry_held(trace, result, near, max_effects, say):
