@@ -2141,7 +2141,8 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
         the effects named include one in the loops and leave more than twice the noise, the loops
         are identified again with them held in place and the diagnosis starts over (said in a
         warning when that closes the gap); where nothing was named against such a misfit, so is
-        the best candidate that fell short, unless a geometric one.
+        the best candidate that fell short, unless a geometric one, and where none fell short, the
+        friction of an axis that the loops, identified with it held, follow closest.
     max_effects : int
         Most effects to name.
     progress : callable, optional
