@@ -130,7 +130,9 @@ def _run_axis(xref, vref, p, ctrl, dt, substeps):
 
     ``ctrl = (kp, kv, ti, vff, i_max, computation delay [periods], velocity filter time constant [s],
     position feedback 0 motor / 1 scale, motor encoder resolution [m], scale resolution [m],
-    position-feedback delay [periods])``.
+    position-feedback delay [periods], the side the play is closed on at the start: +1 after a move in +, -1, 0
+    centred)``. At the start the axis is at rest in position: the loop holds what it reads at the first sample (the
+    motor, or the table on a scale) with the screw's stretch at that edge of its dead zone.
 
     Returns the table and tool positions [m] at the servo instants, shape (N,) each, and the
     tool position half a period later (for jittered logging), shape (N,).
@@ -138,10 +140,11 @@ def _run_axis(xref, vref, p, ctrl, dt, substeps):
     n = xref.size
     kp, kv, ti, vff, i_max = ctrl[0], ctrl[1], ctrl[2], ctrl[3], ctrl[4]
     comp_delay, tau_v, scale_fb, res_m, res_s, fb_delay = int(ctrl[5]), ctrl[6], ctrl[7], ctrl[8], ctrl[9], ctrl[10]
+    half, approach = 0.5 * p[_PLAY], ctrl[11]
     s = np.zeros(8)
-    s[0] = xref[0]
-    s[2] = xref[0]
-    s[4] = xref[0]
+    s[0] = xref[0] + (approach * half if scale_fb > 0.5 else 0.0)  # the motor, beyond the table on a scale
+    s[2] = s[0] - approach * half  # the table: stretch xm - xt at the edge the approach leaves it
+    s[4] = s[2]
     k1, k2, k3, k4, tmp = np.zeros(8), np.zeros(8), np.zeros(8), np.zeros(8), np.zeros(8)
     table, tool, tool_mid, command = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
     history = np.zeros(n)
@@ -295,7 +298,7 @@ def _commission(axis, family, period):
     step[0] = 0.0
     for _ in range(12):
         ctrl = np.array([axis["kp"], axis["kv"], axis["ti"], axis["vff"], 50.0, axis["computation_delay"], axis["tau_v"],
-                         float(axis["scale_feedback"]), axis["res_m"], axis["res_s"], 0.0])
+                         float(axis["scale_feedback"]), axis["res_m"], axis["res_s"], 0.0, 0.0])
         table, tool, _, _ = _run_axis(step, np.zeros(t.size), _plant_vector(axis, (), family, ""), ctrl, period,
                                    int(np.ceil(period / _SUBSTEP)))
         tail = np.max(np.abs(tool[t > t[-1] - 0.3] - 1e-5))
@@ -421,7 +424,7 @@ def _simulate(axes, machine, reference, velocity, effects, family, period, every
     for i, a in enumerate(axes):
         axis = machine[a]
         x, v = reference[:, i] * 1e-3, velocity[:, i] * 1e-3
-        kp, fb_delay, scale = axis["kp"], 0.0, axis["scale_feedback"]
+        kp, fb_delay, scale, approach = axis["kp"], 0.0, axis["scale_feedback"], 0.0
         for effect in (e for e in effects if e["axis"] == a):
             prm = effect["parameters"]
             if effect["name"] == "gain_mismatch":
@@ -433,8 +436,9 @@ def _simulate(axes, machine, reference, velocity, effects, family, period, every
                 fb_delay = prm["delay_s"] / period
             if effect["name"] == "backlash":
                 scale = effect["options"]["feedback"] == "scale"
+                approach = {"+": 1.0, "-": -1.0}.get(effect["options"].get("approach"), 0.0)
         ctrl = np.array([kp, axis["kv"], axis["ti"], axis["vff"], 50.0, axis["computation_delay"], axis["tau_v"],
-                         float(scale), axis["res_m"], axis["res_s"], fb_delay])
+                         float(scale), axis["res_m"], axis["res_s"], fb_delay, approach])
         substeps = int(np.ceil(period / _SUBSTEP))
         _, tool, mid, command = _run_axis(x, v, _plant_vector(axis, effects, family, a), ctrl, period, substeps)
         rows = np.arange(0, x.size, every)
@@ -448,7 +452,7 @@ def _simulate(axes, machine, reference, velocity, effects, family, period, every
     return np.column_stack(columns), np.column_stack(currents)
 
 
-def make_case(family, effects, seed, folder, path=None, currents=False):
+def make_case(family, effects, seed, folder, path=None, currents=False, approach=None):
     """Generate one trace of `family` with the hidden `effects` into `folder`.
 
     Parameters
@@ -466,6 +470,9 @@ def make_case(family, effects, seed, folder, path=None, currents=False):
     currents : bool
         Also log each axis's current command as the drive computed it at the logged servo samples
         (``<axis>_current`` [A]); the positions and the data sheet are the same either way.
+    approach : {"+", "-"}, optional
+        A hidden backlash's play closed at the start as a move that way leaves it, the axis at rest in position
+        (its truth's option ``approach``); default: centred, the stretch zero.
 
     Returns
     -------
@@ -473,6 +480,8 @@ def make_case(family, effects, seed, folder, path=None, currents=False):
     """
     if family not in FAMILIES:
         raise ValueError(f"family must be one of {FAMILIES}, got {family!r}")
+    if approach not in (None, "+", "-"):
+        raise ValueError(f'approach must be "+", "-" or None (the play centred), got {approach!r}')
     rng = np.random.default_rng(seed)
     axes = ("x", "y")
     period = 2.5e-4 if family == "rigid" else float(rng.choice([2.5e-4, 5e-4]))
@@ -509,6 +518,8 @@ def make_case(family, effects, seed, folder, path=None, currents=False):
             hidden[-1]["axis"] = next(a for a in axes if a != hidden[-1]["axis"])
             if name == "straightness":
                 hidden[-1]["options"]["error_direction"] = next(a for a in axes if a != hidden[-1]["axis"])
+        if name == "backlash" and approach is not None:
+            hidden[-1]["options"]["approach"] = approach
     t = np.arange(reference.shape[0]) * period
     rows = np.arange(0, t.size, every)
     jitter = rng.uniform(-0.02, 0.02, rows.size)

@@ -310,3 +310,18 @@ def test_without_a_model_a_friction_the_identified_loops_took_up_is_searched_for
     result = diagnose(read_trace(case.csv))
     assert [(e.name, e.axis) for e in result.effects] == [("coulomb_friction", "x")], result.report()
     assert result.steps[-1].rms_um < 8.32 / 7, result.report()
+
+
+def test_an_independent_backlash_closed_at_the_start_is_named_with_its_approach(independent_truth, tmp_path):
+    """The independent simulator started with its screw's stretch at the dead zone's edge, as a move in + leaves it
+    (its own start state, written apart from the kernel's): a 19.4 µm backlash of y read on a scale, on a CCW circle,
+    is named with that approach (04ebce1, which had no approach, named it centred, 1.746 µm left)."""
+    from contoursim.diagnosis import diagnose
+    from contoursim.model import load_model
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("rigid", "backlash", 13, tmp_path, path="circle_ccw", approach="+")
+    assert case.truths[0]["options"] == {"feedback": "scale", "approach": "+"}
+    result = diagnose(read_trace(case.csv), load_model(case.machine_file))
+    assert [(e.label, e.options["approach"]) for e in result.effects] == [("backlash.y", "+")], result.report()
+    assert result.steps[-1].rms_um < 1.746, result.report()
