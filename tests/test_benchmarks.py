@@ -325,3 +325,53 @@ def test_an_independent_backlash_closed_at_the_start_is_named_with_its_approach(
     result = diagnose(read_trace(case.csv), load_model(case.machine_file))
     assert [(e.label, e.options["approach"]) for e in result.effects] == [("backlash.y", "+")], result.report()
     assert result.steps[-1].rms_um < 1.746, result.report()
+
+
+def test_an_effect_whose_gap_the_refitted_loops_close_without_it_is_not_named(independent_truth, tmp_path):
+    """An independent two-mass delay of x's command (a trefoil, no data sheet): beside the delay a scale error of x
+    came out significant on the loops as they were, but fitted again on the loops refitted around it its ΔBIC was 6.4
+    against those loops without it: the refit, not the scale error, closed what it closed. 4e82718 named it
+    (time_delay.x and scale_error.x, 0.725 µm left in 0.34 µm of noise); it is no longer named, and the loops
+    identified again around the delay alone leave less."""
+    from contoursim.diagnosis import diagnose
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("two_mass", "time_delay", 486966508, tmp_path)
+    assert [(t["name"], t["axis"]) for t in case.truths] == [("time_delay", "x")]
+    result = diagnose(read_trace(case.csv))
+    assert [e.label for e in result.effects] == ["time_delay.x"], result.report()
+    assert result.steps[-1].rms_um < 0.725, result.report()
+
+
+def test_a_delay_the_trace_tells_from_a_squareness_is_not_taken_for_its_look_alike(independent_truth, tmp_path):
+    """An independent delay of y's position reading (0.17 ms) on a circle run one way, with the data sheet: refitted
+    around it, the delay leaves the noise and a squareness, its look-alike on a ballbar, 8.2 noise levels. 4e82718 took
+    them for twins the trace cannot decide (the squareness closes 82 % of what the delay closes) and named the
+    squareness, which the data sheet's exact loop timing makes the more plausible: 1.514 µm left in 0.185 µm of noise."""
+    from contoursim.diagnosis import diagnose
+    from contoursim.model import load_model
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("rigid", "time_delay", 128981420, tmp_path)
+    assert [(t["name"], t["axis"]) for t in case.truths] == [("time_delay", "y")] and case.path == "circle_cw"
+    result = diagnose(read_trace(case.csv), load_model(case.machine_file))
+    assert [e.label for e in result.effects] == ["time_delay.y"], result.report()
+    assert result.effects[0]["delay_s"] == pytest.approx(case.truths[0]["parameters"]["delay_s"], rel=0.05)
+    assert result.steps[-1].rms_um < 0.25, result.report()
+
+
+@pytest.mark.parametrize("approach", ["+", "-"])
+def test_beside_an_independent_backlash_no_cyclic_error_is_named_for_the_plants_misfit(independent_truth, tmp_path,
+                                                                                       approach):
+    """The independent simulator's rigid seed-14 backlash of x, read on the motor encoder and started closed, on a
+    CCW circle with the data sheet (its plant off by a few percent): the backlash alone is named. 4e82718 named a
+    cyclic error of x beside it, at a period of 109 mm (the whole stroke, one slow wave: a shape a cyclic error does
+    not have) and a ΔBIC of 2 ("+") and 12 ("−") once the plant was refitted around it."""
+    from contoursim.diagnosis import diagnose
+    from contoursim.model import load_model
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("rigid", "backlash", 14, tmp_path, path="circle_ccw", approach=approach)
+    assert [(t["name"], t["axis"]) for t in case.truths] == [("backlash", "x")]
+    result = diagnose(read_trace(case.csv), load_model(case.machine_file))
+    assert [(e.label, e.options["approach"]) for e in result.effects] == [("backlash.x", approach)], result.report()
