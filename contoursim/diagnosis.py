@@ -1693,7 +1693,8 @@ def _approached(problem, cand, model):
     """
     x = np.array([cand.fit[name] for name in cand.free])
     others = [_Candidate(cand.effect.with_values(approach=a), cand.free, cand.grid, x=x) for a in ("+", "-")]
-    for other, y in zip(others, problem.predict([_model_of(model, other, x) for other in others])):
+    predicted = problem.predict([_model_of(model, c, x) for c in others])
+    for other, y in zip(others, predicted):
         _score(problem, other, _finite(problem.residual(y)), cand.tau)
     best = min(others, key=lambda c: c.cost)
     if not delta_bic(cand.cost, best.cost, problem.n, 1, cand.tau) > SIGNIFICANT:
