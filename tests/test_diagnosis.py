@@ -212,10 +212,9 @@ def test_a_circle_run_both_ways_tells_squareness_from_a_servo_mismatch(machine, 
 
 
 def test_a_squareness_named_without_the_axes_travel_says_a_straightnesss_slope_would_look_the_same(machine):
-    """Without a travel the straightness candidates bow over the trace's own extent, with no slope there; a
-    straightness over a travel much longer than the path shows there mostly as that slope, a squareness's shear
-    (without a model, the independent rigid family's straightness case on five seeds of six). With the
-    travel given, the straightness candidates weigh it and nothing is added."""
+    """Without a travel the straightness candidates bow over the trace's own extent, their vertex fitted near it; a
+    straightness over a travel much longer than the path shows there mostly as its slope, a squareness's shear, and a
+    squareness named says so. With the travel given, the straightness candidates weigh it and nothing is added."""
     said = {}
     for travel in (None, {"x": (-200.0, 200.0), "y": (-200.0, 200.0)}):
         result = run_blind(replace(machine, axis_travel=travel), (Effect("squareness", "xy", angle_urad=150.0),),
@@ -302,12 +301,14 @@ def test_where_reads_a_circle_run_both_ways_as_a_ballbar_does(machine):
 
 def test_twins_the_trace_cannot_tell_apart_are_said_and_the_one_of_typical_size_is_named():
     """Candidates closing 90 % and 88 % of a gap: a straightness's slope and a squareness's shear are twins on any
-    trace, a squareness and a gain mismatch on one run one way only; of twins, one of typical size is named."""
+    trace, a squareness and a gain mismatch on one run one way only; of twins, one of typical size is named. A bow
+    over the trace's own extent (no travel given) is its sag over the path, which the typical peak does not judge."""
     from types import SimpleNamespace
 
     from contoursim.diagnosis import _Candidate, _choose
 
-    problem = SimpleNamespace(base_residual=np.ones(100), identified=True)  # the gap: a cost of 100; no model
+    travelled = SimpleNamespace(travel={"x": (-200.0, 200.0), "y": (-200.0, 200.0)})
+    problem = SimpleNamespace(base_residual=np.ones(100), identified=True, nominal=travelled)  # the gap: a cost of 100
 
     def fitted(effect, cost, delta_bic):
         return _Candidate(effect, (), [], cost=cost, fit=effect, delta_bic=delta_bic)
@@ -324,6 +325,13 @@ def test_twins_the_trace_cannot_tell_apart_are_said_and_the_one_of_typical_size_
     assert named.fit is square and "the first is named, its size typical" in said and "placed elsewhere in the travel" in said
     named, said = choose([fitted(bow.with_values(peak_um=-10.0), 10.0, 500.0), fitted(square, 12.0, 480.0)], True)
     assert named.fit.name == "straightness" and "the first is named" not in said  # both typical: the better fit
+    sag = bow.with_values(peak_um=-0.3, span_mm=80.0)  # 0.3 µm over an 80 mm path: under the typical 2 µm
+    named, said = choose([fitted(sag, 10.0, 500.0), fitted(square, 12.0, 480.0)], True)
+    assert named.fit.name == "squareness" and "the first is named, its size typical" in said
+    problem.nominal = SimpleNamespace(travel={})
+    named, said = choose([fitted(sag, 10.0, 500.0), fitted(square, 12.0, 480.0)], True)
+    assert named.fit.name == "straightness" and "the first is named" not in said and "placed elsewhere" in said
+    problem.nominal = travelled
     named, said = choose([fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=False)
     assert named.fit is square and "one way only" in said and "run the circle in the other direction" in said
     assert choose([fitted(square, 10.0, 500.0), fitted(gain, 12.0, 480.0)], both_ways=True) == (named, "")
@@ -1510,14 +1518,18 @@ def test_loops_identified_with_a_geometric_error_in_the_trace_are_identified_aga
 def test_loops_identified_with_a_geometric_error_alone_named_are_identified_again_with_it_held(independent_truth,
                                                                                                 tmp_path):
     """An independent rigid pair on a trefoil with a bow of x's guideway (11 µm over its 400 mm), diagnosed without a
-    model: the slope of the bow over the path is a squareness's shear, named so (said beside it). On the loops
-    identified from the trace, which bent to it, 0.357 µm was left in 0.215 µm of noise; identified again with the
-    squareness held, 0.235 µm. (The same happened before only through a false vibration named beside it.)"""
+    model: on the loops identified from the trace, which bent to it, a squareness (the bow's slope over the path) was
+    named, 0.357 µm left in 0.215 µm of noise. Identified again with the squareness held, the loops name the bow
+    itself (its vertex fitted: no travel is known), and identified once more around the bow they name it again:
+    0.219 µm, the bow's sag over the path's 64.9 mm as the truth's curvature gives it (0.290 µm) within 2σ."""
     case = independent_truth.make_case("rigid", "straightness", 30804588, tmp_path)
     result = diagnose(read_trace(case.csv))
-    assert [e.label for e in result.effects] == ["squareness.xy"], result.report()
-    assert any("identified again with squareness.xy held in place" in w and "they had bent to it" in w
+    assert [e.label for e in result.effects] == ["straightness.x"], result.report()
+    assert any("identified again with straightness.x held in place" in w and "named straightness.x instead" in w
                for w in result.warnings), result.warnings
+    bow, truth = result.effects[0], case.truths[0]["parameters"]
+    sag = truth["peak_um"] * (bow["span_mm"] / truth["span_mm"]) ** 2
+    assert abs(bow["peak_um"] - sag) < 2 * result.to_dict()["effects"][0]["uncertainty"]["peak_um"], result.report()
     assert result.steps[-1].rms_um < 1.2 * np.linalg.norm(result.noise_um), result.report()
 
 
