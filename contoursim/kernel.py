@@ -870,8 +870,22 @@ _LROWS = NPAR + 20
 _ANY_QUANTUM, _ANY_DELAY, _ANY_NOISE, _ANY_STRIBECK, _ANY_MODE_OR_CURRENT_LOOP, _ANY_DIFFERENCE, _ANY_GAP = range(7)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
 def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velocity, current, saturated, status):
+    """:func:`_step_lanes` of `rows` (L, n, NPAR), once its lane count is checked here: ``L`` outside 1 .. LANES, or
+    status and outputs of another, raises ValueError (the lanes' arrays hold LANES lanes; numba checks no bounds).
+
+    In Python, not in the compiled steps: there the same checks made ``run_batch`` of 128 variants 3x slower
+    (``kernel_batch_vs_reference`` 0.53 -> 0.18, bench_kernel, b5c14f9 against d9cecd8).
+    """
+    n_lanes = rows.shape[0]
+    if not 1 <= n_lanes <= LANES or status.shape[0] != n_lanes or any(
+            a.shape[1] > 0 and a.shape[0] != n_lanes for a in (tool, encoder, velocity, current, saturated)):
+        raise ValueError(_LANE_COUNT)
+    _step_lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velocity, current, saturated, status)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _step_lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velocity, current, saturated, status):
     """Step up to :data:`LANES` variants `rows` (L, n, NPAR) together, the variant index innermost.
 
     What :func:`_variant` does (coupling off), with the same operations in
@@ -885,8 +899,7 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
     not asked for; the kept samples go to them :data:`_CHUNK` at a time.
     `external` (N, n): the known external forces [N] every lane gets (no rows: none).
     `status` (L, n, 3) as for :func:`_variant` (the reference is checked
-    before). A lane count ``L`` outside 1 .. LANES, or status and outputs
-    of another, raises ValueError (the lanes' arrays hold LANES lanes).
+    before; the lane count, by :func:`_lanes`).
 
     Where a new per-lane effect goes: its parameters are entries of the
     packed row (copied into ``p`` whole); a state of its own is a row of
@@ -903,13 +916,6 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
     """
     n_lanes, n_axes = rows.shape[0], rows.shape[1]
     n_steps, pushed = ref_pos.shape[0], external.shape[0] > 0
-    if not 1 <= n_lanes <= LANES or status.shape[0] != n_lanes:  # the lanes' arrays hold LANES: no write beyond them
-        raise ValueError(_LANE_COUNT)
-    for signal in (tool, encoder, velocity, current):
-        if signal.shape[1] > 0 and signal.shape[0] != n_lanes:
-            raise ValueError(_LANE_COUNT)
-    if saturated.shape[1] > 0 and saturated.shape[0] != n_lanes:
-        raise ValueError(_LANE_COUNT)
     s = np.empty((n_axes, _LROWS, LANES))  # see _LROWS; `p` where parameters are read
     p = s
     has = np.empty((n_axes, 7), np.bool_)
@@ -1070,13 +1076,13 @@ def _lanes(rows, ref_pos, ref_vel, ref_acc, external, every, tool, encoder, velo
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
-    """Controllers and plant of axis `a` of the lanes of :func:`_lanes` for one step, and the next step's encoder.
+    """Controllers and plant of axis `a` of the lanes of :func:`_step_lanes` for one step, and the next step's encoder.
 
     Every lane computes every branch and a select keeps its own, so that the
     loop vectorises. ``rigid`` (a constant where this is inlined): no lane
     has a structural mode or a current loop, whose rows are then skipped;
     else the plant's input and force are kept for a compliant screw's
-    backlash, whose plant :func:`_lanes` steps after this.
+    backlash, whose plant :func:`_step_lanes` steps after this.
     `pushing`: the known external force of the step [N], the same for every lane.
     """
     p = s
@@ -1128,7 +1134,7 @@ def _advance(s, a, n_lanes, x_ref, v_ref, a_ref, pushing, rigid):
 def _readings(s, a, l, x_next, v_next):
     """Lane `l`'s next play and encoder readings from its next motor position and velocity (:func:`_advance`).
 
-    `s` holds the lanes' parameter rows and states (:func:`_lanes`).
+    `s` holds the lanes' parameter rows and states (:func:`_step_lanes`).
     """
     table = _play(x_next, s[a, _LTABLE, l], s[a, _HALF_PLAY, l])
     s[a, _LTABLE, l] = table
@@ -1150,7 +1156,7 @@ def _rigid_row(p, a, l, r, x, v, u, force):
     """Row `r` (0: x, 1: v) of a rigid axis without current loop: :func:`_lane_row` without its zero terms, bit for bit.
 
     There ``d = ḋ = +0`` always and the row's coefficients of ``d, ḋ, i`` are
-    +0.0 (:func:`_lanes` checks), so :func:`_affine` adds ``+0, +0, ±0`` (``±0·i``,
+    +0.0 (:func:`_step_lanes` checks), so :func:`_affine` adds ``+0, +0, ±0`` (``±0·i``,
     `i` finite; a NaN `i` has made `x` and `v` NaN already) after
     ``c0·x + c1·v``: the first turns a -0 into +0 and the others change
     nothing, which is what ``+ 0.0`` does.
