@@ -1410,7 +1410,7 @@ def _candidates(problem, model, warnings):
     trace = problem.trace
     axes = trace.axes
     servo = [a for a in axes if a in model.machine.axes]
-    have = {e.label for e in model.effects}
+    have = _labels(model.effects)
     residual = problem.unwhiten(problem.base_residual)
     out = []
 
@@ -2327,7 +2327,7 @@ def _geometry_held(trace, result, near, max_effects, say):
     labels = ", ".join(e.label for e in held)
     it = "them" if len(held) > 1 else "it"
     left = f"{result.steps[-1].rms_um:.4g} µm RMS left; now {again.steps[-1].rms_um:.4g} µm"
-    dropped = ", ".join(e.label for e in result.effects if e.label not in {f.label for f in again.effects})
+    dropped = ", ".join(e.label for e in result.effects if e.label not in _labels(again.effects))
     said = f" ({left}{swapped})" if alone else f", and {dropped} named on them took that up ({left} with fewer effects)"
     return replace(again, warnings=again.warnings + (
         f"the servo loops were identified again with {labels} held in place: identified with {it} in the trace, they "
