@@ -299,7 +299,7 @@ class ZPETC(Strategy):
 
     Each servo axis's command is pre-filtered by the stable part of the
     inverse of its sampled closed loop ``x_ref -> x`` (exactly the loop the
-    kernel steps: ZOH plant, Tustin controllers), with the zeros that cannot
+    kernel steps: ZOH plant, sampled PI controllers), with the zeros that cannot
     be inverted (outside or on the unit circle, or near -1 where the ZOH puts
     its sampling zeros: they would ring at the Nyquist frequency) compensated
     in phase only; the filter looks ahead a few servo periods (the loop's

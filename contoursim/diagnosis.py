@@ -26,7 +26,9 @@ The workflow (:func:`diagnose`):
    sensitivities (one :func:`~contoursim.simulation.simulate_batch` call of
    finite differences; a step that makes a loop diverge is left out) are
    refitted in every residual below by ridge regression, a Gaussian prior
-   centred on the nominal machine.
+   centred on the nominal machine. How a given model's drives integrate in
+   their velocity PI, where it does not say, is chosen by that refit
+   (:func:`_integrator_chosen`).
    An effect is named only for what a slightly wrong nominal model cannot
    explain; once it is named, the nominal parameters are refitted by
    Gauss–Newton with it in place and its own parameters fitted again
@@ -81,6 +83,7 @@ from .kernel import MAX_DELAY_SAMPLES
 from .machine import CONTROLLER_FIELDS
 from .model import Model, as_model
 from .plotting import fit_circle_center
+from .servo import VELOCITY_INTEGRATORS
 from .simulation import measured_force, measured_reference, simulate_batch
 from .traces import Trace
 
@@ -2459,6 +2462,9 @@ def _diagnose(trace, model, identified, max_effects, say):
     nominal_current = _currents(trace, model, reference, force)
     current_noise = {} if identified else _current_noise(trace, nominal_current, scored, warnings)
     problem = _Problem(trace, model, noise, scored, identified, force, current_noise)
+    if not identified:
+        problem = _integrator_chosen(problem, model, lambda m: _Problem(trace, m, noise, scored, False, force,
+                                                                        current_noise), warnings, say)
     raw = (trace.actual - before)[scored]
     steps = [Step("nominal model", None, {}, _rms_um(raw), _max_um(raw), np.nan)]
     steps.append(_step(problem, "nominal refit", None, {}, np.nan))
@@ -2635,6 +2641,43 @@ def _diagnose(trace, model, identified, max_effects, say):
                             "where the current does not follow; take the refitted plant for a fit, not for the machine's")
     return Diagnosis(trace, model, identified, 1e3 * noise, 1e3 * problem.zero_offset(), tuple(steps), before, after,
                      scored, problem.base, where, tuple(warnings), tuple(left), *currents), near
+
+
+def _integrator_chosen(problem, model, build, warnings, say):
+    """`problem`, of the given `model`, or the problem `build` makes of `model` with the rule its velocity PIs
+    integrate by that the trace follows best, where it does not give it (``velocity_integrator``; said in `warnings`).
+
+    Drives differ in how their sampled PI integrates, and a data sheet rarely says: the rules differ by
+    ``dt/(2·ti)`` of the proportional gain (:data:`~contoursim.servo.VELOCITY_INTEGRATORS`), about 1 % on a velocity
+    loop, which shows wherever the path accelerates. An independent simulator's drives update the integral with the
+    present error (the backward rule): against the trapezoidal rule, the kernel's with nothing said, the same machine
+    with its data sheet exact left a misfit of 0.48 µm at a circle's start and stop in 0.26 µm of noise, to which a
+    gain mismatch of 0.99 was fitted (ΔBIC 70). One rule for all axes (one firmware, as :func:`identify_machine`
+    takes one drive structure), each problem refitted around it; another than the trapezoidal rule is chosen when its
+    ΔBIC, the choice counted as one parameter, is significant.
+    """
+    machine = model.machine
+    axes = [a for a in problem.trace.axes if machine.axes[a].ti is not None and machine.axes[a].velocity_integrator is None]
+    if not axes:
+        return problem
+    rss0 = float(problem.base_residual @ problem.base_residual)
+    tau = autocorrelation_time(problem.samples(problem.base_residual)[problem.scored])
+    best, gain = problem, SIGNIFICANT
+    for rule in (r for r in VELOCITY_INTEGRATORS if r != "tustin"):
+        say(f"the velocity PI integrated by the {rule} rule")
+        try:
+            other = build(_with_servos(model, {a: {"velocity_integrator": rule} for a in axes}))
+        except _FIT_FAILURES:
+            continue
+        better = float(delta_bic(rss0, float(other.base_residual @ other.base_residual), problem.n, 1, tau))
+        if better > gain:
+            best, gain = other, better
+    if best is not problem:
+        rule = best.base.machine.axes[axes[0]].velocity_integrator
+        warnings.append(f"the machine does not say how the velocity PI of {', '.join(axes)} integrates "
+                        f"(velocity_integrator): the trace follows the {rule} rule best (ΔBIC {gain:.3g} over the "
+                        "trapezoidal rule simulated where none is given); the refit and the corrected model take it")
+    return best
 
 
 def _acts_on(effect):

@@ -7,7 +7,7 @@ Two steps, two costs:
   damped or too fast for the period; :func:`run` applies it to every axis;
 * **packing** (closed-form numpy, fast, per variant): :func:`pack` turns one
   axis's servo, period and :class:`LoopEffects` into a parameter row — the
-  exact ZOH plant (:func:`contoursim.servo.zoh`) and the Tustin PI
+  exact ZOH plant (:func:`contoursim.servo.zoh`) and the sampled PI
   coefficients of :func:`contoursim.servo.discretize`, plus the effects'
   parameters. `pack` does not check stability: a variant's stability (new
   gains, masses, delays) is the caller's business; :func:`run` checks the
@@ -107,7 +107,7 @@ from ._numba import njit
 from .estimators import _arc_parts, _linear_arc, _three_point_arc, distinct_samples, search_params
 from .nearest import nearest_knot
 from .exceptions import UnstableLoopError
-from .servo import AxisServo, _plant_matrices, zoh
+from .servo import VELOCITY_INTEGRATORS, AxisServo, _plant_matrices, zoh
 
 __all__ = [
     "Coupling",
@@ -1214,11 +1214,12 @@ def _padded_zoh(servo, effects, dt, gap_open=False):
     return np.concatenate([full_Ad.ravel(), full_Bd[:, 0], full_Bd[:, 1]])
 
 
-def _pi_row(gain, ti, dt):
-    """``(B, C, D)`` of the Tustin PI of :func:`contoursim.servo.discretize` (``(0, 0, gain)`` for a P)."""
+def _pi_row(gain, ti, dt, share=VELOCITY_INTEGRATORS["tustin"]):
+    """``(B, C, D)`` of the sampled PI of :func:`contoursim.servo.discretize` (``(0, 0, gain)`` for a P), its integral
+    adding `share` of the present sample's error (:data:`~contoursim.servo.VELOCITY_INTEGRATORS`)."""
     if ti is None:
         return 0.0, 0.0, gain
-    return dt, gain / ti, gain * (1.0 + dt / (2.0 * ti))
+    return dt, gain / ti, gain * (1.0 + share * dt / ti)
 
 
 def pack(servo, dt, effects=LoopEffects()):
@@ -1235,7 +1236,7 @@ def pack(servo, dt, effects=LoopEffects()):
     Returns
     -------
     ndarray, shape (NPAR,)
-        The exact ZOH plant (:func:`contoursim.servo.zoh`), the Tustin
+        The exact ZOH plant (:func:`contoursim.servo.zoh`), the sampled
         controllers of :func:`contoursim.servo.discretize`, gains, limit,
         the drive's velocity difference and computation delay, and the
         effects' parameters (a backlash in a compliant screw: the ZOH
@@ -1276,7 +1277,7 @@ def pack(servo, dt, effects=LoopEffects()):
     row[_AD : _BF + _NS] = _padded_zoh(servo, effects, dt)
     row[_KP], row[_VFF], row[_AFF] = servo.kp, servo.vff, servo.aff / servo.force_gain
     row[_AMP] = 1.0 / servo.force_constant
-    row[_VB : _VD + 1] = _pi_row(servo.kv_mm, servo.ti, dt)
+    row[_VB : _VD + 1] = _pi_row(servo.kv_mm, servo.ti, dt, servo.integrator_share)
     if servo.electrical:
         row[_CB : _CD + 1] = _pi_row(servo.kc, servo.ti_current, dt)
         row[_ELEC] = 1.0

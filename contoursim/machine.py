@@ -312,14 +312,15 @@ SERVO_KEYS = MappingProxyType({
     "velocity_taps": "velocity_taps",
     "velocity_filter_hz": "velocity_filter_hz",
     "computation_delay_periods": "computation_delay",
+    "velocity_integrator": "velocity_integrator",
     "position_feedback": "position_feedback",
     "motor_mass_kg": "motor_mass",
     "screw_stiffness_N_per_um": "screw_stiffness",
     "screw_damping_ratio": "screw_damping_ratio",
 })
 #: The controller's settings among the servo parameters (the rest is the plant): what ``uncertain`` may list. The
-#: drive's structure (velocity_feedback, velocity_taps, computation_delay: names and whole numbers) is the controller
-#: too, trusted always: a refit cannot step it.
+#: drive's structure (velocity_feedback, velocity_taps, computation_delay, velocity_integrator: names and whole numbers)
+#: is the controller too, trusted always: a refit cannot step it (a diagnosis chooses a velocity_integrator not given).
 CONTROLLER_FIELDS = ("kp", "kv", "ti", "vff", "aff", "kc", "ti_current", "current_bandwidth_hz", "velocity_filter_hz")
 #: Keys of earlier versions -> the keys that replaced them.
 _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}

@@ -51,7 +51,8 @@ the motor encoder ``x`` always (a drive's dual feedback).
 
 The sampled loop (:func:`discretize`) is what the kernel steps: the plant is
 discretised exactly for a zero-order-hold input, the PI controllers by the
-trapezoidal (Tustin) rule, and every controller reads the state sampled at
+trapezoidal (Tustin) rule (the velocity PI by the rule ``velocity_integrator``
+names, where given), and every controller reads the state sampled at
 ``t_k`` and holds its output over ``[t_k, t_k + dt)``.
 """
 
@@ -87,6 +88,7 @@ __all__ = [
     "MIN_DAMPING_RATIO",
     "MAX_CROSSOVER_FRACTION",
     "VELOCITY_FEEDBACK",
+    "VELOCITY_INTEGRATORS",
     "POSITION_FEEDBACK",
     "SCREW_DAMPING_RATIO",
     "MAX_VELOCITY_TAPS",
@@ -135,6 +137,10 @@ MAX_CROSSOVER_FRACTION = 0.25
 
 #: Where the velocity loop's feedback comes from (:class:`AxisServo` ``velocity_feedback``).
 VELOCITY_FEEDBACK = ("state", "difference")
+#: How a sampled PI integrates (``velocity_integrator``), with the share of the present sample's error its integral
+#: adds to the output: the trapezoidal (Tustin) rule half of it, the backward rectangle (``integral += e·dt/ti``, then
+#: ``y = k·(e + integral)``) all of it, the forward rectangle (the sum up to the last sample) none.
+VELOCITY_INTEGRATORS = {"tustin": 0.5, "backward": 1.0, "forward": 0.0}
 #: Where the position loop's encoder is (:class:`AxisServo` ``position_feedback``).
 POSITION_FEEDBACK = ("motor", "scale")
 #: Damping ratio of a compliant screw's relative mode when a machine does not give it [-].
@@ -216,6 +222,15 @@ class AxisServo:
         Whole servo periods (0, 1 or 2) between sampling and the current
         command reaching the drive: the command computed from the samples
         at ``t_k`` is applied over ``[t_k+d, t_k+d+1)``.
+    velocity_integrator : {"tustin", "backward", "forward"}, optional
+        How the sampled velocity PI integrates (:data:`VELOCITY_INTEGRATORS`):
+        ``y[k] = kv·(e[k] + (z[k] + s·dt·e[k])/ti)``, ``z`` the sum of the
+        past errors times ``dt``, ``s`` = 1/2 for the trapezoidal rule, 1
+        for the backward rectangle drive firmware often runs (the integral
+        updated with the present error, then the output), 0 for the
+        forward one. Drives differ and data sheets rarely say: ``None``
+        (default) is not stated, simulated by the trapezoidal rule, and a
+        diagnosis against the machine chooses it by the fit.
     position_feedback : {"motor", "scale"}, default "motor"
         Where the position loop's encoder is: the motor encoder
         (semi-closed loop) or a linear scale on the table (closed loop: it
@@ -270,6 +285,7 @@ class AxisServo:
     velocity_taps: int = 1
     velocity_filter_hz: float | None = None
     computation_delay: int = 0
+    velocity_integrator: str | None = None
     position_feedback: str = "motor"
     motor_mass: float | None = None
     screw_stiffness: float | None = None
@@ -317,7 +333,7 @@ class AxisServo:
             object.__setattr__(self, name, value)
 
     def _drive_structure(self):
-        """The velocity feedback and computation delay settings, checked: ``{name: value}``."""
+        """The velocity feedback, integrator and computation delay settings, checked: ``{name: value}``."""
         if self.velocity_feedback not in VELOCITY_FEEDBACK:
             raise ValueError(f'velocity_feedback must be "state" or "difference", got {self.velocity_feedback!r}')
         checked = {"velocity_taps": _validate.positive_int("velocity_taps", self.velocity_taps)}
@@ -330,6 +346,9 @@ class AxisServo:
             raise ValueError(f"computation_delay must be 0, 1 or {MAX_COMPUTATION_DELAY} servo periods, got {delay}")
         if self.velocity_filter_hz is not None:
             checked["velocity_filter_hz"] = _validate.positive("velocity_filter_hz", self.velocity_filter_hz)
+        if self.velocity_integrator is not None and self.velocity_integrator not in VELOCITY_INTEGRATORS:
+            raise ValueError(f"velocity_integrator must be one of {', '.join(map(repr, VELOCITY_INTEGRATORS))} (or "
+                             f"not given), got {self.velocity_integrator!r}")
         if self.velocity_feedback == "state" and (checked["velocity_taps"] != 1 or self.velocity_filter_hz is not None):
             raise ValueError('velocity_taps and velocity_filter_hz filter the encoder difference: they need '
                              'velocity_feedback = "difference"')
@@ -374,6 +393,12 @@ class AxisServo:
     def kv_mm(self):
         """Velocity-controller gain in internal units, ``kv/1000`` [A per mm/s]."""
         return self.kv / 1000.0
+
+    @property
+    def integrator_share(self):
+        """The share of the present sample's error the sampled velocity PI's integral adds to its output
+        (:data:`VELOCITY_INTEGRATORS`; the trapezoidal rule's where `velocity_integrator` is not given)."""
+        return VELOCITY_INTEGRATORS[self.velocity_integrator or "tustin"]
 
     @property
     def emf_mm(self):
@@ -447,7 +472,7 @@ class DiscreteServo:
         Exact ZOH plant, input ``'i_cmd'`` [A] (or ``'u'`` [V] with electrical
         dynamics), outputs ``'x'`` [mm], ``'v'`` [mm/s] (and ``'i'`` [A]).
     velocity_controller : control.StateSpace
-        Velocity PI (Tustin) or P, ``'e_v'`` [mm/s] -> ``'i_pi'`` [A].
+        Velocity PI (its ``velocity_integrator``'s rule) or P, ``'e_v'`` [mm/s] -> ``'i_pi'`` [A].
     current_controller : control.StateSpace or None
         Current PI (Tustin), ``'e_i'`` [A] -> ``'u'`` [V]; ``None`` without
         electrical dynamics.
@@ -629,19 +654,19 @@ def _gain(k, inp, out, dt):
     return ct.ss(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[k]], dt, inputs=inp, outputs=out)
 
 
-def _pi(k, ti, inp, out, dt, name):
+def _pi(k, ti, inp, out, dt, name, share=VELOCITY_INTEGRATORS["tustin"]):
     """PI ``k·(1 + 1/(ti·s))`` (or P when ti is None), state ``z = ∫e dt`` [input unit · s].
 
     Continuous: ``dz/dt = e``, ``y = (k/ti)·z + k·e``.
-    Discrete, trapezoidal (Tustin) rule: ``z[k+1] = z[k] + dt·e[k]`` and
-    ``y[k] = (k/ti)·(z[k] + dt/2·e[k]) + k·e[k]``, i.e.
-    ``C(z) = k·(1 + dt/(2·ti)·(z + 1)/(z - 1))`` — ``1/s`` replaced by
-    ``dt/2·(z + 1)/(z - 1)``.
+    Discrete: ``z[k+1] = z[k] + dt·e[k]`` and ``y[k] = (k/ti)·(z[k] +
+    share·dt·e[k]) + k·e[k]``; by the trapezoidal (Tustin) rule, ``share`` =
+    1/2, ``C(z) = k·(1 + dt/(2·ti)·(z + 1)/(z - 1))`` — ``1/s`` replaced by
+    ``dt/2·(z + 1)/(z - 1)`` (:data:`VELOCITY_INTEGRATORS`: the other rules).
     """
     if ti is None:
         return _gain(k, inp, out, dt).copy(name=name)
     if dt:
-        D = k * (1.0 + dt / (2.0 * ti))
+        D = k * (1.0 + share * dt / ti)
         return ct.ss([[1.0]], [[dt]], [[k / ti]], [[D]], dt, inputs=inp, outputs=out, states="z", name=name)
     return ct.ss([[0.0]], [[1.0]], [[k / ti]], [[k]], 0, inputs=inp, outputs=out, states="z", name=name)
 
@@ -653,7 +678,7 @@ def _blocks(servo, dt):
         A, B = zoh(A, B, dt)
     blocks = {
         "plant": _plant_system(servo, A, B, states, dt),
-        "velocity": _pi(servo.kv_mm, servo.ti, "e_v", "i_pi", dt, "velocity_controller"),
+        "velocity": _pi(servo.kv_mm, servo.ti, "e_v", "i_pi", dt, "velocity_controller", servo.integrator_share),
         "position": _gain(servo.kp, "e_x", "v_p", dt),
         "position_sum": ct.summing_junction(["x_ref", "-x"], "e_x"),
         "vff": _gain(servo.vff, "v_ref", "v_ff", dt),
@@ -942,7 +967,7 @@ def discretize(servo, dt):
     Returns
     -------
     DiscreteServo
-        Exact ZOH plant (see :func:`zoh`), Tustin PI controllers (see the
+        Exact ZOH plant (see :func:`zoh`), sampled PI controllers (see the
         module docstring), and their closed interconnection.
     """
     dt = _validate.positive("dt", dt)
@@ -1178,7 +1203,7 @@ def margins(servo, dt=None):
     servo : AxisServo
     dt : float, optional
         Servo period [s]. When given, the margins are those of the sampled
-        loop (ZOH plant, Tustin controllers), which includes the sampling
+        loop (ZOH plant, sampled PI controllers), which includes the sampling
         delay; otherwise of the continuous loop.
 
     Returns

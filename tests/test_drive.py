@@ -65,8 +65,9 @@ def reference_loop(servo, quantum, delay, start, play=0.0, position_only=False):
     (``position_feedback="scale"``) or on x, ``enc = q·round(·/q)``, read `delay` periods late (``x_fb``);
     velocity from the motor encoder x, quantised and read as late (now with `position_only`: the delay is the
     position loop's alone), ``(m[k] - m[k-n])/(n·dt)`` low-passed
-    ``a·y + (1 - a)·raw`` (or the motor velocity ``v`` itself); P position + velocity feedforward; Tustin
-    PI velocity + acceleration feedforward, clamped, the integrator held while clamped and pushed further;
+    ``a·y + (1 - a)·raw`` (or the motor velocity ``v`` itself); P position + velocity feedforward; PI velocity
+    (its integral as the trapezoidal rule, the backward rectangle or the forward one sums the errors) +
+    acceleration feedforward, clamped, the integrator held while clamped and pushed further;
     the command applied `computation_delay` periods later. Inputs xr, vr, ar; outputs the table position,
     x_fb and the applied current.
     """
@@ -98,7 +99,12 @@ def reference_loop(servo, quantum, delay, start, play=0.0, position_only=False):
         else:
             v_fb = v
         e_v = servo.kp * (xr - x_fb) + servo.vff * vr - v_fb
-        raw = (kv / servo.ti * (z[iz] + DT / 2 * e_v) if servo.ti else 0.0) + kv * e_v + i_ff * ar
+        # the integral of the errors up to the last sample, z, and of the present one: half of it (the area of the
+        # trapezoid to the next sample's error, taken as this one's), all of it (updated first, then the output),
+        # none (the output, then the update)
+        integral = z[iz] + {"tustin": DT / 2 * e_v, "backward": DT * e_v, "forward": 0.0}[
+            servo.velocity_integrator or "tustin"]
+        raw = (kv / servo.ti * integral if servo.ti else 0.0) + kv * e_v + i_ff * ar
         command = np.clip(raw, -limit, limit)
         held = command != raw and e_v * raw > 0
         applied = np.r_[command, z[ic : ic + 2]][d]
@@ -143,6 +149,12 @@ DRIVES = {
                                 computation_delay=1, current_limit=4.0, vff=1.0, aff=0.7), 2e-4, 1),
     "pi_clamped": (dict(velocity_feedback="difference", velocity_taps=2, computation_delay=1,
                         current_limit=3.0, vff=0.5), 0.0, 0),
+    "pi_backward": (dict(velocity_integrator="backward", velocity_feedback="difference", velocity_filter_hz=800.0,
+                         vff=1.0), 0.0, 0),
+    "pi_forward_clamped_delay1": (dict(velocity_integrator="forward", velocity_feedback="difference",
+                                       computation_delay=1, current_limit=3.0, vff=0.5), 0.0, 0),
+    "pi_backward_screw_scale": (dict(SCREW, velocity_integrator="backward", position_feedback="scale",
+                                     velocity_feedback="difference", current_bandwidth_hz=1500.0), 2e-4, 1),
     "current_lag": (dict(current_bandwidth_hz=1200.0), 0.0, 0),
     "current_lag_fir2_delay1_clamped": (dict(current_bandwidth_hz=800.0, velocity_feedback="difference",
                                              velocity_taps=2, computation_delay=1, current_limit=2.0, vff=0.5), 2e-4, 1),
@@ -375,6 +387,8 @@ def test_a_loop_the_computation_delay_destabilises_is_refused_with_its_margins()
     (dict(velocity_filter_hz=500.0), ValueError, 'they need velocity_feedback = "difference"'),
     (dict(computation_delay=3), ValueError, "computation_delay must be 0, 1 or 2"),
     (dict(computation_delay=True), TypeError, "computation_delay must be a whole number"),
+    (dict(velocity_integrator="trapezoidal"), ValueError, "velocity_integrator must be one of 'tustin', 'backward', "
+                                                          "'forward'"),
     (dict(current_bandwidth_hz=0.0), ValueError, "current_bandwidth_hz must be"),
     (dict(current_bandwidth_hz=1000.0, **ELECTRICAL), ValueError, "give one or the other"),
     (dict(position_feedback="table"), ValueError, 'position_feedback must be "motor" or "scale"'),
@@ -405,12 +419,12 @@ def test_machine_file_keys_and_what_uncertain_may_list(tmp_path):
     file = tmp_path / "m.toml"
     file.write_text(MACHINE.format(extra='velocity_feedback = "difference"\nvelocity_taps = 2\n'
                                          'velocity_filter_hz = 900.0\ncomputation_delay_periods = 1\n'
-                                         'current_bandwidth_hz = 1500.0\n'
+                                         'current_bandwidth_hz = 1500.0\nvelocity_integrator = "backward"\n'
                                          'uncertain = ["velocity_filter_hz", "current_bandwidth_hz"]'))
     machine = load_machine(file)
     servo = machine.axes["x"]
-    assert (servo.velocity_feedback, servo.velocity_taps, servo.velocity_filter_hz, servo.computation_delay) == (
-        "difference", 2, 900.0, 1)
+    assert (servo.velocity_feedback, servo.velocity_taps, servo.velocity_filter_hz, servo.computation_delay,
+            servo.velocity_integrator) == ("difference", 2, 900.0, 1, "backward")
     assert servo.current_bandwidth_hz == 1500.0
     assert machine.uncertain["x"] == ("velocity_filter_hz", "current_bandwidth_hz")
     file.write_text(MACHINE.format(extra="computation_delay_periods = 3"))
