@@ -2612,6 +2612,14 @@ def _diagnose(trace, model, identified, max_effects, say):
                                             next(a for a in trace.axes if a != step.effect.axis))
     if identified:
         warnings += identification_warnings(model.machine, problem.base.machine)
+        moving = int(np.sum(np.ptp(trace.reference, axis=0) > 0))
+        if len(steps) == 2 and not both_ways and moving >= 2 and steps[-1].rms_um > NOISE_FLOOR * 1e3 * float(
+                np.linalg.norm(noise)):
+            warnings.append("nothing named on loops identified from a path run one way: on a circle a squareness or a "
+                            "scale error of its axes is a difference of the axes' lags (an error ∝ y is ∝ x's "
+                            "velocity there, one ∝ x is ∝ x's acceleration), which the loops take up; to tell them "
+                            "apart: the path run the other way too (CW and CCW, as a ballbar test does), or the data "
+                            "sheet (diagnose --model)")
     else:
         warnings += _far_from_prior(problem.nominal, problem.base.machine, trace.axes)
         refused = problem.base.machine.refusal(trace.axes)

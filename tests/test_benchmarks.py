@@ -355,6 +355,31 @@ def test_drives_that_integrate_by_the_backward_rule_are_followed_and_nothing_is_
     assert {s.velocity_integrator for s in load_model(corrected).machine.axes.values()} == {"backward"}
 
 
+def test_without_a_model_a_one_way_circle_that_names_nothing_says_what_would_separate_a_squareness(
+        independent_truth, tmp_path):
+    """An independent two-mass pair out of square by 87 µrad on a CW circle, diagnosed without its data sheet: the
+    loops identified from the trace take the squareness up as a difference of the axes' lags (on a circle an error ∝
+    y is ∝ x's velocity) and nothing is named, 0.52 µm RMS left in 0.27 µm of noise. The report said only that no
+    catalogue effect explains it; it now says why, and which test would tell: the circle run the other way too, or
+    the data sheet. With the data sheet the squareness is named; without it, on the circle run both ways, too."""
+    from contoursim.diagnosis import diagnose
+    from contoursim.model import load_model
+    from contoursim.traces import read_trace
+
+    case = independent_truth.make_case("two_mass", "squareness", 1009787824, tmp_path)
+    assert case.path == "circle_cw"
+    trace = read_trace(case.csv)
+    result = diagnose(trace)
+    said = [w for w in result.warnings if w.startswith("nothing named on loops identified from a path run one way")]
+    assert result.effects == () and len(said) == 1 and "CW and CCW" in said[0], result.report()
+    assert [e.label for e in diagnose(trace, load_model(case.machine_file)).effects] == ["squareness.xy"]
+    both = independent_truth.make_case("two_mass", "squareness", 1009787824, tmp_path / "both", path="circle_both")
+    result = diagnose(read_trace(both.csv))  # as advised: the circle run both ways (a machine of the same seed)
+    assert not [w for w in result.warnings if "path run one way" in w], result.report()
+    assert [e.label for e in result.effects] == ["squareness.xy"], result.report()
+    assert result.effects[0]["angle_urad"] == pytest.approx(both.truths[0]["parameters"]["angle_urad"], rel=0.05)
+
+
 def test_a_drift_that_leaves_the_residual_within_a_tenth_of_the_noise_is_named(independent_truth, tmp_path):
     """An independent rigid square whose Y drifts at −2.59 µm/min (0.105 µm RMS over its 9 s, in 0.30 µm of noise),
     its data sheet as the model: the nominal refit left 0.306 µm RMS, within 1.1 noise levels, and the search stopped
