@@ -37,7 +37,10 @@ estimates), the cases with a false positive (an effect named that
 is not hidden), the null cases kept clean, the median error of the main
 parameter and its 2σ coverage (the truth within twice the reported
 uncertainty) where the hidden effect was named, the median seconds per
-30 s of trace; then per effect: named right / cases, the hidden effect among those named, its
+30 s of trace (each case's seconds scaled to 30 s of its trace; how many
+simulations its fits take does not grow with a trace's length, so a 3-s
+trace scaled so overstates what 30 s take: ``--laps N`` runs each
+independent path N times, measuring it on traces as long); then per effect: named right / cases, the hidden effect among those named, its
 median parameter error and 2σ coverage. Progress goes to stderr.
 
 ``--effects a+b`` hides effects a and b together in each of its cases (an
@@ -51,6 +54,7 @@ Run:  python benchmarks/bench_diagnose.py [--cases 22] [--seed 1] [--families ow
                                          [--effects none,squareness,straightness]
                                          [--effects coulomb_friction+coulomb_friction,backlash+squareness]
       python benchmarks/bench_diagnose.py --fast      (one null case and one effect per family and mode)
+      python benchmarks/bench_diagnose.py --families rigid,two_mass --modes identified --laps 6   (30-s traces)
 """
 
 import argparse
@@ -165,10 +169,10 @@ def own_case(mill, names, seed):
     return path_name, trace, Model(machine), described, signal
 
 
-def independent_case(family, names, seed, folder, currents=False):
+def independent_case(family, names, seed, folder, currents=False, laps=1):
     """A case of an independent family: ``(path, trace, data sheet's file, truths, the effects' RMS [µm])``;
-    with `currents` the trace carries the drives' current commands."""
-    case = independent_truth.make_case(family, names, seed, folder, currents=currents)
+    with `currents` the trace carries the drives' current commands; its path run `laps` times."""
+    case = independent_truth.make_case(family, names, seed, folder, currents=currents, laps=laps)
     return case.path, read_trace(case.csv), case.machine_file, case.truths, case.signal_um
 
 
@@ -218,13 +222,14 @@ def grade(truths, report, named):
     return graded
 
 
-def run(family, mode, names, seed, mill, folder):
-    """Generate one case and diagnose it blind in `mode` ("model", "current" or "identified"); a dict of what
-    happened."""
+def run(family, mode, names, seed, mill, folder, laps=1):
+    """Generate one case (an independent one's path run `laps` times) and diagnose it blind in `mode` ("model",
+    "current" or "identified"); a dict of what happened."""
     if family == "own":
         path, trace, model, truths, signal = own_case(mill, names, seed)
     else:
-        path, trace, model, truths, signal = independent_case(family, names, seed, folder, currents=mode == "current")
+        path, trace, model, truths, signal = independent_case(family, names, seed, folder, currents=mode == "current",
+                                                              laps=laps)
     case = dict(family=family, mode=mode, truths=truths, path=path, signal=signal, duration=float(trace.t[-1] - trace.t[0]),
                 error=None, named=(), right=False, false_positive=False, found=False, parameter_errors=[], covered=[],
                 floor=np.inf)
@@ -281,6 +286,10 @@ def main():
                         help="the hidden effects cycled through, 'none' for a null case, 'a+b' for effects a and b hidden "
                              "together (an effect twice: on two axes) (default: none and the catalogue)")
     parser.add_argument("--fast", action="store_true", help="two cases per family (a null case and a backlash)")
+    parser.add_argument("--laps", type=int, default=1,
+                        help="run each independent case's path this many times (traces about as many times as long: "
+                             "the seconds a diagnosis of a 30-s trace takes, measured on traces that long; "
+                             "independent families only)")
     args = parser.parse_args()
     families, modes = args.families.split(","), args.modes.split(",")
     effects = tuple(() if entry == "none" else tuple(entry.split("+")) for entry in args.effects.split(","))
@@ -290,6 +299,11 @@ def main():
     unknown = [name for names in effects for name in names if name not in CATALOGUE]
     if unknown:
         parser.error(f"--effects: unknown effect {unknown[0]!r}; the effects are: none, {', '.join(CATALOGUE)}")
+    if args.laps < 1:
+        parser.error(f"--laps: a path is run at least once, got {args.laps}")
+    if args.laps > 1 and "own" in families:
+        parser.error("--laps: the own family's paths are the repository's trajectories, run once; "
+                     "give --families rigid,two_mass")
     mill = load_machine("demo_mill")
     plan = cases(2, args.seed) if args.fast else cases(args.cases, args.seed, effects)
     results = {}
@@ -299,14 +313,15 @@ def main():
                 for mode in modes:
                     if family == "own" and mode == "current":
                         continue  # the own family's traces log no current
-                    case = run(family, mode, names, seed, mill, Path(folder))
+                    case = run(family, mode, names, seed, mill, Path(folder), args.laps)
                     results.setdefault((family, mode), []).append(case)
                     named = ", ".join(e.label for e in case["named"]) or "nothing"
                     what = case["error"] or (f"named {named}; RMS {case['before'] or np.nan:.3f} -> {case['after'] or np.nan:.3f} µm "
                                              f"(noise {case['floor']:.3f})")  # a report's null (not finite) as nan
                     print(f"[{family}/{mode} {i + 1}/{len(plan)}] {'ok ' if case['right'] else 'BAD'} {case['path']:<20} "
                           f"hidden {' + '.join(t['name'] + '.' + t['axis'] for t in case['truths']) or 'none'}; "
-                          f"{what}; effect {case['signal']:.3f} µm RMS; {case['seconds']:.1f} s", file=sys.stderr, flush=True)
+                          f"{what}; effect {case['signal']:.3f} µm RMS; {case['seconds']:.1f} s for {case['duration']:.1f} s of trace",
+                          file=sys.stderr, flush=True)
     columns = list(results)
     head = [f"{f}/{m}" for f, m in columns]
     width = 34

@@ -452,7 +452,7 @@ def _simulate(axes, machine, reference, velocity, effects, family, period, every
     return np.column_stack(columns), np.column_stack(currents)
 
 
-def make_case(family, effects, seed, folder, path=None, currents=False, approach=None):
+def make_case(family, effects, seed, folder, path=None, currents=False, approach=None, laps=1):
     """Generate one trace of `family` with the hidden `effects` into `folder`.
 
     Parameters
@@ -473,6 +473,10 @@ def make_case(family, effects, seed, folder, path=None, currents=False, approach
     approach : {"+", "-"}, optional
         A hidden backlash's play closed at the start as a move that way leaves it, the axis at rest in position
         (its truth's option ``approach``); default: centred, the stretch zero.
+    laps : int
+        The closed path run this many times in one move, each lap at the feed of the first (a trace about as
+        many times as long of the same machine and effects, its noise level drawn anew: how the time a diagnosis
+        takes grows with a trace's length); ``circle_both`` runs each way this many times.
 
     Returns
     -------
@@ -482,6 +486,8 @@ def make_case(family, effects, seed, folder, path=None, currents=False, approach
         raise ValueError(f"family must be one of {FAMILIES}, got {family!r}")
     if approach not in (None, "+", "-"):
         raise ValueError(f'approach must be "+", "-" or None (the play centred), got {approach!r}')
+    if isinstance(laps, bool) or not isinstance(laps, (int, np.integer)) or laps < 1:
+        raise ValueError(f"laps must be a whole number of 1 or more, got {laps!r}")
     rng = np.random.default_rng(seed)
     axes = ("x", "y")
     period = 2.5e-4 if family == "rigid" else float(rng.choice([2.5e-4, 5e-4]))
@@ -503,11 +509,12 @@ def make_case(family, effects, seed, folder, path=None, currents=False, approach
               "trefoil": lambda: _trefoil(size), "square": lambda: _rounded_square(2 * size, rng.uniform(1.0, 5.0))}[path]()
     start = rng.uniform(TRAVEL_MM * 0.3, TRAVEL_MM * 0.7, 2) + np.array([size, 0.0])
     station = np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))
-    feed = max(rng.uniform(1000.0, 6000.0) / 60.0, station / 8.0)  # at most about 8 s of motion [mm/s]
+    feed = max(rng.uniform(1000.0, 6000.0) / 60.0, station / 8.0)  # at most about 8 s of motion a lap [mm/s]
     accel = rng.uniform(500.0, 3000.0)
     windows = (() if rng.integers(0, 2) else (rng.uniform(4e-3, 1.5e-2),)) if family == "rigid" else \
         (rng.uniform(4e-3, 1.5e-2), rng.uniform(2e-3, 8e-3))
     runs = [points, _circle(size, "cw")] if path == "circle_both" else [points]  # a ballbar's two runs, a stop between
+    runs = [np.vstack([p] + [p[1:]] * (laps - 1)) for p in runs]  # each closed: a lap ends where the next starts
     reference, velocity = (np.vstack(x) for x in zip(*[_reference(p + start, feed, accel, windows, period) for p in runs]))
     hidden = []
     for name in (() if effects is None else (effects,) if isinstance(effects, str) else effects):

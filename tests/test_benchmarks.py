@@ -65,6 +65,26 @@ def test_independent_truth_writes_a_contract_trace_and_a_data_sheet(independent_
     assert model.machine.travel == {a: (0.0, independent_truth.TRAVEL_MM) for a in "xy"}  # the data sheet's travel
 
 
+def test_independent_truth_runs_its_path_laps_times_on_the_same_machine(independent_truth, tmp_path):
+    """Three laps are one lap's move run three times without a stop: the same drives (the noise level drawn anew), the
+    trace between two and three times as long (one run-up, one stop and the dwells), the reference back where it
+    started at the end of each lap."""
+    from contoursim.traces import read_trace
+
+    one, three = (independent_truth.make_case("rigid", None, 7, tmp_path / str(n), path="circle_ccw", laps=n)
+                  for n in (1, 3))
+    assert {k: v for k, v in three.notes.items() if k != "noise_um"} == {k: v for k, v in one.notes.items() if k != "noise_um"}
+    assert 2.0 < three.duration_s / one.duration_s < 3.0
+    reference = read_trace(three.csv).reference
+    gone = np.linalg.norm(reference - reference[0], axis=1)
+    moving = np.flatnonzero(gone > 1.0)
+    step = np.max(np.linalg.norm(np.diff(reference, axis=0), axis=1))  # a sample's travel at full feed
+    back = np.flatnonzero(gone[moving[0]:moving[-1]] < step)  # at the start between the first departure, last return
+    assert back.size and np.count_nonzero(np.diff(back) > 1) + 1 == 2
+    with pytest.raises(ValueError, match="laps"):
+        independent_truth.make_case("rigid", None, 7, tmp_path / "none", laps=0)
+
+
 def test_independent_truth_hides_effects_together_an_effect_named_twice_on_both_axes(independent_truth, tmp_path):
     """Two backlashes, one on each axis, each closing the loop where the data sheet says; a squareness has one pair of
     axes and is refused twice; one effect in a sequence is the same case as named alone."""
