@@ -558,12 +558,14 @@ def _parse_rows(body, width, index, names, limits, units, fail):
     `limits` are the largest magnitudes allowed in the columns `index`, in
     their `units` (the names of the file's units, for the messages).
     """
-    def beyond(row, col, value):
-        """The error of the cell (`row`, `col`) whose `value` (as the message shows it) is beyond its column's limit."""
-        hint = "; is the time column in ns? Declare it: '# units: t [ns]'" if col == 0 and units[0] == "s" else ""
+    def beyond(row, col):
+        """The error of the cell (`row`, `col`), shown as written, that is beyond its column's limit."""
+        cell = body[row].split(",")[index[col]].strip()
+        hint = ("; is the time column in ns (declare it: '# units: t [ns]') or a clock's (seconds since 1970: write "
+                "the time since the log's start)?") if col == 0 and units[0] == "s" else ""
         what = next((kind for kind, (known, _, _) in INPUTS.items() if units[col] in known), "position or time")
-        return fail(f"column '{names[index[col]]}': value {value} is beyond ±{limits[col]:g} {units[col]}, "
-                    f"not a {what} a trace can hold{hint}", row)
+        return fail(f"column '{names[index[col]]}': value {_validate.shown(cell)} is beyond ±{limits[col]:g} "
+                    f"{units[col]}, not a {what} a trace can hold{hint}", row)
 
     cells = np.array([text.count(",") + 1 for text in body])
     if np.any(cells != width):
@@ -602,9 +604,9 @@ def _parse_rows(body, width, index, names, limits, units, fail):
         cell = body[row].split(",")[index[col]].strip()
         if re.search("inf|nan", cell, re.IGNORECASE):
             raise fail(f"column '{names[index[col]]}': value {data[row, col]} is not finite", row)
-        raise beyond(row, col, _validate.shown(cell))  # a number written too large for a float (1e400): infinite once read
+        raise beyond(row, col)  # a number written too large for a float (1e400): infinite once read
     bad = np.abs(data) > limits
     if bad.any():
         row, col = np.unravel_index(np.argmax(bad), data.shape)
-        raise beyond(row, col, f"{data[row, col]:g}")
+        raise beyond(row, col)
     return data
