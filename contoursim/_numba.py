@@ -8,14 +8,27 @@ cache of contoursim's own functions goes to the user-wide cache folder
 instead (``~/.cache/numba`` on Linux, or ``NUMBA_CACHE_DIR`` when set);
 other packages' functions are cached as numba always does.
 
+numba tells a cached function stale by its own file's contents only, while
+its compiled code holds what it calls from contoursim's other files (and
+their constants): after a ``git pull`` or a reinstall in place that changed
+a callee's file but not its caller's (``contour.py`` calls into
+``nearest.py`` and ``paths.py``), the caller's old code was loaded, and with
+it the old numbers, silently. The stamp of contoursim's cached functions is
+the digest of all its source files instead: a version that differs in any
+of them compiles afresh.
+
 A first run (a cold cache) compiles them, ~20 s of CPU; :class:`CompileClock`
 tells when that happens, so the command line can say so.
 """
 
+import functools
+import hashlib
+import os
 import time
 from pathlib import Path
 
 from numba import njit
+from numba.core import config
 from numba.core.caching import CacheImpl, UserWideCacheLocator
 from numba.core.event import Listener
 
@@ -24,8 +37,26 @@ __all__ = ["CompileClock", "njit"]
 _PACKAGE = Path(__file__).resolve().parent
 
 
+@functools.cache
+def _sources_digest():
+    """The SHA-256 digest of contoursim's source files, their paths in the package and their contents."""
+    digest = hashlib.sha256()
+    for file in sorted(_PACKAGE.rglob("*.py")):
+        digest.update(file.relative_to(_PACKAGE).as_posix().encode() + b"\0" + file.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
 class _PackageCacheLocator(UserWideCacheLocator):
-    """The user-wide cache folder, for functions defined in contoursim's own files only."""
+    """``NUMBA_CACHE_DIR`` where set, else the user-wide cache folder, for functions defined in contoursim's own files
+    only, stamped with all of them (:func:`_sources_digest`)."""
+
+    def __init__(self, py_func, py_file):
+        super().__init__(py_func, py_file)
+        if config.CACHE_DIR:
+            self._cache_path = os.path.join(config.CACHE_DIR, self.get_suitable_cache_subpath(py_file))
+
+    def get_source_stamp(self):
+        return _sources_digest()
 
     @classmethod
     def from_function(cls, py_func, py_file):
@@ -76,5 +107,5 @@ class CompileClock(Listener):
 
 
 if _PackageCacheLocator not in CacheImpl._locator_classes:
-    # After numba's own NUMBA_CACHE_DIR locator, before its in-tree (__pycache__) one.
-    CacheImpl._locator_classes.insert(1, _PackageCacheLocator)
+    # Before numba's own locators (NUMBA_CACHE_DIR's, then the in-tree __pycache__), which stamp a file alone.
+    CacheImpl._locator_classes.insert(0, _PackageCacheLocator)

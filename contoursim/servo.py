@@ -1019,6 +1019,7 @@ def _loop_response(loop):
     # with its permutation, invalid past 2^63 (a stiff current loop's sampled pole e^-500 is balanced by 2^371)
     A, _, _, scale, _ = dgebal(np.asarray(loop.A, float), scale=1)
     H, Q = hessenberg(A, calc_q=True)
+    H = np.ascontiguousarray(H)  # for n <= 2 scipy returns dgebal's Fortran-ordered A: one compiled version, not two
     b, c = Q.T @ (np.asarray(loop.B, float)[:, 0] / scale), (np.asarray(loop.C, float)[0] * scale) @ Q
     d, dt = float(np.asarray(loop.D)[0, 0]), loop.dt
 

@@ -93,8 +93,9 @@ def test_demo_writes_its_table_plots_and_traces(tmp_path, capsys):
     assert not (tmp_path / "new").exists()  # refused before the folder was made (it held a record of nothing)
 
 
-# a fresh process with an empty numba cache (a function loaded from the cache does not compile its callees):
-# the compiled functions the demo uses, and how many machine-code versions of each it made
+# a fresh process with an empty numba cache (a function loaded from the cache does not compile its callees) and no
+# stored loop analyses (read back, they compile nothing): the compiled functions the demo uses, and how many
+# machine-code versions of each it made
 DEMO_SIGNATURES = """
 import contextlib, io, os, sys
 from numba.core.registry import CPUDispatcher
@@ -118,7 +119,7 @@ def test_demo_compiles_each_function_once_and_says_so(tmp_path):
 
     The first run says on stderr that it compiles, once, and how long that took; a second run (a warm cache) says nothing.
     """
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"), CONTOURSIM_CACHE_DIR=str(tmp_path / "analyses"))
     done = subprocess.run([sys.executable, "-c", DEMO_SIGNATURES, str(tmp_path / "out")], cwd=ROOT, env=env,
                           capture_output=True, text=True, check=True)
     assert done.stdout.startswith("exit 0\n")
