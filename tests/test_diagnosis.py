@@ -657,8 +657,9 @@ def test_straightness_is_fitted_over_the_axis_travel_the_machine_gives(machine, 
 ])
 def test_a_trace_with_its_columns_swapped_or_too_short_to_judge_names_nothing_and_says_why(machine, fault, words):
     """Measured and commanded columns swapped (the axis then leads its command by the model's lag), 12 samples (a
-    noise floor from their second differences, a nominal refit fitting them by construction), or the command logged
-    as the measured position too (a gain mismatch of 1.87 was named on it): nothing named, why said."""
+    noise floor from their second differences, a nominal refit fitting them by construction: the nominal parameters
+    kept), or the command logged as the measured position too (a gain mismatch of 1.87 was named on it): nothing
+    named, why said."""
     trace = synthetic_trace(Model(machine), circle("ccw"), mismatch=0.03, noise_um=0.1, every=2, seed=3)
     if fault == "swapped":
         trace = replace(trace, reference=trace.actual, actual=trace.reference)
@@ -668,7 +669,21 @@ def test_a_trace_with_its_columns_swapped_or_too_short_to_judge_names_nothing_an
         trace = replace(trace, t=trace.t[:12], reference=trace.reference[:12], actual=trace.actual[:12])
     result = diagnose(trace, Model(machine))
     assert result.effects == ()
-    assert any(w.startswith(words) and w.endswith("No effect is named") for w in result.warnings), result.warnings
+    assert any(w.startswith(words) and "No effect is named" in w for w in result.warnings), result.warnings
+    if fault == "short":  # the corrected model is the nominal one: a refit of 12 samples would fit them by construction
+        assert result.refitted.machine.axes == machine.axes
+
+
+def test_a_trace_whose_command_jumps_beyond_the_max_feed_is_refused_naming_the_samples():
+    """A logged command that jumps 50 mm in one 1-ms sample (a lost or spliced sample): the simulation refused it as a
+    path planned too fast, with advice for the Python API's planner; the trace is refused naming the samples."""
+    t = np.arange(300) * 1e-3
+    x_ref = np.where(np.arange(300) > 100, 50.0, 0.0)
+    trace = Trace(t, x_ref[:, None], x_ref[:, None], ("x",))
+    with pytest.raises(ValueError, match=r"^the trace's commanded position \(x_ref\) moves 50 mm from sample 101 to "
+                                         r"102 \(t = 0.1 to 0.101 s\), 3e\+06 mm/min, above the machine's max feed "
+                                         r"30000 mm/min: a jump in the log"):
+        diagnose(trace, load_machine("demo_mill"))
 
 
 def test_an_axis_behind_its_command_by_a_delay_the_model_lacks_is_no_swap(independent_truth, tmp_path):
