@@ -59,40 +59,86 @@ def _trajectory(model, path_file, job=None, direction=None):
     "cw") replaces the path file's, for a circle, ISO 230-4 circle or helix.
     The motion waits at the end of each rapid (G0) for
     :func:`~contoursim.simulation.default_settle` seconds, a controller's
-    in-position check: a cut starts with the axes in position.
+    in-position check: a cut starts with the axes in position. A run of the
+    motion and the settle after it (:func:`run_job` appends it) longer than
+    :data:`_LONG_RUN` servo periods is said on stderr (:func:`_say_long_run`).
+    A motion too long for the memory is refused naming the job's ``[feed]``
+    when it lengthens the path file's own motion, else the path file.
     """
-    from ._memory import RUN_BYTES_PER_SAMPLE
     from .feed import sample
     from .model import as_model
     from .pathfile import library_file, override_feed, read_path_file
     from .simulation import default_settle
 
-    read, source = read_path_file(path_file, direction), library_file(path_file)
+    own = read = read_path_file(path_file, direction)
+    file = library_file(path_file)
     if job is not None and "feed" in job.data:
         read = override_feed(read, job)
-        source = job.source if "feed_mm_min" in job.data["feed"] else source
-    settings = read.feed
     machine = as_model(model).machine
+    settle = default_settle(machine)  # the settle after the run, and after each rapid (an in-position check)
+
+    def plan(settings):
+        return settings.plan(read.path, max_feed=machine.max_feed, in_position=settle,
+                             servo_period=machine.servo_period)
+
     try:
-        # at the end of a rapid the axes settle (an in-position check) as long as at the end of a run
-        profile = settings.plan(read.path, max_feed=machine.max_feed, in_position=default_settle(machine),
-                                servo_period=machine.servo_period)
-        periods = profile.duration / machine.servo_period
-        if periods > _LONG_RUN:
-            _stderr_line(f"contoursim: the motion lasts {profile.duration:.6g} s, {periods:.3g} servo periods of "
-                         f"{machine.servo_period:.6g} s to simulate, about {RUN_BYTES_PER_SAMPLE * periods / 1e9:.2g} GB "
-                         "of memory: this takes minutes")
-        return sample(read.path, profile, machine.servo_period), read.program
+        profile = plan(read.feed)
+        try:
+            trajectory = sample(read.path, profile, machine.servo_period)
+        except ValueError as exc:  # too long for the memory: the job's [feed] when it made the file's motion longer
+            if read is not own and _lengthens(plan, own, profile):
+                raise _job_feed_error(exc, job, path_file) from None
+            raise
+        _say_long_run(profile.duration, settle, machine)
+        return trajectory, read.program
     except ConfigError:
         raise
     except ValueError as exc:  # a feed above the machine's max feed, a run too large for the memory: naming the file
         primitive = getattr(exc, "primitive", None)  # and a feed by its line: a program's block's, a [feed] table's
         feed_key = ("feed", "feed_mm_min") if primitive is not None else ()
-        if source != library_file(path_file):  # the job's feed
+        if feed_key and read is not own and "feed_mm_min" in job.data["feed"]:  # the job's feed
             raise job.error(str(exc), *feed_key) from None
         if read.program is None:  # a path file's
-            raise TomlFile.read(source).error(str(exc), *feed_key) from None
-        raise _against_machine(exc, source, read.program) from None
+            raise TomlFile.read(file).error(str(exc), *feed_key) from None
+        raise _against_machine(exc, file, read.program) from None
+
+
+def _lengthens(plan, own, profile):
+    """Whether the motion `profile`, of a job's ``[feed]``, lasts longer than `plan` makes that of the path file `own`
+    as read (a :class:`~contoursim.pathfile.PathFile`) with its own feed: the job's is what runs where the file's
+    cannot (a feed above the machine's max feed)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the corners of a motion that does not run: not said
+        try:
+            return plan(own.feed).duration < profile.duration
+        except ValueError:  # the file's own feed cannot run: the job's is what does
+            return True
+
+
+def _job_feed_error(exc, job, path_file):
+    """The refusal `exc` of a motion a job's ``[feed]`` table makes too long, at the line of its key (of the table,
+    for several keys)."""
+    feed = job.data["feed"]
+    given = ", ".join(f"{key} = {value:g}" for key, value in feed.items())
+    return job.error(f"[feed] {given}, overriding {Path(path_file).name}'s: {exc}", "feed",
+                     *(feed if len(feed) == 1 else ()))
+
+
+def _say_long_run(motion, settle, machine):
+    """Say on stderr a run of more than :data:`_LONG_RUN` servo periods: a motion of `motion` s and the settle of
+    `settle` s after it, whose share is said when it is what makes the run long (its slowest position loop's 5/kp)."""
+    from ._memory import RUN_BYTES_PER_SAMPLE
+
+    dt = machine.servo_period
+    periods = (motion + settle) / dt
+    if periods <= _LONG_RUN:
+        return
+    held = ""
+    if motion / dt <= _LONG_RUN or settle > motion:
+        axis, servo = min(machine.axes.items(), key=lambda item: item[1].kp)
+        held = f", of which {settle:.6g} s the settle after the path, 5/kp of axis {axis} (kp_per_s = {servo.kp:.6g})"
+    _stderr_line(f"contoursim: the run lasts {motion + settle:.6g} s{held}: {periods:.3g} servo periods of {dt:.6g} s "
+                 f"to simulate, about {RUN_BYTES_PER_SAMPLE * periods / 1e9:.2g} GB of memory: this takes minutes")
 
 
 def _against_machine(exc, path_file, program, job=None):
@@ -466,8 +512,8 @@ def compare_command(args):
     """
     from .comparison import JSON_FORM, compare
     from .compensation import STRATEGY_NAMES
-    from .output import atomic_write, report_file
-    from .plotting import COMPARISON_FIGURES, save_comparison_figures
+    from .output import atomic_write, refused_early, report_file
+    from .plotting import comparison_files, save_comparison_figures
     from .simulation import default_settle
 
     model, path_file, job, geometric = _job(args)
@@ -488,8 +534,9 @@ def compare_command(args):
     if args.tune and not any(part.startswith("ccc_") for part in parts):
         raise ValueError(f"--tune tunes a cross-coupled strategy's gains; none runs here (--strategies {','.join(names)})")
     names, left_out = (names, None) if args.tune else _designable(model, names, settings, args.strategies is None)
-    report = report_file(args.json, JSON_FORM, "comparison JSON", args.out,  # never a file the user keeps, nor a plot
-                         written=[f"{Path(path_file).stem}_{figure}.png" for figure in COMPARISON_FIGURES])
+    plots = comparison_files(Path(path_file).stem)
+    report = report_file(args.json, JSON_FORM, "comparison JSON", args.out, written=plots)  # no user's file, no plot
+    refused_early(args.out, plots)  # a user's file of a plot's name: not after the comparison
     (trajectory, program), dt = _trajectory(model, path_file, job), model.machine.servo_period
     _check_memory(len(trajectory) + math.ceil(default_settle(model.machine) / dt), dt, path_file, len(names),
                   "compare fewer strategies (--strategies) or a shorter path")
@@ -624,9 +671,13 @@ def _progress_line(stream):
 
 def sweep_command(args):
     """``contoursim sweep SPEC.toml [--scheduler ADDRESS|local:N]``: every variant of a spec, one table row each."""
-    from .sweep import FIGURES, Progress, diverged_why, read_sweep, run_sweep, write_results
+    from .output import refused_early
+    from .sweep import FIGURES, Progress, diverged_why, read_sweep, run_sweep, table_files, write_results
 
     sweep = read_sweep(args.spec)
+    # a user's file of the table's or a plot's name: not after the sweep; those of the best and worst runs depend on
+    # its results (whether any variant ran, whether their path is a circular test): write_results refuses them
+    refused_early(args.out, table_files(sweep))
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim sweep — {Path(args.spec).name}: {len(sweep.values)} variants of {', '.join(sweep.names)}; "
           f"strategies {sweep.strategies}; on {where}", flush=True)

@@ -351,6 +351,14 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise ValueError(f"strategy {twice[0]!r} is named twice")
+    seen = {}
+    for name in names:  # a composition's parts in another order: the same stages, the same run
+        parts = frozenset(name.split("+")) if isinstance(name, str) else None
+        if parts in seen:
+            raise ValueError(f"strategy {name!r} is {seen[parts]!r}, named twice (a composition's parts act in their "
+                             "stages whatever their order)")
+        if parts is not None:
+            seen[parts] = name
     chain = as_model(model).machine.chain  # the geometric compensation's model: the machine file's errors
     settings = dict(settings or {})
     if tuned is True:

@@ -707,6 +707,8 @@ def strategies_named(name, model=None, chain=None, settings=None):
                              f"{', '.join(makers)}, joined by '+'")
         if part in parts[:i]:  # "none+none" ran as a strategy of its own; a strategy twice is refused below
             raise ValueError(f"strategy {part!r} is named twice in {name!r}: name each part once")
+        if part == "none" and len(set(parts)) > 1:  # ran labelled "none+feedforward", the feedforward alone
+            raise ValueError(f"'none' in {name!r}: none is no compensation, not a part of one; name the other parts")
         try:
             made = makers[part]()
         except ValueError as exc:  # a value the strategy refuses: said by its file key ("kp_per_s must be ...")

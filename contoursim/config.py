@@ -13,6 +13,7 @@ import os
 import re
 import stat
 import tomllib
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -23,7 +24,7 @@ from ._validate import FLOAT_MAX, closest, shown
 from .exceptions import ConfigError
 
 __all__ = ["FORMAT_DOC", "TEXT_KEYS", "TomlFile", "local_file", "read_bytes", "read_text", "text_lines", "text_only",
-           "toml_text"]
+           "toml_text", "unique_columns"]
 
 #: Where messages send a user for the keys of every file.
 FORMAT_DOC = "docs/machines-and-files.md, section 'File format'"
@@ -171,6 +172,31 @@ def text_only(text, file, error=ConfigError):
         raise error("byte 0x00 (NUL) is not text (UTF-16 without a byte-order mark, or a binary file?): save the file "
                     "as UTF-8 text", str(file), line)
     return text
+
+
+def unique_columns(names, file, line, error=ConfigError):
+    """Refuse a CSV header naming a column more than once: one copy would be read, the others dropped without a word.
+
+    Parameters
+    ----------
+    names : list of str
+        The header's column names.
+    file : str or Path
+        The file, for the message.
+    line : int
+        The header's 1-based line.
+    error : type
+        The :class:`ConfigError` subclass to raise.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the header's line and the repeated names.
+    """
+    repeated = sorted(name for name, count in Counter(names).items() if count > 1)
+    if repeated:
+        raise error(f"column name(s) {', '.join(map(repr, repeated))} appear more than once in the header", str(file),
+                    line)
 
 
 def toml_text(data):

@@ -278,12 +278,14 @@ def _stretch_bound(sample_pos, i, j, length, q):
 
     Every such point is within `length` of the two together, in the ellipsoid of foci the samples: within
     half its minor axis, sqrt(length^2 - chord^2) / 2, of the chord. That far from the chord's nearest point.
+    Two samples apart in arc length may share their position (a jerk-limited start, whose first steps are
+    below its rounding): the ellipsoid is then the ball of radius length / 2 about it.
     """
     chord2 = along = 0.0
     for c in range(sample_pos.shape[1]):
         chord2 += (sample_pos[j, c] - sample_pos[i, c]) ** 2
         along += (q[c] - sample_pos[i, c]) * (sample_pos[j, c] - sample_pos[i, c])
-    t = min(max(along / chord2, 0.0), 1.0)
+    t = min(max(along / chord2, 0.0), 1.0) if chord2 > 0.0 else 0.0
     d2 = q[2] ** 2 if sample_pos.shape[1] == 2 else 0.0
     for c in range(sample_pos.shape[1]):
         d2 += (q[c] - sample_pos[i, c] - t * (sample_pos[j, c] - sample_pos[i, c])) ** 2

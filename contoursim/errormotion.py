@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
-from .config import read_text, text_lines
+from .config import read_text, text_lines, unique_columns
 from .exceptions import ConfigError
 
 __all__ = ["COMPONENTS", "ERROR_COLUMNS", "ERROR_UNITS", "Cyclic", "ErrorMotion", "read_error_table"]
@@ -233,9 +233,10 @@ def read_error_table(path, rotary=False):
     """Read a laser-run error table (ISO 230-2 style) from a CSV file.
 
     Format: optional leading ``#`` lines, a header row with a
-    ``position_mm`` column (``position_deg`` for a rotary axis) and any of
-    the columns ``dx_um, dy_um, dz_um, ex_urad, ey_urad, ez_urad``; one
-    numeric row per target position, positions strictly increasing.
+    ``position_mm`` column (``position_deg`` for a rotary axis) and one or
+    more of the columns ``dx_um, dy_um, dz_um, ex_urad, ey_urad, ez_urad``,
+    each named once; one numeric row per target position, positions
+    strictly increasing.
 
     Parameters
     ----------
@@ -252,8 +253,9 @@ def read_error_table(path, rotary=False):
     Raises
     ------
     ConfigError
-        Naming the file, line and column of the problem; a column of an
-        earlier version (``position``, ``dx``) with the name that replaced it.
+        Naming the file, line and column of the problem (a column named
+        twice, a header without an error column); a column of an earlier
+        version (``position``, ``dx``) with the name that replaced it.
     """
     path = Path(path)
     source, rotary = str(path), _validate.flag("rotary", rotary)
@@ -262,6 +264,7 @@ def read_error_table(path, rotary=False):
     if start is None:
         raise ConfigError("the error table has no header row", source)
     header = [h.strip() for h in next(csv.reader([lines[start]]))]
+    unique_columns(header, source, start + 1)
     position = "position_deg" if rotary else "position_mm"
     renamed = {"position": position, **{comp: column for column, (comp, _) in ERROR_COLUMNS.items()}}
     old = [h for h in header if h in renamed]
@@ -270,10 +273,13 @@ def read_error_table(path, rotary=False):
     unknown = [h for h in header if h != position and h not in ERROR_COLUMNS]
     if position not in header or unknown:
         raise ConfigError(
-            f"the header must hold '{position}' and any of {', '.join(ERROR_COLUMNS)}; got {', '.join(header)}",
+            f"the header must hold '{position}' and one or more of {', '.join(ERROR_COLUMNS)}; got {', '.join(header)}",
             source,
             start + 1,
         )
+    if header == [position]:
+        raise ConfigError(f"the error table has no error column, only '{position}': add one or more of "
+                          f"{', '.join(ERROR_COLUMNS)}", source, start + 1)
     rows = []
     for number, row in enumerate(csv.reader(lines[start + 1 :]), start=start + 2):
         if not row or not "".join(row).strip():

@@ -571,7 +571,9 @@ def _arc(start, end, values, normal_axis, ccw, tolerance, fail):
         r_start = np.linalg.norm(offset)
         r_end = np.linalg.norm((end - center) * inplane)
         if abs(r_start - r_end) > tolerance * (1 + 1e-9):  # radii written exactly the tolerance apart are within it
-            fail(f"arc start radius {r_start:.6g} mm and end radius {r_end:.6g} mm differ by more than "
+            # to the digit where they differ: a 1 mm difference shows on radii of 1e6 mm (1.00499e+06 both, in 6 digits)
+            digits = max(6, int(np.log10(max(r_start, r_end)) - np.log10(abs(r_start - r_end))) + 3)
+            fail(f"arc start radius {r_start:.{digits}g} mm and end radius {r_end:.{digits}g} mm differ by more than "
                  f"{tolerance:g} mm")
         sweep = _sweep(start - center, end - center, axis, ccw)
         if abs(sweep) > np.pi and r_start != r_end:  # half about the programmed centre, half tangent to the end

@@ -243,7 +243,7 @@ class LoopEffects:
         Natural frequency [Hz] of a structural mode (the tool-side mass on
         its spring, carriage held); ``None``: rigid axis.
     mode_damping_ratio : float, default 0.05
-        Damping ratio of the mode [-], 0 < ζ < 1.
+        Damping ratio of the mode [-], ζ > 0 (1: critically damped).
     mode_mass_ratio : float, default 0.2
         Tool-side mass / total moving mass [-], 0 < r < 1.
     quantum_mm : float, default 0
@@ -313,11 +313,11 @@ class LoopEffects:
             raise ValueError(f'feedback_delay_on must be "both" or "position", got {self.feedback_delay_on!r}')
         if self.mode_freq_hz is not None:
             checked["mode_freq_hz"] = _validate.positive("mode_freq_hz", self.mode_freq_hz)
-        for name in ("mode_damping_ratio", "mode_mass_ratio"):
-            value = _validate.positive(name, getattr(self, name))
-            if value >= 1:
-                raise ValueError(f"{name} must be between 0 and 1 (exclusive), got {value!r}")
-            checked[name] = value
+        checked["mode_damping_ratio"] = _validate.positive("mode_damping_ratio", self.mode_damping_ratio)
+        ratio = _validate.positive("mode_mass_ratio", self.mode_mass_ratio)
+        if ratio >= 1:
+            raise ValueError(f"mode_mass_ratio must be between 0 and 1 (exclusive), got {ratio!r}")
+        checked["mode_mass_ratio"] = ratio
         checked["seed"] = _validate.seed("seed", self.seed)
         for name, value in checked.items():
             object.__setattr__(self, name, value)

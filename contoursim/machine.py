@@ -32,7 +32,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from . import _validate
+from . import _memory, _validate
 from .config import TEXT_KEYS, TomlFile, local_file
 from .exceptions import ConfigError, PathError, UnstableLoopError
 from .multibody import MAX_TRAVEL
@@ -97,7 +97,8 @@ class Machine:
                 raise TypeError(f"axis {name!r} must be an AxisServo, got {type(servo).__name__}")
         if self.chain is None:
             if tuple(axes) != CARTESIAN[: len(axes)]:
-                raise ValueError(f"a machine without a chain has axes x, y (, z) in that order, got {tuple(axes)}")
+                raise ValueError(f"a machine without a chain has the axes x; x, y; or x, y, z (in that order), got "
+                                 f"{tuple(axes)}")
         else:
             unknown = [a for a in axes if a not in self.chain.axes]
             if unknown:
@@ -143,6 +144,20 @@ class Machine:
     def axis_names(self):
         """All commanded axes in column order: the chain's, else the servo axes."""
         return tuple(self.axes) if self.chain is None else tuple(self.chain.axes)
+
+    @property
+    def settle(self):
+        """Five time constants of the slowest position loop, ``5 / min(kp)`` [s]: the standstill :func:`simulate`
+        appends to a path's reference by default (:func:`~contoursim.simulation.default_settle`)."""
+        return 5.0 / min(servo.kp for servo in self.axes.values())
+
+    def check_settle(self):
+        """Refuse a :attr:`settle` whose run of servo periods would not fit in the memory available (ValueError,
+        naming the slowest axis and its kp)."""
+        axis, servo = min(self.axes.items(), key=lambda item: item[1].kp)
+        _memory.check(self.settle / self.servo_period, f"axis {axis}: kp_per_s = {servo.kp:.6g} 1/s settles in 5/kp "
+                      f"= {self.settle:.6g} s after the path: at the servo period of {self.servo_period:.6g} s",
+                      "a position loop that slow follows no path; check kp_per_s")
 
     @property
     def servo_columns(self):
@@ -470,6 +485,11 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
             bad = next((key for key in table if str(exc).startswith(SERVO_KEYS[key])), None)
             keys = ("axes", axis, bad) if bad else ("axes", axis)
             raise toml.error(f"axis {axis}: {_file_names(exc)}", *keys) from None
+    if chain is None:
+        unknown = next((axis for axis in servos if axis not in CARTESIAN), None)
+        if unknown is not None:
+            raise toml.error(f"unknown axis {unknown!r} ([axes.{unknown}]): a machine without bodies has the axes x, y "
+                             "(, z)", "axes", unknown)
     if set(servos) <= set(CARTESIAN):  # [axes.y] before [axes.x]: TOML's tables have no order, the machine's axes do
         servos = {axis: servos[axis] for axis in CARTESIAN if axis in servos}
     offset = read_work_offset(toml, chain) if "work_offset" in data and geometry else None
@@ -484,10 +504,16 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
             keys = ("servo_period_ms",) if exc.parameter == "dt" else ("axes", axis, _RENAMED[exc.parameter])
             raise toml.error(_file_names(exc), *keys) from None
     try:
-        return Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
-                       max_feed=max_feed, work_offset=offset, uncertain=uncertain, axis_travel=travel if geometry else None)
+        machine = Machine(servos, period, chain if geometry else None, name=data.get("name", str(name_or_file)),
+                          max_feed=max_feed, work_offset=offset, uncertain=uncertain,
+                          axis_travel=travel if geometry else None)
     except (TypeError, ValueError) as exc:
         raise toml.error(str(exc), "axes") from None
+    try:
+        machine.check_settle()  # a position loop so slow that the settle after a path cannot be run: at its line
+    except ValueError as exc:
+        raise toml.error(str(exc), "axes", min(servos, key=lambda axis: servos[axis].kp), "kp_per_s") from None
+    return machine
 
 
 def _axis_travel(toml, axis, value, chain):

@@ -228,15 +228,13 @@ def _path(toml, direction=None):
 
 
 def _file_names(message, arguments, spec):
-    """A builder's `message` with the names of its arguments given in `spec` replaced by their file keys (``points``
-    -> ``points_mm``; where used as a name, not in prose: "3 distinct points"), and the key it names first as a 0- or
-    1-tuple (the error's line)."""
-    keys = {arg: key for key, arg in arguments.items() if key in spec}
-    if not keys:
-        return message, ()
+    """A builder's `message` with the names of its arguments replaced by their file keys (``points`` -> ``points_mm``;
+    where used as a name, not in prose: "3 distinct points"), and the key given in `spec` it names first as a 0- or
+    1-tuple (the error's line; a default's argument has none)."""
+    keys = {arg: key for key, arg in arguments.items()}
     named = re.compile(rf"\b({'|'.join(keys)})\b(?=\[| must| =| holds| contains| \(| \d)")
-    first = named.search(message)
-    return named.sub(lambda match: keys[match.group(0)], message), (keys[first.group(0)],) if first else ()
+    given = [keys[match.group(0)] for match in named.finditer(message) if keys[match.group(0)] in spec]
+    return named.sub(lambda match: keys[match.group(0)], message), tuple(given[:1])
 
 
 def override_feed(read, job):

@@ -920,7 +920,16 @@ def iso230_4_circle(radius, center=(0.0, 0.0), direction="ccw", run_angle=np.pi 
     """
     c = _vector("center", center)
     radius = _scalar(_validate.positive, "radius", radius)
-    run_radius = radius / 2 if run_radius is None else _scalar(_validate.positive, "run_radius", run_radius)
+    if run_radius is None:
+        try:
+            run_radius = _scalar(_validate.positive, "run_radius", radius / 2)
+        except PathError:  # said as what the caller gave: the radius, not a run_radius
+            least = 1.0 / MAX_COORDINATE
+            raise PathError(f"run_radius (by default radius ({radius:g} mm) / 2 = {radius / 2:g} mm) is below {least:g} "
+                            f"mm, the least radius of an arc: give a larger radius (at least {2 * least:g} mm), or "
+                            f"run_radius (at least {least:g} mm and below the test radius)") from None
+    else:
+        run_radius = _scalar(_validate.positive, "run_radius", run_radius)
     if run_radius >= radius:
         raise PathError(f"run_radius ({run_radius} mm) must be below the test radius ({radius} mm)")
     run_angle = _scalar(_validate.positive, "run_angle", run_angle)

@@ -23,7 +23,8 @@ __all__ = [
     "circular_deviation", "deviation_from_nominal", "envelope_indices", "fit_circle_center", "magnification_for",
     "plot_path_error", "plot_polar_deviation",
     "plot_errors_over_time", "save_figures", "figure_files", "plot_compared_paths", "plot_compared_contour_error",
-    "plot_compared_figures", "plot_compared_zoom", "save_comparison_figures", "COMPARISON_FIGURES", "RESOLUTION_UM",
+    "plot_compared_figures", "plot_compared_zoom", "save_comparison_figures", "comparison_files", "COMPARISON_FIGURES",
+    "RESOLUTION_UM",
 ]
 
 #: The figures :func:`save_comparison_figures` writes, each as ``<name>_<figure>.png``.
@@ -1011,6 +1012,24 @@ def plot_compared_figures(figures, fig=None):
     return np.array([errors_ax, current_ax])
 
 
+def comparison_files(name):
+    """The names of the files :func:`save_comparison_figures` writes for the file name stem `name`, drawing none.
+
+    For a command to refuse them (:func:`contoursim.output.refused_early`) before its comparison runs.
+
+    Parameters
+    ----------
+    name : str
+        File name stem.
+
+    Returns
+    -------
+    list of str
+        ``<name>_<figure>.png`` for each of :data:`COMPARISON_FIGURES`.
+    """
+    return [f"{name}_{figure}.png" for figure in COMPARISON_FIGURES]
+
+
 def save_comparison_figures(comparison, out_dir, name):
     """Write ``<name>_compare_path.png``, ``_compare_zoom.png``, ``_compare_contour.png`` and ``_compare_table.png``.
 
@@ -1029,7 +1048,7 @@ def save_comparison_figures(comparison, out_dir, name):
     """
     runs = comparison.runs
     grid = dict(left=0.07, right=0.98, top=0.9, bottom=0.08, hspace=0.35, wspace=0.3)
-    path, zoom, contour, table = (f"{name}_{figure}.png" for figure in COMPARISON_FIGURES)
+    path, zoom, contour, table = comparison_files(name)
     drawings = [
         (path, (10.0, 7.0), grid, lambda fig: plot_compared_paths(runs, fig)),
         (zoom, (10.0, 7.4), grid, lambda fig: plot_compared_zoom(runs, fig)),

@@ -1100,6 +1100,8 @@ def _loop_margins(loop, below=np.inf):
         w_gain = _crossings(at, omega, response, lambda L: np.log(np.abs(L)))
     w_gain = w_gain[w_gain < below]
     w_phase = _crossings(at, omega, response, lambda L: L.imag)
+    if loop.dt:  # L is real at the Nyquist frequency, the grid's end: a phase crossover there if negative, which a
+        w_phase = np.append(w_phase, omega[-1])  # sign change on the grid finds by its rounding only
     w_phase = w_phase[at(w_phase).real < 0] if w_phase.size else w_phase
     gm, pm, wpc, wgc = np.inf, np.inf, np.nan, np.nan
     if w_phase.size:
@@ -1293,7 +1295,8 @@ def _remedy(loop, servo, dt, m, inner):
                     f"{1 / (2 * np.pi * integral):.4g} Hz: raise {gain}, or lengthen {_INTEGRAL_OF[loop]}")
         return f"lower {gain}" + (f", or lengthen {_INTEGRAL_OF[loop]}" if integral else "")
     if m["gain_margin"] < 1:  # above 1 at the phase crossover and crossing 1 nowhere: above 1 up to Nyquist
-        return f"lower {gain}, or check the mass ({servo.mass:.6g} kg)"
+        return (f"lower {gain}, or check the mass ({servo.mass:.6g} kg) and force_constant "
+                f"({servo.force_constant:.6g} N/A)")
     return f"raise {gain}, or check the mass ({servo.mass:.6g} kg)"
 
 

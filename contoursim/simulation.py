@@ -418,10 +418,16 @@ def default_settle(machine):
     -------
     float
         Five time constants of the machine's slowest position loop, ``5 / min(kp)`` [s].
+
+    Raises
+    ------
+    ValueError
+        A run of that many servo periods would not fit in the memory available (:meth:`Machine.check_settle`).
     """
     if not isinstance(machine, Machine):
         raise TypeError(f"machine must be a Machine (load_machine loads one), got {type(machine).__name__}")
-    return 5.0 / min(servo.kp for servo in machine.axes.values())
+    machine.check_settle()
+    return machine.settle
 
 
 def _target(model, trajectory, composition, preview):
@@ -646,7 +652,15 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
     trajectory, pushing, pushed = _reference(machine, reference, settle, preview, force)
     if machine.chain is not None:  # before the run: the machine file's drift over it within the chain's small errors
         check_drift(machine.chain, trajectory.t[-1] - trajectory.t[0])
-    q, response, servos = _servo_run(model, composition, trajectory, pushing, preview)
+    try:
+        q, response, servos = _servo_run(model, composition, trajectory, pushing, preview)
+    except UnstableLoopError as exc:  # the loop check passed the axes alone: name what acts on their loops
+        loop = [e.label for e in model.effects if e.stage == "loop"]
+        if not loop:
+            raise
+        raise UnstableLoopError(f"{exc} (the model's loop effects: {', '.join(loop)})", exc.margins) from None
+    for said in _bows_beyond_their_span(model, dict(zip(servos, _servo_part(model, q).T))):
+        warnings.warn(said, ContoursimWarning, stacklevel=2)
     away = _ran_away(response.position)
     if away.max() >= 0:
         a = int(np.argmax(away >= 0))
@@ -657,6 +671,13 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
                                 f"{', '.join(effects)}) or this coupling is unstable")
     elapsed = _elapsed(trajectory, preview)
     tool = model.geometry.tool_position(_actual(model, q, response.position), elapsed, trajectory.dim)
+    far = np.abs(tool) > MAX_TRAVEL
+    if far.any():  # not the loops (they stayed within it): the geometry, a bow extrapolated far beyond its span
+        k, j = np.unravel_index(int(np.argmax(far)), far.shape)
+        geometric = [e.label for e in model.stage("geometry")] or ["none"]
+        raise ValueError(f"the tool position reaches {tool[k, j]:.6g} mm on {'xyz'[j]} at t = {trajectory.t[k]:.6g} s, "
+                         f"beyond ±{MAX_TRAVEL:g} mm, the axes within it: the geometric effects "
+                         f"({', '.join(geometric)}) or the machine's error model put it there")
     static = model.geometry.tool_position(q, elapsed, trajectory.dim)
     del elapsed  # before the contour error is computed
     tool.flags.writeable = False  # the contour error keeps it as its actual points, without a copy
@@ -679,7 +700,31 @@ def simulate(model, reference, strategies=(), settle=None, contour=True, force=N
                          for axis, f in clipped.items())
         warnings.warn(f"the current command hit its limit on {axes}: the errors include the saturation",
                       ContoursimWarning, stacklevel=2)
+    for axis, commanded, moved in zip(servos, np.ptp(_servo_part(model, q), axis=0), np.ptp(response.position, axis=0)):
+        screw = servos[axis].screw_stiffness
+        if screw is not None and commanded > 0 and moved < 1e-3 * commanded:  # its motor turned, the table stayed
+            warnings.warn(f"axis {axis} was commanded over {commanded:.4g} mm and its table moved {moved:.4g} mm: its "
+                          f"screw (screw_stiffness_N_per_um = {screw:.4g}, {1e6 * screw * commanded * 1e-3:.4g} N "
+                          f"stretched over the whole command) does not carry the motor's motion to it",
+                          ContoursimWarning, stacklevel=2)
     return result
+
+
+def _bows_beyond_their_span(model, q):
+    """What to say of each straightness of `model` whose axis runs outside the bow's span (the travel it is given
+    over), where its parabola is extrapolated; `q`: the commanded positions by servo axis [mm]."""
+    said = []
+    for e in model.effects:
+        if e.name != "straightness" or e.axis not in q:
+            continue
+        start, end, low, high = e["start_mm"], e["start_mm"] + e["span_mm"], q[e.axis].min(), q[e.axis].max()
+        if low < start - 1e-9 * e["span_mm"] or high > end + 1e-9 * e["span_mm"]:
+            u = 2.0 * (np.array([low, high]) - (start + end) / 2) / e["span_mm"]
+            reach = float(np.abs(e["peak_um"] * (1.0 - u**2)).max())
+            said.append(f"{e.label}: axis {e.axis} runs over {low:.6g} .. {high:.6g} mm, beyond the bow's span "
+                        f"{start:.6g} .. {end:.6g} mm (start_mm, span_mm: the guideway's travel), where its parabola is "
+                        f"extrapolated: up to {reach:.4g} µm for a peak_um of {e['peak_um']:.4g}")
+    return said
 
 
 #: Largest kernel output one chunk of a batch may hold [bytes].

@@ -64,7 +64,7 @@ from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
 
 __all__ = ["FIGURES", "METHODS", "PARAMETER_KINDS", "Progress", "Sweep", "best_and_worst", "diverged_why",
-           "plot_sweep", "read_sweep", "run_sweep", "run_variants", "table_text", "write_results"]
+           "plot_sweep", "read_sweep", "run_sweep", "run_variants", "table_files", "table_text", "write_results"]
 
 #: How the variants are drawn.
 METHODS = ("grid", "random", "lhs")
@@ -672,7 +672,7 @@ def plot_sweep(sweep, table):
     import matplotlib.pyplot as plt
 
     ok = table[:, FIGURES.index("diverged")] == 0
-    figures = {}
+    names, figures = _plot_names(sweep), {}
     for j, name in enumerate(sweep.names):
         fig, axes = plt.subplots(2, 4, figsize=(17, 7), layout="constrained")
         x = sweep.values[:, j]
@@ -685,7 +685,7 @@ def plot_sweep(sweep, table):
         if (~ok).any():
             axes.flat[0].legend()
         fig.suptitle(f"{Path(sweep.source).name}: {len(x)} variants, strategies {sweep.strategies}")
-        figures[f"sweep_{name}"] = fig
+        figures[names[j]] = fig
     if len(sweep.names) == 2:
         fig, axes = plt.subplots(2, 4, figsize=(19, 8), layout="constrained")
         x, y = sweep.values[:, 0], sweep.values[:, 1]
@@ -696,8 +696,42 @@ def plot_sweep(sweep, table):
             ax.set(xlabel=sweep.names[0], ylabel=sweep.names[1], xscale="log" if sweep.log[0] else "linear",
                    yscale="log" if sweep.log[1] else "linear")
         fig.suptitle(f"{Path(sweep.source).name}: each figure over the two parameters (red crosses: diverged)")
-        figures["sweep_map"] = fig
+        figures[names[-1]] = fig
     return figures
+
+
+def _plot_names(sweep):
+    """The names of :func:`plot_sweep`'s figures: ``sweep_<parameter>`` for each parameter, ``sweep_map`` for two."""
+    return [f"sweep_{name}" for name in sweep.names] + (["sweep_map"] if len(sweep.names) == 2 else [])
+
+
+def _parquet():
+    """pyarrow and its Parquet module, or None when pyarrow is not installed (no ``sweep.parquet``)."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return None
+    return pa, pq
+
+
+def table_files(sweep):
+    """The names of the files :func:`write_results` writes whatever the variants give: the table and its plots.
+
+    ``sweep.csv``, ``sweep.parquet`` when pyarrow is installed, and a PNG of each of :func:`plot_sweep`'s figures;
+    those of the best and worst variants depend on the results (whether any variant ran, whether its path is a
+    circular test).
+
+    Parameters
+    ----------
+    sweep : Sweep
+
+    Returns
+    -------
+    list of str
+    """
+    return ["sweep.csv", *(["sweep.parquet"] if _parquet() is not None else []),
+            *(f"{name}.png" for name in _plot_names(sweep))]
 
 
 def write_results(sweep, table, out):
@@ -733,11 +767,7 @@ def write_results(sweep, table, out):
     from .simulation import simulate
 
     out = dataclasses.replace(output_dir(out), by="sweep")  # each file recorded as a sweep's
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:
-        pa = None
+    parquet = _parquet()
     figures = plot_sweep(sweep, table)
     chosen = best_and_worst(table)
     runs, metadata = {}, {}  # the best and the worst variant re-run, and what their CSVs say of them
@@ -752,14 +782,15 @@ def write_results(sweep, table, out):
                 warnings.warn(f"the {label} variant, {i}: {warning.message}", warning.category, stacklevel=2)
             metadata[label] = {"sweep": Path(sweep.source).name, "variant": i,
                                "values": "; ".join(f"{n} = {v!r}" for n, v in zip(sweep.names, sweep.values[i].tolist()))}
-    written = ["sweep.csv", *(["sweep.parquet"] if pa is not None else []), *(f"{name}.png" for name in figures),
-               *(f"{label}.csv" for label in runs), *(figure_files(runs, "best_worst") if runs else [])]
+    written = [*table_files(sweep), *(f"{label}.csv" for label in runs),
+               *(figure_files(runs, "best_worst") if runs else [])]
     try:
         for name in written:  # every name refused before any file is written (a user's file of a plot's name)
             out.file(name)
         with out.write("sweep.csv") as stream:
             stream.write(table_text(sweep, table))
-        if pa is not None:
+        if parquet is not None:
+            pa, pq = parquet
             columns = {"variant": np.arange(len(table))}
             columns.update((name, sweep.values[:, j]) for j, name in enumerate(sweep.names))
             columns.update((key, table[:, j].astype(bool) if key == "diverged" else table[:, j])

@@ -37,14 +37,13 @@ columns, a column in other units) is refused.
 import io
 import math
 import re
-from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import _validate
-from .config import read_text, text_lines
+from .config import read_text, text_lines, unique_columns
 from .exceptions import TraceFormatError
 from .output import writing
 
@@ -326,9 +325,7 @@ def read_trace(file):
     def fail(message, line=header_line):
         return TraceFormatError(message, source, line)
 
-    repeated = sorted(name for name, count in Counter(names).items() if count > 1)
-    if repeated:
-        raise fail(f"column name(s) {', '.join(map(repr, repeated))} appear more than once in the header")
+    unique_columns(names, source, header_line, TraceFormatError)
 
     axes = tuple(a for a in ("x", "y", "z") if a in names or f"{a}_ref" in names)
     if "t" not in names:

@@ -172,7 +172,7 @@ def test_a_long_run_is_said_before_it_starts(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(contoursim.cli, "_LONG_RUN", 1000)
     assert main(["simulate", str(tmp_path / "small.toml"), "--machine", "demo_mill", "--out", str(tmp_path / "o")]) == 0
     said = [line for line in capsys.readouterr().err.splitlines() if "servo periods of" in line]
-    assert len(said) == 1 and said[0].startswith("contoursim: the motion lasts ") and said[0].endswith(
+    assert len(said) == 1 and said[0].startswith("contoursim: the run lasts ") and said[0].endswith(
         "GB of memory: this takes minutes"), said
     monkeypatch.setattr(contoursim.cli, "_LONG_RUN", 10**9)
     assert main(["simulate", str(tmp_path / "small.toml"), "--machine", "demo_mill", "--out", str(tmp_path / "p")]) == 0
@@ -665,6 +665,9 @@ def test_compare_tune_tunes_each_coupled_strategy_under_the_check(tmp_path, caps
     ("feedforward+zpetc", "feedforward and zpetc are both a feedforward"),
     ("none,none", "strategy 'none' is named twice"),
     ("none+none", "strategy 'none' is named twice in 'none+none'"),  # ran as a strategy called 'none+none'
+    ("feedforward+ccc_arc,ccc_arc+feedforward", "strategy 'ccc_arc+feedforward' is 'feedforward+ccc_arc', named "
+                                                "twice"),  # the same run twice, two rows alike
+    ("none+feedforward", "'none' in 'none+feedforward': none is no compensation"),  # ran labelled so, feedforward alone
     ("geometric", "needs a machine with a geometric error model"),
     (" , ", "argument --strategies: names no strategy; got ' , '"),  # the API's message named no option
 ])

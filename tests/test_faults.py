@@ -224,6 +224,21 @@ def test_a_loop_made_too_fast_or_unstable_by_one_setting_is_said_at_that_setting
     assert not (tmp_path / "out").exists()
 
 
+def test_a_machine_files_axis_no_machine_has_or_a_loop_too_slow_to_settle_is_refused_at_its_line(tmp_path, capsys):
+    """[axes.q] on a machine without bodies was reported at [axes.x]'s line, "in that order" (the tables may come in
+    any order); kp_per_s = 1e-6 (inside its range) was refused as "a hold of 5e+06 s ... check the duration", naming
+    the path file, which holds no hold nor duration: the settle after the path is 5/kp."""
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    command = ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out", str(tmp_path / "out")]
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).replace("[axes.y]", "[axes.q]"))
+    _refused(capsys, command, f"{tmp_path / 'm.toml'}, line 13: unknown axis 'q' ([axes.q]): a machine without bodies "
+                              "has the axes x, y (, z)")
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).replace("kp_per_s = 40.0", "kp_per_s = 1e-6", 1))
+    _refused(capsys, command, f"{tmp_path / 'm.toml'}, line 11: axis x: kp_per_s = 1e-06 1/s settles in 5/kp = 5e+06 s "
+                              "after the path: at the servo period of 0.0005 s", "check kp_per_s")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_huge_machine_is_refused_in_one_line_without_nan(tmp_path, capsys):
     (tmp_path / "m.toml").write_text(MACHINE.format(mass=1e11))  # a heavy axis: the loop gain never reaches 1
     (tmp_path / "small.toml").write_text(SMALL_PATH)
@@ -1188,3 +1203,137 @@ def test_an_existing_report_nested_too_deeply_to_read_is_not_overwritten(tmp_pat
     _refused(capsys, ["compare", str(tmp_path / "small.toml"), "--strategies", "none", "--json", str(tmp_path / "r.json"),
                       "--out", str(tmp_path / "out")], "r.json exists and is not a")
     assert (tmp_path / "r.json").read_text().startswith("[[[")
+
+
+# -- faults5: a jerk-limited start, error tables' columns, a loop gain too high, a default run-in, arc radii ---------
+
+
+def test_a_jerk_limited_start_whose_first_steps_are_below_rounding_runs(tmp_path, capsys):
+    """jerk_mm_s3 = 3e-6 (within its range) on the 2 mm ISO circle: the first samples advance in arc length by 1e-18 mm,
+    below their positions' rounding, and the contour error's search divided by the zero chord between two of them
+    (a ZeroDivisionError traceback). Far from the origin, 1e-3 mm/s³ does the same on a short circle."""
+    (tmp_path / "slow.toml").write_text('[feed]\nfeed_mm_min = 600\naccel_mm_s2 = 500\njerk_mm_s3 = 1e-3\n\n[path]\n'
+                                        'type = "circle"\ncenter_mm = [1000, 1000]\nradius_mm = 0.01\n'
+                                        'start_angle_deg = 45\n')
+    assert main(["simulate", str(tmp_path / "slow.toml"), "--out", str(tmp_path / "out")]) == 0
+    out, err = capsys.readouterr()
+    assert "error" not in err and "Traceback" not in err, err
+    assert re.search(r"^slow +\d", out, re.M), out
+
+
+@pytest.mark.parametrize("header, words", [
+    ("position_mm,dx_um,dx_um", "column name(s) 'dx_um' appear more than once in the header"),  # the last copy won
+    ("position_mm,dx_um,position_mm", "column name(s) 'position_mm' appear more than once in the header"),  # the first
+    ("position_mm", "the error table has no error column, only 'position_mm': add one or more of dx_um, dy_um"),
+])
+def test_an_error_tables_header_naming_a_column_twice_or_no_error_is_refused_at_its_line(tmp_path, capsys, header,
+                                                                                        words):
+    """A table's repeated column was read as its last copy (its first, for position_mm), and a table of positions only
+    contributed nothing: each without a word, as a trace's repeated column is not."""
+    preset = preset_file("vertical_mill_3axis")
+    (tmp_path / "m.toml").write_text(preset.read_text())
+    table = tmp_path / "vertical_mill_x_laser.csv"  # the X body's error table, beside it
+    cells = ",".join(["0"] * len(header.split(",")))
+    table.write_text(f"{header}\n{cells}\n{cells.replace('0', '500', 1)}\n")
+    _refused(capsys, ["volumetric", str(tmp_path / "m.toml"), "--out", str(tmp_path / "out")], f"{table}, line 1: {words}")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("key, value", [("kv_A_s_per_m = 80.0", "kv_A_s_per_m = 20000"),
+                                        ("mass_kg = {mass}", "mass_kg = 1e-3"),
+                                        ("force_constant_N_per_A = 942.0", "force_constant_N_per_A = 1e6")])
+def test_a_velocity_loop_gain_far_too_high_is_told_to_come_down(tmp_path, capsys, key, value):
+    """The sampled loop's phase reaches -180° at the Nyquist frequency, where its gain is 15.7 (kv = 20000): that phase
+    crossover, at the grid's end, went unseen, the gain margin read inf and the loop 'never reaches 1 ... raise kv'."""
+    (tmp_path / "m.toml").write_text(MACHINE.replace(key, value, 1).format(mass=300.0))
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    _refused(capsys, ["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                      str(tmp_path / "out")], f"{tmp_path / 'm.toml'}, line 6: the velocity loop of axis 'x' is unstable",
+             "no gain crossover (the loop gain stays above 1 up to the Nyquist frequency)",
+             "lower kv_A_s_per_m, or check the mass_kg", "and force_constant_N_per_A")
+
+
+def test_a_test_circle_too_small_for_its_default_run_in_is_said_so_in_the_files_terms(tmp_path, capsys):
+    """radius_mm = 1e-6 was refused quoting 'radius_mm = 5e-07 is outside [1e-06, 1e+06]': its default run-in radius
+    (R/2), a value the file does not hold, under the name of the one it does."""
+    (tmp_path / "tiny.toml").write_text('[feed]\nfeed_mm_min = 600\n\n[path]\ntype = "iso230_4_circle"\nradius_mm = 1e-6\n')
+    _refused(capsys, ["simulate", str(tmp_path / "tiny.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'tiny.toml'}, line 6: bad iso230_4_circle [path]: run_radius_mm (by default radius_mm (1e-06 mm) "
+             "/ 2 = 5e-07 mm) is below 1e-06 mm, the least radius of an arc: give a larger radius_mm (at least 2e-06 mm), "
+             "or run_radius_mm (at least 1e-06 mm and below the test radius)")
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_arcs_radii_that_differ_are_shown_differing(tmp_path, capsys):
+    """Radii of 1e6 mm 1 mm apart were both shown as 1.00499e+06 mm."""
+    (tmp_path / "big.nc").write_text("G21 G90 G17\nG1 X0 Y0 F600\nG2 X10 Y0 I100000 J-1000000\nM30\n")
+    _refused(capsys, ["simulate", str(tmp_path / "big.nc"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'big.nc'}, line 3: arc start radius 1004987.56 mm and end radius 1004986.57 mm differ by more "
+             "than 0.002 mm")
+
+
+# -- faults6: a run made long by its settle, a job's [feed] too long for the memory, a user's file where a run writes --
+
+
+def test_a_run_made_long_by_the_settle_after_the_path_is_said_before_it_starts(tmp_path, capsys, monkeypatch):
+    """kp_per_s = 0.001 (within its range) held a 2-s path for 5/kp = 5000 s: 10 M servo periods and 4.5 GB without the
+    notice, which counted the motion only. Here kp_per_s = 1 holds a 3,810-period motion for 10,000 periods, beyond a
+    threshold (lowered from 5 M) that the motion alone stays below."""
+    import contoursim.cli
+
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "m.toml").write_text(MACHINE.format(mass=300.0).replace("kp_per_s = 40.0", "kp_per_s = 1.0", 1))
+    monkeypatch.setattr(contoursim.cli, "_LONG_RUN", 10_000)
+    assert main(["simulate", str(tmp_path / "small.toml"), "--machine", str(tmp_path / "m.toml"), "--out",
+                 str(tmp_path / "out")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "servo periods of" in line]
+    assert len(said) == 1 and said[0].startswith("contoursim: the run lasts 6.9"), said
+    assert (", of which 5 s the settle after the path, 5/kp of axis x (kp_per_s = 1): 1.38e+04 servo periods of "
+            "0.0005 s to simulate") in said[0], said
+
+
+@pytest.mark.parametrize("feed, words", [
+    ("centripetal_accel_mm_s2 = 1e-6", "[feed] centripetal_accel_mm_s2 = 1e-06, overriding small.toml's: the motion "
+                                       "lasts 14248.8 s: at dt = 0.0002 s"),  # blamed on small.toml, without a line
+    ("feed_mm_min = 0.01", "[feed] feed_mm_min = 0.01, overriding small.toml's: the motion lasts 113097 s"),  # no line
+])
+def test_a_jobs_feed_that_makes_the_motion_too_long_for_the_memory_is_refused_at_its_line(tmp_path, capsys, monkeypatch,
+                                                                                          feed, words):
+    """A job's [feed] override that lengthens the path file's motion beyond the memory was refused naming the path file,
+    which the user did not change (or the job without a line); a path file too long of its own keeps its name."""
+    monkeypatch.setattr(_memory, "available", lambda: 10**9)
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "job.toml").write_text(f'machine = "demo_mill"\npath = "small.toml"\n[feed]\n{feed}\n')
+    _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'job.toml'}, line 4: {words}", "and 1 GB are available")
+    (tmp_path / "slow.toml").write_text(SMALL_PATH.replace("feed_mm_min = 600", "feed_mm_min = 0.01", 1))
+    (tmp_path / "job.toml").write_text('machine = "demo_mill"\npath = "slow.toml"\n[feed]\naccel_mm_s2 = 1000\n')
+    _refused(capsys, ["simulate", str(tmp_path / "job.toml"), "--out", str(tmp_path / "out")],
+             f"{tmp_path / 'slow.toml'}: the motion lasts 113097 s")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command, name", [("sweep", "sweep_axes.x.ti_s.png"), ("sweep", "sweep.csv"),
+                                           ("compare", "small_compare_zoom.png")])
+def test_a_users_file_where_a_sweep_or_compare_writes_is_refused_before_it_runs(tmp_path, capsys, monkeypatch,
+                                                                                command, name):
+    """A user's file in an earlier run's folder, under a name the sweep (the comparison) writes, was refused only once
+    every variant (strategy) had run, and their results were thrown away."""
+    import contoursim.comparison
+    import contoursim.sweep
+
+    def ran(*args, **kwargs):
+        raise AssertionError("the run started")
+
+    monkeypatch.setattr(contoursim.sweep, "run_sweep", ran)
+    monkeypatch.setattr(contoursim.comparison, "compare", ran)
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    (tmp_path / "s.toml").write_text('machine = "demo_mill"\npath = "small.toml"\n[sweep]\nmethod = "grid"\n[[vary]]\n'
+                                     'name = "axes.x.ti_s"\nvalues = [0.016, 0.02]\n')
+    out = output_dir(tmp_path / "out").path  # contoursim's folder, an earlier run's
+    (out / name).write_text("mine\n")
+    argv = (["sweep", str(tmp_path / "s.toml")] if command == "sweep"
+            else ["compare", str(tmp_path / "small.toml"), "--strategies", "none"])
+    _refused(capsys, [*argv, "--out", str(out)],
+             f"{out / name} exists and contoursim did not write it; refusing to overwrite it")
+    assert (out / name).read_text() == "mine\n"

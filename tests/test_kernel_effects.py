@@ -88,7 +88,8 @@ MODE = dict(mode_freq_hz=80.0, mode_damping_ratio=0.03, mode_mass_ratio=0.25)
 
 
 @pytest.mark.parametrize("extra", [dict(damping=1500.0), dict(damping=1500.0, **ELECTRICAL), dict(ti=None)])
-@pytest.mark.parametrize("effects", [LoopEffects(), LoopEffects(**MODE)])
+@pytest.mark.parametrize("effects", [LoopEffects(), LoopEffects(**MODE), LoopEffects(**{**MODE, "mode_damping_ratio": 1.0})],
+                         ids=["rigid", "mode", "critically damped mode"])  # the catalogue's damping reaches 1
 def test_packed_plant_equals_python_control_zoh(extra, effects):
     servo = axis(**extra)
     row = pack(servo, DT, effects)
@@ -692,7 +693,8 @@ def test_importing_the_kernel_does_not_import_python_control():
         (dict(coulomb_N=float("nan")), "coulomb_N"),
         (dict(stribeck_velocity_mm_s=0.0), "stribeck_velocity_mm_s"),
         (dict(mode_freq_hz=-5.0), "mode_freq_hz"),
-        (dict(mode_damping_ratio=1.0), "mode_damping_ratio"),
+        (dict(mode_damping_ratio=0.0), "mode_damping_ratio"),
+        (dict(mode_mass_ratio=1.0), "mode_mass_ratio"),
         (dict(mode_mass_ratio=0.0), "mode_mass_ratio"),
         (dict(noise_mm=-1.0), "noise_mm"),
         (dict(seed=-1), "seed"),

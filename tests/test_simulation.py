@@ -516,3 +516,78 @@ def test_the_measured_reference_hold_and_settle_refuse_bad_arguments_naming_them
     assert len(still.held(0.0025)) == 13
     with pytest.raises(TypeError, match="machine must be a Machine"):
         default_settle("demo_mill")
+
+
+def test_a_bow_the_path_runs_beyond_the_span_of_is_said_with_its_extrapolated_size():
+    """A straightness is a bow over its guideway's travel (start_mm .. start_mm + span_mm): a path outside it got the
+    parabola extrapolated without a word (a 5 µm bow over 500 .. 600 mm, the path at -2 .. 2 mm: 604 µm). It is said,
+    with the size there from the bow's formula; a bow the path stays within says nothing."""
+    from contoursim.effects import Effect
+    from contoursim.model import Model
+
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    path = paths.iso230_4_circle(2.0, direction="ccw")
+    reference = sample(path, plan(path, feed=10.0, accel=500.0), DT)
+    low, high = reference.position[:, 0].min(), reference.position[:, 0].max()
+    u = 2.0 * (np.array([low, high]) - 550.0) / 100.0
+    beyond = float(np.abs(5.0 * (1.0 - u**2)).max())  # [µm]
+    off = Effect("straightness", "x", peak_um=5.0, span_mm=100.0, start_mm=500.0, error_direction="y")
+    with pytest.warns(ContoursimWarning, match=rf"straightness.x: axis x runs over -2 .. 2 mm, beyond the bow's span "
+                                               rf"500 .. 600 mm .* up to {beyond:.4g} µm for a peak_um of 5"):
+        simulate(Model(machine, (off,)), reference)
+    within = Effect("straightness", "x", peak_um=5.0, span_mm=100.0, start_mm=-50.0, error_direction="y")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ContoursimWarning)
+        simulate(Model(machine, (within,)), reference)
+
+
+def test_a_tool_the_geometry_puts_beyond_any_travel_is_refused_naming_the_effects():
+    """A bow extrapolated a million mm beyond its span puts the tool 2e6 mm away: refused naming the effects, not
+    the contour error's array index."""
+    from contoursim.effects import Effect
+    from contoursim.model import Model
+
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    path = paths.iso230_4_circle(2.0, direction="ccw")
+    reference = sample(path, plan(path, feed=10.0, accel=500.0), DT)
+    far = Effect("straightness", "x", peak_um=5.0, span_mm=100.0, start_mm=1e6, error_direction="y")
+    with pytest.warns(ContoursimWarning), pytest.raises(
+            ValueError, match=r"^the tool position reaches -2.000.e\+06 mm on y at t = 0 s, beyond ±1e\+06 mm, the axes "
+                              r"within it: the geometric effects \(straightness.x\)"):
+        simulate(Model(machine, (far,)), reference)
+
+
+def test_a_loop_a_structural_mode_makes_diverge_names_the_models_loop_effects():
+    """Nearly all the axis's mass on the mode's spring (mass_ratio 0.99): the velocity loop, tuned for the whole
+    mass, drives a carriage of a hundredth of it and diverges. The kernel's message named the axis alone."""
+    from contoursim.effects import Effect
+    from contoursim.exceptions import UnstableLoopError
+    from contoursim.model import Model
+
+    machine = Machine({"x": AxisServo(kp=40.0, **AXIS), "y": AxisServo(kp=40.0, **AXIS)}, DT)
+    path = paths.iso230_4_circle(2.0, direction="ccw")
+    reference = sample(path, plan(path, feed=10.0, accel=500.0), DT)
+    mode = Effect("vibration", "x", freq_hz=80.0, damping_ratio=0.05, mass_ratio=0.99)
+    with pytest.raises(UnstableLoopError, match=r"^the simulation of axis 'x' diverged .* \(the model's loop effects: "
+                                                r"vibration.x\)$"):
+        simulate(Model(machine, (mode,)), reference)
+
+
+def test_a_screw_too_soft_to_carry_the_motors_motion_is_said():
+    """A compliant screw of 1e-12 N/µm (inside its range): the motor follows its command, the table does not move,
+    and the run reported its errors without a word. It says so; a real screw (150 N/µm) says nothing."""
+    dt = 5e-4  # the fault's machine file's period
+    path = paths.iso230_4_circle(2.0, direction="ccw")
+    reference = sample(path, plan(path, feed=10.0, accel=500.0), dt)
+
+    def run(stiffness):
+        x = AxisServo(kp=40.0, motor_mass=100.0, screw_stiffness=stiffness, **AXIS)
+        return simulate(Machine({"x": x, "y": AxisServo(kp=40.0, **AXIS)}, dt), reference)
+
+    with pytest.warns(ContoursimWarning, match=r"^axis x was commanded over 4 mm and its table moved .* mm: its screw "
+                                               r"\(screw_stiffness_N_per_um = 1e-12, 4e-09 N stretched over the whole "
+                                               r"command\) does not carry the motor's motion to it$"):
+        run(1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ContoursimWarning)
+        run(150.0)
