@@ -707,8 +707,6 @@ def strategies_named(name, model=None, chain=None, settings=None):
                              f"{', '.join(makers)}, joined by '+'")
         if part in parts[:i]:  # "none+none" ran as a strategy of its own; a strategy twice is refused below
             raise ValueError(f"strategy {part!r} is named twice in {name!r}: name each part once")
-        if part == "none" and len(set(parts)) > 1:  # ran labelled "none+feedforward", the feedforward alone
-            raise ValueError(f"'none' in {name!r}: none is no compensation, not a part of one; name the other parts")
         try:
             made = makers[part]()
         except ValueError as exc:  # a value the strategy refuses: said by its file key ("kp_per_s must be ...")
@@ -721,5 +719,7 @@ def strategies_named(name, model=None, chain=None, settings=None):
             raise ValueError("the geometric strategy needs a machine with a geometric error model (bodies)")
         if made is not None:
             strategies.append(made)
+    if "none" in parts and len(parts) > 1:  # ran labelled "none+feedforward", the feedforward alone
+        raise ValueError(f"'none' in {name!r}: none is no compensation, not a part of one; name the other parts")
     Composition(strategies)  # checks the combination
     return tuple(strategies)

@@ -50,8 +50,7 @@ The workflow (:func:`diagnose`):
    and it closes at least :data:`GAP_SHARE` of the residual's power above
    the noise floor on the axes it acts on (where unmodelled dynamics
    dominate the residual, a catalogue effect bent to them is significant
-   yet closes a sliver) and at least :data:`RESOLVED` of the noise level
-   there (on a long trace a sliver of the model's own misfit is significant);
+   yet closes a sliver);
    the search repeats for a second and a third effect and stops when
    nothing is significant or, an effect named, the residual is at the noise floor
    (:data:`NOISE_FLOOR`). Two candidates within :data:`SIGNIFICANT` of each other are
@@ -89,8 +88,8 @@ from .simulation import measured_force, measured_reference, simulate_batch
 from .traces import Trace
 
 __all__ = [
-    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "REPORT_FORM", "REPORT_OPTIONAL", "RESOLVED",
-    "SIGNIFICANT", "STRUCTURE_SHARE", "TIMING_SPREAD", "UNCERTAINTY_METHOD",
+    "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "REPORT_FORM", "REPORT_OPTIONAL", "SIGNIFICANT",
+    "STRUCTURE_SHARE", "TIMING_SPREAD", "UNCERTAINTY_METHOD",
     "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
     "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
@@ -128,13 +127,6 @@ NOISE_FLOOR = 1.1
 #: axes it acts on (RMS² − floor²): a significant fit that closes a sliver of a gap made by unmodelled dynamics is
 #: not the missing effect.
 GAP_SHARE = 0.25
-#: An effect is named only when what it closes on the axes it acts on, √(RMS² before − RMS² after), is at least this
-#: fraction of the noise level there: the ΔBIC of a fit grows with the trace's samples, and a plant misfit that the
-#: catalogue's laws cannot follow is the same on every lap of a path run again and again, so on a long trace a
-#: catalogue effect bent to a sliver of it is significant (a bow of 1.9 µm over 400 mm on a two-mass null circle run six
-#: times, 23 s: 0.0253 µm RMS closed in 0.299 µm of noise, ΔBIC 177). The smallest hidden effects named right on the
-#: bench close 0.27–0.36 noise levels (a vibration, thermal drifts, a friction).
-RESOLVED = 0.15
 #: The noise is the white part of the residual alone where the second differences' estimate exceeds it this many
 #: times (:func:`noise_level`): white noise's two estimates agree within 6 % at 1000 samples, 59 % at 200.
 LINE_RATIO = 2.0
@@ -2596,14 +2588,6 @@ def _diagnose(trace, model, identified, max_effects, say):
             warnings.append(f"{best.fit.label}: not named, it closes {share:.0%} of the residual above the noise floor "
                             f"on {_acts_on(best.fit)} ({before_um:.4g} -> {after_um:.4g} µm RMS, floor {floor:.3g} µm; "
                             f"named from {GAP_SHARE:.0%})")
-            problem.set_base(base)
-            break
-        closed = np.sqrt(max(before_um**2 - after_um**2, 0.0)) / floor
-        if closed < RESOLVED:  # significant only by the trace's length: a sliver of the model's own misfit
-            warnings.append(f"{best.fit.label}: not named, what it closes on {_acts_on(best.fit)} is {closed:.2g} of the "
-                            f"noise level ({before_um:.4g} -> {after_um:.4g} µm RMS, floor {floor:.3g} µm; named from "
-                            f"{RESOLVED:g}): at the noise, which the model's own misfit repeated along a long trace "
-                            "makes significant")
             problem.set_base(base)
             break
         warnings += ambiguities

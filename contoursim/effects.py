@@ -515,6 +515,7 @@ def read_effects(toml, *keys):
             effects.append(Effect(kind.name, item["axis"], **values))
         except (TypeError, ValueError) as exc:
             message = str(exc)
-            bad = next((k for k in values if repr(k) in message or message.split(": ", 1)[-1].startswith(k)), None)
+            said = message.split(": ", 1)[-1]
+            bad = next((k for k in (*values, "axis") if repr(k) in message or said.startswith(k)), None)
             raise toml.error(f"[[effect]] {message}", *where, *((bad,) if bad else ())) from None
     return tuple(effects)

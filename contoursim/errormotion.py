@@ -263,6 +263,12 @@ def read_error_table(path, rotary=False):
     start = next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
     if start is None:
         raise ConfigError("the error table has no header row", source)
+    for number, line in enumerate(lines[:start], start=1):
+        key, colon, _ = line.lstrip()[1:].partition(":")
+        if colon and key.strip().lower() in ("units", "unit"):  # read as a trace's would be: not ignored, refused
+            raise ConfigError("an error table's units are its columns' (position_mm or position_deg, dx_um .. dz_um, "
+                              "ex_urad .. ez_urad): a '# units:' line is not read; drop it, converting the columns to "
+                              "those units", source, number)
     header = [h.strip() for h in next(csv.reader([lines[start]]))]
     unique_columns(header, source, start + 1)
     position = "position_deg" if rotary else "position_mm"

@@ -1308,7 +1308,7 @@ def _motion_from_toml(toml, base, where, item, rotary, travel, fail):
             if not path.exists():
                 raise fail(f"error table {str(errors['table'])!r} not found (relative to {base})", "errors", "table") from None
             raise exc
-        _warn_short_table(str(errors["table"]), tables, travel, rotary, fail)
+        _table_against_travel(str(errors["table"]), tables, travel, rotary, fail)
     to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
     period_key = "period_deg" if rotary else "period_mm"
     motion = []
@@ -1342,21 +1342,30 @@ def _motion_from_toml(toml, base, where, item, rotary, travel, fail):
     return tuple(motion)
 
 
-def _warn_short_table(name, tables, travel, rotary, fail):
-    """Warn when the error table `name` (`tables`, read by :func:`read_error_table`) does not cover the axis's travel,
-    refuse it when it covers none of it.
+def _table_against_travel(name, tables, travel, rotary, fail):
+    """Refuse the error table `name` (`tables`, read by :func:`read_error_table`) where its positions lie beyond any
+    travel (:data:`MAX_TRAVEL`), span a hundred times the axis's travel or more (positions in µm, or of another
+    machine) or cover none of it; warn when it does not cover all of it.
 
     Beyond its ends the table's first and last values are held (``np.interp``): an error the table
     does not give, which the user is told of rather than left to find in the results.
     """
-    if travel is None or not tables:
+    if not tables:
         return
     positions = next(iter(tables.values()))[0]  # every column shares the table's positions
-    if positions[0] <= travel[0] and positions[-1] >= travel[1]:
-        return
     unit, shown = ("°", np.rad2deg) if rotary else (" mm", np.asarray)
     lo, hi = shown([positions[0], positions[-1]])
+    if max(abs(lo), abs(hi)) > MAX_TRAVEL:
+        raise fail(f"error table {name!r} holds positions up to {max(abs(lo), abs(hi)):g}{unit}, beyond any travel "
+                   f"(±{MAX_TRAVEL:g}{unit})", "errors", "table")
+    if travel is None:
+        return
     start, end = shown(travel)
+    if hi - lo >= 100 * (end - start):  # its rows a hundred travels apart: only its first or last value would apply
+        raise fail(f"error table {name!r} spans {lo:g} .. {hi:g}{unit}, {(hi - lo) / (end - start):.3g} times the "
+                   f"travel {start:g} .. {end:g}{unit}: positions in µm (or of another axis)?", "errors", "table")
+    if positions[0] <= travel[0] and positions[-1] >= travel[1]:
+        return
     if positions[-1] < travel[0] or positions[0] > travel[1]:  # held values alone: the table's errors never apply
         raise fail(f"error table {name!r} covers {lo:g} .. {hi:g}{unit}, none of the travel {start:g} .. {end:g}{unit}: "
                    "positions of another axis, or a sign or unit wrong?", "errors", "table")

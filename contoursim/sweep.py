@@ -210,6 +210,8 @@ def read_sweep(file):
         Naming the file and line of a bad key or value, or of a parameter
         the job has no place for (saying which names it has).
     """
+    from .machine import _file_names
+
     file = Path(file)
     toml = TomlFile.read(file)
     if toml.kind() != "job":
@@ -220,6 +222,8 @@ def read_sweep(file):
     if method not in METHODS:
         raise toml.error(f"method must be one of {', '.join(METHODS)}, got {method!r}", "sweep", "method")
     varies = toml.data.get("vary")
+    if isinstance(varies, dict):  # [vary]: one table, not an array of them
+        raise toml.error("[vary] is one table: a sweep's parameters are each a [[vary]] table (double brackets)", "vary")
     if not isinstance(varies, list) or not varies:
         raise toml.error("a sweep needs at least one [[vary]] table: name = \"axes.x.kp_per_s\", min = ..., max = ...")
     tables = [toml.table("vary", i, allowed=_VARY_KEYS, required=("name",)) for i in range(len(varies))]
@@ -256,7 +260,7 @@ def read_sweep(file):
             except (TypeError, ValueError) as exc:
                 why = ("; its min and max are taken, a value drawn between them not: vary it on a grid with values = "
                        "[...]" if k >= len(bounds) > 0 else "")
-                raise toml.error(f"vary {name!r}: {exc}{why}", "vary", i, "name") from None
+                raise toml.error(f"vary {name!r}: {_file_names(exc)}{why}", "vary", i, "name") from None
     return made
 
 

@@ -10,7 +10,8 @@ commanded (interpolator) positions, the others the measured tool positions.
 Optional measured inputs, per axis: ``<axis>_force`` [N], a known external
 force on the axis (test pulses, a cutting force), and ``<axis>_current`` [A],
 the measured motor current; read and checked like the positions. Other
-columns are ignored on reading.
+columns are ignored on reading; one whose name is close to an input's
+(``x_force_N``, ``X_current``, ``x_curent``) is said in a warning.
 
 Values must be physically meaningful: positions within ±1e6 mm
 (:data:`MAX_POSITION`, a kilometre, far beyond any machine's travel) and
@@ -37,6 +38,7 @@ columns, a column in other units) is refused.
 import io
 import math
 import re
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -44,7 +46,7 @@ import numpy as np
 
 from . import _validate
 from .config import read_text, text_lines, unique_columns
-from .exceptions import TraceFormatError
+from .exceptions import ContoursimWarning, TraceFormatError
 from .output import writing
 
 __all__ = ["Trace", "check_every", "read_trace", "write_trace"]
@@ -347,6 +349,13 @@ def read_trace(file):
     inputs = {f"{axis}_{kind}": kind for kind in INPUTS for axis in axes if f"{axis}_{kind}" in names}
     wanted = ["t"] + positions + list(inputs)
     index = [names.index(name) for name in wanted]
+    unread = [f"{axis}_{kind}" for kind in INPUTS for axis in axes if f"{axis}_{kind}" not in inputs]
+    for name in names:  # an input's column under another name is not read: a known force lost without a word
+        near = _validate.closest(name.lower(), unread) if name not in wanted else ""
+        if near:
+            warnings.warn(f"{source}, line {header_line}: column {name!r} is not read{near}: a known force is read "
+                          "from '<axis>_force', a measured current from '<axis>_current' (their units on a '# units:' "
+                          "line)", ContoursimWarning, stacklevel=2)
     units = {} if units_line is None else _declared_units(metadata["units"], units_key, names, wanted, inputs,
                                                           lambda msg: fail(msg, units_line))
     if units_line is not None:  # the trace holds s, mm, N, A: its metadata says so, and a trace written back reads the same

@@ -425,24 +425,6 @@ def test_a_drift_that_leaves_the_residual_within_a_tenth_of_the_noise_is_named(i
     assert abs(step.effect["rate_um_per_min"] - rate) <= 2 * step.uncertainty["rate_um_per_min"], result.report()
 
 
-def test_a_sliver_of_the_models_misfit_a_long_trace_makes_significant_is_not_named(independent_truth, tmp_path):
-    """An independent effect-free two-mass pair on a CCW circle run six times (23 s), its data sheet as the model: the
-    plant's misfit, which no catalogue law follows, is the same on every lap, and a bow of Y fitted to it closed
-    0.0253 µm RMS in 0.299 µm of noise (0.30113 -> 0.30006 µm on its axis), yet with ΔBIC 177 on 45724 samples it
-    was named (run once, the same misfit was not significant). An effect closing less than RESOLVED noise levels is
-    not named, and the report says why."""
-    from contoursim.diagnosis import RESOLVED, diagnose
-    from contoursim.model import load_model
-    from contoursim.traces import read_trace
-
-    case = independent_truth.make_case("two_mass", None, 899339824, tmp_path, laps=6)
-    assert case.path == "circle_ccw" and not case.truths
-    result = diagnose(read_trace(case.csv), load_model(case.machine_file))
-    assert result.effects == (), result.report()
-    said = [w for w in result.warnings if "of the noise level" in w and f"named from {RESOLVED:g}" in w]
-    assert said and said[0].startswith("straightness.y: not named"), result.warnings
-
-
 def test_without_a_model_a_mode_the_identified_loops_took_up_as_lag_is_named_on_loops_identified_around_it(
         independent_truth, tmp_path):
     """An independent rigid pair whose Y carries its tool on an 88 Hz mode (damping 0.034), on a CCW circle: the

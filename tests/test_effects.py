@@ -421,6 +421,9 @@ angle_urad = -40
      r"line 5: .*unknown parameter 'lost_motion' \(did you mean 'lost_motion_um'\?\); its parameters are lost_motion_um, feedback"),
     ('name = "backlash"\naxis = "x"\nlost_motion_um = -8', r"line 5: .*lost_motion_um must lie in \[0, 1000\] µm"),
     ('name = "backlash"\nlost_motion_um = 8', r"line 2: \[\[effect\]\] needs 'axis'"),
+    # was the table's line 2, the other keys' at their own (a corrected model edited by hand)
+    ('name = "backlash"\naxis = "X"\nlost_motion_um = 8', r"line 4: \[\[effect\]\] backlash: axis must be one axis "
+                                                           r"letter of x, y, z, got 'X'"),
     ('name = "time_delay"\naxis = "x"\ndelay_s = 1e-3\nkind = "velocity"',
      "line 6: .*kind must be one of 'command', 'feedback', 'position', got 'velocity'"),
 ])

@@ -96,6 +96,8 @@ def test_read_error_table_converts_units(tmp_path):
         ("# c\nposition_mm,dx_um\n0,1\n1,2,3\n", 4, "expected 2 cells"),
         ("position_mm,dx_um\n0,1\n1,nan\n", 3, "not finite"),
         ("# old\nposition,dx\n0,1\n1,2\n", 2, "column 'position' is now 'position_mm'"),
+        ("# laser run\n# units: dx_um [mm]\nposition_mm,dx_um\n0,0\n500,0.006\n", 2,  # was read as µm, not said
+         "an error table's units are its columns'"),
         ("position_mm,ey\n0,1\n1,2\n", 1, "column 'ey' is now 'ey_urad'"),
         ("position_deg,dx_um\n0,1\n1,2\n", 1, "header must hold 'position_mm'"),
     ],

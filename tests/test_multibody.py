@@ -667,6 +667,19 @@ def test_an_error_table_outside_the_travel_is_refused_naming_the_table_and_line(
         chain_from_toml(TomlFile.read(tmp_path / "m.toml"))
 
 
+@pytest.mark.parametrize("rows, words", [
+    ("0,0\n50000,3\n100000,6\n", "spans 0 .. 100000 mm, 1e+03 times the travel 0 .. 100 mm: positions in µm"),
+    ("0,0\n1e300,6\n", "holds positions up to 1e+300 mm, beyond any travel (±1e+06 mm)"),
+])
+def test_an_error_table_in_micrometres_or_beyond_any_travel_is_refused(tmp_path, rows, words):
+    """A laser table whose positions are in µm covers the travel with its first interval: its 6 µm became 0.006 µm
+    without a word (an outside probe); rows at 1e300 mm ran as well."""
+    (tmp_path / "x.csv").write_text("position_mm,dx_um\n" + rows)
+    (tmp_path / "m.toml").write_text(MACHINE.replace("[body.errors]\n", 'travel_mm = [0, 100]\n[body.errors]\ntable = "x.csv"\n'))
+    with pytest.raises(ConfigError, match=re.escape(f"{tmp_path / 'm.toml'}, line 12: body 'X': error table 'x.csv' {words}")):
+        chain_from_toml(TomlFile.read(tmp_path / "m.toml"))
+
+
 def test_a_thermal_drift_beyond_the_small_errors_within_a_run_is_refused():
     # X travels 0..100 mm (MACHINE has no travel: given here); the small errors allow 1 mm of drift along it, 10 mrad.
     text = MACHINE.replace('squareness = { y_urad = 10 }', 'squareness = { y_urad = 10 }\ntravel_mm = [0, 100]\n'

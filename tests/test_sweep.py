@@ -110,6 +110,23 @@ def test_a_drawn_range_the_parameter_cannot_take_is_said_by_its_bound_or_as_a_gr
         read_sweep(_spec(tmp_path, [vary], 'method = "lhs"\ncount = 3\nseed = 4'))
 
 
+def test_a_value_the_parameter_cannot_take_is_said_by_its_file_key(tmp_path):
+    """A grid's value of kp_per_s below zero was refused as "kp must be positive", the servo's own name."""
+    with pytest.raises(ConfigError, match=r"spec.toml, line 12: vary 'axes.x.kp_per_s': kp_per_s must be positive, "
+                                          r"got -35.0$"):
+        read_sweep(_spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[-35.0, 40.0]"}]))
+
+
+def test_a_single_vary_table_is_told_to_be_an_array_of_tables(tmp_path):
+    """[vary] (one table) was told "a sweep needs at least one [[vary]] table", with no line and no hint."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}])
+    spec.write_text(spec.read_text().replace("[[vary]]", "[vary]"))
+    line = spec.read_text().splitlines().index("[vary]") + 1
+    with pytest.raises(ConfigError, match=rf"spec.toml, line {line}: \[vary\] is one table: a sweep's parameters are "
+                                          r"each a \[\[vary\]\] table \(double brackets\)"):
+        read_sweep(spec)
+
+
 @pytest.mark.parametrize(("vary", "sweep", "message"), [
     # was "vary.count must be a whole number, at least 1; got None"
     ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0}, 'method = "grid"', r"spec.toml, line 11: vary.count is "

@@ -100,6 +100,25 @@ def test_reads_metadata_and_ignores_extra_columns(tmp_path):
     np.testing.assert_array_equal(trace.reference[:, 0], [0, 1, 2])
 
 
+@pytest.mark.parametrize("column, meant", [("x_force_N", "x_force"), ("X_current", "x_current"),
+                                           ("x_curent", "x_current")])
+def test_an_input_column_under_another_name_is_said_not_read(tmp_path, column, meant):
+    """A known force with its unit in its name, a current in capitals or misspelt: ignored like any other column, the
+    diagnosis then ran as if no force acted. Said; the columns contoursim writes beside the positions are not."""
+    from contoursim.exceptions import ContoursimWarning
+
+    (tmp_path / "f.csv").write_text(f"t,x_ref,x,{column},contour,measuring\n0,0,0,100,0,1\n0.001,1,1,100,0,1\n")
+    with pytest.warns(ContoursimWarning, match=rf"f.csv, line 1: column '{column}' is not read \(did you mean "
+                                               rf"'{meant}'\?\)"):
+        trace = read_trace(tmp_path / "f.csv")
+    assert not trace.force and not trace.current
+    (tmp_path / "g.csv").write_text("t,x_ref,x,x_force,contour,contour_normal,measuring,rapid\n0,0,0,1,0,0,1,0\n"
+                                    "0.001,1,1,1,0,0,1,0\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert set(read_trace(tmp_path / "g.csv").force) == {"x"}
+
+
 @pytest.mark.parametrize(
     "text, line, words",
     [
