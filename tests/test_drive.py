@@ -500,5 +500,6 @@ def test_a_sweep_varies_the_computation_delay_over_whole_periods(tmp_path):
               for v in sweep.values[:, 0]]
     assert delays == [0, 1, 2] and all(isinstance(d, int) for d in delays)
     spec.write_text(SWEEP.format(method="random", count="count = 4", values="min = 0.0\nmax = 2.0"))
-    with pytest.raises(ConfigError, match=r"vary 'axes.x.computation_delay_periods': computation_delay must be a whole"):
+    with pytest.raises(ConfigError, match=r"vary 'axes.x.computation_delay_periods': computation_delay_periods must "
+                                          r"be a whole"):  # the file's key, not the servo's computation_delay
         read_sweep(spec)
