@@ -135,8 +135,9 @@ def _say_long_run(motion, settle, machine):
         return
     held = ""
     if motion / dt <= _LONG_RUN or settle > motion:
-        axis, servo = min(machine.axes.items(), key=lambda item: item[1].kp)
-        held = f", of which {settle:.6g} s the settle after the path, 5/kp of axis {axis} (kp_per_s = {servo.kp:.6g})"
+        axis = machine.slowest_axis
+        held = (f", of which {settle:.6g} s the settle after the path, 5/kp of axis {axis} "
+                f"(kp_per_s = {machine.axes[axis].kp:.6g})")
     _stderr_line(f"contoursim: the run lasts {motion + settle:.6g} s{held}: {periods:.3g} servo periods of {dt:.6g} s "
                  f"to simulate, about {RUN_BYTES_PER_SAMPLE * periods / 1e9:.2g} GB of memory: this takes minutes")
 

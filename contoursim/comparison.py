@@ -348,17 +348,14 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
     names = list(names)
     if not names:
         raise ValueError("compare needs at least one strategy name")
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise ValueError(f"strategy {twice[0]!r} is named twice")
     seen = {}
-    for name in names:  # a composition's parts in another order: the same stages, the same run
-        parts = frozenset(name.split("+")) if isinstance(name, str) else None
+    for name in filter(lambda n: isinstance(n, str), names):  # its parts in another order too: the same run
+        parts = frozenset(name.split("+"))
         if parts in seen:
-            raise ValueError(f"strategy {name!r} is {seen[parts]!r}, named twice (a composition's parts act in their "
+            raise ValueError(f"strategy {name!r} is named twice" if seen[parts] == name else
+                             f"strategy {name!r} is {seen[parts]!r}, named twice (a composition's parts act in their "
                              "stages whatever their order)")
-        if parts is not None:
-            seen[parts] = name
+        seen[parts] = name
     chain = as_model(model).machine.chain  # the geometric compensation's model: the machine file's errors
     settings = dict(settings or {})
     if tuned is True:

@@ -146,15 +146,21 @@ class Machine:
         return tuple(self.axes) if self.chain is None else tuple(self.chain.axes)
 
     @property
+    def slowest_axis(self):
+        """The servo axis of the slowest position loop (the least kp)."""
+        return min(self.axes, key=lambda axis: self.axes[axis].kp)
+
+    @property
     def settle(self):
         """Five time constants of the slowest position loop, ``5 / min(kp)`` [s]: the standstill :func:`simulate`
         appends to a path's reference by default (:func:`~contoursim.simulation.default_settle`)."""
-        return 5.0 / min(servo.kp for servo in self.axes.values())
+        return 5.0 / self.axes[self.slowest_axis].kp
 
     def check_settle(self):
         """Refuse a :attr:`settle` whose run of servo periods would not fit in the memory available (ValueError,
         naming the slowest axis and its kp)."""
-        axis, servo = min(self.axes.items(), key=lambda item: item[1].kp)
+        axis = self.slowest_axis
+        servo = self.axes[axis]
         _memory.check(self.settle / self.servo_period, f"axis {axis}: kp_per_s = {servo.kp:.6g} 1/s settles in 5/kp "
                       f"= {self.settle:.6g} s after the path: at the servo period of {self.servo_period:.6g} s",
                       "a position loop that slow follows no path; check kp_per_s")
@@ -512,7 +518,7 @@ def load_machine(name_or_file, geometry=True, effects=False, check=True):
     try:
         machine.check_settle()  # a position loop so slow that the settle after a path cannot be run: at its line
     except ValueError as exc:
-        raise toml.error(str(exc), "axes", min(servos, key=lambda axis: servos[axis].kp), "kp_per_s") from None
+        raise toml.error(str(exc), "axes", machine.slowest_axis, "kp_per_s") from None
     return machine
 
 
