@@ -53,6 +53,7 @@ def connected(scheduler):
         return
     text = str(scheduler)
     if not text.startswith("local:"):
+        _check_port(text)
         _answers(text)
         try:
             client = Client(text, timeout=f"{CONNECT_TIMEOUT_S}s")
@@ -92,6 +93,19 @@ def _uninterrupted_children():
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def _check_port(address):
+    """Refuse an address whose port is missing or not one (``tcp://host``, ``tcp://host:abc``, ``host:99999``) at
+    once: dask said "invalid literal for int()", or waited for a port that cannot be."""
+    scheme, _, rest = address.rpartition("://")
+    if scheme not in ("", "tcp", "tls", "ws", "wss"):
+        return  # dask's other schemes (inproc, ucx) and unknown ones: its own message
+    host, colon, port = rest.rpartition(":")
+    if not colon or not host:
+        raise ValueError(f"--scheduler {address!r} lacks a host and port; {_ADDRESS}")
+    if not (port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+        raise ValueError(f"--scheduler {address!r}: its port {port!r} is not a port number (1 to 65535); {_ADDRESS}")
 
 
 def _answers(address):

@@ -332,7 +332,9 @@ class TomlFile:
         found = _too_large(data)
         if found:
             keys, value = found
-            raise self.error(f"{_dotted(keys)} = {shown(getattr(value, 'text', value))} is too large a number: "
+            leaf = max(i for i, k in enumerate(keys) if isinstance(k, str))  # an array of tables' item is counted
+            where = f" in {_table(keys[:leaf])}" if any(isinstance(k, int) for k in keys[:leaf]) else ""
+            raise self.error(f"{_dotted(keys[leaf:] if where else keys)}{where} = {shown(getattr(value, 'text', value))} is too large a number: "
                              f"beyond ±{FLOAT_MAX:.4g}", *keys)
 
     @classmethod
@@ -444,18 +446,18 @@ class TomlFile:
             try:
                 value = value[key]
             except (KeyError, IndexError, TypeError):
-                raise self.error(f"missing [{_dotted(keys[: i + 1])}]", *keys[:i]) from None
+                raise self.error(f"missing {_table(keys[: i + 1])}", *keys[:i]) from None
         if not isinstance(value, dict):
-            raise self.error(f"{_dotted(keys)} must be a table", *keys)
+            raise self.error(f"{_table(keys)} must be a table", *keys)
         if allowed is not None:
             allowed = set(allowed) | set(required)
             for key in value:
                 if key in (renamed or {}):
-                    raise self.error(f"key '{key}' in [{_dotted(keys)}] is now '{renamed[key]}' (units in the key name): "
+                    raise self.error(f"key '{key}' in {_table(keys)} is now '{renamed[key]}' (units in the key name): "
                                      f"rename it; every key is listed in {FORMAT_DOC}", *keys, key)
                 if key not in allowed:
                     raise self.error(
-                        f"unknown key '{key}' in [{_dotted(keys)}]{closest(key, allowed)}; expected one of: "
+                        f"unknown key '{key}' in {_table(keys)}{closest(key, allowed)}; expected one of: "
                         f"{', '.join(sorted(allowed))} "
                         f"(see {FORMAT_DOC})",
                         *keys,
@@ -463,9 +465,9 @@ class TomlFile:
                     )
         for key in required:
             if key not in value:
-                raise self.error(f"missing key '{key}' in [{_dotted(keys)}]", *keys)
+                raise self.error(f"missing key '{key}' in {_table(keys)}", *keys)
         for key, what in (text or {}).items():
-            where = f" in [{_dotted(keys)}]" if keys else ""
+            where = f" in {_table(keys)}" if keys else ""
             if key in value and not isinstance(value[key], str):
                 raise self.error(f"{key}{where} must be {what} in quotes, got {value[key]!r}", *keys, key)
             if key == "name" and key in value and re.search(r"[\r\n]", value[key]):  # it heads a '# key: value' line
@@ -517,4 +519,20 @@ def _too_large(value, keys=()):
 
 
 def _dotted(keys):
-    return ".".join(str(k) for k in keys) if keys else "top level"
+    """A value's key path as written: ``servo.kp``, an array's item by its index (``points[2][0]``)."""
+    return "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in keys).lstrip(".")
+
+
+def _table(keys):
+    """The table at key path `keys` as a file's reader counts: ``[servo]``, ``the 2nd [[body]]``, ``[body.errors] of
+    the 2nd [[body]]``; ``the file's top level`` for none."""
+    if not keys:
+        return "the file's top level"
+    last = max((i for i, k in enumerate(keys) if isinstance(k, int)), default=None)
+    if last is None:
+        return f"[{'.'.join(keys)}]"
+    array = f"[[{_dotted(keys[:last])}]]"
+    n = keys[last] + 1
+    item = f"the {n}{'th' if n % 100 in (11, 12, 13) else {1: 'st', 2: 'nd', 3: 'rd'}.get(n % 10, 'th')} {array}"
+    rest = keys[last + 1:]
+    return f"[{_dotted(keys[:last] + rest)}] of {item}" if rest else item

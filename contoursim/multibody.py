@@ -1307,7 +1307,9 @@ def _motion_from_toml(toml, base, where, item, rotary, travel, fail):
         except ConfigError as exc:
             if not path.exists():
                 raise fail(f"error table {str(errors['table'])!r} not found (relative to {base})", "errors", "table") from None
-            raise exc
+            if exc.line is None:  # the table as a whole (a folder, unreadable): said at the line naming it too
+                raise fail(f"error table {str(errors['table'])!r}: {exc}", "errors", "table") from None
+            raise
         _table_against_travel(str(errors["table"]), tables, travel, rotary, fail)
     to_q = np.pi / 180 if rotary else 1.0  # config position unit -> internal
     period_key = "period_deg" if rotary else "period_mm"

@@ -277,6 +277,9 @@ def _draw(toml, tables, method, count, seed):
     """The variants' values, shape (n_variants, len(tables)): a full grid, or `count` seeded draws."""
     columns = []
     for i, t in enumerate(tables):
+        log = t.get("log", False)
+        if not isinstance(log, bool):
+            raise toml.error(f"log must be true or false, got {log!r}", "vary", i, "log")
         if "values" in t:
             values = t["values"]
             if method != "grid" or any(k in t for k in ("min", "max", "count")):
@@ -284,15 +287,15 @@ def _draw(toml, tables, method, count, seed):
                                  "vary", i, "values")
             if not isinstance(values, list) or not values or not all(_number(v) for v in values):
                 raise toml.error(f"values must be a list of numbers, got {values!r}", "vary", i, "values")
+            if log and min(values) <= 0:  # its plot's axis is logarithmic: such a point would not be drawn
+                raise toml.error(f"vary {t['name']!r}: log = true plots the values on a log scale, which "
+                                 f"{min(values)!r} is not on: give positive values, or log = false", "vary", i, "log")
             columns.append(np.array(values, float))
             continue
         for key in ("min", "max"):
             if not _number(t.get(key)):
                 raise toml.error(f"vary {t['name']!r} needs {key} = <number> (or values = [...] in a grid)", "vary", i)
         low, high = float(t["min"]), float(t["max"])
-        log = t.get("log", False)
-        if not isinstance(log, bool):
-            raise toml.error(f"log must be true or false, got {log!r}", "vary", i, "log")
         if high < low or (log and low <= 0):
             raise toml.error(f"vary {t['name']!r}: min must not exceed max" + (" and both be positive (log)" if log else ""),
                              "vary", i, "min")

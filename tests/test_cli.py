@@ -613,7 +613,7 @@ def test_compare_takes_strategy_settings_from_the_job_file_and_the_command_line(
 
 
 @pytest.mark.parametrize("tables, options, message", [
-    ('[[strategy]]\nname = "ccc_arc"\nkp = 30.0\n', [], "job.toml, line 6: unknown key 'kp' in [strategy.0]"),
+    ('[[strategy]]\nname = "ccc_arc"\nkp = 30.0\n', [], "job.toml, line 6: unknown key 'kp' in the 1st [[strategy]]"),
     ('[[strategy]]\nname = "ccc_arc"\nkp_per_s = -3.0\n', [], "job.toml, line 6: [[strategy]] ccc_arc: kp_per_s must be"),
     ('[[strategy]]\nname = "pid"\n', [], "job.toml, line 5: [[strategy]] needs name = one of 'feedforward', 'zpetc'"),
     ("", ["--set", "ccc_arc.kp=3"], "--set ccc_arc.kp=3: unknown setting 'kp' of ccc_arc; expected one of kp_per_s"),

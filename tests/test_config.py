@@ -53,7 +53,7 @@ def test_a_name_with_a_line_break_is_refused_by_its_line():
     f = TomlFile("m.toml", 'servo_period_ms = 0.5\nname = "two\\naxes"\n[[body]]\nname = "x\\r"\n')
     with pytest.raises(ConfigError, match=r"^m.toml, line 2: name must be one line, got 'two\\naxes'$"):
         f.table(text={"name": "text"})
-    with pytest.raises(ConfigError, match=r"^m.toml, line 4: name in \[body.0\] must be one line"):
+    with pytest.raises(ConfigError, match=r"^m.toml, line 4: name in the 1st \[\[body\]\] must be one line"):
         f.table("body", 0, text={"name": "a body's name"})
 
 

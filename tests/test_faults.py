@@ -762,12 +762,12 @@ def test_results_and_machines_pickle_and_copy_and_a_result_cannot_be_written_int
      "description must be text in quotes, got True"),
     ("table_tilting_5axis", 'name = "5-axis table-tilting A/C"', "name = 3.5", 13, "name must be text in quotes, got 3.5"),
     ("table_tilting_5axis", 'tool = "tool"', "tool = 1", 15, "tool must be a body's name in quotes, got 1"),
-    ("table_tilting_5axis", 'name = "X"', 'name = ["X"]', 51, "name in [body.0] must be text in quotes, got ['X']"),
-    ("table_tilting_5axis", 'parent = "X"', "parent = 1", 65, "parent in [body.1] must be a body's name in quotes, got 1"),
-    ("table_tilting_5axis", 'axis = "x"', "axis = 0", 54, "axis in [body.0] must be an axis name in quotes, got 0"),
-    ("table_tilting_5axis", 'joint = "linear x"', "joint = 1", 53, "joint in [body.0] must be a joint in quotes, got 1"),
-    ("demo_mill", None, '[[effect]]\nname = 3\naxis = "x"', 38, "name in [effect.0] must be an effect's name in quotes, got 3"),
-    ("demo_mill", None, '[[effect]]\nname = "backlash"\naxis = 1', 39, "axis in [effect.0] must be axis letters in quotes, got 1"),
+    ("table_tilting_5axis", 'name = "X"', 'name = ["X"]', 51, "name in the 1st [[body]] must be text in quotes, got ['X']"),
+    ("table_tilting_5axis", 'parent = "X"', "parent = 1", 65, "parent in the 2nd [[body]] must be a body's name in quotes, got 1"),
+    ("table_tilting_5axis", 'axis = "x"', "axis = 0", 54, "axis in the 1st [[body]] must be an axis name in quotes, got 0"),
+    ("table_tilting_5axis", 'joint = "linear x"', "joint = 1", 53, "joint in the 1st [[body]] must be a joint in quotes, got 1"),
+    ("demo_mill", None, '[[effect]]\nname = 3\naxis = "x"', 38, "name in the 1st [[effect]] must be an effect's name in quotes, got 3"),
+    ("demo_mill", None, '[[effect]]\nname = "backlash"\naxis = 1', 39, "axis in the 1st [[effect]] must be axis letters in quotes, got 1"),
 ])
 def test_a_number_where_a_machine_file_wants_text_is_refused_naming_its_line_and_key(tmp_path, preset, old, new, line,
                                                                                    words):
@@ -868,7 +868,7 @@ def test_a_trace_cell_too_large_for_a_float_is_said_to_be_so_not_infinite(tmp_pa
     ("1e400", "line 11: axes.x.kp_per_s = 1e400 is too large a number: beyond ±1.798e+308"),
     ("1" + "0" * 400, "line 11: axes.x.kp_per_s = 100000000000… (401 characters) is too large a number"),
     ("1" + "0" * 5000, "line 11: a whole number of more than 4300 digits is too large a number"),
-    ("[1, -1e999]", "line 11: axes.x.kp_per_s.1 = -1e999 is too large a number"),
+    ("[1, -1e999]", "line 11: axes.x.kp_per_s[1] = -1e999 is too large a number"),
 ])
 def test_a_toml_number_too_large_for_a_float_is_refused_by_its_line(tmp_path, capsys, value, words):
     """TOML reads 1e400 as inf ("must be finite, got inf"); a whole number of 400 digits ended in an OverflowError."""
@@ -1076,7 +1076,7 @@ def test_a_file_name_of_bytes_that_are_not_utf8_runs_and_runs_again_into_its_fol
                 'name = "axes.x.kp_per_sec"\nvalues = [30, 40]\n'}, ["sweep", "{d}/w.toml"], "(did you mean 'kp_per_s'?)"),
     ({}, ["compare", "rounded_square", "--strategies", "none,ccc_arcc"], "(did you mean 'ccc_arc'?)"),
     ({"j.toml": 'machin = "demo_mill"\npath = "rounded_square"\n'}, ["simulate", "{d}/j.toml"],
-     "line 1: unknown key 'machin' in [top level] (did you mean 'machine'?)"),
+     "line 1: unknown key 'machin' in the file's top level (did you mean 'machine'?)"),
 ])
 def test_a_misspelt_name_is_refused_suggesting_the_name_meant(tmp_path, capsys, files, argv, meant):
     """A typo among 24 axis keys, 12 effects or the presets was refused listing them all, the one meant not said."""

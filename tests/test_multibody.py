@@ -680,6 +680,15 @@ def test_an_error_table_in_micrometres_or_beyond_any_travel_is_refused(tmp_path,
         chain_from_toml(TomlFile.read(tmp_path / "m.toml"))
 
 
+def test_an_error_table_that_is_a_folder_is_refused_at_the_line_naming_it(tmp_path):
+    """The folder's own name was said, not the machine file's line that named it (an outside probe)."""
+    (tmp_path / "x.csv").mkdir()
+    (tmp_path / "m.toml").write_text(MACHINE.replace("[body.errors]\n", 'travel_mm = [0, 100]\n[body.errors]\ntable = "x.csv"\n'))
+    with pytest.raises(ConfigError, match=re.escape(f"{tmp_path / 'm.toml'}, line 12: body 'X': error table 'x.csv': "
+                                                    f"{tmp_path / 'x.csv'}: cannot read the file: it is a directory")):
+        chain_from_toml(TomlFile.read(tmp_path / "m.toml"))
+
+
 def test_a_thermal_drift_beyond_the_small_errors_within_a_run_is_refused():
     # X travels 0..100 mm (MACHINE has no travel: given here); the small errors allow 1 mm of drift along it, 10 mrad.
     text = MACHINE.replace('squareness = { y_urad = 10 }', 'squareness = { y_urad = 10 }\ntravel_mm = [0, 100]\n'

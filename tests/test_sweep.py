@@ -110,6 +110,20 @@ def test_a_drawn_range_the_parameter_cannot_take_is_said_by_its_bound_or_as_a_gr
         read_sweep(_spec(tmp_path, [vary], 'method = "lhs"\ncount = 3\nseed = 4'))
 
 
+@pytest.mark.parametrize(("log", "message"), [
+    # it ran, the table plotting its 0 µm point nowhere on the log scale it was asked for
+    ("true", r"line 14: vary 'effect.backlash.x.lost_motion_um': log = true plots the values on a log scale, which 0.0 "
+             r"is not on: give positive values, or log = false"),
+    ('"yes"', r"line 14: log must be true or false, got 'yes'"),  # beside values it was not read
+])
+def test_a_grids_values_plotted_on_a_log_scale_are_positive(tmp_path, log, message):
+    with pytest.raises(ConfigError, match=message):
+        read_sweep(_spec(tmp_path, [{"name": '"effect.backlash.x.lost_motion_um"', "values": "[0.0, 8.0]", "log": log}]))
+    sweep = read_sweep(_spec(tmp_path, [{"name": '"effect.backlash.x.lost_motion_um"', "values": "[2.0, 8.0]",
+                                         "log": "true"}]))
+    assert sweep.log == (True,)
+
+
 def test_a_value_the_parameter_cannot_take_is_said_by_its_file_key(tmp_path):
     """A grid's value of kp_per_s below zero was refused as "kp must be positive", the servo's own name."""
     with pytest.raises(ConfigError, match=r"spec.toml, line 12: vary 'axes.x.kp_per_s': kp_per_s must be positive, "
@@ -366,6 +380,21 @@ def test_a_local_cluster_listens_on_the_loopback_only_and_a_bad_address_is_one_l
         assert len(listening) >= 5 and {address.ip for address in listening} == {"127.0.0.1"}
     with pytest.raises(ValueError, match=r"cannot reach a dask scheduler at 'tcp://127.0.0.1:1'"):
         with connected("tcp://127.0.0.1:1"):
+            pass
+
+
+@pytest.mark.parametrize("address, words", [
+    ("tcp://host", "'tcp://host' lacks a host and port"),
+    ("tcp://:8786", "'tcp://:8786' lacks a host and port"),
+    ("tcp://host:abc", "'tcp://host:abc': its port 'abc' is not a port number (1 to 65535)"),  # int()'s words
+    ("host:99999", "'host:99999': its port '99999' is not a port number (1 to 65535)"),  # waited 10 s for it
+])
+def test_an_address_without_a_port_is_refused_naming_it(address, words):
+    pytest.importorskip("distributed", reason="dask.distributed not installed (pip install \"contoursim[distributed]\")")
+    from contoursim.cluster import connected
+
+    with pytest.raises(ValueError, match=re.escape(f"--scheduler {words}; give its address as tcp://host:8786")):
+        with connected(address):
             pass
 
 
