@@ -117,6 +117,18 @@ def read_bytes(file, error=ConfigError):
     return raw
 
 
+def named_as(file, suffix, what, error=ConfigError):
+    """Refuse `file` where its name ends as another kind of file contoursim reads than `suffix` (a G-code program, a
+    ``.csv`` table or a ``.toml`` file) says: given as a machine file or a trace, a G-code program was refused by the
+    other format's first complaint ("not valid TOML", "missing column 't' in the header '%'")."""
+    from .gcode import SUFFIXES
+
+    found = Path(str(file)).suffix.lower()
+    kinds = {".toml": "a TOML file", ".csv": "a CSV table", **dict.fromkeys(SUFFIXES, "a G-code program")}
+    if found != suffix and found in kinds:
+        raise error(f"this is {kinds[found]} (by its name), not {what}", str(file))
+
+
 def read_text(file, error=ConfigError):
     """The UTF-8 text of `file` (a leading byte-order mark dropped), with errors naming the file.
 
@@ -340,6 +352,7 @@ class TomlFile:
     @classmethod
     def read(cls, path):
         """Read and parse the TOML file at `path`."""
+        named_as(path, ".toml", "a TOML file (a machine, path, job or sweep file)")
         return cls(str(path), read_text(path))
 
     def kind(self):

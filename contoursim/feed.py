@@ -5,7 +5,9 @@ s = 0 to rest at s = L. :func:`plan` builds it with the standard
 forward/backward pass over sections of constant velocity limit:
 
 1. each primitive gets a velocity limit: its block feed, lowered on curved
-   primitives to sqrt(a_c / kappa_max) when a centripetal limit a_c is given;
+   primitives to sqrt(a_c / kappa_max) under the centripetal limit a_c (by
+   default the acceleration limit: a controller bounds the acceleration
+   across the path as well as along it, as an arc feed clamp does);
 2. consecutive primitives with the same limit and a smooth join merge into
    one section; a join whose tangent turns by more than `corner_tolerance`
    is an exact stop (velocity 0);
@@ -305,7 +307,8 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     jerk : float, optional
         Path jerk limit [mm/s^3]; None gives trapezoidal profiles.
     centripetal_accel : float, optional
-        Limit on v^2 kappa [mm/s^2]: on curved primitives v <= sqrt(a_c / kappa_max).
+        Limit on v^2 kappa [mm/s^2]: on curved primitives v <= sqrt(a_c / kappa_max); default `accel` (a G-code
+        fillet of 0.5 mm at 3000 mm/min ran through at 5000 mm/s^2 under a limit of 1000).
     corner_tolerance : float
         Tangent turn at a join above which the motion stops exactly [rad].
     max_feed : float, optional
@@ -365,11 +368,11 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
             raise PathError(f"feed {feeds[i]:.6g} mm/s ({feeds[i] * 60:.6g} mm/min, segment {i}) exceeds "
                             f"max_feed = {max_feed:.6g} mm/s ({max_feed * 60:.6g} mm/min)", primitive=i)
     limits = feeds.copy()
-    if centripetal_accel is not None:
-        ac = _setting("centripetal_accel", _validate.positive("centripetal_accel", centripetal_accel))
-        kappa = path.max_curvature()
-        curved = kappa > 0
-        limits[curved] = np.minimum(limits[curved], np.sqrt(ac / kappa[curved]))
+    ac = accel if centripetal_accel is None else _setting("centripetal_accel", _validate.positive("centripetal_accel",
+                                                                                                  centripetal_accel))
+    kappa = path.max_curvature()
+    curved = kappa > 0
+    limits[curved] = np.minimum(limits[curved], np.sqrt(ac / kappa[curved]))
     in_position = _validate.nonnegative("in_position", in_position)
     servo_period = None if servo_period is None else _validate.positive("servo_period", servo_period)
     stops = np.array(_stops(stops), dtype=int)
@@ -430,7 +433,7 @@ class FeedSettings:
     jerk : float, optional
         Path jerk limit [mm/s^3]; None for trapezoidal profiles.
     centripetal_accel : float, optional
-        Centripetal acceleration limit [mm/s^2]; None for none.
+        Centripetal acceleration limit [mm/s^2]; None for `accel`.
     corner_tolerance : float
         Exact-stop threshold on the tangent turn at joins [rad].
     stops : tuple of int

@@ -111,13 +111,15 @@ _REFUSED_G = {20: "inch programs are not supported (G20): convert to mm and use 
               95: "feed per revolution (G95) is not supported: program F in mm/min (G94)",
               **{g: f"canned cycles (G{g}: a cycle or its return level) are not supported: write the cycle's moves "
                     "out as G0/G1 blocks" for g in (73, 74, 76, 81, 82, 83, 84, 85, 86, 87, 88, 89, 98, 99)}}
+_O_WORD = r"(end)?(sub|if|while|repeat)\b|call\b|else(if)?\b|do\b|return\b|break\b|continue\b"  # after o100
 _IGNORED_LETTERS = "ONSTDH"  # program and sequence numbers, spindle, tool and its offsets
 #: File name endings read as G-code (lower case).
 SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".eia")
 #: The assumptions :func:`read_gcode` makes, in one line (the command line prints it with a G-code file's table).
 DIALECT = ("Fanuc/LinuxCNC/GRBL mill dialect: mm (G21), feed per minute (G94), absolute unless G91, arc centres "
            "I/J/K relative to the arc's start, comments ( ) and ;, G28/G30/G53 positioning outside the contour, "
-           "block delete / off (its blocks run)")
+           "block delete / off (its blocks run), a coordinate without a decimal point in mm (X100 is 100 mm, which a "
+           "Fanuc without decimal point input reads as 0.1 mm)")
 _BLOCK_DELETE = re.compile(r"^\s*/[1-9]?")  # optional-block skip, with Fanuc's level
 _COMMENT = re.compile(r"\([^)]*\)|;.*")  # the leftmost first: a ( ) comment may hold a ;, a ; comment a ( or )
 _SUPPORTED = ("G0-G3, G4, G17-G19, G21, G28, G30, G40, G43, G49, G53-G59, G61, G64, G80, G90, G91, G91.1, G94, "
@@ -196,6 +198,8 @@ def _words(raw, fail):
     def unread(rest):
         rest = rest.strip()
         hint = (": a decimal comma? write the number with a point" if rest.startswith(",") else
+                ": LinuxCNC's o-word subroutines and control flow (o100 sub, call, if, while) are not supported: write "
+                "the moves out in one program" if re.match(_O_WORD, rest, re.IGNORECASE) else
                 ": macro variables and expressions (# [ ]) are not supported: write the numbers out"
                 if any(c in rest for c in "#[") else
                 ": a space inside a number (X 1 0)? write the number without one" if rest[:1].isdigit() else "")
@@ -350,6 +354,9 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             away.update(dict.fromkeys(moved, number))
             continue
         if "P" in values and 64 not in gcodes:
+            if motion in (2, 3) and any(a in values for a in "XYZIJKR"):
+                fail(f"P{values['P']:g} on an arc (LinuxCNC: its number of turns) is not supported: write each turn "
+                     "as an arc of its own")
             fail("P belongs to a dwell (G4)")
         axes = [a for a in "XYZ" if a in values]
         arc_words = [a for a in "IJKR" if a in values]

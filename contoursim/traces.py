@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate
-from .config import read_text, text_lines, unique_columns
+from .config import named_as, read_text, text_lines, unique_columns
 from .exceptions import ContoursimWarning, TraceFormatError
 from .output import writing
 
@@ -302,6 +302,7 @@ def read_trace(file):
         a measured column that does not follow its reference (:data:`FOLLOWING_GAIN`).
     """
     source = str(file)
+    named_as(file, ".csv", "a measured trace (a CSV table)", TraceFormatError)
     lines = text_lines(read_text(file, TraceFormatError))  # a leading BOM (Excel) is dropped
 
     metadata = {}
@@ -336,7 +337,10 @@ def read_trace(file):
         upper = [name for name in names if name != name.lower() and name.lower() in _POSITION_COLUMNS]
         if upper:  # 't' in lower case, the axes not: said as for a header without 't'
             raise fail(_header_problem(names))
-        raise fail(f"the axes present ({', '.join(axes) or 'none'}) must be x, x+y or x+y+z")
+        if not axes:  # 't,x_cmd,x_act,...': said as "the axes present (none) must be ..."
+            raise fail(f"no axis columns in the header {','.join(names)!r}; expected x_ref, x (then y_ref, y, z_ref, "
+                       "z): the commanded and the measured position of each axis [mm] (x_cmd, x_act: rename them)")
+        raise fail(f"the axes present ({', '.join(axes)}) must be x, x+y or x+y+z")
     for axis in axes:
         for name in (f"{axis}_ref", axis):
             if name not in names:

@@ -672,6 +672,11 @@ def test_a_trace_with_its_columns_swapped_or_too_short_to_judge_names_nothing_an
     assert any(w.startswith(words) and "No effect is named" in w for w in result.warnings), result.warnings
     if fault == "short":  # the corrected model is the nominal one: a refit of 12 samples would fit them by construction
         assert result.refitted.machine.axes == machine.axes
+        assert result.steps[1].rms_um == result.steps[0].rms_um  # a refit row that refitted them was shown beside it
+        # without a model 3 samples gave loops of kp 311 1/s, written as a corrected model for another experiment
+        with pytest.raises(ValueError, match=r"^identifying the servo loops needs at least 16 samples, the trace has "
+                                             r"12: log a longer run, or give the nominal model \(--model\)$"):
+            diagnose(trace)
 
 
 def test_a_trace_whose_command_jumps_beyond_the_max_feed_is_refused_naming_the_samples():
@@ -870,6 +875,19 @@ def test_a_trace_that_never_moves_is_diagnosed_for_hunting_with_a_model_and_with
     assert any(w.startswith("hunting at standstill on x") for w in result.warnings), result.report()
     assert any(w.startswith("the trace's reference never moves: its servo loops cannot be identified")
                for w in result.warnings)
+
+
+def test_a_trace_standing_still_away_from_zero_to_the_last_digit_is_diagnosed(machine):
+    """Both axes at rest at (0, -35.355339) mm, the encoder reading the same value throughout: the reference centred
+    by its mean's rounding left a turn column of 1e-14 mm, the zeros' own, and the diagnosis ended in numpy's
+    'Singular matrix' (an outside probe). It says the trace never moves, and no gap of rounding's size."""
+    t = np.arange(2000) * 2e-3
+    reference = np.broadcast_to([0.0, -35.355339], (t.size, 2)).copy()
+    measured = np.broadcast_to([-0.00005, -35.3553], (t.size, 2)).copy()
+    result = diagnose(Trace(t, reference, measured, ("x", "y")), Model(machine))
+    assert result.effects == (), result.report()
+    assert any(w.startswith("the trace's reference never moves") for w in result.warnings)
+    assert not any(w.startswith("the corrected model as written") for w in result.warnings), result.warnings
 
 
 def test_standstill_white_noise_is_no_limit_cycle_however_short_the_standstill(machine):

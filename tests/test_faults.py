@@ -322,7 +322,7 @@ def test_a_machine_built_in_python_takes_the_servo_periods_a_machine_file_takes(
     assert [Machine(axes, period).servo_period for period in (1e-6, 1.0)] == [1e-6, 1.0]
 
 
-@pytest.mark.parametrize("n, dt, noise", [(5, 1e-3, 0.0), (50, 0.1, 1e-3), (500, 1e-4, 1e-6)])
+@pytest.mark.parametrize("n, dt, noise", [(20, 1e-3, 0.0), (50, 0.1, 1e-3), (500, 1e-4, 1e-6)])
 def test_a_trace_that_stands_still_is_diagnosed_without_a_numpy_warning(tmp_path, capsys, n, dt, noise):
     t = np.arange(n) * dt
     x = np.full(n, 420.735492)  # rounded as a logger writes it: its mean differs from it in the last bit
@@ -351,9 +351,9 @@ def test_path_numbers_far_out_of_range_end_in_one_line(tmp_path, capsys, old, ne
 
 @pytest.mark.parametrize("model", [[], ["--model", "demo_mill"]])
 def test_a_trace_over_less_than_a_mm_is_diagnosed_without_a_straightness_over_it(tmp_path, capsys, model):
-    """Five samples over 55 µm of travel: a guideway's bow over less than 1 mm (straightness's shortest span) is no
-    candidate; it was the end of the run ('straightness.x: span_mm must lie in [1, 100000] mm')."""
-    rows = [f"{k * 1e-3:.3f},{100 + 0.011 * k:.6f},{100 + 0.011 * k - 0.0003:.6f},20,20" for k in range(6)]
+    """Twenty samples over 0.22 mm of travel: a guideway's bow over less than 1 mm (straightness's shortest span) is
+    no candidate; it was the end of the run ('straightness.x: span_mm must lie in [1, 100000] mm')."""
+    rows = [f"{k * 1e-3:.3f},{100 + 0.011 * k:.6f},{100 + 0.011 * k - 0.0003:.6f},20,20" for k in range(21)]
     (tmp_path / "short.csv").write_text("t,x_ref,x,y_ref,y\n" + "\n".join(rows) + "\n")
     assert main(["diagnose", str(tmp_path / "short.csv"), *model, "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
@@ -533,25 +533,30 @@ def _within(seconds, call):
     return outcome[0] if outcome else ("blocked", None)
 
 
-@pytest.mark.parametrize("reader", [read_trace, load_machine, read_gcode, read_error_table])
-def test_a_pipe_a_device_a_folder_or_a_packed_file_is_refused_before_it_is_read(tmp_path, reader):
+@pytest.mark.parametrize("reader, suffix", [(read_trace, ".csv"), (load_machine, ".toml"), (read_gcode, ".nc"),
+                                            (read_error_table, ".csv")],
+                         ids=["read_trace", "load_machine", "read_gcode", "read_error_table"])
+def test_a_pipe_a_device_a_folder_or_a_packed_file_is_refused_before_it_is_read(tmp_path, reader, suffix):
     """A pipe would block the read until some program writes, /dev/zero would fill the memory: refused by what they are."""
-    release = _pipe(tmp_path / "pipe.csv")
+    pipe = tmp_path / f"pipe{suffix}"
+    release = _pipe(pipe)
     try:
-        kind, value = _within(10, lambda: reader(tmp_path / "pipe.csv"))
+        kind, value = _within(10, lambda: reader(pipe))
     finally:
         release()
     assert kind == "raised" and isinstance(value, ConfigError), (kind, value)
-    assert str(value) == f"{tmp_path / 'pipe.csv'}: cannot read the file: it is a named pipe (FIFO), not a regular file"
-    (tmp_path / "device.csv").symlink_to("/dev/null")  # as /dev/zero, without its endless read on the old code
-    with pytest.raises(ConfigError, match=r"device.csv: cannot read the file: it is a device, not a regular file$"):
-        reader(tmp_path / "device.csv")
-    (tmp_path / "folder.csv").mkdir()
-    with pytest.raises(ConfigError, match=r"folder.csv: cannot read the file: it is a directory, not a regular file$"):
-        reader(tmp_path / "folder.csv")
-    (tmp_path / "packed.csv").write_bytes(gzip.compress(b"t,x_ref,x\n0,0,0\n0.001,0,0\n"))
-    with pytest.raises(ConfigError, match=r"packed.csv, line 1: the file is gzip-compressed, not text: unpack it first$"):
-        reader(tmp_path / "packed.csv")
+    assert str(value) == f"{pipe}: cannot read the file: it is a named pipe (FIFO), not a regular file"
+    (tmp_path / f"device{suffix}").symlink_to("/dev/null")  # as /dev/zero, without its endless read on the old code
+    with pytest.raises(ConfigError, match=rf"device\{suffix}: cannot read the file: it is a device, not a regular file$"):
+        reader(tmp_path / f"device{suffix}")
+    (tmp_path / f"folder{suffix}").mkdir()
+    with pytest.raises(ConfigError, match=rf"folder\{suffix}: cannot read the file: it is a directory, not a regular "
+                                          r"file$"):
+        reader(tmp_path / f"folder{suffix}")
+    (tmp_path / f"packed{suffix}").write_bytes(gzip.compress(b"t,x_ref,x\n0,0,0\n0.001,0,0\n"))
+    with pytest.raises(ConfigError, match=rf"packed\{suffix}, line 1: the file is gzip-compressed, not text: unpack it "
+                                          r"first$"):
+        reader(tmp_path / f"packed{suffix}")
 
 
 @pytest.mark.parametrize("encoding, words", [

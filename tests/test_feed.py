@@ -135,6 +135,20 @@ def test_centripetal_limit():
     assert traj.speed.max() == pytest.approx(np.sqrt(50.0 * 50.0), rel=1e-12)
 
 
+def test_an_arc_is_run_within_the_acceleration_limit_across_the_path_by_default():
+    """A G-code corner rounded by a 0.5 mm fillet at F3000: its 50 mm/s turned through v²/R = 5000 mm/s² under a limit
+    of 1000, the corner's contour error twice a control's (an outside probe). v ≤ √(a·R) on the arc, as a control's
+    arc feed clamp holds it; the straight blocks keep their feed."""
+    from contoursim.gcode import read_gcode
+
+    program = read_gcode("G90 G21 G17\nG1 X29.5 Y0 F3000\nG3 X30 Y0.5 R0.5\nG1 X30 Y30\n")
+    settings = FeedSettings(tuple(program.feeds), accel=1000.0)
+    traj = sample(program.path, settings.plan(program.path), 1e-4)
+    on_arc = (traj.position[:, 0] > 29.5 + 1e-9) & (traj.position[:, 1] < 0.5 - 1e-9)  # the fillet's quarter
+    assert traj.speed[on_arc].max() == pytest.approx(np.sqrt(1000.0 * 0.5), rel=1e-9)
+    assert traj.speed.max() == pytest.approx(50.0, rel=1e-12)
+
+
 def test_a_rapid_traverses_at_most_at_the_machines_max_feed():
     """A G0 between two cuts on a machine of max_feed 3000 mm/min was refused at its line, feed 10000 mm/min, a feed
     the program never wrote: no program with a rapid between cuts could run there (an outside probe)."""

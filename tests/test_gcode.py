@@ -140,6 +140,11 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G90.1\nG1 X1 F100\n", 1, "absolute arc centres \\(G90.1\\) are not supported"),
     ("G1 X1 F100\nM98 P1000\n", 2, "subprogram calls \\(M98\\)"),
     ("G1 X1 F100\nG1 X2 P3\n", 2, "P belongs to a dwell"),
+    # LinuxCNC's turns and o-word subroutines: said as a dwell's P and as "cannot read 'sub'" (an outside probe)
+    ("G0 X10 Y0\nG3 X10 Y0 I-10 J0 P3 F500\n", 2, "P3 on an arc \\(LinuxCNC: its number of turns\\) is not supported"),
+    ("G21 G90\no100 sub\nG1 X10 F100\no100 endsub\n", 2, "cannot read 'sub': LinuxCNC's o-word subroutines and "
+                                                         "control flow"),
+    ("G1 X1 F100\nO200 IF [1 GT 0]\n", 2, "cannot read 'IF \\[1 G': LinuxCNC's o-word"),
     ("G1 X1 F100\nG91 G28 Z0\nG1 X2\n", 3, "from a machine position is not supported: line 2 \\(G28/G30/G53\\) took Z there; "
                                          "position Z with G0 first"),
     ("G1 X1 F100\nG28\nG0 X0 Y0\nG1 X2\n", 4, "line 2 \\(G28/G30/G53\\) took Z there"),  # G28 alone: all axes

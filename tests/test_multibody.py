@@ -543,7 +543,7 @@ def test_toml_thermal_growth_reference_and_time_constant():
         ('axis = "x"', 'axis = "x"\ntravel_mm = [10, 0]', 9, r"body 'X': travel_mm must be \[min, max\] with min < max, got \[10, 0\]"),
         ('axis = "x"', 'axis = "x"\ntravel_deg = [0, 1]', 9, "the travel of a linear joint is 'travel_mm'"),
         # keys without their unit (earlier versions) name the key that replaced them
-        ('axis = "x"', 'axis = "x"\ntravel = [0, 1]', 9, r"key 'travel' in \[body.0\] is now 'travel_mm'"),
+        ('axis = "x"', 'axis = "x"\ntravel = [0, 1]', 9, r"key 'travel' in the 1st \[\[body\]\] is now 'travel_mm'"),
         ('squareness = { y_urad = 10 }', 'squareness = { y = 10 }', 9, "key 'y' .* is now 'y_urad'"),
         ("dx_um = { poly", "dx = { poly", 11, "key 'dx' .* is now 'dx_um'"),
         ('parent = "X"', 'parent = "X"\noffset = [0, 0, 1]', 16, "key 'offset' .* is now 'offset_mm'"),

@@ -149,6 +149,9 @@ def test_an_input_column_under_another_name_is_said_not_read(tmp_path, column, m
         ("t,X_ref,X,Y_ref,Y\n0,0,0,0,0\n0.001,1,1,1,1\n", 1, "column names are case-sensitive: the header has 'X_ref', "
                                                           "'X', 'Y_ref', 'Y'; expected comma-separated column names t"),
         ("time,x_ref,x\n0,0,0\n0.001,1,1\n", 1, "missing column 't' in the header 'time,x_ref,x'; expected"),
+        # a drive's export names (an outside probe: "the axes present (none) must be x, x+y or x+y+z")
+        ("t,x_cmd,x_act\n0,0,0\n0.001,1,1\n", 1, "no axis columns in the header 't,x_cmd,x_act'; expected x_ref, x "
+                                                "(then y_ref, y, z_ref, z)"),
         ("# c\nt,x_ref,x\n0,0,0\n0.002,1,1\n0.001,1,1\n", 5, "column 't' must be strictly increasing"),
         # steps 1, 1, 2, 1 ms: step 2 (rows 2 -> 3) is off, row 3 is on line 1 + 1 + 3
         ("t,x_ref,x\n0,0,0\n0.001,1,1\n0.002,1,1\n0.004,1,1\n0.005,1,1\n", 5, "column 't' must be uniformly sampled: step 2"),
@@ -559,3 +562,21 @@ def test_an_extra_column_read_back_as_the_traces_own_is_refused(tmp_path, name, 
         write_trace(tmp_path / "a.csv", _trace(axes=("x",)), extra={name: np.zeros(50)})
     with pytest.raises(TypeError, match="extra must map column names to arrays"):
         write_trace(tmp_path / "a.csv", _trace(axes=("x",)), extra=[np.zeros(50)])
+
+
+def test_a_file_of_another_kind_is_refused_by_its_name(tmp_path):
+    """A G-code program given as the trace or as the model was refused by the other format's first complaint: "missing
+    column 't' in the header '%'", "not valid TOML" (an outside probe)."""
+    from contoursim.config import ConfigError
+    from contoursim.model import load_model
+
+    program = tmp_path / "pocket.nc"
+    program.write_text("%\nG1 X10 F100\n%\n")
+    with pytest.raises(TraceFormatError, match=r"pocket.nc: this is a G-code program \(by its name\), not a measured "
+                                               r"trace \(a CSV table\)$"):
+        read_trace(program)
+    with pytest.raises(ConfigError, match=r"pocket.nc: this is a G-code program \(by its name\), not a TOML file"):
+        load_model(program)
+    (tmp_path / "t.csv").write_text("t,x_ref,x\n0,0,0\n0.001,1,1\n")
+    with pytest.raises(ConfigError, match=r"t.csv: this is a CSV table \(by its name\), not a TOML file"):
+        load_model(tmp_path / "t.csv")
