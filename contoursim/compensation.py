@@ -451,8 +451,16 @@ class CrossCoupled(Strategy):
         return "designed" if self.kp is None else "kp_per_s set, ki_per_s2 designed"
 
     def settings(self, servos, dt):
-        kp, ki, kd = self.gains(dict(list(servos.items())[:3]), dt)
+        kp, ki, kd = self.gains(self._coupled(servos), dt)
         return {"kp_per_s": kp, "ki_per_s2": ki, "kd": kd}
+
+    def _coupled(self, servos):
+        """The first 2 or 3 of `servos`: the axes it couples (on one axis its design failed in numpy's matmul)."""
+        coupled = dict(list(servos.items())[:3])
+        if len(coupled) < 2:
+            raise ValueError(f"{self.name}: cross-coupled control needs 2 or 3 servo axes, the machine has "
+                             f"{len(servos)} ({', '.join(servos)})")
+        return coupled
 
     def gains(self, servos, dt):
         """``(kp, ki, kd)`` of the coupling for the coupled `servos` (mapping axis -> AxisServo) at period `dt` [s].
@@ -488,10 +496,7 @@ class CrossCoupled(Strategy):
         return dict(kp=kp, ki=ki, kd=kd, **margins_along(rows, kp, ki, kd, dt, path, self.up))
 
     def coupling(self, path, servos, dt):
-        coupled = dict(list(servos.items())[:3])
-        if len(coupled) < 2:
-            raise ValueError(f"{self.name}: cross-coupled control needs 2 or 3 servo axes, the machine has "
-                             f"{len(servos)} ({', '.join(servos)})")
+        coupled = self._coupled(servos)
         path = path[:, : len(coupled)]
         m = self.margins(path, coupled, dt)  # the loops as simulated, not as modelled
         if m["spectral_radius"] >= 1.0:

@@ -51,8 +51,11 @@ def trace_files(paths):
         if path.is_dir():
             found = sorted(p for p in path.iterdir()  # NIGHT_1.CSV too
                            if p.suffix.lower() == ".csv" and not _block_table(p))
-            if not found:
-                raise ValueError(f"{path} holds no .csv trace")
+            if not found:  # a folder a machine or a night: its subfolders are not searched, which is said
+                below = sorted(p.parent.name for p in path.glob("*/*") if p.suffix.lower() == ".csv")
+                inside = (f" (its subfolders, not searched, hold {len(below)}: in "
+                          f"{', '.join(dict.fromkeys(below))}; name them)" if below else "")
+                raise ValueError(f"{path} holds no .csv trace{inside}")
             files += found
         elif path.exists():
             files.append(path)

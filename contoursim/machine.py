@@ -36,7 +36,7 @@ from . import _memory, _validate
 from .config import TEXT_KEYS, TomlFile, local_file
 from .exceptions import ConfigError, PathError, UnstableLoopError
 from .multibody import MAX_TRAVEL
-from .servo import AxisServo, SamplingError
+from .servo import MIN_SERVO_PERIOD, AxisServo, SamplingError
 
 __all__ = ["CARTESIAN", "CONTROLLER_FIELDS", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
 
@@ -348,7 +348,7 @@ _RENAMED = {field: key for key, field in SERVO_KEYS.items() if field != key}
 # a parameter name where a message uses it as one ("kp must be", "lower kp = 40"), not in prose ("damping ratio")
 _SERVO_NAME = re.compile(r"\b(" + "|".join(_RENAMED) + r")\b(?=( =| must| is| \(| \[|,| given| as well|\.|$))")
 #: Servo periods a machine may have [s]: servo loops from 1 MHz down to 1 Hz.
-SERVO_PERIOD_RANGE = (1e-6, 1.0)
+SERVO_PERIOD_RANGE = (MIN_SERVO_PERIOD, 1.0)
 _SERVO_KEYS = ("name", "description", "servo_period_ms", "max_feed_mm_min", "work_offset", "axes", "effect")
 #: Keys of an ``[axes.<name>]`` table besides the servo parameters.
 _AXIS_KEYS = ("uncertain", "travel_mm")

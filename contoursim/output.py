@@ -582,6 +582,8 @@ def writing(file, overwrite=False, binary=False):
 
     Raises
     ------
+    IsADirectoryError
+        `file` names a folder.
     FileExistsError
         `file` names an existing file and `overwrite` is false.
     """
@@ -589,6 +591,8 @@ def writing(file, overwrite=False, binary=False):
     if hasattr(file, "write"):
         return nullcontext(file)
     file = Path(file)
+    if file.is_dir():  # "exists; refusing to overwrite it", which overwrite=True would not have helped
+        raise IsADirectoryError(f"{file} is a folder: give a file name in it (e.g. {file / 'run.csv'})")
     if file.exists() and not overwrite:
         raise FileExistsError(f"{file} exists; refusing to overwrite it")
     return atomic_write(file, binary=binary)

@@ -349,6 +349,9 @@ class AxisServo:
         if self.velocity_integrator is not None and self.velocity_integrator not in VELOCITY_INTEGRATORS:
             raise ValueError(f"velocity_integrator must be one of {', '.join(map(repr, VELOCITY_INTEGRATORS))} (or "
                              f"not given), got {self.velocity_integrator!r}")
+        if self.velocity_integrator is not None and self.ti is None:  # a P loop's: accepted, without effect
+            raise ValueError("velocity_integrator says how the velocity PI integrates: it needs ti (a P velocity loop, "
+                             "without ti, has no integral)")
         if self.velocity_feedback == "state" and (checked["velocity_taps"] != 1 or self.velocity_filter_hz is not None):
             raise ValueError('velocity_taps and velocity_filter_hz filter the encoder difference: they need '
                              'velocity_feedback = "difference"')
@@ -1122,6 +1125,27 @@ def _loop_margins(loop, below=np.inf):
     )
 
 
+def _largest_kp(servo, dt, rule):
+    """The largest kp at which the position loop of `servo` passes the check at `dt` [s], rounded down to 3 digits
+    (as said, it passes), or None where
+    the check's bound lies below `rule` [1/s] (the rule of thumb, then said alone): a refusal had said the rule's
+    64.6 1/s where 400 passed. Bisected in log kp (the margins fall as kp rises), on the analysis not stored."""
+    def passes(kp):
+        m = _analysed(dataclasses.replace(servo, kp=kp, vff=0.0, aff=0.0), dt)["position"]
+        return m["stable"] and m["phase_margin"] >= MIN_PHASE_MARGIN_DEG and m["damping_ratio"] >= MIN_DAMPING_RATIO
+
+    low, high = rule, servo.kp
+    if not low < high or not passes(low):
+        return None
+    while high / low > 1.0 + 1e-4:
+        middle = np.sqrt(low * high)
+        low, high = (middle, high) if passes(middle) else (low, middle)
+    unit = 10.0 ** (np.floor(np.log10(low)) - 2)
+    return float(np.floor(low / unit) * unit)
+
+
+#: The shortest servo period a drive has [s] (a machine's range: :data:`contoursim.machine.SERVO_PERIOD_RANGE`).
+MIN_SERVO_PERIOD = 1e-6
 #: On an axis with a compliant screw the loop criteria apply below this fraction of its antiresonance (:func:`margins`).
 _MODE_BAND = 1.0 - 1e-3
 
@@ -1283,11 +1307,23 @@ def _remedy(loop, servo, dt, m, inner):
                     f"at least {CASCADE_RATIO:g} times faster)")
             if not np.isfinite(inner_crossover):
                 return f"{slow}: raise kv"
-            lower = f"lower kp, to {inner_crossover / CASCADE_RATIO:.3g} 1/s or less"
+            rule = inner_crossover / CASCADE_RATIO
+            largest = _largest_kp(servo, dt, rule)
+            lower = (f"lower kp, to {largest:.3g} 1/s or less (the check's bound; a velocity loop {CASCADE_RATIO:g} "
+                     f"times faster, the rule of thumb, allows {rule:.3g} 1/s)" if largest is not None else
+                     f"lower kp, to {rule:.3g} 1/s or less")
             ceiling = np.pi * MAX_CROSSOVER_FRACTION / dt  # the fastest velocity loop the check lets run at dt [rad/s]
             if CASCADE_RATIO * servo.kp > ceiling:
                 return f"{slow}, and at dt = {dt:.6g} s none may cross over above {ceiling / (2 * np.pi):.4g} Hz: {lower}"
             return f"{slow}: raise kv, or {lower}"
+    if servo.compliant and loop != "current" and m["damping_ratio"] < MIN_DAMPING_RATIO:
+        mode = np.sqrt(1e6 * servo.screw_stiffness / (servo.mass - servo.motor_mass))  # antiresonance [rad/s]
+        if not mode > CASCADE_RATIO * crossover:  # in the loop's band: the screw's 2-5 % damping is the pole's
+            within = (f", within {CASCADE_RATIO:g} times the crossover {crossover / (2 * np.pi):.4g} Hz"
+                      if np.isfinite(crossover) else "")
+            return (f"the screw's mode lies in the loop's band (its antiresonance {mode / (2 * np.pi):.4g} Hz{within}): "
+                    f"check screw_stiffness ({servo.screw_stiffness:.6g} N/µm: one in N/mm reads a thousand times too "
+                    f"soft), or lower {gain}")
     integral = getattr(servo, _INTEGRAL_OF.get(loop, ""), None)
     if loop == "velocity" and np.isfinite(crossover):  # the current's lag: a current loop as slow is the cause
         current, bandwidth = (("current_bandwidth_hz", 2 * np.pi * servo.current_bandwidth_hz)
@@ -1357,9 +1393,12 @@ def check(servo, dt, axis="x"):
                     f"{integral} = {getattr(servo, integral):.6g} s is too short for the {loop} loop of axis {axis!r} at "
                     f"dt = {dt:.6g} s: its integral action lifts the crossover to {f_c:.4g} Hz, above 1/4 of the "
                     f"Nyquist frequency ({f_max:.4g} Hz). Lengthen {integral}, or use {use}.", integral)
+            units = ("" if MAX_CROSSOVER_FRACTION / (2 * f_c) >= MIN_SERVO_PERIOD else  # no drive samples that fast
+                     f" (a crossover no drive has: check the mass, {servo.mass:.6g} kg, and force_constant, "
+                     f"{servo.force_constant:.6g} N/A, for their units)")
             raise SamplingError(
                 f"dt = {dt:.6g} s is too long for the {loop} loop of axis {axis!r}: its crossover "
-                f"{f_c:.4g} Hz is above 1/4 of the Nyquist frequency ({f_max:.4g} Hz). Use "
+                f"{f_c:.4g} Hz is above 1/4 of the Nyquist frequency ({f_max:.4g} Hz){units}. Use "
                 f"{use}, or lower {gain} = {getattr(servo, gain):.6g}.", "dt")
     sampled = margins(servo, dt)
     inner = None  # the margins of the loop inside the one checked (innermost first)

@@ -324,7 +324,7 @@ def _plot(chain, ideal, dp, sweep, values, rotary, out, note=""):
     shape = tuple(len(v) for v in values)
     P = ideal.reshape(shape + (3,))
     D = 1e3 * dp.reshape(shape + (3,))
-    pairs = list(combinations(range(len(sweep)), 2))[:3] or [(0, None)]
+    pairs = list(combinations(range(len(sweep)), 2)) or [(0, None)]  # each plane (the first three of 4 axes were kept)
     files = [out.file(f"volumetric_{sweep[i]}{'' if j is None else sweep[j]}.png") for i, j in pairs]
     for (i, j), name in zip(pairs, files):
         index = [s // 2 for s in shape]

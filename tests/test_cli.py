@@ -572,6 +572,25 @@ def test_a_json_with_a_reports_key_but_not_its_form_is_the_users_and_never_repla
     assert "(it holds 'my_notes' besides)" in capsys.readouterr().err
 
 
+def test_a_coupling_on_one_axis_or_two_couplings_are_refused_without_advice_on_gains(tmp_path, capsys):
+    """On a one-axis machine a coupling's design ended in numpy's 'matmul: Input operand 1 has a mismatch in its core
+    dimension 0', and two couplings in one composition were told to set their gains or tune them (an outside probe)."""
+    (tmp_path / "m.toml").write_text(MACHINE.format(kp=40.0).split("[axes.y]")[0])
+    (tmp_path / "line.toml").write_text('[feed]\nfeed_mm_min = 1200\n[path]\ntype = "polyline"\n'
+                                        'points_mm = [[0, 0], [50, 0]]\n')
+    argv = ["compare", str(tmp_path / "line.toml"), "--machine", str(tmp_path / "m.toml")]
+    assert main([*argv, "--strategies", "ccc_arc", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().endswith("error: --strategies ccc_arc: ccc_arc: cross-coupled control needs 2 or 3 servo axes, "
+                                "the machine has 1 (x)"), err
+    assert main([*argv, "--out", str(tmp_path / "out2")]) == 0
+    assert ("left out: ccc_linear, ccc_arc, feedforward+ccc_arc — ccc_linear: cross-coupled control needs 2 or 3 servo "
+            "axes, the machine has 1 (x)\n") in capsys.readouterr().out
+    assert main(["compare", str(tmp_path / "line.toml"), "--strategies", "ccc_arc+ccc_linear",
+                 "--out", str(tmp_path / "out3")]) == 2
+    assert capsys.readouterr().err.strip().endswith("strategies ccc_arc and ccc_linear are both a coupling: choose one")
+
+
 def test_compare_leaves_out_the_couplings_a_machine_allows_no_designed_gains_and_runs_the_rest(tmp_path, capsys):
     """Axis loops damped below 0.7 (kp 80/s on the 0.5 ms machine: 0.64) leave the coupling no designed gains: the
     whole comparison ended in 'set the coupling gains kp, ki' (an outside probe). The default set runs the other
@@ -582,7 +601,8 @@ def test_compare_leaves_out_the_couplings_a_machine_allows_no_designed_gains_and
     assert main([*argv, "--out", str(tmp_path / "out")]) == 0
     out = capsys.readouterr().out
     assert ("left out: ccc_linear, ccc_arc, feedforward+ccc_arc — the coupled loop is damped at 0.6" in out
-            and "(--set ccc_arc.kp_per_s=... --set ccc_arc.ki_per_s2=..., or a [[strategy]] table), or tune them" in out)
+            and "(--set ccc_linear.kp_per_s=... --set ccc_linear.ki_per_s2=..., or a [[strategy]] table), or tune them"
+            in out)
     rows = [line.split()[0] for line in out.splitlines()[out.splitlines().index(next(
         x for x in out.splitlines() if x.startswith("---"))) + 1:] if line and not line.startswith("plots")]
     assert rows == ["none", "feedforward", "zpetc"]

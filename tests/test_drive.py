@@ -354,6 +354,29 @@ def test_a_loop_the_screw_destabilises_is_refused_with_its_margins():
     assert margins["velocity"]["stable"] and margins["velocity"]["phase_margin"] > 30
     assert kernel.spectral_radius(pack(stiff, DT)) < 1.0
 
+@pytest.mark.parametrize("stiffness, within", [(0.5, ", within 4 times the crossover 6.832 Hz"), (0.01, "")])
+def test_a_screw_whose_mode_lies_in_the_velocity_loops_band_is_named_in_the_refusal(stiffness, within):
+    """A 0.5 N/µm screw (in N/mm, a real one's number) under a 250 kg table: the velocity loop badly damped by the
+    screw's mode was told to raise kv or lengthen ti, or to check the mass; the screw was never named (an outside
+    probe)."""
+    soft = AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0, motor_mass=50.0,
+                     screw_stiffness=stiffness)
+    with pytest.raises(UnstableLoopError, match=r"the velocity loop of axis 'x' is badly damped") as err:
+        soft.check(2e-4)
+    assert str(err.value).endswith(
+        f"the screw's mode lies in the loop's band (its antiresonance {np.sqrt(stiffness * 4e3) / (2 * np.pi):.4g} "
+        f"Hz{within}): check screw_stiffness ({stiffness:g} N/µm: one in N/mm reads a thousand times too soft), or "
+        "lower kv."), str(err.value)
+
+
+def test_an_integrator_rule_on_a_p_velocity_loop_is_refused():
+    """velocity_integrator on an axis without ti ran without effect, the results the same for every rule, while
+    velocity_taps without difference feedback was refused (an outside probe)."""
+    with pytest.raises(ValueError, match=r"^velocity_integrator says how the velocity PI integrates: it needs ti"):
+        axis(ti=None, velocity_integrator="backward")
+    assert axis(velocity_integrator="backward").velocity_integrator == "backward"
+
+
 def test_the_state_feedback_default_is_the_loop_of_before():
     servo = axis()
     assert (servo.velocity_feedback, servo.velocity_taps, servo.velocity_filter_hz, servo.computation_delay) == (

@@ -49,7 +49,12 @@ def test_one_trace_keeps_the_single_report_and_fleet_options_need_several(tmp_pa
     assert "--summary and --scheduler are for several traces" in capsys.readouterr().err
     assert main(["diagnose", str(FLEET), "--report", str(tmp_path / "r.json"), "--out", str(tmp_path / "o")]) == 2
     assert "--report names one trace's report" in capsys.readouterr().err
-    with pytest.raises(ValueError, match="holds no .csv trace"):
+    with pytest.raises(ValueError, match="holds no .csv trace$"):
+        trace_files([tmp_path])
+    (tmp_path / "mill_a").mkdir()
+    (tmp_path / "mill_a" / "night.csv").write_text("t,x_ref,x\n")
+    with pytest.raises(ValueError, match=r"holds no .csv trace \(its subfolders, not searched, hold 1: in mill_a; name "
+                                         r"them\)$"):  # was "holds no .csv trace" (an outside probe)
         trace_files([tmp_path])
     with pytest.raises(ValueError, match="no trace file"):
         trace_files([tmp_path / "missing.csv"])

@@ -292,3 +292,11 @@ def test_a_record_naming_a_file_outside_the_folder_is_refused_by_its_line_before
         output_dir(tmp_path / "out")
     assert (tmp_path / "victim.txt").exists() is False and sorted(os.listdir(tmp_path / "out")) == [".contoursim-out",
                                                                                                     "a.csv"]
+
+
+def test_a_folder_given_for_a_file_is_said_to_be_one(tmp_path):
+    """SimResult.save_csv on an existing folder said it 'exists; refusing to overwrite it', which overwrite=True would
+    not have helped (an outside probe)."""
+    for overwrite in (False, True):
+        with pytest.raises(IsADirectoryError, match=f"{tmp_path} is a folder: give a file name in it"):
+            output.writing(tmp_path, overwrite=overwrite)

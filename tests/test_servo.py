@@ -341,6 +341,24 @@ def test_a_position_loop_failing_for_a_slow_velocity_loop_is_told_to_raise_kv_or
         dataclasses.replace(servo, kp=float(lower.group(1))).check(2e-4)
 
 
+def test_the_kp_a_refusal_says_to_lower_to_is_the_checks_own_bound():
+    """kp 500 on a velocity loop of 41 Hz was told to go to 64.6 1/s or less (a velocity loop 4 times faster, the rule
+    of thumb), where 400 passes the check (an outside probe): the bound said passes, a tenth of a percent above fails."""
+    import re
+
+    servo = AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=500.0)
+    with pytest.raises(UnstableLoopError, match=r"the position loop of axis 'x' is badly damped") as err:
+        servo.check(2e-4)
+    said = re.search(r"lower kp, to ([0-9.e+-]+) 1/s or less \(the check's bound; a velocity loop 4 times faster, the "
+                     r"rule of thumb, allows ([0-9.]+) 1/s\)", str(err.value))
+    assert said, str(err.value)
+    bound, rule = float(said.group(1)), float(said.group(2))
+    assert rule < 100.0 < 400.0 < bound < 500.0
+    dataclasses.replace(servo, kp=bound).check(2e-4)
+    with pytest.raises(UnstableLoopError):
+        dataclasses.replace(servo, kp=1.01 * bound).check(2e-4)
+
+
 def test_a_pi_velocity_loop_crossing_below_its_integral_corner_is_told_to_raise_kv_not_lower_it():
     """At kv = 1 the PI loop crosses over at 2.3 Hz, below its corner 1/(2π ti) = 9.9 Hz: lowering kv made it worse."""
     servo = AxisServo(mass=300.0, force_constant=942.0, kv=1.0, ti=0.016, kp=1.0)
@@ -379,3 +397,14 @@ def test_an_integral_time_too_short_for_the_period_is_named_not_the_period_or_kv
     with pytest.raises(SamplingError, match=r"dt = 0.01 s is too long.*or lower kv = 80\.$") as err:
         AxisServo(mass=300.0, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0).check(1e-2)
     assert err.value.parameter == "dt"
+
+
+def test_a_crossover_no_drive_has_names_the_mass_and_force_constant():
+    """mass_kg = 1e-6 (a mass in tonnes written in kg, a millionth too small) was told to use dt <= 1e-11 s, the mass
+    never named (an outside probe)."""
+    from contoursim.servo import SamplingError
+
+    with pytest.raises(SamplingError, match=r"its crossover 1.199e\+10 Hz is above 1/4 of the Nyquist frequency \(625 "
+                                            r"Hz\) \(a crossover no drive has: check the mass, 1e-06 kg, and "
+                                            r"force_constant, 942 N/A, for their units\)"):
+        AxisServo(mass=1e-6, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0).check(2e-4)

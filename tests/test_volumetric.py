@@ -50,6 +50,14 @@ def test_report_gives_the_worst_errors_and_plots(tmp_path):
     assert "position |Δ| [µm]" in text and "tool axis y [µrad]" in text
 
 
+def test_each_plane_of_four_linear_axes_is_plotted(tmp_path):
+    """The 7-axis driller's linear axes x, y, z, z1: the planes y-z, y-z1 and z-z1 were left out without a word (the
+    first three pairs kept), where the page promises each plane (an outside probe)."""
+    volumetric_report("aircraft_drilling_7axis", tmp_path / "out", grid=3)
+    assert sorted(p.name for p in (tmp_path / "out").glob("*.png")) == [
+        f"volumetric_{plane}.png" for plane in ("xy", "xz", "xz1", "yz", "yz1", "zz1")]
+
+
 def test_a_component_that_is_zero_to_rounding_is_printed_as_zero(tmp_path):
     """The 3-axis mill turns its tool axis about z by nothing, to rounding: +0.000, not -0.000."""
     text = volumetric_report("vertical_mill_3axis", tmp_path, grid=3)
