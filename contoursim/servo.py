@@ -1393,13 +1393,13 @@ def check(servo, dt, axis="x"):
                     f"{integral} = {getattr(servo, integral):.6g} s is too short for the {loop} loop of axis {axis!r} at "
                     f"dt = {dt:.6g} s: its integral action lifts the crossover to {f_c:.4g} Hz, above 1/4 of the "
                     f"Nyquist frequency ({f_max:.4g} Hz). Lengthen {integral}, or use {use}.", integral)
-            units = ("" if MAX_CROSSOVER_FRACTION / (2 * f_c) >= MIN_SERVO_PERIOD else  # no drive samples that fast
-                     f" (a crossover no drive has: check the mass, {servo.mass:.6g} kg, and force_constant, "
-                     f"{servo.force_constant:.6g} N/A, for their units)")
+            physical = MAX_CROSSOVER_FRACTION / (2 * f_c) >= MIN_SERVO_PERIOD  # else no drive samples that fast
+            units = ("" if physical else f" (a crossover no drive has: check the mass, {servo.mass:.6g} kg, and "
+                                         f"force_constant, {servo.force_constant:.6g} N/A, for their units)")
             raise SamplingError(
                 f"dt = {dt:.6g} s is too long for the {loop} loop of axis {axis!r}: its crossover "
                 f"{f_c:.4g} Hz is above 1/4 of the Nyquist frequency ({f_max:.4g} Hz){units}. Use "
-                f"{use}, or lower {gain} = {getattr(servo, gain):.6g}.", "dt")
+                f"{use}, or lower {gain} = {getattr(servo, gain):.6g}.", "dt" if physical else "mass")
     sampled = margins(servo, dt)
     inner = None  # the margins of the loop inside the one checked (innermost first)
     for loop, m in sampled.items():

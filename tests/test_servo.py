@@ -400,11 +400,12 @@ def test_an_integral_time_too_short_for_the_period_is_named_not_the_period_or_kv
 
 
 def test_a_crossover_no_drive_has_names_the_mass_and_force_constant():
-    """mass_kg = 1e-6 (a mass in tonnes written in kg, a millionth too small) was told to use dt <= 1e-11 s, the mass
-    never named (an outside probe)."""
+    """mass_kg = 1e-6 (a millionth of the mass) was told to use dt <= 1e-11 s at servo_period_ms's line, the mass never
+    named (an outside probe)."""
     from contoursim.servo import SamplingError
 
     with pytest.raises(SamplingError, match=r"its crossover 1.199e\+10 Hz is above 1/4 of the Nyquist frequency \(625 "
                                             r"Hz\) \(a crossover no drive has: check the mass, 1e-06 kg, and "
-                                            r"force_constant, 942 N/A, for their units\)"):
+                                            r"force_constant, 942 N/A, for their units\)") as err:
         AxisServo(mass=1e-6, force_constant=942.0, kv=80.0, ti=0.016, kp=40.0, damping=500.0).check(2e-4)
+    assert err.value.parameter == "mass"  # a machine file's refusal at mass_kg's line, not servo_period_ms's
