@@ -346,7 +346,8 @@ class TomlFile:
             keys, value = found
             leaf = max(i for i, k in enumerate(keys) if isinstance(k, str))  # an array of tables' item is counted
             where = f" in {_table(keys[:leaf])}" if any(isinstance(k, int) for k in keys[:leaf]) else ""
-            raise self.error(f"{_dotted(keys[leaf:] if where else keys)}{where} = {shown(getattr(value, 'text', value))} is too large a number: "
+            written = shown(getattr(value, "text", value))
+            raise self.error(f"{_dotted(keys[leaf:] if where else keys)}{where} = {written} is too large a number: "
                              f"beyond ±{FLOAT_MAX:.4g}", *keys)
 
     @classmethod

@@ -1321,8 +1321,8 @@ def _remedy(loop, servo, dt, m, inner):
         if not mode > CASCADE_RATIO * crossover:  # in the loop's band: the screw's 2-5 % damping is the pole's
             within = (f", within {CASCADE_RATIO:g} times the crossover {crossover / (2 * np.pi):.4g} Hz"
                       if np.isfinite(crossover) else "")
-            return (f"the screw's mode lies in the loop's band (its antiresonance {mode / (2 * np.pi):.4g} Hz{within}): "
-                    f"check screw_stiffness ({servo.screw_stiffness:.6g} N/µm: one in N/mm reads a thousand times too "
+            return (f"the screw's mode lies in the loop's band (its antiresonance {mode / (2 * np.pi):.4g} "
+                    f"Hz{within}): check screw_stiffness ({servo.screw_stiffness:.6g} N/µm: one in N/mm reads a thousand times too "
                     f"soft), or lower {gain}")
     integral = getattr(servo, _INTEGRAL_OF.get(loop, ""), None)
     if loop == "velocity" and np.isfinite(crossover):  # the current's lag: a current loop as slow is the cause
