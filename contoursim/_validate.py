@@ -205,8 +205,10 @@ def float_array(name, value, ndim=None, shape=None):
         raise TypeError(f"{name} must be numeric, got {value!r}")
     try:
         kind = np.asarray(value).dtype.kind
-        if kind == "O":  # e.g. a list mixing numbers and text
-            kind = "U" if any(isinstance(v, (str, bytes, bool, np.bool_)) for v in np.asarray(value, object).flat) else "f"
+        if kind == "O" or (kind in "iuf" and not isinstance(value, np.ndarray)):  # a list mixing numbers and text, or
+            # numbers and booleans, which numpy reads as numbers: [[true, 0], [10, 0]] as [[1, 0], [10, 0]]
+            mixed = any(isinstance(v, (str, bytes, bool, np.bool_)) for v in np.asarray(value, object).flat)
+            kind = "U" if mixed else "f" if kind == "O" else kind
         arr = np.asarray(value, dtype=float) if kind in "iuf" else None
     except OverflowError:  # an int beyond a float's range
         raise ValueError(f"{name} holds a number beyond ±{FLOAT_MAX:.4g}") from None

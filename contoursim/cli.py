@@ -294,7 +294,7 @@ def _job(args, extra_keys=()):
     """
     from .machine import preset_file, read_work_offset
     from .model import load_model, with_file_effects
-    from .pathfile import library_file
+    from .pathfile import NAME_SUFFIXES, library_file
 
     file = Path(args.file)
     if file.suffix == ".toml" and file.exists():
@@ -340,7 +340,7 @@ def _job(args, extra_keys=()):
             model = with_file_effects(replace(model, machine=machine), job)
             if geometric and machine.chain is None:  # simulate's, compare's and a sweep's, said where the job asks
                 raise job.error(_no_chain(machine), "geometric_compensation")
-            return model, named("path", lambda near: near, library_file, (".toml", ".nc")), job, geometric
+            return model, named("path", lambda near: near, library_file, NAME_SUFFIXES), job, geometric
     return load_model(args.machine or preset_file(DEMO_MACHINE, here=False)), library_file(args.file), None, False
 
 

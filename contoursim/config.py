@@ -308,6 +308,37 @@ _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
 _KEY = re.compile(r"""^\s*("[^"]*"|'[^']*'|[A-Za-z0-9_\-]+(?:\s*\.\s*[A-Za-z0-9_\-]+)*)\s*=""")
 
 
+# a TOML line's tokens that open or close what may go on over the next lines (multi-line strings, arrays), its
+# one-line strings (whose brackets are text) and its comment; and what closes each kind of multi-line string
+_CLOSE = {'"""': re.compile(r'(?:[^"\\]|\\.|"(?!""))*"""'), "'''": re.compile(r"(?:[^']|'(?!''))*'''")}
+_TOKEN = re.compile("|".join([*map(re.escape, _CLOSE), r'"(?:[^"\\]|\\.)*"?', r"'[^']*'?", "#", r"\[", r"\]"]))
+
+
+def _continued(lines):
+    """Per line of a TOML text, whether it starts inside a multi-line string or array: a value's continuation, whose
+    ``[axes.x]`` or ``kp_per_s = 35`` (a description's notes) is text, no table header or key."""
+    inside, depth, flags = None, 0, []
+    for line in lines:
+        flags.append(inside is not None or depth > 0)
+        pos = 0
+        while True:
+            if inside is not None:
+                close = _CLOSE[inside].match(line, pos)
+                if close is None:  # the string goes on over the next line
+                    break
+                pos, inside = close.end(), None
+                continue
+            token = _TOKEN.search(line, pos)
+            if token is None or token.group() == "#":
+                break
+            if token.group() in _CLOSE:
+                inside = token.group()
+            elif token.group() in "[]":
+                depth = max(depth + (1 if token.group() == "[" else -1), 0)
+            pos = token.end()
+    return flags
+
+
 def _split_key(text):
     return tuple(part.strip().strip("\"'") for part in text.split("."))
 
@@ -403,7 +434,10 @@ class TomlFile:
         best = inside = None
         table = ()
         counts = {}
-        for number, line in enumerate(text_lines(self.text), start=1):
+        lines = text_lines(self.text)
+        for number, (line, continued) in enumerate(zip(lines, _continued(lines)), start=1):
+            if continued:  # inside a multi-line string or array: text or values, no header or key
+                continue
             header = _HEADER.match(line)
             if header:
                 path = _split_key(header.group(2))

@@ -25,7 +25,13 @@ from .feed import SETTING_RANGE, FeedSettings
 from .gcode import SUFFIXES, read_gcode
 from .paths import MAX_COORDINATE, circle, helix, iso230_4_circle, polyline, spline
 
-__all__ = ["PathFile", "library_file", "load_path_file", "override_feed", "read_feed_table", "read_path_file"]
+__all__ = ["NAME_SUFFIXES", "PathFile", "library_file", "load_path_file", "override_feed", "read_feed_table",
+           "read_path_file"]
+
+
+#: The suffixes tried in turn after a path file's name given without one: a TOML path, then each G-code suffix (the
+#: user's ``part.ngc`` for ``part``, not the library's ``pocket.nc`` for a ``pocket.ngc`` here).
+NAME_SUFFIXES = (".toml", *SUFFIXES)
 
 
 def _converted(scale, low, high, check=None):
@@ -88,8 +94,8 @@ def library_file(name, here=True):
     ----------
     name : str or os.PathLike
         A file name, or a library entry with or without its suffix
-        (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then ``.nc`` is tried, here
-        first: a file here is read rather than the library's of that name).
+        (``"butterfly"``, ``"pocket.nc"``; without a suffix, ``.toml`` then each G-code suffix is tried
+        (:data:`NAME_SUFFIXES`), here first: a file here is read rather than the library's of that name).
     here : bool
         ``False``: the library's entry only (a job file's name not found beside the job).
 
@@ -104,11 +110,11 @@ def library_file(name, here=True):
     if any(c in os.fspath(name) for c in "\r\n"):  # its stem names the files written: refused there, after the run
         raise ConfigError(f"the path file's name {os.fspath(name)!r} has a line break, which no file written from it "
                           "may have: rename it")
-    found = local_file(name, suffixes=(".toml", ".nc")) if here else None  # a user's copy of a library entry is meant
+    found = local_file(name, suffixes=NAME_SUFFIXES) if here else None  # a user's copy of a library entry is meant
     if found is not None and not found.is_dir():
         return found
     library = _library()
-    for candidate in (str(name), f"{name}.toml", f"{name}.nc"):
+    for candidate in (str(name), *(f"{name}{suffix}" for suffix in NAME_SUFFIXES)):
         if library.joinpath(candidate).is_file():
             return library / candidate
     if found is not None:  # a folder of that name, and no library entry

@@ -59,7 +59,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from . import _validate
-from .config import TomlFile, read_text
+from .config import TomlFile, local_file, read_text
 from .exceptions import ConfigError
 from .simulation import SUMMARY_KEYS
 
@@ -162,12 +162,15 @@ class Sweep:
 def _bundle(spec, toml):
     """``(files, elsewhere)``: the spec's text and those of the files it names in its folder (the machine file's
     tables too), by path relative to the folder; and the files it names outside it."""
+    from .pathfile import NAME_SUFFIXES
+
     files, elsewhere = {spec.name: toml.text}, []
     folder = spec.parent.resolve()
 
-    def add(value, base):
-        file = (base / value).resolve()
-        if not file.is_file():
+    def add(value, base, suffixes=()):
+        found = local_file(value, base, suffixes)  # as the job reads it: "demo_mill" is a demo_mill.toml beside it
+        file = None if found is None else found.resolve()
+        if file is None or not file.is_file():
             if Path(value).is_file():  # relative to the working directory
                 elsewhere.append(str(value))
             return None
@@ -177,9 +180,9 @@ def _bundle(spec, toml):
         files[file.relative_to(folder).as_posix()] = read_text(file)
         return file
 
-    machine = add(str(toml.data.get("machine", "")), spec.parent) if isinstance(toml.data.get("machine"), str) else None
+    machine = add(toml.data["machine"], spec.parent, (".toml",)) if isinstance(toml.data.get("machine"), str) else None
     if isinstance(toml.data.get("path"), str):
-        add(toml.data["path"], spec.parent)
+        add(toml.data["path"], spec.parent, NAME_SUFFIXES)
     if machine is not None:  # tables a machine file names (an ISO 230-2 table = "x_laser.csv"), relative to it
         stack = [TomlFile.read(machine).data]
         while stack:
@@ -287,6 +290,10 @@ def _draw(toml, tables, method, count, seed):
                                  "vary", i, "values")
             if not isinstance(values, list) or not values or not all(_number(v) for v in values):
                 raise toml.error(f"values must be a list of numbers, got {values!r}", "vary", i, "values")
+            twice = next((v for k, v in enumerate(values) if v in values[:k]), None)  # 2 and 2.0 alike
+            if twice is not None:  # the same variants again, each row of them twice in the table
+                raise toml.error(f"vary {t['name']!r}: values lists {twice!r} more than once: each would run again; "
+                                 "list each value once", "vary", i, "values")
             if log and min(values) <= 0:  # its plot's axis is logarithmic: such a point would not be drawn
                 raise toml.error(f"vary {t['name']!r}: log = true plots the values on a log scale, which "
                                  f"{min(values)!r} is not on: give positive values, or log = false", "vary", i, "log")
@@ -298,6 +305,10 @@ def _draw(toml, tables, method, count, seed):
         low, high = float(t["min"]), float(t["max"])
         if high < low or (log and low <= 0):
             raise toml.error(f"vary {t['name']!r}: min must not exceed max" + (" and both be positive (log)" if log else ""),
+                             "vary", i, "min")
+        if not math.isfinite(high / low if log else high - low):  # the draws between them would be inf or nan
+            raise toml.error(f"vary {t['name']!r}: min = {low:g} and max = {high:g} lie too far apart to draw between: "
+                             f"their {'ratio' if log else 'difference'} is beyond ±{_validate.FLOAT_MAX:.4g}",
                              "vary", i, "min")
         if method == "grid":
             points = _integer(toml, ("vary", i, "count"), t.get("count"), 1)

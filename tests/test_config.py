@@ -35,6 +35,18 @@ def test_line_of_walks_tables_and_arrays_of_tables():
     assert f.line_of("nothing") is None
 
 
+def test_a_header_or_key_written_inside_a_multi_line_string_or_array_is_not_the_files():
+    """A description's notes ('[axes.x]', 'kp_per_s = 35 was too soft') were taken for the table and key: a bad
+    kp_per_s was said at the description's line 5, not at its own line 13."""
+    f = TomlFile("m.toml", 'name = "m"\ndescription = """\nRetuned in 2024:\n[axes.x]\nkp_per_s = 35 was too soft\n'
+                           "\\\"\"\" quoted, and a [bracket]\"\"\"\nnotes = '''\n[axes.x]'''\n"
+                           'points = [\n  [1],\n]\n[axes.x]\nkp_per_s = -40 # """ [\n[axes]\n')
+    assert f.data["axes"]["x"]["kp_per_s"] == -40
+    assert f.line_of("axes", "x") == 12
+    assert f.line_of("axes", "x", "kp_per_s") == 13
+    assert f.line_of("points") == 9
+
+
 def test_unknown_key_is_reported_with_its_line():
     with pytest.raises(ConfigError, match=r"^m.toml, line 7: unknown key 'kvv' in \[axes.x\] \(did you mean 'kv'\?\); expected one of: kp, kv \(see docs/machines-and-files.md, section 'File format'\)$"):
         TomlFile("m.toml", TEXT).table("axes", "x", allowed=["kp", "kv"])

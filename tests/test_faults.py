@@ -1164,6 +1164,24 @@ def test_a_users_copy_of_a_library_path_or_a_preset_named_without_its_suffix_is_
     assert model.machine.axes["x"].kp == 40.0
 
 
+@pytest.mark.parametrize("named", ["command line", "job file"])
+def test_a_users_program_of_any_gcode_suffix_named_without_it_is_the_one_read(tmp_path, monkeypatch, named):
+    """``pocket`` ran the library's pocket.nc while the user's pocket.ngc lay here (the table said 'path: pocket.nc'),
+    and ``part`` for a part.gcode was "no path file 'part' here nor in the trajectories library"."""
+    from contoursim.cli import _job
+
+    folder = tmp_path / "job"
+    folder.mkdir()
+    for name in ("pocket.ngc", "part.gcode"):
+        (folder / name).write_text("G21 G90\nG1 X0 Y0 F600\nG1 X10\n")
+    monkeypatch.chdir(folder if named == "command line" else tmp_path)
+    for name in ("pocket", "part"):
+        (folder / "j.toml").write_text(f'machine = "demo_mill"\npath = "{name}"\n')
+        args = (SimpleNamespace(file=name, machine=None, command="simulate") if named == "command line"
+                else SimpleNamespace(file=str(folder / "j.toml"), machine=None, command="simulate"))
+        assert _job(args)[1].resolve() == next(folder.glob(f"{name}.*")).resolve()
+
+
 def test_a_folders_traces_whose_suffix_is_upper_case_are_in_the_fleet(tmp_path):
     """NIGHT_2.CSV (as a Windows controller names it) was left out of the fleet without a word; alone, the folder was
     said to hold no .csv trace."""

@@ -85,15 +85,24 @@ def test_a_latin_hypercube_puts_one_draw_in_each_stratum_of_each_parameter(count
     ({"name": '"effect.backlash.x.lost_motion_um"', "min": -5.0, "max": 2.0}, r"line 12: vary 'effect.backlash.x.lost_motion_um': "),
     ({"name": '"axes.x.kp_per_s"', "min": 50.0, "max": 2.0, "count": 2}, r"line 13: vary 'axes.x.kp_per_s': min must not exceed max"),
     ({"name": '"axes.x.kp_per_s"', "min": 5.0}, r"line 11: vary 'axes.x.kp_per_s' needs max = <number>"),
+    # "values contains a non-finite value (nan) at index (0, 0)", naming no file: the grid's step overflowed
+    ({"name": '"axes.x.kp_per_s"', "min": -1.7e308, "max": 1.7e308},
+     r"line 13: vary 'axes.x.kp_per_s': min = -1.7e\+308 and max = 1.7e\+308 lie too far apart to draw between: their "
+     r"difference is beyond ±1.798e\+308"),
+    ({"name": '"axes.x.kp_per_s"', "min": 1e-300, "max": 1e300, "log": "true"},  # a log draw's ratio overflowed
+     r"line 13: vary 'axes.x.kp_per_s': min = 1e-300 and max = 1e\+300 .* their ratio is beyond"),
     ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0, "count": 0}, r"line 15: vary.count must be a whole number, "
                                                                          r"at least 1; got 0"),  # it was a TypeError's
     ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 9.0, "count": 1},  # it ran kp 5 alone
      r"line 15: vary 'axes.x.kp_per_s': count = 1 is min = 5 alone, max = 9 never runs"),
     ({"name": '"axes.x.kp_per_s"', "min": 5.0, "max": 5.0, "count": 3},  # it ran kp 5 three times
      r"line 15: vary 'axes.x.kp_per_s': min = max = 5: count = 3 would run that one value 3 times"),
+    ({"name": '"axes.x.kp_per_s"', "values": "[30, 40, 30.0]"},  # it ran kp 30 twice, two rows of the same figures
+     r"line 13: vary 'axes.x.kp_per_s': values lists 30.0 more than once: each would run again; list each value once"),
 ])
 def test_bad_varies_name_the_file_line_and_what_is_there(tmp_path, vary, message):
-    vary.setdefault("count", 2)
+    if "values" not in vary:
+        vary.setdefault("count", 2)
     with pytest.raises(ConfigError, match=message):
         read_sweep(_spec(tmp_path, [vary]))
 
@@ -363,6 +372,35 @@ def test_a_file_outside_the_specs_folder_runs_here_but_not_on_a_cluster(tmp_path
     assert run_sweep(sweep)[0, FIGURES.index("diverged")] == 0.0
     with pytest.raises(ValueError, match=r"names .*mill.toml, outside its folder: .* copy the file next to the spec"):
         run_sweep(sweep, "local:1")
+
+
+def test_files_the_spec_names_without_their_suffix_go_to_the_workers(tmp_path):
+    """``machine = "demo_mill"``, ``path = "rounded_square"`` with the user's demo_mill.toml and rounded_square.toml
+    beside the spec ran them here, but were not sent to a cluster's workers, which ran the preset and the library's
+    square: another table, without a word."""
+    from contoursim import sweep as module
+    from contoursim.machine import preset_file
+
+    (tmp_path / "demo_mill.toml").write_text(preset_file("demo_mill").read_text().replace("kp_per_s = 36.0",
+                                                                                         "kp_per_s = 30.0"))
+    (tmp_path / "rounded_square.toml").write_text(SMALL_SQUARE)
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[35.0]"}])
+    spec.write_text(spec.read_text().replace("[feed]\nfeed_mm_min = 3000\n", ""))
+    sweep = read_sweep(spec)
+    assert sorted(sweep.files) == ["demo_mill.toml", "rounded_square.toml", "spec.toml"] and not sweep.elsewhere
+    module._JOBS.clear()  # as on a worker: the job rebuilt from the files sent
+    job = _job(sweep.files)
+    assert job.model.machine.axes["y"].kp == 30.0 and job.trajectory.path.length < 200
+
+
+SMALL_SQUARE = """[feed]
+feed_mm_min = 2000
+
+[path]
+type = "polyline"
+blend_radius_mm = 5
+points_mm = [[0, -20], [20, -20], [20, 20], [-20, 20], [-20, -20], [0, -20]]
+"""
 
 
 def test_a_local_cluster_listens_on_the_loopback_only_and_a_bad_address_is_one_line(tmp_path):

@@ -33,7 +33,11 @@ def test_scalar_checks_take_numbers():
     assert _validate.nonnegative("vff", 0) == 0.0
 
 
-@pytest.mark.parametrize("value", ["1.5", ["1", "2"], [True, False], np.array([1.0 + 2.0j]), np.array([1.0, "a"], object)])
+@pytest.mark.parametrize("value", ["1.5", ["1", "2"], [True, False], np.array([1.0 + 2.0j]),
+                                   np.array([1.0, "a"], object),
+                                   # a boolean among numbers, which numpy reads as a number: a path file's points_mm =
+                                   # [[true, 0], [10, 0]] ran from x = 1
+                                   [[True, 0], [10, 0]], [0.5, False], (np.True_, 2)])
 def test_array_check_refuses_text_booleans_and_complex(value):
     with pytest.raises(TypeError, match="travel must be numeric"):
         _validate.finite_array("travel", value)
