@@ -261,9 +261,11 @@ def demo(args):
     from .comparison import Comparison
     from .compensation import strategies_named
     from .machine import load_machine, preset_file
+    from .output import refused_early
     from .pathfile import library_file
     from .simulation import simulate
 
+    refused_early(args.out, [f"{Path(f).stem}.csv" for files in DEMO_RUNS.values() for f in files])  # before the runs
     machine = load_machine(preset_file(DEMO_MACHINE, here=False))
     groups = {name: [run_job(machine, library_file(f)) for f in files] for name, files in DEMO_RUNS.items()}
     (_, free_form, plain, _), = groups["butterfly"]
@@ -379,6 +381,7 @@ def simulate_command(args):
     from .gcode import DIALECT
     from .geocomp import GeometricCompensation
     from .model import Model
+    from .output import refused_early
     from .pathfile import load_path_file
 
     model, path_file, job, geometric = _job(args)
@@ -395,11 +398,14 @@ def simulate_command(args):
     directions, subtract = ballbar or ((None,), False)
     variants = [("", [])] + ([("_geometric_comp", [GeometricCompensation(machine.chain)])]
                              if geometric or args.geometric_compensation else [])
+    names = {(direction, suffix): (stem if direction is None else f"{stem}_{direction}") + suffix
+             for direction in directions for suffix, _ in variants}
+    refused_early(args.out, [f"{name}.csv" for name in names.values()])  # a file for --out: not after the runs
     total = len(directions) * len(variants) * (2 if subtract else 1)  # the runs held at once
     runs, nominal = [], {}
     for direction in directions:
         for suffix, strategies in variants:
-            name = (stem if direction is None else f"{stem}_{direction}") + suffix
+            name = names[direction, suffix]
             runs.append(run_job(model, path_file, job, strategies, label=name, direction=direction,
                                 runs=1 if runs else total))  # fmt: skip
             if subtract:  # the same run on the machine without effects

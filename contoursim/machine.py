@@ -35,7 +35,7 @@ import numpy as np
 from . import _memory, _validate
 from .config import TEXT_KEYS, TomlFile, local_file
 from .exceptions import ConfigError, PathError, UnstableLoopError
-from .multibody import MAX_TRAVEL
+from .multibody import MAX_TRAVEL, MachineChain
 from .servo import MIN_SERVO_PERIOD, AxisServo, SamplingError
 
 __all__ = ["CARTESIAN", "CONTROLLER_FIELDS", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
@@ -95,6 +95,13 @@ class Machine:
         for name, servo in axes.items():
             if not isinstance(servo, AxisServo):
                 raise TypeError(f"axis {name!r} must be an AxisServo, got {type(servo).__name__}")
+        if self.chain is not None and not isinstance(self.chain, MachineChain):
+            raise TypeError(f"chain must be a MachineChain (a machine's geometry) or None, got "
+                            f"{type(self.chain).__name__}")
+        for key, example in (("work_offset", "250.0"), ("uncertain", "('kp',)"), ("axis_travel", "(0.0, 500.0)")):
+            if getattr(self, key) is not None and not isinstance(getattr(self, key), Mapping):  # a list read otherwise
+                raise TypeError(f"{key} must map axis names to values ({{'x': {example}}}), got "
+                                f"{type(getattr(self, key)).__name__}")
         if self.chain is None:
             if tuple(axes) != CARTESIAN[: len(axes)]:
                 raise ValueError(f"a machine without a chain has the axes x; x, y; or x, y, z (in that order), got "
@@ -117,6 +124,9 @@ class Machine:
         object.__setattr__(self, "work_offset", _validate.Frozen(offset))
         uncertain = {a: tuple(fields) for a, fields in (self.uncertain or {}).items() if fields}
         for a, fields in uncertain.items():
+            if isinstance(self.uncertain[a], str):  # its letters would be the settings: 'k' of axis x
+                raise TypeError(f"uncertain[{a!r}] must be a sequence of controller settings, got the string "
+                                f"{self.uncertain[a]!r}: give ({self.uncertain[a]!r},)")
             if a not in axes:
                 raise ValueError(f"uncertain names axis {a!r}, which the machine does not have")
             bad = [f for f in fields if f not in CONTROLLER_FIELDS or getattr(axes[a], f) is None]

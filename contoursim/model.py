@@ -159,6 +159,9 @@ class Model:
 
     def with_effect(self, effect):
         """A model with `effect` added, replacing an effect of the same name on the same axis."""
+        if not isinstance(effect, Effect):  # its .label, not found, said nothing of what an effect is
+            raise TypeError(f"effect must be an Effect, e.g. Effect('backlash', 'x', lost_motion_um=5.0), got "
+                            f"{type(effect).__name__}")
         kept = tuple(e for e in self.effects if e.label != effect.label)
         return Model(self.machine, kept + (effect,))
 

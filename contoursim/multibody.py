@@ -69,6 +69,7 @@ _JOINT = re.compile(r"^\s*(fixed|linear|rotary)(?:\s+([+-]?)([xyz]))?\s*$")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
 MAX_TRAVEL = 1e6  # [mm or rad]: largest |end| of an axis's travel (a kilometre; a trace holds positions as far)
 _LARGEST_NUMBER = 1e12  # largest |number| in a machine file's geometric half (offsets, travels, error terms)
+_UNIT_TOLERANCE = 1e-9  # a tool axis is a unit vector: its length within this of 1 [-]
 SMALL_ERROR = 0.01  # a machine file's error motions stay within this: [rad] of angle, and of a linear travel's length
 
 
@@ -414,7 +415,7 @@ class MachineChain:
         axes = self._axes()
         object.__setattr__(self, "axes", axes)
         v = _validate.finite_array("tool_axis", self.tool_axis, shape=(3,))
-        if abs(np.linalg.norm(v) - 1) > 1e-9:
+        if abs(np.linalg.norm(v) - 1) > _UNIT_TOLERANCE:
             raise ValueError(f"tool_axis must be a unit vector, got {v}")
         v.flags.writeable = False
         object.__setattr__(self, "tool_axis", v)
@@ -864,13 +865,20 @@ class MachineChain:
         Raises
         ------
         ValueError
-            The iteration does not converge within `max_iter` steps.
+            The iteration does not converge within `max_iter` steps; a
+            `tool_axis` row is not a unit vector; `tol` is not positive.
         """
         position = _validate.finite_array("position", position, ndim=2)
         n = position.shape[0]
         _validate.finite_array("position", position, shape=(n, 3))
         if tool_axis is not None:
             tool_axis = _validate.finite_array("tool_axis", tool_axis, shape=(n, 3))
+            length = np.linalg.norm(tool_axis, axis=1)
+            off = np.abs(length - 1) > _UNIT_TOLERANCE  # matched as it is: (0, 0, 2) moved the rotary axes elsewhere
+            if off.any():
+                i = int(np.argmax(off))
+                raise ValueError(f"tool_axis must hold unit vectors, got {tool_axis[i]} (length {length[i]:g}) at row "
+                                 f"{i}")
         q = np.zeros((n, len(self.axes))) if q0 is None else _validate.finite_array("q0", q0, shape=(n, len(self.axes)))
         q = q.copy()
         t = None if t is None else _validate.finite_array("t", t, shape=(n,))
@@ -884,7 +892,7 @@ class MachineChain:
         rows = 6 if tool_axis is not None else 3
         columns = np.flatnonzero(mask)
         target_axis = np.zeros((0, 3)) if tool_axis is None else tool_axis
-        max_iter = _validate.positive_int("max_iter", max_iter)
+        tol, max_iter = _validate.positive("tol", tol), _validate.positive_int("max_iter", max_iter)
         for part in blocks(n):
             self._newton(q[part], position[part], target_axis[part], None if t is None else t[part], columns, rows, ideal,
                          tol, max_iter, part.start)

@@ -582,6 +582,8 @@ def writing(file, overwrite=False, binary=False):
 
     Raises
     ------
+    TypeError
+        `file` is neither a file name nor a file object.
     IsADirectoryError
         `file` names a folder.
     FileExistsError
@@ -590,6 +592,8 @@ def writing(file, overwrite=False, binary=False):
     overwrite, binary = _validate.flag("overwrite", overwrite), _validate.flag("binary", binary)
     if hasattr(file, "write"):
         return nullcontext(file)
+    if not isinstance(file, (str, os.PathLike)):  # pathlib's "expected str, bytes or os.PathLike object, not int"
+        raise TypeError(f"expected a file name (str or Path) or a file object to write to, got {type(file).__name__}")
     file = Path(file)
     if file.is_dir():  # "exists; refusing to overwrite it", which overwrite=True would not have helped
         raise IsADirectoryError(f"{file} is a folder: give a file name in it (e.g. {file / 'run.csv'})")

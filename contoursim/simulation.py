@@ -825,7 +825,8 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
         The variants do not share one structure; an unknown output; `every`
         keeping the first sample alone; a `dtype` other than float64 or
         float32; per-variant strategies that are not B sequences; noise on an
-        encoder (``noise`` with ``at = "encoder"``).
+        encoder (``noise`` with ``at = "encoder"``); the outputs kept would
+        not fit in the memory available.
     UnstableLoopError
         A nominal machine's loop is unstable or badly damped, or (with
         `check`) a variant's cross-coupled controller fails its check.
@@ -873,6 +874,9 @@ def simulate_batch(models, reference, outputs=("tool_position",), strategies=(),
     keep = slice(None, None, every)
     n_keep = len(range(*keep.indices(len(trajectory))))
     width = {"tool_position": trajectory.dim, "axis_position": q.shape[1], "current": servo.size}
+    _memory.check(len(models) * n_keep, f"{len(models)} models, {n_keep} samples of each kept:",
+                  "give fewer models, every > 1, or outputs=('summary',)",
+                  per_sample=dtype.itemsize * sum(width[name] for name in traces))  # numpy's MemoryError otherwise
     result = {"t": trajectory.t[keep].copy()}
     result.update({name: np.empty((len(models), n_keep, width[name]), dtype) for name in traces})
     result["diverged_step"] = np.empty((len(models), servo.size), np.int64)

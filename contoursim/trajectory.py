@@ -146,6 +146,8 @@ class Trajectory:
         n = int(n)
         if n == 0:
             return self
+        _memory.check(len(self) + n, f"a standstill of {n} samples before the start, at dt = {self.dt:.6g} s:",
+                      "check samples")
         head = np.zeros((n, self.dim))
         return Trajectory(
             np.concatenate([self.t[0] - self.dt * np.arange(n, 0, -1), self.t]),

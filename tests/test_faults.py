@@ -1360,3 +1360,76 @@ def test_a_users_file_where_a_sweep_or_compare_writes_is_refused_before_it_runs(
     _refused(capsys, [*argv, "--out", str(out)],
              f"{out / name} exists and contoursim did not write it; refusing to overwrite it")
     assert (out / name).read_text() == "mine\n"
+
+
+# -- faults6: the public API from a notebook; where simulate and demo write -------------------------------------------
+
+
+@pytest.mark.parametrize("command, mine", [("simulate", "f.txt"), ("demo", "f.txt"), ("simulate", "out/small.csv"),
+                                           ("demo", "out/butterfly.csv")])
+def test_an_out_that_simulate_or_demo_cannot_write_is_refused_before_the_runs(tmp_path, capsys, monkeypatch, command,
+                                                                              mine):
+    """``simulate PATH --out FILE`` (and demo's) ran every run, then said 'FILE is a file, not a directory'; a user's
+    file of a trace's name in an earlier run's folder was refused after the runs as well."""
+    import contoursim.cli
+
+    def ran(*args, **kwargs):
+        raise AssertionError("the run started")
+
+    monkeypatch.setattr(contoursim.cli, "run_job", ran)
+    (tmp_path / "small.toml").write_text(SMALL_PATH)
+    output_dir(tmp_path / "out")  # contoursim's folder, an earlier run's
+    (tmp_path / mine).write_text("mine\n")
+    out = tmp_path / ("f.txt" if mine == "f.txt" else "out")
+    argv = ["simulate", str(tmp_path / "small.toml")] if command == "simulate" else ["demo"]
+    words = (f"{out} is a file, not a directory" if mine == "f.txt"
+             else f"{tmp_path / mine} exists and contoursim did not write it; refusing to overwrite it")
+    _refused(capsys, [*argv, "--out", str(out)], words)
+    assert (tmp_path / mine).read_text() == "mine\n"
+
+
+@pytest.mark.parametrize("call, error, words", [
+    # pathlib's "expected str, bytes or os.PathLike object, not int", from inside
+    (lambda a: write_trace(3, a.trace), TypeError,
+     "expected a file name (str or Path) or a file object to write to, got int"),
+    (lambda a: simulate(a.machine, a.trajectory).save_csv(None), TypeError,
+     "expected a file name (str or Path) or a file object to write to, got NoneType"),
+    # 'str' object has no attribute 'label'
+    (lambda a: Model(a.machine).with_effect("backlash"), TypeError,
+     "effect must be an Effect, e.g. Effect('backlash', 'x', lost_motion_um=5.0), got str"),
+    # 'str' object has no attribute 'axes'; 'list' object has no attribute 'items'; 'k' is not a controller setting
+    (lambda a: Machine(dict(a.machine.axes), 2e-4, chain="vertical_mill_3axis"), TypeError,
+     "chain must be a MachineChain (a machine's geometry) or None, got str"),
+    (lambda a: Machine(dict(a.machine.axes), 2e-4, uncertain=["x"]), TypeError,
+     "uncertain must map axis names to values ({'x': ('kp',)}), got list"),
+    (lambda a: Machine(dict(a.machine.axes), 2e-4, uncertain={"x": "kp"}), TypeError,
+     "uncertain['x'] must be a sequence of controller settings, got the string 'kp': give ('kp',)"),
+    (lambda a: Machine(dict(a.machine.axes), 2e-4, axis_travel=[(0.0, 500.0)]), TypeError,  # 'names axis 0'
+     "axis_travel must map axis names to values ({'x': (0.0, 500.0)}), got list"),
+    # a target tool axis of length 2 or 0 was matched as it was, the answer moved without a word; a negative tol
+    # ended in 'did not converge in 20 steps', a tol of text in a comparison's TypeError
+    (lambda a: load_machine("table_tilting_5axis").chain.inverse(np.zeros((2, 3)), tool_axis=[[0, 0, 1], [0, 0, 2]]),
+     ValueError, "tool_axis must hold unit vectors, got [0. 0. 2.] (length 2) at row 1"),
+    (lambda a: load_machine("table_tilting_5axis").chain.inverse(np.zeros((1, 3)), tool_axis=np.zeros((1, 3))),
+     ValueError, "tool_axis must hold unit vectors, got [0. 0. 0.] (length 0) at row 0"),
+    (lambda a: load_machine("table_tilting_5axis").chain.inverse(np.zeros((1, 3)), tol=-1.0), ValueError,
+     "tol must be positive, got -1.0"),
+    (lambda a: load_machine("table_tilting_5axis").chain.inverse(np.zeros((1, 3)), tol="1e-9"), TypeError,
+     "tol must be a number, got '1e-9'"),
+])
+def test_the_api_from_a_notebook_refuses_naming_the_argument_not_from_inside(api, call, error, words):
+    with pytest.raises(error) as info:
+        call(api)
+    assert str(info.value) == words
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda a: simulate_batch([a.machine] * 10**4, a.trajectory), "10000 models, 7080 samples of each kept: that is "),
+    (lambda a: a.trajectory.preceded(10**12), "a standstill of 1000000000000 samples before the start, at dt = 0.0002"),
+])
+def test_a_huge_count_is_refused_by_the_memory_it_needs_not_numpys_memoryerror(api, monkeypatch, call, words):
+    """A batch of 10000 models, a trajectory preceded by 1e12 samples: numpy's 'Unable to allocate 1.05 GiB'."""
+    monkeypatch.setattr(_memory, "available", lambda: 10**8)
+    with pytest.raises(ValueError) as info:
+        call(api)
+    assert str(info.value).startswith(words) and "GB of memory and 0.1 GB are available" in str(info.value)
