@@ -222,8 +222,8 @@ def float_array(name, value, ndim=None, shape=None):
         if arr.ndim != len(shape) or any(
             want is not None and want != got for want, got in zip(shape, arr.shape)
         ):
-            want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
-            raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+            want = ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "")  # (3,)
+            raise ValueError(f"{name} must have shape ({want}), got {arr.shape}")
     return arr
 
 

@@ -206,6 +206,7 @@ class ErrorMotion:
 
     def scaled(self, factor):
         """A copy with every term (table included) multiplied by `factor`."""
+        factor = _validate.finite("factor", factor)
         table = None if self.table is None else (self.table[0], factor * self.table[1])
         return ErrorMotion(
             tuple(factor * c for c in self.poly),

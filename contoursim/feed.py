@@ -550,9 +550,10 @@ def sample(path, profile, dt):
     Raises
     ------
     ValueError
-        The profile does not fit the path, or a run of the motion's samples
-        would need more memory than is available (:func:`contoursim._memory.check`;
-        a very long path or a very slow feed).
+        The profile does not fit the path, `dt` is not shorter than the
+        motion (no sample between its start and end), or a run of the
+        motion's samples would need more memory than is available
+        (:func:`contoursim._memory.check`; a very long path or a very slow feed).
     """
     dt = _validate.positive("dt", dt)
     if not isinstance(profile, FeedProfile):
@@ -560,7 +561,14 @@ def sample(path, profile, dt):
     if abs(profile.length - _path(path).length) > 1e-9 * max(1.0, path.length):
         raise ValueError(f"profile length {profile.length} mm differs from the path length {path.length} mm")
     periods = profile.duration / dt  # a whole number to rounding (a path moved: 7020.0000000000016) is that number
-    n = max(round(periods) if abs(periods - round(periods)) <= 1e-9 * max(periods, 1.0) else math.ceil(periods), 1)
+    n = round(periods) if abs(periods - round(periods)) <= 1e-9 * max(periods, 1.0) else math.ceil(periods)
+    if n < 2:  # its start and its end only: a step from one to the other, as a controller runs a block shorter than
+        # its period; but a path that is no straight line between them would be skipped, whatever it is
+        ends = path.derivatives(np.array([0.0, path.length]))[0][:, :path.dim]
+        if path.length > (1 + 1e-9) * np.linalg.norm(ends[1] - ends[0]):
+            raise ValueError(f"dt = {dt:.6g} s is not shorter than the motion, which lasts {profile.duration:.6g} s: "
+                             "no sample would lie on the path between its start and its end; sample it at a shorter "
+                             "dt (the servo period), or plan a longer or slower motion")
     _memory.check(n + 1, f"the motion lasts {profile.duration:.6g} s: at dt = {dt:.6g} s",
                   "check the path length, the feed and the servo period")
     t = np.arange(n + 1) * dt

@@ -87,7 +87,11 @@ class Model:
             raise TypeError(f"machine must be a Machine, got {type(self.machine).__name__}")
         if isinstance(self.effects, Effect):  # iterable by its __getitem__: it would fail as 'no parameter 0'
             raise TypeError(f"effects must be a sequence of Effect objects: give ({self.effects!r},), not the effect alone")
-        effects = tuple(self.effects)
+        try:
+            effects = tuple(self.effects)
+        except TypeError:  # None, a number
+            raise TypeError(f"effects must be a sequence of Effect objects, e.g. (Effect('backlash', 'x', "
+                            f"lost_motion_um=5.0),), got {type(self.effects).__name__}") from None
         for e in effects:
             if not isinstance(e, Effect):
                 raise TypeError(f"effects must be Effect objects, got {type(e).__name__}")

@@ -214,8 +214,14 @@ class Body:
             raise ValueError(f"body name must be an identifier other than 'bed', got {self.name!r}")
         if self.joint not in ("fixed", "linear", "rotary"):
             raise ValueError(f"{self.name}: joint must be 'fixed', 'linear' or 'rotary', got {self.joint!r}")
-        if self.direction not in (0, 1, 2) or self.sign not in (1, -1):
-            raise ValueError(f"{self.name}: direction must be 0, 1 or 2 and sign ±1")
+        direction = _validate.positive_int(f"{self.name}.direction", self.direction, least=0)  # True == 1 indexes as a mask
+        if direction > 2:
+            raise ValueError(f"{self.name}.direction must be 0, 1 or 2 (x, y, z), got {direction}")
+        sign = _validate.finite(f"{self.name}.sign", self.sign)
+        if sign not in (1, -1):
+            raise ValueError(f"{self.name}.sign must be 1 or -1, got {sign:g}")
+        object.__setattr__(self, "direction", direction)
+        object.__setattr__(self, "sign", sign)
         if (self.axis is None) != (self.joint == "fixed"):
             raise ValueError(f"{self.name}: a moving joint needs an axis name, a fixed one has none")
         if len(self.motion) != 6 or not all(isinstance(m, ErrorMotion) for m in self.motion):
@@ -258,6 +264,7 @@ class Body:
 
     def scaled(self, factor):
         """A copy with every error multiplied by `factor`."""
+        factor = _validate.finite("factor", factor)
         return replace(
             self,
             static=factor * self.static,
@@ -494,6 +501,8 @@ class MachineChain:
 
     def chain_to(self, j):
         """Bodies from the bed out to body `j` (tuple of indices; empty for the bed)."""
+        if _validate.positive_int("j", j, least=0) > len(self.bodies):
+            raise ValueError(f"j must be a body index 0..{len(self.bodies)} (0 the bed), got {j}")
         if j == 0:
             return ()
         column = self.lower[:, j - 1]
@@ -501,6 +510,8 @@ class MachineChain:
 
     def axis_kind(self, axis):
         """``"linear"`` or ``"rotary"`` for an axis name."""
+        if axis not in self.axes:
+            raise ValueError(f"axis must be one of the chain's axes ({', '.join(self.axes)}), got {axis!r}")
         return next(b.joint for b in self.bodies if b.axis == axis)
 
     @property
@@ -879,7 +890,8 @@ class MachineChain:
                 i = int(np.argmax(off))
                 raise ValueError(f"tool_axis must hold unit vectors, got {tool_axis[i]} (length {length[i]:g}) at row "
                                  f"{i}")
-        q = np.zeros((n, len(self.axes))) if q0 is None else _validate.finite_array("q0", q0, shape=(n, len(self.axes)))
+        q = (np.zeros((n, len(self.axes))) if q0 is None else
+             _validate.finite_array("q0", q0, shape=(n, len(self.axes)), limit=MAX_TRAVEL))
         q = q.copy()
         t = None if t is None else _validate.finite_array("t", t, shape=(n,))
         if free is None:
@@ -926,7 +938,7 @@ class MachineChain:
     # -- helpers ----------------------------------------------------------
 
     def _check(self, q, t):
-        q = _validate.finite_array("q", q, ndim=2)
+        q = _validate.finite_array("q", q, ndim=2, limit=MAX_TRAVEL)  # beyond, the error motions overflow to NaN
         if q.shape[1] != len(self.axes):
             raise ValueError(f"q must have shape (N, {len(self.axes)}) for axes {list(self.axes)}, got {q.shape}")
         if t is not None:

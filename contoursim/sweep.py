@@ -567,6 +567,13 @@ def run_variants(files, names, rows):
 # Running
 
 
+def _sweep(sweep):
+    """`sweep`, refused unless it is a :class:`Sweep`."""
+    if not isinstance(sweep, Sweep):
+        raise TypeError(f"sweep must be a Sweep (read_sweep reads one from its spec), got {type(sweep).__name__}")
+    return sweep
+
+
 def run_sweep(sweep, scheduler=None, progress=None):
     """Run every variant of a sweep; the table of their figures.
 
@@ -591,9 +598,7 @@ def run_sweep(sweep, scheduler=None, progress=None):
     ValueError
         A bad scheduler; dask.distributed missing (saying how to install it).
     """
-    if not isinstance(sweep, Sweep):
-        raise TypeError(f"sweep must be a Sweep (read_sweep reads one from its spec), got {type(sweep).__name__}")
-    n = len(sweep.values)
+    n = len(_sweep(sweep).values)
     table = np.full((n, len(FIGURES)), np.nan)
     report = _validate.callback("progress", progress) or (lambda done, total: None)
     if scheduler is None:
@@ -638,6 +643,12 @@ _PLOTTED = {"contour_max_um": "contour max [µm]", "contour_rms_um": "contour RM
             "volumetric_max_um": "volumetric max [µm]", "volumetric_rms_um": "volumetric RMS [µm]"}
 
 
+def _table(table, sweep=None):
+    """`table` as a float array, refused unless it holds a row of :data:`FIGURES` per variant (of `sweep`, given)."""
+    rows = None if sweep is None else len(_sweep(sweep).values)
+    return _validate.float_array("table", table, shape=(rows, len(FIGURES)))
+
+
 def table_text(sweep, table):
     """The table as CSV text: ``variant``, the varied values, then :data:`FIGURES` (floats exact, as ``repr``).
 
@@ -647,6 +658,7 @@ def table_text(sweep, table):
     table : ndarray, shape (n_variants, len(FIGURES))
         From :func:`run_sweep`.
     """
+    table = _table(table, sweep)
     lines = [",".join(("variant",) + sweep.names + FIGURES)]
     for i, (values, figures) in enumerate(zip(sweep.values, table)):
         cells = [str(i)] + [repr(float(v)) for v in values]
@@ -663,6 +675,7 @@ def best_and_worst(table):
     table : ndarray, shape (n_variants, len(FIGURES))
         From :func:`run_sweep`.
     """
+    table = _table(table)
     contour = np.where(table[:, FIGURES.index("diverged")] == 0, table[:, FIGURES.index("contour_max_um")], np.nan)
     if np.isnan(contour).all():
         return None
@@ -689,6 +702,7 @@ def plot_sweep(sweep, table):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    table = _table(table, sweep)
     ok = table[:, FIGURES.index("diverged")] == 0
     names, figures = _plot_names(sweep), {}
     for j, name in enumerate(sweep.names):
@@ -784,6 +798,7 @@ def write_results(sweep, table, out):
     from .plotting import figure_files, save_figures
     from .simulation import simulate
 
+    table = _table(table, sweep)  # before the folder is made
     out = dataclasses.replace(output_dir(out), by="sweep")  # each file recorded as a sweep's
     parquet = _parquet()
     figures = plot_sweep(sweep, table)

@@ -471,7 +471,7 @@ def test_zpetc_commands_and_coupling_settings_are_checked_where_given():
         (lambda: cp.zpetc_commands(servo, 2e-4, q, negative_radius=5.0), ValueError, "negative_radius must be between 0 and 1"),
         (lambda: cp.zpetc_commands(servo, float("nan"), q), ValueError, "dt must be finite"),
         (lambda: cp.CrossCoupled(up=(0, 0, 0)), ValueError, "up must be a nonzero direction"),
-        (lambda: cp.CrossCoupled(up=(0, 1)), ValueError, r"up must have shape \(3\)"),
+        (lambda: cp.CrossCoupled(up=(0, 1)), ValueError, r"up must have shape \(3,\)"),
         (lambda: cp.CrossCoupled(kp=1e300), ValueError, r"kp must be at most 1e\+09, got 1e\+300"),
         (lambda: cp.CrossCoupled(kd=float("inf")), ValueError, "kd must be finite"),
         (lambda: cp.strategies_named("ccc_arc", settings={"ccc_arc": {"kp_per_s": 1e300}}), ValueError,

@@ -35,12 +35,14 @@ from contoursim.fleet import diagnose_fleet, trace_files
 from contoursim.gcode import read_gcode
 from contoursim.machine import Machine, load_machine, preset_file
 from contoursim.model import Model
+from contoursim.multibody import Body
 from contoursim.output import output_dir
 from contoursim.pathfile import library_file, load_path_file
-from contoursim.paths import circle, line, spline
+from contoursim.paths import circle, line, polyline, spline
 from contoursim.plotting import save_comparison_figures, save_figures
 from contoursim.servo import closed_loop
 from contoursim.simulation import measured_reference, simulate, simulate_batch
+from contoursim.sweep import FIGURES, Sweep, best_and_worst, table_text
 from contoursim.traces import Trace, read_trace, write_trace
 from contoursim.trajectory import Trajectory
 from test_cli import SMALL_PATH
@@ -1416,11 +1418,60 @@ def test_an_out_that_simulate_or_demo_cannot_write_is_refused_before_the_runs(tm
      "tol must be positive, got -1.0"),
     (lambda a: load_machine("table_tilting_5axis").chain.inverse(np.zeros((1, 3)), tol="1e-9"), TypeError,
      "tol must be a number, got '1e-9'"),
+    # an axis or a body the chain lacks: StopIteration, IndexError (chain_to(-1) answered another body's chain)
+    (lambda a: load_machine("vertical_mill_3axis").chain.axis_kind("q"), ValueError,
+     "axis must be one of the chain's axes (x, y, z), got 'q'"),
+    (lambda a: load_machine("vertical_mill_3axis").chain.chain_to(99), ValueError,
+     "j must be a body index 0..6 (0 the bed), got 99"),
+    (lambda a: load_machine("vertical_mill_3axis").chain.chain_to(-1), ValueError, "j must be at least 0, got -1"),
+    # numpy's UFuncTypeError; 'poly contains a non-finite value (nan)' (or 'sin must be finite'), not the factor
+    (lambda a: load_machine("vertical_mill_3axis").chain.scaled("2"), TypeError, "factor must be a number, got '2'"),
+    (lambda a: load_machine("vertical_mill_3axis").chain.scaled(np.nan), ValueError, "factor must be finite, got nan"),
+    # numpy's 'truth value of an array with more than one element is ambiguous'
+    (lambda a: Body("b", joint="linear", axis="x", direction=True), TypeError,
+     "b.direction must be a whole number, got True"),
+    (lambda a: Body("b", joint="linear", axis="x", direction=3), ValueError,
+     "b.direction must be 0, 1 or 2 (x, y, z), got 3"),
+    (lambda a: Body("b", joint="linear", axis="x", sign=np.array([1, 1])), TypeError,
+     "b.sign must be a number, got array([1, 1])"),
+    (lambda a: Body("b", joint="linear", axis="x", sign=0.5), ValueError, "b.sign must be 1 or -1, got 0.5"),
+    # NaN with only numpy's overflow warning: positions beyond the chain's range, refused as a Trajectory's are
+    (lambda a: load_machine("vertical_mill_3axis").chain.tool_pose(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1e300]])),
+     ValueError, "q holds 1e+300 at index (1, 2), beyond ±1e+06"),
+    (lambda a: load_machine("vertical_mill_3axis").chain.inverse(np.zeros((1, 3)), q0=np.full((1, 3), 2e6)), ValueError,
+     "q0 holds 2e+06 at index (0, 0), beyond ±1e+06"),
+    # a 2-sample trajectory, the circle's start and end, without a word
+    (lambda a: sample(a.path, a.profile, 100.0), ValueError,
+     "dt = 100 s is not shorter than the motion, which lasts 1.27664 s: no sample would lie on the path between its "
+     "start and its end; sample it at a shorter dt (the servo period), or plan a longer or slower motion"),
+    # "'NoneType' object is not iterable"
+    (lambda a: Model(a.machine, None), TypeError,
+     "effects must be a sequence of Effect objects, e.g. (Effect('backlash', 'x', lost_motion_um=5.0),), got NoneType"),
+    # "'int' object has no attribute 'names'", "unhashable type: 'slice'", a table of another sweep zipped short
+    (lambda a: table_text(3, 3), TypeError, "sweep must be a Sweep (read_sweep reads one from its spec), got int"),
+    (lambda a: table_text(Sweep("s.toml", {"s.toml": ""}, "none", ("a",), [[1.0]]), np.zeros((2, len(FIGURES)))),
+     ValueError, f"table must have shape (1, {len(FIGURES)}), got (2, {len(FIGURES)})"),
+    (lambda a: best_and_worst({}), TypeError, "table must be numeric (not text, booleans or complex numbers)"),
+    # a one-element shape was written "(2)"
+    (lambda a: load_machine("table_tilting_5axis").chain.inverse(np.zeros((2, 3)), t=np.zeros(1)), ValueError,
+     "t must have shape (2,), got (1,)"),
 ])
 def test_the_api_from_a_notebook_refuses_naming_the_argument_not_from_inside(api, call, error, words):
     with pytest.raises(error) as info:
         call(api)
     assert str(info.value) == words
+
+
+def test_a_servo_period_as_long_as_a_curved_motion_is_refused_and_one_just_shorter_samples_between(api):
+    """sample(path, profile, dt=100.0) returned the circle's start and its end, a 2-sample trajectory straight across.
+    A straight move shorter than the period is the step a controller makes of a block shorter than its period."""
+    with pytest.raises(ValueError, match=r"^dt = 1.27664 s is not shorter than the motion, which lasts 1.27664 s: "):
+        sample(api.path, api.profile, api.profile.duration)
+    trajectory = sample(api.path, api.profile, 0.99 * api.profile.duration)
+    assert len(trajectory) == 3 and 0 < trajectory.s[1] < api.path.length
+    jog = polyline([[0.0, 0.0], [0.002, 0.0]])
+    step = sample(jog, plan(jog, 10.0, 500.0), 0.01)  # the 2 µm move takes 4 ms
+    np.testing.assert_array_equal(step.position, [[0.0, 0.0], [0.002, 0.0]])
 
 
 @pytest.mark.parametrize("call, words", [

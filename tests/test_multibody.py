@@ -448,7 +448,7 @@ def test_inverse_errors_name_the_whole_input_not_a_block():
     q0[n - 3] += 1.0  # every other sample starts at its solution: the first block stops at once
     with pytest.raises(ValueError, match=f"did not converge in 1 steps \\(sample {n - 3}, last step 1"):
         chain.inverse(p, q0=q0, ideal=True, max_iter=1)
-    with pytest.raises(ValueError, match=f"t must have shape \\({n}\\)"):  # the whole input's length, not a block's
+    with pytest.raises(ValueError, match=f"t must have shape \\({n},\\)"):  # the whole input's length, not a block's
         chain.inverse(p, q0=q_true, t=np.zeros(n - 1))
 
 

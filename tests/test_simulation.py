@@ -404,7 +404,7 @@ def test_a_force_on_an_axis_the_machine_lacks_is_refused():
     reference = measured_reference(trace, DT)
     with pytest.raises(ValueError, match=r"force names axis 'z', which is not a servo axis of the machine \(x, y\)"):
         simulate(machine, reference, force={"z": np.zeros(len(reference))})
-    with pytest.raises(ValueError, match=r"force\['x'\] must have shape \(400\)"):
+    with pytest.raises(ValueError, match=r"force\['x'\] must have shape \(400,\)"):
         simulate_batch([machine], reference, force={"x": np.zeros(5)})
 
 

@@ -531,7 +531,7 @@ def test_a_trace_checks_its_inputs():
     t = np.arange(5) * 1e-3
     with pytest.raises(ValueError, match="force names axis 'y', which is not one of the trace's axes x"):
         Trace(t, t[:, None], t[:, None], ("x",), force={"y": np.zeros(5)})
-    with pytest.raises(ValueError, match=r"x_current must have shape \(5\), got \(4,\)"):
+    with pytest.raises(ValueError, match=r"x_current must have shape \(5,\), got \(4,\)"):
         Trace(t, t[:, None], t[:, None], ("x",), current={"x": np.zeros(4)})
     with pytest.raises(ValueError, match="x_force contains a non-finite value"):
         Trace(t, t[:, None], t[:, None], ("x",), force={"x": [0, 1, np.inf, 0, 0]})

@@ -179,7 +179,7 @@ def test_ranges_fixed_time_and_points_are_checked_naming_them(monkeypatch):
     for kwargs, error, words in (
         (dict(ranges={"x": (float("nan"), 1.0)}), ValueError, r"ranges\['x'\] contains a non-finite value \(nan\)"),
         (dict(ranges={"x": "ab"}), TypeError, r"ranges\['x'\] must be numeric"),
-        (dict(ranges={"x": 5.0}), ValueError, r"ranges\['x'\] must have shape \(2\)"),
+        (dict(ranges={"x": 5.0}), ValueError, r"ranges\['x'\] must have shape \(2,\)"),
         (dict(ranges={"x": (0.0, 1e300)}), ValueError, r"ranges\['x'\] holds 1e\+300 at index 1, beyond ±1e\+06"),
         (dict(ranges={"a": (0.0, 1.0)}), ValueError, r"ranges: axis 'a' is not swept \(sweep: x, y, z\)"),
         (dict(fixed={"a": float("nan")}), ValueError, r"fixed\['a'\] must be finite"),
