@@ -85,6 +85,33 @@ def check(samples, what, advice, runs=1, per_sample=RUN_BYTES_PER_SAMPLE):
           f"{what} that is {samples:.4g} samples, {held} needs", advice)
 
 
+def check_diagnosis(trace, model, source):
+    """Refuse the diagnosis of `trace` that would not fit in the memory available: every servo period it lasts is
+    simulated, :data:`DIAGNOSIS_BYTES_PER_SAMPLE` each.
+
+    Parameters
+    ----------
+    trace : contoursim.traces.Trace
+    model : contoursim.model.Model or None
+        The nominal model, whose servo period the trace is resampled at; ``None``: identified from the trace
+        (:func:`contoursim.identify.servo_period_for`).
+    source : str
+        The trace's file, starting the message.
+
+    Raises
+    ------
+    ValueError
+        More memory is needed than is available (nothing is checked where that is unknown).
+    """
+    from .identify import servo_period_for
+
+    period = model.machine.servo_period if model is not None else servo_period_for(trace.dt)
+    duration = trace.t[-1] - trace.t[0]
+    check(int(duration / period) + 1, f"{source}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
+          "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
+          per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
+
+
 def check_sweep(variants, parameters, what, advice):
     """Refuse a sweep of `variants` variants of `parameters` parameters that would not fit in the memory available.
 

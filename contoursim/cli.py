@@ -612,9 +612,8 @@ def diagnose_command(args):
 
     Several traces, or a folder of them: :func:`fleet_command`.
     """
-    from ._memory import DIAGNOSIS_BYTES_PER_SAMPLE, check
+    from ._memory import check_diagnosis
     from .diagnosis import FIGURE_FILES, REPORT_FORM, REPORT_OPTIONAL, diagnose, save_figures
-    from .identify import servo_period_for
     from .machine import _file_names
     from .model import load_model
     from .output import refused_early, report_file, writing
@@ -627,11 +626,7 @@ def diagnose_command(args):
     args.file = args.file[0]
     trace = read_trace(args.file)
     model = load_model(args.model, check=False) if args.model else None  # the trace judges its loops' stability
-    period = model.machine.servo_period if model is not None else servo_period_for(trace.dt)
-    duration = trace.t[-1] - trace.t[0]
-    check(int(duration / period) + 1, f"{args.file}: the trace lasts {duration:.6g} s: every servo period of {period:.6g} s",
-          "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period",
-          per_sample=DIAGNOSIS_BYTES_PER_SAMPLE)
+    check_diagnosis(trace, model, args.file)
     report = report_file(args.report, REPORT_FORM, "diagnosis report", args.out,  # never a user's file,
                          written=(*FIGURE_FILES, "corrected_model.toml"), also=REPORT_OPTIONAL)  # nor one the run writes
     corrected = Path(args.out) / "corrected_model.toml"

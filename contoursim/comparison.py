@@ -14,7 +14,6 @@ contract: names and keys exact; the settings, margins and clamped share are
 added fields).
 """
 
-import json
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ import numpy as np
 from .compensation import STRATEGY_NAMES, Composition, strategies_named
 from .exceptions import ContoursimWarning, UnstableLoopError
 from .model import as_model
+from .output import json_text
 from .simulation import simulate
 
 __all__ = ["Comparison", "compare", "tune", "JSON_KEYS", "JSON_FORM", "TUNE_KP_START", "TUNE_KP_STEP", "TUNE_KP_END",
@@ -133,7 +133,8 @@ class Comparison:
         (strategy -> file key -> value), and with a coupling ``gains``
         (how they were chosen) and ``coupled_loop`` (``phase_margin_deg``,
         ``gain_margin``, ``damping_ratio``, ``spectral_radius``, ``frames``);
-        ``axes`` gives each axis's position-loop margins.
+        ``axes`` gives each axis's position-loop margins. Strict JSON: a margin
+        that does not exist (a loop gain that never crosses 1: infinite) is ``null``.
         """
         runs = {}
         loops = self.coupled_loops
@@ -146,7 +147,7 @@ class Comparison:
                                        "damping_ratio": m["damping_ratio"],
                                        "spectral_radius": m["spectral_radius"], "frames": m["frames"]}
             runs[name] = run
-        return json.dumps({"runs": runs, "axes": self.axis_loops}, indent=2)
+        return json_text({"runs": runs, "axes": self.axis_loops})
 
     def header(self):
         """The lines above the table: the axes' loop margins, how the gains were chosen, every strategy's settings."""

@@ -3,8 +3,9 @@
 ``contoursim diagnose A.csv B.csv …`` (or a folder of traces) runs
 :func:`contoursim.diagnosis.diagnose` on each trace, in this process or as
 tasks on a dask cluster (:mod:`contoursim.cluster`): a task carries the
-trace's text and the nominal machine file's text, and the worker reads them
-as the CLI would. :func:`fleet_summary` says, per effect named (name and
+trace's text and the nominal machine file's text (its error tables named
+where they lie), and the worker reads them as the CLI would.
+:func:`fleet_summary` says, per effect named (name and
 axis), on how many traces it was named and how its parameters are
 distributed, in the order of the traces (file names sorted: nightly tests
 named by date read as a drift), and which traces failed and why.
@@ -108,6 +109,7 @@ def diagnose_text(name, text, model=None):
         :meth:`contoursim.diagnosis.Diagnosis.to_dict`) and ``text`` (its
         table), or ``error`` (why the trace could not be diagnosed).
     """
+    from ._memory import check_diagnosis
     from .cluster import task_threads
     from .diagnosis import diagnose
     from .exceptions import ConfigError, UnstableLoopError
@@ -126,7 +128,9 @@ def diagnose_text(name, text, model=None):
                     machine = Path(folder) / Path(model[0]).name
                     machine.write_text(model[1], encoding="utf-8")
                 nominal = load_model(machine, check=False)  # the trace judges its loops' stability
-            result = diagnose(read_trace(file), nominal)
+            trace = read_trace(file)
+            check_diagnosis(trace, nominal, str(file))  # a trace too long for the memory: its failure, not the fleet's
+            result = diagnose(trace, nominal)
             return {"trace": name, "report": json.loads(result.to_json()), "text": result.report()}
         except (ConfigError, UnstableLoopError, ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError) as exc:
             return {"trace": name, "error": str(exc).replace(str(Path(folder)) + "/", "")}
@@ -150,15 +154,27 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
     -------
     list of dict
         :func:`diagnose_text` of each trace.
+
+    Raises
+    ------
+    ConfigError
+        `model` is no preset and no machine file, or a file that cannot be read (at its line), before any trace.
     """
-    from .config import read_text
+    from .config import TomlFile, local_file, read_text, toml_text
     from .exceptions import ConfigError, TraceFormatError
-    from .machine import preset_file
+    from .machine import preset_file, tables_where_they_lie
+    from .model import load_model
 
     machine = None
     if model is not None:
         file = preset_file(model)  # a preset or a file: refused here, before any trace, when neither
-        machine = (str(model), None) if not Path(model).exists() else (file.name, read_text(file))
+        load_model(file, check=False)  # a file's error said once at its line, not as every trace's failure
+        if local_file(model, suffixes=(".toml",)) is None:  # a preset's name: the workers have the preset
+            machine = (str(model), None)
+        else:  # the user's file (named with or without .toml), its error tables named where they lie
+            toml = TomlFile.read(file)
+            data = tables_where_they_lie(toml)
+            machine = (file.name, toml.text if data == toml.data else toml_text(data))
     files = _names("files", files)
     outcomes, tasks, todo = [None] * len(files), [], []
     for i, f in enumerate(map(Path, files)):

@@ -22,6 +22,7 @@ x, y (, z). With bodies, axes without a ``[axes.*]`` table (rotary tables on
 a contouring test, say) follow their commands exactly.
 """
 
+import copy
 import os
 import re
 from collections.abc import Mapping
@@ -38,7 +39,8 @@ from .exceptions import ConfigError, PathError, UnstableLoopError
 from .multibody import MAX_TRAVEL, MachineChain
 from .servo import MIN_SERVO_PERIOD, AxisServo, SamplingError
 
-__all__ = ["CARTESIAN", "CONTROLLER_FIELDS", "SERVO_KEYS", "Machine", "load_machine", "preset_names", "read_work_offset"]
+__all__ = ["CARTESIAN", "CONTROLLER_FIELDS", "SERVO_KEYS", "Machine", "load_machine", "preset_names",
+           "read_work_offset", "tables_where_they_lie"]
 
 CARTESIAN = ("x", "y", "z")
 
@@ -420,6 +422,28 @@ def preset_file(name_or_file, here=True):
         return Path(str(resources.files("contoursim").joinpath(_PRESETS, f"{name_or_file}.toml")))
     raise ConfigError(f"no machine file {str(name_or_file)!r} and no preset of that name"
                       f"{_validate.closest(str(name_or_file), preset_names())}; presets: {', '.join(preset_names())}")
+
+
+def tables_where_they_lie(toml):
+    """The data of the machine file `toml` (a :class:`~contoursim.config.TomlFile`) with each error table it names
+    (``[body.errors] table``, relative to the file) named where it lies: read from another folder, it names the
+    same tables.
+
+    Parameters
+    ----------
+    toml : contoursim.config.TomlFile
+        A machine file as read.
+
+    Returns
+    -------
+    dict
+        A copy of ``toml.data``; equal to it where no table is named relative to the file.
+    """
+    data = copy.deepcopy(dict(toml.data))
+    for body in data.get("body", []):
+        if "table" in body.get("errors", {}):
+            body["errors"]["table"] = str((Path(toml.source).parent / body["errors"]["table"]).resolve())
+    return data
 
 
 def load_machine(name_or_file, geometry=True, effects=False, check=True):

@@ -30,11 +30,14 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from . import _validate
 from .config import read_text
 from .exceptions import ConfigError, OutputError
 
-__all__ = ["OutputDir", "atomic_write", "has_form", "output_dir", "refused_early", "report_file", "writing"]
+__all__ = ["OutputDir", "atomic_write", "has_form", "json_text", "output_dir", "refused_early", "report_file",
+           "strict", "writing"]
 
 _MARKER = ".contoursim-out"
 _MARKER_HEADER = "# written by contoursim; the files it wrote here, one per line, are replaced on each run\n"
@@ -509,6 +512,57 @@ def has_form(data, form, also=None):
         if not isinstance(entries, list) or not all(isinstance(e, dict) and set(keys) <= set(e) for e in entries):
             return False
     return True
+
+
+def json_text(data):
+    """`data` (nested dicts, lists, numbers, text) as strict JSON text, indented: no NaN or Infinity, which strict
+    readers refuse (a loop margin that does not exist, infinite), but ``null``; numpy's numbers as Python's.
+
+    Parameters
+    ----------
+    data : object
+        A report: dicts, lists and tuples of text, booleans, numbers and ``None``.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> print(json_text({"phase_margin_deg": float("inf"), "frames": 3}))
+    {
+      "phase_margin_deg": null,
+      "frames": 3
+    }
+    """
+    return json.dumps(strict(data), indent=2, ensure_ascii=False, allow_nan=False)
+
+
+def strict(value):
+    """`value` with every number a plain float or int and each non-finite one ``None``: a report as strict JSON holds
+    it (:func:`json_text`).
+
+    Parameters
+    ----------
+    value : object
+        Nested dicts, lists and tuples of text, booleans, numbers (numpy's too) and ``None``.
+
+    Returns
+    -------
+    object
+        Dicts, lists, ``bool``, ``int``, ``float`` (finite) and ``None`` in its place.
+    """
+    if isinstance(value, dict):
+        return {k: strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 @contextmanager

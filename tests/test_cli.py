@@ -532,6 +532,25 @@ def test_compare_writes_its_files_before_a_reader_can_go(tmp_path, monkeypatch):
                                                                  for k in ("path", "zoom", "contour", "table")}
 
 
+def test_a_coupled_loop_without_a_gain_crossover_is_null_in_a_strict_comparison_json(tmp_path, capsys):
+    """A coupling gain too small for its loop gain to reach 1 has no phase margin (infinite): the JSON said
+    ``Infinity``, which strict readers (JSON.parse, jq) refuse."""
+    import json
+
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL_PATH)
+    report = tmp_path / "r.json"
+    assert main(["compare", str(path), "--strategies", "none,ccc_arc", "--set", "ccc_arc.kp_per_s=0.01",
+                 "--set", "ccc_arc.ki_per_s2=0", "--json", str(report), "--out", str(tmp_path / "out")]) == 0
+    assert " inf " in capsys.readouterr().out  # the table shows it as it is
+
+    def refuse(constant):
+        raise ValueError(f"not strict JSON: {constant}")
+
+    loop = json.loads(report.read_text(), parse_constant=refuse)["runs"]["ccc_arc"]["coupled_loop"]
+    assert loop["phase_margin_deg"] is None and loop["frames"] > 0
+
+
 def test_a_json_with_a_reports_key_but_not_its_form_is_the_users_and_never_replaced(tmp_path, capsys):
     """r.json = {"runs": {"my": "notes"}} was replaced by compare --json r.json, the key alone taken for a comparison
     JSON's (and likewise residual_rms_before_um for diagnose --report, failed for --summary)."""

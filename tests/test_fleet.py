@@ -11,6 +11,7 @@ import pytest
 from conftest import ROOT
 
 from contoursim.cli import main
+from contoursim.exceptions import ConfigError
 from contoursim.fleet import diagnose_fleet, fleet_summary, trace_files
 
 FLEET = ROOT / "examples" / "fleet"
@@ -184,3 +185,59 @@ def test_a_trace_named_fleet_is_told_apart_from_two_of_a_name(tmp_path, capsys, 
     (tmp_path / "more" / "night.csv").write_text("t,x_ref,x\n0,0,0\n0.001,0.1,0.1\n")
     assert main(["diagnose", str(tmp_path / "logs" / "night.csv"), str(tmp_path / "more"), "--out", str(tmp_path / "o")]) == 2
     assert "two traces named night.csv: their reports would share a file name; rename one" in capsys.readouterr().err
+
+
+def test_a_trace_too_long_for_the_memory_is_that_traces_failure_as_diagnose_says_it(tmp_path, monkeypatch):
+    """A single trace is refused by the memory its diagnosis needs before it starts; in a fleet the trace was
+    diagnosed anyway (an out-of-memory error ended the whole fleet, naming no trace)."""
+    import numpy as np
+
+    from contoursim import _memory
+
+    t = np.arange(4001) * 5e-3  # 20 s: 40,000 servo periods of the nightly mill's 0.5 ms, 180 MB to diagnose
+    x = 5 * np.sin(2 * np.pi * t / 10)
+    long = tmp_path / "long.csv"
+    long.write_text("t,x_ref,x\n" + "".join(f"{a:.3f},{b:.6f},{b:.6f}\n" for a, b in zip(t, x)))
+    night = FLEET / "night_2026-10-05.csv"  # 9.7 s: 88 MB
+    monkeypatch.setattr(_memory, "available", lambda: 1.2e8)
+    failed, diagnosed = diagnose_fleet([long, night], FLEET / "nightly_mill.toml")
+    assert failed == {"trace": str(long), "error": "long.csv: the trace lasts 20 s: every servo period of 0.0005 s "
+                      "that is 4e+04 samples, a run of them needs about 0.18 GB of memory and 0.12 GB are available; "
+                      "check the unit of the trace's time column (e.g. a line '# units: t [ms]') and the servo period"}
+    assert diagnosed["report"]["effects"][0]["name"] == "backlash"
+
+
+def test_a_fleet_reads_the_error_tables_of_its_machine_file_and_a_machine_file_named_without_its_suffix(
+        tmp_path, monkeypatch):
+    """The machine file was copied alone into each task's folder: every trace failed with its ISO 230-2 table 'not
+    found (relative to /tmp/contoursim-fleet-...)', where diagnose of one trace read it; a machine file named without
+    .toml went to the tasks as a preset's name (on a cluster's workers: the shipped preset, or none)."""
+    import shutil
+
+    import numpy as np
+
+    from contoursim.machine import preset_file
+
+    shipped = preset_file("vertical_mill_3axis", here=False)
+    (tmp_path / "mill").mkdir()
+    for name in (shipped.name, "vertical_mill_x_laser.csv"):  # the table named beside it
+        shutil.copy(shipped.parent / name, tmp_path / "mill" / name)
+    t = np.arange(301) * 1e-3
+    x = 5 * np.sin(2 * np.pi * t / 0.3)
+    trace = tmp_path / "a.csv"
+    rows = "".join(f"{a:.3f},{b:.6f},{b:.6f},{b:.6f},{b:.6f}\n" for a, b in zip(t, x))
+    trace.write_text("t,x_ref,x,y_ref,y\n" + rows)
+    (outcome,) = diagnose_fleet([trace], tmp_path / "mill" / shipped.name)
+    assert "report" in outcome, outcome["error"]
+    monkeypatch.chdir(tmp_path / "mill")
+    import contoursim.fleet
+
+    tasks = []
+    monkeypatch.setattr(contoursim.fleet, "diagnose_text", lambda *task: tasks.append(task) or outcome)
+    diagnose_fleet([trace], "vertical_mill_3axis")  # the file here, before the preset of that name
+    assert tasks[0][2][0] == shipped.name and "vertical_mill_x_laser.csv" in tasks[0][2][1]
+    # a machine file the tasks cannot read is refused once, at its line, before any trace (each trace failed with it)
+    (tmp_path / "bad.toml").write_text('name = "bad"\nservo_period_ms = 0.2\n[axes.x]\nmass_kg = 300\n')
+    with pytest.raises(ConfigError, match=r"bad.toml, line 3: missing key 'force_constant_N_per_A' in \[axes.x\]"):
+        diagnose_fleet([trace], tmp_path / "bad.toml")
+    assert len(tasks) == 1
