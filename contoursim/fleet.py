@@ -3,8 +3,10 @@
 ``contoursim diagnose A.csv B.csv …`` (or a folder of traces) runs
 :func:`contoursim.diagnosis.diagnose` on each trace, in this process or as
 tasks on a dask cluster (:mod:`contoursim.cluster`): a task carries the
-trace's text and the nominal machine file's text (its error tables named
-where they lie), and the worker reads them as the CLI would.
+trace's text and the texts of the nominal machine file and of the error
+tables it names, as a sweep's task carries its job's files, and the worker
+writes them into a folder of its own and reads them as the CLI would: it
+needs none of the user's files.
 :func:`fleet_summary` says, per effect named (name and
 axis), on how many traces it was named and how its parameters are
 distributed, in the order of the traces (file names sorted: nightly tests
@@ -98,9 +100,12 @@ def diagnose_text(name, text, model=None):
         The trace's file name (messages name it).
     text : str
         The trace CSV's text.
-    model : tuple of (str, str), optional
-        The nominal machine: ``(name, None)`` for a preset, or ``(file name,
-        text)`` of a machine file; ``None``: identified from each trace.
+    model : str or dict of str -> str, optional
+        The nominal machine: a preset's name (or a machine file, read where
+        it lies), or the files of a machine file: its text under its name,
+        first, then those of the error tables it names, by path relative to
+        it (as :attr:`contoursim.sweep.Sweep.files`); ``None``: identified
+        from each trace.
 
     Returns
     -------
@@ -114,6 +119,7 @@ def diagnose_text(name, text, model=None):
     from .diagnosis import diagnose
     from .exceptions import ConfigError, UnstableLoopError
     from .model import load_model
+    from .sweep import _written
     from .traces import read_trace
 
     task_threads()
@@ -122,11 +128,8 @@ def diagnose_text(name, text, model=None):
         try:
             file.write_text(text, encoding="utf-8")
             nominal = None
-            if model is not None:
-                machine = model[0]
-                if model[1] is not None:
-                    machine = Path(folder) / Path(model[0]).name
-                    machine.write_text(model[1], encoding="utf-8")
+            if model is not None:  # the machine's files in a folder of their own, apart from the trace
+                machine = model if isinstance(model, str) else _written(model, Path(folder) / "machine")
                 nominal = load_model(machine, check=False)  # the trace judges its loops' stability
             trace = read_trace(file)
             check_diagnosis(trace, nominal, str(file))  # a trace too long for the memory: its failure, not the fleet's
@@ -148,7 +151,9 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
     scheduler : None, str or distributed.Client
         As for :func:`contoursim.sweep.run_sweep`: ``None`` runs here.
     progress : callable, optional
-        Called as ``progress(done, total)``.
+        Called as ``progress(done, total)``: first as the work starts (the
+        traces that failed on reading counted done), then as each trace is
+        diagnosed.
 
     Returns
     -------
@@ -159,22 +164,28 @@ def diagnose_fleet(files, model=None, scheduler=None, progress=None):
     ------
     ConfigError
         `model` is no preset and no machine file, or a file that cannot be read (at its line), before any trace.
+    ValueError
+        On a cluster, a machine file naming an error table outside its folder (the workers get its folder only).
     """
-    from .config import TomlFile, local_file, read_text, toml_text
+    from .config import TomlFile, local_file, read_text
     from .exceptions import ConfigError, TraceFormatError
-    from .machine import preset_file, tables_where_they_lie
+    from .machine import preset_file
     from .model import load_model
+    from .sweep import _bundle
 
     machine = None
     if model is not None:
         file = preset_file(model)  # a preset or a file: refused here, before any trace, when neither
         load_model(file, check=False)  # a file's error said once at its line, not as every trace's failure
         if local_file(model, suffixes=(".toml",)) is None:  # a preset's name: the workers have the preset
-            machine = (str(model), None)
-        else:  # the user's file (named with or without .toml), its error tables named where they lie
-            toml = TomlFile.read(file)
-            data = tables_where_they_lie(toml)
-            machine = (file.name, toml.text if data == toml.data else toml_text(data))
+            machine = str(model)
+        else:  # the user's file (named with or without .toml) and the error tables it names: their texts, as a sweep's
+            machine, elsewhere = _bundle(file, TomlFile.read(file))
+            if elsewhere and scheduler is not None:
+                raise ValueError(f"{file} names {elsewhere[0]}, outside its folder: a cluster's workers get the "
+                                 "machine file's folder only; copy the table next to the machine file (or below it)")
+            if elsewhere:  # here: the file read where it lies, its tables found where it names them
+                machine = str(file.resolve())
     files = _names("files", files)
     outcomes, tasks, todo = [None] * len(files), [], []
     for i, f in enumerate(map(Path, files)):

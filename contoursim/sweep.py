@@ -88,8 +88,9 @@ class Sweep:
         The spec file.
     files : dict of str -> str
         The spec's text (under its file name, the first entry) and the texts
-        of the machine and path files it names next to it: all a worker
-        needs to rebuild the job.
+        of the machine and path files it names next to it (and of the error
+        tables the machine file names), by path relative to the spec's
+        folder: all a worker needs to rebuild the job.
     strategies : str
         The strategies' comparison name (``"none"``, ``"ccc_arc"``, ...).
     names : tuple of str
@@ -159,41 +160,49 @@ class Sweep:
         object.__setattr__(self, "log", log)
 
 
-def _bundle(spec, toml):
-    """``(files, elsewhere)``: the spec's text and those of the files it names in its folder (the machine file's
-    tables too), by path relative to the folder; and the files it names outside it."""
+def _bundle(file, toml):
+    """``(files, elsewhere)``: the text of a sweep's spec or of a machine file (`file`, read as `toml`) and those of
+    the files it names in its folder (a machine file's error tables too), by path relative to the folder; and the
+    files it names outside it. :func:`_written` writes them into another folder, where the names find them."""
     from .pathfile import NAME_SUFFIXES
 
-    files, elsewhere = {spec.name: toml.text}, []
-    folder = spec.parent.resolve()
+    files, elsewhere = {file.name: toml.text}, []
+    folder = file.parent.resolve()
 
     def add(value, base, suffixes=()):
         found = local_file(value, base, suffixes)  # as the job reads it: "demo_mill" is a demo_mill.toml beside it
-        file = None if found is None else found.resolve()
-        if file is None or not file.is_file():
+        found = None if found is None else found.resolve()
+        if found is None or not found.is_file():
             if Path(value).is_file():  # relative to the working directory
                 elsewhere.append(str(value))
             return None
-        if not file.is_relative_to(folder):
-            elsewhere.append(str(file))
+        if not found.is_relative_to(folder):
+            elsewhere.append(str(found))
             return None
-        files[file.relative_to(folder).as_posix()] = read_text(file)
-        return file
+        files[found.relative_to(folder).as_posix()] = read_text(found)
+        return found
 
-    machine = add(toml.data["machine"], spec.parent, (".toml",)) if isinstance(toml.data.get("machine"), str) else None
-    if isinstance(toml.data.get("path"), str):
-        add(toml.data["path"], spec.parent, NAME_SUFFIXES)
-    if machine is not None:  # tables a machine file names (an ISO 230-2 table = "x_laser.csv"), relative to it
-        stack = [TomlFile.read(machine).data]
-        while stack:
-            item = stack.pop()
-            values = item.values() if isinstance(item, dict) else item if isinstance(item, list) else ()
-            for value in values:
-                if isinstance(value, str) and value.endswith(".csv"):
-                    add(value, machine.parent)
-                elif isinstance(value, (dict, list)):
-                    stack.append(value)
+    if toml.kind() != "job":  # a machine file (a fleet's nominal machine): its tables
+        machine = file.resolve()
+    else:  # a spec: the machine and path files it names, the machine file's tables
+        machine = (add(toml.data["machine"], file.parent, (".toml",)) if isinstance(toml.data.get("machine"), str)
+                   else None)
+        if isinstance(toml.data.get("path"), str):
+            add(toml.data["path"], file.parent, NAME_SUFFIXES)
+    bodies = None if machine is None else TomlFile.read(machine).data.get("body")
+    for body in bodies if isinstance(bodies, list) else ():  # its error tables ([body.errors] table), relative to it
+        errors = body.get("errors") if isinstance(body, dict) else None
+        if isinstance(errors, dict) and isinstance(errors.get("table"), str):
+            add(errors["table"], machine.parent)
     return files, tuple(elsewhere)
+
+
+def _written(files, folder):
+    """Write `files` (:func:`_bundle`'s: texts by path relative to the folder) into `folder`; the first one's path."""
+    for name, text in files.items():  # where the names of the first find them
+        (Path(folder) / name).parent.mkdir(parents=True, exist_ok=True)
+        (Path(folder) / name).write_text(text, encoding="utf-8")
+    return Path(folder) / next(iter(files))
 
 
 def read_sweep(file):
@@ -485,10 +494,7 @@ def _job(sweep_or_files):
             _JOBS[digest] = _build(Path(sweep_or_files.source))
         else:
             with tempfile.TemporaryDirectory(prefix="contoursim-sweep-") as folder:
-                for name, text in files.items():  # where the job's names find them
-                    (Path(folder) / name).parent.mkdir(parents=True, exist_ok=True)
-                    (Path(folder) / name).write_text(text, encoding="utf-8")
-                _JOBS[digest] = _build(Path(folder) / next(iter(files)))
+                _JOBS[digest] = _build(_written(files, folder))
     return _JOBS[digest]
 
 
@@ -853,7 +859,9 @@ LOG_EVERY = 10.0
 class Progress:
     """A one-line progress bar on stderr: ``sweep: [#####.....] 412/1000 variants, 8.1/s, 1.2 min left``.
 
-    Called as ``progress(done, total)``; the rate counts from the call with ``done = 0``. On a terminal the
+    Called as ``progress(done, total)``; the rate counts from the first call, when the work starts (a cluster
+    is up and warm), and from its ``done``: work done before, a fleet's traces that failed on reading, is not in
+    it, and until work is done here the line says no rate and no time left. On a terminal the
     bar is drawn again in place every half second; elsewhere (a log file, a pipe) it is a line of its own every
     :data:`LOG_EVERY` seconds and at the end, not thousands of redrawings on one line. Used as a context
     manager, it ends a line left open (a run interrupted or failed), so that what is said next has a line of
@@ -872,7 +880,7 @@ class Progress:
     def __init__(self, label="sweep", what="variants", stream=None):
         self.label, self.what, self.stream = label, what, stream or sys.stderr
         self.terminal = getattr(self.stream, "isatty", lambda: False)()  # a caller's stream may have none
-        self.start, self.last = time.monotonic(), -1.0
+        self.start, self.first, self.last = None, None, -1.0  # set by the first call
         self.open = False  # a line written without its end
 
     def __enter__(self):
@@ -885,16 +893,17 @@ class Progress:
 
     def __call__(self, done, total):
         now = time.monotonic()
-        if done == 0:  # the work starts (a cluster is up and warm): the rate counts from here
-            self.start = now
+        if self.start is None:  # the work starts: the rate counts from here and from what was done before
+            self.start, self.first = now, done
         if done < total and now - self.last < (0.5 if self.terminal else LOG_EVERY):
             return
         self.last = now
-        rate = done / max(now - self.start, 1e-9)
-        left = (total - done) / rate if rate > 0 else float("inf")
         bar = "#" * round(20 * done / total) + "." * (20 - round(20 * done / total))
-        eta = "" if done == 0 else f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left"
+        line = f"{self.label}: [{bar}] {done}/{total} {self.what}"
+        if done > self.first:  # work done here: its rate, and the time the rest takes at it
+            rate = (done - self.first) / max(now - self.start, 1e-9)
+            left = (total - done) / rate
+            line += f", {rate:.3g}/s, " + (f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left")
         end = "\n" if done >= total or not self.terminal else ""
-        line = f"{self.label}: [{bar}] {done}/{total} {self.what}, {rate:.3g}/s, {eta}"
         print(f"\r{line}   " if self.terminal else line, end=end, file=self.stream, flush=True)
         self.open = not end

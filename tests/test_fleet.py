@@ -235,9 +235,54 @@ def test_a_fleet_reads_the_error_tables_of_its_machine_file_and_a_machine_file_n
     tasks = []
     monkeypatch.setattr(contoursim.fleet, "diagnose_text", lambda *task: tasks.append(task) or outcome)
     diagnose_fleet([trace], "vertical_mill_3axis")  # the file here, before the preset of that name
-    assert tasks[0][2][0] == shipped.name and "vertical_mill_x_laser.csv" in tasks[0][2][1]
+    assert list(tasks[0][2]) == [shipped.name, "vertical_mill_x_laser.csv"]  # the file and its table, as texts
     # a machine file the tasks cannot read is refused once, at its line, before any trace (each trace failed with it)
     (tmp_path / "bad.toml").write_text('name = "bad"\nservo_period_ms = 0.2\n[axes.x]\nmass_kg = 300\n')
     with pytest.raises(ConfigError, match=r"bad.toml, line 3: missing key 'force_constant_N_per_A' in \[axes.x\]"):
         diagnose_fleet([trace], tmp_path / "bad.toml")
     assert len(tasks) == 1
+
+
+def test_a_fleets_tasks_carry_the_error_tables_so_that_a_worker_seeing_none_of_the_users_files_reads_them(
+        tmp_path, monkeypatch):
+    """A task named the machine file's error tables where they lie (an absolute path): a worker of a remote cluster,
+    which cannot see that path, failed every trace with the table 'not found'. A task carries the tables' texts, as a
+    sweep's carries its job's files (rebuilt here as on a worker: the user's folders renamed)."""
+    import shutil
+
+    import numpy as np
+
+    import contoursim.fleet
+    from contoursim.fleet import diagnose_text
+    from contoursim.machine import preset_file
+
+    shipped = preset_file("vertical_mill_3axis", here=False)
+    mill, logs = tmp_path / "mill", tmp_path / "logs"
+    (mill / "laser").mkdir(parents=True)
+    logs.mkdir()
+    (mill / "mine.toml").write_text(shipped.read_text().replace('table = "vertical_mill_x_laser.csv"',
+                                                                'table = "laser/x.csv"'))
+    shutil.copy(shipped.parent / "vertical_mill_x_laser.csv", mill / "laser" / "x.csv")
+    t = np.arange(301) * 1e-3
+    x = 5 * np.sin(2 * np.pi * t / 0.3)
+    (logs / "a.csv").write_text("t,x_ref,x,y_ref,y\n" + "".join(f"{a:.3f},{b:.6f},{b:.6f},{b:.6f},{b:.6f}\n"
+                                                                 for a, b in zip(t, x)))
+    tasks = []
+    monkeypatch.setattr(contoursim.fleet, "diagnose_text", lambda *task: tasks.append(task) or {"trace": task[0]})
+    diagnose_fleet([logs / "a.csv"], mill / "mine.toml")
+    (task,) = tasks
+    mill.rename(tmp_path / "moved")  # as on a worker: neither the machine file, its table nor the trace where named
+    logs.rename(tmp_path / "gone")
+    outcome = diagnose_text(*task)
+    assert "report" in outcome, outcome["error"]  # was "error table '/tmp/.../mill/laser/x.csv' not found"
+    assert task[2] == {"mine.toml": (tmp_path / "moved" / "mine.toml").read_text(),
+                       "laser/x.csv": (tmp_path / "moved" / "laser" / "x.csv").read_text()}
+    # a table outside the machine file's folder: read where it lies here, refused on a cluster before one starts
+    (tmp_path / "moved" / "mine.toml").write_text(task[2]["mine.toml"].replace('"laser/x.csv"', '"../x.csv"'))
+    shutil.copy(tmp_path / "moved" / "laser" / "x.csv", tmp_path / "x.csv")
+    diagnose_fleet([tmp_path / "gone" / "a.csv"], tmp_path / "moved" / "mine.toml")
+    assert tasks[-1][2] == str(tmp_path / "moved" / "mine.toml") and "report" in diagnose_text(*tasks[-1])
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(tmp_path / 'moved' / 'mine.toml'))} names "
+                                         rf"{re.escape(str(tmp_path / 'x.csv'))}, outside its folder: a cluster's "
+                                         r"workers get the machine file's folder only"):
+        diagnose_fleet([tmp_path / "gone" / "a.csv"], tmp_path / "moved" / "mine.toml", "local:1")

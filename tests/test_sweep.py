@@ -539,6 +539,36 @@ def test_progress_redraws_one_line_on_a_terminal_and_writes_a_line_now_and_then_
     assert screen.getvalue().count("\n") == 1 and screen.getvalue().count("\r") > 40
 
 
+def test_progress_counts_its_rate_from_the_work_done_when_it_starts(monkeypatch):
+    """A fleet counts its traces that failed on reading as done before the first is diagnosed: its first line said
+    '1/8 traces, 1e+09/s, 0 s left' with 7 traces to do (the clock started at the bar's making, or on a call with
+    done 0, which a fleet never made). The rate counts from the first call, from its done."""
+    import io
+
+    from contoursim.sweep import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    now = [100.0]
+    monkeypatch.setattr("contoursim.sweep.time.monotonic", lambda: now[0])
+    screen = Terminal()
+    with Progress("diagnose", "traces", stream=screen) as progress:
+        for now[0], done in ((100.0, 1), (102.0, 2), (106.0, 8)):  # one failed on reading, then 1 in 2 s, 6 in 4 s
+            progress(done, 8)
+    assert screen.getvalue().split("\r") == ["", "diagnose: [##..................] 1/8 traces   ",
+                                             "diagnose: [#####...............] 2/8 traces, 0.5/s, 12 s left   ",
+                                             "diagnose: [####################] 8/8 traces, 1.17/s, 0 s left   \n"]
+    log = io.StringIO()  # a sweep's: from 0, as before
+    with Progress(stream=log) as progress:
+        for now[0], done in ((200.0, 0), (230.0, 60), (300.0, 200)):
+            progress(done, 200)
+    assert log.getvalue().splitlines() == ["sweep: [....................] 0/200 variants",
+                                           "sweep: [######..............] 60/200 variants, 2/s, 1.2 min left",
+                                           "sweep: [####################] 200/200 variants, 2/s, 0 s left"]
+
+
 def test_a_local_clusters_workers_leave_a_ctrl_c_to_the_command():
     """A Ctrl-C in a terminal reaches every process of the command: each worker of local:N ended in a traceback of
     its own (KeyboardInterrupt, and the nanny's errors) under the command's one line."""
