@@ -135,8 +135,9 @@ def travel(reference, axes, seed):
 
 
 def own_case(mill, names, seed):
-    """A case of the own family: ``(path, trace, nominal model, truths, the effects' RMS [µm])``, one truth dict for
-    each of the effects `names` (an effect named twice: on two axes)."""
+    """A case of the own family: ``(path, trace, nominal model, truths, the effects' RMS [µm], each axis's velocity
+    loop gain Kf·kv [N·s/m])``, one truth dict for each of the effects `names` (an effect named twice: on two axes);
+    the gain the nominal model's, the trace's force constant drawn within 3 % of it."""
     rng = np.random.default_rng(seed)
     path_name = PATHS[int(rng.integers(len(PATHS)))]
     path, settings = load_path_file(path_name)
@@ -166,14 +167,16 @@ def own_case(mill, names, seed):
     added -= added.mean(axis=0)  # a constant shift is the instrument's zero: no trace shows it
     signal = 1e3 * float(np.sqrt(np.mean(np.sum(added**2, axis=1))))
     described = tuple(dict(name=e.name, axis=e.axis, parameters=e.values(), options=dict(e.options)) for e in truth)
-    return path_name, trace, Model(machine), described, signal
+    return path_name, trace, Model(machine), described, signal, {a: _velocity_gain(machine.axes[a]) for a in axes}
 
 
 def independent_case(family, names, seed, folder, currents=False, laps=1):
-    """A case of an independent family: ``(path, trace, data sheet's file, truths, the effects' RMS [µm])``;
-    with `currents` the trace carries the drives' current commands; its path run `laps` times."""
+    """A case of an independent family: ``(path, trace, data sheet's file, truths, the effects' RMS [µm], each axis's
+    true velocity loop gain Kf·kv [N·s/m])``; with `currents` the trace carries the drives' current commands; its
+    path run `laps` times."""
     case = independent_truth.make_case(family, names, seed, folder, currents=currents, laps=laps)
-    return case.path, read_trace(case.csv), case.machine_file, case.truths, case.signal_um
+    gains = case.notes["velocity_gain_N_s_per_m"]
+    return case.path, read_trace(case.csv), case.machine_file, case.truths, case.signal_um, gains
 
 
 def truth_value(truth, named):
@@ -185,17 +188,30 @@ def truth_value(truth, named):
     return value
 
 
-def equivalent(truths, report, axes):
-    """The truths as the report can know them: without a nominal model, on two axes, a gain mismatch only as a ratio.
+def equivalent(truths, report, axes, gains, machine):
+    """The truths as the report can know them: without a nominal model, on two axes, a gain mismatch only as a ratio,
+    and a friction's force as the identified loops see it (their mass and force constant assumed).
 
     With one position gain identified for both axes, kp_ratio r on one axis and 1/r on the other are the
-    same machine; the report's choice of axis is then graded in its own terms.
+    same machine; the report's choice of axis is then graded in its own terms. A friction force F is what the
+    velocity loop, of gain Kf·kv (`gains`, the truth's), sees as a speed error F / (Kf·kv) it integrates away: on
+    the identified `machine`, whose mass and force constant are assumed, the same speed error is the force the
+    report can know.
     """
-    return tuple(_equivalent(truth, report, axes) for truth in truths)
+    return tuple(_equivalent(truth, report, axes, gains, machine) for truth in truths)
 
 
-def _equivalent(truth, report, axes):
+def _velocity_gain(axis):
+    """An axis servo's velocity loop gain Kf·kv [N·s/m]."""
+    return axis.force_constant * axis.kv
+
+
+def _equivalent(truth, report, axes, gains, machine):
     """:func:`equivalent` of one truth."""
+    if truth["name"] == "coulomb_friction" and report["nominal_identified"]:
+        a = truth["axis"]
+        force = truth["parameters"]["force_N"] * _velocity_gain(machine.axes[a]) / gains[a]
+        return dict(truth, parameters=dict(truth["parameters"], force_N=force))
     if truth["name"] != "gain_mismatch" or not report["nominal_identified"] or len(axes) != 2:
         return truth
     other = next(a for a in axes if a != truth["axis"])
@@ -226,10 +242,10 @@ def run(family, mode, names, seed, mill, folder, laps=1):
     """Generate one case (an independent one's path run `laps` times) and diagnose it blind in `mode` ("model",
     "current" or "identified"); a dict of what happened."""
     if family == "own":
-        path, trace, model, truths, signal = own_case(mill, names, seed)
+        path, trace, model, truths, signal, gains = own_case(mill, names, seed)
     else:
-        path, trace, model, truths, signal = independent_case(family, names, seed, folder, currents=mode == "current",
-                                                              laps=laps)
+        path, trace, model, truths, signal, gains = independent_case(family, names, seed, folder,
+                                                                      currents=mode == "current", laps=laps)
     case = dict(family=family, mode=mode, truths=truths, path=path, signal=signal, duration=float(trace.t[-1] - trace.t[0]),
                 error=None, named=(), right=False, false_positive=False, found=False, parameter_errors=[], covered=[],
                 floor=np.inf)
@@ -243,7 +259,8 @@ def run(family, mode, names, seed, mill, folder, laps=1):
     except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is a result to count, not a reason to stop
         case["error"] = f"{type(exc).__name__}: {exc}"
     else:
-        case.update(grade(equivalent(truths, report, trace.axes), report, result.effects), named=result.effects, before=report["residual_rms_before_um"],
+        truths = equivalent(truths, report, trace.axes, gains, result.refitted.machine)  # the effects fitted on it
+        case.update(grade(truths, report, result.effects), named=result.effects, before=report["residual_rms_before_um"],
                     after=report["residual_rms_after_um"], floor=float(np.linalg.norm(result.noise_um)))
     case["seconds"] = time.perf_counter() - start
     return case

@@ -551,7 +551,8 @@ def make_case(family, effects, seed, folder, path=None, currents=False, approach
     _write_data_sheet(toml, machine, period, rng, f"independent truth {family} seed {seed} (data sheet)", hidden)
     truths = tuple({k: e[k] for k in ("name", "axis", "parameters", "options")} for e in hidden)
     notes = dict(period_s=period, log_s=every * period, noise_um=noise_um, vff=vff, computation_delay=computation_delay,
-                 scale_feedback=scale_feedback, windows_s=windows)
+                 scale_feedback=scale_feedback, windows_s=windows,
+                 velocity_gain_N_s_per_m={a: machine[a]["kf"] * machine[a]["kv"] for a in axes})
     return Case(family, path, csv, toml, truths, signal, float(t[rows][-1]), notes)
 
 

@@ -514,7 +514,8 @@ def delta_bic(rss0, rss1, n, k, tau):
     float
     """
     n_eff = n / tau
-    return n_eff * np.log(max(rss0, 1e-300) / max(rss1, 1e-300)) - k * np.log(n_eff)  # rss0 = 0: a trace followed exactly
+    # rss0 = 0: a trace followed exactly; rss1 = inf: a model that diverged (the ratio would underflow to 0)
+    return n_eff * (np.log(max(rss0, 1e-300)) - np.log(max(rss1, 1e-300))) - k * np.log(n_eff)
 
 
 def _on_trace(trace, t_sim, y):

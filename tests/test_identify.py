@@ -6,6 +6,7 @@ its structures are the truth's candidates), and a trace of the independent
 simulator of benchmarks/independent_truth.py, written apart from the kernel.
 """
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -14,7 +15,7 @@ import pytest
 from contoursim import paths
 from contoursim.diagnosis import diagnose, synthetic_trace
 from contoursim.feed import plan, sample
-from contoursim.identify import WEAK_KP_VFF, identify_machine, identification_warnings, servo_period_for
+from contoursim.identify import WEAK_KP_VFF, delta_bic, identify_machine, identification_warnings, servo_period_for
 from contoursim.machine import Machine
 from contoursim.model import load_model
 from contoursim.servo import AxisServo
@@ -257,3 +258,11 @@ def test_a_trace_logged_every_ms_is_simulated_at_1_ms_whatever_its_clock_reads(s
     t = np.round(start + np.arange(3000) * 1e-3, 6)  # as a CSV with µs writes them
     x = np.sin(t - start)[:, None]
     assert servo_period_for(Trace(t, x, x, ("x",)).dt) == pytest.approx(1e-3, rel=1e-9)
+
+
+def test_delta_bic_is_its_closed_form_and_minus_infinity_for_a_model_that_diverged_without_a_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the ratio 1e-300 / inf underflowed to 0, and numpy warned of log(0)
+        assert delta_bic(1.0, np.inf, 100, 1, 1.0) == -np.inf
+        assert delta_bic(0.0, 0.0, 100, 1, 1.0) == pytest.approx(-np.log(100))  # followed exactly either way
+        assert delta_bic(2.0, 1.0, 400, 3, 4.0) == pytest.approx(100 * np.log(2.0) - 3 * np.log(100))
