@@ -891,7 +891,7 @@ class MachineChain:
                 raise ValueError(f"tool_axis must hold unit vectors, got {tool_axis[i]} (length {length[i]:g}) at row "
                                  f"{i}")
         q = (np.zeros((n, len(self.axes))) if q0 is None else
-             _validate.finite_array("q0", q0, shape=(n, len(self.axes)), limit=MAX_TRAVEL))
+             _validate.finite_array("q0", q0, shape=(n, len(self.axes)), limit=_LARGEST_NUMBER))
         q = q.copy()
         t = None if t is None else _validate.finite_array("t", t, shape=(n,))
         if free is None:
@@ -938,7 +938,9 @@ class MachineChain:
     # -- helpers ----------------------------------------------------------
 
     def _check(self, q, t):
-        q = _validate.finite_array("q", q, ndim=2, limit=MAX_TRAVEL)  # beyond, the error motions overflow to NaN
+        # beyond any number a machine file holds, the error motions overflow to NaN; a position beyond the travel is
+        # the travel check's to say, naming the work offset or the path (Machine.axis_joints)
+        q = _validate.finite_array("q", q, ndim=2, limit=_LARGEST_NUMBER)
         if q.shape[1] != len(self.axes):
             raise ValueError(f"q must have shape (N, {len(self.axes)}) for axes {list(self.axes)}, got {q.shape}")
         if t is not None:

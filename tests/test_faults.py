@@ -1437,9 +1437,9 @@ def test_an_out_that_simulate_or_demo_cannot_write_is_refused_before_the_runs(tm
     (lambda a: Body("b", joint="linear", axis="x", sign=0.5), ValueError, "b.sign must be 1 or -1, got 0.5"),
     # NaN with only numpy's overflow warning: positions beyond the chain's range, refused as a Trajectory's are
     (lambda a: load_machine("vertical_mill_3axis").chain.tool_pose(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1e300]])),
-     ValueError, "q holds 1e+300 at index (1, 2), beyond ±1e+06"),
-    (lambda a: load_machine("vertical_mill_3axis").chain.inverse(np.zeros((1, 3)), q0=np.full((1, 3), 2e6)), ValueError,
-     "q0 holds 2e+06 at index (0, 0), beyond ±1e+06"),
+     ValueError, "q holds 1e+300 at index (1, 2), beyond ±1e+12"),
+    (lambda a: load_machine("vertical_mill_3axis").chain.inverse(np.zeros((1, 3)), q0=np.full((1, 3), 2e13)), ValueError,
+     "q0 holds 2e+13 at index (0, 0), beyond ±1e+12"),
     # a 2-sample trajectory, the circle's start and end, without a word
     (lambda a: sample(a.path, a.profile, 100.0), ValueError,
      "dt = 100 s is not shorter than the motion, which lasts 1.27664 s: no sample would lie on the path between its "
