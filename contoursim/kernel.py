@@ -1201,17 +1201,31 @@ def _continuous_plant(servo, effects, gap_open=False):
 
 
 def _padded_zoh(servo, effects, dt, gap_open=False):
-    """The plant's exact ZOH over `dt` on all five states: ``Ad`` (25, row-major), ``Bu`` (5), ``BF`` (5) in one array.
+    """The plant's exact ZOH over `dt` on all five states: ``Ad`` (25, row-major), ``Bu`` (5), ``BF`` (5) in one array
+    (read-only: it may be shared, see :data:`_ZOHS`).
 
     Without a current state the current holds the command of the period (its ``Bu`` entry 1).
     """
     A, B, states = _continuous_plant(servo, effects, gap_open)
-    Ad, Bd = zoh(A, B, dt)
-    full_Ad, full_Bd = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
-    full_Ad[np.ix_(states, states)], full_Bd[states] = Ad, Bd
-    if 4 not in states:
-        full_Bd[4, 0] = 1.0  # ideal current loop: the current state holds the command of the period
-    return np.concatenate([full_Ad.ravel(), full_Bd[:, 0], full_Bd[:, 1]])
+    key = (A.tobytes(), B.tobytes(), tuple(states), float(dt))
+    padded = _ZOHS.get(key)
+    if padded is None:
+        Ad, Bd = zoh(A, B, dt)
+        full_Ad, full_Bd = np.zeros((_NS, _NS)), np.zeros((_NS, 2))
+        full_Ad[np.ix_(states, states)], full_Bd[states] = Ad, Bd
+        if 4 not in states:
+            full_Bd[4, 0] = 1.0  # ideal current loop: the current state holds the command of the period
+        padded = _read_only(np.concatenate([full_Ad.ravel(), full_Bd[:, 0], full_Bd[:, 1]]))
+        if len(_ZOHS) >= _ZOHS_KEPT:
+            _ZOHS.clear()
+        _ZOHS[key] = padded
+    return padded
+
+
+#: The plants' ZOHs packed lately, by their continuous matrices and period: a fit's variants of the controller (a
+#: finite-difference Jacobian's steps of its gains) share one plant, whose matrix exponentials are then taken once.
+_ZOHS = {}
+_ZOHS_KEPT = 4096
 
 
 def _pi_row(gain, ti, dt, share=VELOCITY_INTEGRATORS["tustin"]):

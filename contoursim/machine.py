@@ -238,7 +238,11 @@ class Machine:
             An axis would leave its travel (``primitive``: the path's
             primitive where it first does).
         """
-        p, v, a = (_validate.as_xyz(x) for x in (trajectory.position, trajectory.velocity, trajectory.acceleration))
+        p, v, a = trajectory.position, trajectory.velocity, trajectory.acceleration  # read-only
+        if self.chain is None and trajectory.dim == len(self.axes):  # the path's coordinates are the axes'
+            self._check_travel(p, trajectory)
+            return p, v, a
+        p, v, a = (_validate.as_xyz(x) for x in (p, v, a))
         if self.chain is None:
             n = len(self.axes)
             if np.abs(p[:, n:]).max(initial=0.0) > 0:
@@ -318,8 +322,10 @@ class Machine:
         ndarray, shape (N, dim)
             [mm]
         """
-        p = _validate.as_xyz(q) if self.chain is None else self.chain.tool_pose(q, t)[0] - self.origin()
-        return p[:, :dim]
+        if self.chain is None:  # the axes' positions are the tool's (a copy), padded with z = 0 where dim asks for it
+            q = np.asarray(q, dtype=float)
+            return q[:, :dim].copy() if q.shape[1] >= dim else _validate.as_xyz(q)[:, :dim]
+        return (self.chain.tool_pose(q, t)[0] - self.origin())[:, :dim]
 
 
 

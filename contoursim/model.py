@@ -197,7 +197,7 @@ class Model:
         fields = {axis: {} for axis in self.machine.axes}
         for e in self.stage("loop"):
             fields[e.axis].update(_LOOP[e.name](e))
-        return {axis: kernel.LoopEffects(**f) for axis, f in fields.items()}
+        return {axis: kernel.LoopEffects(**f) if f else _NO_LOOP_EFFECTS for axis, f in fields.items()}
 
     def commands(self, q, v, a):
         """Axis commands after the command stage (``time_delay`` with ``kind = "command"``).
@@ -445,6 +445,8 @@ _GEOMETRY = {
     "straightness": _straightness,
     "thermal_drift": _thermal_drift,
 }
+
+_NO_LOOP_EFFECTS = kernel.LoopEffects()  # frozen: shared by the axes without any
 
 _LOOP = {
     "backlash": lambda e: dict(backlash_mm=e["lost_motion_um"] * _MM_PER_UM,  # feedback: the servo's, bound by Model

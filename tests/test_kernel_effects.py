@@ -103,6 +103,21 @@ def test_packed_plant_equals_python_control_zoh(extra, effects):
         np.testing.assert_allclose(Bd[:, :1], blocks.plant.B, rtol=1e-12, atol=1e-12 * np.abs(blocks.plant.B).max())
 
 
+def test_variants_packed_in_turn_each_get_their_own_plants_zoh():
+    """A fit's variants share their plant's ZOH (packed once, kernel._ZOHS): variants alternating two masses, two
+    dampings and two gains, a mode on and off, each row's plant is python-control's sampling of its own plant."""
+    variants = [(MASS, 0.0, 40.0, LoopEffects()), (MASS, 0.0, 80.0, LoopEffects()), (1.01 * MASS, 0.0, 40.0, LoopEffects()),
+                (MASS, 1500.0, 40.0, LoopEffects(**MODE)), (MASS, 0.0, 40.0, LoopEffects()), (MASS, 1500.0, 80.0, LoopEffects())]
+    for mass, damping, kp, effects in variants * 2:
+        servo = axis(mass=mass, damping=damping, kp=kp)
+        row = pack(servo, DT, effects)
+        assert row.flags.writeable and row[kernel._KP] == kp  # the caller's own row
+        Ad, Bd = packed_plant(row, servo, effects)
+        ref = ct.sample_system(two_mass_plant(servo, effects), DT, method="zoh")
+        np.testing.assert_allclose(Ad, ref.A, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(Bd, ref.B, rtol=1e-12, atol=1e-12 * np.abs(ref.B).max())
+
+
 @pytest.mark.parametrize("extra", [dict(), dict(ti=None), dict(**ELECTRICAL)])
 def test_packed_controllers_equal_discretize_blocks(extra):
     servo = axis(**extra)
