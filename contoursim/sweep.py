@@ -882,6 +882,7 @@ class Progress:
         self.terminal = getattr(self.stream, "isatty", lambda: False)()  # a caller's stream may have none
         self.start, self.first, self.last = None, None, -1.0  # set by the first call
         self.open = False  # a line written without its end
+        self.drawn = 0  # characters of the line drawn last in place, which the next one covers
 
     def __enter__(self):
         return self
@@ -905,5 +906,6 @@ class Progress:
             left = (total - done) / rate
             line += f", {rate:.3g}/s, " + (f"{left / 60:.1f} min left" if left > 60 else f"{left:.0f} s left")
         end = "\n" if done >= total or not self.terminal else ""
-        print(f"\r{line}   " if self.terminal else line, end=end, file=self.stream, flush=True)
+        print(f"\r{line:<{self.drawn}}" if self.terminal else line, end=end, file=self.stream, flush=True)
         self.open = not end
+        self.drawn = len(line) if self.open else 0

@@ -557,9 +557,9 @@ def test_progress_counts_its_rate_from_the_work_done_when_it_starts(monkeypatch)
     with Progress("diagnose", "traces", stream=screen) as progress:
         for now[0], done in ((100.0, 1), (102.0, 2), (106.0, 8)):  # one failed on reading, then 1 in 2 s, 6 in 4 s
             progress(done, 8)
-    assert screen.getvalue().split("\r") == ["", "diagnose: [##..................] 1/8 traces   ",
-                                             "diagnose: [#####...............] 2/8 traces, 0.5/s, 12 s left   ",
-                                             "diagnose: [####################] 8/8 traces, 1.17/s, 0 s left   \n"]
+    assert screen.getvalue().split("\r") == ["", "diagnose: [##..................] 1/8 traces",
+                                             "diagnose: [#####...............] 2/8 traces, 0.5/s, 12 s left",
+                                             "diagnose: [####################] 8/8 traces, 1.17/s, 0 s left\n"]
     log = io.StringIO()  # a sweep's: from 0, as before
     with Progress(stream=log) as progress:
         for now[0], done in ((200.0, 0), (230.0, 60), (300.0, 200)):
@@ -567,6 +567,30 @@ def test_progress_counts_its_rate_from_the_work_done_when_it_starts(monkeypatch)
     assert log.getvalue().splitlines() == ["sweep: [....................] 0/200 variants",
                                            "sweep: [######..............] 60/200 variants, 2/s, 1.2 min left",
                                            "sweep: [####################] 200/200 variants, 2/s, 0 s left"]
+
+
+def test_progress_redrawn_in_place_covers_all_of_the_line_before_it(monkeypatch):
+    """A line drawn over a longer one was padded by three spaces: where the line shrank by more ('0.01/s, 165.0 min
+    left' to '0.99/s, 0 s left'), the end of the old line stayed on the screen after the new one."""
+    import io
+
+    from contoursim.sweep import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    now = [0.0]
+    monkeypatch.setattr("contoursim.sweep.time.monotonic", lambda: now[0])
+    screen = Terminal()
+    with Progress(stream=screen) as progress:
+        for now[0], done in ((0.0, 0), (100.0, 1), (101.0, 100)):
+            progress(done, 100)
+    shown = ""
+    for drawn in screen.getvalue().rstrip("\n").split("\r"):  # what a terminal shows: each drawing over the last
+        shown = drawn + shown[len(drawn):]
+    assert shown.rstrip() == "sweep: [####################] 100/100 variants, 0.99/s, 0 s left", repr(shown)
+    assert "165.0 min left" in screen.getvalue()  # the longer line it had to cover
 
 
 def test_a_local_clusters_workers_leave_a_ctrl_c_to_the_command():
