@@ -293,6 +293,11 @@ def read_error_table(path, rotary=False):
             continue
         if len(row) != len(header):
             raise ConfigError(f"expected {len(header)} cells, got {len(row)}", source, number)
+        odd = next((h for h, cell in zip(header, row) if "_" in cell or not cell.isascii()), None)
+        if odd is not None:  # float() reads "1_000" and a full-width "１" as numbers
+            cell = row[header.index(odd)]
+            raise ConfigError(f"column '{odd}': {_validate.shown(repr(cell.strip()))} is not a number as a table writes one: "
+                              "write it with the digits 0-9 and no '_'", source, number)
         try:
             values = [float(cell) for cell in row]
         except ValueError:

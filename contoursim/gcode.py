@@ -94,8 +94,8 @@ __all__ = ["BLOCK_COLUMNS", "DIALECT", "SUFFIXES", "BlockErrors", "Program", "bl
 #: The columns of a program's per-block table (:meth:`BlockErrors.save_csv`, ``NAME_blocks.csv`` beside a run's trace).
 BLOCK_COLUMNS = ("line", "rapid", "feed_mm_min", "contour_max_um", "tracking_max_um", "block")
 
-_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
-_EXPONENT = re.compile(r"[eE][-+]?\d+")  # right after a number: its exponent
+_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))", re.ASCII)  # 0-9 only: \d and float() take "１"
+_EXPONENT = re.compile(r"[eE][-+]?\d+", re.ASCII)  # right after a number: its exponent
 _LARGEST = 1e9  # largest |number| in a word [mm, mm/min, s]: a km-long axis is 1e6 mm
 _PLANES = {17: 2, 18: 1, 19: 0}  # G code -> index of the normal axis (Z, Y, X)
 _PLANE_NAMES = {2: "G17 (XY)", 1: "G18 (ZX)", 0: "G19 (YZ)"}  # normal axis -> the plane's code and name
@@ -202,6 +202,8 @@ def _words(raw, fail):
                 "the moves out in one program" if re.match(_O_WORD, rest, re.IGNORECASE) else
                 ": macro variables and expressions (# [ ]) are not supported: write the numbers out"
                 if any(c in rest for c in "#[") else
+                ": a digit other than 0-9 (a full-width one?): write the number in ASCII digits"
+                if any(c.isdigit() and not c.isascii() for c in rest) else
                 ": a space inside a number (X 1 0)? write the number without one" if rest[:1].isdigit() else "")
         fail(f"cannot read {rest!r}{hint}")
 

@@ -92,6 +92,8 @@ def test_read_error_table_converts_units(tmp_path):
     [
         ("position_mm,dq_um\n0,1\n1,2\n", 1, "header must hold"),
         ("position_mm,dx_um\n0,1\n1,x\n", 3, "column 'dx_um' is not a number"),
+        ("position_mm,dx_um\n0,1\n1,1_000\n", 3, "column 'dx_um': '1_000' is not a number"),  # float() read 1000
+        ("position_mm,dx_um\n0,1\n１,2\n", 3, "column 'position_mm': '１' is not a number"),  # full-width: read 1
         ("position_mm,dx_um\n0,1\n2,2\n1,3\n", 4, "strictly increasing"),
         ("# c\nposition_mm,dx_um\n0,1\n1,2,3\n", 4, "expected 2 cells"),
         ("position_mm,dx_um\n0,1\n1,nan\n", 3, "not finite"),

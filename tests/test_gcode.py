@@ -179,6 +179,7 @@ def test_an_arc_cut_at_its_middle_is_one_block():
     ("G1 X5 F0\n", 1, r"F0 must lie within \[6e-05, 6e\+13\] mm/min"),
     ("G1 X10,5 F100\n", 1, "cannot read ',5': a decimal comma\\? write the number with a point"),
     ("G1 X 1 0 F100\n", 1, r"cannot read '0': a space inside a number \(X 1 0\)\? write the number without one"),
+    ("G1 X１0 F100\n", 1, r"cannot read 'X１0': a digit other than 0-9 \(a full-width one\?\)"),  # was read as X10
     ("#100=5\nG1 X#100 F100\n", 1, "cannot read '#100=5': macro variables and expressions"),
     ("G1 X[1+2] F100\n", 1, r"cannot read 'X\[1\+2\]': macro variables"),
 ])
