@@ -322,9 +322,9 @@ class Machine:
         ndarray, shape (N, dim)
             [mm]
         """
-        if self.chain is None:  # the axes' positions are the tool's (a copy), padded with z = 0 where dim asks for it
+        if self.chain is None:  # the axes' positions are the tool's (a view), padded with z = 0 where dim asks for it
             q = np.asarray(q, dtype=float)
-            return q[:, :dim].copy() if q.shape[1] >= dim else _validate.as_xyz(q)[:, :dim]
+            return q[:, :dim] if q.shape[1] >= dim else _validate.as_xyz(q)[:, :dim]
         return (self.chain.tool_pose(q, t)[0] - self.origin())[:, :dim]
 
 
