@@ -1,6 +1,7 @@
 """Sweeps: the spec, the draws, each row against its own single run, and the same table on any number of workers."""
 
 import dataclasses
+import io
 import os
 import re
 import signal
@@ -511,10 +512,15 @@ def test_a_warning_of_the_best_or_worst_run_names_its_variant(tmp_path, capsys):
     assert said and all(re.search(r"the (best|worst) variant, [01]: the current command hit its limit", s) for s in said)
 
 
+class _Terminal(io.StringIO):
+    """A stream that says it is a terminal: Progress redraws its line in place on it."""
+
+    def isatty(self):
+        return True
+
+
 def test_progress_redraws_one_line_on_a_terminal_and_writes_a_line_now_and_then_to_a_file(monkeypatch):
     """A sweep's progress sent to a log file was one line of thousands of carriage-return redrawings."""
-    import io
-
     from contoursim.sweep import Progress
 
     clock = iter(np.arange(0.0, 100.0, 0.25))
@@ -527,12 +533,8 @@ def test_progress_redraws_one_line_on_a_terminal_and_writes_a_line_now_and_then_
     assert "\r" not in log.getvalue() and 3 <= len(lines) <= 5, lines  # 25 s: one line each 10 s and the last
     assert lines[-1].startswith("sweep: [####################] 100/100 variants")
 
-    class Terminal(io.StringIO):
-        def isatty(self):
-            return True
-
     clock = iter(np.arange(0.0, 100.0, 0.25))
-    screen = Terminal()
+    screen = _Terminal()
     with Progress(stream=screen) as progress:
         for done in range(101):
             progress(done, 100)
@@ -543,17 +545,11 @@ def test_progress_counts_its_rate_from_the_work_done_when_it_starts(monkeypatch)
     """A fleet counts its traces that failed on reading as done before the first is diagnosed: its first line said
     '1/8 traces, 1e+09/s, 0 s left' with 7 traces to do (the clock started at the bar's making, or on a call with
     done 0, which a fleet never made). The rate counts from the first call, from its done."""
-    import io
-
     from contoursim.sweep import Progress
-
-    class Terminal(io.StringIO):
-        def isatty(self):
-            return True
 
     now = [100.0]
     monkeypatch.setattr("contoursim.sweep.time.monotonic", lambda: now[0])
-    screen = Terminal()
+    screen = _Terminal()
     with Progress("diagnose", "traces", stream=screen) as progress:
         for now[0], done in ((100.0, 1), (102.0, 2), (106.0, 8)):  # one failed on reading, then 1 in 2 s, 6 in 4 s
             progress(done, 8)
@@ -572,17 +568,11 @@ def test_progress_counts_its_rate_from_the_work_done_when_it_starts(monkeypatch)
 def test_progress_redrawn_in_place_covers_all_of_the_line_before_it(monkeypatch):
     """A line drawn over a longer one was padded by three spaces: where the line shrank by more ('0.01/s, 165.0 min
     left' to '0.99/s, 0 s left'), the end of the old line stayed on the screen after the new one."""
-    import io
-
     from contoursim.sweep import Progress
-
-    class Terminal(io.StringIO):
-        def isatty(self):
-            return True
 
     now = [0.0]
     monkeypatch.setattr("contoursim.sweep.time.monotonic", lambda: now[0])
-    screen = Terminal()
+    screen = _Terminal()
     with Progress(stream=screen) as progress:
         for now[0], done in ((0.0, 0), (100.0, 1), (101.0, 100)):
             progress(done, 100)
