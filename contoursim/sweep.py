@@ -263,17 +263,41 @@ def read_sweep(file):
     log = tuple(t.get("log", False) is True for t in tables)
     made = Sweep(str(file), files, strategies, names, values, task_size, elsewhere, log)
     job = _job(made)  # the spec's job, every name and the extreme values checked here, not on a worker
+    # a draw's range checked by its bounds first: a range the parameter cannot take is said by the value written
+    bounds = [() if method == "grid" else (float(t["min"]), float(t["max"])) for t in tables]
+    checked = [(*b, values[:, i].min(), values[:, i].max()) for i, b in enumerate(bounds)]
+    # Each name's values are checked beside the other names, as a variant sets them all (some are valid only together:
+    # an effect's period_mm beside the amplitude_um it is added with, a screw's motor_mass_kg and
+    # screw_stiffness_N_per_um), those held at a value of theirs the job takes: a value refused is then its own table's,
+    # not that of another beside it. Each is held at the first of its checked values the job takes beside the others
+    # held, from the first variant's; one it takes at none is kept at the first variant's value in the first round (its
+    # partner's may be the one wrong), then held at none (a name the job has no place for: said at its own table).
+    held = dict(zip(names, values[0]))
+    for again in range(3):  # the third: the names taken beside the others once such a name is dropped
+        for name, candidates in zip(names, checked):
+            value = next((v for v in candidates if _takes(job, {**held, name: v})), None)
+            if value is not None:
+                held[name] = value
+            elif again:
+                held.pop(name, None)
     for i, (name, table) in enumerate(zip(names, tables)):
-        # a draw's range checked by its bounds first: a range the parameter cannot take is said by the value written
-        bounds = () if method == "grid" else (float(table["min"]), float(table["max"]))
-        for k, value in enumerate((*bounds, values[:, i].min(), values[:, i].max())):
+        for k, value in enumerate(checked[i]):
             try:
-                job.variant({name: value})
+                job.variant({**held, name: value})
             except (TypeError, ValueError) as exc:
                 why = ("; its min and max are taken, a value drawn between them not: vary it on a grid with values = "
-                       "[...]" if k >= len(bounds) > 0 else "")
+                       "[...]" if k >= len(bounds[i]) > 0 else "")
                 raise toml.error(f"vary {name!r}: {_file_names(exc)}{why}", "vary", i, "name") from None
     return made
+
+
+def _takes(job, values):
+    """Whether `job` makes the variant of `values` (parameter name -> value) without refusing one of them."""
+    try:
+        job.variant(values)
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 def _integer(toml, keys, value, least):
@@ -331,6 +355,9 @@ def _draw(toml, tables, method, count, seed):
         elif "count" in t:
             raise toml.error("a vary table's count gives a grid's points: with random or lhs set [sweep] count",
                              "vary", i, "count")
+        elif high == low:  # drawn, it varies in no variant (alone: the same variant count times, as a grid's count)
+            raise toml.error(f"vary {t['name']!r}: min = max = {low:g}: every variant would draw that one value; set "
+                             "it in the job (or its machine file) instead, or give a max above min", "vary", i, "max")
         else:
             columns.append((low, high, log))
     _fits(toml, tables, method, count, columns)
@@ -390,7 +417,7 @@ class _Job:
     def variant(self, values):
         """``(model, strategies)`` with the named parameters (module docstring) set to `values`."""
         machine = self.model.machine
-        axes, effects, gains = dict(machine.axes), {}, {}
+        axes, fields, effects, gains = dict(machine.axes), {}, {}, {}
         for name, value in values.items():
             kind, _, rest = name.partition(".")
             parts = rest.split(".")
@@ -399,7 +426,7 @@ class _Job:
                 field = _servo_field(machine, *parts)
                 if isinstance(getattr(axes[parts[0]], field), int) and value.is_integer():
                     value = int(value)  # a count (velocity_taps, computation_delay_periods): a grid's whole numbers
-                axes[parts[0]] = dataclasses.replace(axes[parts[0]], **{field: value})
+                fields.setdefault(parts[0], {})[field] = value
             elif kind == "effect" and len(parts) == 3:
                 effects[name[len("effect.") :]] = value
             elif kind == "strategy" and len(parts) == 2:
@@ -407,6 +434,8 @@ class _Job:
             else:
                 raise ValueError(f"a parameter name is axes.<axis>.<key>, effect.<effect>.<axis>.<parameter> or "
                                  f"strategy.<strategy>.<gain>, got {name!r}")
+        for axis, changed in fields.items():  # at once: a servo checks them together (motor_mass needs screw_stiffness)
+            axes[axis] = dataclasses.replace(axes[axis], **changed)
         model = self.model
         if axes != dict(machine.axes):
             model = dataclasses.replace(model, machine=dataclasses.replace(machine, axes=axes))
@@ -539,11 +568,23 @@ def run_variants(files, names, rows):
         the loop check refuses (:func:`contoursim.servo.check`: unstable, too
         poorly damped, too fast for the servo period), which ``simulate``
         would not run, counts as diverged too.
+
+    Raises
+    ------
+    TypeError
+        `rows` holds text or booleans.
+    ValueError
+        `rows` not one row of ``len(names)`` values per variant (one
+        variant's values given flat, ``[40.0]`` for ``[[40.0]]``).
     """
     from .simulation import simulate_batch
 
     from .cluster import task_threads
 
+    try:  # a variant's values given flat (np.array([40.0])) were iterated as its rows: "'float' is not iterable"
+        rows = _validate.float_array("rows", rows, shape=(None, len(names)))
+    except ValueError as exc:
+        raise ValueError(f"{exc}: a row per variant, its values in the order of names {tuple(names)}") from None
     job = _job(files)
     task_threads()
     variants = [job.variant(dict(zip(names, row))) for row in rows]

@@ -120,6 +120,82 @@ def test_a_drawn_range_the_parameter_cannot_take_is_said_by_its_bound_or_as_a_gr
         read_sweep(_spec(tmp_path, [vary], 'method = "lhs"\ncount = 3\nseed = 4'))
 
 
+@pytest.mark.parametrize("method", ["random", "lhs"])
+def test_a_drawn_range_of_one_value_is_refused_by_its_line(tmp_path, method):
+    """min = max drew that one value in every variant: three rows of the same figures (a grid refuses it)."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "min": 40.0, "max": 40.0}],
+                 f'method = "{method}"\ncount = 3\nseed = 4')
+    line = spec.read_text().splitlines().index("max = 40.0") + 1
+    with pytest.raises(ConfigError, match=rf"spec.toml, line {line}: vary 'axes.x.kp_per_s': min = max = 40: every "
+                                          r"variant would draw that one value; set it in the job \(or its machine "
+                                          r"file\) instead, or give a max above min$"):
+        read_sweep(spec)
+
+
+def test_parameters_valid_only_together_are_checked_and_varied_together(tmp_path):
+    """A cyclic error's period_mm beside the amplitude_um it is added with was refused, "cyclic_error: missing
+    'amplitude_um'", though the other table varied it: each name was checked alone (run_sweep ran the pair)."""
+    from contoursim.effects import Effect
+
+    spec = _spec(tmp_path, [{"name": '"effect.cyclic_error.x.amplitude_um"', "values": "[3.0]"},
+                            {"name": '"effect.cyclic_error.x.period_mm"', "values": "[5.0, 20.0]"}], strategies="none")
+    sweep = read_sweep(spec)
+    table = run_sweep(sweep)
+    job = _job(sweep)
+    volumetric = FIGURES.index("volumetric_rms_um")
+    for i, (amplitude, period) in enumerate(sweep.values):  # each row the run of the job given that effect
+        model = job.model.with_effect(Effect("cyclic_error", "x", amplitude_um=amplitude, period_mm=period))
+        single = simulate(model, job.trajectory, job.strategies, settle=0.0).summary()
+        assert table[i, volumetric] == single["volumetric_rms_um"] > 1.0
+    assert table[0, volumetric] != table[1, volumetric]  # the period reached the effect
+
+
+def test_a_compliant_screws_motor_mass_and_stiffness_are_varied_together(tmp_path):
+    """motor_mass_kg and screw_stiffness_N_per_um, each needing the other, were set on the servo one at a time:
+    "motor_mass_kg is given, so the compliant screw needs screw_stiffness_N_per_um as well"."""
+    spec = _spec(tmp_path, [{"name": '"axes.x.motor_mass_kg"', "values": "[60.0]"},
+                            {"name": '"axes.x.screw_stiffness_N_per_um"', "values": "[100.0, 400.0]"}],
+                 strategies="none")
+    sweep = read_sweep(spec)
+    table = run_sweep(sweep)
+    job = _job(sweep)
+    contour = FIGURES.index("contour_max_um")
+    for i, (motor, stiffness) in enumerate(sweep.values):  # each row the run of the machine given that screw
+        axes = {**job.model.machine.axes}
+        axes["x"] = dataclasses.replace(axes["x"], motor_mass=motor, screw_stiffness=stiffness)
+        model = dataclasses.replace(job.model, machine=dataclasses.replace(job.model.machine, axes=axes))
+        single = simulate(model, job.trajectory, job.strategies, settle=0.0).summary()
+        assert table[i, contour] == single["contour_max_um"]
+    assert table[0, contour] != table[1, contour] and not table[:, FIGURES.index("diverged")].any()
+
+
+@pytest.mark.parametrize(("varies", "bad", "message"), [
+    # period_mm's range beside amplitude_um: was "cyclic_error: missing 'amplitude_um'"
+    ([("effect.cyclic_error.x.amplitude_um", 1.0, 3.0), ("effect.cyclic_error.x.period_mm", 0.01, 20.0)], 1,
+     r"cyclic_error.x: period_mm must lie in \[0.1, 1000\] mm, got 0.01$"),
+    # amplitude_um's range, period_mm before it: was said at period_mm's table ("missing 'amplitude_um'")
+    ([("effect.cyclic_error.x.period_mm", 5.0, 20.0), ("effect.cyclic_error.x.amplitude_um", -1.0, 3.0)], 1,
+     r"cyclic_error.x: amplitude_um must lie in \[0, 1000\] µm, got -1$"),
+    ([("axes.x.screw_stiffness_N_per_um", 100.0, 400.0), ("axes.x.motor_mass_kg", 60.0, 400.0)], 1,
+     r"motor_mass_kg must be less than mass_kg \(300 kg\)"),
+    # one range the job cannot take beside a good one: at its own table, not at the other's checked with its draws
+    ([("axes.x.kp_per_s", 30.0, 50.0), ("effect.backlash.x.lost_motion_um", -5.0, 2.0)], 1,
+     r"backlash.x: lost_motion_um must lie in \[0, 1000\] µm, got -5$"),
+    ([("effect.backlash.x.lost_motion_um", -5.0, 2.0), ("axes.x.kp_per_s", 30.0, 50.0)], 0,
+     r"backlash.x: lost_motion_um must lie in \[0, 1000\] µm, got -5$"),
+    ([("axes.x.kp_per_s", 30.0, 50.0), ("axes.w.kp_per_s", 30.0, 50.0)], 1, r"the machine has no servo axis 'w'"),
+    # a name the job has no place for after a pair: not "missing 'amplitude_um'" at period_mm's table
+    ([("effect.cyclic_error.x.amplitude_um", 1.0, 3.0), ("effect.cyclic_error.x.period_mm", 5.0, 20.0),
+      ("axes.x.kp", 1.0, 2.0)], 2, r"no axis key 'kp'"),
+])  # fmt: skip
+def test_a_value_refused_beside_the_other_varied_names_is_said_at_its_own_table(tmp_path, varies, bad, message):
+    spec = _spec(tmp_path, [{"name": f'"{name}"', "min": low, "max": high} for name, low, high in varies],
+                 'method = "lhs"\ncount = 4\nseed = 2')
+    line = spec.read_text().splitlines().index(f'name = "{varies[bad][0]}"') + 1
+    with pytest.raises(ConfigError, match=rf"spec.toml, line {line}: vary '{varies[bad][0]}': {message}"):
+        read_sweep(spec)
+
+
 @pytest.mark.parametrize(("log", "message"), [
     # it ran, the table plotting its 0 µm point nowhere on the log scale it was asked for
     ("true", r"line 14: vary 'effect.backlash.x.lost_motion_um': log = true plots the values on a log scale, which 0.0 "
@@ -746,3 +822,16 @@ def test_run_sweep_of_a_spec_file_name_says_to_read_it_first():
     # run_sweep("spec.toml") was an AttributeError ('str' object has no attribute 'values')
     with pytest.raises(TypeError, match="sweep must be a Sweep \\(read_sweep reads one from its spec\\), got str"):
         run_sweep("spec.toml")
+
+
+def test_run_variants_takes_a_row_of_values_per_variant_and_says_so_of_a_flat_one(tmp_path):
+    """rows = np.array([40.0]), one variant's values given flat, ended in "TypeError: 'numpy.float64' object is not
+    iterable", naming no argument; two values for one name ran the first alone (zip cut the second)."""
+    from contoursim.sweep import run_variants
+
+    sweep = read_sweep(_spec(tmp_path, [{"name": '"axes.x.kp_per_s"', "values": "[40.0]"}], strategies="none"))
+    for rows, shape in ((np.array([40.0]), r"\(1,\)"), ([[40.0, 5.0]], r"\(1, 2\)"), (40.0, r"\(\)")):
+        with pytest.raises(ValueError, match=rf"^rows must have shape \(N, 1\), got {shape}: a row per variant, its "
+                                             r"values in the order of names \('axes.x.kp_per_s',\)$"):
+            run_variants(sweep.files, sweep.names, rows)
+    assert run_variants(sweep.files, sweep.names, np.array([[40.0]])) == run_sweep(sweep).tolist()
