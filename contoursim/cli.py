@@ -715,7 +715,7 @@ def fleet_command(args):
 
     import matplotlib.pyplot as plt
 
-    from .fleet import SUMMARY_FORM, diagnose_fleet, fleet_summary, plot_fleet, trace_files
+    from .fleet import SUMMARY_FORM, SUMMARY_OPTIONAL, diagnose_fleet, fleet_summary, plot_fleet, trace_files
     from .output import refused_early, report_file, writing
     from .sweep import Progress
 
@@ -731,7 +731,8 @@ def fleet_command(args):
         raise ValueError(f"the trace {files[stems.index('fleet')]}'s report would be fleet.json, the fleet summary's "
                          "file; rename the trace")
     summary_file = report_file(args.summary, SUMMARY_FORM, "fleet summary", args.out,  # never a file the user keeps
-                               written=[f"{stem}.json" for stem in stems] + ["fleet.png"])  # nor a trace's report
+                               written=[f"{stem}.json" for stem in stems] + ["fleet.png"],  # nor a trace's report
+                               also=SUMMARY_OPTIONAL)
     refused_early(args.out, [f"{stem}.json" for stem in stems] + ["fleet.json", "fleet.png"])  # not after the fleet
     where = "this process" if args.scheduler is None else f"dask scheduler {args.scheduler}"
     print(f"contoursim diagnose — {len(files)} traces; nominal model: {args.model or 'identified from each trace'}; "
@@ -761,7 +762,7 @@ def fleet_command(args):
         fig.savefig(stream, format="png", dpi=100)
     plt.close(fig)
     print(f"{summary['diagnosed']} of {summary['traces']} traces diagnosed; explained by the nominal model: "
-          f"{len(summary['nominal'])}")
+          f"{len(summary['nominal'])}; no effect named, more than noise left: {len(summary['unexplained'])}")
     for label, e in summary["effects"].items():
         spread = "; ".join(f"{key} {d['min']:.4g} … {d['max']:.4g} (median {d['median']:.4g})"
                            for key, d in e["parameters"].items())

@@ -75,8 +75,8 @@ from scipy.signal import lombscargle, periodogram
 from . import _validate
 from .effects import Effect, effect_kind
 from .exceptions import UnstableLoopError
-from .identify import (SIGNIFICANT, _on_trace, autocorrelation_time, delta_bic, identification_warnings, identify_machine,
-                       one_blas_thread)
+from .identify import (SIGNIFICANT, _FEWEST_SAMPLES, _on_trace, autocorrelation_time, delta_bic, identification_warnings,
+                       identify_machine, one_blas_thread)
 from .kernel import MAX_DELAY_SAMPLES
 from .machine import CONTROLLER_FIELDS
 from .model import Model, as_model
@@ -90,7 +90,7 @@ __all__ = [
     "DAMPING_SPREAD", "FIGURE_FILES", "GAP_SHARE", "MAX_EFFECTS", "NOISE_FLOOR", "NOMINAL_SPREAD", "REPORT_FORM", "REPORT_OPTIONAL", "SIGNIFICANT",
     "STRUCTURE_SHARE", "TIMING_SPREAD", "UNCERTAINTY_METHOD",
     "Diagnosis", "Step", "diagnose", "locate", "noise_level", "path_normal", "standstill_cycles", "turning", "unexplained",
-    "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
+    "within_noise", "plot_magnified", "plot_polar", "plot_residuals", "save_figures", "synthetic_trace",
 ]
 
 #: Most effects named in one diagnosis.
@@ -163,7 +163,6 @@ _CURRENT_WORSE = 1.5
 CURRENT_FITS = ("coulomb_friction",)
 _CURRENT_TOLERANCE = 1.25  # a friction fitted with the current leaves the positions at most this × their own fit's RMS
 _CURRENT_SCALE = (0.0, 100.0)  # a measured current more than the first, less than the second times the model's is fitted
-_FEWEST_SAMPLES = 16  # fewer samples scored than this leave the noise floor (from second differences) unknown
 _WHITE_SAMPLES = 200  # fewer samples than this: the noise from the second differences alone (see LINE_RATIO)
 _CYCLE_FALSE_ALARM = 1e-3  # share of white-noise standstill runs :func:`standstill_cycles` may take for a limit cycle
 _SLOWEST_LOG = 0.01  # a trace sampled slower than this [s] does not resolve servo dynamics (a position loop's 1/kp)
@@ -503,7 +502,7 @@ class Diagnosis:
             lines.append("measured − simulated current [A RMS]: "
                          + ", ".join(f"{a} {before[a]:.4g} -> {after[a]:.4g}" for a in before))
         lines += [f"unexplained on {u['axis']}: {u['signature']} ({u['rms_um']:.3g} µm RMS)" for u in self.unexplained]
-        if not self.effects and not self.unexplained and self.steps[-1].rms_um <= NOISE_FLOOR * float(np.linalg.norm(self.noise_um)):
+        if within_noise(self.effects, self.unexplained, self.steps[-1].rms_um, self.noise_um):
             lines.append("no effect named: the measurement is explained by the nominal model within noise "
                          "(and the nominal parameters' usual spread)")
         elif not self.effects:
@@ -818,6 +817,26 @@ def _cycle_share(n):
     band = total[rows, np.minimum(k + 3, spec.shape[1])] - total[rows, np.maximum(k - 2, 1)]
     share = np.where(k >= 3, band / total[:, -1], 0.0)
     return max(0.5, float(np.quantile(share, 1.0 - _CYCLE_FALSE_ALARM)))
+
+
+def within_noise(effects, unexplained, rms_um, noise_um):
+    """Whether a diagnosis explains the measurement by the nominal model within noise: no effect named, no structure
+    left unexplained, and a residual within :data:`NOISE_FLOOR` times the noise level.
+
+    Parameters
+    ----------
+    effects, unexplained : sequence
+        The effects named and the structure left (:class:`Diagnosis`'s, or its report's lists).
+    rms_um : float
+        The final residual [µm RMS].
+    noise_um : sequence of float
+        The noise level per axis [µm].
+
+    Returns
+    -------
+    bool
+    """
+    return not effects and not unexplained and rms_um <= NOISE_FLOOR * float(np.linalg.norm(noise_um))
 
 
 def unexplained(trace, reference, residual, noise, scored):
@@ -2225,9 +2244,6 @@ def diagnose(trace, model=None, max_effects=MAX_EFFECTS, progress=None):
     say = _validate.callback("progress", progress) or (lambda text: None)
     if model is not None:
         return _diagnose(trace, as_model(model), False, max_effects, say)[0]
-    if len(trace.t) < _FEWEST_SAMPLES:  # 3 samples gave loops of kp 311 1/s, written as a corrected model
-        raise ValueError(f"identifying the servo loops needs at least {_FEWEST_SAMPLES} samples, the trace has "
-                         f"{len(trace.t)}: log a longer run, or give the nominal model (--model)")
     say("no nominal model given: identifying the servo loops from the trace")
     result, near = _diagnose(trace, Model(identify_machine(trace, progress=say)), True, max_effects, say)
     result, near = _geometry_held(trace, result, near, max_effects, say)

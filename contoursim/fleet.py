@@ -25,11 +25,13 @@ import numpy as np
 
 from . import _validate
 
-__all__ = ["SUMMARY_FORM", "diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "trace_files"]
+__all__ = ["SUMMARY_FORM", "SUMMARY_OPTIONAL", "diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "trace_files"]
 
 #: The form of :func:`fleet_summary` (:func:`contoursim.output.has_form`): ``--summary`` replaces only a file of it.
 SUMMARY_FORM = {"traces": None, "diagnosed": None, "failed": ("trace", "error"), "nominal": None,
                 "effects": ("name", "axis", "count", "traces", "parameters")}
+#: The keys :func:`fleet_summary` has besides those of :data:`SUMMARY_FORM` (an earlier version's summary lacks them).
+SUMMARY_OPTIONAL = ("unexplained",)
 
 
 def trace_files(paths):
@@ -84,6 +86,8 @@ def _block_table(file):
     """Whether `file` is a G-code run's per-block table (its first line :data:`~contoursim.gcode.BLOCK_COLUMNS`)."""
     from .gcode import BLOCK_COLUMNS
 
+    if not file.is_file():  # a named pipe or a device: opening it could wait for ever; read as a trace, which says why
+        return False
     try:
         with open(file, encoding="utf-8", errors="replace") as stream:
             return stream.readline(1000).rstrip("\r\n") == ",".join(BLOCK_COLUMNS)
@@ -100,7 +104,7 @@ def diagnose_text(name, text, model=None):
         The trace's file name (messages name it).
     text : str
         The trace CSV's text.
-    model : str or dict of str -> str, optional
+    model : str, Path or dict of str -> str, optional
         The nominal machine: a preset's name (or a machine file, read where
         it lies), or the files of a machine file: its text under its name,
         first, then those of the error tables it names, by path relative to
@@ -113,6 +117,11 @@ def diagnose_text(name, text, model=None):
         ``trace`` (the name), and either ``report`` (the diagnosis report,
         :meth:`contoursim.diagnosis.Diagnosis.to_dict`) and ``text`` (its
         table), or ``error`` (why the trace could not be diagnosed).
+
+    Raises
+    ------
+    TypeError
+        `model` is none of these.
     """
     from ._memory import check_diagnosis
     from .cluster import task_threads
@@ -122,6 +131,11 @@ def diagnose_text(name, text, model=None):
     from .sweep import _written
     from .traces import read_trace
 
+    if isinstance(model, os.PathLike):
+        model = os.fspath(model)
+    if not (model is None or isinstance(model, (str, Mapping))):
+        raise TypeError(f"model must be a preset's name, a machine file or its files (a dict of name -> text), got "
+                        f"{type(model).__name__}")
     task_threads()
     with tempfile.TemporaryDirectory(prefix="contoursim-fleet-") as folder:
         file = Path(folder) / Path(name).name
@@ -234,7 +248,10 @@ def fleet_summary(outcomes):
     dict
         ``traces`` (how many), ``diagnosed`` (how many reports), ``failed``
         (``[{"trace", "error"}]``), ``nominal`` (traces explained by the
-        nominal model: no effect named), and ``effects``: per effect label
+        nominal model within noise:
+        :func:`contoursim.diagnosis.within_noise`), ``unexplained`` (no
+        effect named, but more than noise left), and ``effects``: per
+        effect label
         ``<name>.<axis>`` its ``name``, ``axis``, ``count`` (traces it was
         named on), ``traces`` (which, in order) and per parameter its
         distribution over those traces (``values`` in trace order, ``min``,
@@ -247,13 +264,17 @@ def fleet_summary(outcomes):
     ValueError
         `outcomes` is empty, or an outcome is not one :func:`diagnose_text` returns.
     """
+    from .diagnosis import within_noise
+
     _outcomes(outcomes)
-    effects, nominal = {}, []
+    effects, nominal, unexplained = {}, [], []
     reports = [o for o in outcomes if "report" in o]
     for o in reports:
         named = o["report"]["effects"]
-        if not named:
-            nominal.append(o["trace"])
+        if not named:  # what the nominal model explains, or what no catalogue effect does
+            r = o["report"]
+            explained = within_noise(named, r["unexplained"], r["steps"][-1]["rms_um"], list(r["noise_um"].values()))
+            (nominal if explained else unexplained).append(o["trace"])
         for e in named:
             entry = effects.setdefault(f"{e['name']}.{e['axis']}", {"name": e["name"], "axis": e["axis"], "traces": [],
                                                                     "parameters": {}})
@@ -265,7 +286,11 @@ def fleet_summary(outcomes):
         entry["parameters"] = {k: _distribution(v) for k, v in entry["parameters"].items()}
     return {"traces": len(outcomes), "diagnosed": len(reports),
             "failed": [{"trace": o["trace"], "error": o["error"]} for o in outcomes if "error" in o],
-            "nominal": nominal, "effects": dict(sorted(effects.items(), key=lambda item: -item[1]["count"]))}
+            "nominal": nominal, "unexplained": unexplained, "effects": dict(sorted(effects.items(), key=lambda item: -item[1]["count"]))}
+
+
+#: What a report that names no effect must hold for the summary to tell the nominal model's from the unexplained.
+_OF_NOTHING_NAMED = ("noise_um", "steps", "unexplained")
 
 
 def _outcomes(outcomes):
@@ -282,9 +307,11 @@ def _outcomes(outcomes):
         if "trace" not in o or ("report" in o) == ("error" in o):
             raise ValueError(f"outcomes[{i}] must hold 'trace' and either 'report' or 'error' (diagnose_text's "
                              f"outcome), got the keys {list(o)}")
-        if "report" in o and not (isinstance(o["report"], Mapping) and "effects" in o["report"]):
+        if "report" in o and not (isinstance(o["report"], Mapping) and "effects" in o["report"]
+                                  and (o["report"]["effects"] or all(k in o["report"] for k in _OF_NOTHING_NAMED))):
             raise ValueError(f"outcomes[{i}]['report'] must be a diagnosis report (Diagnosis.to_dict) with its "
-                             f"'effects', got {_validate.shown(o['report'])}")
+                             f"'effects' (where it names none, its {', '.join(map(repr, _OF_NOTHING_NAMED))} too), "
+                             f"got {_validate.shown(o['report'])}")
 
 
 def plot_fleet(summary):

@@ -103,6 +103,7 @@ from .machine import Machine
 from .model import Model
 from .servo import AxisServo
 from .simulation import measured_reference, simulate_batch
+from .traces import Trace
 
 __all__ = ["DRIVES", "FORCE_CONSTANT", "MASS", "SIGNIFICANT", "STATE", "WEAK_KP_VFF", "autocorrelation_time", "delta_bic",
            "identification_warnings", "identify_machine", "servo_period_for"]
@@ -125,6 +126,7 @@ STATE = ("state", 1, 0)
 DRIVES = tuple(("difference", n, k) for n in (1, 2) for k in (0, 1))
 
 _FD_STEP = 1e-3
+_FEWEST_SAMPLES = 16  # fewer samples than this leave the noise floor (from second differences) unknown; 3 gave kp 311
 _KP_MIN = 5.0  # lowest identified position gain [1/s]: an NC's is 10-100 (1-6 m/min/mm)
 _VALLEY_VFF = 0.9  # the feedforward the second search of the (kp, vff) valley starts from [-]
 _AT_BOUND = 0.01  # a fitted log-parameter this close to its bound ran to it
@@ -270,9 +272,15 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
         it the ``damping`` where that does too). A trace
         whose reference never moves leaves them at their starting values.
     """
+    if not isinstance(trace, Trace):
+        raise TypeError(f"trace must be a Trace (contoursim.read_trace reads one from its CSV file), got "
+                        f"{type(trace).__name__}")
+    if len(trace.t) < _FEWEST_SAMPLES:
+        raise ValueError(f"identifying the servo loops needs at least {_FEWEST_SAMPLES} samples, the trace has "
+                         f"{len(trace.t)}: log a longer run, or give the nominal model (--model)")
     progress = _validate.callback("progress", progress)
     play = {e.axis: e.options["feedback"] or "motor" for e in effects if e.name == "backlash"}
-    period = servo_period_for(trace.dt) if servo_period is None else float(servo_period)
+    period = servo_period_for(trace.dt) if servo_period is None else _validate.positive("servo_period", servo_period)
     if play and servo_period is None:
         period /= np.ceil(period / _PLAY_SERVO_PERIOD - 1e-9)
     reference = measured_reference(trace, period)

@@ -104,10 +104,13 @@ class Model:
         linear = tuple(servo_axes) if chain is None else tuple(a for a in chain.axes if chain.axis_kind(a) == "linear")
         for e in effects:
             allowed = linear if e.stage == "geometry" else servo_axes
-            missing = [a for a in e.axis if a not in allowed]
+            direction = e.options.get("error_direction", "")  # a straightness's: an axis too
+            missing = [a for a in e.axis + direction if a not in allowed]
             if missing:
                 what = "linear axes" if e.stage == "geometry" else "servo axes"
-                raise ValueError(f"{e.label}: the machine has no axis {missing[0]!r} among its {what} ({', '.join(allowed)})")
+                which = f"error_direction {direction!r}: " if missing[0] not in e.axis else ""
+                raise ValueError(f"{e.label}: {which}the machine has no axis {missing[0]!r} among its {what} "
+                                 f"({', '.join(allowed)})")
             if _delay_problem(e, self.machine):
                 raise ValueError(_delay_problem(e, self.machine))
         for e in effects:

@@ -350,7 +350,14 @@ def refused_early(out, names):
         As :func:`output_dir`.
     FileExistsError
         As :meth:`OutputDir.file`.
+    ValueError
+        A name that is no plain file name (as :meth:`OutputDir.file`), whether `out` exists or not.
     """
+    names = list(names)
+    for name in names:
+        if not isinstance(name, str) or not _plain(name):
+            raise ValueError(f"cannot write {name!r} into {out}: it is no plain file name (a folder or a line break "
+                             "in it); rename the file it is named after")
     if os.path.lexists(out):
         folder = output_dir(out)
         for name in names:

@@ -70,7 +70,11 @@ FOLLOWING_GAIN = (0.2, 5.0)
 """Range of the slope of each measured column regressed on its reference [mm/mm] the reader accepts: about 1 for
 an axis that follows its command (less where it lags a fast motion), 0 for swapped columns of a circle, 1e-3 or
 1e3 for a column in m or µm read as mm, -1 for a reversed sign. Axes whose reference moves less than 1 µm RMS
-are not checked."""
+are not checked by it, but by :data:`STANDSTILL_MOTION`."""
+STANDSTILL_MOTION = 0.1
+"""Most an axis whose reference stands still (moves less than 1 µm RMS) may move [mm RMS]: hunting, a disturbance's
+response or a drift move µm to tens of µm; a measured column that moves millimetres is not that axis's, or its
+reference is not logged."""
 FOLLOWING_SPAN = 0.5
 """A trace shorter than this [s] whose measured column hardly moves may have ended before the axis followed its
 command (a lag of 1/Kp is 10-100 ms): its error says so beside the columns and units."""
@@ -392,7 +396,11 @@ def read_trace(file):
                    "'# units: t [ms]' before the header ('t [s]' if seconds are right)")
     for i, axis in enumerate(axes):
         gain = _following_gain(data[:, 1 + 2 * i], data[:, 2 + 2 * i])
-        if not FOLLOWING_GAIN[0] <= gain <= FOLLOWING_GAIN[1]:
+        moved = float(np.std(data[:, 2 + 2 * i]))
+        if gain is None and moved > STANDSTILL_MOTION:
+            raise fail(f"column {axis!r}: the measured {axis} moves {moved:.3g} mm RMS while {axis}_ref stands still "
+                       f"(a servo axis at standstill moves µm): columns swapped, units wrong or {axis}_ref not logged?")
+        if gain is not None and not FOLLOWING_GAIN[0] <= gain <= FOLLOWING_GAIN[1]:
             gain = gain if abs(gain) >= 1e-3 else 0.0  # not -3.8e-18 for a swapped circle
             duration = data[-1, 0] - data[0, 0]
             why = ("columns swapped or units wrong?" if abs(gain) >= FOLLOWING_GAIN[0] or duration >= FOLLOWING_SPAN else
@@ -408,11 +416,12 @@ def read_trace(file):
 
 
 def _following_gain(reference, actual):
-    """The slope of `actual` regressed on `reference` [mm/mm]: about 1 for an axis that follows (1 if it does not move)."""
+    """The slope of `actual` regressed on `reference` [mm/mm]: about 1 for an axis that follows (None if its reference
+    stands still)."""
     motion = reference - reference.mean()
     spread = float(motion @ motion)
     if spread <= (1e-3) ** 2 * reference.size:  # moves less than 1 µm RMS: nothing to tell
-        return 1.0
+        return None
     return float(motion @ (actual - actual.mean())) / spread
 
 

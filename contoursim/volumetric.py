@@ -24,7 +24,7 @@ import numpy as np
 from . import _memory, _validate
 from .exceptions import ConfigError
 from .output import output_dir
-from .machine import load_machine
+from .machine import Machine, load_machine
 from .multibody import MAX_TRAVEL, MachineChain
 from .plotting import magnification_for
 
@@ -173,9 +173,9 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
 
     Parameters
     ----------
-    machine : str, Path or MachineChain
+    machine : str, Path, Machine or MachineChain
         A machine preset name or machine file with a geometric half
-        (``[[body]]``), or the chain itself.
+        (``[[body]]``), such a machine, or its chain itself.
     out_dir : str, Path or contoursim.output.OutputDir, optional
         Output folder for the PNG plots (see :func:`contoursim.output.output_dir`:
         created if missing; a file there that contoursim did not write is
@@ -212,14 +212,15 @@ def volumetric_report(machine, out_dir=None, grid=11, sweep=None, ranges=None, f
     if isinstance(machine, MachineChain):
         chain = machine
     else:
-        chain = load_machine(machine).chain
+        where = machine.name if isinstance(machine, Machine) else str(machine)
+        chain = (machine if isinstance(machine, Machine) else load_machine(machine)).chain
         if chain is None:
-            raise ConfigError("the machine has no geometric half ([[body]] tables): nothing to map", str(machine))
+            raise ConfigError("the machine has no geometric half ([[body]] tables): nothing to map", where)
         travel = {b.axis: b.travel for b in chain.bodies if b.axis is not None}
         bare = [a for a in _swept(chain, sweep) if travel[a] is None and a not in (ranges or {})]
         if bare:  # the file's, not an argument's
             raise ConfigError(f"axis {bare[0]!r} has no travel: give its body travel_mm (or travel_deg) to map it",
-                              str(machine))
+                              where)
     q, values = volumetric_grid(chain, sweep, grid, ranges, fixed)
     sweep = _swept(chain, sweep)
     rotary = dict(zip(chain.axes, chain.rotary_axes))

@@ -128,6 +128,10 @@ def test_a_model_refuses_repeated_effects_and_missing_axes():
         Model(MACHINE, (Effect("backlash", "z", lost_motion_um=1.0),))
     with pytest.raises(ValueError, match="squareness.xz: the machine has no axis 'z' among its linear axes"):
         Model(MACHINE, (Effect("squareness", "xz", angle_urad=10.0),))
+    # a bow of X in the z direction on an x, y machine: taken, and it changed nothing (an outside probe)
+    with pytest.raises(ValueError, match=r"straightness.x: error_direction 'z': the machine has no axis 'z' among its "
+                                         r"linear axes \(x, y\)"):
+        Model(MACHINE, (Effect("straightness", "x", peak_um=5.0, span_mm=100.0, start_mm=0.0, error_direction="z"),))
 
 
 def test_stages_realise_the_effects():

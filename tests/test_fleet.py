@@ -163,6 +163,8 @@ def test_a_fleet_summary_of_what_diagnose_fleet_does_not_return_is_refused_namin
         ([{"error": "x"}], ValueError, r"outcomes\[0\] must hold 'trace' and either .*, got the keys \['error'\]"),
         ([{"trace": "b.csv", "report": {}}], ValueError, r"outcomes\[0\]\['report'\] must be a diagnosis report "
                                                          r"\(Diagnosis.to_dict\) with its 'effects'"),
+        ([{"trace": "b.csv", "report": {"effects": []}}], ValueError,
+         r"with its 'effects' \(where it names none, its 'noise_um', 'steps', 'unexplained' too\)"),
     ):
         with pytest.raises(error, match=words):
             fleet_summary(outcomes)
@@ -286,3 +288,56 @@ def test_a_fleets_tasks_carry_the_error_tables_so_that_a_worker_seeing_none_of_t
                                          rf"{re.escape(str(tmp_path / 'x.csv'))}, outside its folder: a cluster's "
                                          r"workers get the machine file's folder only"):
         diagnose_fleet([tmp_path / "gone" / "a.csv"], tmp_path / "moved" / "mine.toml", "local:1")
+
+
+def test_a_fleet_counts_as_explained_by_the_nominal_model_only_what_its_report_says_is_within_noise():
+    """Two traces with 1444 µm RMS of drift left and nothing named were printed as 'explained by the nominal model: 2'
+    (an outside probe). The summary now follows the report's own verdict (diagnosis.within_noise)."""
+    from contoursim.diagnosis import NOISE_FLOOR
+
+    def outcome(name, rms_um, unexplained=()):
+        return {"trace": name, "report": {"effects": [], "unexplained": list(unexplained), "noise_um": {"x": 0.3, "y": 0.4},
+                                          "steps": [{"label": "nominal model", "rms_um": rms_um, "max_um": rms_um}]}}
+
+    summary = fleet_summary([outcome("clean.csv", 0.5), outcome("drift.csv", 1444.0, [{"axis": "x", "signature":
+                                                                                        "drift", "rms_um": 1444.0}]),
+                             outcome("above.csv", 1.01 * NOISE_FLOOR * 0.5), outcome("edge.csv", NOISE_FLOOR * 0.5)])
+    assert summary["nominal"] == ["clean.csv", "edge.csv"]
+    assert summary["unexplained"] == ["drift.csv", "above.csv"]
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes are POSIX")
+def test_a_named_pipe_among_a_folders_traces_is_a_failed_trace_not_a_fleet_that_waits_for_ever(tmp_path):
+    """Listing a folder's traces opened each .csv to tell a G-code run's block table from a trace; a named pipe with no
+    writer blocked that open for ever (an outside probe)."""
+    import os
+
+    os.mkfifo(tmp_path / "b.csv")
+    assert trace_files([tmp_path]) == [tmp_path / "b.csv"]
+    (outcome,) = diagnose_fleet([tmp_path / "b.csv"], "demo_mill")
+    assert outcome["error"] == "b.csv: cannot read the file: it is a named pipe (FIFO), not a regular file"
+
+
+def test_a_trace_whose_report_could_not_be_written_is_refused_before_the_fleet_runs(tmp_path, capsys, monkeypatch):
+    """A trace named with a line break: every trace was diagnosed, then the run ended in 'name must be a plain file
+    name', no report written and an empty output folder left (an outside probe)."""
+    import contoursim.fleet
+
+    (tmp_path / "f").mkdir()
+    for name in ("a\nb.csv", "c.csv"):
+        (tmp_path / "f" / name).write_text("t,x_ref,x\n0,0,0\n")
+    monkeypatch.setattr(contoursim.fleet, "diagnose_fleet", lambda *a, **k: pytest.fail("diagnosed before the refusal"))
+    assert main(["diagnose", str(tmp_path / "f"), "--model", "demo_mill", "--out", str(tmp_path / "new")]) == 2
+    assert "cannot write 'a\\nb.json' into" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_task_takes_the_machine_file_as_a_path_and_refuses_what_is_no_machine_naming_model(tmp_path):
+    from contoursim.fleet import diagnose_text
+    from contoursim.machine import preset_file
+
+    text = "t,x_ref,x\n" + "".join(f"{k * 1e-3:.3f},{k * 1e-3:.6f},{k * 1e-3 - 1e-4:.6f}\n" for k in range(3))
+    via_path = diagnose_text("a.csv", text, preset_file("demo_mill"))
+    assert via_path == diagnose_text("a.csv", text, str(preset_file("demo_mill")))  # was AttributeError: 'PosixPath'
+    with pytest.raises(TypeError, match=r"^model must be a preset's name, a machine file or its files .*, got int$"):
+        diagnose_text("a.csv", text, 3)

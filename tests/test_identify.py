@@ -251,6 +251,19 @@ def test_loops_identified_around_an_independent_backlash_follow_it_on_two_masses
     assert left(machine, (play,)) < without / 5, without
 
 
+def test_a_trace_too_short_or_a_period_that_is_no_number_is_refused_by_name():
+    """Five samples gave loops of kp 311 1/s (diagnose refused them, identify_machine did not); servo_period "abc" was
+    float()'s "could not convert string to float"."""
+    trace = own_trace()
+    short = Trace(trace.t[:5], trace.reference[:5], trace.actual[:5], trace.axes)
+    with pytest.raises(ValueError, match="identifying the servo loops needs at least 16 samples, the trace has 5"):
+        identify_machine(short)
+    with pytest.raises(TypeError, match="servo_period"):
+        identify_machine(trace, servo_period="abc")
+    with pytest.raises(TypeError, match="trace must be a Trace"):
+        identify_machine(trace.actual)
+
+
 @pytest.mark.parametrize("start", [0.0, 86400.0, 1e7])
 def test_a_trace_logged_every_ms_is_simulated_at_1_ms_whatever_its_clock_reads(start):
     """A logger whose clock started a day earlier: a step of its times read 1.0000000038 ms, and the identified

@@ -399,10 +399,21 @@ def test_a_short_trace_whose_axis_has_not_yet_followed_is_said_maybe_too_short(t
         read_trace(tmp_path / "s.csv")
 
 
-def test_a_reference_that_does_not_move_is_not_judged(tmp_path):
-    rows = "\n".join(f"{k * 1e-3:.3f},5,{5 + 1e-3 * np.sin(k):.6f}" for k in range(100))  # hunting at standstill
+def test_a_reference_that_does_not_move_is_not_judged_by_its_slope(tmp_path):
+    rows = "\n".join(f"{k * 1e-3:.3f},5,{5 + 20e-3 * np.sin(k):.6f}" for k in range(100))  # hunting ±20 µm at standstill
     (tmp_path / "h.csv").write_text("t,x_ref,x\n" + rows)
     assert read_trace(tmp_path / "h.csv").axes == ("x",)
+
+
+def test_a_measured_column_that_moves_millimetres_against_a_reference_standing_still_is_refused(tmp_path):
+    """x moving 5 mm while x_ref stands at 0 (an outside probe): read, and diagnosed as 1444 µm RMS of 'drift' that a
+    fleet counted as explained by the nominal model."""
+    t = np.arange(2000) * 2e-4
+    rows = "\n".join(f"{a:.4f},0,{b:.6f},0,0" for a, b in zip(t, np.linspace(0.0, 5.0, t.size)))
+    (tmp_path / "still.csv").write_text("t,x_ref,x,y_ref,y\n" + rows)
+    with pytest.raises(TraceFormatError, match=r"line 1: column 'x': the measured x moves 1\.44 mm RMS while x_ref "
+                                               r"stands still .*x_ref not logged\?"):
+        read_trace(tmp_path / "still.csv")
 
 
 # -- property-based: any text is read or refused in one line naming the file; what is read is what was written ------

@@ -63,6 +63,11 @@ def test_a_component_that_is_zero_to_rounding_is_printed_as_zero(tmp_path):
     text = volumetric_report("vertical_mill_3axis", tmp_path, grid=3)
     row = next(line for line in text.splitlines() if line.startswith("tool axis z [µrad]"))
     assert row.split()[4:7] == ["+0.000"] * 3, row
+    # the machine a user holds maps as its file does (it was refused: "str or Path, got Machine")
+    assert volumetric_report(load_preset("vertical_mill_3axis"), grid=3) == volumetric_report("vertical_mill_3axis",
+                                                                                              grid=3)
+    with pytest.raises(ConfigError, match="the machine has no geometric half"):
+        volumetric_report(load_preset("demo_mill"))
 
 
 def test_report_never_replaces_a_file_it_did_not_write(tmp_path):
