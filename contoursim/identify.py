@@ -141,6 +141,20 @@ _PLAY_SCREW_DAMPING = 0.2  # ... damped well beyond a screw's 0.02-0.05: the pla
 _PLAY_SERVO_PERIOD = 2.5e-4  # longest servo period [s] the loops are identified at with a backlash held
 
 
+def _parameters(machine, axes, like):
+    """``(structure, x)`` of :func:`_machine` nearest `machine`'s loops of `axes`, with a PI loop and a damping on
+    every axis (``ti·ω_v`` 4 and a mechanical pole of 0.01 /s where an axis has none: held in place, an effect may
+    need what the loops without it did not, a friction an integrator); kp, vff and the drive structure those of axis
+    ``like[0]`` (the first that moves)."""
+    servos = [machine.axes[a] for a in axes]
+    first = servos[like[0]]
+    w = np.array([s.kv * s.force_constant / s.mass for s in servos])
+    x = [np.log(first.kp), first.vff, *np.log(w)]
+    x += [np.log(4.0 if s.ti is None else s.ti * wi) for s, wi in zip(servos, w)]
+    x += [np.log(max(s.damping / s.mass, _POLE_RANGE[0])) for s in servos]
+    return (first.velocity_feedback, first.velocity_taps, first.computation_delay), np.array(x)
+
+
 def servo_period_for(dt):
     """The servo period to simulate a trace sampled every `dt`: `dt` up to 1 ms, else `dt` divided to 1 ms or less.
 
@@ -242,7 +256,7 @@ one_blas_thread = threadpool_limits.wrap(limits=1, user_api="blas")
 
 
 @one_blas_thread
-def identify_machine(trace, servo_period=None, progress=None, effects=()):
+def identify_machine(trace, servo_period=None, progress=None, effects=(), start=None):
     """Identify the nominal servo loop of each axis of a trace (see the module docstring).
 
     Parameters
@@ -261,6 +275,15 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
         axis is identified as two masses, read where the backlash is, and
         the loops at 0.25 ms or less unless `servo_period` is given (see
         the module docstring).
+    start : Machine, optional
+        Loops to fit from, with the trace's axes: one fit of every
+        parameter from them, a PI velocity loop and a damping on every
+        axis, on their drive structure and on each of :data:`STATE` and
+        :data:`DRIVES`, the closest kept, in place of the staged search
+        over starts and parameters kept (a diagnosis's held search ranks
+        effects held in place so, from the loops identified without
+        them). Its first moving axis's ``kp``, ``vff`` and structure are
+        taken for all.
 
     Returns
     -------
@@ -279,6 +302,9 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
         raise ValueError(f"identifying the servo loops needs at least {_FEWEST_SAMPLES} samples, the trace has "
                          f"{len(trace.t)}: log a longer run, or give the nominal model (--model)")
     progress = _validate.callback("progress", progress)
+    if start is not None and not (isinstance(start, Machine) and set(trace.axes) <= set(start.axes)):
+        raise TypeError(f"start must be a Machine with the trace's axes {', '.join(trace.axes)}, got "
+                        + (f"one with {', '.join(start.axes)}" if isinstance(start, Machine) else type(start).__name__))
     play = {e.axis: e.options["feedback"] or "motor" for e in effects if e.name == "backlash"}
     period = servo_period_for(trace.dt) if servo_period is None else _validate.positive("servo_period", servo_period)
     if play and servo_period is None:
@@ -363,6 +389,15 @@ def identify_machine(trace, servo_period=None, progress=None, effects=()):
     def rss(x, structure):
         r = fun(x, structure)
         return float(r @ r) if np.all(np.isfinite(r)) else np.inf, autocorrelation_time(r.reshape(len(trace.t), d))
+
+    if start is not None:  # one fit from `start` on its structure and on each other, the closest kept
+        own, x = _parameters(start, axes, like)
+        x = np.clip(x, lower[: x.size] + 1e-6, upper[: x.size] - 1e-6)
+        free = np.ones(x.size, bool)
+        free[1] = x[1] > 0.0
+        fits = [(structure, fitted(x, free, structure)) for structure in dict.fromkeys((own, STATE) + DRIVES)]
+        structure, x = min(fits, key=lambda fit: rss(fit[1], fit[0])[0])
+        return _machine(axes, period, x, structure, like, play)
 
     # kp and vff set the steady lag together, (1 − vff)/kp: the feedforward is kept only when the
     # transients show it (ΔBIC over the fit without it), else a valley of (kp, vff) pairs fits alike
