@@ -25,7 +25,8 @@ import numpy as np
 
 from . import _validate
 
-__all__ = ["SUMMARY_FORM", "SUMMARY_OPTIONAL", "diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet", "trace_files"]
+__all__ = ["SUMMARY_FORM", "SUMMARY_OPTIONAL", "diagnose_fleet", "diagnose_text", "fleet_summary", "plot_fleet",
+           "trace_files"]
 
 #: The form of :func:`fleet_summary` (:func:`contoursim.output.has_form`): ``--summary`` replaces only a file of it.
 SUMMARY_FORM = {"traces": None, "diagnosed": None, "failed": ("trace", "error"), "nominal": None,
@@ -286,7 +287,8 @@ def fleet_summary(outcomes):
         entry["parameters"] = {k: _distribution(v) for k, v in entry["parameters"].items()}
     return {"traces": len(outcomes), "diagnosed": len(reports),
             "failed": [{"trace": o["trace"], "error": o["error"]} for o in outcomes if "error" in o],
-            "nominal": nominal, "unexplained": unexplained, "effects": dict(sorted(effects.items(), key=lambda item: -item[1]["count"]))}
+            "nominal": nominal, "unexplained": unexplained,
+            "effects": dict(sorted(effects.items(), key=lambda item: -item[1]["count"]))}
 
 
 #: What a report that names no effect must hold for the summary to tell the nominal model's from the unexplained.

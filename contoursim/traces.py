@@ -399,7 +399,8 @@ def read_trace(file):
         moved = float(np.std(data[:, 2 + 2 * i]))
         if gain is None and moved > STANDSTILL_MOTION:
             raise fail(f"column {axis!r}: the measured {axis} moves {moved:.3g} mm RMS while {axis}_ref stands still "
-                       f"(a servo axis at standstill moves µm): columns swapped, units wrong or {axis}_ref not logged?")
+                       f"(a servo axis at standstill moves µm): columns swapped, units wrong or {axis}_ref not "
+                       "logged?")
         if gain is not None and not FOLLOWING_GAIN[0] <= gain <= FOLLOWING_GAIN[1]:
             gain = gain if abs(gain) >= 1e-3 else 0.0  # not -3.8e-18 for a swapped circle
             duration = data[-1, 0] - data[0, 0]

@@ -296,8 +296,9 @@ def test_a_fleet_counts_as_explained_by_the_nominal_model_only_what_its_report_s
     from contoursim.diagnosis import NOISE_FLOOR
 
     def outcome(name, rms_um, unexplained=()):
-        return {"trace": name, "report": {"effects": [], "unexplained": list(unexplained), "noise_um": {"x": 0.3, "y": 0.4},
-                                          "steps": [{"label": "nominal model", "rms_um": rms_um, "max_um": rms_um}]}}
+        steps = [{"label": "nominal model", "rms_um": rms_um, "max_um": rms_um}]
+        return {"trace": name, "report": {"effects": [], "unexplained": list(unexplained), "steps": steps,
+                                          "noise_um": {"x": 0.3, "y": 0.4}}}
 
     summary = fleet_summary([outcome("clean.csv", 0.5), outcome("drift.csv", 1444.0, [{"axis": "x", "signature":
                                                                                         "drift", "rms_um": 1444.0}]),

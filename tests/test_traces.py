@@ -400,7 +400,7 @@ def test_a_short_trace_whose_axis_has_not_yet_followed_is_said_maybe_too_short(t
 
 
 def test_a_reference_that_does_not_move_is_not_judged_by_its_slope(tmp_path):
-    rows = "\n".join(f"{k * 1e-3:.3f},5,{5 + 20e-3 * np.sin(k):.6f}" for k in range(100))  # hunting ±20 µm at standstill
+    rows = "\n".join(f"{k * 1e-3:.3f},5,{5 + 20e-3 * np.sin(k):.6f}" for k in range(100))  # hunting ±20 µm, still
     (tmp_path / "h.csv").write_text("t,x_ref,x\n" + rows)
     assert read_trace(tmp_path / "h.csv").axes == ("x",)
 
