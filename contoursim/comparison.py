@@ -392,10 +392,10 @@ def compare(model, trajectory, names=STRATEGY_NAMES, design=None, settings=None,
         for name, value in worst.items():
             # below the table's resolution (a path along one axis: none's error is exactly 0) nothing is worse
             if value > WORSE * max(worst["none"], _RESOLUTION):
-                why = (": past a corner that turns back, its correction can hold the tool on the line the path left, "
-                       "where the position loops pull it back along the path while the tracking error grows, until "
-                       "its estimate's search (twice the tracking error about the commanded point) reaches the "
-                       "commanded part of the path and the tool crosses to it" if "ccc" in name else "")
+                why = ("; where the path turns back at a corner, a coupling's correction can hold the tool on the "
+                       "line the path left while the position loops pull it back along the path and the tracking "
+                       "error grows, until its estimate's search (twice the tracking error about the commanded point) "
+                       "reaches the commanded part of the path and the tool crosses to it" if "ccc" in name else "")
                 times = f"is {value / worst['none']:.3g} times" if worst["none"] >= _RESOLUTION else "exceeds"
                 warnings.warn(f"strategy {name}: its max contour error, {value:.4g} µm, {times} that without compensation "
                               f"({_nm(worst['none'])} µm){why}", ContoursimWarning, stacklevel=2)

@@ -870,6 +870,9 @@ def helix(center, radius, pitch, turns, direction="ccw", normal=(0, 0, 1), start
     c, n = _vector("center", center), _unit("normal", normal)
     radius = _scalar(_validate.positive, "radius", radius)
     turns = _scalar(_validate.positive, "turns", turns)
+    if 2 * np.pi * turns > MAX_COORDINATE:  # its sweep [rad] is held within that (said of turns, not of a sweep)
+        raise PathError(f"turns = {turns:.10g} is outside [{1.0 / MAX_COORDINATE:g}, "
+                        f"{MAX_COORDINATE / (2 * np.pi):.6g}], not a path a machine follows")
     pitch = _number("pitch", pitch)
     start_angle = _number("start_angle", start_angle)
     e1, e2 = _plane_basis(n)

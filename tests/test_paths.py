@@ -76,6 +76,9 @@ def test_helix_closed_form():
                                atol=1e-12)
     np.testing.assert_allclose(kappa, 20.0 / (20.0**2 + h**2), rtol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(tan, axis=1), 1.0, rtol=1e-14)
+    # turns beyond what its sweep may be [rad] were said as "sweep must lie within ±1e+06, got 6.28319e+06"
+    with pytest.raises(PathError, match=r"^turns = 1000000 is outside \[1e-06, 159155\], not a path a machine follows$"):
+        paths.helix((0, 0, 0), 1.0, 0.001, 1e6)
 
 
 def test_iso230_4_circle_geometry():
