@@ -15,22 +15,26 @@ contour: ``%`` lines (a ``%`` after the first block ends the program, as on
 Fanuc and LinuxCNC: nothing after it runs), comments ``( ... )`` (a ``;`` inside one is part of the
 comment) and ``; ...`` (to the end of the line), sequence numbers
 ``N``, program numbers ``O``, spindle speed ``S``, tool ``T`` with its offsets
-``D``/``H``, M codes other than the program end (spindle ``M3 M4 M5``, coolant
-``M7 M8 M9``, tool change ``M6``, stops ``M0 M1`` ...), ``G43`` (tool length
+``D``/``H``, M codes other than the program end and the stops (spindle ``M3 M4 M5``, coolant
+``M7 M8 M9`` ...; the optional stop ``M1`` is run through, as with its switch off), ``G43`` (tool length
 compensation: the path is the tool tip's), work offsets ``G54``-``G59`` (the
 path's origin is the work offset), path modes ``G61 G64`` (with LinuxCNC's
 ``G64 P`` tolerance; the planner's own corner rule applies). The dwell ``G4``
-stops the motion at the end of the move before it, which waits there in
-position as at the end of a rapid (:attr:`Program.stops`); its ``P``/``X``
-time (milliseconds or seconds, by dialect; ``X`` only without ``P``) is
-not a move and is not simulated: once in position the axes hold it. A move
-in its block follows the dwell. Home returns and machine-coordinate moves (``G28 G30 G53``, e.g. a
-post's ``G28 G91 Z0`` before a tool change) take the axes they name (``G28``
-and ``G30`` without axis words: all) to a machine position contoursim does
-not know in work coordinates: the tool is taken to stay where it was (before
-the first move, the program's start), and the G0 moves that follow position
-it from there (rapids, not scored); a feed move while an axis is still at
-such a position is refused (also before the first feed move: a program's
+and the tool change ``M6`` stop the motion at the end of the move before
+them, which waits there in position as at the end of a rapid
+(:attr:`Program.stops`); a move in their block follows. The program stop
+``M0`` and the pallet change ``M60`` stop it at the end of the move of their
+block (of the move before, in a block without one), as controllers run them.
+A dwell's ``P``/``X`` time (milliseconds or seconds, by dialect; ``X`` only
+without ``P``), the wait for the operator and the tool change are not moves
+and are not simulated: once in position the axes hold it. Home returns and
+machine-coordinate moves (``G28 G30 G53``, e.g. a post's ``G28 G91 Z0``
+before a tool change) take the axes they name (``G28`` and ``G30`` without
+axis words: all) to a machine position contoursim does not know in work
+coordinates: the tool is taken to stay where it was (before the first move,
+the program's start), and the G0 moves that follow position it from there
+(rapids, not scored); a feed move while an axis is still at such a position
+is refused (also before the first feed move: a program's
 ``G28 G91 Z0`` before it cuts would cut at the home height). A block that starts with the
 block-delete mark ``/`` (Fanuc's ``/1``–``/9`` too) runs, as with the
 controller's block-delete switch off: the program as written, all of it
@@ -112,6 +116,8 @@ _REFUSED_G = {20: "inch programs are not supported (G20): convert to mm and use 
               **{g: f"canned cycles (G{g}: a cycle or its return level) are not supported: write the cycle's moves "
                     "out as G0/G1 blocks" for g in (73, 74, 76, 81, 82, 83, 84, 85, 86, 87, 88, 89, 98, 99)}}
 _O_WORD = r"(end)?(sub|if|while|repeat)\b|call\b|else(if)?\b|do\b|return\b|break\b|continue\b"  # after o100
+_STOPS_BEFORE = (6,)  # tool change: the motion stops before the move of its block, as at a dwell
+_STOPS_AFTER = (0, 60)  # program stop, pallet change and stop: after the move of its block
 _IGNORED_LETTERS = "ONSTDH"  # program and sequence numbers, spindle, tool and its offsets
 #: File name endings read as G-code (lower case).
 SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".mpf", ".iso", ".eia")
@@ -147,8 +153,9 @@ class Program:
         The words ignored (``"S12000"``, ``"M3"``, ``"G54"``, ``"G64 P0.01"``
         ...), each once, in the order they first appear.
     stops : tuple of int
-        The primitives after which the program dwells (G4): the motion stops
-        at their end (:class:`contoursim.feed.FeedSettings`).
+        The primitives after which the program dwells (G4), stops (M0, M60)
+        or changes the tool (M6): the motion stops at their end
+        (:class:`contoursim.feed.FeedSettings`).
     """
 
     path: Path
@@ -309,7 +316,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
         for m in mcodes:
             if m in (98, 99):
                 fail(f"subprogram calls (M{m:g}) are not supported: write the moves out in one program")
-            if m not in (2, 30):
+            if m not in (2, 30, *_STOPS_BEFORE, *_STOPS_AFTER):
                 ignored.setdefault(f"M{m:g}", None)
         ended = any(m in (2, 30) for m in mcodes)  # a move in its block runs first, as on Fanuc and LinuxCNC
         for group in ((0, 1, 2, 3), tuple(_PLANES), (90, 91)):  # a modal group twice: Fanuc takes the last, others refuse
@@ -349,14 +356,16 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             if values.get(time, 0.0) < 0:
                 fail(f"a dwell's time (G4 P or X) must be zero or positive, got {values[time]:g}")
             values.pop(time, None)
-            if cutting:
-                stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
-        elif nonmodal is not None:
+        halt_after = any(m in _STOPS_AFTER for m in mcodes)  # after the move of its block, if it has one
+        moves = any(a in values for a in "XYZIJKR")
+        if cutting and (nonmodal == 4 or any(m in _STOPS_BEFORE for m in mcodes) or halt_after and not moves):
+            stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
+        if nonmodal not in (None, 4):
             moved = [a for a in "XYZ" if a in values] or (list("XYZ") if nonmodal in (28, 30) else [])
             away.update(dict.fromkeys(moved, number))
             continue
         if "P" in values and 64 not in gcodes:
-            if motion in (2, 3) and any(a in values for a in "XYZIJKR"):
+            if motion in (2, 3) and moves:
                 fail(f"P{values['P']:g} on an arc (LinuxCNC: its number of turns) is not supported: write each turn "
                      "as an arc of its own")
             fail("P belongs to a dwell (G4)")
@@ -400,6 +409,8 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             lines += [number] * added
             texts += [raw.strip()] * added
             cutting = cutting or motion > 0
+        if halt_after and cutting:  # at the end of its move (of the last, if of no length)
+            stops[len(prims) - 1] = None
         here = target
 
     if not cutting:
@@ -421,12 +432,13 @@ def _ignored_text(ignored):
     """The words a program's reading ignored, grouped by why the path is as if they were not there."""
     why = {"mode": "path modes: the planner's corner_tolerance_deg decides where the motion stops",
            "frame": "tool length and work offsets: the path is the tool tip's, from the work offset",
+           "switch": "optional stop: run through, as with its switch off",
            "other": "no contour motion"}
     groups = {kind: [] for kind in why}
     for word in ignored:
         head = word.split()[0]
         groups["mode" if head in ("G61", "G64") else "frame" if head in ("G43", *(f"G{g}" for g in range(54, 60)))
-               else "other"].append(word)
+               else "switch" if head == "M1" else "other"].append(word)
     return "; ".join(f"{' '.join(words)} ({why[kind]})" for kind, words in groups.items() if words)
 
 

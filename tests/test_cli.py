@@ -360,7 +360,7 @@ def test_real_gcode_runs_and_says_in_one_line_what_it_ignored(tmp_path, capsys):
     captured = capsys.readouterr()
     assert captured.err.splitlines() == [f"contoursim simulate: warning: {tmp_path / 'part.nc'}: ignored: G54 (tool "
                                          "length and work offsets: the path is the tool tip's, from the work offset); "
-                                         "O1234 T1 M6 S12000 M3 M8 (no contour motion)"]
+                                         "O1234 T1 S12000 M3 M8 (no contour motion)"]
     assert "part " in captured.out
 
 

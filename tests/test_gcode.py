@@ -219,12 +219,12 @@ N150 M30
 
 
 def test_a_real_program_reads_and_lists_what_it_ignored():
-    words = "O1234 G28 T1 M6 G54 S12000 M3 H1 M8 G43 M9 M5".split()
+    words = "O1234 G28 T1 G54 S12000 M3 H1 M8 G43 M9 M5".split()  # M6 is a stop, before the first cut here
     with pytest.warns(ContoursimWarning) as record:
         program = read_gcode(REAL)
     # grouped by why the path is as if they were not there: G54 and G43 change where it is, as the path says
     assert [str(w.message) for w in record] == ["<gcode>: ignored: G54 G43 (tool length and work offsets: the path is "
-                                                "the tool tip's, from the work offset); O1234 G28 T1 M6 S12000 M3 H1 M8 "
+                                                "the tool tip's, from the work offset); O1234 G28 T1 S12000 M3 H1 M8 "
                                                 "M9 M5 (no contour motion)"]
     assert program.ignored == tuple(words)
     # G91 in the G28 block stays modal: G90 on N30 restores absolute; the dwell's X is a time, not a move
@@ -246,6 +246,36 @@ def test_a_dwell_stops_the_motion_and_waits_in_position(tmp_path):
     assert at.sum() >= 100 and np.abs(trajectory.velocity[at]).max() < 1e-9  # 0.1 s in position at X10
     plain = sample(read.path, FeedSettings(read.feed.feed).plan(read.path, in_position=0.1), 1e-3)
     assert np.abs(plain.velocity[np.abs(plain.position[:, 0] - 10) < 0.01, 0]).min() == pytest.approx(20.0)
+
+
+@pytest.mark.parametrize("block, stops", [
+    ("M0", (0,)),  # a program stop in a block of its own: at the end of the move before it
+    ("M60", (0,)),  # a pallet change and stop
+    ("M6", (0,)),  # a tool change
+    ("G1 X10 Y10 M0", (1,)),  # at the end of the move of its block, not before it
+    ("M6 G1 X10 Y10", (0,)),  # a tool change before the move of its block, as a dwell
+    ("G1 X10 M0", (0,)),  # a move of no length: at the end of the move before
+])
+def test_a_program_stop_or_a_tool_change_stops_the_motion_as_a_dwell_does(tmp_path, block, stops):
+    """M0, M6 and M60 were ignored: the motion ran on through them at full feed, as no controller runs it."""
+    from contoursim.feed import sample
+
+    def run(program):
+        (tmp_path / "part.nc").write_text(f"G0 X0 Y0\nG1 X10 F1200\n{program}G1 X20 Y10\nG1 X30\n")
+        read = read_path_file(tmp_path / "part.nc")
+        return read, sample(read.path, read.feed.plan(read.path), 1e-3)
+
+    read, stopped = run(f"{block}\n")
+    assert read.program.stops == read.feed.stops == stops
+    moves = "".join(f"{line}\n" for line in ("G1 X10", "G1 X10 Y10") if line in block)
+    dwelled = run(f"{moves}G4 P0\n" if block.startswith("G1") else f"G4 P0\n{moves}")[1]  # the same motion
+    np.testing.assert_array_equal(stopped.position, dwelled.position)
+
+
+def test_the_optional_stop_is_run_through_as_with_its_switch_off():
+    with pytest.warns(ContoursimWarning, match=r"ignored: M1 \(optional stop: run through, as with its switch off\)$"):
+        program = read_gcode("G0 X0 Y0\nG1 X10 F1200\nM1\nG1 X20 Y10\n")
+    assert program.stops == ()
 
 
 @pytest.mark.parametrize("block, line, feed, stops", [
