@@ -1064,10 +1064,11 @@ def _spline_slopes(chord, slope, closed):
     """First derivatives dP/ds at the knots of a C2 cubic spline, shape (n, 3).
 
     The tridiagonal system of scipy's ``CubicSpline`` (``bc_type``
-    ``"not-a-knot"`` or ``"periodic"``), with its special cases, solved as it
-    does (``scipy.linalg.solve_banded``; ``scipy.interpolate`` would cost a
+    ``"natural"`` or ``"periodic"``), solved as it does
+    (``scipy.linalg.solve_banded``; ``scipy.interpolate`` would cost a
     quarter of a second more to import). For the interior knots
-    ``dx[i]·s[i-1] + 2(dx[i-1] + dx[i])·s[i] + dx[i-1]·s[i+1] = 3(dx[i]·slope[i-1] + dx[i-1]·slope[i])``.
+    ``dx[i]·s[i-1] + 2(dx[i-1] + dx[i])·s[i] + dx[i-1]·s[i+1] = 3(dx[i]·slope[i-1] + dx[i-1]·slope[i])``;
+    a natural end has no curvature: ``2·s[0] + s[1] = 3·slope[0]``.
 
     Parameters
     ----------
@@ -1076,27 +1077,18 @@ def _spline_slopes(chord, slope, closed):
     slope : ndarray, shape (n - 1, 3)
         Chord slopes ``ΔP / dx`` [-].
     closed : bool
-        Periodic (the last knot repeats the first; n >= 4) or not-a-knot ends.
+        Periodic (the last knot repeats the first; n >= 4) or natural ends.
     """
     n, dx = chord.size, np.diff(chord)
-    if n == 2:  # a straight line
-        return np.vstack([slope, slope])
-    if n == 3 and not closed:  # the parabola through the three points
-        middle = (dx[1] * slope[0] + dx[0] * slope[1]) / (dx[0] + dx[1])
-        return np.vstack([2 * slope[0] - middle, middle, 2 * slope[1] - middle])
     band = np.zeros((3, n))  # upper diagonal, diagonal, lower diagonal (solve_banded's layout)
     band[1, 1:-1] = 2 * (dx[:-1] + dx[1:])
     band[0, 2:] = dx[:-1]
     band[2, :-2] = dx[1:]
     rhs = np.empty((n, 3))
     rhs[1:-1] = 3 * (dx[1:, None] * slope[:-1] + dx[:-1, None] * slope[1:])
-    if not closed:
-        d = chord[2] - chord[0]
-        band[1, 0], band[0, 1] = dx[1], d
-        rhs[0] = ((dx[0] + 2 * d) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / d
-        d = chord[-1] - chord[-3]
-        band[1, -1], band[2, -2] = dx[-2], d
-        rhs[-1] = (dx[-1] ** 2 * slope[-2] + (2 * d + dx[-1]) * dx[-2] * slope[-1]) / d
+    if not closed:  # the end rows scaled by their interval, as the others are
+        band[1, 0], band[0, 1], rhs[0] = 2 * dx[0], dx[0], 3 * dx[0] * slope[0]
+        band[1, -1], band[2, -2], rhs[-1] = 2 * dx[-1], dx[-1], 3 * dx[-1] * slope[-1]
         return solve_banded((1, 1), band, rhs, overwrite_ab=True, overwrite_b=True, check_finite=False)
     # Periodic: unknowns s[0] .. s[n-2] (s[n-1] = s[0]), a cyclic system. With the last unknown s[n-2] taken out,
     # the n - 2 rows left are tridiagonal: solved for the right-hand side (s1) and for the column of s[n-2] (s2),
@@ -1113,6 +1105,13 @@ def _spline_slopes(chord, slope, closed):
 
 def spline(points, closed=False, role="path"):
     """C2 cubic spline through `points`, chord-length parameterised.
+
+    An open spline has natural ends (no curvature at its first and last
+    point). Not-a-knot ends (scipy's default) make the first and last piece
+    the same cubic as their neighbour: where a long piece meets a tight turn
+    that cubic, carried over the long piece, swings far out (a 106-mm hairpin,
+    ``[[0, 0], [50, 0], [52, 2], [50, 4], [0, 4]]``, became a 407-mm loop out
+    to x = -74 mm; with natural ends it stays within x 0 to 52 mm, 110 mm long).
 
     Parameters
     ----------

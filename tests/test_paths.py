@@ -180,7 +180,7 @@ def test_spline_is_scipys_cubic_spline(n, closed):
     if closed:
         points[-1] = points[0]
     chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    reference = CubicSpline(chord, points, bc_type="periodic" if closed else "not-a-knot")
+    reference = CubicSpline(chord, points, bc_type="periodic" if closed else "natural")
     path = paths.spline(points[:-1] if closed else points, closed=closed)
     w = np.linspace(0.0, 1.0, 7)[:, None]
     for i, piece in enumerate(path.primitives):
@@ -375,3 +375,15 @@ def test_building_and_evaluating_paths_compiles_one_signature():
         path.derivatives(np.linspace(0.0, path.length, 50))
         path.primitives[0].evaluate(np.array([0.0, 1.0]))
     assert len(paths._evaluate_local.signatures) == 1
+
+
+def test_an_open_spline_stays_near_its_points_where_a_long_piece_meets_a_tight_turn():
+    """Not-a-knot ends carried the hairpin's cubic over the 50-mm legs: a 407-mm loop out to x = -74 mm."""
+    points = np.array([[0, 0], [50, 0], [52, 2], [50, 4], [0, 4]], float)
+    path = paths.spline(points)
+    position = path.evaluate(np.linspace(0.0, path.length, 20001))[0]
+    assert position[:, 0].min() > -1e-9 and position[:, 0].max() < 52 + 1e-9
+    polygon = np.linalg.norm(np.diff(points, axis=0), axis=1).sum()
+    assert path.length < 1.05 * polygon
+    _, _, curvature = path.derivatives([0.0, path.length])  # natural ends: no curvature at the first and last point
+    np.testing.assert_allclose(curvature, 0.0, atol=1e-12)
