@@ -439,7 +439,24 @@ def _ignored_text(ignored):
         head = word.split()[0]
         groups["mode" if head in ("G61", "G64") else "frame" if head in ("G43", *(f"G{g}" for g in range(54, 60)))
                else "switch" if head == "M1" else "other"].append(word)
-    return "; ".join(f"{' '.join(words)} ({why[kind]})" for kind, words in groups.items() if words)
+    return "; ".join(f"{_listed(words)} ({why[kind]})" for kind, words in groups.items() if words)
+
+
+def _listed(words, most=3):
+    """`words` in one line, a letter that takes a value a block (``S``, ``T`` ...) at its first `most` values and
+    counted: a program setting the spindle speed in every block warned in one line of 131 KB."""
+    counts, kept, shown = {}, {}, []
+    for word in words:
+        counts[word[0]] = counts.get(word[0], 0) + 1
+    for word in words:
+        letter = word[0]
+        if letter not in _IGNORED_LETTERS or counts[letter] <= most:
+            shown.append(word)
+            continue
+        kept[letter] = kept.get(letter, 0) + 1
+        if kept[letter] <= most:
+            shown.append(word + (f" … ({counts[letter]} {letter} words)" if kept[letter] == most else ""))
+    return " ".join(shown)
 
 
 @dataclass(frozen=True)

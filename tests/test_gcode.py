@@ -234,6 +234,16 @@ def test_a_real_program_reads_and_lists_what_it_ignored():
     assert program.stops == (1,)  # the two dwells after the arc
 
 
+def test_a_word_set_in_every_block_is_listed_at_its_first_values_and_counted():
+    """A spindle speed set in each of 5000 blocks: the warning listed every value in one line of 131 KB."""
+    blocks = "".join(f"G1 X{i + 1} S{10000 + i} F600\n" for i in range(5000))
+    with pytest.warns(ContoursimWarning) as record:
+        program = read_gcode(f"G0 X0 Y0 M3\n{blocks}")
+    assert [str(w.message) for w in record] == ["<gcode>: ignored: M3 S10000 S10001 S10002 … (5000 S words) "
+                                                "(no contour motion)"]
+    assert len(program.ignored) == 5001  # all of them, as read
+
+
 def test_a_dwell_stops_the_motion_and_waits_in_position(tmp_path):
     """G4 between two moves in line: the motion stops there (it ran on through at full feed) and waits in position."""
     from contoursim.feed import FeedSettings, sample
