@@ -7,8 +7,11 @@ forward/backward pass over sections of constant velocity limit:
 1. each primitive gets a velocity limit: its block feed, lowered on curved
    primitives to sqrt(a_c / kappa_max) under the centripetal limit a_c (by
    default the acceleration limit: a controller bounds the acceleration
-   across the path as well as along it, as an arc feed clamp does);
-2. consecutive primitives with the same limit and a smooth join merge into
+   across the path as well as along it, as an arc feed clamp does); a
+   spline piece, whose curvature varies along it, by 64ths
+   (:meth:`~contoursim.paths.Path.curvature_profile`): a tight turn in it
+   slows the motion there, not over the whole piece;
+2. consecutive intervals with the same limit and a smooth join merge into
    one section; a join whose tangent turns by more than `corner_tolerance`
    is an exact stop (velocity 0);
 3. junction velocities are capped by a forward pass (how fast can we be here
@@ -307,7 +310,8 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     jerk : float, optional
         Path jerk limit [mm/s^3]; None gives trapezoidal profiles.
     centripetal_accel : float, optional
-        Limit on v^2 kappa [mm/s^2]: on curved primitives v <= sqrt(a_c / kappa_max); default `accel` (a G-code
+        Limit on v^2 kappa [mm/s^2]: v <= sqrt(a_c / kappa) with kappa the largest curvature of each curved
+        primitive (of each 64th of a spline piece); default `accel` (a G-code
         fillet of 0.5 mm at 3000 mm/min ran through at 5000 mm/s^2 under a limit of 1000).
     corner_tolerance : float
         Tangent turn at a join above which the motion stops exactly [rad].
@@ -367,10 +371,10 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
             i = int(np.argmax(feeds))
             raise PathError(f"feed {feeds[i]:.6g} mm/s ({feeds[i] * 60:.6g} mm/min, segment {i}) exceeds "
                             f"max_feed = {max_feed:.6g} mm/s ({max_feed * 60:.6g} mm/min)", primitive=i)
-    limits = feeds.copy()
     ac = accel if centripetal_accel is None else _setting("centripetal_accel", _validate.positive("centripetal_accel",
                                                                                                   centripetal_accel))
-    kappa = path.max_curvature()
+    edges, kappa, primitive = path.curvature_profile()  # intervals: a line or an arc each, 64 a spline piece
+    limits = feeds[primitive]
     curved = kappa > 0
     limits[curved] = np.minimum(limits[curved], np.sqrt(ac / kappa[curved]))
     in_position = _validate.nonnegative("in_position", in_position)
@@ -381,12 +385,15 @@ def plan(path, feed, accel, jerk=None, *, centripetal_accel=None, corner_toleran
     waits[stops] = True
     waits = waits[:-1]  # the path's end is a stop of its own
     stop = (path.corner_angles() > tolerance) | waits
-    split = stop | (limits[1:] != limits[:-1])
+    joins = np.flatnonzero(np.diff(primitive))  # the intervals that end a primitive (not the last)
+    halts, rests = np.zeros((2, len(primitive) - 1), bool)
+    halts[joins], rests[joins] = stop, waits
+    split = halts | (limits[1:] != limits[:-1])
     first = np.concatenate([[0], np.flatnonzero(split) + 1])
-    breaks = np.append(path.breaks[first], path.length)
-    inner = np.where(stop[first[1:] - 1], 0.0, np.minimum(limits[first[1:] - 1], limits[first[1:]]))
+    breaks = np.append(edges[first], path.length)
+    inner = np.where(halts[first[1:] - 1], 0.0, np.minimum(limits[first[1:] - 1], limits[first[1:]]))
     vjunction = np.concatenate([[0.0], inner, [0.0]])
-    dwell = np.append(np.where(waits[first[1:] - 1], in_position, 0.0), 0.0)
+    dwell = np.append(np.where(rests[first[1:] - 1], in_position, 0.0), 0.0)
     profile = _plan_sections(breaks, limits[first], vjunction, accel, jerk, dwell)
     _warn_corners(path, profile, stop, waits, tolerance, accel, servo_period)
     return profile

@@ -42,6 +42,7 @@ NCOL = 29
 CONTINUITY_TOL = 1e-9  # [mm] gap allowed between consecutive primitives
 MAX_COORDINATE = 1e6  # [mm]: largest |coordinate| and size of a path (a kilometre, as a measured trace's positions)
 _TABLE = 16  # arc-length table intervals per spline piece
+_SAMPLES = 64  # curvature sampling intervals per spline piece: w = 0, 1/64, ..., 1
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 _GL_X = 0.5 * (_GL_X + 1.0)  # nodes on [0, 1]
 _GL_W = 0.5 * _GL_W
@@ -66,6 +67,16 @@ def _spline_integral(row, w0, w1):
     for k in range(_GL_X.size):
         acc += _GL_W[k] * _spline_speed(row, w0 + h * _GL_X[k])
     return acc * h
+
+
+@njit(cache=True)
+def _spline_lengths(rows):
+    """Arc length [mm] of spline pieces (K, NCOL) at w = 0, 1/64, ..., 1, shape (K, 65)."""
+    u = np.empty((rows.shape[0], _SAMPLES + 1))
+    for k in range(rows.shape[0]):
+        for m in range(_SAMPLES + 1):
+            u[k, m] = _spline_u_of_w(rows[k], m / _SAMPLES)
+    return u
 
 
 @njit(cache=True)
@@ -112,39 +123,30 @@ def _spline_w_of_u(row, u):
 
 @njit(cache=True)
 def _spline_tables(coefs):
-    """Rows of spline pieces from their (K, 12) coefficients, their largest curvature, and which have a cusp.
+    """Rows of spline pieces from their (K, 12) coefficients, and which have a cusp.
 
-    Each row holds its cumulative arc-length table. At w = 0, 1/64, ..., 1:
-    the largest curvature |P' × P''| / |P'|³ [1/mm], and a cusp (or zero
-    length) where the speed |P'| = |dP/dw| drops to 1e-9 of the chord.
+    Each row holds its cumulative arc-length table. A cusp (or zero length)
+    where the speed |P'| = |dP/dw| at w = 0, 1/64, ..., 1 drops to 1e-9 of
+    the chord.
     """
     # np.empty, every entry set below: np.zeros would compile three more functions per signature (~0.07 s each)
     rows = np.empty((coefs.shape[0], NCOL))
-    curvature = np.empty(coefs.shape[0])
     cusp = np.empty(coefs.shape[0], np.bool_)
     for k in range(coefs.shape[0]):
         row = rows[k]
         for c in range(12):  # not row[:12] = coefs[k]: numba would compile its shape-mismatch error (~1.5 s)
             row[c] = coefs[k, c]
-        row[12] = curvature[k] = 0.0
+        row[12] = 0.0
         for j in range(_TABLE):  # integrated over the read-only coefs[k]: the signature of every other call
             row[13 + j] = row[12 + j] + _spline_integral(coefs[k], j / _TABLE, (j + 1) / _TABLE)
-        chord2 = slowest2 = 0.0
+        chord2 = 0.0
         for i in range(3):
             chord2 += (row[3 + i] + row[6 + i] + row[9 + i]) ** 2
-        for m in range(65):
-            w = m / 64.0
-            d1x = row[3] + 2.0 * row[6] * w + 3.0 * row[9] * w * w  # dP/dw
-            d1y = row[4] + 2.0 * row[7] * w + 3.0 * row[10] * w * w
-            d1z = row[5] + 2.0 * row[8] * w + 3.0 * row[11] * w * w
-            d2x, d2y, d2z = 2.0 * row[6] + 6.0 * row[9] * w, 2.0 * row[7] + 6.0 * row[10] * w, 2.0 * row[8] + 6.0 * row[11] * w
-            speed2 = d1x * d1x + d1y * d1y + d1z * d1z
-            slowest2 = speed2 if m == 0 else min(slowest2, speed2)
-            if speed2 > 0.0:
-                cx, cy, cz = d1y * d2z - d1z * d2y, d1z * d2x - d1x * d2z, d1x * d2y - d1y * d2x
-                curvature[k] = max(curvature[k], math.sqrt((cx * cx + cy * cy + cz * cz) / speed2**3))
-        cusp[k] = slowest2 <= 1e-18 * max(chord2, 1e-300)
-    return rows, curvature, cusp
+        slowest = _spline_speed(coefs[k], 0.0)  # the read-only coefs[k] again
+        for m in range(1, _SAMPLES + 1):
+            slowest = min(slowest, _spline_speed(coefs[k], m / _SAMPLES))
+        cusp[k] = slowest**2 <= 1e-18 * max(chord2, 1e-300)
+    return rows, cusp
 
 
 @njit(cache=True)
@@ -415,7 +417,8 @@ class SplinePiece(_Primitive):
     Attributes
     ----------
     max_curvature : float
-        Largest curvature |P' × P''| / |P'|³ at w = 0, 1/64, ..., 1 [1/mm].
+        Largest curvature |P' × P''| / |P'|³ on the piece [1/mm] (at its
+        ends or where it is stationary: a root of a polynomial of degree 7).
 
     Notes
     -----
@@ -482,8 +485,55 @@ def _spline_rows(coefs):
     indices of pieces with a cusp (:func:`_spline_tables`)."""
     flat = np.ascontiguousarray(coefs.reshape(len(coefs), 12))  # a new view: the caller's array keeps its flags
     flat.flags.writeable = False  # read-only as a Path's rows are: one compiled signature of the spline helpers
-    rows, curvature, cusp = _spline_tables(flat)
-    return rows, curvature, np.flatnonzero(cusp)
+    rows, cusp = _spline_tables(flat)
+    cusps = np.flatnonzero(cusp)
+    if cusps.size:
+        return rows, None, cusps
+    ends = np.zeros((len(coefs), 2))
+    ends[:, 1] = 1.0
+    curvature = _spline_curvature(coefs, np.hstack([ends, np.nan_to_num(_spline_curvature_peaks(coefs))])).max(axis=1)
+    return rows, curvature, cusps
+
+
+def _spline_curvature(coefs, w):
+    """Curvature |P' × P''| / |P'|³ [1/mm] of spline pieces with coefficients (K, 4, 3) at parameters w, shape (K, M)."""
+    b, c, d = (coefs[:, None, i] for i in (1, 2, 3))
+    w = w[..., None]
+    velocity = b + w * (2 * c + 3 * w * d)
+    cross = np.cross(velocity, 2 * c + 6 * w * d)
+    return np.sqrt(np.sum(cross**2, axis=-1) / np.sum(velocity**2, axis=-1) ** 3)  # no cusp: |P'| > 0
+
+
+def _spline_curvature_peaks(coefs):
+    """Parameters w in (0, 1) where the curvature of spline pieces with coefficients (K, 4, 3) is stationary, shape
+    (K, 7), NaN where there is none.
+
+    With V = P' and C = P' × P'' = 2 b×c + 6 b×d w + 6 c×d w² (quadratics in
+    w), the squared curvature |C|² / |V|⁶ is stationary where
+    (|C|²)'·|V|² − 3 |C|²·(|V|²)' = 0, a polynomial of degree 7.
+    """
+    b, c, d = coefs[:, 1], coefs[:, 2], coefs[:, 3]
+    velocity = np.stack([b, 2 * c, 3 * d], axis=1)  # in ascending powers of w
+    cross = np.stack([2 * np.cross(b, c), 6 * np.cross(b, d), 6 * np.cross(c, d)], axis=1)
+    n, v = _polynomial_product(cross, cross), _polynomial_product(velocity, velocity)  # |C|², |V|², degree 4
+    powers = np.arange(1, 5)
+    stationary = _polynomial_product(n[:, 1:] * powers, v) - 3 * _polynomial_product(n, v[:, 1:] * powers)
+    peaks = np.full((len(coefs), 7), np.nan)
+    for k, coefficients in enumerate(stationary):
+        w = np.roots(coefficients[::-1]).real  # leading zeros dropped; a root's rounding off the axis kept near it
+        w = w[(w > 0) & (w < 1)]
+        peaks[k, :w.size] = w
+    return peaks
+
+
+def _polynomial_product(a, b):
+    """The product of polynomials in ascending powers, shapes (K, m, ...) and (K, n, ...), with any trailing axes
+    summed over (the dot product of two vector polynomials): shape (K, m + n - 1)."""
+    out = np.zeros((a.shape[0], a.shape[1] + b.shape[1] - 1))
+    for i in range(a.shape[1]):
+        for j in range(b.shape[1]):
+            out[:, i + j] += (a[:, i] * b[:, j]).reshape(len(a), -1).sum(axis=1)
+    return out
 
 
 # --------------------------------------------------------------------------- path
@@ -683,7 +733,7 @@ class Path:
         return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
 
     def max_curvature(self):
-        """Largest curvature of each primitive [1/mm] (sampled at w = 0, 1/64, ..., 1 on spline pieces).
+        """Largest curvature of each primitive [1/mm] (on a spline piece at its ends or where it is stationary).
 
         Returns
         -------
@@ -695,6 +745,41 @@ class Path:
         pieces = self.kinds == SPLINE
         result[pieces] = [p.max_curvature for p in self.primitives if p.kind == SPLINE]
         return result
+
+    def curvature_profile(self):
+        """The largest curvature along the path, by intervals: one a line or an arc, 64 a spline piece.
+
+        A spline piece's curvature varies along it: its intervals are those
+        between the parameters w = 0, 1/64, ..., 1, each with the largest
+        curvature on it (at its ends or where it is stationary inside).
+
+        Returns
+        -------
+        edges : ndarray, shape (C + 1,)
+            Arc length at the intervals' starts, then the path's length [mm].
+        curvature : ndarray, shape (C,)
+            Largest curvature on each interval [1/mm].
+        primitive : ndarray of int, shape (C,)
+            The primitive each interval lies on.
+        """
+        pieces = self.kinds == SPLINE
+        primitive = np.repeat(np.arange(len(self.primitives)), np.where(pieces, _SAMPLES, 1))
+        edges, curvature = self.breaks[primitive], self.max_curvature()[primitive]  # copies, by the fancy index
+        if pieces.any():
+            rows = self.rows[pieces]
+            rows.flags.writeable = False  # the signature the spline helpers are compiled for
+            coefs = rows[:, :12].reshape(-1, 4, 3)
+            inside = pieces[primitive]
+            edges[inside] += _spline_lengths(rows)[:, :-1].ravel()
+            w = np.broadcast_to(np.linspace(0.0, 1.0, _SAMPLES + 1), (len(rows), _SAMPLES + 1))
+            at_edges = _spline_curvature(coefs, w)
+            largest = np.maximum(at_edges[:, :-1], at_edges[:, 1:])
+            peaks = _spline_curvature_peaks(coefs)
+            k, i = np.nonzero(np.isfinite(peaks))
+            np.maximum.at(largest, (k, np.minimum((peaks[k, i] * _SAMPLES).astype(int), _SAMPLES - 1)),
+                          _spline_curvature(coefs[k], peaks[k, i, None])[:, 0])
+            curvature[inside] = largest.ravel()
+        return np.append(edges, self.length), curvature, primitive
 
 
 def join(*paths):

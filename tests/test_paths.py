@@ -202,16 +202,19 @@ def test_closed_spline_is_c2_at_the_seam():
 
 
 def test_max_curvature_of_each_primitive():
-    """Lines 0, arcs r/(r² + p²) (p = rise per radian), spline pieces |P' × P''| / |P'|³ at w = 0, 1/64, ..., 1."""
+    """Lines 0, arcs r/(r² + p²) (p = rise per radian), spline pieces the largest |P' × P''| / |P'|³ on them: the most
+    of 100001 values of w, to its rounding; never less (it was the most of 65 values: 0.15 of it on the near cusp of
+    the last piece)."""
     rng = np.random.default_rng(1)
-    curve = paths.spline(10 * rng.normal(size=(40, 3)))
-    w = np.linspace(0, 1, 65)[:, None]
+    curve = paths.spline(np.vstack([10 * rng.normal(size=(40, 3)), [[0, 0, 0], [0.3, 0, 0], [0, 0.001, 0]]]))
+    w = np.linspace(0, 1, 100001)[:, None]
     want = []
     for piece in curve.primitives:
         a, b, c, d = piece.coefficients
         d1, d2 = b + 2 * c * w + 3 * d * w**2, 2 * c + 6 * d * w
         want.append(np.max(np.linalg.norm(np.cross(d1, d2), axis=1) / np.linalg.norm(d1, axis=1) ** 3))
-    np.testing.assert_allclose(curve.max_curvature(), want, rtol=1e-12)
+    np.testing.assert_allclose(curve.max_curvature(), want, rtol=1e-7)
+    assert np.all(curve.max_curvature() >= np.array(want) * (1 - 1e-12))
     helix = paths.helix((0, 0, 0), 5.0, pitch=2 * np.pi, turns=1.0)  # rises 1 mm per radian
     line = paths.line((0, 0), (3, 4))
     np.testing.assert_allclose([helix.max_curvature()[0], line.max_curvature()[0]], [5 / 26, 0.0], rtol=1e-12)
