@@ -45,7 +45,7 @@ from ._numba import njit
 from . import _validate
 from ._blocks import blocks
 from .nearest import _along, _beyond, _real, moved, nearest_knots
-from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_guess
+from .paths import ARC, LINE, _eval_prim, _eval_spline_w, _primitive_at, _spline_u_of_w, _spline_w_of_u
 from .trajectory import Trajectory
 
 __all__ = ["ContourError", "exact_contour_error"]
@@ -101,8 +101,10 @@ class ContourError:
         Component (P_a - foot) . b [mm] along the path's plane normal b (for
         helices and 3-D curves, b made orthogonal to T, so that
         normal^2 + out_of_plane^2 = magnitude^2 wherever the foot is not a
-        path end); zero for planar paths and estimates (a 2-D exact result
-        holds one zero, read-only, broadcast to shape (N,)).
+        path end or a corner); zero for planar paths and estimates (a 2-D
+        exact result holds one zero, read-only, broadcast to shape (N,)).
+        At a corner, T, n_left and b are those of the side the point is
+        closest to square to (the smaller |(P_a - foot) . T|).
     foot : ndarray, shape (N, d), optional
         Nearest path points [mm]. Exact only (``None`` for estimates).
     s : ndarray, shape (N,), optional
@@ -203,8 +205,9 @@ def _closest(kind, row, p, u0, length, out):
                 break
             u = un
     else:
-        # seed from the arc-length table; the distance Newton below does the rest
-        w = 0.0 if u0 <= 0.0 else 1.0 if u0 >= length else _spline_w_guess(row, u0)[1]
+        # seed at u0's own parameter (the table's linear guess near a tight turn could lie on the turn's other leg,
+        # and Newton stay there); the distance Newton below does the rest
+        w = _spline_w_of_u(row, u0)
         for _ in range(50):
             g = gp = speed2 = 0.0
             for i in range(3):
@@ -245,6 +248,16 @@ def _refine(kinds, rows, breaks, p, s_lo, s_hi, s0, best_d, best_k, best_u, out,
             for c in range(9):  # not frame[:] = out: numba compiles its shape-mismatch error (~2 s)
                 frame[c] = out[c]
     return best_d, best_k, best_u
+
+
+@njit(cache=True)
+def _across(breaks, k, u, step, closed):
+    """The primitive after (`step` 1) or before (-1) primitive k, when arc length u on k is at that end of it (on a
+    closed path the first follows the last); else -1."""
+    k_count = breaks.size - 1
+    at_end = u >= breaks[k + 1] - breaks[k] - 1e-12 if step == 1 else u <= 1e-12
+    nk = (k + step) % k_count if closed else k + step
+    return nk if at_end and 0 <= nk < k_count else -1
 
 
 @njit(cache=True)
@@ -400,11 +413,8 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
         for step in (-1, 1):  # foot clamped at a primitive end: try the neighbour
             k, u = best_k, best_u
             for _ in range(k_count):
-                at_end = u >= breaks[k + 1] - breaks[k] - 1e-12 if step == 1 else u <= 1e-12
-                nk = k + step
-                if lap != 0.0:
-                    nk %= k_count
-                if not at_end or nk < 0 or nk >= k_count:
+                nk = _across(breaks, k, u, step, lap != 0.0)
+                if nk < 0:
                     break
                 length = breaks[nk + 1] - breaks[nk]
                 u = _closest(kinds[nk], rows[nk], p, length if step == -1 else 0.0, length, out)
@@ -415,12 +425,23 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
                 for c in range(9):
                     frame[c] = out[c]
         s_out[i] = breaks[best_k] + best_u
+        dx, dy, dz = p[0] - frame[0], p[1] - frame[1], p[2] - frame[2]
+        fk = best_k  # the primitive whose frame the error is split in
+        for step in (-1, 1):  # a foot on a corner: the side the tool is square to, not the one rounding chose
+            nk = _across(breaks, best_k, best_u, step, lap != 0.0)
+            if nk < 0:
+                continue
+            _eval_prim(kinds[nk], rows[nk], 0.0 if step == 1 else breaks[nk + 1] - breaks[nk], out)
+            if abs(dx * out[3] + dy * out[4] + dz * out[5]) < abs(dx * frame[3] + dy * frame[4] + dz * frame[5]):
+                fk = nk
+                for c in range(9):
+                    frame[c] = out[c]
         # the plane normal b at the foot: the path's plane, an arc's axis, the osculating binormal, else z
         tx, ty, tz = frame[3], frame[4], frame[5]
         if plane[0] != 0.0 or plane[1] != 0.0 or plane[2] != 0.0:
             bx, by, bz = plane[0], plane[1], plane[2]
-        elif kinds[best_k] == ARC:
-            bx, by, bz = rows[best_k, 9], rows[best_k, 10], rows[best_k, 11]
+        elif kinds[fk] == ARC:
+            bx, by, bz = rows[fk, 9], rows[fk, 10], rows[fk, 11]
         else:
             bx, by, bz = ty * frame[8] - tz * frame[7], tz * frame[6] - tx * frame[8], tx * frame[7] - ty * frame[6]
             nb = math.sqrt(bx * bx + by * by + bz * bz)
@@ -433,7 +454,6 @@ def _foot_points(kinds, rows, breaks, lap, sample_s, sample_pos, first, anchors,
         lx, ly, lz = by * tz - bz * ty, bz * tx - bx * tz, bx * ty - by * tx  # left of travel: b x t
         nl = math.sqrt(lx * lx + ly * ly + lz * lz)
         lx, ly, lz = lx / nl, ly / nl, lz / nl
-        dx, dy, dz = p[0] - frame[0], p[1] - frame[1], p[2] - frame[2]
         magnitude[i] = math.sqrt(dx * dx + dy * dy + dz * dz)
         normal[i] = dx * lx + dy * ly + dz * lz
         if d == 3:  # along t x l
