@@ -518,12 +518,26 @@ def _spline_curvature_peaks(coefs):
     n, v = _polynomial_product(cross, cross), _polynomial_product(velocity, velocity)  # |C|², |V|², degree 4
     powers = np.arange(1, 5)
     stationary = _polynomial_product(n[:, 1:] * powers, v) - 3 * _polynomial_product(n, v[:, 1:] * powers)
-    peaks = np.full((len(coefs), 7), np.nan)
-    for k, coefficients in enumerate(stationary):
-        w = np.roots(coefficients[::-1]).real  # leading zeros dropped; a root's rounding off the axis kept near it
-        w = w[(w > 0) & (w < 1)]
-        peaks[k, :w.size] = w
-    return peaks
+    return _roots_inside(stationary)
+
+
+def _roots_inside(coefficients):
+    """The real parts in (0, 1) of the roots of polynomials in ascending powers, shape (K, n + 1): shape (K, n), NaN
+    where there is none (a root rounded off the real axis is kept near it). One eigenvalue call per degree, leading
+    coefficients within rounding of the largest dropped."""
+    n = coefficients.shape[1] - 1
+    inside = np.full((len(coefficients), n), np.nan)
+    scale = np.abs(coefficients).max(axis=1, keepdims=True)
+    degree = n - np.cumprod(np.abs(coefficients[:, ::-1]) <= 1e-14 * scale, axis=1).sum(axis=1)
+    for m in range(1, n + 1):
+        rows = np.flatnonzero(degree == m)
+        if rows.size:  # the companion matrices of the monic polynomials: their eigenvalues are the roots
+            companion = np.zeros((rows.size, m, m))
+            companion[:, 1:, :-1] = np.eye(m - 1)
+            companion[:, :, -1] = -coefficients[rows, :m] / coefficients[rows, m:m + 1]
+            w = np.linalg.eigvals(companion).real
+            inside[rows, :m] = np.where((w > 0) & (w < 1), w, np.nan)
+    return inside
 
 
 def _polynomial_product(a, b):

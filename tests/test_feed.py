@@ -138,7 +138,7 @@ def test_centripetal_limit():
     assert traj.speed.max() == pytest.approx(np.sqrt(50.0 * 50.0), rel=1e-12)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40, deadline=None, derandomize=True)
 @given(st.lists(st.tuples(st.integers(-40, 40), st.integers(-40, 40)), min_size=3, max_size=9, unique=True),
        st.sampled_from([0.01, 0.1, 1.0]))
 def test_a_spline_is_run_within_the_centripetal_limit_everywhere(points, scale):
@@ -163,6 +163,17 @@ def test_a_tight_turn_in_a_spline_piece_slows_the_motion_there_not_over_the_whol
     assert traj.speed.max() == pytest.approx(1000 / 60, rel=1e-9)  # at the feed on most of the way out and back
     curvature = np.linalg.norm(path.derivatives(traj.s)[2], axis=1)
     assert np.max(traj.speed**2 * curvature) <= 1000.0 * (1 + 1e-6)
+
+
+def test_a_spline_through_a_circles_points_is_run_as_the_circle():
+    """A closed spline through 400 points of a 10-mm circle, at a feed the centripetal limit lowers to √(a_c R): its
+    run lasts as the arc's (within 0.5 %). Its pieces' limits, apart in their rounding, made 400 sections, each from
+    and to zero acceleration: 1.654 s against the arc's 0.979 s."""
+    t = np.linspace(0.0, 2 * np.pi, 400, endpoint=False)
+    spline = paths.spline(10.0 * np.column_stack([np.cos(t), np.sin(t)]), closed=True)
+    circle = paths.circle((0, 0), 10.0)
+    durations = [plan(path, 200.0, 1000.0, 50000.0, centripetal_accel=500.0).duration for path in (spline, circle)]
+    assert durations[0] == pytest.approx(durations[1], rel=5e-3)
 
 
 def test_an_arc_is_run_within_the_acceleration_limit_across_the_path_by_default():
