@@ -357,7 +357,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
                 fail(f"a dwell's time (G4 P or X) must be zero or positive, got {values[time]:g}")
             values.pop(time, None)
         halt_after = any(m in _STOPS_AFTER for m in mcodes)  # after the move of its block, if it has one
-        moves = any(a in values for a in "XYZIJKR")
+        moves = nonmodal in (None, 4) and any(a in values for a in "XYZIJKR")  # a move along the contour
         if cutting and (nonmodal == 4 or any(m in _STOPS_BEFORE for m in mcodes) or halt_after and not moves):
             stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
         if nonmodal not in (None, 4):
@@ -445,18 +445,11 @@ def _ignored_text(ignored):
 def _listed(words, most=3):
     """`words` in one line, a letter that takes a value a block (``S``, ``T`` ...) at its first `most` values and
     counted: a program setting the spindle speed in every block warned in one line of 131 KB."""
-    counts, kept, shown = {}, {}, []
+    alike = {}
     for word in words:
-        counts[word[0]] = counts.get(word[0], 0) + 1
-    for word in words:
-        letter = word[0]
-        if letter not in _IGNORED_LETTERS or counts[letter] <= most:
-            shown.append(word)
-            continue
-        kept[letter] = kept.get(letter, 0) + 1
-        if kept[letter] <= most:
-            shown.append(word + (f" … ({counts[letter]} {letter} words)" if kept[letter] == most else ""))
-    return " ".join(shown)
+        alike.setdefault(word[0] if word[0] in _IGNORED_LETTERS else word, []).append(word)
+    return " ".join(" ".join(same[:most]) + (f" … ({len(same)} {same[0][0]} words)" if len(same) > most else "")
+                    for same in alike.values())
 
 
 @dataclass(frozen=True)

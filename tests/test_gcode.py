@@ -236,12 +236,12 @@ def test_a_real_program_reads_and_lists_what_it_ignored():
 
 def test_a_word_set_in_every_block_is_listed_at_its_first_values_and_counted():
     """A spindle speed set in each of 5000 blocks: the warning listed every value in one line of 131 KB."""
-    blocks = "".join(f"G1 X{i + 1} S{10000 + i} F600\n" for i in range(5000))
+    blocks = "".join(f"G1 X{i + 1} S{10000 + i} T{i % 7} F600\n" for i in range(5000))
     with pytest.warns(ContoursimWarning) as record:
         program = read_gcode(f"G0 X0 Y0 M3\n{blocks}")
     assert [str(w.message) for w in record] == ["<gcode>: ignored: M3 S10000 S10001 S10002 … (5000 S words) "
-                                                "(no contour motion)"]
-    assert len(program.ignored) == 5001  # all of them, as read
+                                                "T0 T1 T2 … (7 T words) (no contour motion)"]
+    assert len(program.ignored) == 5008  # all of them, as read
 
 
 def test_a_dwell_stops_the_motion_and_waits_in_position(tmp_path):
@@ -280,6 +280,14 @@ def test_a_program_stop_or_a_tool_change_stops_the_motion_as_a_dwell_does(tmp_pa
     moves = "".join(f"{line}\n" for line in ("G1 X10", "G1 X10 Y10") if line in block)
     dwelled = run(f"{moves}G4 P0\n" if block.startswith("G1") else f"G4 P0\n{moves}")[1]  # the same motion
     np.testing.assert_array_equal(stopped.position, dwelled.position)
+
+
+@pytest.mark.parametrize("block", ["G53 G0 Z0 M0", "G91 G28 Z0 M0"])
+def test_a_program_stop_in_a_block_that_goes_home_stops_the_motion(block):
+    """M0 beside a G28/G53 move (no move of the contour) was dropped without a word."""
+    with pytest.warns(ContoursimWarning, match="ignored: G"):
+        program = read_gcode(f"G1 X10 F100\n{block}\nG90 G0 Z0\nG1 X20\n")
+    assert program.stops == (0,)
 
 
 def test_the_optional_stop_is_run_through_as_with_its_switch_off():
