@@ -29,9 +29,10 @@ A dwell's ``P``/``X`` time (milliseconds or seconds, by dialect; ``X`` only
 without ``P``), the wait for the operator and the tool change are not moves
 and are not simulated: once in position the axes hold it. Home returns and
 machine-coordinate moves (``G28 G30 G53``, e.g. a post's ``G28 G91 Z0``
-before a tool change) take the axes they name (``G28`` and ``G30`` without
-axis words: all) to a machine position contoursim does not know in work
-coordinates: the tool is taken to stay where it was (before the first move,
+before a tool change) stop the motion at the end of the move before them
+and take the axes they name (``G28`` and ``G30`` without axis words: all) to
+a machine position contoursim does not know in work coordinates: the tool is
+taken to stay where it was (before the first move,
 the program's start), and the G0 moves that follow position it from there
 (rapids, not scored); a feed move while an axis is still at such a position
 is refused (also before the first feed move: a program's
@@ -153,9 +154,9 @@ class Program:
         The words ignored (``"S12000"``, ``"M3"``, ``"G54"``, ``"G64 P0.01"``
         ...), each once, in the order they first appear.
     stops : tuple of int
-        The primitives after which the program dwells (G4), stops (M0, M60)
-        or changes the tool (M6): the motion stops at their end
-        (:class:`contoursim.feed.FeedSettings`).
+        The primitives after which the program dwells (G4), stops (M0, M60),
+        changes the tool (M6) or moves home (G28, G30, G53): the motion stops
+        at their end (:class:`contoursim.feed.FeedSettings`).
     """
 
     path: Path
@@ -358,7 +359,7 @@ def read_gcode(file_or_text, *, rapid_feed=10000.0 / 60.0, start=(0.0, 0.0, 0.0)
             values.pop(time, None)
         halt_after = any(m in _STOPS_AFTER for m in mcodes)  # after the move of its block, if it has one
         moves = nonmodal in (None, 4) and any(a in values for a in "XYZIJKR")  # a move along the contour
-        if cutting and (nonmodal == 4 or any(m in _STOPS_BEFORE for m in mcodes) or halt_after and not moves):
+        if cutting and (nonmodal is not None or any(m in _STOPS_BEFORE for m in mcodes) or halt_after and not moves):
             stops[len(prims) - 1] = None  # the motion stops at the end of the last move (a rapid's end already)
         if nonmodal not in (None, 4):
             moved = [a for a in "XYZ" if a in values] or (list("XYZ") if nonmodal in (28, 30) else [])

@@ -282,9 +282,11 @@ def test_a_program_stop_or_a_tool_change_stops_the_motion_as_a_dwell_does(tmp_pa
     np.testing.assert_array_equal(stopped.position, dwelled.position)
 
 
-@pytest.mark.parametrize("block", ["G53 G0 Z0 M0", "G91 G28 Z0 M0"])
-def test_a_program_stop_in_a_block_that_goes_home_stops_the_motion(block):
-    """M0 beside a G28/G53 move (no move of the contour) was dropped without a word."""
+@pytest.mark.parametrize("block", ["G53 G0 Z0 M0", "G91 G28 Z0 M0", "G53 G0 Z0", "G91 G28 Z0"])
+def test_a_move_home_stops_the_motion(block):
+    """The axes leave for a machine position: the motion stops at the end of the move before. It ran through at the
+    feed, as if the tool had not left (the G0 back, of no length in work coordinates, was skipped); and an M0 beside
+    the move home was dropped without a word."""
     with pytest.warns(ContoursimWarning, match="ignored: G"):
         program = read_gcode(f"G1 X10 F100\n{block}\nG90 G0 Z0\nG1 X20\n")
     assert program.stops == (0,)
