@@ -72,7 +72,10 @@ and each parameter the state structure did not keep as one). The structures are 
 identified servo period (:func:`servo_period_for`, the trace's own up to
 1 ms): a drive that runs faster than it logs is identified by the
 structure whose lags match its own best at that period, not necessarily
-by its own.
+by its own. The fits that do not depend on each other, the valley's two
+ends and the drive structures, run side by side in forked processes, one
+a core (:func:`contoursim._parallel.fork_map`; the same machine, to the
+last bit, as one after the other).
 A backlash held in place (`effects`, as a diagnosis holds one) is a play in the screw between the
 motor and a table of its own: its axis is identified as two masses, 0.3 of :data:`MASS` on the
 motor side of a screw whose mode is at 1.5 kHz (damped at 0.2: the play, not a mode the loops
@@ -99,6 +102,7 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from . import _validate
+from ._parallel import fork_map
 from .machine import Machine
 from .model import Model
 from .servo import AxisServo
@@ -395,7 +399,8 @@ def identify_machine(trace, servo_period=None, progress=None, effects=(), start=
         x = np.clip(x, lower[: x.size] + 1e-6, upper[: x.size] - 1e-6)
         free = np.ones(x.size, bool)
         free[1] = x[1] > 0.0
-        fits = [(structure, fitted(x, free, structure)) for structure in dict.fromkeys((own, STATE) + DRIVES)]
+        structures = list(dict.fromkeys((own, STATE) + DRIVES))
+        fits = zip(structures, fork_map(lambda structure: fitted(x, free, structure), structures))
         structure, x = min(fits, key=lambda fit: rss(fit[1], fit[0])[0])
         return _machine(axes, period, x, structure, like, play)
 
@@ -410,7 +415,7 @@ def identify_machine(trace, servo_period=None, progress=None, effects=(), start=
     # velocity loop, whose bandwidth per axis absorbs any difference of the axes' position gains
     valley = x1.copy()
     valley[0], valley[1] = max(x1[0] + np.log(1.0 - _VALLEY_VFF), lower[0] + 1e-6), _VALLEY_VFF
-    fits = [fitted(x, np.ones(x0.size, bool), STATE) for x in (x1, valley)]
+    fits = fork_map(lambda x: fitted(x, np.ones(x0.size, bool), STATE), (x1, valley))
     x2 = min((x for x in fits if x[0] > lower[0] + _AT_BOUND), key=lambda x: rss(x, STATE)[0], default=x1)
     (rss1, _), (rss2, tau) = rss(x1, STATE), rss(x2, STATE)
     feedforward = delta_bic(rss1, rss2, measured.size, 1, tau) > SIGNIFICANT
@@ -437,14 +442,13 @@ def identify_machine(trace, servo_period=None, progress=None, effects=(), start=
     # the sampled drive structures, each fitted from the state structure's fit with the PI loop and the damping free,
     # kept or not there: behind a sampled velocity loop's lags the mechanical pole can show where on the state
     # structure it did not (an effect-free trace was left at 8 times its noise)
-    found = [(STATE, best, rss0), (STATE, x4, rss4)]
     free = np.ones(x4.size, bool)
     free[1] = feedforward
-    for drive in DRIVES:
-        x = x4.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
-        x[2: 2 + d] = np.minimum(x[2: 2 + d], np.log(0.5 * top))
-        x = fitted(x, free, drive)
-        found.append((drive, x, rss(x, drive)[0]))
+    damped = x4.copy()  # started where a sampled velocity loop is well damped: ω_v within half its bound
+    damped[2: 2 + d] = np.minimum(damped[2: 2 + d], np.log(0.5 * top))
+    found = [(STATE, best, rss0), (STATE, x4, rss4)]
+    found += [(drive, x, rss(x, drive)[0])
+              for drive, x in zip(DRIVES, fork_map(lambda drive: fitted(damped, free, drive), DRIVES))]
 
     # each stage starts from the last one's fit: a trace whose loops lie far from the regression's start (a velocity
     # loop barely faster than its position loop, behind a feedforward) can leave them all in another valley (an

@@ -352,9 +352,9 @@ def test_without_a_model_a_backlash_the_identified_loops_took_up_is_named_on_loo
     progress = []
     result = diagnose(read_trace(case.csv), progress=progress.append)
     assert [e.label for e in result.effects] == ["backlash.y"], result.report()
-    held = [line.removeprefix("identifying the servo loops with ") for line in progress
-            if line.startswith("identifying the servo loops with ")]
-    assert len(held) == 10 and all(line.startswith("backlash.y (feedback = motor)") for line in held[8:]), held
+    held = [line.split(": ", 1)[1].split("; ") for line in progress if "times, each with one held in place" in line]
+    assert [len(batch) for batch in held] == [8, 2], held
+    assert all(effect.startswith("backlash.y (feedback = motor)") for effect in held[1]), held
     assert result.effects[0]["lost_motion_um"] == pytest.approx(truth["parameters"]["lost_motion_um"], rel=0.05)
     assert result.steps[-1].rms_um < 2 * np.linalg.norm(result.noise_um), result.report()
 

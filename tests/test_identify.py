@@ -12,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from contoursim import paths
+from contoursim import _parallel, paths
 from contoursim.diagnosis import diagnose, synthetic_trace
 from contoursim.feed import plan, sample
 from contoursim.identify import WEAK_KP_VFF, delta_bic, identify_machine, identification_warnings, servo_period_for
@@ -270,6 +270,19 @@ def test_loops_fitted_from_a_start_away_from_them_are_the_truth():
     assert fitted.axes["x"].kp == pytest.approx(30.0, rel=0.02)
     assert [fitted.axes[a].kv for a in "xy"] == pytest.approx([150.0, 120.0], rel=0.05)
     assert [fitted.axes[a].damping for a in "xy"] == pytest.approx([500.0, 500.0], rel=0.2)
+
+
+@pytest.mark.parametrize("start", [False, True], ids=["staged search", "from a start"])
+def test_fits_run_side_by_side_on_the_cores_identify_what_they_identify_one_after_the_other(monkeypatch, start):
+    """The fits that do not depend on each other (the valley's two ends, each drive structure) run in forked processes
+    where the machine has the cores (contoursim._parallel.fork_map): the machine identified is the same, to the last
+    bit, as with every fit in this process one after the other."""
+    trace = own_trace(velocity_feedback="difference", computation_delay=1, damping=500.0)
+    servo = dict(mass=100.0, force_constant=100.0, kp=34.5, vff=0.0, damping=100.0)
+    begin = Machine({"x": AxisServo(kv=120.0, ti=0.045, **servo), "y": AxisServo(kv=96.0, ti=0.06, **servo)}, DT)
+    side_by_side = identify_machine(trace, start=begin if start else None)
+    monkeypatch.setattr(_parallel, "_cores", lambda: 1)
+    assert identify_machine(trace, start=begin if start else None) == side_by_side
 
 
 def test_a_trace_too_short_or_a_period_that_is_no_number_is_refused_by_name():
